@@ -1,0 +1,23 @@
+"""Models: the inverse-sensor-model update terms (Delta families) and, later, the Pyro map model."""
+
+from .delta import (
+    BorensteinKoren,
+    DeltaFamily,
+    Elfes,
+    MarshallBarfoot,
+    Moravec,
+    PN,
+    Stachniss,
+    delta_by_name,
+)
+
+__all__ = [
+    "DeltaFamily",
+    "BorensteinKoren",
+    "Moravec",
+    "MarshallBarfoot",
+    "Stachniss",
+    "Elfes",
+    "PN",
+    "delta_by_name",
+]

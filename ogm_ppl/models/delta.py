@@ -1,0 +1,261 @@
+r"""Update terms Delta of traditional OGM: the log-odds inverse sensor models of Table 2.1 and pN.
+
+Traditional OGM (Section 2.4, Eq. 2.10) adds an update term ``Delta`` to the evidence of every cell
+``m_kappa`` on the ray of reading ``z_n``. Every family here is a ``torch.nn.Module`` whose named
+parameters are differentiable (a later fit treats them as amortised variational parameters, Section 2.5),
+and produces a lookup table
+
+.. math:: T[\kappa, z] = \Delta(\kappa; z_n = z), \qquad T[\kappa, Z] = \Delta(\kappa; \text{max range})
+
+over ``kappa = 0..n_kappa-1`` and ``z = 0..Z-1``; the last column is the update of a max-range reading.
+Families that depend on ``d = kappa - z_n`` only give a max-range reading their far-before-the-reading
+value ``Delta(d -> -inf)`` (the "free" value), so a max-range reading frees the whole ray.
+
+The parameter values the thesis reports (Table 2.1 "Optimized Values", Table 2.2 for p21, Hähnel 2004
+for traditional OGM) are available through :func:`delta_by_name`.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+from torch import nn
+
+from ..sensors import GaussianRange
+
+__all__ = [
+    "DeltaFamily",
+    "BorensteinKoren",
+    "Moravec",
+    "MarshallBarfoot",
+    "Stachniss",
+    "Elfes",
+    "PN",
+    "delta_by_name",
+    "THESIS_P21",
+]
+
+
+def _param(value: float) -> nn.Parameter:
+    return nn.Parameter(torch.tensor(float(value), dtype=torch.float64))
+
+
+class DeltaFamily(nn.Module):
+    """Base class. Subclasses of the offset form implement ``delta(d)`` and ``far()``."""
+
+    def delta(self, d: torch.Tensor) -> torch.Tensor:  # pragma: no cover - interface
+        """Delta at integer offsets ``d = kappa - z_n`` (float64 tensor of any shape)."""
+        raise NotImplementedError
+
+    def far(self) -> torch.Tensor:
+        """Delta far before the reading (``d -> -inf``): the update of a max-range reading."""
+        return self.delta(torch.tensor([-1.0e9], dtype=torch.float64))[0]
+
+    def table(self, n_kappa: int, n_z: int) -> torch.Tensor:
+        """``n_kappa x (n_z + 1)`` float64 table; column ``n_z`` is the max-range reading."""
+        kappa = torch.arange(n_kappa, dtype=torch.float64)[:, None]
+        z = torch.arange(n_z, dtype=torch.float64)[None, :]
+        hits = self.delta(kappa - z)
+        mx = self.far().expand(n_kappa, 1)
+        return torch.cat([hits, mx], dim=1)
+
+    def extra_repr(self) -> str:
+        return ", ".join(f"{k}={v.item():.4f}" for k, v in self.named_parameters())
+
+
+class BorensteinKoren(DeltaFamily):
+    r"""Borenstein & Koren (1991): information only at the reading, ``Delta = l_occ`` at ``d = 0``."""
+
+    def __init__(self, l_occ: float = 1.3863) -> None:
+        super().__init__()
+        self.l_occ = _param(l_occ)
+
+    def delta(self, d):
+        return torch.where(d == 0, self.l_occ, torch.zeros((), dtype=torch.float64))
+
+
+class Moravec(DeltaFamily):
+    r"""Moravec (1988), Fig. 2.2: ``l_free`` for ``d < 0``, ``l_occ`` at ``d = 0``, 0 beyond.
+
+    Hähnel's (2004) ``l_occ = -l_free = log(0.8/0.2) = 1.3863`` is the thesis's *traditional OGM*
+    (``Moravec.haehnel()``).
+    """
+
+    def __init__(self, l_occ: float = 1.3863, l_free: float = -1.3863) -> None:
+        super().__init__()
+        self.l_occ = _param(l_occ)
+        self.l_free = _param(l_free)
+
+    @classmethod
+    def haehnel(cls) -> "Moravec":
+        """Traditional OGM: ``p_occ = 0.8``, ``p_free = 0.2`` (Hähnel 2004), natural log-odds."""
+        return cls(math.log(4.0), -math.log(4.0))
+
+    def delta(self, d):
+        zero = torch.zeros((), dtype=torch.float64)
+        return torch.where(d < 0, self.l_free, torch.where(d == 0, self.l_occ, zero))
+
+
+class MarshallBarfoot(DeltaFamily):
+    r"""Marshall & Barfoot (2007): ``l_occ = -l_free``, occupied for ``beta`` cells ``0 <= d < beta``.
+
+    ``beta`` is an integer (not differentiable).
+    """
+
+    def __init__(self, l_occ: float = 1.3863, beta: int = 1) -> None:
+        super().__init__()
+        if int(beta) != beta or beta < 1:
+            raise ValueError(f"MarshallBarfoot.beta must be a positive integer, got {beta!r}")
+        self.l_occ = _param(l_occ)
+        self.beta = int(beta)
+
+    def delta(self, d):
+        zero = torch.zeros((), dtype=torch.float64)
+        occ = (d >= 0) & (d < self.beta)
+        return torch.where(d < 0, -self.l_occ, torch.where(occ, self.l_occ, zero))
+
+    def extra_repr(self) -> str:
+        return f"l_occ={self.l_occ.item():.4f}, beta={self.beta}"
+
+
+class Stachniss(DeltaFamily):
+    r"""Stachniss (2006), sonar: linear interpolation of width ``alpha`` centred on the reading.
+
+    Our reading of Fig. 2.3: ``l_free`` up to ``d = -alpha/2``, rising linearly to ``l_occ`` at
+    ``d = 0``, falling linearly to 0 at ``d = alpha/2``, 0 beyond. ``alpha -> 0`` recovers Moravec.
+    """
+
+    def __init__(self, l_occ: float = 1.3863, l_free: float = -1.3863, alpha: float = 2.0) -> None:
+        super().__init__()
+        if not alpha > 0:
+            raise ValueError(f"Stachniss.alpha must be positive, got {alpha!r}")
+        self.l_occ = _param(l_occ)
+        self.l_free = _param(l_free)
+        self.alpha = _param(alpha)
+
+    def delta(self, d):
+        h = self.alpha.abs() / 2 + 1e-12
+        rise = self.l_free + (self.l_occ - self.l_free) * torch.clamp((d + h) / h, 0.0, 1.0)
+        fall = self.l_occ * torch.clamp(1.0 - d / h, 0.0, 1.0)
+        return torch.where(d <= 0, rise, fall)
+
+
+class Elfes(DeltaFamily):
+    r"""Elfes (1989a): the exact single-reading update of a Gaussian range sensor, floored at ``l_min``.
+
+    .. math::
+        \Delta = \max\Bigl(l_{min}, \log \frac{\sum_f p(z_n \mid f)\, p(f \mid m_\kappa = 1)}
+                                             {\sum_f p(z_n \mid f)\, p(f \mid m_\kappa = 0)}\Bigr)
+
+    with ``p(z | f) = N(f, sigma^2)`` (:class:`~ogm_ppl.sensors.GaussianRange`, censored at the ray's
+    end for max-range readings) and ``p(f | m_kappa)`` from independent cells of prior ``prior`` along a
+    ray of ``n_kappa`` cells (Section 2.5). Depends on ``kappa`` and ``z`` separately, not only on
+    ``kappa - z``.
+    """
+
+    def __init__(self, sigma: float = 3.0, l_min: float = -12.9047, prior: float = 0.5) -> None:
+        super().__init__()
+        if not sigma > 0:
+            raise ValueError(f"Elfes.sigma must be positive, got {sigma!r}")
+        if not 0.0 < prior < 1.0:
+            raise ValueError(f"Elfes.prior must lie in (0, 1), got {prior!r}")
+        self.sigma = _param(sigma)
+        self.l_min = _param(l_min)
+        self.prior = float(prior)
+
+    def table(self, n_kappa: int, n_z: int) -> torch.Tensor:
+        F = n_kappa - 1
+        dt = torch.float64
+        lam = self.prior
+        j = torch.arange(n_kappa + 1, dtype=dt)  # f = 0..F, and F + 1 = none
+        kap = torch.arange(n_kappa, dtype=dt)[:, None]
+        log_l, log_1l = math.log(lam), math.log1p(-lam)
+        base = torch.where(j <= F, log_l + j * log_1l, (F + 1) * log_1l)  # p(f) with iid cells
+        ninf = torch.tensor(-math.inf, dtype=dt)
+        # m_kappa = 1: f <= kappa only; f = kappa loses its log(lam) factor
+        lp1 = torch.where(j < kap, base, torch.where(j == kap, j * log_1l, ninf))
+        # m_kappa = 0: f != kappa; cells past kappa lose one log(1 - lam) factor
+        lp0 = torch.where(j < kap, base, torch.where(j == kap, ninf, base - log_1l))
+        sensor = GaussianRange(self.sigma.abs() + 1e-12)
+        z = torch.arange(n_z, dtype=dt)
+        zz = torch.cat([z, torch.tensor([F + 1.0], dtype=dt)])[:, None]  # n_z + 1 readings
+        is_max = torch.zeros(n_z + 1, 1, dtype=torch.bool)
+        is_max[-1] = True
+        lz = sensor.log_prob(zz, j[None, :], torch.tensor(float(F), dtype=dt), is_max)  # (n_z+1, F+2)
+        num = torch.logsumexp(lp1[:, None, :] + lz[None, :, :], dim=-1)
+        den = torch.logsumexp(lp0[:, None, :] + lz[None, :, :], dim=-1)
+        return torch.maximum(num - den, self.l_min)
+
+    def delta(self, d):  # pragma: no cover - Elfes is not a function of d alone
+        raise TypeError("Elfes depends on kappa and z separately; use table()")
+
+    def far(self):  # pragma: no cover
+        raise TypeError("Elfes depends on kappa and z separately; use table()")
+
+
+class PN(DeltaFamily):
+    r"""The free-form update term pN of Section 2.5: ``N`` values of ``Delta(kappa - z_n)``.
+
+    The values sit at offsets ``d = lo..lo+N-1`` with ``lo = -ceil(N/2)``; cells nearer the robot than
+    ``lo`` take the first value and cells past the last offset take 0. This is the thesis's layout:
+    p1 is a single "free" value before the reading, p2 is Moravec, and p21 spans ``d = -11..9``
+    (Table 2.2).
+    """
+
+    def __init__(self, values) -> None:
+        super().__init__()
+        values = torch.as_tensor(values, dtype=torch.float64).flatten()
+        if values.numel() < 1:
+            raise ValueError("PN needs at least one value")
+        self.values = nn.Parameter(values.clone())
+
+    @property
+    def N(self) -> int:
+        return self.values.numel()
+
+    @property
+    def lo(self) -> int:
+        return -((self.N + 1) // 2)
+
+    @classmethod
+    def zeros(cls, N: int) -> "PN":
+        return cls(torch.zeros(N, dtype=torch.float64))
+
+    def delta(self, d):
+        idx = (d - self.lo).clamp(min=0)
+        inside = idx < self.N
+        vals = self.values[idx.clamp(max=self.N - 1).long()]
+        return torch.where(inside, vals, torch.zeros((), dtype=torch.float64))
+
+    def extra_repr(self) -> str:
+        return f"N={self.N}, lo={self.lo}"
+
+
+# Table 2.2: p21, offsets -11 (and below) .. 9; 0 from 10 on.
+THESIS_P21 = (
+    -5.4028, -2.2993, -1.7025, -1.2979, -0.9722, -0.6836, -0.4341, -0.2476, -0.1083, 0.0051,
+    0.0719, 0.0995, 0.0877, 0.0564, 0.0242, -0.0077, -0.0215, -0.0213, -0.0149, -0.0068, 0.0034,
+)  # fmt: skip
+
+
+def delta_by_name(name: str) -> DeltaFamily:
+    """A Delta family with published values.
+
+    Names: ``"haehnel"`` (traditional OGM), and the thesis's optimised values (Table 2.1, 2.2):
+    ``"borenstein_koren_thesis"``, ``"moravec_thesis"``, ``"marshall_barfoot_thesis"``,
+    ``"stachniss_thesis"``, ``"elfes_thesis"``, ``"p21_thesis"``.
+    """
+    makers = {
+        "haehnel": Moravec.haehnel,
+        "borenstein_koren_thesis": lambda: BorensteinKoren(-0.2197),
+        "moravec_thesis": lambda: Moravec(0.9787, -0.7021),
+        "marshall_barfoot_thesis": lambda: MarshallBarfoot(0.7183, 2),
+        "stachniss_thesis": lambda: Stachniss(0.5115, -0.8135, 7.0),
+        "elfes_thesis": lambda: Elfes(2.9627, -12.9047),
+        "p21_thesis": lambda: PN(THESIS_P21),
+    }
+    try:
+        return makers[name]()
+    except KeyError:
+        raise ValueError(f"unknown Delta name {name!r}; known: {sorted(makers)}") from None

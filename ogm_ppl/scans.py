@@ -1,0 +1,156 @@
+"""Range scans: robot poses, beam angles, ranges and the sensor's maximum range.
+
+A scan is taken from one pose ``x_s = (x, y, yaw)`` with ``B`` beams at angles relative to the yaw.
+Per-reading poses (``x_n`` of Section 2.1) are scans of one beam. Readings are validated on
+construction: NaN, infinite or negative ranges, ranges over ``max_range`` (unless the caller asks for them
+to be read as max-range, "no return" readings), mismatched shapes and non-finite poses raise
+``ValueError`` naming the field and the first offending index.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+__all__ = ["Scans"]
+
+
+def _first_bad(mask: np.ndarray) -> tuple[int, ...]:
+    return tuple(int(i) for i in np.argwhere(mask)[0])
+
+
+@dataclass(frozen=True)
+class Scans:
+    """Validated range readings.
+
+    Args:
+        poses: ``S x 3`` array of ``(x, y, yaw)`` in metres and radians (a ``3`` vector for one scan).
+        angles: beam angles relative to the yaw, ``B`` (shared by all scans) or ``S x B``.
+        ranges: ``S x B`` ranges in metres (``B`` for one scan).
+        max_range: the sensor's maximum range in metres. A reading equal to it is a max-range reading.
+        over_range: ``"error"`` (default) rejects readings above ``max_range``; ``"max"`` reads them as
+            max-range readings.
+
+    Attributes:
+        is_max: ``S x B`` boolean, True where the reading is a max-range (no return) reading.
+
+    >>> s = Scans(poses=[0.0, 0.0, 0.0], angles=[0.0, np.pi / 2], ranges=[1.0, 4.0], max_range=4.0)
+    >>> s.num_readings, s.is_max.tolist()
+    (2, [[False, True]])
+    """
+
+    poses: np.ndarray
+    angles: np.ndarray
+    ranges: np.ndarray
+    max_range: float
+    over_range: str = "error"
+    is_max: np.ndarray = field(init=False)
+
+    def __post_init__(self) -> None:
+        poses = np.asarray(self.poses, dtype=float)
+        if poses.ndim == 1:
+            poses = poses[None, :]
+        if poses.ndim != 2 or poses.shape[1] != 3:
+            raise ValueError(f"Scans.poses must have shape S x 3 (x, y, yaw), got {poses.shape}")
+        S = poses.shape[0]
+        ranges = np.asarray(self.ranges, dtype=float)
+        if ranges.ndim == 1:
+            ranges = ranges[None, :] if S == 1 else ranges[:, None]
+        if ranges.ndim != 2 or ranges.shape[0] != S:
+            raise ValueError(
+                f"Scans.ranges must have shape S x B with S = {S} poses, got {np.shape(self.ranges)}"
+            )
+        B = ranges.shape[1]
+        angles = np.asarray(self.angles, dtype=float)
+        if angles.ndim == 0:
+            angles = angles[None]
+        if angles.ndim == 1:
+            if angles.shape[0] != B:
+                raise ValueError(
+                    f"Scans.angles has {angles.shape[0]} beams but Scans.ranges has {B} per scan"
+                )
+            angles = np.broadcast_to(angles, (S, B))
+        if angles.shape != (S, B):
+            raise ValueError(f"Scans.angles must have shape B or S x B = {(S, B)}, got {angles.shape}")
+        mr = float(self.max_range)
+        if not np.isfinite(mr) or mr <= 0:
+            raise ValueError(f"Scans.max_range must be a positive finite number, got {self.max_range!r}")
+        if self.over_range not in ("error", "max"):
+            raise ValueError(f"Scans.over_range must be 'error' or 'max', got {self.over_range!r}")
+        bad = ~np.isfinite(poses)
+        if bad.any():
+            raise ValueError(f"Scans.poses has a non-finite value at index {_first_bad(bad)}")
+        bad = ~np.isfinite(angles)
+        if bad.any():
+            raise ValueError(f"Scans.angles has a non-finite value at index {_first_bad(bad)}")
+        bad = np.isnan(ranges)
+        if bad.any():
+            raise ValueError(f"Scans.ranges is NaN at index {_first_bad(bad)}")
+        bad = np.isinf(ranges)
+        if bad.any():
+            raise ValueError(f"Scans.ranges is infinite at index {_first_bad(bad)}")
+        bad = ranges < 0
+        if bad.any():
+            i = _first_bad(bad)
+            raise ValueError(f"Scans.ranges is negative ({ranges[i]}) at index {i}")
+        over = ranges > mr
+        if over.any() and self.over_range == "error":
+            i = _first_bad(over)
+            raise ValueError(
+                f"Scans.ranges exceeds max_range = {mr} ({ranges[i]}) at index {i}; pass "
+                "over_range='max' to read such readings as max-range readings"
+            )
+        ranges = np.minimum(ranges, mr)
+        for name, value in (("poses", poses), ("angles", angles), ("ranges", ranges)):
+            value = np.ascontiguousarray(value)
+            value.setflags(write=False)
+            object.__setattr__(self, name, value)
+        is_max = ranges >= mr
+        is_max.setflags(write=False)
+        object.__setattr__(self, "max_range", mr)
+        object.__setattr__(self, "is_max", is_max)
+
+    @property
+    def num_scans(self) -> int:
+        """S."""
+        return self.ranges.shape[0]
+
+    @property
+    def beams_per_scan(self) -> int:
+        """B."""
+        return self.ranges.shape[1]
+
+    @property
+    def num_readings(self) -> int:
+        """N = S * B."""
+        return self.ranges.size
+
+    def world_angles(self) -> np.ndarray:
+        """Beam directions in the world frame, ``S x B`` (yaw + beam angle)."""
+        return self.poses[:, 2:3] + self.angles
+
+    @classmethod
+    def one_d(
+        cls,
+        ranges,
+        max_range: float,
+        position: float = 0.5,
+        direction: int = 1,
+        over_range: str = "error",
+    ) -> "Scans":
+        """Readings of a stationary robot on a 1D grid (Section 2.3.1): all from ``position`` (metres)
+        looking along ``+x`` (``direction=1``) or ``-x`` (``-1``). One scan per reading."""
+        if direction not in (1, -1):
+            raise ValueError(f"Scans.one_d direction must be 1 or -1, got {direction!r}")
+        ranges = np.atleast_1d(np.asarray(ranges, dtype=float))
+        n = ranges.shape[0]
+        yaw = 0.0 if direction == 1 else np.pi
+        poses = np.tile([position, 0.0, yaw], (n, 1))
+        return cls(
+            poses=poses,
+            angles=np.zeros(1),
+            ranges=ranges[:, None],
+            max_range=max_range,
+            over_range=over_range,
+        )

@@ -1,0 +1,168 @@
+"""Forward sensor models p(z_n | f_n) of a narrow-beam range sensor (Section 2.6).
+
+Units are cells along the ray (kappa units, Section 2.4): ``z`` is the reading, ``f`` the kappa of the
+first occupied cell, ``F`` the last kappa of the ray (the maximum range in kappa units). Two events are
+explicit:
+
+* **no occupied cell within the ray** (``f > F``; pass ``f = F + 1``): the beam has nothing to reflect
+  off inside the sensor's range;
+* **a max-range reading** (``is_max``): the sensor reported no return.
+
+Both models are normalised over the outcome space ``{hit at z} U {max-range}``; ``ogm_ppl.testing``
+checks it for any model.
+"""
+
+from __future__ import annotations
+
+import math
+
+import torch
+
+__all__ = ["SensorModel", "GaussianRange", "PatternMatch"]
+
+_LOG_SQRT_2PI = 0.5 * math.log(2 * math.pi)
+
+
+def _as_tensor(x, dtype=None) -> torch.Tensor:
+    if isinstance(x, torch.Tensor):
+        return x if dtype is None else x.to(dtype)
+    return torch.as_tensor(x, dtype=dtype if dtype is not None else torch.get_default_dtype())
+
+
+def _check_prob(name: str, value: float, open_right: bool = True) -> float:
+    value = float(value)
+    ok = 0.0 < value < 1.0 if open_right else 0.0 < value <= 1.0
+    if not ok:
+        raise ValueError(f"{name} must lie in (0, 1{')' if open_right else ']'}, got {value}")
+    return value
+
+
+class SensorModel:
+    """Base class: ``log_prob(z, f, F, is_max)`` -> ``log p(z | f)`` elementwise (broadcasting).
+
+    Args of ``log_prob``:
+        z: readings in kappa units (ignored where ``is_max``).
+        f: kappa of the first occupied cell; any value ``> F`` means none within the ray.
+        F: last kappa of the ray.
+        is_max: True where the reading is a max-range reading (default: none are).
+    """
+
+    def log_prob(self, z, f, F, is_max=None) -> torch.Tensor:  # pragma: no cover - interface
+        raise NotImplementedError
+
+    def sample(self, f, F, generator: torch.Generator | None = None):
+        """Draw readings given first-occupied cells: returns ``(z, is_max)``."""
+        raise NotImplementedError  # pragma: no cover - interface
+
+
+class GaussianRange(SensorModel):
+    r"""Gaussian noise about the first occupied cell, censored at the maximum range.
+
+    .. math::
+        p(z_n \mid f) = (1 - p_{rand})\,\mathcal{N}(z_n; f, \sigma^2) + \frac{p_{rand}}{F + 1}
+        \quad (z_n \le F + \tfrac12), \qquad
+        P(\text{max} \mid f) = (1 - p_{rand})\,\bigl(1 - \Phi(\tfrac{F + 1/2 - f}{\sigma})\bigr)
+
+    for ``f <= F``: a noisy range beyond the far edge of cell ``F`` is reported as max range. With no
+    occupied cell in the ray the reading is max range with probability ``1 - p_rand`` and a uniform
+    random hit on ``[-1/2, F + 1/2]`` otherwise. ``p_rand = 0`` (default) is the thesis's model
+    ``N(f, sigma^2)`` (Section 2.6); a hit then has zero likelihood under a map with nothing to reflect it.
+
+    >>> s = GaussianRange(3.0)
+    >>> round(float(s.log_prob(8.0, 8, 75)), 4)
+    -2.0176
+    """
+
+    def __init__(self, sigma: float, p_rand: float = 0.0) -> None:
+        sigma_t = _as_tensor(sigma)
+        if not torch.isfinite(sigma_t).all() or (sigma_t <= 0).any():
+            raise ValueError(f"GaussianRange.sigma must be positive and finite, got {sigma}")
+        if not 0.0 <= float(p_rand) < 1.0:
+            raise ValueError(f"GaussianRange.p_rand must lie in [0, 1), got {p_rand}")
+        self.sigma = sigma
+        self.p_rand = float(p_rand)
+
+    def __repr__(self) -> str:
+        return f"GaussianRange(sigma={float(self.sigma)}, p_rand={self.p_rand})"
+
+    def log_prob(self, z, f, F, is_max=None) -> torch.Tensor:
+        z = _as_tensor(z)
+        dtype = z.dtype
+        f = _as_tensor(f, dtype)
+        F = _as_tensor(F, dtype)
+        sigma = _as_tensor(self.sigma, dtype)
+        none = f > F
+        f_safe = torch.where(none, F, f)
+        log_n = -0.5 * ((z - f_safe) / sigma) ** 2 - torch.log(sigma) - _LOG_SQRT_2PI
+        log_tail = torch.special.log_ndtr((f_safe - F - 0.5) / sigma)  # log(1 - Phi((F+1/2-f)/sigma))
+        if self.p_rand > 0:
+            lr = math.log(self.p_rand) - torch.log(F + 1.0)
+            lk = math.log1p(-self.p_rand)
+            hit = torch.where(none, lr, torch.logaddexp(lk + log_n, lr))
+            mx = torch.where(none, torch.full_like(log_tail, lk), lk + log_tail)
+        else:
+            hit = torch.where(none, torch.full_like(log_n, -math.inf), log_n)
+            mx = torch.where(none, torch.zeros_like(log_tail), log_tail)
+        if is_max is None:
+            return hit
+        return torch.where(torch.as_tensor(is_max, dtype=torch.bool), mx, hit)
+
+    def sample(self, f, F, generator: torch.Generator | None = None):
+        f = _as_tensor(f)
+        F = _as_tensor(F, f.dtype).expand_as(f)
+        none = f > F
+        y = f + float(self.sigma) * torch.randn(f.shape, generator=generator, dtype=f.dtype)
+        if self.p_rand > 0:
+            rand = torch.rand(f.shape, generator=generator, dtype=f.dtype) < self.p_rand
+            u = -0.5 + (F + 1.0) * torch.rand(f.shape, generator=generator, dtype=f.dtype)
+            y = torch.where(rand, u, y)
+            none = none & ~rand
+        is_max = none | (y > F + 0.5)
+        return torch.where(is_max, F + 1.0, y), is_max
+
+
+class PatternMatch(SensorModel):
+    r"""The pattern-matching (piecewise-constant) sensor model of Section 2.6.
+
+    Readings are discrete outcomes: a hit at ``z in {0..F}`` or max range. The outcome that matches the
+    map (``z = f``, or max range when no cell in the ray is occupied) has probability ``p_occ``; the
+    other ``F + 1`` outcomes share ``1 - p_occ`` equally:
+
+    .. math:: p(z_n \mid f) = p_{occ} \text{ if } z_n = f, \quad (1 - p_{occ}) / (F + 1) \text{ otherwise.}
+
+    (The thesis counts ``F`` other outcomes because its rays start at ``kappa = 1``; ours include the
+    sensor's own cell ``kappa = 0``.)
+    """
+
+    def __init__(self, p_occ: float) -> None:
+        self.p_occ = _check_prob("PatternMatch.p_occ", p_occ, open_right=False)
+
+    def __repr__(self) -> str:
+        return f"PatternMatch(p_occ={self.p_occ})"
+
+    def log_prob(self, z, f, F, is_max=None) -> torch.Tensor:
+        z = _as_tensor(z)
+        dtype = z.dtype
+        f = _as_tensor(f, dtype)
+        F = _as_tensor(F, dtype)
+        none = f > F
+        if is_max is None:
+            is_max = torch.zeros(torch.broadcast_shapes(z.shape, f.shape), dtype=torch.bool)
+        is_max = torch.as_tensor(is_max, dtype=torch.bool)
+        match = torch.where(is_max, none, (~none) & (torch.round(z) == f))
+        other = torch.log1p(torch.tensor(-self.p_occ, dtype=dtype)) - torch.log(F + 1.0) \
+            if self.p_occ < 1 else torch.full_like(F, -math.inf)
+        return torch.where(match, torch.tensor(math.log(self.p_occ), dtype=dtype), other)
+
+    def sample(self, f, F, generator: torch.Generator | None = None):
+        f = _as_tensor(f)
+        F = _as_tensor(F, f.dtype).expand_as(f)
+        none = f > F
+        keep = torch.rand(f.shape, generator=generator, dtype=f.dtype) < self.p_occ
+        # an "other" outcome: uniform over the F + 1 outcomes that differ from the matching one
+        u = torch.floor(torch.rand(f.shape, generator=generator, dtype=f.dtype) * (F + 1.0))
+        truth = torch.where(none, F + 1.0, f)  # F + 1 encodes max range
+        other = torch.where(u >= truth, u + 1.0, u)
+        out = torch.where(keep, truth, other)
+        is_max = out > F
+        return torch.where(is_max, F + 1.0, out), is_max
