@@ -25,11 +25,11 @@ from functools import cached_property
 
 import numpy as np
 
-from ._raycast_kernels import transpose_csr, traverse_all
+from ._raycast_kernels import entry_positions, transpose_csr, traverse_all
 from .grid import Grid
 from .scans import Scans
 
-__all__ = ["Rays", "CellIndex", "raycast"]
+__all__ = ["Rays", "CellIndex", "RayInputs", "ray_inputs", "raycast"]
 
 
 @dataclass(frozen=True)
@@ -74,15 +74,18 @@ class Rays:
         return np.diff(self.offsets)
 
     @cached_property
+    def _entries(self) -> tuple[np.ndarray, np.ndarray]:
+        return entry_positions(self.offsets)
+
+    @property
     def kappa(self) -> np.ndarray:
         """Position of every entry along its ray (``nnz``, int64)."""
-        ray_of = np.repeat(np.arange(self.num_rays), self.lengths)
-        return np.arange(self.nnz, dtype=np.int64) - self.offsets[ray_of]
+        return self._entries[1]
 
-    @cached_property
+    @property
     def ray_of_entry(self) -> np.ndarray:
         """Ray of every entry (``nnz``, int64)."""
-        return np.repeat(np.arange(self.num_rays, dtype=np.int64), self.lengths)
+        return self._entries[0]
 
     def ray(self, r: int) -> np.ndarray:
         """Cells of ray ``r``, from the sensor outward."""
@@ -108,19 +111,30 @@ class Rays:
         return self.cells[self.offsets[rr] + self.z[rr]]
 
 
-def raycast(grid: Grid, scans: Scans) -> Rays:
-    """Traverse every reading of ``scans`` through ``grid`` (Amanatides-Woo, exact).
+@dataclass(frozen=True)
+class RayInputs:
+    """Per-ray start, direction, length and reading in continuous cell units (validated)."""
 
-    Rays are cut at ``scans.max_range`` (cells entered at a distance ``< max_range``) and at the grid edge.
+    u0: np.ndarray
+    v0: np.ndarray
+    du: np.ndarray
+    dv: np.ndarray
+    length: np.ndarray
+    range_cells: np.ndarray
+    is_max: np.ndarray
+
+    def capacity(self) -> int:
+        """Upper bound on the cells of any ray (also on the kappa of any reading)."""
+        L = self.length.max(initial=0.0)
+        return int(np.floor(L * np.abs(self.du)).max(initial=0) + np.floor(L * np.abs(self.dv)).max(initial=0)) + 3
+
+
+def ray_inputs(grid: Grid, scans: Scans) -> RayInputs:
+    """Check the poses against ``grid`` and express every reading's ray in cell units.
 
     Raises:
         ValueError: a pose outside the grid (names the scan index), or a 1D grid with a beam that is not
             along the row.
-
-    >>> from ogm_ppl import Grid, Scans
-    >>> rays = raycast(Grid.line(10), Scans.one_d([3.0, 5.0], max_range=5.0))
-    >>> rays.ray(0).tolist(), int(rays.z[0]), bool(rays.is_max[1])
-    ([0, 1, 2, 3, 4, 5], 3, True)
     """
     xy = scans.poses[:, :2]
     inside = grid.contains(xy)
@@ -146,16 +160,37 @@ def raycast(grid: Grid, scans: Scans) -> Rays:
             )
         dv = np.zeros_like(dv)
         du = np.sign(du)
-    S, B = scans.ranges.shape
+    B = scans.beams_per_scan
     uv = grid.world_to_continuous(xy)
-    u0 = np.repeat(uv[:, 0], B)
-    v0 = np.repeat(uv[:, 1], B)
-    res = grid.resolution
-    range_cells = scans.ranges.ravel() / res
-    length = np.full(S * B, scans.max_range / res)
-    is_max = np.ascontiguousarray(scans.is_max.ravel())
+    n = scans.num_readings
+    return RayInputs(
+        u0=np.repeat(uv[:, 0], B),
+        v0=np.repeat(uv[:, 1], B),
+        du=du,
+        dv=dv,
+        length=np.full(n, scans.max_range / grid.resolution),
+        range_cells=scans.ranges.ravel() / grid.resolution,
+        is_max=np.ascontiguousarray(scans.is_max.ravel()),
+    )
+
+
+def raycast(grid: Grid, scans: Scans) -> Rays:
+    """Traverse every reading of ``scans`` through ``grid`` (Amanatides-Woo, exact).
+
+    Rays are cut at ``scans.max_range`` (cells entered at a distance ``< max_range``) and at the grid edge.
+
+    Raises:
+        ValueError: a pose outside the grid (names the scan index), or a 1D grid with a beam that is not
+            along the row.
+
+    >>> from ogm_ppl import Grid, Scans
+    >>> rays = raycast(Grid.line(10), Scans.one_d([3.0, 5.0], max_range=5.0))
+    >>> rays.ray(0).tolist(), int(rays.z[0]), bool(rays.is_max[1])
+    ([0, 1, 2, 3, 4, 5], 3, True)
+    """
+    ri = ray_inputs(grid, scans)
     offsets, cells, t_enter, z, in_grid = traverse_all(
-        u0, v0, du, dv, length, range_cells, is_max, grid.rows, grid.cols
+        ri.u0, ri.v0, ri.du, ri.dv, ri.length, ri.range_cells, ri.is_max, grid.rows, grid.cols
     )
     return Rays(
         grid=grid,
@@ -163,7 +198,7 @@ def raycast(grid: Grid, scans: Scans) -> Rays:
         cells=cells,
         t_enter=t_enter,
         z=z,
-        is_max=is_max,
+        is_max=ri.is_max,
         endpoint_in_grid=in_grid,
-        range_cells=range_cells,
+        range_cells=ri.range_cells,
     )

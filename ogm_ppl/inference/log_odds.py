@@ -21,10 +21,11 @@ import torch
 
 from ..grid import Grid
 from ..models.delta import DeltaFamily
-from ..raycast import Rays
-from ._ogm_kernels import evidence_update
+from ..raycast import Rays, ray_inputs
+from ..scans import Scans
+from ._ogm_kernels import evidence_from_scans, evidence_update
 
-__all__ = ["LogOddsMap", "evidence_grid", "delta_table_for", "OCTOMAP_CLAMP"]
+__all__ = ["LogOddsMap", "evidence_grid", "evidence_grid_from_scans", "delta_table_for", "OCTOMAP_CLAMP"]
 
 #: OctoMap's default clamping thresholds in log-odds (probabilities 0.1192 and 0.971).
 OCTOMAP_CLAMP = (-2.0, 3.5)
@@ -72,6 +73,15 @@ def _logit(p: float) -> float:
     return float(np.log(p) - np.log1p(-p))
 
 
+def _check_clamp(clamp, l0: float):
+    if clamp is None:
+        return -np.inf, np.inf
+    lo, hi = float(clamp[0]), float(clamp[1])
+    if not lo < l0 < hi:
+        raise ValueError(f"clamp {tuple(clamp)} must contain the prior log-odds {l0:.4f}")
+    return lo, hi
+
+
 def evidence_grid(
     rays: Rays,
     delta: DeltaFamily,
@@ -98,10 +108,7 @@ def evidence_grid(
     """
     l0 = _logit(prior)
     K = rays.grid.num_cells
-    if clamp is not None:
-        lo, hi = float(clamp[0]), float(clamp[1])
-        if not lo < l0 < hi:
-            raise ValueError(f"clamp {clamp} must contain the prior log-odds {l0:.4f}")
+    lo, hi = _check_clamp(clamp, l0)
     if differentiable:
         if clamp is not None:
             raise ValueError("clamping is sequential and not differentiable; pass clamp=None")
@@ -118,9 +125,35 @@ def evidence_grid(
         table, max_col = delta_table_for(rays, delta)
     ev = np.full(K, l0, dtype=np.float64)
     touched = np.zeros(K, dtype=np.bool_)
-    lo, hi = (clamp if clamp is not None else (-np.inf, np.inf))
     evidence_update(
         ev, touched, rays.offsets, rays.cells, rays.z, rays.is_max,
         np.ascontiguousarray(table.numpy()), max_col, float(lo), float(hi), clamp is not None,
     )  # fmt: skip
     return LogOddsMap(rays.grid, torch.from_numpy(ev), torch.from_numpy(touched))
+
+
+def evidence_grid_from_scans(
+    grid: Grid,
+    scans: Scans,
+    delta: DeltaFamily,
+    prior: float = 0.5,
+    clamp: tuple[float, float] | None = None,
+) -> LogOddsMap:
+    """Traditional OGM straight from scans: traversal and update fused in one compiled pass.
+
+    Gives the numbers of ``evidence_grid(raycast(grid, scans), delta, ...)`` without building the
+    ray -> cells structure: the fast path for large maps when only the evidence grid is wanted.
+    """
+    l0 = _logit(prior)
+    lo, hi = _check_clamp(clamp, l0)
+    ri = ray_inputs(grid, scans)
+    cap = ri.capacity()
+    with torch.no_grad():
+        table = np.ascontiguousarray(delta.table(cap, cap).numpy())
+    ev = np.full(grid.num_cells, l0, dtype=np.float64)
+    touched = np.zeros(grid.num_cells, dtype=np.bool_)
+    evidence_from_scans(
+        ri.u0, ri.v0, ri.du, ri.dv, ri.length, ri.range_cells, ri.is_max, grid.rows, grid.cols,
+        ev, touched, table, cap, lo, hi, clamp is not None,
+    )  # fmt: skip
+    return LogOddsMap(grid, torch.from_numpy(ev), torch.from_numpy(touched))

@@ -151,10 +151,17 @@ class Elfes(DeltaFamily):
     with ``p(z | f) = N(f, sigma^2)`` (:class:`~ogm_ppl.sensors.GaussianRange`, censored at the ray's
     end for max-range readings) and ``p(f | m_kappa)`` from independent cells of prior ``prior`` along a
     ray of ``n_kappa`` cells (Section 2.5). Depends on ``kappa`` and ``z`` separately, not only on
-    ``kappa - z``.
+    ``kappa - z``. ``max_kappa`` fixes the ray's last kappa ``F`` (the sensor's range in kappa units,
+    75 in the thesis's 1D setting); by default it is the table's last row.
     """
 
-    def __init__(self, sigma: float = 3.0, l_min: float = -12.9047, prior: float = 0.5) -> None:
+    def __init__(
+        self,
+        sigma: float = 3.0,
+        l_min: float = -12.9047,
+        prior: float = 0.5,
+        max_kappa: int | None = None,
+    ) -> None:
         super().__init__()
         if not sigma > 0:
             raise ValueError(f"Elfes.sigma must be positive, got {sigma!r}")
@@ -163,9 +170,12 @@ class Elfes(DeltaFamily):
         self.sigma = _param(sigma)
         self.l_min = _param(l_min)
         self.prior = float(prior)
+        self.max_kappa = None if max_kappa is None else int(max_kappa)
 
     def table(self, n_kappa: int, n_z: int) -> torch.Tensor:
-        F = n_kappa - 1
+        F = n_kappa - 1 if self.max_kappa is None else self.max_kappa
+        out_rows = n_kappa
+        n_kappa = F + 1
         dt = torch.float64
         lam = self.prior
         j = torch.arange(n_kappa + 1, dtype=dt)  # f = 0..F, and F + 1 = none
@@ -185,7 +195,10 @@ class Elfes(DeltaFamily):
         lz = sensor.log_prob(zz, j[None, :], torch.tensor(float(F), dtype=dt), is_max)  # (n_z+1, F+2)
         num = torch.logsumexp(lp1[:, None, :] + lz[None, :, :], dim=-1)
         den = torch.logsumexp(lp0[:, None, :] + lz[None, :, :], dim=-1)
-        return torch.maximum(num - den, self.l_min)
+        table = torch.maximum(num - den, self.l_min)
+        if out_rows > n_kappa:  # rows past the sensor's range: no information
+            table = torch.cat([table, table.new_zeros(out_rows - n_kappa, n_z + 1)])
+        return table[:out_rows]
 
     def delta(self, d):  # pragma: no cover - Elfes is not a function of d alone
         raise TypeError("Elfes depends on kappa and z separately; use table()")

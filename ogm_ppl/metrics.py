@@ -1,0 +1,165 @@
+r"""Comparing occupancy grids: KL divergence, cross-entropy (Section 2.5), precision / recall / F1
+against a binary map, masks (Fig. 6.16b), and ROC AUC.
+
+For two grids of cell probabilities ``p`` (the benchmark) and ``q`` (the estimate), per cell
+
+.. math::
+    D_{KL}(p_k \| q_k) = \sum_{m_k \in \{0,1\}} p(m_k) \log \frac{p(m_k)}{q(m_k)}, \qquad
+    H(p_k, q_k) = -\sum_{m_k} p(m_k) \log q(m_k),
+
+and the map-level values are sums over cells. All functions accept numpy arrays or torch tensors; the
+KL and cross-entropy functions return torch tensors (differentiable in ``q``), the detection metrics
+numpy values.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import torch
+
+__all__ = [
+    "kl_per_cell",
+    "kl_divergence",
+    "cross_entropy_per_cell",
+    "cross_entropy",
+    "PRCurve",
+    "precision_recall",
+    "best_f1",
+    "roc_auc",
+    "near_mapped_mask",
+]
+
+
+def _prob(x, name: str) -> torch.Tensor:
+    t = x if isinstance(x, torch.Tensor) else torch.as_tensor(np.asarray(x, dtype=float))
+    t = t.to(torch.float64)
+    if torch.isnan(t).any():
+        raise ValueError(f"{name} contains NaN at index {int(torch.isnan(t).nonzero()[0, 0])}")
+    bad = (t < 0) | (t > 1)
+    if bad.any():
+        i = int(bad.flatten().nonzero()[0, 0])
+        raise ValueError(f"{name} must hold probabilities in [0, 1]; index {i} is {float(t.flatten()[i])}")
+    return t
+
+
+def _xlogy(x: torch.Tensor, y: torch.Tensor) -> torch.Tensor:
+    return torch.special.xlogy(x, y)
+
+
+def cross_entropy_per_cell(p, q) -> torch.Tensor:
+    """``H(p_k, q_k)`` in nats, elementwise (``0 log 0 = 0``; infinite where q rules out p's mass)."""
+    p, q = _prob(p, "p"), _prob(q, "q")
+    return -(_xlogy(p, q) + _xlogy(1 - p, 1 - q))
+
+
+def kl_per_cell(p, q) -> torch.Tensor:
+    """``D_KL(p_k || q_k)`` in nats, elementwise."""
+    p, q = _prob(p, "p"), _prob(q, "q")
+    return _xlogy(p, p) + _xlogy(1 - p, 1 - p) - _xlogy(p, q) - _xlogy(1 - p, 1 - q)
+
+
+def _masked_sum(x: torch.Tensor, mask) -> torch.Tensor:
+    if mask is None:
+        return x.sum()
+    m = torch.as_tensor(np.asarray(mask, dtype=bool)).reshape(x.shape)
+    return x[m].sum()
+
+
+def cross_entropy(p, q, mask=None) -> torch.Tensor:
+    """Summed cross-entropy ``H(p, q) = sum_k H(p_k, q_k)`` over the (optionally masked) cells."""
+    return _masked_sum(cross_entropy_per_cell(p, q), mask)
+
+
+def kl_divergence(p, q, mask=None) -> torch.Tensor:
+    """Summed ``D_KL(p || q) = sum_k D_KL(p_k || q_k)`` over the (optionally masked) cells."""
+    return _masked_sum(kl_per_cell(p, q), mask)
+
+
+@dataclass(frozen=True)
+class PRCurve:
+    """Precision, recall and F1 at each threshold (a cell is called occupied when ``p > threshold``)."""
+
+    thresholds: np.ndarray
+    precision: np.ndarray
+    recall: np.ndarray
+    f1: np.ndarray
+    tp: np.ndarray
+    fp: np.ndarray
+    fn: np.ndarray
+
+
+def _flat(estimate, truth, mask):
+    est = np.asarray(
+        estimate.detach().cpu().numpy() if isinstance(estimate, torch.Tensor) else estimate,
+        dtype=float,
+    ).ravel()
+    tru = np.asarray(truth, dtype=bool).ravel()
+    if est.shape != tru.shape:
+        raise ValueError(f"estimate has {est.size} cells but truth has {tru.size}")
+    if mask is not None:
+        m = np.asarray(mask, dtype=bool).ravel()
+        if m.shape != tru.shape:
+            raise ValueError(f"mask has {m.size} cells but truth has {tru.size}")
+        est, tru = est[m], tru[m]
+    if np.isnan(est).any():
+        raise ValueError(f"estimate contains NaN at (masked) index {int(np.flatnonzero(np.isnan(est))[0])}")
+    return est, tru
+
+
+def precision_recall(estimate, truth, thresholds=None, mask=None) -> PRCurve:
+    """Precision, recall and F1 of ``estimate > t`` against the binary ``truth`` for every ``t``.
+
+    Args:
+        estimate: cell probabilities; truth: binary map of the same size.
+        thresholds: default 0.01..0.99 in steps of 0.01.
+        mask: boolean, cells to score (e.g. :func:`near_mapped_mask`).
+
+    Precision is 1 where nothing is called occupied (no false positives); F1 is 0 where precision
+    and recall are both 0.
+    """
+    est, tru = _flat(estimate, truth, mask)
+    thr = np.linspace(0.01, 0.99, 99) if thresholds is None else np.atleast_1d(np.asarray(thresholds, float))
+    called = est[None, :] > thr[:, None]
+    tp = (called & tru).sum(1)
+    fp = (called & ~tru).sum(1)
+    fn = (~called & tru).sum(1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        prec = np.where(tp + fp > 0, tp / np.maximum(tp + fp, 1), 1.0)
+        rec = np.where(tp + fn > 0, tp / np.maximum(tp + fn, 1), 0.0)
+        f1 = np.where(prec + rec > 0, 2 * prec * rec / (prec + rec), 0.0)
+    return PRCurve(thr, prec, rec, f1, tp, fp, fn)
+
+
+def best_f1(estimate, truth, thresholds=None, mask=None) -> tuple[float, float]:
+    """``(best F1, its threshold)`` over ``thresholds`` (the first best on ties)."""
+    c = precision_recall(estimate, truth, thresholds, mask)
+    i = int(np.argmax(c.f1))
+    return float(c.f1[i]), float(c.thresholds[i])
+
+
+def roc_auc(estimate, truth, mask=None) -> float:
+    """Area under the ROC curve: the probability that a random occupied cell scores higher than a
+    random free one (ties count one half); the Mann-Whitney statistic, exact."""
+    from scipy.stats import rankdata
+
+    est, tru = _flat(estimate, truth, mask)
+    n1, n0 = int(tru.sum()), int((~tru).sum())
+    if n1 == 0 or n0 == 0:
+        raise ValueError("roc_auc needs both occupied and free cells in truth (after masking)")
+    ranks = rankdata(est)
+    return float((ranks[tru].sum() - n1 * (n1 + 1) / 2) / (n1 * n0))
+
+
+def near_mapped_mask(mapped, distance: float = 10.0) -> np.ndarray:
+    """Cells within ``distance`` cells (Euclidean, centre to centre) of a mapped cell (Fig. 6.16b).
+
+    ``mapped`` is a boolean map of the grid's shape (e.g. ``LogOddsMap.observed`` reshaped).
+    """
+    from scipy.ndimage import distance_transform_edt
+
+    mapped = np.asarray(mapped, dtype=bool)
+    if not mapped.any():
+        return np.zeros_like(mapped)
+    return distance_transform_edt(~mapped) <= distance

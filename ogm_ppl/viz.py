@@ -1,0 +1,103 @@
+"""Pictures a researcher expects: 2D maps on the thesis colour scale, 1D marginal bars, P-R curves.
+
+The colour scale of Fig. 1.10g runs white -> yellow -> red -> black for ``p = 0 -> 1`` (darker is more
+likely occupied); a cell at the prior 0.5 is red-orange. Matplotlib is imported lazily (Agg backend
+when no display is set) so that importing :mod:`ogm_ppl` never needs a screen.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+
+import numpy as np
+
+__all__ = ["thesis_cmap", "plot_map", "plot_marginals_1d", "plot_pr_curve"]
+
+
+def _plt():
+    import matplotlib
+
+    if matplotlib.get_backend().lower() not in ("agg", "module://matplotlib_inline.backend_inline"):
+        try:
+            import os
+
+            if not os.environ.get("DISPLAY"):
+                matplotlib.use("Agg")
+        except Exception:  # pragma: no cover
+            pass
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def thesis_cmap():
+    """The white-yellow-red-black occupancy colour map of Fig. 1.10g."""
+    from matplotlib.colors import LinearSegmentedColormap
+
+    return LinearSegmentedColormap.from_list(
+        "ogm_thesis", [(0.0, "white"), (1 / 3, "yellow"), (2 / 3, "red"), (1.0, "black")]
+    )
+
+
+def plot_map(probabilities, grid=None, ax=None, title: str | None = None, poses=None, colorbar=True):
+    """Show a 2D occupancy grid (probabilities, shape ``grid.shape`` or ``K``) on the thesis scale.
+
+    NaN cells (e.g. unknown, see :meth:`LogOddsMap.image`) are drawn light grey. Rows grow upwards (y).
+    """
+    plt = _plt()
+    p = np.asarray(probabilities, dtype=float)
+    if grid is not None:
+        p = p.reshape(grid.shape)
+    if ax is None:
+        _, ax = plt.subplots(figsize=(4, 4))
+    cmap = thesis_cmap().copy()
+    cmap.set_bad("#d9d9d9")
+    extent = grid.extent if grid is not None else None
+    im = ax.imshow(np.ma.masked_invalid(p), cmap=cmap, vmin=0, vmax=1, origin="lower",
+                   extent=extent, interpolation="nearest")  # fmt: skip
+    if poses is not None:
+        poses = np.atleast_2d(poses)
+        ax.plot(poses[:, 0], poses[:, 1], "o", color="tab:blue", ms=5)
+    if title:
+        ax.set_title(title, fontsize=9)
+    ax.set_xticks([])
+    ax.set_yticks([])
+    if colorbar:
+        ax.figure.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="p(m_k = 1 | z)")
+    return ax
+
+
+def plot_marginals_1d(series: Mapping[str, np.ndarray], ax=None, cells=None, title: str | None = None):
+    """Grouped bars of 1D marginals ``p(m_k | z)`` for several algorithms (Fig. 2.1 style)."""
+    plt = _plt()
+    if ax is None:
+        _, ax = plt.subplots(figsize=(8, 3))
+    names = list(series)
+    K = len(next(iter(series.values())))
+    k = np.arange(K) if cells is None else np.asarray(cells)
+    width = 0.8 / max(len(names), 1)
+    for i, name in enumerate(names):
+        ax.bar(k + (i - (len(names) - 1) / 2) * width, np.asarray(series[name])[: len(k)], width,
+               label=name)  # fmt: skip
+    ax.set_xlabel("cell k")
+    ax.set_ylabel("p(m_k = 1 | z)")
+    ax.set_ylim(0, 1)
+    ax.legend(fontsize=7, ncol=min(len(names), 4))
+    if title:
+        ax.set_title(title, fontsize=9)
+    return ax
+
+
+def plot_pr_curve(curves: Mapping[str, tuple[np.ndarray, np.ndarray]], ax=None):
+    """Precision-recall curves: ``{name: (recall, precision)}``."""
+    plt = _plt()
+    if ax is None:
+        _, ax = plt.subplots(figsize=(4, 4))
+    for name, (rec, prec) in curves.items():
+        ax.plot(rec, prec, label=name)
+    ax.set_xlabel("recall")
+    ax.set_ylabel("precision")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1.02)
+    ax.legend(fontsize=7)
+    return ax
