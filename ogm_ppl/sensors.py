@@ -65,7 +65,7 @@ class GaussianRange(SensorModel):
 
     for ``f <= F``: a noisy range beyond the far edge of cell ``F`` is reported as max range. With no
     occupied cell in the ray the reading is max range with probability ``1 - p_rand`` and a uniform
-    random hit on ``[-1/2, F + 1/2]`` otherwise. ``p_rand = 0`` (default) is the thesis's model
+    random hit on ``[-1/2, F + 1/2]`` otherwise (the ``p_rand`` term lives on that interval only). ``p_rand = 0`` (default) is the thesis's model
     ``N(f, sigma^2)`` (Section 2.6); a hit then has zero likelihood under a map with nothing to reflect it.
 
     >>> s = GaussianRange(3.0)
@@ -95,14 +95,17 @@ class GaussianRange(SensorModel):
         f_safe = torch.where(none, F, f)
         log_n = -0.5 * ((z - f_safe) / sigma) ** 2 - torch.log(sigma) - _LOG_SQRT_2PI
         log_tail = torch.special.log_ndtr((f_safe - F - 0.5) / sigma)  # log(1 - Phi((F+1/2-f)/sigma))
+        beyond = z > F + 0.5  # such a noisy range is reported as max range, never as a hit
         if self.p_rand > 0:
-            lr = math.log(self.p_rand) - torch.log(F + 1.0)
+            in_support = (z >= -0.5) & ~beyond
+            lr = torch.where(in_support, math.log(self.p_rand) - torch.log(F + 1.0), -math.inf)
             lk = math.log1p(-self.p_rand)
             hit = torch.where(none, lr, torch.logaddexp(lk + log_n, lr))
             mx = torch.where(none, torch.full_like(log_tail, lk), lk + log_tail)
         else:
             hit = torch.where(none, torch.full_like(log_n, -math.inf), log_n)
             mx = torch.where(none, torch.zeros_like(log_tail), log_tail)
+        hit = torch.where(beyond, -math.inf, hit)
         if is_max is None:
             return hit
         return torch.where(torch.as_tensor(is_max, dtype=torch.bool), mx, hit)

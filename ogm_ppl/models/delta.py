@@ -60,6 +60,10 @@ class DeltaFamily(nn.Module):
         mx = self.far().expand(n_kappa, 1)
         return torch.cat([hits, mx], dim=1)
 
+    def forward(self, n_kappa: int, n_z: int) -> torch.Tensor:
+        """Same as :meth:`table` (so that ``torch.func.functional_call`` works on a family)."""
+        return self.table(n_kappa, n_z)
+
     def extra_repr(self) -> str:
         return ", ".join(f"{k}={v.item():.4f}" for k, v in self.named_parameters())
 
@@ -188,7 +192,8 @@ class Elfes(DeltaFamily):
         # m_kappa = 0: f != kappa; cells past kappa lose one log(1 - lam) factor
         lp0 = torch.where(j < kap, base, torch.where(j == kap, ninf, base - log_1l))
         sensor = GaussianRange(self.sigma.abs() + 1e-12)
-        z = torch.arange(n_z, dtype=dt)
+        # readings past the range (z > F) cannot occur: computed at z = F, then given no information
+        z = torch.arange(n_z, dtype=dt).clamp(max=F)
         zz = torch.cat([z, torch.tensor([F + 1.0], dtype=dt)])[:, None]  # n_z + 1 readings
         is_max = torch.zeros(n_z + 1, 1, dtype=torch.bool)
         is_max[-1] = True
@@ -196,6 +201,8 @@ class Elfes(DeltaFamily):
         num = torch.logsumexp(lp1[:, None, :] + lz[None, :, :], dim=-1)
         den = torch.logsumexp(lp0[:, None, :] + lz[None, :, :], dim=-1)
         table = torch.maximum(num - den, self.l_min)
+        if n_z > F + 1:
+            table = torch.cat([table[:, : F + 1], table.new_zeros(n_kappa, n_z - F - 1), table[:, -1:]], 1)
         if out_rows > n_kappa:  # rows past the sensor's range: no information
             table = torch.cat([table, table.new_zeros(out_rows - n_kappa, n_z + 1)])
         return table[:out_rows]

@@ -1,0 +1,108 @@
+import itertools
+import math
+
+import pytest
+import torch
+
+from ogm_ppl import GaussianRange
+from ogm_ppl.models import PN, BorensteinKoren, Elfes, MarshallBarfoot, Moravec, Stachniss, delta_by_name
+from ogm_ppl.models.delta import THESIS_P21
+
+D = torch.arange(-30, 31, dtype=torch.float64)
+
+
+def test_moravec_is_p2_and_haehnel_values():
+    m = Moravec(0.9787, -0.7021)
+    torch.testing.assert_close(m.delta(D), PN([-0.7021, 0.9787]).delta(D))
+    h = Moravec.haehnel()
+    assert h.l_occ.item() == pytest.approx(1.3863, abs=1e-4) and h.l_free.item() == -h.l_occ.item()
+
+
+def test_pn_layout_matches_table_2_2():
+    p = PN(THESIS_P21)
+    assert p.lo == -11
+    vals = p.delta(D)
+    by_d = dict(zip(D.long().tolist(), vals.tolist()))
+    assert by_d[-30] == by_d[-11] == -5.4028
+    assert by_d[0] == 0.0995 and by_d[9] == 0.0034 and by_d[10] == 0.0 and by_d[30] == 0.0
+    assert PN([0.3]).delta(torch.tensor([-5.0, -1.0, 0.0])).tolist() == [0.3, 0.3, 0.0]  # p1: free only
+
+
+def test_simple_families():
+    assert BorensteinKoren(0.7).delta(torch.tensor([-2.0, 0.0, 1.0])).tolist() == [0.0, 0.7, 0.0]
+    mb = MarshallBarfoot(0.5, beta=2).delta(torch.tensor([-3.0, -1.0, 0.0, 1.0, 2.0]))
+    assert mb.tolist() == [-0.5, -0.5, 0.5, 0.5, 0.0]
+    with pytest.raises(ValueError, match="beta"):
+        MarshallBarfoot(0.5, beta=0)
+    st = Stachniss(1.0, -0.6, 4.0).delta(torch.tensor([-3.0, -2.0, -1.0, 0.0, 1.0, 2.0, 3.0]))
+    torch.testing.assert_close(st, torch.tensor([-0.6, -0.6, 0.2, 1.0, 0.5, 0.0, 0.0]))
+    torch.testing.assert_close(Stachniss(1.0, -0.6, 1e-3).delta(D), Moravec(1.0, -0.6).delta(D))
+
+
+def test_max_range_column_is_the_free_value():
+    for d in (Moravec.haehnel(), PN(THESIS_P21), MarshallBarfoot(0.7, 2), BorensteinKoren(0.2)):
+        t = d.table(10, 12)
+        assert t.shape == (10, 13)
+        assert torch.all(t[:, -1] == d.delta(torch.tensor([-1e9]))[0])
+
+
+def brute_force_update(F, lam, sigma, z, is_max):
+    """Log-odds update of every cell from one reading, by enumerating all 2^(F+1) maps."""
+    s = GaussianRange(sigma)
+    num = torch.full((F + 1,), -math.inf)
+    den = torch.full((F + 1,), -math.inf)
+    for m in itertools.product([0, 1], repeat=F + 1):
+        f = m.index(1) if 1 in m else F + 1
+        lp = sum(math.log(lam) if c else math.log1p(-lam) for c in m)
+        lp = torch.tensor(lp) + s.log_prob(torch.tensor(float(z)), f, F, is_max=is_max)
+        occ = torch.tensor(m, dtype=torch.bool)
+        num = torch.where(occ, torch.logaddexp(num, lp), num)
+        den = torch.where(occ, den, torch.logaddexp(den, lp))
+    return num - den - (math.log(lam) - math.log1p(-lam))
+
+
+@pytest.mark.parametrize("lam", [0.5, 0.3])
+def test_elfes_is_the_exact_single_reading_update(lam):
+    F, sigma = 7, 1.7
+    table = Elfes(sigma, l_min=-1e9, prior=lam).table(F + 1, F + 1)
+    for z in (0, 3, 7):
+        torch.testing.assert_close(table[:, z], brute_force_update(F, lam, sigma, z, False))
+    torch.testing.assert_close(table[:, -1], brute_force_update(F, lam, sigma, 0, True))
+
+
+def test_elfes_floor_and_fixed_range():
+    e = Elfes(2.9627, -12.9047, max_kappa=75)
+    t = e.table(80, 78)
+    assert t.shape == (80, 79) and t.min().item() == pytest.approx(-12.9047)
+    assert torch.all(t[76:] == 0)  # beyond the sensor's range: no information
+    torch.testing.assert_close(t[:76], Elfes(2.9627, -12.9047).table(76, 78))
+
+
+@pytest.mark.parametrize(
+    "family",
+    [lambda: Stachniss(0.5, -0.8, 6.3), lambda: Elfes(2.0, -3.0), lambda: PN(torch.randn(7)),
+     lambda: Moravec(0.3, -0.2), lambda: MarshallBarfoot(0.4, 2), lambda: BorensteinKoren(0.3)],
+)  # fmt: skip
+def test_tables_have_correct_gradients(family):
+    fam = family()
+    names = [n for n, _ in fam.named_parameters()]
+    inputs = tuple(p.detach().clone().requires_grad_(True) for p in fam.parameters())
+
+    def table(*values):
+        return torch.func.functional_call(fam, dict(zip(names, values)), (12, 14))
+
+    assert torch.autograd.gradcheck(table, inputs)
+
+
+def test_delta_by_name():
+    for name in ("haehnel", "moravec_thesis", "p21_thesis", "elfes_thesis", "stachniss_thesis",
+                 "marshall_barfoot_thesis", "borenstein_koren_thesis"):  # fmt: skip
+        assert delta_by_name(name).table(5, 5).isfinite().all()
+    with pytest.raises(ValueError, match="unknown Delta name"):
+        delta_by_name("nope")
+
+
+@pytest.mark.parametrize("kw", [dict(sigma=0.0), dict(prior=1.0), dict(prior=0.0)])
+def test_elfes_bad_parameters(kw):
+    with pytest.raises(ValueError):
+        Elfes(**kw)
