@@ -84,6 +84,7 @@ def test_clamping_is_sequential_per_update():
     d = Moravec(2.2, -0.9)
     got = evidence_grid(rays, d, clamp=OCTOMAP_CLAMP).log_odds.numpy()
     table, max_col = delta_table_for(rays, d)
+    table = table.detach()
     ev = np.zeros(grid.num_cells)
     for r in range(rays.num_rays):
         col = max_col if rays.is_max[r] else rays.z[r]
