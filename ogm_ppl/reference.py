@@ -98,49 +98,51 @@ def evidence_grid_reference(
 
 
 def evidence_grid_numpy(
-    grid: Grid, scans: Scans, l_occ: float, l_free: float, prior: float = 0.5, chunk: int = 4096
+    grid: Grid, scans: Scans, l_occ: float, l_free: float, prior: float = 0.5
 ) -> np.ndarray:
     """Moravec/Hähnel traditional OGM, batched and vectorised in numpy (traversal included).
 
-    Every ray's column and row crossings are computed as one array, sorted per ray (column first on
-    ties), turned into cells by cumulative steps, cut at the grid edge and max range, and the updates
-    summed with ``np.bincount``.
+    A batched DDA: all rays advance one cell per step together (vector operations over the rays still
+    inside the grid and range), the visited cells and their update terms are collected per step and
+    summed once with ``np.bincount``. Same crossing formula and tie rule as the compiled kernel.
     """
     u0, v0, du, dv, rng, is_max, L = _rays_of(grid, scans)
-    ev = np.zeros(grid.num_cells)
     rows, cols = grid.rows, grid.cols
+    col = np.floor(u0).astype(np.int64)
+    row = np.floor(v0).astype(np.int64)
+    sx = np.sign(du).astype(np.int64)
+    sy = np.sign(dv).astype(np.int64)
+    bx = np.where(du > 0, col + 1.0, col.astype(float))
+    by = np.where(dv > 0, row + 1.0, row.astype(float))
     with np.errstate(divide="ignore", invalid="ignore"):
-        for a in range(0, len(u0), chunk):
-            s = slice(a, a + chunk)
-            parts, steps = [], []
-            for p0, d in ((u0[s], du[s]), (v0[s], dv[s])):
-                n = int(np.floor(L * np.abs(d)).max()) + 2
-                c0 = np.floor(p0)
-                sgn = np.sign(d)
-                first = np.where(d > 0, c0 + 1, c0)
-                b = first[:, None] + sgn[:, None] * np.arange(n)[None, :]
-                t = (b - p0[:, None]) / d[:, None]
-                t[~np.isfinite(t) | (t >= L)] = np.inf
-                parts.append(t)
-                steps.append(np.broadcast_to(sgn[:, None], t.shape))
-            t = np.concatenate(parts, axis=1)
-            is_y = np.concatenate([np.zeros(parts[0].shape), np.ones(parts[1].shape)], axis=1)
-            order = np.argsort(t, axis=1, kind="stable")
-            t = np.take_along_axis(t, order, 1)
-            is_y = np.take_along_axis(is_y, order, 1).astype(bool)
-            st = np.take_along_axis(np.concatenate(steps, axis=1), order, 1)
-            col = np.floor(u0[s])[:, None] + np.cumsum(np.where(is_y, 0, st), axis=1)
-            row = np.floor(v0[s])[:, None] + np.cumsum(np.where(is_y, st, 0), axis=1)
-            col = np.concatenate([np.floor(u0[s])[:, None], col], axis=1).astype(np.int64)
-            row = np.concatenate([np.floor(v0[s])[:, None], row], axis=1).astype(np.int64)
-            t = np.concatenate([np.zeros((t.shape[0], 1)), t], axis=1)
-            out = (col < 0) | (col >= cols) | (row < 0) | (row >= rows) | ~np.isfinite(t)
-            valid = ~np.maximum.accumulate(out, axis=1)
-            before = t <= rng[s][:, None]
-            # the reading's cell is the last one entered at or before the end point
-            zk = np.where(is_max[s], 10**9, before.sum(axis=1) - 1)[:, None]
-            k = np.arange(t.shape[1])[None, :]
-            val = np.where(k < zk, l_free, np.where(k == zk, l_occ, 0.0))
-            keep = valid & (val != 0)
-            ev += np.bincount((row * cols + col)[keep], weights=val[keep], minlength=grid.num_cells)
+        tx = np.where(sx != 0, (bx - u0) / du, np.inf)
+        ty = np.where(sy != 0, (by - v0) / dv, np.inf)
+    t = np.zeros_like(u0)
+    th = np.where(is_max, np.inf, rng)
+    idx = np.arange(len(u0))
+    done_hit = np.zeros(len(u0), dtype=bool)
+    all_cells, all_vals = [], []
+    while idx.size:
+        # the current cell of every live ray: free before the reading's cell, occupied at it
+        nxt = np.minimum(tx, ty)
+        at_end = (t <= th) & (nxt > th)  # the end point lies in this cell
+        val = np.where(at_end, l_occ, l_free)
+        all_cells.append(row * cols + col)
+        all_vals.append(val)
+        done_hit[idx[at_end]] = True
+        step_x = tx <= ty
+        t = np.where(step_x, tx, ty)
+        col = col + np.where(step_x, sx, 0)
+        row = row + np.where(step_x, 0, sy)
+        with np.errstate(invalid="ignore"):
+            bx = bx + np.where(step_x, sx, 0)
+            by = by + np.where(step_x, 0, sy)
+            tx = np.where(step_x & (sx != 0), (bx - u0) / np.where(du == 0, 1, du), tx)
+            ty = np.where(~step_x & (sy != 0), (by - v0) / np.where(dv == 0, 1, dv), ty)
+        live = (t < L) & ~at_end & (col >= 0) & (col < cols) & (row >= 0) & (row < rows)
+        idx, col, row, sx, sy, bx, by, tx, ty, t, th, u0, v0, du, dv = (
+            a[live] for a in (idx, col, row, sx, sy, bx, by, tx, ty, t, th, u0, v0, du, dv)
+        )
+    ev = np.bincount(np.concatenate(all_cells), weights=np.concatenate(all_vals),
+                     minlength=grid.num_cells)  # fmt: skip
     return ev + math.log(prior / (1 - prior))

@@ -1,0 +1,148 @@
+"""Traditional OGM speed: traversal plus evidence-grid update (issue: foundation).
+
+Scene: a 500 x 500 grid at 5 cm, 100 scan poses x 720 beams (72,000 rays), max range 75 cells, range
+noise sigma = 3 cells, sparse obstacles so that most beams are max-range readings. Every method does the
+same work (Hähnel's update term, traversal included) and must give the same evidence grid.
+
+Compared in the same run, on one core:
+  ours (fused)   ogm_ppl.inference.evidence_grid_from_scans: one compiled pass, no ray structure kept
+  ours (CSR)     raycast() then evidence_grid(): builds the ray -> cells structure other algorithms use
+  numpy          ogm_ppl.reference.evidence_grid_numpy, batched and vectorised
+  python loop    ogm_ppl.reference.evidence_grid_reference, one ray at a time (timed on a subset)
+  octomap        OctoMap's insertPointCloud through octomap-python (optional; z = 0 point clouds)
+
+Rates: rays/s and ray-cell updates/s, where ray-cell updates = cells traversed within max range and
+grid (the same count for every method). Writes out/bench/bench_ogm.json.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OMP_NUM_THREADS", "1")  # one core for OctoMap too
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+
+import math  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+sys.path.insert(0, os.path.dirname(__file__))
+from _common import best_time, peak_rss_mb, write_json  # noqa: E402
+
+from ogm_ppl import Grid, Scans, raycast  # noqa: E402
+from ogm_ppl.datasets import simulate_scans  # noqa: E402
+from ogm_ppl.inference import evidence_grid, evidence_grid_from_scans  # noqa: E402
+from ogm_ppl.models import Moravec  # noqa: E402
+from ogm_ppl.reference import evidence_grid_numpy, evidence_grid_reference  # noqa: E402
+
+RES, N, F, SIGMA = 0.05, 500, 75, 3.0
+L4 = math.log(4.0)
+
+
+def scene(seed: int = 0):
+    rng = np.random.default_rng(seed)
+    truth = np.zeros((N, N), dtype=bool)
+    truth[0, :] = truth[-1, :] = truth[:, 0] = truth[:, -1] = True
+    for _ in range(40):  # sparse wall segments
+        r, c = rng.integers(10, N - 10, 2)
+        length = int(rng.integers(20, 80))
+        if rng.random() < 0.5:
+            truth[r, c : c + length] = True
+        else:
+            truth[r : r + length, c] = True
+    grid = Grid((N, N), resolution=RES)
+    free = np.argwhere(~truth)
+    pick = free[rng.choice(len(free), 100, replace=False)]
+    poses = np.c_[(pick[:, 1] + 0.5) * RES, (pick[:, 0] + 0.5) * RES, rng.uniform(-np.pi, np.pi, 100)]
+    angles = np.arange(720) * (np.pi / 360)
+    scans = simulate_scans(grid, truth, poses, angles, F * RES, SIGMA, seed)
+    return grid, scans
+
+
+def octomap_time(scans: Scans):
+    try:
+        import octomap
+    except ImportError:
+        return None, "octomap-python not installed (pip install -e '.[bench]')"
+    theta = scans.world_angles()
+    rng = np.where(scans.is_max, scans.max_range * 1.001, scans.ranges)  # max-range: free space only
+    clouds = []
+    for s in range(scans.num_scans):
+        x, y = scans.poses[s, :2]
+        pts = np.c_[x + rng[s] * np.cos(theta[s]), y + rng[s] * np.sin(theta[s]), np.zeros(len(rng[s]))]
+        clouds.append((np.ascontiguousarray(pts), np.array([x, y, 0.0])))
+
+    def run():
+        tree = octomap.OcTree(RES)
+        tree.setProbHit(0.8)
+        tree.setProbMiss(0.2)
+        for pts, origin in clouds:
+            tree.insertPointCloud(pts, origin, maxrange=scans.max_range)
+        return tree
+
+    return best_time(run, repeat=3), "ok"
+
+
+def main() -> dict:
+    t0 = time.perf_counter()
+    grid, scans = scene()
+    rays = raycast(grid, scans)
+    nnz, R = rays.nnz, rays.num_rays
+    haehnel = Moravec.haehnel()
+    print(f"scene: {N}x{N} cells at {RES} m, {R} rays, {scans.is_max.mean():.1%} max-range, "
+          f"{nnz / 1e6:.2f} M ray-cell updates ({nnz / R:.1f} per ray); setup {time.perf_counter() - t0:.1f} s")  # fmt: skip
+
+    t = time.perf_counter()
+    evidence_grid_from_scans(grid, scans, haehnel)
+    compile_s = time.perf_counter() - t
+    ours_fused = evidence_grid_from_scans(grid, scans, haehnel).log_odds.numpy()
+    t_fused = best_time(lambda: evidence_grid_from_scans(grid, scans, haehnel), repeat=7)
+    t_csr = best_time(lambda: evidence_grid(raycast(grid, scans), haehnel), repeat=5)
+    t_numpy = best_time(lambda: evidence_grid_numpy(grid, scans, L4, -L4), repeat=2, warmup=0)
+    ref_np = evidence_grid_numpy(grid, scans, L4, -L4)
+    sub = Scans(scans.poses[:10], scans.angles[:10], scans.ranges[:10], scans.max_range)
+    sub_nnz = raycast(grid, sub).nnz
+    t = time.perf_counter()
+    ref_loop = evidence_grid_reference(grid, sub, L4, -L4)
+    t_loop_sub = time.perf_counter() - t
+    t_loop = t_loop_sub * nnz / sub_nnz  # extrapolated by work
+    agree_numpy = float(np.abs(ours_fused - ref_np).max())
+    agree_loop = float(np.abs(evidence_grid_from_scans(grid, sub, haehnel).log_odds.numpy() - ref_loop).max())
+    t_octo, octo_status = octomap_time(scans)
+
+    rows = {"ours (fused)": t_fused, "ours (CSR)": t_csr, "numpy (batched)": t_numpy,
+            "python loop": t_loop}  # fmt: skip
+    if t_octo is not None:
+        rows["octomap"] = t_octo
+    print(f"\n{'method':<18}{'time (s)':>10}{'rays/s':>14}{'M updates/s':>14}{'ours fused is':>16}")
+    for name, sec in rows.items():
+        print(f"{name:<18}{sec:>10.4f}{R / sec:>14,.0f}{nnz / sec / 1e6:>14.1f}{sec / t_fused:>15.1f}x")
+    if t_octo is None:
+        print(f"octomap: {octo_status}")
+    print(f"\npython loop timed on 10 scans ({sub_nnz} updates, {t_loop_sub:.2f} s) and scaled by work")
+    print(f"max |ours - numpy| = {agree_numpy:.2e}, max |ours - python loop| = {agree_loop:.2e}")
+    print(f"numba compile/load on first call: {compile_s:.2f} s; peak RSS {peak_rss_mb():.0f} MiB")
+    target = nnz / t_fused / 1e6
+    print(f"target >= 100 M updates/s: {target:.0f} M/s -> {'met' if target >= 100 else 'NOT met'}")
+    payload = {
+        "scene": {"grid": [N, N], "resolution_m": RES, "rays": R, "max_range_cells": F,
+                  "sigma_cells": SIGMA, "max_range_fraction": float(scans.is_max.mean()),
+                  "ray_cell_updates": nnz},  # fmt: skip
+        "seconds": rows,
+        "rays_per_second": {k: R / v for k, v in rows.items()},
+        "updates_per_second": {k: nnz / v for k, v in rows.items()},
+        "speedup_of_fused_over": {k: v / t_fused for k, v in rows.items()},
+        "octomap_status": octo_status,
+        "python_loop_subset": {"ray_cell_updates": sub_nnz, "seconds": t_loop_sub},
+        "max_abs_difference": {"numpy": agree_numpy, "python_loop": agree_loop},
+        "first_call_seconds": compile_s,
+        "peak_rss_mib": peak_rss_mb(),
+    }
+    print("wrote", write_json("bench_ogm", payload))
+    return payload
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,88 @@
+import math
+
+import numpy as np
+import pytest
+import torch
+from hypothesis import given
+from hypothesis import strategies as st
+
+from ogm_ppl.metrics import (
+    best_f1,
+    cross_entropy,
+    cross_entropy_per_cell,
+    kl_divergence,
+    kl_per_cell,
+    near_mapped_mask,
+    precision_recall,
+    roc_auc,
+)
+
+probs = st.lists(st.floats(0.0, 1.0), min_size=1, max_size=30)
+
+
+def test_kl_closed_form():
+    expected = 0.3 * math.log(0.3 / 0.6) + 0.7 * math.log(0.7 / 0.4)
+    assert float(kl_per_cell([0.3], [0.6])[0]) == pytest.approx(expected, abs=1e-15)
+    h = -(0.3 * math.log(0.6) + 0.7 * math.log(0.4))
+    assert float(cross_entropy([0.3, 0.0], [0.6, 0.0])) == pytest.approx(h, abs=1e-15)
+
+
+@given(probs, st.data())
+def test_kl_nonnegative_and_cross_entropy_decomposes(p, data):
+    q = data.draw(st.lists(st.floats(1e-6, 1 - 1e-6), min_size=len(p), max_size=len(p)))
+    kl = kl_per_cell(p, q)
+    assert torch.all(kl >= -1e-12)
+    assert float(kl_divergence(p, p)) == pytest.approx(0.0, abs=1e-12)
+    pt = torch.tensor(p)
+    entropy = -(torch.special.xlogy(pt, pt) + torch.special.xlogy(1 - pt, 1 - pt))
+    torch.testing.assert_close(cross_entropy_per_cell(p, q), kl + entropy)
+
+
+def test_impossible_estimate_is_infinite_and_masks_apply():
+    assert math.isinf(float(cross_entropy([0.5], [0.0])))
+    assert float(kl_divergence([0.5, 0.2], [0.0, 0.2], mask=[False, True])) == 0.0
+
+
+@pytest.mark.parametrize("bad", [[np.nan, 0.5], [1.2, 0.5], [-0.1, 0.5]])
+def test_bad_probabilities(bad):
+    with pytest.raises(ValueError, match="q"):
+        cross_entropy([0.5, 0.5], bad)
+
+
+def test_precision_recall_by_hand():
+    est, truth = [0.9, 0.6, 0.2, 0.7], [1, 0, 1, 0]
+    c = precision_recall(est, truth, thresholds=[0.5, 0.95, 0.1])
+    np.testing.assert_allclose(c.precision, [1 / 3, 1.0, 0.5])
+    np.testing.assert_allclose(c.recall, [0.5, 0.0, 1.0])
+    np.testing.assert_allclose(c.f1, [0.4, 0.0, 2 / 3])
+    c = precision_recall(est, truth, thresholds=[0.5], mask=[True, False, True, False])
+    assert c.precision[0] == 1.0 and c.recall[0] == 0.5
+    f1, thr = best_f1(est, truth, thresholds=[0.5, 0.95, 0.1])
+    assert f1 == pytest.approx(2 / 3) and thr == 0.1
+
+
+def test_roc_auc_is_the_pairwise_statistic():
+    rng = np.random.default_rng(0)
+    est = rng.integers(0, 5, 200) / 4.0  # many ties
+    truth = rng.random(200) < 0.3
+    pos, neg = est[truth], est[~truth]
+    pairs = (pos[:, None] > neg[None, :]).mean() + 0.5 * (pos[:, None] == neg[None, :]).mean()
+    assert roc_auc(est, truth) == pytest.approx(pairs, abs=1e-12)
+    assert roc_auc([0.1, 0.9], [0, 1]) == 1.0 and roc_auc([0.9, 0.1], [0, 1]) == 0.0
+    with pytest.raises(ValueError, match="both"):
+        roc_auc([0.1, 0.2], [0, 0])
+
+
+def test_near_mapped_mask_matches_brute_force():
+    rng = np.random.default_rng(1)
+    mapped = rng.random((30, 40)) < 0.02
+    got = near_mapped_mask(mapped, 10.0)
+    rr, cc = np.nonzero(mapped)
+    R, C = np.mgrid[0:30, 0:40]
+    d2 = ((R[..., None] - rr) ** 2 + (C[..., None] - cc) ** 2).min(-1)
+    np.testing.assert_array_equal(got, d2 <= 100)
+
+
+def test_shape_mismatch():
+    with pytest.raises(ValueError, match="cells"):
+        precision_recall([0.5, 0.5], [1, 0, 1])
