@@ -50,8 +50,7 @@ def plot_map(probabilities, grid=None, ax=None, title: str | None = None, poses=
         p = p.reshape(grid.shape)
     if ax is None:
         _, ax = plt.subplots(figsize=(4, 4))
-    cmap = thesis_cmap().copy()
-    cmap.set_bad("#d9d9d9")
+    cmap = thesis_cmap().with_extremes(bad="#d9d9d9")
     extent = grid.extent if grid is not None else None
     im = ax.imshow(np.ma.masked_invalid(p), cmap=cmap, vmin=0, vmax=1, origin="lower",
                    extent=extent, interpolation="nearest")  # fmt: skip
@@ -82,7 +81,7 @@ def plot_marginals_1d(series: Mapping[str, np.ndarray], ax=None, cells=None, tit
     ax.set_xlabel("cell k")
     ax.set_ylabel("p(m_k = 1 | z)")
     ax.set_ylim(0, 1)
-    ax.legend(fontsize=7, ncol=min(len(names), 4))
+    ax.legend(fontsize=7, ncol=min(len(names), 3), loc="upper left", framealpha=0.9)
     if title:
         ax.set_title(title, fontsize=9)
     return ax
