@@ -22,20 +22,20 @@ import os
 os.environ.setdefault("OMP_NUM_THREADS", "1")  # one core for OctoMap too
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
 
-import math  # noqa: E402
-import sys  # noqa: E402
-import time  # noqa: E402
+import math
+import sys
+import time
 
-import numpy as np  # noqa: E402
+import numpy as np
 
 sys.path.insert(0, os.path.dirname(__file__))
-from _common import best_time, peak_rss_mb, write_json  # noqa: E402
+from _common import best_time, peak_rss_mb, write_json
 
-from ogm_ppl import Grid, Scans, raycast  # noqa: E402
-from ogm_ppl.datasets import simulate_scans  # noqa: E402
-from ogm_ppl.inference import evidence_grid, evidence_grid_from_scans  # noqa: E402
-from ogm_ppl.models import Moravec  # noqa: E402
-from ogm_ppl.reference import evidence_grid_numpy, evidence_grid_reference  # noqa: E402
+from ogm_ppl import Grid, Scans, raycast
+from ogm_ppl.datasets import simulate_scans
+from ogm_ppl.inference import evidence_grid, evidence_grid_from_scans
+from ogm_ppl.models import Moravec
+from ogm_ppl.reference import evidence_grid_numpy, evidence_grid_reference
 
 RES, N, F, SIGMA = 0.05, 500, 75, 3.0
 L4 = math.log(4.0)

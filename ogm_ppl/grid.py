@@ -142,6 +142,6 @@ class Grid:
         return xy
 
     @classmethod
-    def line(cls, num_cells: int, resolution: float = 1.0) -> "Grid":
+    def line(cls, num_cells: int, resolution: float = 1.0) -> Grid:
         """The 1D grid of the thesis's toy problems: cells ``0..K-1`` starting at ``x = 0``."""
         return cls((num_cells,), resolution=resolution, origin=(0.0, 0.0))

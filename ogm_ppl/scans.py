@@ -138,7 +138,7 @@ class Scans:
         position: float = 0.5,
         direction: int = 1,
         over_range: str = "error",
-    ) -> "Scans":
+    ) -> Scans:
         """Readings of a stationary robot on a 1D grid (Section 2.3.1): all from ``position`` (metres)
         looking along ``+x`` (``direction=1``) or ``-x`` (``-1``). One scan per reading."""
         if direction not in (1, -1):

@@ -1,6 +1,5 @@
 """Every notebook in notebooks/ runs top to bottom (small settings: CI is set in the kernel)."""
 
-import os
 from pathlib import Path
 
 import nbformat

@@ -1,12 +1,12 @@
 """Models: the inverse-sensor-model update terms (Delta families) and, later, the Pyro map model."""
 
 from .delta import (
+    PN,
     BorensteinKoren,
     DeltaFamily,
     Elfes,
     MarshallBarfoot,
     Moravec,
-    PN,
     Stachniss,
     delta_by_name,
 )

@@ -92,7 +92,7 @@ class Moravec(DeltaFamily):
         self.l_free = _param(l_free)
 
     @classmethod
-    def haehnel(cls) -> "Moravec":
+    def haehnel(cls) -> Moravec:
         """Traditional OGM: ``p_occ = 0.8``, ``p_free = 0.2`` (Hähnel 2004), natural log-odds."""
         return cls(math.log(4.0), -math.log(4.0))
 
@@ -239,7 +239,7 @@ class PN(DeltaFamily):
         return -((self.N + 1) // 2)
 
     @classmethod
-    def zeros(cls, N: int) -> "PN":
+    def zeros(cls, N: int) -> PN:
         return cls(torch.zeros(N, dtype=torch.float64))
 
     def delta(self, d):

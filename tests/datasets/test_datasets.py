@@ -2,7 +2,13 @@ import numpy as np
 import pytest
 
 from ogm_ppl import Grid, raycast
-from ogm_ppl.datasets import THESIS_TOY_READINGS, first_hit, simple_2d_example, simulate_scans, toy_1d
+from ogm_ppl.datasets import (
+    THESIS_TOY_READINGS,
+    first_hit,
+    simple_2d_example,
+    simulate_scans,
+    toy_1d,
+)
 
 
 def test_toy_is_seeded_and_rounded():

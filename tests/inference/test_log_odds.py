@@ -8,7 +8,15 @@ from ogm_ppl import Grid, Scans, raycast
 from ogm_ppl.datasets import THESIS_TOY_READINGS, toy_1d
 from ogm_ppl.inference import evidence_grid, evidence_grid_from_scans
 from ogm_ppl.inference.log_odds import OCTOMAP_CLAMP, delta_table_for
-from ogm_ppl.models import PN, BorensteinKoren, Elfes, MarshallBarfoot, Moravec, Stachniss, delta_by_name
+from ogm_ppl.models import (
+    PN,
+    BorensteinKoren,
+    Elfes,
+    MarshallBarfoot,
+    Moravec,
+    Stachniss,
+    delta_by_name,
+)
 from ogm_ppl.reference import evidence_grid_numpy, evidence_grid_reference
 
 L4 = math.log(4.0)

@@ -5,7 +5,15 @@ import pytest
 import torch
 
 from ogm_ppl import GaussianRange
-from ogm_ppl.models import PN, BorensteinKoren, Elfes, MarshallBarfoot, Moravec, Stachniss, delta_by_name
+from ogm_ppl.models import (
+    PN,
+    BorensteinKoren,
+    Elfes,
+    MarshallBarfoot,
+    Moravec,
+    Stachniss,
+    delta_by_name,
+)
 from ogm_ppl.models.delta import THESIS_P21
 
 D = torch.arange(-30, 31, dtype=torch.float64)
