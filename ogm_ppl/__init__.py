@@ -7,6 +7,7 @@ from .grid import Grid
 from .raycast import CellIndex, Rays, raycast
 from .scans import Scans
 from .sensors import GaussianRange, PatternMatch, SensorModel
+from .models.occupancy import OccupancyModel
 
 __all__ = [
     "Grid",
@@ -17,5 +18,6 @@ __all__ = [
     "SensorModel",
     "GaussianRange",
     "PatternMatch",
+    "OccupancyModel",
 ]
 __version__ = "0.1.0"

@@ -10,6 +10,7 @@ from .delta import (
     Stachniss,
     delta_by_name,
 )
+from .occupancy import MapDistribution, OccupancyModel
 
 __all__ = [
     "DeltaFamily",
@@ -20,4 +21,6 @@ __all__ = [
     "Elfes",
     "PN",
     "delta_by_name",
+    "OccupancyModel",
+    "MapDistribution",
 ]

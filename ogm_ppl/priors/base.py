@@ -1,0 +1,60 @@
+r"""The map-prior interface every prior implements (Chapter 5).
+
+A prior over binary maps ``m in {0, 1}^K`` answers three questions, all vectorised over a batch of maps:
+
+* :meth:`MapPrior.log_prob` — ``log p(m)`` of full maps, shape ``B x K -> B`` (``-inf`` where a prior has
+  zeros, e.g. the data-driven priors of Section 5.1 and 5.2.2);
+* :meth:`MapPrior.log_prob_patch` — ``log p(m_C = c, m_{-C})`` for every configuration ``c`` of a patch
+  ``C`` of ``L`` cells, up to an additive constant that does not depend on ``c``: what a (patch) Gibbs
+  sweep needs (Eq. 4.2, Algorithm 1). The default sets each configuration into the map and calls
+  ``log_prob``; priors override it with a local computation;
+* :meth:`MapPrior.sample` — maps drawn from the prior.
+
+Priors whose cells are independent also expose :meth:`MapPrior.cell_log_odds` (``K``), which lets the
+compiled kernels skip the generic patch call. The Pyro model wraps any prior in
+:class:`~ogm_ppl.models.occupancy.MapDistribution`.
+"""
+
+from __future__ import annotations
+
+import torch
+
+__all__ = ["MapPrior"]
+
+
+class MapPrior:
+    """Base class of priors over binary maps of ``num_cells`` cells."""
+
+    num_cells: int
+
+    def log_prob(self, maps: torch.Tensor) -> torch.Tensor:  # pragma: no cover - interface
+        """``log p(m)`` for maps of shape ``... x K`` (0/1 values) -> ``...``."""
+        raise NotImplementedError
+
+    def log_prob_patch(self, maps: torch.Tensor, cells: torch.Tensor, configs: torch.Tensor) -> torch.Tensor:
+        """``log p(m_C = c, m_{-C})`` up to a constant in ``c``.
+
+        Args:
+            maps: ``B x K`` (or ``K``) current maps.
+            cells: ``L`` cell indices of the patch ``C``.
+            configs: ``W x L`` configurations (0/1).
+
+        Returns:
+            ``B x W`` (or ``W``).
+        """
+        maps = torch.as_tensor(maps)
+        squeeze = maps.dim() == 1
+        maps = maps.reshape(-1, maps.shape[-1])
+        B, W = maps.shape[0], configs.shape[0]
+        trial = maps[:, None, :].expand(B, W, maps.shape[-1]).clone()
+        trial[:, :, cells] = configs.to(trial.dtype)[None]
+        out = self.log_prob(trial)
+        return out[0] if squeeze else out
+
+    def cell_log_odds(self) -> torch.Tensor | None:
+        """Per-cell prior log-odds ``l(lambda_k)`` if cells are independent a priori, else ``None``."""
+        return None
+
+    def sample(self, sample_shape=(), generator: torch.Generator | None = None) -> torch.Tensor:
+        """Maps drawn from the prior, ``sample_shape x K`` (float 0/1)."""
+        raise NotImplementedError  # pragma: no cover - interface

@@ -1,0 +1,101 @@
+"""Contract checks that every sensor model and every prior must pass (GPyTorch-style test mixins).
+
+A new prior gets the generic suite by subclassing :class:`PriorContract` in a test module and writing one
+factory method; likewise :class:`SensorContract` for sensor models. The checks are exact (enumeration over
+small problems) or statistical with tolerances derived from the sample size.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+
+import torch
+
+__all__ = ["SensorContract", "PriorContract"]
+
+
+class SensorContract:
+    """Mix into a pytest class and define ``make_sensor()``."""
+
+    F = 12
+    discrete = False  # True for sensors whose hits are whole cells (PatternMatch)
+
+    def make_sensor(self):  # pragma: no cover - to be provided
+        raise NotImplementedError
+
+    def test_log_prob_normalises(self):
+        from scipy.integrate import quad
+
+        s = self.make_sensor()
+        F = self.F
+        for f in (0, F // 2, F, F + 1):
+            p_max = math.exp(float(s.log_prob(torch.tensor(0.0), f, F, is_max=True)))
+            if self.discrete:
+                hits = s.log_prob(torch.arange(F + 1, dtype=torch.float64), f, F).exp().sum().item()
+            else:
+
+                def dens(z, f=f):
+                    return math.exp(float(s.log_prob(torch.tensor(z), f, F)))
+
+                pts = [-0.5, f - 0.5, f + 0.5] if f <= F else [-0.5]
+                hits = quad(dens, -math.inf, -0.5)[0] + quad(dens, -0.5, F + 0.5, points=pts, limit=200)[0]
+            assert abs(hits + p_max - 1.0) < 1e-7, (f, hits, p_max)
+
+    def test_log_prob_is_vectorised(self):
+        s = self.make_sensor()
+        z = torch.arange(6, dtype=torch.float64)[:, None]
+        f = torch.arange(8)[None, :]
+        out = s.log_prob(z, f, self.F)
+        assert out.shape == (6, 8)
+        assert not torch.isnan(out).any()
+        for i in range(6):
+            for j in range(8):
+                assert torch.equal(out[i, j], s.log_prob(z[i, 0], int(f[0, j]), self.F))
+
+
+class PriorContract:
+    """Mix into a pytest class and define ``make_prior(num_cells)``."""
+
+    num_cells = 6
+
+    def make_prior(self, num_cells):  # pragma: no cover - to be provided
+        raise NotImplementedError
+
+    def _all_maps(self):
+        return torch.tensor(list(itertools.product([0.0, 1.0], repeat=self.num_cells)), dtype=torch.float64)
+
+    def test_normalised_over_all_maps(self):
+        lp = self.make_prior(self.num_cells).log_prob(self._all_maps())
+        assert lp.shape == (2**self.num_cells,) and not torch.isnan(lp).any()
+        assert abs(torch.logsumexp(lp, 0).item()) < 1e-10
+
+    def test_patch_conditional_matches_log_prob(self):
+        prior = self.make_prior(self.num_cells)
+        maps = self._all_maps()
+        cells = torch.tensor([1, 3, 4])
+        configs = torch.tensor(list(itertools.product([0.0, 1.0], repeat=3)), dtype=torch.float64)
+        got = prior.log_prob_patch(maps, cells, configs)  # B x W
+        trial = maps[:, None, :].repeat(1, len(configs), 1)
+        trial[:, :, cells] = configs
+        want = prior.log_prob(trial)
+        # equal up to a per-map constant (finite entries), same -inf pattern
+        assert torch.equal(torch.isinf(got), torch.isinf(want))
+        fin = torch.isfinite(want)
+        diff = torch.where(fin, got - want, torch.nan)
+        spread = diff.nan_to_num(-math.inf).amax(1) - diff.nan_to_num(math.inf).amin(1)
+        rows = fin.any(1)
+        assert (spread[rows] < 1e-10).all()
+
+    def test_samples_follow_log_prob(self):
+        from pyro.distributions.testing.gof import multinomial_goodness_of_fit
+
+        prior = self.make_prior(self.num_cells)
+        g = torch.Generator().manual_seed(0)
+        s = prior.sample((20000,), generator=g)
+        codes = (s * (2 ** torch.arange(self.num_cells - 1, -1, -1))).sum(-1).long()
+        counts = torch.bincount(codes, minlength=2**self.num_cells).double()
+        probs = prior.log_prob(self._all_maps()).exp()
+        support = probs > 0
+        assert counts[~support].sum() == 0  # nothing sampled where the prior has no mass
+        assert multinomial_goodness_of_fit(probs[support], counts[support]) > 1e-3
