@@ -11,7 +11,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-__all__ = ["thesis_cmap", "plot_map", "plot_marginals_1d", "plot_pr_curve"]
+__all__ = ["thesis_cmap", "plot_map", "plot_marginals_1d", "plot_first_hit", "plot_mutual_information", "plot_pr_curve"]
 
 
 def _plt():
@@ -82,6 +82,45 @@ def plot_marginals_1d(series: Mapping[str, np.ndarray], ax=None, cells=None, tit
     ax.set_ylabel("p(m_k = 1 | z)")
     ax.set_ylim(0, 1)
     ax.legend(fontsize=7, ncol=min(len(names), 3), loc="upper left", framealpha=0.9)
+    if title:
+        ax.set_title(title, fontsize=9)
+    return ax
+
+
+def plot_first_hit(series: Mapping[str, np.ndarray], ax=None, title: str | None = None):
+    """Lines of ``p(f = k | z)`` (Eq. 4.6) for several algorithms (Fig. 4.7 / 5.4 style).
+
+    Each series has one entry per cell of the ray and, optionally, a last entry for "no occupied cell",
+    which is not drawn.
+    """
+    plt = _plt()
+    if ax is None:
+        _, ax = plt.subplots(figsize=(7, 3))
+    for name, p in series.items():
+        p = np.asarray(p, dtype=float)
+        ax.plot(np.arange(len(p)), p, marker="o", ms=3, label=name)
+    ax.set_xlabel("first occupied cell f = k")
+    ax.set_ylabel("p(f = k | z)")
+    ax.legend(fontsize=7)
+    if title:
+        ax.set_title(title, fontsize=9)
+    return ax
+
+
+def plot_mutual_information(mi, ax=None, title: str | None = None, cells=None):
+    """Heat map of a mutual-information matrix between cells (Fig. 2.9, 5.2); the diagonal (each
+    cell's entropy) is masked so that the off-diagonal structure stays visible."""
+    plt = _plt()
+    mi = np.array(mi, dtype=float)
+    np.fill_diagonal(mi, np.nan)
+    if ax is None:
+        _, ax = plt.subplots(figsize=(4, 3.5))
+    ticks = np.arange(mi.shape[0]) if cells is None else np.asarray(cells)
+    im = ax.imshow(np.ma.masked_invalid(mi), cmap="viridis", origin="lower",
+                   extent=(ticks[0] - 0.5, ticks[-1] + 0.5, ticks[0] - 0.5, ticks[-1] + 0.5))  # fmt: skip
+    ax.set_xlabel("cell j")
+    ax.set_ylabel("cell k")
+    ax.figure.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="MI (nats)")
     if title:
         ax.set_title(title, fontsize=9)
     return ax
