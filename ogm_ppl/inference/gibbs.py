@@ -1,0 +1,481 @@
+r"""Gibbs sampling of whole maps as Pyro ``MCMCKernel``\ s (Chapter 4; Algorithms 1 and 2).
+
+* :class:`CellGibbs` — single-cell Gibbs (Section 4.1, Eq. 4.2):
+  ``l(m_k | z, m_{-k}) = l(m_k | m_{-k}) + sum_n log p(z_n | m_k = 1, .) / p(z_n | m_k = 0, .)``.
+* :class:`PatchGibbs` — blocks of ``L`` cells drawn from their ``W = 2^L`` configurations (Section 4.2,
+  Eq. 4.4, Algorithm 1); with ``p_rand_patch > 0`` a random configuration is proposed instead, as in
+  Algorithm 2, and accepted by Metropolis-Hastings so that the posterior stays invariant.
+* :class:`MetropolisCell` — single-cell Metropolis-Hastings flips, with uniform or endpoint-weighted
+  ("heat map", Dhiman et al. 2014) cell proposals, for comparing samplers on the same model.
+
+Each kernel runs through ``pyro.infer.MCMC`` (site ``"m"``: the whole map as float 0/1) or through
+:func:`~ogm_ppl.inference.runner.run_gibbs` (streamed statistics, checkpoints). One ``sample`` call is one
+*sweep*: as many cell / patch updates as there are latent cells / patches. The likelihood of a flip costs
+only the rays through the cell, and rays blocked before it are skipped (Section 4.1.2), in compiled
+kernels. Random numbers come from torch's global generator, so ``pyro.set_rng_seed`` (or
+``torch.manual_seed``) makes a run reproducible.
+
+Scans: ``"random"`` (Algorithm 1: updates at uniformly random cells / patch positions, with
+replacement), ``"permutation"`` (a fresh random order every sweep) or ``"systematic"`` (a fixed order).
+Priors with independent cells use the compiled path; any other :class:`~ogm_ppl.priors.MapPrior` goes
+through its ``log_prob_patch`` one update at a time (correct, but meant for small maps).
+
+.. note:: ``pyro.infer.MCMC`` keeps every sample in memory (``num_samples x K``). For large maps pass a
+   :class:`~ogm_ppl.inference.runner.RunningStats` as ``hook_fn`` and few samples, or use ``run_gibbs``.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+
+import numpy as np
+import torch
+from pyro.infer.mcmc.mcmc_kernel import MCMCKernel
+
+from ..models.occupancy import OccupancyModel
+from ._cell_kernels import cell_log_lik_ratio, first_hits, set_cell
+from ._gibbs_kernels import (
+    build_patch,
+    gibbs_cell_sweep,
+    gibbs_patch_sweep,
+    metropolis_cell_sweep,
+    patch_config,
+    patch_log_lik,
+    patch_log_weights,
+    set_patch,
+)
+
+__all__ = ["CellGibbs", "PatchGibbs", "MetropolisCell", "patch_shape", "initial_map"]
+
+_SCANS = ("random", "permutation", "systematic")
+
+
+def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: float | None = None) -> torch.Tensor:
+    """A starting map (``K`` float 0/1; pinned cells free).
+
+    ``init``: ``"ogm"`` — traditional OGM thresholded at the cell prior (Section 4.1.2; ``delta`` names the
+    update term, ``threshold`` defaults to the mean prior occupancy or 0.5); ``"prior"`` — a draw from the
+    prior; ``"occupied"``; ``"free"``; or a ``K`` map.
+    """
+    K = model.num_cells
+    if isinstance(init, str):
+        if init == "ogm":
+            from ..models.delta import delta_by_name
+            from .log_odds import evidence_grid
+
+            lo = model.prior.cell_log_odds()
+            thr = threshold if threshold is not None else (
+                float(torch.sigmoid(lo).mean()) if lo is not None else 0.5)  # fmt: skip
+            d = delta_by_name(delta) if isinstance(delta, str) else delta
+            m = (evidence_grid(model.rays, d).probabilities > thr).to(torch.float64)
+        elif init == "prior":
+            m = model.prior.sample().to(torch.float64)
+        elif init == "occupied":
+            m = torch.ones(K, dtype=torch.float64)
+        elif init == "free":
+            m = torch.zeros(K, dtype=torch.float64)
+        else:
+            raise ValueError(f"init must be 'ogm', 'prior', 'occupied', 'free' or a map, got {init!r}")
+    else:
+        m = torch.as_tensor(init, dtype=torch.float64).flatten().clone()
+        if m.shape != (K,):
+            raise ValueError(f"init map must have {K} cells, got {tuple(m.shape)}")
+        m = (m != 0).to(torch.float64)
+    m[model.known_free] = 0.0
+    return m
+
+
+def patch_shape(shape, ndim: int) -> tuple[np.ndarray, np.ndarray]:
+    """Row and column offsets of a patch shape (Fig. 3.1).
+
+    ``shape``: an int ``L`` (1D: a run of ``L`` cells; 2D: an ``L``-cell horizontal run), ``(h, w)`` (a
+    rectangle, e.g. ``(3, 3)``), ``"plus"`` (the 4-neighbourhood, L = 5), ``"square"`` (3 x 3, the
+    8-neighbourhood, L = 9), or an ``L x 2`` array of offsets.
+    """
+    if isinstance(shape, str):
+        if shape == "plus":
+            off = [(0, 0), (-1, 0), (1, 0), (0, -1), (0, 1)]
+        elif shape == "square":
+            off = [(r, c) for r in (-1, 0, 1) for c in (-1, 0, 1)]
+        else:
+            raise ValueError(f"unknown patch shape {shape!r}; use an int, (h, w), 'plus' or 'square'")
+        off = np.array(off)
+    elif np.isscalar(shape):
+        L = int(shape)
+        if L < 1:
+            raise ValueError(f"patch length must be >= 1, got {shape}")
+        off = np.stack([np.zeros(L, int), np.arange(L)], 1)
+    else:
+        arr = np.asarray(shape)
+        if arr.shape == (2,) and np.issubdtype(arr.dtype, np.integer):
+            h, w = int(arr[0]), int(arr[1])
+            if h < 1 or w < 1:
+                raise ValueError(f"patch (h, w) must be positive, got {shape}")
+            off = np.array([(r, c) for r in range(h) for c in range(w)])
+        elif arr.ndim == 2 and arr.shape[1] == 2:
+            off = arr.astype(int)
+        else:
+            raise ValueError(f"cannot read patch shape {shape!r}")
+    if ndim == 1 and np.any(off[:, 0] != 0):
+        raise ValueError("a 1D grid only takes patches along the row")
+    if len(off) > 20:
+        raise ValueError(f"patches of {len(off)} cells mean 2^{len(off)} configurations; at most 20")
+    return np.ascontiguousarray(off[:, 0], dtype=np.int64), np.ascontiguousarray(off[:, 1], dtype=np.int64)
+
+
+class _MapKernel(MCMCKernel):
+    """Shared state handling: the map, every ray's first hit, and sync with Pyro's ``params``."""
+
+    site = "m"
+
+    def __init__(self, model: OccupancyModel, scan: str = "random", init="ogm", delta="haehnel") -> None:
+        if scan not in _SCANS:
+            raise ValueError(f"scan must be one of {_SCANS}, got {scan!r}")
+        self.model = model
+        self.scan = scan
+        self.init = init
+        self.delta = delta
+        self.transforms = {}
+        self._initial_params = None
+        self._ready = False
+        self._last = None
+        self.sweeps = 0
+        self._changes = 0
+        self._updates = 0
+        super().__init__()
+
+    # --------------------------------------------------------------- set-up
+    def _prepare(self) -> None:
+        if self._ready:
+            return
+        model = self.model
+        r = model.rays
+        idx = r.by_cell
+        self._offsets, self._cells = r.offsets, r.cells
+        self._c_off, self._c_ray, self._c_kappa = idx.offsets, idx.ray, idx.kappa
+        self._ll = np.ascontiguousarray(model.loglik_table.numpy())
+        lo = model.prior.cell_log_odds()
+        self._prior_lo = None if lo is None else np.ascontiguousarray(lo.numpy(), dtype=np.float64)
+        self._latent = model.latent.numpy().astype(np.int64)
+        self._pinned = model.known_free.numpy().astype(np.uint8)
+        self._ready = True
+
+    def setup(self, warmup_steps=0, *args, **kwargs) -> None:
+        self._prepare()
+        if self._initial_params is None:
+            self._initial_params = {self.site: initial_map(self.model, self.init, self.delta)}
+        self._set_state(self._initial_params[self.site])
+
+    @property
+    def initial_params(self):
+        if self._initial_params is None:
+            self._initial_params = {self.site: initial_map(self.model, self.init, self.delta)}
+        return self._initial_params
+
+    @initial_params.setter
+    def initial_params(self, params):
+        self._initial_params = params
+
+    def _set_state(self, m) -> None:
+        m = torch.as_tensor(m)
+        self._m = np.ascontiguousarray((m.detach().cpu().numpy() != 0).astype(np.uint8))
+        self._m[self._pinned.astype(bool)] = 0
+        self._f = first_hits(self._m, self._offsets, self._cells)
+        self._last = None
+
+    @property
+    def state(self) -> np.ndarray:
+        """The current map (uint8, ``K``)."""
+        return self._m
+
+    @property
+    def first_hit_state(self) -> np.ndarray:
+        """Every ray's current first-occupied kappa (``R``)."""
+        return self._f
+
+    # --------------------------------------------------------------- sampling
+    def sample(self, params):
+        self._prepare()
+        m = params[self.site]
+        if m is not self._last:
+            self._set_state(m)
+        self._changes += self._sweep()
+        self.sweeps += 1
+        out = torch.from_numpy(self._m.astype(np.float64))
+        self._last = out
+        return {self.site: out}
+
+    def _order(self, items: np.ndarray) -> np.ndarray:
+        n = len(items)
+        if self.scan == "systematic":
+            return items
+        if self.scan == "permutation":
+            return np.ascontiguousarray(items[torch.randperm(n).numpy()])
+        return np.ascontiguousarray(items[torch.randint(0, n, (n,)).numpy()]) if n else items
+
+    def _uniforms(self, n: int) -> np.ndarray:
+        return torch.rand(n, dtype=torch.float64).numpy()
+
+    def logging(self):
+        rate = self._changes / max(self._updates, 1)
+        return OrderedDict([("sweeps", self.sweeps), ("change rate", f"{rate:.3f}")])
+
+    def diagnostics(self):
+        return {"sweeps": self.sweeps, "change rate": self._changes / max(self._updates, 1)}
+
+    # --------------------------------------------------------------- checkpoints
+    def state_dict(self) -> dict:
+        return {"m": self._m.copy(), "sweeps": self.sweeps, "changes": self._changes, "updates": self._updates}
+
+    def load_state_dict(self, state: dict) -> None:
+        self._prepare()
+        self._set_state(torch.from_numpy(np.asarray(state["m"])))
+        self.sweeps = int(state["sweeps"])
+        self._changes = int(state["changes"])
+        self._updates = int(state["updates"])
+
+
+class CellGibbs(_MapKernel):
+    """Single-cell Gibbs sampling of the map (Section 4.1; Algorithm 1 with ``L = 1``).
+
+    Args:
+        model: an :class:`~ogm_ppl.OccupancyModel`.
+        scan: ``"random"``, ``"permutation"`` or ``"systematic"``.
+        init: starting map, see :func:`initial_map` (default: thresholded traditional OGM).
+
+    >>> import pyro
+    >>> from pyro.infer import MCMC
+    >>> from ogm_ppl import GaussianRange, OccupancyModel, raycast
+    >>> from ogm_ppl.datasets import toy_1d
+    >>> from ogm_ppl.priors import IndependentPrior
+    >>> toy = toy_1d(num_cells=15, readings=[11.0, 7.0, 8.0, 8.0, 5.0, 9.0])
+    >>> model = OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0), IndependentPrior(0.5, 15))
+    >>> mcmc = MCMC(CellGibbs(model), num_samples=50, warmup_steps=5, disable_progbar=True)
+    >>> mcmc.run()
+    >>> mcmc.get_samples()["m"].shape
+    torch.Size([50, 15])
+    """
+
+    def _sweep(self) -> int:
+        order = self._order(self._latent)
+        u = self._uniforms(len(order))
+        self._updates += len(order)
+        if self._prior_lo is not None:
+            return gibbs_cell_sweep(order, self._prior_lo, self._m, self._f, self._offsets, self._cells,
+                                    self._c_off, self._c_ray, self._c_kappa, self._ll, u)  # fmt: skip
+        return self._generic_sweep(order, u)
+
+    def cell_log_odds(self, k: int) -> float:
+        """``l(m_k | z, m_{-k})`` at the current state (Eq. 4.2)."""
+        self._prepare()
+        lik = cell_log_lik_ratio(int(k), self._m, self._f, self._offsets, self._cells, self._c_off,
+                                 self._c_ray, self._c_kappa, self._ll)  # fmt: skip
+        if self._prior_lo is not None:
+            return float(self._prior_lo[k] + lik)
+        cur = torch.from_numpy(self._m.astype(np.float64))
+        lp = self.model.prior.log_prob_patch(cur, torch.tensor([int(k)]), torch.tensor([[0.0], [1.0]]))
+        if not torch.isfinite(lp).any():
+            return float("nan")
+        if not torch.isfinite(lp).all():
+            return math.inf if lp[1] > lp[0] else -math.inf
+        return float(lp[1] - lp[0]) + lik
+
+    def _generic_sweep(self, order, u) -> int:
+        changes = 0
+        for k, uk in zip(order, u):
+            lo = self.cell_log_odds(int(k))
+            if lo != lo:
+                continue
+            v = 1 if (lo == math.inf or (lo > -math.inf and uk * (1 + math.exp(-lo)) < 1)) else 0
+            if v != self._m[k]:
+                set_cell(int(k), v, self._m, self._f, self._offsets, self._cells, self._c_off, self._c_ray,
+                         self._c_kappa)  # fmt: skip
+                changes += 1
+        return changes
+
+
+class MetropolisCell(_MapKernel):
+    """Single-cell Metropolis-Hastings: propose flipping a cell, accept with ``min(1, ratio)``.
+
+    ``proposal="uniform"`` picks latent cells uniformly; ``"endpoint"`` picks cells holding a laser end
+    point ``endpoint_weight`` times as often (the "heat map" proposal of Dhiman et al., ICRA 2014). Cell
+    choices do not depend on the state, so the flip proposal is symmetric. Independent priors only.
+    """
+
+    def __init__(self, model, proposal: str = "uniform", endpoint_weight: float = 4.0, init="ogm",
+                 delta="haehnel") -> None:  # fmt: skip
+        super().__init__(model, "random", init, delta)
+        if proposal not in ("uniform", "endpoint"):
+            raise ValueError(f"proposal must be 'uniform' or 'endpoint', got {proposal!r}")
+        if not endpoint_weight > 0:
+            raise ValueError(f"endpoint_weight must be positive, got {endpoint_weight}")
+        if model.prior.cell_log_odds() is None:
+            raise ValueError("MetropolisCell needs a prior with independent cells")
+        self.proposal = proposal
+        self.endpoint_weight = float(endpoint_weight)
+        self._weights = None
+
+    def proposal_probs(self) -> torch.Tensor:
+        """Probability of proposing each latent cell (in ``model.latent`` order)."""
+        if self._weights is None:
+            w = torch.ones(len(self.model.latent), dtype=torch.float64)
+            if self.proposal == "endpoint":
+                ends = torch.zeros(self.model.num_cells, dtype=torch.bool)
+                ends[torch.from_numpy(self.model.rays.endpoint_cells())] = True
+                w[ends[self.model.latent]] = self.endpoint_weight
+            self._weights = w / w.sum()
+        return self._weights
+
+    def _sweep(self) -> int:
+        n = len(self._latent)
+        picks = torch.multinomial(self.proposal_probs(), n, replacement=True).numpy() if n else np.zeros(0, int)
+        order = self._latent[picks]
+        u = self._uniforms(n)
+        self._updates += n
+        return metropolis_cell_sweep(order, self._prior_lo, self._m, self._f, self._offsets, self._cells,
+                                     self._c_off, self._c_ray, self._c_kappa, self._ll, u)  # fmt: skip
+
+
+class PatchGibbs(_MapKernel):
+    """Patch Gibbs sampling (Section 4.2, Algorithm 1; Algorithm 2 with ``p_rand_patch``).
+
+    Args:
+        model: an :class:`~ogm_ppl.OccupancyModel`.
+        patch: the patch shape, see :func:`patch_shape` (``3`` for a 1D run of 3, ``(3, 3)``, ``"plus"``).
+        scan: ``"systematic"`` / ``"permutation"`` visit a fixed set of patch positions (a tiling for runs
+            and rectangles, shifted by ``offset``; every cell's neighbourhood for other shapes);
+            ``"random"`` (Algorithm 1) places the patch at uniformly random cells, ``ceil(K / L)`` times
+            per sweep.
+        p_rand_patch: Algorithm 2's probability of proposing a random configuration instead (0.001 in the
+            thesis), accepted by Metropolis-Hastings unless ``random_patch="thesis"``.
+    """
+
+    def __init__(self, model, patch=3, scan: str = "random", offset=0, p_rand_patch: float = 0.0,
+                 random_patch: str = "mh", init="ogm", delta="haehnel") -> None:  # fmt: skip
+        super().__init__(model, scan, init, delta)
+        self.dr, self.dc = patch_shape(patch, model.grid.ndim)
+        if not 0.0 <= p_rand_patch < 1.0:
+            raise ValueError(f"p_rand_patch must lie in [0, 1), got {p_rand_patch}")
+        if random_patch not in ("mh", "thesis"):
+            raise ValueError(f"random_patch must be 'mh' or 'thesis', got {random_patch!r}")
+        self.p_rand_patch = float(p_rand_patch)
+        self.thesis_random = random_patch == "thesis"
+        self.offset = offset
+        self._stamp = 0
+        self._anchors = self._fixed_anchors()
+        if self.scan != "random" and len(self._anchors) == 0:
+            raise ValueError("no patch holds a latent cell")
+
+    @property
+    def L(self) -> int:
+        return len(self.dr)
+
+    def _fixed_anchors(self) -> np.ndarray:
+        """``n x 2`` (row, col) patch positions for the systematic / permutation scans."""
+        g = self.model.grid
+        rows, cols = g.rows, g.cols
+        is_rect = (self.dr.min() == 0 and self.dc.min() == 0
+                   and len(self.dr) == (self.dr.max() + 1) * (self.dc.max() + 1))  # fmt: skip
+        if is_rect:
+            h, w = int(self.dr.max()) + 1, int(self.dc.max()) + 1
+            orow, ocol = (0, int(self.offset)) if np.isscalar(self.offset) else (int(o) for o in self.offset)
+            r0 = np.arange(-(orow % h), rows, h)
+            c0 = np.arange(-(ocol % w), cols, w)
+        else:
+            r0, c0 = np.arange(rows), np.arange(cols)
+        R, C = np.meshgrid(r0, c0, indexing="ij")
+        anchors = np.stack([R.ravel(), C.ravel()], 1).astype(np.int64)
+        self._prepare()
+        live = np.array([self._live(a) > 0 for a in anchors], dtype=bool)
+        return np.ascontiguousarray(anchors[live])
+
+    def _live(self, anchor) -> int:
+        g = self.model.grid
+        patch = np.empty(self.L, np.int64)
+        return build_patch(int(anchor[0]), int(anchor[1]), self.dr, self.dc, g.rows, g.cols, self._pinned, patch)
+
+    def patches(self) -> list[np.ndarray]:
+        """The fixed patch positions as arrays of cells (``-1`` where cut off or pinned)."""
+        g = self.model.grid
+        out = []
+        for a in self._anchors:
+            p = np.empty(self.L, np.int64)
+            build_patch(int(a[0]), int(a[1]), self.dr, self.dc, g.rows, g.cols, self._pinned, p)
+            out.append(p)
+        return out
+
+    def _sweep(self) -> int:
+        g = self.model.grid
+        if self.scan == "random":
+            n = math.ceil(len(self._latent) / self.L)
+            cells = self._latent[torch.randint(0, len(self._latent), (n,)).numpy()] if n else self._latent
+            anchors = np.ascontiguousarray(np.stack(np.divmod(cells, g.cols), 1).astype(np.int64))
+        else:
+            anchors = self._order(self._anchors)
+        n = len(anchors)
+        u_choice, u_rand, u_accept = self._uniforms(n), self._uniforms(n), self._uniforms(n)
+        self._updates += n
+        rows, cols, pinned = g.rows, g.cols, self._pinned
+        if self._prior_lo is not None:
+            stamp0 = self._stamp
+            self._stamp += n
+            return gibbs_patch_sweep(anchors, self.dr, self.dc, rows, cols, pinned, self._prior_lo, self._m,
+                                     self._f, self._offsets, self._cells, self._c_off, self._c_ray,
+                                     self._c_kappa, self._ll, u_choice, u_rand, u_accept, self.p_rand_patch,
+                                     self.thesis_random, self._ray_stamp(), stamp0)  # fmt: skip
+        return self._python_sweep(anchors, u_choice, u_rand, u_accept)
+
+    def _ray_stamp(self) -> np.ndarray:
+        if not hasattr(self, "_ray_stamp_arr"):
+            self._ray_stamp_arr = np.full(self.model.rays.num_rays, -1, np.int64)
+        return self._ray_stamp_arr
+
+    def patch_log_weights(self, patch: np.ndarray) -> np.ndarray:
+        """Unnormalised log conditional of each configuration of ``patch`` (grid cells, ``-1`` = none)
+        at the current state: bit ``j`` of configuration ``w`` is the ``j``-th live cell."""
+        self._prepare()
+        patch = np.ascontiguousarray(patch, dtype=np.int64)
+        logw = np.empty(1 << self.L, np.float64)
+        in_patch = np.zeros(self.model.num_cells, np.bool_)
+        self._stamp += 1
+        if self._prior_lo is not None:
+            W = patch_log_weights(patch, self._prior_lo, self._m, self._f, in_patch, self._ray_stamp(),
+                                  self._stamp, self._offsets, self._cells, self._c_off, self._c_ray,
+                                  self._c_kappa, self._ll, logw)  # fmt: skip
+            return logw[:W].copy()
+        W = patch_log_lik(patch, self._m, self._f, in_patch, self._ray_stamp(), self._stamp, self._offsets,
+                          self._cells, self._c_off, self._c_ray, self._c_kappa, self._ll, logw)  # fmt: skip
+        live = patch[patch >= 0]
+        configs = ((torch.arange(W)[:, None] >> torch.arange(len(live))) & 1).to(torch.float64)
+        cur = torch.from_numpy(self._m.astype(np.float64))
+        prior = self.model.prior.log_prob_patch(cur, torch.from_numpy(live), configs).numpy()
+        return logw[:W] + prior
+
+    def _python_sweep(self, anchors, u_choice, u_rand, u_accept) -> int:
+        g = self.model.grid
+        p = np.empty(self.L, np.int64)
+        changed = 0
+        for i, a in enumerate(anchors):
+            if build_patch(int(a[0]), int(a[1]), self.dr, self.dc, g.rows, g.cols, self._pinned, p) == 0:
+                continue
+            logw = self.patch_log_weights(p)
+            W = len(logw)
+            cur = patch_config(p, self._m)
+            if self.p_rand_patch > 0 and u_rand[i] < self.p_rand_patch:
+                prop = min(int(u_choice[i] * W), W - 1)
+                d = logw[prop] - logw[cur]
+                new = prop if (self.thesis_random or d >= 0 or (d > -np.inf and u_accept[i] < math.exp(d))) else cur
+            else:
+                mx = logw.max()
+                if mx == -np.inf:
+                    continue
+                w = np.exp(logw - mx)
+                c = np.cumsum(w)
+                new = int(np.searchsorted(c, u_choice[i] * c[-1], side="right"))
+                new = min(new, W - 1)
+            if new != cur:
+                set_patch(p, new, self._m, self._f, self._offsets, self._cells, self._c_off, self._c_ray,
+                          self._c_kappa)  # fmt: skip
+                changed += 1
+        return changed

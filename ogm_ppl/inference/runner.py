@@ -1,0 +1,253 @@
+r"""Anytime Gibbs runs: streamed statistics, checkpoints, resumption, thinned samples on disk.
+
+:class:`RunningStats` accumulates, sweep by sweep, the running marginals ``p(m_k | z)``, ``p(f | z)`` of
+chosen rays (Eq. 4.6), the joint occupancy and mutual information of chosen cell pairs, and the
+probability that chosen paths are all free. It is also a ``hook_fn`` for ``pyro.infer.MCMC``, which
+otherwise keeps every sample in memory.
+
+:func:`run_gibbs` drives any of our kernels for ``num_sweeps`` sweeps with a progress bar (sweeps/s),
+writes a checkpoint (map, torch RNG state, statistics; atomically) every ``checkpoint_every`` sweeps and
+when interrupted (Ctrl-C stops at the end of the current sweep), and resumes from it: an interrupted and
+resumed run gives bit for bit the result of an uninterrupted one with the same seed.
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm.auto import tqdm
+
+from ..posterior import mutual_information_from_joint
+
+__all__ = ["RunningStats", "GibbsRun", "run_gibbs"]
+
+_FORMAT = 1
+
+
+class RunningStats:
+    """Running statistics of map samples.
+
+    Args:
+        model: the :class:`~ogm_ppl.OccupancyModel`.
+        rays: ray indices whose ``p(f | z)`` to track.
+        pairs: ``P x 2`` cell pairs whose joint occupancy (and MI) to track.
+        paths: lists of cells whose all-free probability to track.
+        trace_cells: cells whose per-sweep values to keep (for R-hat / ESS); keep this small.
+    """
+
+    def __init__(self, model, rays=(), pairs=(), paths=(), trace_cells=()) -> None:
+        self.model = model
+        self.rays = torch.as_tensor(list(rays), dtype=torch.long)
+        self.pairs = torch.as_tensor(np.asarray(pairs, dtype=np.int64).reshape(-1, 2))
+        self.paths = [torch.as_tensor(list(p), dtype=torch.long) for p in paths]
+        self.trace_cells = torch.as_tensor(list(trace_cells), dtype=torch.long)
+        K = model.num_cells
+        self.n = 0
+        self._sum = np.zeros(K, np.float64)
+        lengths = model.lengths[self.rays] if len(self.rays) else torch.zeros(0, dtype=torch.long)
+        self._fh = [np.zeros(int(n) + 1, np.float64) for n in lengths]
+        self._pair = np.zeros(len(self.pairs), np.float64)
+        self._path = np.zeros(len(self.paths), np.float64)
+        self._trace: list[np.ndarray] = []
+
+    def update(self, m) -> None:
+        """Add one sample (``K``, 0/1)."""
+        mt = torch.as_tensor(m)
+        mn = mt.detach().cpu().numpy()
+        self._sum += mn
+        if len(self.rays):
+            f = self.model.first_hits(mt.to(torch.float64), self.rays).numpy()
+            for i, fi in enumerate(f):
+                self._fh[i][fi] += 1
+        if len(self.pairs):
+            p = self.pairs.numpy()
+            self._pair += mn[p[:, 0]] * mn[p[:, 1]]
+        for i, path in enumerate(self.paths):
+            self._path[i] += float(not mn[path.numpy()].any())
+        if len(self.trace_cells):
+            self._trace.append(mn[self.trace_cells.numpy()].astype(np.uint8))
+        self.n += 1
+
+    def __call__(self, kernel, params, stage, i) -> None:
+        """``hook_fn`` for ``pyro.infer.MCMC``: accumulates samples after warm-up."""
+        if stage.startswith("Sample"):
+            self.update(params["m"])
+
+    def _check(self):
+        if self.n == 0:
+            raise ValueError("no samples accumulated yet")
+
+    @property
+    def marginals(self) -> torch.Tensor:
+        self._check()
+        return torch.from_numpy(self._sum / self.n)
+
+    def first_hit(self, i: int = 0) -> torch.Tensor:
+        """``p(f | z)`` of the ``i``-th tracked ray (last entry: no occupied cell)."""
+        self._check()
+        return torch.from_numpy(self._fh[i] / self.n)
+
+    def pair_joint(self) -> torch.Tensor:
+        self._check()
+        return torch.from_numpy(self._pair / self.n)
+
+    def mutual_information(self) -> torch.Tensor:
+        """MI of each tracked pair (``P``)."""
+        self._check()
+        p = self.marginals
+        out = torch.empty(len(self.pairs), dtype=torch.float64)
+        for j, (a, b) in enumerate(self.pairs.tolist()):
+            p11 = torch.tensor([[p[a].item(), self._pair[j] / self.n], [self._pair[j] / self.n, p[b].item()]])
+            out[j] = mutual_information_from_joint(torch.stack([p[a], p[b]]), p11)[0, 1]
+        return out
+
+    def prob_free(self) -> torch.Tensor:
+        """All-free probability of each tracked path."""
+        self._check()
+        return torch.from_numpy(self._path / self.n)
+
+    def trace(self) -> np.ndarray:
+        """``sweeps x len(trace_cells)`` uint8 values of the traced cells."""
+        return np.stack(self._trace) if self._trace else np.zeros((0, len(self.trace_cells)), np.uint8)
+
+    def state_dict(self) -> dict:
+        d = {"n": np.int64(self.n), "sum": self._sum, "pair": self._pair, "path": self._path, "trace": self.trace()}
+        for i, a in enumerate(self._fh):
+            d[f"fh{i}"] = a
+        return d
+
+    def load_state_dict(self, d) -> None:
+        self.n = int(d["n"])
+        self._sum = np.array(d["sum"], dtype=np.float64)
+        self._pair = np.array(d["pair"], dtype=np.float64)
+        self._path = np.array(d["path"], dtype=np.float64)
+        tr = np.array(d["trace"])
+        self._trace = list(tr) if tr.size else []
+        self._fh = [np.array(d[f"fh{i}"], dtype=np.float64) for i in range(len(self._fh))]
+
+
+@dataclass
+class GibbsRun:
+    """What :func:`run_gibbs` returns."""
+
+    stats: RunningStats
+    sweeps: int
+    seconds: float
+    interrupted: bool
+    state: np.ndarray
+
+
+def _save_checkpoint(path: Path, kernel, stats: RunningStats, sweep: int, seed: int) -> None:
+    payload = {f"kernel_{k}": np.asarray(v) for k, v in kernel.state_dict().items()}
+    payload.update({f"stats_{k}": np.asarray(v) for k, v in stats.state_dict().items()})
+    payload["rng"] = torch.get_rng_state().numpy()
+    payload["sweep"] = np.int64(sweep)
+    payload["seed"] = np.int64(seed)
+    payload["format"] = np.int64(_FORMAT)
+    payload["num_cells"] = np.int64(kernel.model.num_cells)
+    tmp = path.with_name(path.name + ".tmp.npz")
+    np.savez(tmp, **payload)
+    os.replace(tmp, path)
+
+
+def _load_checkpoint(path: Path, kernel, stats: RunningStats, seed: int) -> int:
+    with np.load(path, allow_pickle=False) as z:
+        if int(z["format"]) != _FORMAT:
+            raise ValueError(f"{path}: checkpoint format {int(z['format'])}, expected {_FORMAT}")
+        if int(z["num_cells"]) != kernel.model.num_cells:
+            raise ValueError(f"{path}: checkpoint of a map with {int(z['num_cells'])} cells")
+        if int(z["seed"]) != seed:
+            raise ValueError(f"{path}: checkpoint was written with seed {int(z['seed'])}, not {seed}")
+        kernel.load_state_dict({k[7:]: z[k] for k in z.files if k.startswith("kernel_")})
+        stats.load_state_dict({k[6:]: z[k] for k in z.files if k.startswith("stats_")})
+        torch.set_rng_state(torch.from_numpy(z["rng"].copy()))
+        return int(z["sweep"])
+
+
+def run_gibbs(
+    kernel,
+    num_sweeps: int,
+    stats: RunningStats | None = None,
+    warmup: int = 0,
+    seed: int = 0,
+    checkpoint: str | os.PathLike | None = None,
+    checkpoint_every: int = 100,
+    store_every: int = 0,
+    store_dir: str | os.PathLike | None = None,
+    progress: bool = True,
+    stop_after: int | None = None,
+) -> GibbsRun:
+    """Run ``warmup + num_sweeps`` sweeps of ``kernel``; statistics count the last ``num_sweeps``.
+
+    Args:
+        kernel: a :class:`CellGibbs`, :class:`PatchGibbs` or :class:`MetropolisCell`.
+        stats: where statistics accumulate (default: marginals only).
+        seed: seeds torch's generator at the start of a fresh run (a resumed run restores its state).
+        checkpoint: an ``.npz`` path; if it exists the run resumes from it.
+        store_every: keep every ``store_every``-th sample (bit-packed ``.npy``) in ``store_dir``.
+        stop_after: stop (as if interrupted) after this many sweeps of this call: for tests.
+    """
+    if num_sweeps < 0 or warmup < 0:
+        raise ValueError("num_sweeps and warmup must be >= 0")
+    stats = stats if stats is not None else RunningStats(kernel.model)
+    ckpt = Path(checkpoint) if checkpoint is not None else None
+    if ckpt is not None and ckpt.suffix != ".npz":
+        raise ValueError("checkpoint must be an .npz path")
+    start = 0
+    if ckpt is not None and ckpt.exists():
+        start = _load_checkpoint(ckpt, kernel, stats, seed)
+    else:
+        torch.manual_seed(seed)  # before set-up: a drawn initial map ("prior") follows the seed too
+        kernel.setup(warmup)
+    if store_every and store_dir is None:
+        raise ValueError("store_every needs store_dir")
+    if store_dir is not None:
+        Path(store_dir).mkdir(parents=True, exist_ok=True)
+    total = warmup + num_sweeps
+    stop = {"flag": False}
+
+    def handler(signum, frame):
+        stop["flag"] = True
+
+    old = signal.signal(signal.SIGINT, handler) if _main_thread() else None
+    params = {kernel.site: torch.from_numpy(kernel.state.astype(np.float64))}
+    kernel._last = params[kernel.site]
+    t0 = time.perf_counter()
+    done = start
+    bar = tqdm(total=total, initial=start, disable=not progress, unit="sweep", desc="gibbs")
+    try:
+        for i in range(start, total):
+            params = kernel.sample(params)
+            if i >= warmup:
+                stats.update(params[kernel.site])
+                if store_every and (i - warmup) % store_every == 0:
+                    out = Path(store_dir) / f"sweep_{i:09d}.npy"
+                    tmp = out.with_name(out.stem + ".tmp.npy")
+                    np.save(tmp, np.packbits(kernel.state))
+                    os.replace(tmp, out)
+            done = i + 1
+            bar.update(1)
+            if ckpt is not None and done % checkpoint_every == 0:
+                _save_checkpoint(ckpt, kernel, stats, done, seed)
+            if stop["flag"] or (stop_after is not None and done - start >= stop_after):
+                stop["flag"] = True
+                break
+    finally:
+        bar.close()
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
+        if ckpt is not None:
+            _save_checkpoint(ckpt, kernel, stats, done, seed)
+    return GibbsRun(stats, done, time.perf_counter() - t0, bool(stop["flag"]) and done < total, kernel.state.copy())
+
+
+def _main_thread() -> bool:
+    import threading
+
+    return threading.current_thread() is threading.main_thread()
