@@ -76,8 +76,9 @@ def _first_outside(m, in_patch, offsets, cells, r, start):
 def patch_log_lik(patch, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa, ll, out):
     """``out[w] = log p(z | patch = w, rest)`` up to a constant common to all ``w`` (Eq. 4.4).
 
-    Scratch: ``in_patch`` (bool ``K``, left all False) and ``ray_stamp`` (int64 ``R``; entries equal to
-    ``stamp`` mark rays already collected for this patch; pass a new ``stamp`` on every call).
+    Scratch: ``in_patch`` (bool ``K``, left all False) and ``ray_stamp`` (int64 ``R x 2``: a ray whose
+    first entry equals ``stamp`` was already collected for this patch, into the slot in its second
+    entry; pass a ``stamp`` never used before on every call).
     Returns ``W``.
     """
     L = 0
@@ -104,14 +105,12 @@ def patch_log_lik(patch, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off
             continue
         for p in range(c_off[c], c_off[c + 1]):
             r = c_ray[p]
-            if ray_stamp[r] != stamp:
-                ray_stamp[r] = stamp
+            if ray_stamp[r, 0] != stamp:
+                ray_stamp[r, 0] = stamp
+                ray_stamp[r, 1] = n_slots
                 slot_ray[n_slots] = r
                 n_slots += 1
-            # find the slot of r (rays of a cell are sorted, slots are few: linear search)
-            s = n_slots - 1
-            while slot_ray[s] != r:
-                s -= 1
+            s = ray_stamp[r, 1]
             ent_kappa[s, slot_n[s]] = c_kappa[p]
             ent_bit[s, slot_n[s]] = bit
             slot_n[s] += 1

@@ -428,7 +428,7 @@ class PatchGibbs(_MapKernel):
 
     def _ray_stamp(self) -> np.ndarray:
         if not hasattr(self, "_ray_stamp_arr"):
-            self._ray_stamp_arr = np.full(self.model.rays.num_rays, -1, np.int64)
+            self._ray_stamp_arr = np.full((self.model.rays.num_rays, 2), -1, np.int64)
         return self._ray_stamp_arr
 
     def patch_log_weights(self, patch: np.ndarray) -> np.ndarray:
@@ -438,13 +438,14 @@ class PatchGibbs(_MapKernel):
         patch = np.ascontiguousarray(patch, dtype=np.int64)
         logw = np.empty(1 << self.L, np.float64)
         in_patch = np.zeros(self.model.num_cells, np.bool_)
+        stamp = self._stamp
         self._stamp += 1
         if self._prior_lo is not None:
             W = patch_log_weights(patch, self._prior_lo, self._m, self._f, in_patch, self._ray_stamp(),
-                                  self._stamp, self._offsets, self._cells, self._c_off, self._c_ray,
+                                  stamp, self._offsets, self._cells, self._c_off, self._c_ray,
                                   self._c_kappa, self._ll, logw)  # fmt: skip
             return logw[:W].copy()
-        W = patch_log_lik(patch, self._m, self._f, in_patch, self._ray_stamp(), self._stamp, self._offsets,
+        W = patch_log_lik(patch, self._m, self._f, in_patch, self._ray_stamp(), stamp, self._offsets,
                           self._cells, self._c_off, self._c_ray, self._c_kappa, self._ll, logw)  # fmt: skip
         live = patch[patch >= 0]
         configs = ((torch.arange(W)[:, None] >> torch.arange(len(live))) & 1).to(torch.float64)

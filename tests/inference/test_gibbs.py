@@ -1,0 +1,319 @@
+import itertools
+import math
+import os
+
+import numpy as np
+import pytest
+import torch
+from pyro.distributions.testing.gof import multinomial_goodness_of_fit
+
+from ogm_ppl import GaussianRange, Grid, OccupancyModel, PatternMatch, Scans, raycast
+from ogm_ppl.datasets import THESIS_TOY_READINGS, toy_1d
+from ogm_ppl.inference.exact import brute_force, pose_constrained_1d
+from ogm_ppl.inference.gibbs import CellGibbs, MetropolisCell, PatchGibbs
+from ogm_ppl.inference.runner import RunningStats, run_gibbs
+from ogm_ppl.metrics import kl_divergence
+from ogm_ppl.priors import DataDriven1DPrior, IndependentPrior
+
+
+def model_1d(K=6, readings=(3.0, 4.0, 2.0), sensor=None, prior=None):
+    toy = toy_1d(num_cells=K + 1, wall=1, readings=readings)
+    prior = prior if prior is not None else IndependentPrior(torch.linspace(0.2, 0.6, K + 1))
+    return OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), sensor or GaussianRange(1.5), prior)
+
+
+def model_2d(sensor=None):
+    grid = Grid((2, 4), resolution=1.0)
+    scans = Scans([[0.5, 0.5, 0.0], [0.5, 0.5, 0.0], [3.5, 1.5, math.pi], [0.5, 0.5, math.pi / 2]],
+                  [0.0], [[2.2], [3.9], [1.4], [1.0]], max_range=3.9, over_range="max")  # fmt: skip
+    return OccupancyModel(grid, raycast(grid, scans), sensor or GaussianRange(0.9),
+                          IndependentPrior(torch.linspace(0.25, 0.55, 8)))  # fmt: skip
+
+
+def states(model):
+    L = len(model.latent)
+    maps = torch.zeros(2**L, model.num_cells, dtype=torch.float64)
+    codes = torch.arange(2**L)
+    maps[:, model.latent] = ((codes[:, None] >> torch.arange(L)) & 1).double()
+    return maps
+
+
+def code_of(model, m) -> int:
+    bits = torch.as_tensor(m)[model.latent].long()
+    return int((bits << torch.arange(len(model.latent))).sum())
+
+
+def exact_pi(model):
+    lj = model.log_joint(states(model))
+    return torch.softmax(lj, 0)
+
+
+def cell_update_matrix(kernel, model, k):
+    S = states(model)
+    T = torch.zeros(len(S), len(S), dtype=torch.float64)
+    for i, s in enumerate(S):
+        kernel._set_state(s)
+        lo = kernel.cell_log_odds(int(k))
+        if lo != lo:  # a state the prior rules out: the kernel leaves it unchanged
+            T[i, i] = 1.0
+            continue
+        p1 = 1.0 if lo == math.inf else 0.0 if lo == -math.inf else 1 / (1 + math.exp(-lo))
+        for v, p in ((1, p1), (0, 1 - p1)):
+            t = s.clone()
+            t[k] = v
+            T[i, code_of(model, t)] += p
+    return T
+
+
+def patch_update_matrix(kernel, model, patch, p_rand=0.0):
+    S = states(model)
+    T = torch.zeros(len(S), len(S), dtype=torch.float64)
+    live = patch[patch >= 0]
+    for i, s in enumerate(S):
+        kernel._set_state(s)
+        logw = torch.from_numpy(kernel.patch_log_weights(patch))
+        W = len(logw)
+        if not torch.isfinite(logw).any():  # a state the prior rules out: left unchanged
+            T[i, i] = 1.0
+            continue
+        gibbs = torch.softmax(logw, 0)
+        cur = int(sum(int(s[c]) << j for j, c in enumerate(live)))
+        mh = torch.zeros(W, dtype=torch.float64)
+        for w in range(W):
+            a = 1.0 if logw[w] >= logw[cur] else float(torch.exp(logw[w] - logw[cur]))
+            mh[w] += a / W
+            mh[cur] += (1 - a) / W
+        row = (1 - p_rand) * gibbs + p_rand * mh
+        for w in range(W):
+            t = s.clone()
+            t[torch.from_numpy(live)] = torch.tensor([(w >> j) & 1 for j in range(len(live))], dtype=torch.float64)
+            T[i, code_of(model, t)] += row[w]
+    return T
+
+
+MODELS = {
+    "1d_gauss": lambda: model_1d(),
+    "1d_pattern": lambda: model_1d(sensor=PatternMatch(0.7)),
+    "2d_gauss": lambda: model_2d(),
+    "1d_wall_prior": lambda: model_1d(5, prior=DataDriven1DPrior(6, 1)),
+}
+
+
+@pytest.mark.parametrize("name", list(MODELS))
+def test_exact_posterior_is_stationary_for_cell_gibbs(name):
+    model = MODELS[name]()
+    assert len(model.latent) <= 6
+    pi = exact_pi(model)
+    torch.testing.assert_close(pi, brute_force(model).log_probs.exp(), rtol=0, atol=1e-12)
+    kernel = CellGibbs(model, scan="systematic")
+    kernel.setup()
+    sweep = torch.eye(len(pi), dtype=torch.float64)
+    for k in model.latent.tolist():
+        T = cell_update_matrix(kernel, model, k)
+        torch.testing.assert_close(T.sum(1), torch.ones(len(pi)), rtol=0, atol=1e-12)
+        torch.testing.assert_close(pi @ T, pi, rtol=0, atol=1e-12)
+        sweep = sweep @ T
+    torch.testing.assert_close(pi @ sweep, pi, rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize(
+    "name, patch, p_rand",
+    [("1d_gauss", 2, 0.0), ("1d_gauss", 3, 0.3), ("1d_pattern", 3, 0.0), ("2d_gauss", (2, 2), 0.0),
+     ("2d_gauss", "plus", 0.2), ("1d_wall_prior", 3, 0.0), ("1d_wall_prior", 2, 0.25)],
+)  # fmt: skip
+def test_exact_posterior_is_stationary_for_patch_gibbs(name, patch, p_rand):
+    model = MODELS[name]()
+    pi = exact_pi(model)
+    kernel = PatchGibbs(model, patch, scan="systematic", p_rand_patch=p_rand)
+    kernel.setup()
+    for p in kernel.patches():
+        T = patch_update_matrix(kernel, model, p, p_rand)
+        torch.testing.assert_close(T.sum(1), torch.ones(len(pi)), rtol=0, atol=1e-12)
+        torch.testing.assert_close(pi @ T, pi, rtol=0, atol=1e-12)
+
+
+def test_thesis_random_patch_is_not_exact():
+    """Algorithm 2 as printed (random configuration always kept) moves the stationary distribution."""
+    model = MODELS["1d_gauss"]()
+    pi = exact_pi(model)
+    kernel = PatchGibbs(model, 3, scan="systematic")
+    kernel.setup()
+    p = kernel.patches()[0]
+    S = states(model)
+    T = torch.zeros(len(S), len(S), dtype=torch.float64)
+    live = p[p >= 0]
+    for i, s in enumerate(S):
+        kernel._set_state(s)
+        row = 0.7 * torch.softmax(torch.from_numpy(kernel.patch_log_weights(p)), 0) + 0.3 / 2 ** len(live)
+        for w in range(2 ** len(live)):
+            t = s.clone()
+            t[torch.from_numpy(live)] = torch.tensor([(w >> j) & 1 for j in range(len(live))], dtype=torch.float64)
+            T[i, code_of(model, t)] += row[w]
+    assert (pi @ T - pi).abs().max() > 1e-3
+
+
+@pytest.mark.parametrize("proposal", ["uniform", "endpoint"])
+def test_metropolis_cell_is_stationary(proposal):
+    model = model_2d()
+    pi = exact_pi(model)
+    kernel = MetropolisCell(model, proposal=proposal, endpoint_weight=4.0)
+    kernel.setup()
+    q = kernel.proposal_probs()
+    S = states(model)
+    T = torch.zeros(len(S), len(S), dtype=torch.float64)
+    for i, s in enumerate(S):
+        kernel._set_state(s)
+        for j, k in enumerate(model.latent.tolist()):
+            lo = kernel.model.prior.cell_log_odds()[k] + _lik(kernel, k)
+            delta = -lo if s[k] else lo
+            a = min(1.0, math.exp(delta)) if delta > -math.inf else 0.0
+            t = s.clone()
+            t[k] = 1 - s[k]
+            T[i, code_of(model, t)] += q[j] * a
+            T[i, i] += q[j] * (1 - a)
+    torch.testing.assert_close(pi @ T, pi, rtol=0, atol=1e-12)
+    if proposal == "endpoint":
+        assert q.max() / q.min() == pytest.approx(4.0)
+
+
+def _lik(kernel, k):
+    from ogm_ppl.inference._cell_kernels import cell_log_lik_ratio
+
+    return cell_log_lik_ratio(k, kernel._m, kernel._f, kernel._offsets, kernel._cells, kernel._c_off,
+                              kernel._c_ray, kernel._c_kappa, kernel._ll)  # fmt: skip
+
+
+@pytest.mark.parametrize("make", [lambda m: CellGibbs(m, scan="systematic"),
+                                  lambda m: PatchGibbs(m, 3, scan="systematic", p_rand_patch=0.3)])  # fmt: skip
+def test_compiled_sweep_draws_from_its_transition_row(make):
+    """One compiled sweep from a fixed state, repeated: next states follow the sweep's matrix row."""
+    model = model_1d()
+    kernel = make(model)
+    kernel.setup()
+    if isinstance(kernel, CellGibbs):
+        mats = [cell_update_matrix(kernel, model, k) for k in model.latent.tolist()]
+    else:
+        mats = [patch_update_matrix(kernel, model, p, 0.3) for p in kernel.patches()]
+    sweep = torch.eye(2 ** len(model.latent), dtype=torch.float64)
+    for T in mats:
+        sweep = sweep @ T
+    start = states(model)[37]
+    torch.manual_seed(5)
+    counts = torch.zeros(len(sweep), dtype=torch.float64)
+    for _ in range(20000):
+        kernel._set_state(start)
+        out = kernel.sample({"m": start})["m"]
+        counts[code_of(model, out)] += 1
+    row = sweep[37]
+    assert counts[row == 0].sum() == 0
+    # chi-square needs expected counts of at least ~5: test the common next states (truncated test)
+    big = row * counts.sum() >= 5
+    assert multinomial_goodness_of_fit(row[big], counts[big], total_count=int(counts.sum())) > 1e-3
+
+
+def test_kl_to_exact_falls_as_one_over_n():
+    toy = toy_1d(num_cells=21, readings=THESIS_TOY_READINGS)
+    model = OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0), IndependentPrior(0.5, 21))
+    exact = pose_constrained_1d(model).marginals
+    checkpoints = [250, 1000, 4000, 16000]
+    kls = np.zeros((8, len(checkpoints)))
+    for c in range(8):
+        kernel = CellGibbs(model)
+        torch.manual_seed(c)
+        kernel.setup()
+        params = kernel.initial_params
+        acc = torch.zeros(21, dtype=torch.float64)
+        for i in range(1, checkpoints[-1] + 1):
+            params = kernel.sample(params)
+            acc += params["m"]
+            if i in checkpoints:
+                q = (acc / i).clamp(1e-9, 1 - 1e-9)
+                kls[c, checkpoints.index(i)] = float(kl_divergence(exact, q))
+    mean = kls.mean(0)
+    slope = np.polyfit(np.log(checkpoints), np.log(mean), 1)[0]
+    assert -1.35 < slope < -0.65, (slope, mean)
+
+
+@pytest.mark.parametrize("L", [1, 3, 5])
+def test_patch_gibbs_agrees_with_exact(L):
+    toy = toy_1d(num_cells=16, readings=THESIS_TOY_READINGS)
+    model = OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0), IndependentPrior(0.5, 16))
+    exact = pose_constrained_1d(model)
+    stats = RunningStats(model, rays=[0])
+    run_gibbs(PatchGibbs(model, L, scan="systematic"), 6000, stats, warmup=50, seed=L, progress=False)
+    # Monte Carlo error: sd of a marginal estimate is at most 0.5 * sqrt(tau / n); tau < 20 here
+    tol = 4 * 0.5 * math.sqrt(20 / 6000)
+    assert (stats.marginals - exact.marginals).abs().max() < tol
+    assert (stats.first_hit(0) - exact.first_hit()).abs().max() < tol
+
+
+def test_data_driven_prior_gibbs_agrees_with_exact():
+    toy = toy_1d(num_cells=12, readings=THESIS_TOY_READINGS)
+    model = OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0), DataDriven1DPrior(12, 1))
+    exact = pose_constrained_1d(model)
+    stats = RunningStats(model)
+    run_gibbs(PatchGibbs(model, 3, p_rand_patch=0.001, init="free"), 1500, stats, warmup=50, seed=0,
+              progress=False)  # fmt: skip
+    assert (stats.marginals - exact.marginals).abs().max() < 4 * 0.5 * math.sqrt(20 / 1500)
+
+
+def test_resume_is_bit_for_bit(tmp_path):
+    toy = toy_1d(num_cells=16, readings=THESIS_TOY_READINGS)
+    model = OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0), IndependentPrior(0.3, 16))
+
+    def stats():
+        return RunningStats(model, rays=[0], pairs=[[7, 8]], paths=[[1, 2, 3]], trace_cells=[8])
+
+    for make in (lambda: CellGibbs(model, init="prior"), lambda: PatchGibbs(model, 3)):
+        full = run_gibbs(make(), 400, stats(), warmup=10, seed=11, progress=False)
+        ck = tmp_path / f"ck{id(make)}.npz"
+        part = run_gibbs(make(), 400, stats(), warmup=10, seed=11, checkpoint=ck, checkpoint_every=50,
+                         stop_after=123, progress=False)  # fmt: skip
+        assert part.interrupted and part.sweeps == 123
+        rest = run_gibbs(make(), 400, stats(), warmup=10, seed=11, checkpoint=ck, checkpoint_every=50,
+                         progress=False)  # fmt: skip
+        assert not rest.interrupted and rest.sweeps == 410
+        assert np.array_equal(full.state, rest.state)
+        assert torch.equal(full.stats.marginals, rest.stats.marginals)
+        assert torch.equal(full.stats.first_hit(0), rest.stats.first_hit(0))
+        assert np.array_equal(full.stats.trace(), rest.stats.trace())
+        assert not list(tmp_path.glob("*.tmp*"))
+    with pytest.raises(ValueError, match="seed"):
+        run_gibbs(CellGibbs(model), 400, stats(), seed=12, checkpoint=ck, progress=False)
+
+
+def test_thinned_samples_on_disk(tmp_path):
+    model = model_1d()
+    run_gibbs(CellGibbs(model), 20, seed=0, store_every=5, store_dir=tmp_path, progress=False)
+    files = sorted(os.listdir(tmp_path))
+    assert files == [f"sweep_{i:09d}.npy" for i in (0, 5, 10, 15)]
+    m = np.unpackbits(np.load(tmp_path / files[0]))[: model.num_cells]
+    assert m.shape == (model.num_cells,) and m[0] == 0
+
+
+def test_pyro_mcmc_with_running_stats_hook():
+    from pyro.infer import MCMC
+
+    model = model_1d()
+    stats = RunningStats(model)
+    mcmc = MCMC(PatchGibbs(model, 2), num_samples=3000, warmup_steps=50, hook_fn=stats, disable_progbar=True)
+    mcmc.run()
+    samples = mcmc.get_samples()["m"]
+    assert samples.shape == (3000, model.num_cells) and stats.n == 3000
+    torch.testing.assert_close(samples.mean(0), stats.marginals)
+    exact = brute_force(model).marginals
+    assert (stats.marginals - exact).abs().max() < 4 * 0.5 * math.sqrt(10 / 3000)
+
+
+def test_bad_arguments():
+    model = model_1d()
+    with pytest.raises(ValueError, match="scan"):
+        CellGibbs(model, scan="sideways")
+    with pytest.raises(ValueError, match="p_rand_patch"):
+        PatchGibbs(model, 3, p_rand_patch=1.0)
+    with pytest.raises(ValueError, match="patch"):
+        PatchGibbs(model, (2, 2))  # a 1D grid takes runs only
+    with pytest.raises(ValueError, match="init"):
+        CellGibbs(model, init="zeros").setup()
+    with pytest.raises(ValueError, match="independent"):
+        MetropolisCell(model_1d(5, prior=DataDriven1DPrior(6, 1)))
