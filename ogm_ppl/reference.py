@@ -146,3 +146,37 @@ def evidence_grid_numpy(
     ev = np.bincount(np.concatenate(all_cells), weights=np.concatenate(all_vals),
                      minlength=grid.num_cells)  # fmt: skip
     return ev + math.log(prior / (1 - prior))
+
+
+def gibbs_cell_sweep_reference(model, m: np.ndarray, cells_order, uniforms, prior_log_odds) -> np.ndarray:
+    """One single-cell Gibbs sweep in plain Python (Eq. 4.2): for every cell, every ray through it is
+    walked from the sensor to find its first occupied cell with the cell occupied and free.
+
+    ``m`` (uint8 ``K``) is updated in place and returned.
+    """
+    rays = model.rays
+    idx = rays.by_cell
+    ll = model.loglik_table.numpy()
+    offsets, cells = rays.offsets.tolist(), rays.cells.tolist()
+
+    def first(r):
+        for j in range(offsets[r], offsets[r + 1]):
+            if m[cells[j]]:
+                return j - offsets[r]
+        return offsets[r + 1] - offsets[r]
+
+    for k, u in zip(cells_order, uniforms):
+        k = int(k)
+        saved = m[k]
+        lo = float(prior_log_odds[k])
+        for p in range(idx.offsets[k], idx.offsets[k + 1]):
+            r = int(idx.ray[p])
+            m[k] = 1
+            f1 = first(r)
+            m[k] = 0
+            f0 = first(r)
+            lo += ll[r, f1] - ll[r, f0]
+        m[k] = saved
+        p1 = 1.0 / (1.0 + math.exp(-lo)) if lo > -700 else 0.0
+        m[k] = 1 if u < p1 else 0
+    return m

@@ -317,3 +317,35 @@ def test_bad_arguments():
         CellGibbs(model, init="zeros").setup()
     with pytest.raises(ValueError, match="independent"):
         MetropolisCell(model_1d(5, prior=DataDriven1DPrior(6, 1)))
+
+
+def test_chains_diagnostics():
+    from ogm_ppl.inference.diagnostics import kl_trace, run_chains
+
+    model = model_1d(8, readings=(4.0, 5.0, 4.0, 6.0))
+    res = run_chains(lambda: CellGibbs(model, init="prior"), num_chains=4, num_sweeps=800, trace_cells=[3, 4, 5],
+                     warmup=20)  # fmt: skip
+    assert res.traces().shape == (4, 800, 3)
+    rhat, n_eff = res.rhat(), res.ess()
+    assert torch.all((rhat - 1).abs() < 0.05), rhat
+    assert torch.all(n_eff > 100) and torch.all(n_eff <= 4 * 800 * 1.5)
+    exact = brute_force(model).marginals
+    assert (res.marginals - exact).abs().max() < 4 * 0.5 * math.sqrt(10 / 3200)
+    kl = kl_trace(CellGibbs(model), exact, [100, 1000])
+    assert kl[1] < kl[0]
+
+
+def test_table_3_1_setup_subsample():
+    """Table 3.1's Gibbs entry on a subsample: the mean summed KL is of Monte Carlo size. With n nearly
+    independent sweeps each uncertain cell adds about 1 / (2n); we allow an autocorrelation time of 2."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[2] / "experiments" / "table_3_1_gibbs.py"
+    spec = importlib.util.spec_from_file_location("table_3_1_gibbs", path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    n, K = 20_000, 30
+    res = mod.run(num_datasets=12, sweeps=n, cells=K, progress=False)
+    assert 0 < res["gibbs_mean_kl"] < 2 * K / (2 * n)
+    assert res["haehnel_mean_kl"] > 100 * res["gibbs_mean_kl"]
