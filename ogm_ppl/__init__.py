@@ -4,10 +4,10 @@ Implements Merali (2020), "A Study of the Benefits of Cell Correlations in Occup
 """
 
 from .grid import Grid
+from .models.occupancy import OccupancyModel
 from .raycast import CellIndex, Rays, raycast
 from .scans import Scans
 from .sensors import GaussianRange, PatternMatch, SensorModel
-from .models.occupancy import OccupancyModel
 
 __all__ = [
     "Grid",

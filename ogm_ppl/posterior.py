@@ -117,7 +117,7 @@ class WeightedMaps(MapPosterior):
         self.num_maps = int(num_maps)
 
     @classmethod
-    def from_samples(cls, model, samples: torch.Tensor, chunk: int = 4096) -> "WeightedMaps":
+    def from_samples(cls, model, samples: torch.Tensor, chunk: int = 4096) -> WeightedMaps:
         """Equal weights on ``S x K`` sampled maps (e.g. from MCMC)."""
         samples = torch.as_tensor(samples, dtype=torch.float64)
         if samples.dim() != 2 or samples.shape[1] != model.num_cells:

@@ -1,6 +1,23 @@
-"""Inference: traditional OGM (log-odds); exact posteriors, MAP, patch maps and MCMC in later modules."""
+"""Inference: traditional OGM (log-odds), exact posteriors, MAP, and MCMC over whole maps."""
 
-from . import log_odds
+from . import exact, log_odds
+from .gibbs import CellGibbs, MetropolisCell, PatchGibbs
 from .log_odds import LogOddsMap, evidence_grid, evidence_grid_from_scans
+from .map_estimate import MapEstimate, map_estimate
+from .runner import GibbsRun, RunningStats, run_gibbs
 
-__all__ = ["log_odds", "LogOddsMap", "evidence_grid", "evidence_grid_from_scans"]
+__all__ = [
+    "exact",
+    "log_odds",
+    "LogOddsMap",
+    "evidence_grid",
+    "evidence_grid_from_scans",
+    "map_estimate",
+    "MapEstimate",
+    "CellGibbs",
+    "PatchGibbs",
+    "MetropolisCell",
+    "RunningStats",
+    "GibbsRun",
+    "run_gibbs",
+]

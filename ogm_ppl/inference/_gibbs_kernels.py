@@ -273,7 +273,7 @@ def gibbs_cell_marginals(order, prior_log_odds, m, f, offsets, cells, c_off, c_r
     """
     np.random.seed(seed)
     acc = np.zeros(m.shape[0], np.float64)
-    for s in range(num_sweeps):
+    for _ in range(num_sweeps):
         for i in range(order.shape[0]):
             k = order[i]
             lo = prior_log_odds[k] + cell_log_lik_ratio(k, m, f, offsets, cells, c_off, c_ray, c_kappa, ll)

@@ -197,8 +197,10 @@ def run_gibbs(
         raise ValueError("num_sweeps and warmup must be >= 0")
     stats = stats if stats is not None else RunningStats(kernel.model)
     ckpt = Path(checkpoint) if checkpoint is not None else None
-    if ckpt is not None and ckpt.suffix != ".npz":
-        raise ValueError("checkpoint must be an .npz path")
+    if ckpt is not None:
+        if ckpt.suffix != ".npz":
+            raise ValueError("checkpoint must be an .npz path")
+        ckpt.parent.mkdir(parents=True, exist_ok=True)
     start = 0
     if ckpt is not None and ckpt.exists():
         start = _load_checkpoint(ckpt, kernel, stats, seed)
