@@ -20,16 +20,27 @@ from .runner import RunningStats, run_gibbs
 __all__ = ["ChainsResult", "run_chains", "split_rhat", "ess", "kl_trace"]
 
 
+def _per_cell(fn, traces) -> torch.Tensor:
+    """Apply a Pyro statistic to the non-constant cells only: with pyro 1.9, one cell that never changes
+    makes ``effective_sample_size`` NaN for *every* cell (and ``MCMC.summary`` shows NaN n_eff), and
+    binary maps always have such cells (pinned, or far from any reading)."""
+    x = torch.as_tensor(np.asarray(traces), dtype=torch.float64)
+    flat = x.reshape(-1, x.shape[-1])
+    varying = (flat != flat[:1]).any(0)
+    out = torch.full((x.shape[-1],), float("nan"), dtype=torch.float64)
+    if varying.any():
+        out[varying] = fn(x[..., varying], chain_dim=0, sample_dim=1)
+    return out
+
+
 def split_rhat(traces: np.ndarray | torch.Tensor) -> torch.Tensor:
     """Split R-hat per traced cell from ``chains x sweeps x cells`` values (NaN for constant cells)."""
-    x = torch.as_tensor(np.asarray(traces), dtype=torch.float64)
-    return split_gelman_rubin(x, chain_dim=0, sample_dim=1)
+    return _per_cell(split_gelman_rubin, traces)
 
 
 def ess(traces: np.ndarray | torch.Tensor) -> torch.Tensor:
-    """Effective sample size per traced cell, over all chains."""
-    x = torch.as_tensor(np.asarray(traces), dtype=torch.float64)
-    return effective_sample_size(x, chain_dim=0, sample_dim=1)
+    """Effective sample size per traced cell, over all chains (NaN for constant cells)."""
+    return _per_cell(effective_sample_size, traces)
 
 
 @dataclass

@@ -332,6 +332,12 @@ def test_chains_diagnostics():
     assert (res.marginals - exact).abs().max() < 4 * 0.5 * math.sqrt(10 / 3200)
     kl = kl_trace(CellGibbs(model), exact, [100, 1000])
     assert kl[1] < kl[0]
+    # a constant cell (pinned cell 0) gets NaN and leaves the others intact
+    from ogm_ppl.inference.diagnostics import ess
+
+    res0 = run_chains(lambda: CellGibbs(model), num_chains=2, num_sweeps=300, trace_cells=[0, 4])
+    e = ess(res0.traces())
+    assert torch.isnan(e[0]) and torch.isfinite(e[1])
 
 
 def test_table_3_1_setup_subsample():
