@@ -8,6 +8,8 @@ import resource
 import time
 from pathlib import Path
 
+import numpy as np
+
 OUT = Path(__file__).resolve().parent.parent / "out" / "bench"
 
 
@@ -35,3 +37,28 @@ def write_json(name: str, payload: dict) -> Path:
     tmp.write_text(json.dumps(payload, indent=2))
     os.replace(tmp, path)
     return path
+
+
+def sparse_scene(n: int, poses: int, walls: int, seed: int = 0, res: float = 0.05, max_range_cells: int = 75,
+                 sigma_cells: float = 3.0, beams: int = 720):  # fmt: skip
+    """An ``n x n`` map with a border and ``walls`` random wall segments, scanned from ``poses`` random
+    free cells with ``beams`` beams each (simulated, seeded): most beams are max-range readings."""
+    from ogm_ppl import Grid
+    from ogm_ppl.datasets import simulate_scans
+
+    rng = np.random.default_rng(seed)
+    truth = np.zeros((n, n), dtype=bool)
+    truth[0, :] = truth[-1, :] = truth[:, 0] = truth[:, -1] = True
+    for _ in range(walls):
+        r, c = rng.integers(5, n - 5, 2)
+        length = int(rng.integers(20, 80))
+        if rng.random() < 0.5:
+            truth[r, c : c + length] = True
+        else:
+            truth[r : r + length, c] = True
+    grid = Grid((n, n), resolution=res)
+    free = np.argwhere(~truth)
+    pick = free[rng.choice(len(free), poses, replace=False)]
+    xy = np.c_[(pick[:, 1] + 0.5) * res, (pick[:, 0] + 0.5) * res, rng.uniform(-np.pi, np.pi, poses)]
+    angles = np.arange(beams) * (2 * np.pi / beams)
+    return grid, simulate_scans(grid, truth, xy, angles, max_range_cells * res, sigma_cells, seed)

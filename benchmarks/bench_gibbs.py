@@ -21,10 +21,9 @@ import numpy as np
 import torch
 
 sys.path.insert(0, os.path.dirname(__file__))
-from _common import best_time, peak_rss_mb, write_json
+from _common import best_time, peak_rss_mb, sparse_scene, write_json
 
-from ogm_ppl import GaussianRange, Grid, OccupancyModel, raycast
-from ogm_ppl.datasets import simulate_scans
+from ogm_ppl import GaussianRange, OccupancyModel, raycast
 from ogm_ppl.inference.gibbs import CellGibbs, PatchGibbs
 from ogm_ppl.priors import IndependentPrior
 from ogm_ppl.reference import gibbs_cell_sweep_reference
@@ -34,23 +33,8 @@ RES, F, SIGMA = 0.05, 75, 3.0
 
 
 def scene(n: int, poses: int, beams: int = 720, seed: int = 0):
-    rng = np.random.default_rng(seed)
-    truth = np.zeros((n, n), dtype=bool)
-    truth[0, :] = truth[-1, :] = truth[:, 0] = truth[:, -1] = True
-    for _ in range(max(4, n * n // 6000)):
-        r, c = rng.integers(5, n - 5, 2)
-        length = int(rng.integers(20, 80))
-        if rng.random() < 0.5:
-            truth[r, c : c + length] = True
-        else:
-            truth[r : r + length, c] = True
-    grid = Grid((n, n), resolution=RES)
-    free = np.argwhere(~truth)
-    pick = free[rng.choice(len(free), poses, replace=False)]
-    xy = np.c_[(pick[:, 1] + 0.5) * RES, (pick[:, 0] + 0.5) * RES, rng.uniform(-np.pi, np.pi, poses)]
-    angles = np.arange(beams) * (2 * np.pi / beams)
-    scans = simulate_scans(grid, truth, xy, angles, F * RES, SIGMA, seed)
-    return grid, scans
+    return sparse_scene(n, poses, walls=max(4, n * n // 6000), seed=seed, res=RES, max_range_cells=F,
+                        sigma_cells=SIGMA, beams=beams)  # fmt: skip
 
 
 def build(n: int, poses: int, beams: int = 720, lam: float = 0.234):

@@ -29,10 +29,9 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(__file__))
-from _common import best_time, peak_rss_mb, write_json
+from _common import best_time, peak_rss_mb, sparse_scene, write_json
 
-from ogm_ppl import Grid, Scans, raycast
-from ogm_ppl.datasets import simulate_scans
+from ogm_ppl import Scans, raycast
 from ogm_ppl.inference import evidence_grid, evidence_grid_from_scans
 from ogm_ppl.models import Moravec
 from ogm_ppl.reference import evidence_grid_numpy, evidence_grid_reference
@@ -42,23 +41,7 @@ L4 = math.log(4.0)
 
 
 def scene(seed: int = 0):
-    rng = np.random.default_rng(seed)
-    truth = np.zeros((N, N), dtype=bool)
-    truth[0, :] = truth[-1, :] = truth[:, 0] = truth[:, -1] = True
-    for _ in range(40):  # sparse wall segments
-        r, c = rng.integers(10, N - 10, 2)
-        length = int(rng.integers(20, 80))
-        if rng.random() < 0.5:
-            truth[r, c : c + length] = True
-        else:
-            truth[r : r + length, c] = True
-    grid = Grid((N, N), resolution=RES)
-    free = np.argwhere(~truth)
-    pick = free[rng.choice(len(free), 100, replace=False)]
-    poses = np.c_[(pick[:, 1] + 0.5) * RES, (pick[:, 0] + 0.5) * RES, rng.uniform(-np.pi, np.pi, 100)]
-    angles = np.arange(720) * (np.pi / 360)
-    scans = simulate_scans(grid, truth, poses, angles, F * RES, SIGMA, seed)
-    return grid, scans
+    return sparse_scene(N, 100, walls=40, seed=seed, res=RES, max_range_cells=F, sigma_cells=SIGMA)
 
 
 def octomap_time(scans: Scans):

@@ -29,6 +29,14 @@ def _as_tensor(x, dtype=None) -> torch.Tensor:
     return torch.as_tensor(x, dtype=dtype if dtype is not None else torch.get_default_dtype())
 
 
+def _common(z, f, F):
+    """Readings, first hits and ray ends as tensors of the readings' dtype, and the "none" mask."""
+    z = _as_tensor(z)
+    f = _as_tensor(f, z.dtype)
+    F = _as_tensor(F, z.dtype)
+    return z, f, F, f > F
+
+
 def _check_prob(name: str, value: float, open_right: bool = True) -> float:
     value = float(value)
     ok = 0.0 < value < 1.0 if open_right else 0.0 < value <= 1.0
@@ -86,12 +94,8 @@ class GaussianRange(SensorModel):
         return f"GaussianRange(sigma={float(self.sigma)}, p_rand={self.p_rand})"
 
     def log_prob(self, z, f, F, is_max=None) -> torch.Tensor:
-        z = _as_tensor(z)
-        dtype = z.dtype
-        f = _as_tensor(f, dtype)
-        F = _as_tensor(F, dtype)
-        sigma = _as_tensor(self.sigma, dtype)
-        none = f > F
+        z, f, F, none = _common(z, f, F)
+        sigma = _as_tensor(self.sigma, z.dtype)
         f_safe = torch.where(none, F, f)
         log_n = -0.5 * ((z - f_safe) / sigma) ** 2 - torch.log(sigma) - _LOG_SQRT_2PI
         log_tail = torch.special.log_ndtr((f_safe - F - 0.5) / sigma)  # log(1 - Phi((F+1/2-f)/sigma))
@@ -144,11 +148,8 @@ class PatternMatch(SensorModel):
         return f"PatternMatch(p_occ={self.p_occ})"
 
     def log_prob(self, z, f, F, is_max=None) -> torch.Tensor:
-        z = _as_tensor(z)
+        z, f, F, none = _common(z, f, F)
         dtype = z.dtype
-        f = _as_tensor(f, dtype)
-        F = _as_tensor(F, dtype)
-        none = f > F
         if is_max is None:
             is_max = torch.zeros(torch.broadcast_shapes(z.shape, f.shape), dtype=torch.bool)
         is_max = torch.as_tensor(is_max, dtype=torch.bool)
