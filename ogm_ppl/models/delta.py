@@ -259,12 +259,73 @@ THESIS_P21 = (
 )  # fmt: skip
 
 
-def delta_by_name(name: str) -> DeltaFamily:
-    """A Delta family with published values.
+_FAMILIES = {}  # filled below: class name -> class, for artefacts
 
-    Names: ``"haehnel"`` (traditional OGM), and the thesis's optimised values (Table 2.1, 2.2):
+
+def family_to_dict(family: DeltaFamily) -> dict:
+    """A JSON-able description of a family and its parameter values (see :func:`family_from_dict`)."""
+    fixed = {}
+    if isinstance(family, MarshallBarfoot):
+        fixed["beta"] = family.beta
+    if isinstance(family, Elfes):
+        fixed.update(prior=family.prior, max_kappa=family.max_kappa)
+    if type(family).__name__ == "NeuralDelta":
+        fixed.update(F=family.F, hidden=family.hidden)
+    params = {k: v.detach().tolist() for k, v in family.state_dict().items()}
+    return {"family": type(family).__name__, "params": params, "fixed": fixed}
+
+
+def family_from_dict(spec: dict) -> DeltaFamily:
+    """Rebuild a family from :func:`family_to_dict`'s output (no code is executed from the file)."""
+    name = spec["family"]
+    if name == "NeuralDelta":
+        from ..inference.delta_fit import NeuralDelta
+
+        cls = NeuralDelta
+    else:
+        cls = _FAMILIES.get(name)
+    if cls is None:
+        raise ValueError(f"unknown Delta family {name!r} in artefact")
+    fixed = dict(spec.get("fixed", {}))
+    params = spec["params"]
+    if cls is PN:
+        fam = PN(params["values"])
+    else:
+        fam = cls(**fixed) if fixed else cls()
+        fam.load_state_dict({k: torch.as_tensor(v, dtype=torch.float64) for k, v in params.items()})
+    return fam
+
+
+def fitted_names() -> list[str]:
+    """Names of the fitted artefacts shipped in ``ogm_ppl/fitted`` (``delta_<name>.json``)."""
+    from importlib import resources
+
+    root = resources.files("ogm_ppl") / "fitted"
+    return sorted(p.name[len("delta_") : -len(".json")] for p in root.iterdir()
+                  if p.name.startswith("delta_") and p.name.endswith(".json") and p.name != "delta_cv.json")  # fmt: skip
+
+
+def load_fitted(name: str) -> tuple[DeltaFamily, dict]:
+    """A shipped fitted family and its record (training settings, scores)."""
+    import json
+    from importlib import resources
+
+    path = resources.files("ogm_ppl") / "fitted" / f"delta_{name}.json"
+    if not path.is_file():
+        raise ValueError(f"no fitted Delta named {name!r}; shipped: {fitted_names()}")
+    record = json.loads(path.read_text())
+    if record.get("format") != 1:
+        raise ValueError(f"{path}: unknown artefact format {record.get('format')!r}")
+    return family_from_dict(record["delta"]), record
+
+
+def delta_by_name(name: str) -> DeltaFamily:
+    """A Delta family with published or fitted values.
+
+    Names: ``"haehnel"`` (traditional OGM); the thesis's optimised values (Table 2.1, 2.2):
     ``"borenstein_koren_thesis"``, ``"moravec_thesis"``, ``"marshall_barfoot_thesis"``,
-    ``"stachniss_thesis"``, ``"elfes_thesis"``, ``"p21_thesis"``.
+    ``"stachniss_thesis"``, ``"elfes_thesis"``, ``"p21_thesis"``; and our fits shipped with the library
+    (:func:`fitted_names`: ``"moravec_opt"``, ``"elfes_opt"``, ``"p1"`` .. ``"p21"``, ``"neural_opt"``, ...).
     """
     makers = {
         "haehnel": Moravec.haehnel,
@@ -275,7 +336,11 @@ def delta_by_name(name: str) -> DeltaFamily:
         "elfes_thesis": lambda: Elfes(2.9627, -12.9047),
         "p21_thesis": lambda: PN(THESIS_P21),
     }
-    try:
+    if name in makers:
         return makers[name]()
-    except KeyError:
-        raise ValueError(f"unknown Delta name {name!r}; known: {sorted(makers)}") from None
+    if name in fitted_names():
+        return load_fitted(name)[0]
+    raise ValueError(f"unknown Delta name {name!r}; known: {sorted(makers) + fitted_names()}")
+
+
+_FAMILIES.update({c.__name__: c for c in (BorensteinKoren, Moravec, MarshallBarfoot, Stachniss, Elfes, PN)})
