@@ -48,7 +48,7 @@ from ._gibbs_kernels import (
     set_patch,
 )
 
-__all__ = ["CellGibbs", "PatchGibbs", "MetropolisCell", "patch_shape", "initial_map"]
+__all__ = ["CellGibbs", "PatchGibbs", "MetropolisCell", "patch_shape", "initial_map", "tiling_starts"]
 
 _SCANS = ("random", "permutation", "systematic")
 
@@ -86,6 +86,13 @@ def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: f
         m = (m != 0).to(torch.float64)
     m[model.known_free] = 0.0
     return m
+
+
+def tiling_starts(offset: int, size: int, n: int) -> np.ndarray:
+    """Start positions of a tiling of ``0..n-1`` by runs of ``size`` in which a run starts at ``offset``
+    (a partial run may start before 0)."""
+    start = int(offset) % size
+    return np.arange(start - size if start else 0, n, size)
 
 
 def patch_shape(shape, ndim: int) -> tuple[np.ndarray, np.ndarray]:
@@ -362,7 +369,7 @@ class PatchGibbs(_MapKernel):
         model: an :class:`~ogm_ppl.OccupancyModel`.
         patch: the patch shape, see :func:`patch_shape` (``3`` for a 1D run of 3, ``(3, 3)``, ``"plus"``).
         scan: ``"systematic"`` / ``"permutation"`` visit a fixed set of patch positions (a tiling for runs
-            and rectangles, shifted by ``offset``; every cell's neighbourhood for other shapes);
+            and rectangles in which a patch starts at column ``offset`` (or at ``(row, col)``); every cell's neighbourhood for other shapes);
             ``"random"`` (Algorithm 1) places the patch at uniformly random cells, ``ceil(K / L)`` times
             per sweep.
         p_rand_patch: Algorithm 2's probability of proposing a random configuration instead (0.001 in the
@@ -398,8 +405,8 @@ class PatchGibbs(_MapKernel):
         if is_rect:
             h, w = int(self.dr.max()) + 1, int(self.dc.max()) + 1
             orow, ocol = (0, int(self.offset)) if np.isscalar(self.offset) else (int(o) for o in self.offset)
-            r0 = np.arange(-(orow % h), rows, h)
-            c0 = np.arange(-(ocol % w), cols, w)
+            r0 = tiling_starts(orow, h, rows)
+            c0 = tiling_starts(ocol, w, cols)
         else:
             r0, c0 = np.arange(rows), np.arange(cols)
         R, C = np.meshgrid(r0, c0, indexing="ij")

@@ -26,7 +26,7 @@ from pyro.distributions.torch_distribution import TorchDistribution
 from torch.distributions import constraints
 
 from ..models.occupancy import OccupancyModel
-from .gibbs import patch_shape
+from .gibbs import patch_shape, tiling_starts
 
 __all__ = ["MeanFieldGuide", "PatchGuide", "PatchMapDistribution", "fit_guide"]
 
@@ -102,7 +102,8 @@ class PatchMapDistribution(TorchDistribution):
 
 class PatchGuide:
     """Independent categoricals over the configurations of non-overlapping patches (a tiling of runs or
-    rectangles, see :func:`~ogm_ppl.inference.gibbs.patch_shape`), parameter ``"<name>.logits"``."""
+    rectangles, see :func:`~ogm_ppl.inference.gibbs.patch_shape`, in which a patch starts at column
+    ``offset``), parameter ``"<name>.logits"``."""
 
     def __init__(self, model: OccupancyModel, patch=3, name: str = "patch", offset: int = 0) -> None:
         self.model = model
@@ -114,8 +115,8 @@ class PatchGuide:
         h, w = int(dr.max()) + 1, int(dc.max()) + 1
         pinned = model.known_free.numpy()
         rows = []
-        for r0 in range(-(0 % h), g.rows, h):
-            for c0 in range(-(offset % w), g.cols, w):
+        for r0 in tiling_starts(0, h, g.rows):
+            for c0 in tiling_starts(offset, w, g.cols):
                 cells = []
                 for a, b in zip(dr, dc):
                     r, c = r0 + a, c0 + b
