@@ -181,7 +181,7 @@ def _run(model, mode, patches, centre, m_ref, keep, log_match=0.0, log_other=0.0
     for j in cols:
         ok = patches[:, j] >= 0
         out[torch.from_numpy(patches[ok, j])] = torch.from_numpy(marg[ok, j])
-    return out, (weights if keep else None)
+    return out.clamp(0.0, 1.0), (weights if keep else None)  # sums of exp may pass 1 by an ulp
 
 
 def online_patch_map(model: OccupancyModel, patch=3, offset=0, sensor: str = "forward", p_match: float = 0.9) -> PatchMap:
