@@ -73,30 +73,22 @@ def _first_outside(m, in_patch, offsets, cells, r, start):
 
 
 @nb.njit(cache=True)
-def patch_log_lik(patch, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa, ll, out):
-    """``out[w] = log p(z | patch = w, rest)`` up to a constant common to all ``w`` (Eq. 4.4).
+def collect_patch_rays(patch, c_off, c_ray, c_kappa, ray_stamp, stamp):
+    """The rays through a patch and, per ray (a *slot*), the (kappa, bit) of each patch cell on it.
 
-    Scratch: ``in_patch`` (bool ``K``, left all False) and ``ray_stamp`` (int64 ``R x 2``: a ray whose
-    first entry equals ``stamp`` was already collected for this patch, into the slot in its second
-    entry; pass a ``stamp`` never used before on every call).
-    Returns ``W``.
+    Returns ``(L, n_slots, slot_ray, slot_n, ent_kappa, ent_bit)``; bit ``j`` is the ``j``-th live cell.
     """
     L = 0
     n_ent = 0
     for i in range(patch.shape[0]):
         c = patch[i]
         if c >= 0:
-            in_patch[c] = True
             L += 1
             n_ent += c_off[c + 1] - c_off[c]
-    W = 1 << L
-    for w in range(W):
-        out[w] = 0.0
-    # gather, per ray through the patch, the (kappa, bit) of every patch cell on it
     slot_ray = np.empty(n_ent, np.int64)
     slot_n = np.zeros(n_ent, np.int64)
-    ent_kappa = np.empty((n_ent, L), np.int64)
-    ent_bit = np.empty((n_ent, L), np.int64)
+    ent_kappa = np.empty((n_ent, max(L, 1)), np.int64)
+    ent_bit = np.empty((n_ent, max(L, 1)), np.int64)
     n_slots = 0
     bit = 0
     for i in range(patch.shape[0]):
@@ -115,6 +107,25 @@ def patch_log_lik(patch, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off
             ent_bit[s, slot_n[s]] = bit
             slot_n[s] += 1
         bit += 1
+    return L, n_slots, slot_ray, slot_n, ent_kappa, ent_bit
+
+
+@nb.njit(cache=True)
+def patch_log_lik(patch, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa, ll, out):
+    """``out[w] = log p(z | patch = w, rest)`` up to a constant common to all ``w`` (Eq. 4.4).
+
+    Scratch: ``in_patch`` (bool ``K``, left all False) and ``ray_stamp`` (int64 ``R x 2``: a ray whose
+    first entry equals ``stamp`` was already collected for this patch, into the slot in its second
+    entry; pass a ``stamp`` never used before on every call).
+    Returns ``W``.
+    """
+    L, n_slots, slot_ray, slot_n, ent_kappa, ent_bit = collect_patch_rays(patch, c_off, c_ray, c_kappa, ray_stamp, stamp)
+    for i in range(patch.shape[0]):
+        if patch[i] >= 0:
+            in_patch[patch[i]] = True
+    W = 1 << L
+    for w in range(W):
+        out[w] = 0.0
     for s in range(n_slots):
         r = slot_ray[s]
         a = offsets[r]

@@ -20,7 +20,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ._gibbs_kernels import patch_log_lik
+from ._gibbs_kernels import collect_patch_rays, patch_log_lik
 
 OFFLINE, ONLINE, INVERSE = 0, 1, 2
 
@@ -37,41 +37,6 @@ def _logaddexp(a, b):
 
 
 @nb.njit(cache=True)
-def _collect(patch, c_off, c_ray, c_kappa, ray_stamp, stamp):
-    """Rays through the patch and, per ray, the (kappa, bit) of each patch cell on it."""
-    L = 0
-    n_ent = 0
-    for i in range(patch.shape[0]):
-        c = patch[i]
-        if c >= 0:
-            L += 1
-            n_ent += c_off[c + 1] - c_off[c]
-    slot_ray = np.empty(n_ent, np.int64)
-    slot_n = np.zeros(n_ent, np.int64)
-    ent_kappa = np.empty((n_ent, max(L, 1)), np.int64)
-    ent_bit = np.empty((n_ent, max(L, 1)), np.int64)
-    n_slots = 0
-    bit = 0
-    for i in range(patch.shape[0]):
-        c = patch[i]
-        if c < 0:
-            continue
-        for p in range(c_off[c], c_off[c + 1]):
-            r = c_ray[p]
-            if ray_stamp[r, 0] != stamp:
-                ray_stamp[r, 0] = stamp
-                ray_stamp[r, 1] = n_slots
-                slot_ray[n_slots] = r
-                n_slots += 1
-            s = ray_stamp[r, 1]
-            ent_kappa[s, slot_n[s]] = c_kappa[p]
-            ent_bit[s, slot_n[s]] = bit
-            slot_n[s] += 1
-        bit += 1
-    return L, n_slots, slot_ray, slot_n, ent_kappa, ent_bit
-
-
-@nb.njit(cache=True)
 def patch_log_weights_mode(mode, patch, prior_lo, log_on, log_off, m_ref, f_ref, in_patch, ray_stamp, stamp,
                            offsets, cells, c_off, c_ray, c_kappa, ll, z, is_max, log_match, log_other, out):  # fmt: skip
     """``out[w]``: unnormalised log posterior of configuration ``w`` (prior included). Returns ``W``."""
@@ -79,7 +44,7 @@ def patch_log_weights_mode(mode, patch, prior_lo, log_on, log_off, m_ref, f_ref,
         W = patch_log_lik(patch, m_ref, f_ref, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray,
                           c_kappa, ll, out)  # fmt: skip
     else:
-        L, n_slots, slot_ray, slot_n, ent_kappa, ent_bit = _collect(patch, c_off, c_ray, c_kappa, ray_stamp, stamp)
+        L, n_slots, slot_ray, slot_n, ent_kappa, ent_bit = collect_patch_rays(patch, c_off, c_ray, c_kappa, ray_stamp, stamp)
         W = 1 << L
         for w in range(W):
             out[w] = 0.0
