@@ -24,7 +24,14 @@ import torch
 
 from ogm_ppl.datasets import wall_datasets
 from ogm_ppl.inference.delta_fit import NeuralDelta, cross_entropy_loss, fit_delta, warm_start_pn
-from ogm_ppl.models import PN, BorensteinKoren, Elfes, MarshallBarfoot, Moravec, Stachniss, delta_by_name
+from ogm_ppl.models import (
+    BorensteinKoren,
+    Elfes,
+    MarshallBarfoot,
+    Moravec,
+    Stachniss,
+    delta_by_name,
+)
 from ogm_ppl.models.delta import family_to_dict
 
 torch.set_default_dtype(torch.float64)

@@ -61,7 +61,7 @@ def run(num_datasets: int = 1000, gibbs_sweeps: int = 100_000, cells: int = 30, 
         model = OccupancyModel(toy.grid, rays, GaussianRange(2.0), IndependentPrior(0.5, cells + 1))
         exact = pose_constrained_1d(model).marginals[1:]
 
-        def score(name, q):
+        def score(name, q, exact=exact):
             kls.setdefault(name, []).append(float(kl_divergence(exact, q[1:].clamp(1e-12, 1 - 1e-12))))
 
         for name, delta in deltas.items():

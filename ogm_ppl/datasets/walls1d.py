@@ -40,7 +40,7 @@ class WallDatasets:
     def __len__(self) -> int:
         return self.counts.shape[0]
 
-    def subset(self, idx) -> "WallDatasets":
+    def subset(self, idx) -> WallDatasets:
         idx = torch.as_tensor(idx, dtype=torch.long)
         return WallDatasets([self.readings[i] for i in idx.tolist()], self.counts[idx], self.exact[idx],
                             self.F, self.wall, self.sigma, self.prior, self.seed)  # fmt: skip

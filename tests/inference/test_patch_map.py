@@ -8,7 +8,12 @@ from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
 from ogm_ppl.datasets import THESIS_TOY_READINGS, simple_2d_example, toy_1d
 from ogm_ppl.inference import evidence_grid
 from ogm_ppl.inference.exact import brute_force, pose_constrained_1d
-from ogm_ppl.inference.patch_map import offline_patch_map, online_patch_map, reference_map, tile_patches
+from ogm_ppl.inference.patch_map import (
+    offline_patch_map,
+    online_patch_map,
+    reference_map,
+    tile_patches,
+)
 from ogm_ppl.metrics import kl_divergence
 from ogm_ppl.models import Elfes, Moravec
 from ogm_ppl.priors import IndependentPrior
