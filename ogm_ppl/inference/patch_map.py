@@ -47,14 +47,24 @@ def _cells_at(model, r0, c0, dr, dc):
 
 
 def tile_patches(model: OccupancyModel, patch=3, offset=0) -> np.ndarray:
-    """Non-overlapping patches covering the grid (runs or rectangles), a patch starting at column
-    ``offset`` (or ``(row, col)``); ``P x L`` cells with ``-1`` where cut off or pinned."""
-    dr, dc = patch_shape(patch, model.grid.ndim)
+    """Non-overlapping patches covering the grid, ``P x L`` cells with ``-1`` where cut off or pinned.
+
+    Runs and rectangles tile with a patch starting at column ``offset`` (or ``(row, col)``); the
+    plus-shaped 4-neighbourhood (``"plus"``, L = 5) tiles the plane with centres where
+    ``(col + 2 row - offset) mod 5 == 0``.
+    """
+    g = model.grid
+    if isinstance(patch, str) and patch == "plus":
+        dr, dc = patch_shape("plus", g.ndim)
+        rows = [_cells_at(model, r0, c0, dr, dc) for r0 in range(-1, g.rows + 1) for c0 in range(-2, g.cols + 2)
+                if (c0 + 2 * r0 - int(offset)) % 5 == 0]  # fmt: skip
+        arr = np.array(rows, dtype=np.int64).reshape(-1, 5)
+        return arr[(arr >= 0).any(1)]
+    dr, dc = patch_shape(patch, g.ndim)
     if dr.min() != 0 or dc.min() != 0 or len(dr) != (dr.max() + 1) * (dc.max() + 1):
-        raise ValueError("non-overlapping patches must be runs or rectangles")
+        raise ValueError("non-overlapping patches must be runs, rectangles or 'plus'")
     h, w = int(dr.max()) + 1, int(dc.max()) + 1
     orow, ocol = (0, int(offset)) if np.isscalar(offset) else (int(o) for o in offset)
-    g = model.grid
     rows = [_cells_at(model, r0, c0, dr, dc) for r0 in tiling_starts(orow, h, g.rows) for c0 in tiling_starts(ocol, w, g.cols)]
     arr = np.array(rows, dtype=np.int64).reshape(-1, len(dr))
     return arr[(arr >= 0).any(1)]

@@ -87,8 +87,10 @@ def test_2d_patch_maps_and_reference():
     model = OccupancyModel(ex.grid, raycast(ex.grid, ex.scans), GaussianRange(3.0), IndependentPrior(0.5, ex.grid.num_cells))
     ref = reference_map(model)
     assert ref[~model.rays.reached()].all()  # unknown cells reflect the beam
-    tiles = tile_patches(model, (3, 3))
-    assert sorted(tiles[tiles >= 0].tolist()) == model.latent.tolist()  # each latent cell in one tile
+    for shape in ((3, 3), "plus", (2, 5)):
+        tiles = tile_patches(model, shape)
+        assert sorted(tiles[tiles >= 0].tolist()) == model.latent.tolist()  # each latent cell in one tile
+    assert online_patch_map(model, "plus").marginals.shape == (ex.grid.num_cells,)
     for pm in (online_patch_map(model, (3, 3)), offline_patch_map(model, (3, 3), reference=ref),
                offline_patch_map(model, "plus", overlap=True, reference=ref)):  # fmt: skip
         p = pm.marginals
@@ -104,7 +106,7 @@ def test_bad_arguments():
         online_patch_map(model, 3, sensor="inverse", p_match=1.0)
     with pytest.raises(ValueError, match="reference"):
         offline_patch_map(model, 3, reference=torch.zeros(5))
-    with pytest.raises(ValueError, match="runs or rectangles"):
+    with pytest.raises(ValueError, match="runs, rectangles"):
         online_patch_map(model, [[0, 0], [0, 2]])
     grid = Grid((3, 3))
     m2 = OccupancyModel(grid, raycast(grid, Scans([[0.5, 0.5, 0.0]], [0.0], [[1.5]], max_range=2.5)),
