@@ -220,10 +220,8 @@ def build_patch(r0, c0, dr, dc, rows, cols, pinned, patch):
 
 
 @nb.njit(cache=True)
-def patch_log_weights(patch, prior_log_odds, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off,
-                      c_ray, c_kappa, ll, logw):  # fmt: skip
-    """Unnormalised log conditional of every configuration of ``patch`` under an independent prior."""
-    W = patch_log_lik(patch, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa, ll, logw)
+def add_patch_prior(patch, prior_log_odds, logw, W):
+    """Add the independent cell prior (log-odds of the occupied cells) to every configuration's weight."""
     for w in range(W):
         bit = 0
         for j in range(patch.shape[0]):
@@ -233,6 +231,14 @@ def patch_log_weights(patch, prior_log_odds, m, f, in_patch, ray_stamp, stamp, o
             if (w >> bit) & 1:
                 logw[w] += prior_log_odds[c]
             bit += 1
+
+
+@nb.njit(cache=True)
+def patch_log_weights(patch, prior_log_odds, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off,
+                      c_ray, c_kappa, ll, logw):  # fmt: skip
+    """Unnormalised log conditional of every configuration of ``patch`` under an independent prior."""
+    W = patch_log_lik(patch, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa, ll, logw)
+    add_patch_prior(patch, prior_log_odds, logw, W)
     return W
 
 

@@ -20,7 +20,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ._gibbs_kernels import collect_patch_rays, patch_log_lik
+from ._gibbs_kernels import add_patch_prior, collect_patch_rays, patch_log_weights
 
 OFFLINE, ONLINE, INVERSE = 0, 1, 2
 
@@ -41,8 +41,8 @@ def patch_log_weights_mode(mode, patch, prior_lo, log_on, log_off, m_ref, f_ref,
                            offsets, cells, c_off, c_ray, c_kappa, ll, z, is_max, log_match, log_other, out):  # fmt: skip
     """``out[w]``: unnormalised log posterior of configuration ``w`` (prior included). Returns ``W``."""
     if mode == OFFLINE:
-        W = patch_log_lik(patch, m_ref, f_ref, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray,
-                          c_kappa, ll, out)  # fmt: skip
+        return patch_log_weights(patch, prior_lo, m_ref, f_ref, in_patch, ray_stamp, stamp, offsets, cells, c_off,
+                                 c_ray, c_kappa, ll, out)  # fmt: skip
     else:
         L, n_slots, slot_ray, slot_n, ent_kappa, ent_bit = collect_patch_rays(patch, c_off, c_ray, c_kappa, ray_stamp, stamp)
         W = 1 << L
@@ -109,16 +109,7 @@ def patch_log_weights_mode(mode, patch, prior_lo, log_on, log_off, m_ref, f_ref,
         for i in range(patch.shape[0]):
             if patch[i] >= 0:
                 in_patch[patch[i]] = False
-    # the cell prior of the configuration
-    for w in range(W):
-        bit = 0
-        for j in range(patch.shape[0]):
-            c = patch[j]
-            if c < 0:
-                continue
-            if (w >> bit) & 1:
-                out[w] += prior_lo[c]
-            bit += 1
+    add_patch_prior(patch, prior_lo, out, W)
     return W
 
 
