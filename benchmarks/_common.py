@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import json
-import os
 import resource
 import time
 from pathlib import Path
@@ -31,12 +30,9 @@ def peak_rss_mb() -> float:
 
 
 def write_json(name: str, payload: dict) -> Path:
-    OUT.mkdir(parents=True, exist_ok=True)
-    path = OUT / f"{name}.json"
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(payload, indent=2))
-    os.replace(tmp, path)
-    return path
+    from ogm_ppl.io import atomic_write_text
+
+    return atomic_write_text(OUT / f"{name}.json", json.dumps(payload, indent=2))
 
 
 def sparse_scene(n: int, poses: int, walls: int, seed: int = 0, res: float = 0.05, max_range_cells: int = 75,

@@ -15,7 +15,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import time
 from pathlib import Path
 
@@ -24,6 +23,7 @@ import torch
 
 from ogm_ppl.datasets import wall_datasets
 from ogm_ppl.inference.delta_fit import NeuralDelta, cross_entropy_loss, fit_delta, warm_start_pn
+from ogm_ppl.io import atomic_write_text as _write
 from ogm_ppl.models import (
     BorensteinKoren,
     Elfes,
@@ -170,12 +170,6 @@ def main() -> None:
              "cv": {k: {"mean": v["mean"], "std": v["std"]} for k, v in cv.items()},
              "params": {r["name"]: r["params"] for r in rows}, "data_driven": dd_scores}, indent=1))  # fmt: skip
     print(text)
-
-
-def _write(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 if __name__ == "__main__":

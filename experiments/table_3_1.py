@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
 import time
 from pathlib import Path
 
@@ -30,6 +29,7 @@ from ogm_ppl.inference import evidence_grid
 from ogm_ppl.inference.exact import pose_constrained_1d
 from ogm_ppl.inference.gibbs import CellGibbs
 from ogm_ppl.inference.patch_map import offline_patch_map, online_patch_map, reference_map
+from ogm_ppl.io import atomic_write_text
 from ogm_ppl.metrics import kl_divergence
 from ogm_ppl.models import delta_by_name
 from ogm_ppl.priors import IndependentPrior
@@ -98,11 +98,8 @@ def main() -> None:
                  f"{res['seconds']:.0f} s.")  # fmt: skip
     md = "\n".join(lines)
     out = Path(__file__).resolve().parent.parent / "out" / "experiments"
-    out.mkdir(parents=True, exist_ok=True)
-    for name, text in (("table_3_1.md", md), ("table_3_1.json", json.dumps(res, indent=2))):
-        tmp = out / (name + ".tmp")
-        tmp.write_text(text)
-        os.replace(tmp, out / name)
+    atomic_write_text(out / "table_3_1.md", md)
+    atomic_write_text(out / "table_3_1.json", json.dumps(res, indent=2))
     print(md)
 
 

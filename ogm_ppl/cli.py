@@ -22,6 +22,7 @@ from .datasets import THESIS_TOY_READINGS, simple_2d_example, toy_1d
 from .inference import CellGibbs, RunningStats, evidence_grid, run_gibbs
 from .inference.exact import pose_constrained_1d
 from .inference.patch_map import offline_patch_map
+from .io import atomic_write_text
 from .metrics import best_f1, near_mapped_mask, roc_auc
 from .models import delta_by_name
 from .priors import IndependentPrior
@@ -34,12 +35,6 @@ MAPS = {
     "p21": "p21, our fit (Section 2.5)",
 }
 GIBBS_SWEEPS = 2000
-
-
-def _atomic_write(path: Path, text: str) -> None:
-    tmp = path.with_suffix(path.suffix + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, path)
 
 
 def _savefig(fig, path: Path) -> None:
@@ -128,7 +123,7 @@ def run_headline(out: Path, seed: int = 0) -> dict:
         },
         "toy1d": {k: np.asarray(v).round(4).tolist() for k, v in series.items()},
     }
-    _atomic_write(out / "report.json", json.dumps(report, indent=2))
+    atomic_write_text(out / "report.json", json.dumps(report, indent=2))
     lines = [
         "# ogm_ppl headline run",
         "",
@@ -146,7 +141,7 @@ def run_headline(out: Path, seed: int = 0) -> dict:
         lines.append(f"| {r['label']} | {r['best_f1']:.3f} | {r['best_threshold']:.2f} | "
                      f"{r['roc_auc']:.3f} | {r['seconds']:.3f} |")  # fmt: skip
     lines += ["", "Figures: `simple2d_maps.png` (Fig. 1.10 / 2.8 style), `toy1d_marginals.png` (Fig. 2.1 style).", ""]
-    _atomic_write(out / "report.md", "\n".join(lines))
+    atomic_write_text(out / "report.md", "\n".join(lines))
     return report
 
 

@@ -43,72 +43,71 @@ def patch_log_weights_mode(mode, patch, prior_lo, log_on, log_off, m_ref, f_ref,
     if mode == OFFLINE:
         return patch_log_weights(patch, prior_lo, m_ref, f_ref, in_patch, ray_stamp, stamp, offsets, cells, c_off,
                                  c_ray, c_kappa, ll, out)  # fmt: skip
-    else:
-        L, n_slots, slot_ray, slot_n, ent_kappa, ent_bit = collect_patch_rays(patch, c_off, c_ray, c_kappa, ray_stamp, stamp)
-        W = 1 << L
-        for w in range(W):
-            out[w] = 0.0
-        for i in range(patch.shape[0]):
-            if patch[i] >= 0:
-                in_patch[patch[i]] = True
-        for s in range(n_slots):
-            r = slot_ray[s]
-            a = offsets[r]
-            n = offsets[r + 1] - a
-            if mode == ONLINE:
-                # running log A (reflection by an outside cell before j) and log B (outside cells before
-                # j all free) along the ray, recorded at the patch kappas and at the end
-                logA = -np.inf
-                logB = 0.0
-                rec_A = np.empty(slot_n[s] + 1, np.float64)
-                rec_B = np.empty(slot_n[s] + 1, np.float64)
-                for j in range(n + 1):
-                    for e in range(slot_n[s]):
-                        if ent_kappa[s, e] == j:
-                            rec_A[e] = logA
-                            rec_B[e] = logB
-                    if j == n:
-                        rec_A[slot_n[s]] = logA
-                        rec_B[slot_n[s]] = logB
-                        break
-                    c = cells[a + j]
-                    if not in_patch[c]:
-                        logA = _logaddexp(logA, logB + log_on[c] + ll[r, j])
-                        logB += log_off[c]
-                none_term = _logaddexp(rec_A[slot_n[s]], rec_B[slot_n[s]] + ll[r, n])
-                for w in range(W):
-                    best = -1
-                    for e in range(slot_n[s]):
-                        if (w >> ent_bit[s, e]) & 1 and (best < 0 or ent_kappa[s, e] < ent_kappa[s, best]):
-                            best = e
-                    if best < 0:
-                        out[w] += none_term
-                    else:
-                        out[w] += _logaddexp(rec_A[best], rec_B[best] + ll[r, ent_kappa[s, best]])
-            else:  # INVERSE
-                zr = n if is_max[r] else z[r]
-                constrained = 0
+    L, n_slots, slot_ray, slot_n, ent_kappa, ent_bit = collect_patch_rays(patch, c_off, c_ray, c_kappa, ray_stamp, stamp)
+    W = 1 << L
+    for w in range(W):
+        out[w] = 0.0
+    for i in range(patch.shape[0]):
+        if patch[i] >= 0:
+            in_patch[patch[i]] = True
+    for s in range(n_slots):
+        r = slot_ray[s]
+        a = offsets[r]
+        n = offsets[r + 1] - a
+        if mode == ONLINE:
+            # running log A (reflection by an outside cell before j) and log B (outside cells before
+            # j all free) along the ray, recorded at the patch kappas and at the end
+            logA = -np.inf
+            logB = 0.0
+            rec_A = np.empty(slot_n[s] + 1, np.float64)
+            rec_B = np.empty(slot_n[s] + 1, np.float64)
+            for j in range(n + 1):
                 for e in range(slot_n[s]):
-                    if ent_kappa[s, e] <= zr:
-                        constrained += 1
-                if constrained == 0:
-                    continue
-                # configurations matching the reading: 2^(L - constrained) of W
-                log_m = log_match - (L - constrained) * math.log(2.0)
-                n_other = W - (1 << (L - constrained))
-                log_o = log_other - math.log(n_other) if n_other > 0 else -np.inf
-                for w in range(W):
-                    ok = True
-                    for e in range(slot_n[s]):
-                        k = ent_kappa[s, e]
-                        bit = (w >> ent_bit[s, e]) & 1
-                        if (k < zr and bit == 1) or (k == zr and bit == 0 and not is_max[r]):
-                            ok = False
-                            break
-                    out[w] += log_m if ok else log_o
-        for i in range(patch.shape[0]):
-            if patch[i] >= 0:
-                in_patch[patch[i]] = False
+                    if ent_kappa[s, e] == j:
+                        rec_A[e] = logA
+                        rec_B[e] = logB
+                if j == n:
+                    rec_A[slot_n[s]] = logA
+                    rec_B[slot_n[s]] = logB
+                    break
+                c = cells[a + j]
+                if not in_patch[c]:
+                    logA = _logaddexp(logA, logB + log_on[c] + ll[r, j])
+                    logB += log_off[c]
+            none_term = _logaddexp(rec_A[slot_n[s]], rec_B[slot_n[s]] + ll[r, n])
+            for w in range(W):
+                best = -1
+                for e in range(slot_n[s]):
+                    if (w >> ent_bit[s, e]) & 1 and (best < 0 or ent_kappa[s, e] < ent_kappa[s, best]):
+                        best = e
+                if best < 0:
+                    out[w] += none_term
+                else:
+                    out[w] += _logaddexp(rec_A[best], rec_B[best] + ll[r, ent_kappa[s, best]])
+        else:  # INVERSE
+            zr = n if is_max[r] else z[r]
+            constrained = 0
+            for e in range(slot_n[s]):
+                if ent_kappa[s, e] <= zr:
+                    constrained += 1
+            if constrained == 0:
+                continue
+            # configurations matching the reading: 2^(L - constrained) of W
+            log_m = log_match - (L - constrained) * math.log(2.0)
+            n_other = W - (1 << (L - constrained))
+            log_o = log_other - math.log(n_other) if n_other > 0 else -np.inf
+            for w in range(W):
+                ok = True
+                for e in range(slot_n[s]):
+                    k = ent_kappa[s, e]
+                    bit = (w >> ent_bit[s, e]) & 1
+                    if (k < zr and bit == 1) or (k == zr and bit == 0 and not is_max[r]):
+                        ok = False
+                        break
+                out[w] += log_m if ok else log_o
+    for i in range(patch.shape[0]):
+        if patch[i] >= 0:
+            in_patch[patch[i]] = False
     add_patch_prior(patch, prior_lo, out, W)
     return W
 

@@ -26,7 +26,7 @@ from pyro.distributions.torch_distribution import TorchDistribution
 from torch.distributions import constraints
 
 from ..models.occupancy import OccupancyModel
-from .gibbs import patch_shape, tiling_starts
+from .patch_map import tile_patches
 
 __all__ = ["MeanFieldGuide", "PatchGuide", "PatchMapDistribution", "fit_guide"]
 
@@ -108,25 +108,16 @@ class PatchGuide:
     def __init__(self, model: OccupancyModel, patch=3, name: str = "patch", offset: int = 0) -> None:
         self.model = model
         self.name = name
-        dr, dc = patch_shape(patch, model.grid.ndim)
-        if dr.min() != 0 or dc.min() != 0 or len(dr) != (dr.max() + 1) * (dc.max() + 1):
-            raise ValueError("PatchGuide needs a run or a rectangle (a tiling without overlaps)")
-        g = model.grid
-        h, w = int(dr.max()) + 1, int(dc.max()) + 1
-        pinned = model.known_free.numpy()
-        rows = []
-        for r0 in tiling_starts(0, h, g.rows):
-            for c0 in tiling_starts(offset, w, g.cols):
-                cells = []
-                for a, b in zip(dr, dc):
-                    r, c = r0 + a, c0 + b
-                    k = r * g.cols + c
-                    cells.append(k if (0 <= r < g.rows and 0 <= c < g.cols and not pinned[k]) else -1)
-                if any(c >= 0 for c in cells):
-                    # live cells first, so configurations count only them
-                    live = [c for c in cells if c >= 0]
-                    rows.append(live + [-1] * (len(cells) - len(live)))
-        self.patches = torch.tensor(np.array(rows), dtype=torch.long)
+        try:
+            tiles = tile_patches(model, patch, offset)
+        except ValueError as e:
+            raise ValueError(f"PatchGuide needs a tiling without overlaps: {e}") from None
+        # live cells first, so that configuration bits count only them
+        live_first = np.full_like(tiles, -1)
+        for i, row in enumerate(tiles):
+            live = row[row >= 0]
+            live_first[i, : len(live)] = live
+        self.patches = torch.from_numpy(live_first)
         self.L = self.patches.shape[1]
 
     def _logits(self) -> torch.Tensor:

@@ -214,20 +214,10 @@ def test_kl_to_exact_falls_as_one_over_n():
     toy = toy_1d(num_cells=21, readings=THESIS_TOY_READINGS)
     model = OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0), IndependentPrior(0.5, 21))
     exact = pose_constrained_1d(model).marginals
+    from ogm_ppl.inference.diagnostics import kl_trace
+
     checkpoints = [250, 1000, 4000, 16000]
-    kls = np.zeros((8, len(checkpoints)))
-    for c in range(8):
-        kernel = CellGibbs(model)
-        torch.manual_seed(c)
-        kernel.setup()
-        params = kernel.initial_params
-        acc = torch.zeros(21, dtype=torch.float64)
-        for i in range(1, checkpoints[-1] + 1):
-            params = kernel.sample(params)
-            acc += params["m"]
-            if i in checkpoints:
-                q = (acc / i).clamp(1e-9, 1 - 1e-9)
-                kls[c, checkpoints.index(i)] = float(kl_divergence(exact, q))
+    kls = np.stack([kl_trace(CellGibbs(model), exact, checkpoints, seed=c).numpy() for c in range(8)])
     mean = kls.mean(0)
     slope = np.polyfit(np.log(checkpoints), np.log(mean), 1)[0]
     assert -1.35 < slope < -0.65, (slope, mean)
