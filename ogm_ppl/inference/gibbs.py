@@ -48,7 +48,7 @@ from ._gibbs_kernels import (
     set_patch,
 )
 
-__all__ = ["CellGibbs", "PatchGibbs", "MetropolisCell", "patch_shape", "initial_map", "tiling_starts"]
+__all__ = ["CellGibbs", "PatchGibbs", "MetropolisCell", "patch_shape", "patch_cells", "initial_map", "tiling_starts"]
 
 _SCANS = ("random", "permutation", "systematic")
 
@@ -93,6 +93,19 @@ def tiling_starts(offset: int, size: int, n: int) -> np.ndarray:
     (a partial run may start before 0)."""
     start = int(offset) % size
     return np.arange(start - size if start else 0, n, size)
+
+
+def patch_cells(model: OccupancyModel, anchors: np.ndarray, dr: np.ndarray, dc: np.ndarray) -> np.ndarray:
+    """Cells of the patch ``(dr, dc)`` placed at each ``(row, col)`` anchor (``n x 2``), vectorised:
+    ``n x L`` with ``-1`` where a cell is off the grid or pinned (the rule of the compiled ``build_patch``)."""
+    g = model.grid
+    anchors = np.asarray(anchors, dtype=np.int64).reshape(-1, 2)
+    r = anchors[:, :1] + dr[None, :]
+    c = anchors[:, 1:] + dc[None, :]
+    inside = (r >= 0) & (r < g.rows) & (c >= 0) & (c < g.cols)
+    k = np.where(inside, r * g.cols + c, 0)
+    ok = inside & ~model.known_free.numpy()[k]
+    return np.where(ok, k, -1)
 
 
 def patch_shape(shape, ndim: int) -> tuple[np.ndarray, np.ndarray]:
@@ -411,24 +424,12 @@ class PatchGibbs(_MapKernel):
             r0, c0 = np.arange(rows), np.arange(cols)
         R, C = np.meshgrid(r0, c0, indexing="ij")
         anchors = np.stack([R.ravel(), C.ravel()], 1).astype(np.int64)
-        self._prepare()
-        live = np.array([self._live(a) > 0 for a in anchors], dtype=bool)
+        live = (patch_cells(self.model, anchors, self.dr, self.dc) >= 0).any(1)
         return np.ascontiguousarray(anchors[live])
-
-    def _live(self, anchor) -> int:
-        g = self.model.grid
-        patch = np.empty(self.L, np.int64)
-        return build_patch(int(anchor[0]), int(anchor[1]), self.dr, self.dc, g.rows, g.cols, self._pinned, patch)
 
     def patches(self) -> list[np.ndarray]:
         """The fixed patch positions as arrays of cells (``-1`` where cut off or pinned)."""
-        g = self.model.grid
-        out = []
-        for a in self._anchors:
-            p = np.empty(self.L, np.int64)
-            build_patch(int(a[0]), int(a[1]), self.dr, self.dc, g.rows, g.cols, self._pinned, p)
-            out.append(p)
-        return out
+        return list(patch_cells(self.model, self._anchors, self.dr, self.dc))
 
     def _sweep(self) -> int:
         g = self.model.grid

@@ -30,20 +30,14 @@ from ..models.occupancy import OccupancyModel
 from ..posterior import MapPosterior
 from ._cell_kernels import first_hits
 from ._patch_kernels import INVERSE, OFFLINE, ONLINE, patch_map_all
-from .gibbs import patch_shape, tiling_starts
+from .gibbs import patch_cells, patch_shape, tiling_starts
 
 __all__ = ["PatchMap", "online_patch_map", "offline_patch_map", "tile_patches", "centred_patches"]
 
 
-def _cells_at(model, r0, c0, dr, dc):
-    g = model.grid
-    pinned = model.known_free.numpy()
-    out = []
-    for a, b in zip(dr, dc):
-        r, c = r0 + a, c0 + b
-        k = r * g.cols + c
-        out.append(k if (0 <= r < g.rows and 0 <= c < g.cols and not pinned[k]) else -1)
-    return out
+def _anchors(rows, cols) -> np.ndarray:
+    R, C = np.meshgrid(np.asarray(rows), np.asarray(cols), indexing="ij")
+    return np.stack([R.ravel(), C.ravel()], 1)
 
 
 def tile_patches(model: OccupancyModel, patch=3, offset=0) -> np.ndarray:
@@ -56,17 +50,16 @@ def tile_patches(model: OccupancyModel, patch=3, offset=0) -> np.ndarray:
     g = model.grid
     if isinstance(patch, str) and patch == "plus":
         dr, dc = patch_shape("plus", g.ndim)
-        rows = [_cells_at(model, r0, c0, dr, dc) for r0 in range(-1, g.rows + 1) for c0 in range(-2, g.cols + 2)
-                if (c0 + 2 * r0 - int(offset)) % 5 == 0]  # fmt: skip
-        arr = np.array(rows, dtype=np.int64).reshape(-1, 5)
+        anchors = _anchors(range(-1, g.rows + 1), range(-2, g.cols + 2))
+        anchors = anchors[(anchors[:, 1] + 2 * anchors[:, 0] - int(offset)) % 5 == 0]
+        arr = patch_cells(model, anchors, dr, dc)
         return arr[(arr >= 0).any(1)]
     dr, dc = patch_shape(patch, g.ndim)
     if dr.min() != 0 or dc.min() != 0 or len(dr) != (dr.max() + 1) * (dc.max() + 1):
         raise ValueError("non-overlapping patches must be runs, rectangles or 'plus'")
     h, w = int(dr.max()) + 1, int(dc.max()) + 1
     orow, ocol = (0, int(offset)) if np.isscalar(offset) else (int(o) for o in offset)
-    rows = [_cells_at(model, r0, c0, dr, dc) for r0 in tiling_starts(orow, h, g.rows) for c0 in tiling_starts(ocol, w, g.cols)]
-    arr = np.array(rows, dtype=np.int64).reshape(-1, len(dr))
+    arr = patch_cells(model, _anchors(tiling_starts(orow, h, g.rows), tiling_starts(ocol, w, g.cols)), dr, dc)
     return arr[(arr >= 0).any(1)]
 
 
@@ -79,10 +72,8 @@ def centred_patches(model: OccupancyModel, patch=3) -> tuple[np.ndarray, int]:
         cr, cc = int(dr.max()) // 2, int(dc.max()) // 2
     dr, dc = dr - cr, dc - cc
     centre = int(np.flatnonzero((dr == 0) & (dc == 0))[0])
-    g = model.grid
-    lat = model.latent.numpy()
-    rows = [_cells_at(model, *divmod(int(k), g.cols), dr, dc) for k in lat]
-    return np.array(rows, dtype=np.int64).reshape(-1, len(dr)), centre
+    anchors = np.stack(np.divmod(model.latent.numpy(), model.grid.cols), 1)
+    return patch_cells(model, anchors, dr, dc), centre
 
 
 class PatchMap(MapPosterior):
