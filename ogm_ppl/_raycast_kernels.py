@@ -44,25 +44,35 @@ def ray_capacity(length: float, du: float, dv: float) -> int:
 
 
 @nb.njit(cache=True, inline="always")
-def trace_ray(u0, v0, du, dv, L, th, mx, rows, cols, out_cells, out_t, base):
-    """Walk one ray, writing its cells and entry distances at ``out_*[base:]``.
+def trace_ray(u0, v0, du, dv, L, th, mx, rows, cols, out_cells, out_t, base, count_all):
+    """Walk one ray, writing its in-grid cells and entry distances at ``out_*[base:]``.
 
-    Returns ``(n, z)``: the number of cells in the grid before max range, and the kappa of the cell
-    holding the reading (counted on past the grid edge; ``n`` for a max-range reading).
+    The reading ``th`` (cells) belongs to the cell whose entry distance is nearest to it (the range
+    convention of :mod:`ogm_ppl.raycast`; ties go to the nearer cell); past the grid edge the kappa is
+    counted on. With ``count_all`` the walk also counts the cells beyond the edge up to max range.
+
+    Returns ``(n, z, n_range)``: the cells in the grid before max range, the reading's kappa (``n`` for a
+    max-range reading) and, with ``count_all``, the cells the ray enters before max range on an unbounded
+    grid (else a lower bound).
     """
     col, sx, bx = _axis_setup(u0, du)
     row, sy, by = _axis_setup(v0, dv)
     tx = _t_cross(bx, u0, du, sx)
     ty = _t_cross(by, v0, dv, sy)
     n = 0
+    k = 0
     t = 0.0
+    t_prev = 0.0
     zr = -1
+    inside = True
     while True:
-        out_cells[base + n] = row * cols + col
-        out_t[base + n] = t
-        if not mx and t <= th:
-            zr = n
-        n += 1
+        if inside:
+            out_cells[base + n] = row * cols + col
+            out_t[base + n] = t
+            n += 1
+        if not mx and (k == 0 or 0.5 * (t_prev + t) < th):
+            zr = k
+        t_prev = t
         if tx <= ty:
             t = tx
             col += sx
@@ -75,27 +85,14 @@ def trace_ray(u0, v0, du, dv, L, th, mx, rows, cols, out_cells, out_t, base):
             ty = _t_cross(by, v0, dv, sy)
         if t >= L:
             break
-        if col < 0 or col >= cols or row < 0 or row >= rows:
-            # left the grid: for a hit beyond the edge, count on to the reading's kappa
-            if not mx and t <= th:
-                k = n
-                while True:
-                    zr = k
-                    k += 1
-                    if tx <= ty:
-                        t = tx
-                        bx += sx
-                        tx = _t_cross(bx, u0, du, sx)
-                    else:
-                        t = ty
-                        by += sy
-                        ty = _t_cross(by, v0, dv, sy)
-                    if t > th or t >= L:
-                        break
+        k += 1
+        if inside and (col < 0 or col >= cols or row < 0 or row >= rows):
+            inside = False
+        if not inside and not count_all and (mx or 0.5 * (t_prev + t) >= th):
             break
     if mx:
         zr = n
-    return n, zr
+    return n, zr, k + 1
 
 
 @nb.njit(cache=True)
@@ -109,7 +106,8 @@ def traverse_all(u0, v0, du, dv, length, t_hit, is_max, rows, cols):
         t_hit: reading in cells (ignored where ``is_max``).
 
     Returns:
-        offsets (R+1 int64), cells (int64), t_enter (float32), z (int64), endpoint_in_grid (bool).
+        offsets (R+1 int64), cells (int64), t_enter (float32), z (int64), endpoint_in_grid (bool),
+        range_len (int64: cells before max range on an unbounded grid).
     """
     R = u0.shape[0]
     total = 0
@@ -123,15 +121,52 @@ def traverse_all(u0, v0, du, dv, length, t_hit, is_max, rows, cols):
     offsets = np.empty(R + 1, np.int64)
     z = np.empty(R, np.int64)
     in_grid = np.zeros(R, np.bool_)
+    range_len = np.empty(R, np.int64)
     offsets[0] = 0
     for r in range(R):
-        n, zr = trace_ray(u0[r], v0[r], du[r], dv[r], length[r], t_hit[r], is_max[r], rows, cols,
-                          cells, t_enter, offsets[r])  # fmt: skip
+        n, zr, nr = trace_ray(u0[r], v0[r], du[r], dv[r], length[r], t_hit[r], is_max[r], rows, cols,
+                              cells, t_enter, offsets[r], True)  # fmt: skip
         offsets[r + 1] = offsets[r] + n
         z[r] = zr
         in_grid[r] = (not is_max[r]) and zr < n
+        range_len[r] = nr
     nnz = offsets[R]
-    return offsets, cells[:nnz], t_enter[:nnz], z, in_grid
+    return offsets, cells[:nnz], t_enter[:nnz], z, in_grid, range_len
+
+
+@nb.njit(cache=True)
+def entries_beyond(u0, v0, du, dv, length, skip):
+    """Entry distances of the cells a ray enters before ``length`` on an unbounded grid, from kappa
+    ``skip[r]`` on (the cells past the grid edge), CSR over the rays: ``(offsets, t)``."""
+    R = u0.shape[0]
+    offsets = np.zeros(R + 1, np.int64)
+    total = 0
+    for r in range(R):
+        total += ray_capacity(length[r], du[r], dv[r])
+    out = np.empty(total, np.float64)
+    for r in range(R):
+        col, sx, bx = _axis_setup(u0[r], du[r])
+        row, sy, by = _axis_setup(v0[r], dv[r])
+        tx = _t_cross(bx, u0[r], du[r], sx)
+        ty = _t_cross(by, v0[r], dv[r], sy)
+        t = 0.0
+        k = 0
+        p = offsets[r]
+        while t < length[r]:
+            if k >= skip[r]:
+                out[p] = t
+                p += 1
+            if tx <= ty:
+                t = tx
+                bx += sx
+                tx = _t_cross(bx, u0[r], du[r], sx)
+            else:
+                t = ty
+                by += sy
+                ty = _t_cross(by, v0[r], dv[r], sy)
+            k += 1
+        offsets[r + 1] = p
+    return offsets, out[: offsets[R]]
 
 
 @nb.njit(cache=True)

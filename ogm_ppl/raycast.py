@@ -6,13 +6,30 @@ cell holding the sensor) and cut at the grid edge. The rays are stored CSR-style
 
 * ``offsets`` (``R + 1``, int64) and ``cells`` (int64): ray ``r`` visits ``cells[offsets[r]:offsets[r+1]]``;
 * ``t_enter`` (float32): distance, in cells, from the sensor to where the beam enters each cell;
-* ``z`` (int64): the reading in kappa units, i.e. the kappa of the cell holding the beam's end point
-  (counted on past the grid edge when the end point lies outside the grid; equal to the ray's cell count
-  for max-range readings, which have no end point);
-* ``is_max``: the reading is a max-range (no return) reading; ``endpoint_in_grid``.
+* ``z`` (int64): the reading in kappa units (the convention below; counted on past the grid edge when
+  the reading lies outside the grid; equal to the ray's cell count for max-range readings);
+* ``is_max``: the reading is a max-range reading; ``endpoint_in_grid``;
+* ``reading`` (int64): the flat beam index (``scan * B + beam``) each ray came from. Beams that are not
+  readings (``Scans.valid`` False: no return, below minimum range) get no ray.
+* ``range_len`` (int64): the cells the ray would enter before the sensor's maximum range on an unbounded
+  grid (``F_n + 1`` of the sensor; equal to the ray's length unless the grid edge cut it);
+* ``geometry`` (``R x 5`` float64): start ``u0, v0`` and direction ``du, dv`` in continuous cell units and
+  the maximum range in cells, from which :meth:`Rays.entries_beyond_edge` recomputes the entry distances
+  of the cells past the grid edge.
 
-In 1D the ray is the row of cells from the robot outward; a robot in the middle of cell 0 with integer
-readings gives ``z_n`` equal to the reading, as in the thesis's toy problems.
+**The range convention (one for the whole library).** Physically a beam returns where it *enters* the
+first occupied cell, at its near face. A metric range ``r`` therefore becomes the kappa of the cell whose
+entry point is nearest to ``r``: ray cell ``kappa`` owns the ranges between the midpoints
+``(t_{kappa-1} + t_kappa) / 2`` and ``(t_kappa + t_{kappa+1}) / 2`` of consecutive entry distances
+(ties go to the farther cell; a reading past the last entry midpoint inside the range belongs to the last
+cell). A noise-free reading of a wall entered at kappa ``f`` gives ``z = f`` exactly, and symmetric range
+noise gives readings whose kappa averages ``f``: the sensor models centre ``p(z | f)`` on ``f``
+(:mod:`ogm_ppl.sensors`), and :func:`~ogm_ppl.datasets.simulate_scans` measures ranges to the near face.
+
+In 1D the ray is the row of cells from the robot outward; from a robot in the middle of cell 0, cell
+``kappa >= 1`` is entered at ``kappa - 1/2``, so a wall at ``f`` reads ``f - 1/2`` metres (1 m cells).
+The thesis's integer toy readings ``z`` are the kappa values themselves (:func:`~ogm_ppl.datasets.toy_1d`
+converts them to near-face ranges).
 
 The transposed index cell -> (ray, kappa), needed by Gibbs sampling (Section 4.1.2), is built on first
 use by :attr:`Rays.by_cell`.
@@ -25,7 +42,7 @@ from functools import cached_property
 
 import numpy as np
 
-from ._raycast_kernels import entry_positions, transpose_csr, traverse_all
+from ._raycast_kernels import entries_beyond, entry_positions, transpose_csr, traverse_all
 from .grid import Grid
 from .scans import Scans
 
@@ -57,6 +74,15 @@ class Rays:
     is_max: np.ndarray
     endpoint_in_grid: np.ndarray
     range_cells: np.ndarray
+    reading: np.ndarray | None = None
+    range_len: np.ndarray | None = None
+    geometry: np.ndarray | None = None
+
+    def __post_init__(self) -> None:
+        if self.reading is None:
+            object.__setattr__(self, "reading", np.arange(self.num_rays, dtype=np.int64))
+        if self.range_len is None:
+            object.__setattr__(self, "range_len", self.lengths.copy())
 
     @property
     def num_rays(self) -> int:
@@ -86,6 +112,22 @@ class Rays:
     def ray_of_entry(self) -> np.ndarray:
         """Ray of every entry (``nnz``, int64)."""
         return self._entries[0]
+
+    def max_range_cells(self) -> np.ndarray:
+        """The sensor's maximum range of every ray, in cells (``R``)."""
+        if self.geometry is None:
+            return self.lengths.astype(np.float64)
+        return self.geometry[:, 4]
+
+    def entries_beyond_edge(self, rays: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Entry distances (cells) of the cells past the grid edge before max range, for the given rays:
+        CSR ``(offsets, t)`` with ``range_len - lengths`` entries per ray."""
+        rays = np.asarray(rays, dtype=np.int64)
+        if self.geometry is None:
+            raise ValueError("these Rays carry no geometry; build them with raycast()")
+        g = self.geometry[rays]
+        return entries_beyond(g[:, 0].copy(), g[:, 1].copy(), g[:, 2].copy(), g[:, 3].copy(), g[:, 4].copy(),
+                              self.lengths[rays].astype(np.int64))  # fmt: skip
 
     def ray(self, r: int) -> np.ndarray:
         """Cells of ray ``r``, from the sensor outward."""
@@ -122,6 +164,7 @@ class RayInputs:
     length: np.ndarray
     range_cells: np.ndarray
     is_max: np.ndarray
+    reading: np.ndarray
 
     def capacity(self) -> int:
         """Upper bound on the cells of any ray (also on the kappa of any reading)."""
@@ -162,22 +205,25 @@ def ray_inputs(grid: Grid, scans: Scans) -> RayInputs:
         du = np.sign(du)
     B = scans.beams_per_scan
     uv = grid.world_to_continuous(xy)
-    n = scans.num_readings
+    keep = np.flatnonzero(scans.valid.ravel())
+    n = keep.shape[0]
     return RayInputs(
-        u0=np.repeat(uv[:, 0], B),
-        v0=np.repeat(uv[:, 1], B),
-        du=du,
-        dv=dv,
+        u0=np.repeat(uv[:, 0], B)[keep],
+        v0=np.repeat(uv[:, 1], B)[keep],
+        du=np.ascontiguousarray(du[keep]),
+        dv=np.ascontiguousarray(dv[keep]),
         length=np.full(n, scans.max_range / grid.resolution),
-        range_cells=scans.ranges.ravel() / grid.resolution,
-        is_max=np.ascontiguousarray(scans.is_max.ravel()),
+        range_cells=scans.ranges.ravel()[keep] / grid.resolution,
+        is_max=np.ascontiguousarray(scans.is_max.ravel()[keep]),
+        reading=keep.astype(np.int64),
     )
 
 
 def raycast(grid: Grid, scans: Scans) -> Rays:
     """Traverse every reading of ``scans`` through ``grid`` (Amanatides-Woo, exact).
 
-    Rays are cut at ``scans.max_range`` (cells entered at a distance ``< max_range``) and at the grid edge.
+    Rays are cut at ``scans.max_range`` (cells entered at a distance ``< max_range``) and at the grid edge;
+    beams with ``scans.valid`` False get no ray.
 
     Raises:
         ValueError: a pose outside the grid (names the scan index), or a 1D grid with a beam that is not
@@ -189,7 +235,7 @@ def raycast(grid: Grid, scans: Scans) -> Rays:
     ([0, 1, 2, 3, 4, 5], 3, True)
     """
     ri = ray_inputs(grid, scans)
-    offsets, cells, t_enter, z, in_grid = traverse_all(
+    offsets, cells, t_enter, z, in_grid, range_len = traverse_all(
         ri.u0, ri.v0, ri.du, ri.dv, ri.length, ri.range_cells, ri.is_max, grid.rows, grid.cols
     )
     return Rays(
@@ -201,4 +247,7 @@ def raycast(grid: Grid, scans: Scans) -> Rays:
         is_max=ri.is_max,
         endpoint_in_grid=in_grid,
         range_cells=ri.range_cells,
+        reading=ri.reading,
+        range_len=range_len,
+        geometry=np.stack([ri.u0, ri.v0, ri.du, ri.dv, ri.length], axis=1),
     )

@@ -3,8 +3,9 @@
 Nothing here is fast. :func:`traverse_reference` finds a ray's cells by listing *every* column and row
 boundary the ray crosses before its end, sorting the crossings, and stepping once per crossing (ties
 step the column first, the same convention as the compiled kernel). :func:`evidence_grid_reference` is
-traditional OGM one ray at a time in pure Python, locating the reading's cell geometrically (the cell
-holding the end point), independently of the traversal's kappa count. :func:`evidence_grid_numpy` is the
+traditional OGM one ray at a time in pure Python, locating the reading's cell from the sorted list of
+every entry distance (the cell whose entry is nearest the reading, :mod:`ogm_ppl.raycast`), independently
+of the compiled traversal. :func:`evidence_grid_numpy` is the
 batched, vectorised numpy version that a careful user would write without a compiler.
 """
 
@@ -66,15 +67,27 @@ def _rays_of(grid: Grid, scans: Scans):
     du, dv = np.cos(theta), np.sin(theta)
     if grid.ndim == 1:
         du, dv = np.sign(du), np.zeros_like(dv)
+    keep = scans.valid.ravel()
     return (
-        np.repeat(uv[:, 0], B),
-        np.repeat(uv[:, 1], B),
-        du,
-        dv,
-        scans.ranges.ravel() / grid.resolution,
-        scans.is_max.ravel(),
+        np.repeat(uv[:, 0], B)[keep],
+        np.repeat(uv[:, 1], B)[keep],
+        du[keep],
+        dv[keep],
+        scans.ranges.ravel()[keep] / grid.resolution,
+        scans.is_max.ravel()[keep],
         scans.max_range / grid.resolution,
     )
+
+
+def reading_kappa_reference(u0: float, v0: float, du: float, dv: float, length: float, r: float) -> int:
+    """Kappa of a reading ``r`` (cells) on an unbounded grid: the cell whose entry distance is nearest
+    to ``r`` (ties to the nearer cell), from the sorted list of every boundary crossing before ``length``."""
+    ts = [0.0] + sorted(_crossings(float(u0), float(du), length) + _crossings(float(v0), float(dv), length))
+    z = 0
+    for k in range(1, len(ts)):
+        if 0.5 * (ts[k - 1] + ts[k]) < r:
+            z = k
+    return z
 
 
 def evidence_grid_reference(
@@ -85,12 +98,9 @@ def evidence_grid_reference(
     u0, v0, du, dv, rng, is_max, L = _rays_of(grid, scans)
     for r in range(len(u0)):
         cells, _ = traverse_reference(u0[r], v0[r], du[r], dv[r], L, grid.rows, grid.cols)
-        end = None
-        if not is_max[r]:
-            eu, ev_ = u0[r] + rng[r] * du[r], v0[r] + rng[r] * dv[r]
-            end = math.floor(ev_) * grid.cols + math.floor(eu)
-        for c in cells:
-            if c == end:
+        z = len(cells) if is_max[r] else reading_kappa_reference(u0[r], v0[r], du[r], dv[r], L, rng[r])
+        for kappa, c in enumerate(cells):
+            if kappa == z:
                 ev[c] += l_occ
                 break
             ev[c] += l_free
@@ -118,6 +128,7 @@ def evidence_grid_numpy(
         tx = np.where(sx != 0, (bx - u0) / du, np.inf)
         ty = np.where(sy != 0, (by - v0) / dv, np.inf)
     t = np.zeros_like(u0)
+    t_prev = np.full_like(u0, -np.inf)
     th = np.where(is_max, np.inf, rng)
     idx = np.arange(len(u0))
     done_hit = np.zeros(len(u0), dtype=bool)
@@ -125,12 +136,14 @@ def evidence_grid_numpy(
     while idx.size:
         # the current cell of every live ray: free before the reading's cell, occupied at it
         nxt = np.minimum(tx, ty)
-        at_end = (t <= th) & (nxt > th)  # the end point lies in this cell
+        # the reading belongs to the cell whose entry distance is nearest to it (ogm_ppl.raycast)
+        at_end = np.isfinite(th) & (0.5 * (t_prev + t) < th) & ((0.5 * (t + nxt) >= th) | (nxt >= L))
         val = np.where(at_end, l_occ, l_free)
         all_cells.append(row * cols + col)
         all_vals.append(val)
         done_hit[idx[at_end]] = True
         step_x = tx <= ty
+        t_prev = t
         t = np.where(step_x, tx, ty)
         col = col + np.where(step_x, sx, 0)
         row = row + np.where(step_x, 0, sy)
@@ -140,8 +153,8 @@ def evidence_grid_numpy(
             tx = np.where(step_x & (sx != 0), (bx - u0) / np.where(du == 0, 1, du), tx)
             ty = np.where(~step_x & (sy != 0), (by - v0) / np.where(dv == 0, 1, dv), ty)
         live = (t < L) & ~at_end & (col >= 0) & (col < cols) & (row >= 0) & (row < rows)
-        idx, col, row, sx, sy, bx, by, tx, ty, t, th, u0, v0, du, dv = (
-            a[live] for a in (idx, col, row, sx, sy, bx, by, tx, ty, t, th, u0, v0, du, dv)
+        idx, col, row, sx, sy, bx, by, tx, ty, t, t_prev, th, u0, v0, du, dv = (
+            a[live] for a in (idx, col, row, sx, sy, bx, by, tx, ty, t, t_prev, th, u0, v0, du, dv)
         )
     ev = np.bincount(np.concatenate(all_cells), weights=np.concatenate(all_vals),
                      minlength=grid.num_cells)  # fmt: skip

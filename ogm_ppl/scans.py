@@ -3,8 +3,15 @@
 A scan is taken from one pose ``x_s = (x, y, yaw)`` with ``B`` beams at angles relative to the yaw.
 Per-reading poses (``x_n`` of Section 2.1) are scans of one beam. Readings are validated on
 construction: NaN, infinite or negative ranges, ranges over ``max_range`` (unless the caller asks for them
-to be read as max-range, "no return" readings), mismatched shapes and non-finite poses raise
-``ValueError`` naming the field and the first offending index.
+to be read as max-range readings), mismatched shapes and non-finite poses raise ``ValueError`` naming the
+field and the first offending index.
+
+Real sensors report beams that are not readings at all: no return (the Intel log's 81.83 m), a value
+below the sensor's minimum range, or padding where scans have different beam counts. Such beams are
+marked ``valid = False``: they are neither a hit nor a max-range reading, are never validated and are
+left out of ray casting and mapping (the thesis drops them, Section 6.2). Turning a no-return beam into
+a max-range reading instead would paint free space through the wall it missed; a reader that wants that
+sets the range to ``max_range`` itself.
 """
 
 from __future__ import annotations
@@ -30,10 +37,14 @@ class Scans:
         ranges: ``S x B`` ranges in metres (``B`` for one scan).
         max_range: the sensor's maximum range in metres. A reading equal to it is a max-range reading.
         over_range: ``"error"`` (default) rejects readings above ``max_range``; ``"max"`` reads them as
-            max-range readings.
+            max-range readings; ``"drop"`` marks them invalid.
+        valid: optional ``S x B`` boolean mask; False marks beams that are not readings (see the module
+            docstring). Their ranges are not checked and are stored as 0.
+        min_range: readings below it (metres, ``>= 0``) are marked invalid.
 
     Attributes:
-        is_max: ``S x B`` boolean, True where the reading is a max-range (no return) reading.
+        is_max: ``S x B`` boolean, True where a valid reading is a max-range reading.
+        valid: ``S x B`` boolean, True for the beams that are readings.
 
     >>> s = Scans(poses=[0.0, 0.0, 0.0], angles=[0.0, np.pi / 2], ranges=[1.0, 4.0], max_range=4.0)
     >>> s.num_readings, s.is_max.tolist()
@@ -45,6 +56,8 @@ class Scans:
     ranges: np.ndarray
     max_range: float
     over_range: str = "error"
+    valid: np.ndarray | None = None
+    min_range: float = 0.0
     is_max: np.ndarray = field(init=False)
 
     def __post_init__(self) -> None:
@@ -76,8 +89,27 @@ class Scans:
         mr = float(self.max_range)
         if not np.isfinite(mr) or mr <= 0:
             raise ValueError(f"Scans.max_range must be a positive finite number, got {self.max_range!r}")
-        if self.over_range not in ("error", "max"):
-            raise ValueError(f"Scans.over_range must be 'error' or 'max', got {self.over_range!r}")
+        if self.over_range not in ("error", "max", "drop"):
+            raise ValueError(
+                f"Scans.over_range must be 'error', 'max' or 'drop', got {self.over_range!r}"
+            )
+        min_range = float(self.min_range)
+        if not (np.isfinite(min_range) and 0.0 <= min_range < mr):
+            raise ValueError(
+                f"Scans.min_range must lie in [0, max_range = {mr}), got {self.min_range!r}"
+            )
+        if self.valid is None:
+            valid = np.ones((S, B), dtype=bool)
+        else:
+            valid = np.asarray(self.valid)
+            if valid.dtype != bool:
+                raise ValueError(f"Scans.valid must be a boolean mask, got dtype {valid.dtype}")
+            if valid.ndim == 1 and S == 1:
+                valid = valid[None, :]
+            if valid.shape != (S, B):
+                raise ValueError(f"Scans.valid must have shape S x B = {(S, B)}, got {valid.shape}")
+            valid = valid.copy()
+        ranges = np.where(valid, ranges, 0.0)
         bad = ~np.isfinite(poses)
         if bad.any():
             raise ValueError(f"Scans.poses has a non-finite value at index {_first_bad(bad)}")
@@ -95,6 +127,10 @@ class Scans:
             i = _first_bad(bad)
             raise ValueError(f"Scans.ranges is negative ({ranges[i]}) at index {i}")
         over = ranges > mr
+        if self.over_range == "drop":
+            valid &= ~over
+            ranges = np.where(over, 0.0, ranges)
+            over = np.zeros_like(over)
         if over.any() and self.over_range == "error":
             i = _first_bad(over)
             raise ValueError(
@@ -102,14 +138,17 @@ class Scans:
                 "over_range='max' to read such readings as max-range readings"
             )
         ranges = np.minimum(ranges, mr)
-        for name, value in (("poses", poses), ("angles", angles), ("ranges", ranges)):
+        short = valid & (ranges < min_range)
+        valid &= ~short
+        ranges = np.where(short, 0.0, ranges)
+        is_max = valid & (ranges >= mr)
+        for name, value in (("poses", poses), ("angles", angles), ("ranges", ranges),
+                            ("valid", valid), ("is_max", is_max)):  # fmt: skip
             value = np.ascontiguousarray(value)
             value.setflags(write=False)
             object.__setattr__(self, name, value)
-        is_max = ranges >= mr
-        is_max.setflags(write=False)
         object.__setattr__(self, "max_range", mr)
-        object.__setattr__(self, "is_max", is_max)
+        object.__setattr__(self, "min_range", min_range)
 
     @property
     def num_scans(self) -> int:
@@ -123,8 +162,30 @@ class Scans:
 
     @property
     def num_readings(self) -> int:
-        """N = S * B."""
+        """N = S * B beams, valid or not (ray ``r`` of :func:`~ogm_ppl.raycast.raycast` came from the
+        flat beam index ``rays.reading[r]``)."""
         return self.ranges.size
+
+    @property
+    def num_valid(self) -> int:
+        """Beams that are readings (hits or max range)."""
+        return int(self.valid.sum())
+
+    def subsample(self, pose_step: int = 1, beam_step: int = 1, pose_fraction: float | None = None) -> Scans:
+        """Every ``pose_step``-th scan (or an evenly spaced ``pose_fraction`` of them) and every
+        ``beam_step``-th beam: the sparser experiments of Table 6.5 (half the beams, 10 % of the poses)."""
+        S = self.num_scans
+        if pose_step < 1 or beam_step < 1:
+            raise ValueError(f"pose_step and beam_step must be >= 1, got {pose_step}, {beam_step}")
+        if pose_fraction is not None:
+            if not 0.0 < pose_fraction <= 1.0:
+                raise ValueError(f"pose_fraction must lie in (0, 1], got {pose_fraction}")
+            n = max(1, int(round(S * pose_fraction)))
+            keep = np.unique(np.floor(np.arange(n) * (S / n)).astype(np.int64))
+        else:
+            keep = np.arange(0, S, pose_step)
+        return Scans(self.poses[keep], self.angles[keep, ::beam_step], self.ranges[keep, ::beam_step],
+                     self.max_range, valid=self.valid[keep, ::beam_step], min_range=self.min_range)  # fmt: skip
 
     def world_angles(self) -> np.ndarray:
         """Beam directions in the world frame, ``S x B`` (yaw + beam angle)."""

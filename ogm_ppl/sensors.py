@@ -10,6 +10,19 @@ explicit:
 
 Both models are normalised over the outcome space ``{hit at z} U {max-range}``; ``ogm_ppl.testing``
 checks it for any model.
+
+**Where a reading sits (the one convention, see :mod:`ogm_ppl.raycast`).** A beam returns where it enters
+the first occupied cell, at its near face. A sensor with ``continuous_range = True`` (``GaussianRange``) is
+evaluated by :class:`~ogm_ppl.models.OccupancyModel` on the measured range itself, in the continuous
+kappa coordinate ``kappa_c = t + 1/2`` (``t``: distance in cells from the sensor): ``z = r + 1/2`` for a
+reading at range ``r``, ``f = t_f + 1/2`` where ``t_f`` is the entry distance of the first occupied cell,
+and ``F = L`` for a maximum range of ``L`` cells (so max range is censored at ``F + 1/2 = L + 1/2``,
+i.e. at ``r = L``); the sensor's own cell sits at ``kappa_c = 0``. In 1D, from a robot in the middle of cell 0, cell ``kappa`` is entered at
+``kappa - 1/2``: ``kappa_c`` of a wall at ``f`` is exactly ``f``, and the thesis's integer readings are
+kappa values. In 2D this keeps ``p(z | f)`` centred where the beam meets the wall at every beam angle
+(diagonal rays cross more cells per metre; integer kappa would shift the centre by up to half a cell).
+A discrete sensor (``continuous_range = False``, ``PatternMatch``) compares the reading's kappa
+``rays.z`` with the first hit's kappa ``f``.
 """
 
 from __future__ import annotations
@@ -55,6 +68,9 @@ class SensorModel:
         is_max: True where the reading is a max-range reading (default: none are).
     """
 
+    #: evaluated on continuous ranges (True) or on integer kappa (False); see the module docstring
+    continuous_range: bool = False
+
     def log_prob(self, z, f, F, is_max=None) -> torch.Tensor:  # pragma: no cover - interface
         raise NotImplementedError
 
@@ -80,6 +96,8 @@ class GaussianRange(SensorModel):
     >>> round(float(s.log_prob(8.0, 8, 75)), 4)
     -2.0176
     """
+
+    continuous_range = True
 
     def __init__(self, sigma: float, p_rand: float = 0.0) -> None:
         sigma_t = _as_tensor(sigma)

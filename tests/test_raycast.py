@@ -6,7 +6,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ogm_ppl import Grid, Scans, raycast
-from ogm_ppl.reference import traverse_reference
+from ogm_ppl.reference import _crossings, reading_kappa_reference, traverse_reference
 
 ROWS, COLS = 23, 31
 
@@ -43,18 +43,19 @@ def test_traversal_properties(u0, v0, theta, frac, max_range):
     t = rays.t_enter[rays.offsets[0] : rays.offsets[1]].astype(float)
     # t_enter is float32: below max range up to its rounding
     assert t[0] == 0.0 and np.all(np.diff(t) >= 0) and np.all(t <= max_range * (1 + 1e-6))
-    # ends at the end cell: the cell holding the end point when it is inside the grid
+    # the reading's kappa: the cell whose entry distance is nearest to it (ties to the nearer), counted
+    # on past the grid edge; compared with the reference built from the sorted list of every crossing
+    ts = [0.0] + sorted(_crossings(u0, math.cos(theta), max_range) + _crossings(v0, math.sin(theta), max_range))
+    assert rays.range_len[0] == len(ts) >= len(cells)
     if rng < max_range:
-        eu, ev = u0 + rng * math.cos(theta), v0 + rng * math.sin(theta)
-        inside = 0 <= eu < COLS and 0 <= ev < ROWS
-        if inside and rays.endpoint_in_grid[0]:
-            end = rays.cells[rays.offsets[0] + rays.z[0]]
-            er, ec = divmod(int(end), COLS)
-            # the end point lies in (or, for floating-point ties, on the border of) the end cell
-            assert ec - 1e-9 <= eu <= ec + 1 + 1e-9 and er - 1e-9 <= ev <= er + 1 + 1e-9
-        # a hit inside the grid is always inside its ray (up to boundary ties of the end point)
-        if inside and min(eu % 1, 1 - eu % 1, ev % 1, 1 - ev % 1) > 1e-9:
-            assert rays.endpoint_in_grid[0]
+        mids = [0.5 * (a + b) for a, b in zip(ts[:-1], ts[1:])]
+        if min((abs(m - rng) for m in mids), default=1.0) > 1e-6:  # no floating-point tie
+            z_ref = reading_kappa_reference(u0, v0, math.cos(theta), math.sin(theta), max_range, rng)
+            assert rays.z[0] == z_ref
+            assert abs(ts[z_ref] - rng) <= min(abs(t - rng) for t in ts) + 1e-9
+            assert rays.endpoint_in_grid[0] == (z_ref < len(cells))
+    else:
+        assert rays.is_max[0] and rays.z[0] == len(cells)
 
 
 @settings(max_examples=1500)

@@ -3,6 +3,10 @@
 Readings are drawn from ``N(f, sigma^2)`` and rounded to whole cells (the thesis's readings are
 integers); they are clipped to ``[0, max_range]``. The thesis's own six readings are
 :data:`THESIS_TOY_READINGS` (``f = 8``, ``sigma = 3``).
+
+Readings are in kappa units, as in the thesis: reading ``z`` is a beam that returned where it entered
+cell ``z``, i.e. at range ``z - 1/2`` metres from the robot in the middle of cell 0 (the range convention
+of :mod:`ogm_ppl.raycast`); a reading at ``max_range`` is a max-range reading.
 """
 
 from __future__ import annotations
@@ -61,5 +65,6 @@ def toy_1d(
         readings = np.rint(wall + sigma * rng.standard_normal(num_readings))
     readings = np.clip(np.asarray(readings, dtype=float), 0.0, F)
     grid = Grid.line(num_cells)
-    scans = Scans.one_d(readings, max_range=F, position=0.5)
+    ranges = np.where(readings >= F, F, np.maximum(readings - 0.5, 0.0))  # near face of cell z
+    scans = Scans.one_d(ranges, max_range=F, position=0.5)
     return Toy1D(grid, scans, readings, int(wall), float(sigma))

@@ -44,8 +44,8 @@ def evidence_from_scans(u0, v0, du, dv, length, t_hit, is_max, rows, cols, evide
     buf_t = np.empty(cap, np.float32)
     n_rows = table.shape[0]
     for r in range(R):
-        n, zr = trace_ray(u0[r], v0[r], du[r], dv[r], length[r], t_hit[r], is_max[r], rows, cols,
-                          buf_cells, buf_t, 0)  # fmt: skip
+        n, zr, _ = trace_ray(u0[r], v0[r], du[r], dv[r], length[r], t_hit[r], is_max[r], rows, cols,
+                             buf_cells, buf_t, 0, False)  # fmt: skip
         col = max_col if is_max[r] else zr
         for j in range(min(n, n_rows)):
             d = table[j, col]

@@ -7,9 +7,19 @@ where ``f_n(m)`` is the first occupied cell along ray ``n`` (static world, Secti
 kappa units along their ray (:mod:`ogm_ppl.raycast`), so every ray's likelihood is a lookup table over its
 ``F_n + 2`` first-hit values (``f = 0..F_n`` and "none"), computed once from the sensor model.
 
-A hit whose end point lies outside the grid is explained by the cells inside (if one of them is the first
-occupied cell) or, when none is, by an obstacle outside the grid at the reading. Cells holding a sensor are
-known to be free (the robot is not inside a wall); they are pinned to 0 and are not latent.
+**Rays cut by the grid edge.** The sensor's ray has ``F_n + 1`` cells up to its maximum range
+(``rays.range_len``); the grid holds the first ``len_n`` of them. The cells beyond the edge are cells the
+map does not hold: they are marginalised under the prior's occupancy of a cell outside the map,
+``lambda_out`` (:meth:`~ogm_ppl.priors.MapPrior.outside_occupancy`, independent cells), so the "no
+occupied cell in the grid" column is
+
+.. math::
+    p(z \mid f > len_n - 1) = \sum_{j = len_n}^{F_n} \lambda_{out} (1 - \lambda_{out})^{j - len_n}
+        p(z \mid f = j; F_n) + (1 - \lambda_{out})^{F_n + 1 - len_n} p(z \mid \text{none}; F_n)
+
+and every column censors max range at the sensor's ``F_n``, not at the grid edge. Each ray's likelihood
+is thereby a normalised distribution over readings for every map (tested by summing it). Cells holding a
+sensor are known to be free (the robot is not inside a wall); they are pinned to 0 and are not latent.
 """
 
 from __future__ import annotations
@@ -96,24 +106,69 @@ class OccupancyModel:
     def _loglik_table(self) -> torch.Tensor:
         r = self.rays
         lengths = torch.from_numpy(r.lengths)
-        W = int(lengths.max()) + 1
-        z = torch.from_numpy(r.z).to(torch.float64)
+        range_len = torch.from_numpy(np.maximum(r.range_len, r.lengths))
+        R, W = r.num_rays, int(lengths.max()) + 1
         is_max = torch.from_numpy(r.is_max.copy())
-        outside = torch.from_numpy(~r.endpoint_in_grid & ~r.is_max)
-        bad = (z < 0) & ~is_max
+        bad = (torch.from_numpy(r.z) < 0) & ~is_max
         if bad.any():
             raise ValueError(f"reading of ray {int(bad.nonzero()[0, 0])} lies before its ray")
-        F = (lengths - 1).to(torch.float64)
         col = torch.arange(W, dtype=torch.float64)[None, :]
         none_col = col == lengths[:, None]
-        # no occupied cell in the grid: "none" inside range, or an obstacle past the edge at the reading
-        f = torch.where(none_col, torch.where(outside[:, None], z[:, None], F[:, None] + 1), col)
-        F_eff = torch.where(outside, torch.maximum(F, z), F)[:, None]
-        table = self.sensor.log_prob(z[:, None].expand(-1, W), f, F_eff, is_max[:, None].expand(-1, W))
-        table = torch.where(col <= lengths[:, None], table.to(torch.float64), -math.inf)
+        if self.sensor.continuous_range:  # continuous kappa t + 1/2 (ogm_ppl.sensors)
+            z = torch.from_numpy(r.range_cells).to(torch.float64) + 0.5
+            F = torch.from_numpy(r.max_range_cells()).to(torch.float64)
+            t = torch.zeros(R, W, dtype=torch.float64)
+            t[torch.from_numpy(r.ray_of_entry), torch.from_numpy(r.kappa)] = torch.from_numpy(r.t_enter).double()
+            t[:, 0] = -0.5  # the sensor's own cell sits at kappa_c = 0 (ogm_ppl.sensors)
+            f = torch.where(none_col, F[:, None] + 1, t + 0.5)
+        else:
+            z = torch.from_numpy(r.z).to(torch.float64)
+            F = (range_len - 1).to(torch.float64)  # the sensor's last kappa, beyond the grid edge if cut
+            f = torch.where(none_col, F[:, None] + 1, col)
+        table = self.sensor.log_prob(z[:, None].expand(-1, W), f, F[:, None], is_max[:, None].expand(-1, W))
+        table = table.to(torch.float64)
+        cut = torch.nonzero(range_len > lengths).flatten()
+        if len(cut):
+            none = self._beyond_edge(cut, z[cut], F[cut], is_max[cut], lengths[cut], range_len[cut])
+            table[cut, lengths[cut]] = none
+        table = torch.where(col <= lengths[:, None], table, -math.inf)
         if torch.isnan(table).any():
             raise ValueError("the sensor model returned NaN log-likelihoods")
         return table
+
+    def _beyond_edge(self, rays, z, F, is_max, lengths, range_len, chunk: int = 4096) -> torch.Tensor:
+        """``log p(z | no occupied cell in the grid)`` for rays cut by the grid edge: the cells beyond it
+        marginalised under independent occupancy ``lambda_out`` (module docstring)."""
+        lam = float(self.prior.outside_occupancy())
+        if not 0.0 <= lam <= 1.0:
+            raise ValueError(f"prior.outside_occupancy() must lie in [0, 1], got {lam}")
+        log_on = math.log(lam) if lam > 0 else -math.inf
+        log_off = math.log1p(-lam) if lam < 1 else -math.inf
+        out = torch.empty(len(z), dtype=torch.float64)
+        for a in range(0, len(z), chunk):
+            sl = slice(a, a + chunk)
+            n_out = range_len[sl] - lengths[sl]
+            J = int(n_out.max()) + 1  # i = 0..n_out - 1: first hit at lengths + i; i = n_out: none
+            i = torch.arange(J, dtype=torch.float64)[None, :]
+            none = i == n_out[:, None]
+            if self.sensor.continuous_range:
+                off, t = self.rays.entries_beyond_edge(rays[sl].numpy())
+                if not np.array_equal(np.diff(off), n_out.numpy()):
+                    raise RuntimeError("entry distances past the grid edge disagree with Rays.range_len")
+                te = torch.zeros(len(n_out), J, dtype=torch.float64)
+                idx = torch.from_numpy(np.repeat(np.arange(len(n_out)), np.diff(off)))
+                pos = torch.from_numpy(np.arange(len(t)) - np.repeat(off[:-1], np.diff(off)))
+                te[idx, pos] = torch.from_numpy(t)
+                f = torch.where(none, F[sl, None] + 1, te + 0.5)
+            else:
+                f = torch.where(none, F[sl, None] + 1, lengths[sl, None] + i)
+            lz = self.sensor.log_prob(z[sl, None].expand(-1, J), f, F[sl, None], is_max[sl, None].expand(-1, J))
+            # log weight: lambda (1 - lambda)^i for a first hit at lengths + i, (1 - lambda)^n_out for none
+            pow_off = torch.where(i == 0, 0.0, i * log_off) if lam == 1 else i * log_off
+            lw = torch.where(none, pow_off, log_on + pow_off)
+            lw = torch.where(i > n_out[:, None], -math.inf, lw)
+            out[sl] = torch.logsumexp(lz.to(torch.float64) + lw, dim=-1)
+        return out
 
     def _dense_rays(self) -> torch.Tensor:
         """``R x Lmax`` cell indices, padded with ``K`` (a dummy always-free column)."""

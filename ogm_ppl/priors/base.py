@@ -51,6 +51,12 @@ class MapPrior:
         out = self.log_prob(trial)
         return out[0] if squeeze else out
 
+    def outside_occupancy(self) -> float:
+        """Occupancy probability ``lambda_out`` of a cell outside the map, used to marginalise the part of
+        a ray beyond the grid edge (:class:`~ogm_ppl.models.OccupancyModel`). Default 0.5 (the uniform
+        prior); priors override it with their cell marginal."""
+        return 0.5
+
     def cell_log_odds(self) -> torch.Tensor | None:
         """Per-cell prior log-odds ``l(lambda_k)`` if cells are independent a priori, else ``None``."""
         return None

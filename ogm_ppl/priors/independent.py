@@ -51,6 +51,10 @@ class IndependentPrior(MapPrior):
         maps = torch.as_tensor(maps)
         return lp if maps.dim() == 1 else lp.expand(maps.shape[0], -1)
 
+    def outside_occupancy(self) -> float:
+        """The mean ``lambda_`` (cells outside the map are exchangeable with those inside)."""
+        return float(self.lambda_.mean())
+
     def cell_log_odds(self):
         return self._log_on - self._log_off
 

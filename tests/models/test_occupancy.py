@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 import torch
 
-from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
+from ogm_ppl import GaussianRange, Grid, OccupancyModel, PatternMatch, Scans, raycast
 from ogm_ppl.inference._cell_kernels import first_hits
 from ogm_ppl.priors import IndependentPrior
 
@@ -26,26 +26,69 @@ def test_first_hits_agree_with_compiled_kernel_and_a_loop():
             assert got[b, r] == (occ[0] if occ else rays.lengths[r])
 
 
-def test_likelihood_table_and_out_of_grid_hits():
+def _cut_ray_model(K, readings, lam, sigma=1.0, max_range=20.0, sensor=None):
+    grid = Grid.line(K)
+    rays = raycast(grid, Scans.one_d(readings, max_range=max_range))
+    return OccupancyModel(grid, rays, sensor or GaussianRange(sigma), IndependentPrior(lam, K))
+
+
+def test_ray_cut_by_grid_edge_is_a_normalised_distribution_over_readings():
+    # a 9-cell grid and a sensor that reaches 20 cells: every outcome (a hit at kappa 0..20, max range)
+    # summed for every map of the grid must give 1 (Issue: it gave 1.40 when the edge censored max range
+    # and a hit past the edge counted as an obstacle at the reading)
+    # The pattern-matching sensor has discrete outcomes: exact to rounding. The Gaussian is a density
+    # on continuous ranges, so its sum over integer kappa is a Riemann sum: exact to ~1e-3 only.
+    # near-face ranges of kappa 0..20 (continuous kappa r + 1/2 = 1..20 on the integer lattice), max range
+    readings = [0.0] + [z - 0.5 for z in range(1, 21)] + [20.0]
+    for lam in (0.5, 0.234, 0.05):
+        for sensor, cols, tol in ((PatternMatch(0.8), range(10), 1e-12), (GaussianRange(1.0), range(4, 10), 1e-3)):
+            model = _cut_ray_model(9, readings, lam, sensor=sensor)
+            rays = model.rays
+            assert (rays.lengths == 9).all() and (rays.range_len == 21).all()
+            assert rays.z[:21].tolist() == list(range(21)) and rays.is_max.tolist() == [False] * 21 + [True]
+            table = model.loglik_table
+            # every first hit f in the grid and none in the grid (column 9); for the Gaussian, f >= 4
+            # (its mass below kappa -1/2 is < 1e-5)
+            for col in cols:
+                total = torch.logsumexp(table[:, col], 0).exp().item()
+                assert total == pytest.approx(1.0, abs=tol), (sensor, lam, col, total)
+
+
+def test_cells_beyond_the_edge_are_marginalised_under_the_prior():
+    # the cut model equals a model of the whole ray (21 cells) with the 12 outside cells summed out
+    # under the independent prior, for hits in the grid, past the edge and max range
+    lam = 0.3
+    readings = [3.0, 6.0, 11.0, 17.0, 20.0]
+    small = _cut_ray_model(9, readings, lam, sigma=2.0)
+    big = _cut_ray_model(21, readings, lam, sigma=2.0)
+    assert (big.rays.lengths == 21).all()
+    outside = torch.tensor(list(__import__("itertools").product([0.0, 1.0], repeat=12)), dtype=torch.float64)
+    log_p_out = IndependentPrior(lam, 12).log_prob(outside)
+    for inside in ([0] * 9, [0, 0, 0, 0, 0, 1, 0, 0, 0], [0, 0, 0, 0, 0, 0, 0, 0, 1]):
+        m_in = torch.tensor(inside, dtype=torch.float64)
+        full = torch.cat([m_in.expand(len(outside), -1), outside], 1)
+        f_big = big.first_hits(full)  # 4096 x R
+        per_ray = big.loglik_table[torch.arange(len(readings))[None, :], f_big]  # 4096 x R
+        expected = torch.logsumexp(per_ray + log_p_out[:, None], 0)
+        got = small.loglik_table[torch.arange(len(readings)), small.first_hits(m_in)]
+        torch.testing.assert_close(got, expected, rtol=0, atol=1e-10)
+
+
+def test_likelihood_of_in_grid_hits():
     grid = Grid.line(6)
     scans = Scans.one_d([2.0, 9.0, 20.0], max_range=20.0)  # in grid, past the edge, max range
     rays = raycast(grid, scans)
     assert rays.endpoint_in_grid.tolist() == [True, False, False] and rays.is_max.tolist() == [False, False, True]
     s = GaussianRange(1.5)
     model = OccupancyModel(grid, rays, s, IndependentPrior(0.5, 6))
-    free = torch.zeros(6)
-    # all cells free: the max-range reading is certain, the hit past the edge is explained by an
-    # obstacle outside the grid at the reading, the in-grid hit is impossible
-    ll = model.loglik_table
-    assert ll[0, 6] == -math.inf
-    assert ll[1, 6].item() == pytest.approx(-math.log(1.5 * math.sqrt(2 * math.pi)))
-    assert ll[2, 6].item() == 0.0
     wall = torch.zeros(6)
     wall[4] = 1.0
-    expected = s.log_prob(torch.tensor(2.0), 4, 5) + s.log_prob(torch.tensor(9.0), 4, 9) + \
-        s.log_prob(torch.tensor(0.0), 4, 5, is_max=True)  # fmt: skip
+    # the sensor's ray reaches kappa 20 whatever the grid holds: max range is censored there
+    # GaussianRange is evaluated on the range in continuous kappa r + 1/2; the wall cell 4 is entered
+    # at 3.5 cells (kappa_c 4)
+    expected = s.log_prob(torch.tensor(2.5), 4, 20) + s.log_prob(torch.tensor(9.5), 4, 20) + \
+        s.log_prob(torch.tensor(0.0), 4, 20, is_max=True)  # fmt: skip
     assert model.log_likelihood(wall).item() == pytest.approx(expected.item(), abs=1e-12)
-    assert model.log_likelihood(free).item() == -math.inf
     assert model.known_free.tolist() == [True] + [False] * 5
 
 

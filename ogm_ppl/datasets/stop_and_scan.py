@@ -1,0 +1,517 @@
+r"""Simulated stop-and-scan datasets on any ground-truth map, as in the thesis's Section 6.1.
+
+The thesis simulated its 2D datasets in Player/Stage: "a simple exploration algorithm is used to ensure
+coverage", and the robot "only maps the environment when stopped", measuring 360 degrees around itself at
+each stop, with a maximum range of :math:`F = 75` cells and Gaussian range noise
+:math:`p(z_n | f) = \mathcal{N}(f, 3^2)` (in cells). The exploration algorithm itself is not given, so
+this module supplies one:
+
+:func:`plan_route`
+    greedy frontier exploration. The robot knows what a noise-free 360 degree sensor of range ``F`` has
+    shown it so far; a *frontier* is a known-free cell next to an unknown one. From each stop the robot
+    drives to the nearest (geodesic, through known-free cells that keep ``clearance_cells`` from every
+    wall and from the grid edge) pose within reach of a frontier, scans, and repeats until the share of
+    observed free cells reaches ``coverage``, ``num_poses`` stops are placed, or no frontier is reachable.
+:func:`stop_and_scan`
+    the route plus simulated scans (:func:`~ogm_ppl.datasets.simulate.simulate_scans`): 720 beams over
+    360 degrees, ``F = 75`` cells, ``sigma = 3`` cells by default; sparser variants keep an evenly spaced
+    subset of the stops (``pose_fraction``) or of the beams (``beam_step``). Each stop's noise comes from
+    its own seeded stream and all beams are drawn before thinning, so a sparser dataset's readings are
+    exactly a subset of the full dataset's readings for the same seed.
+
+Poses are ``P x 3`` arrays of ``(x, y, yaw)`` in metres and radians; the yaw is the direction of travel
+into the stop (0 at the start), which does not matter for a 360 degree scan.
+
+>>> from ogm_ppl import Grid
+>>> truth = np.zeros((60, 60), bool); truth[[0, -1], :] = truth[:, [0, -1]] = True
+>>> truth[:, 30] = True; truth[25:35, 30] = False  # two rooms and a doorway
+>>> grid = Grid(truth.shape, resolution=0.05)
+>>> data = stop_and_scan(truth, grid, max_range_cells=40, seed=1)
+>>> data.scans.beams_per_scan, route_coverage(truth, grid, data.route, max_range_cells=40) >= 0.95
+(720, True)
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy import ndimage
+from scipy.sparse import csgraph, csr_matrix
+
+from ..grid import Grid
+from ..raycast import raycast
+from ..scans import Scans
+from .simulate import first_hit, simulate_scans
+
+__all__ = ["StopAndScan", "plan_route", "route_coverage", "stop_and_scan"]
+
+_BIG = 1e9  # weight of an edge through a cell the robot has not seen free yet
+_EIGHT = np.ones((3, 3), dtype=bool)
+
+
+@dataclass(frozen=True, eq=False)
+class StopAndScan:
+    """A simulated stop-and-scan dataset.
+
+    Attributes:
+        scans: the readings (``S x B``), taken at ``route[settings["pose_indices"]]``.
+        route: the full planned route (``P x 3``, metres/radians); a sparser variant scans at a subset of it.
+        truth: the ground-truth map (``rows x cols`` bool, True = occupied).
+        grid: the grid of ``truth``.
+        settings: the arguments and derived values (plain JSON-able numbers and lists).
+    """
+
+    scans: Scans
+    route: np.ndarray
+    truth: np.ndarray
+    grid: Grid
+    settings: dict = field(default_factory=dict)
+
+
+# --------------------------------------------------------------------------- checks
+def _check_truth(truth, grid: Grid) -> np.ndarray:
+    if not isinstance(grid, Grid):
+        raise TypeError(f"grid must be an ogm_ppl.Grid, got {type(grid).__name__}")
+    if grid.ndim != 2:
+        raise ValueError(f"stop-and-scan datasets need a 2D grid, got shape {grid.shape}")
+    truth = np.asarray(truth)
+    if truth.shape != grid.shape:
+        raise ValueError(f"truth has shape {truth.shape}, the grid {grid.shape}")
+    truth = truth.astype(bool)
+    if truth.all():
+        raise ValueError("truth has no free cell: there is nowhere to put the robot")
+    return truth
+
+
+def _check_positive(name: str, value: float) -> float:
+    value = float(value)
+    if not np.isfinite(value) or value <= 0:
+        raise ValueError(f"{name} must be a positive finite number, got {value!r}")
+    return value
+
+
+# --------------------------------------------------------------------------- geometry
+def _num_probe_beams(max_range_cells: float) -> int:
+    # 720 beams (the thesis) leave no gap at F = 75; keep the arc between beams <= 2/3 cell for larger F.
+    return max(720, int(np.ceil(1.5 * 2 * np.pi * max_range_cells)))
+
+
+def _observe(grid: Grid, truth: np.ndarray, poses: np.ndarray, max_range_cells: float) -> np.ndarray:
+    """Flat boolean ``K``: cells a noise-free 360 degree scan from each pose reaches (up to and including
+    the first occupied cell of each beam)."""
+    B = _num_probe_beams(max_range_cells)
+    angles = np.arange(B) * (2 * np.pi / B)
+    max_range = max_range_cells * grid.resolution
+    poses = np.atleast_2d(poses)
+    seen = np.zeros(grid.num_cells, dtype=bool)
+    for p in poses:  # one pose at a time keeps the ray structure small
+        rays = raycast(grid, Scans(p, angles, np.full(B, max_range), max_range))
+        f = first_hit(rays, truth)
+        seen[rays.cells[rays.kappa <= np.repeat(f, rays.lengths)]] = True
+    return seen
+
+
+def _free_component(free: np.ndarray, cells: np.ndarray) -> np.ndarray:
+    """Free cells 4-connected (a beam crosses cell faces) to any of ``cells`` (``N x 2``)."""
+    lab, _ = ndimage.label(free)
+    ids = np.unique(lab[cells[:, 0], cells[:, 1]])
+    return np.isin(lab, ids[ids > 0])
+
+
+def route_coverage(truth, grid: Grid, route, *, max_range_cells: float = 75) -> float:
+    """Share of the free cells around the route (its 4-connected free component) that noise-free 360 degree
+    scans of range ``max_range_cells`` from the route's poses observe.
+
+    >>> from ogm_ppl import Grid
+    >>> t = np.zeros((10, 10), bool); t[:, 5] = True
+    >>> route_coverage(t, Grid((10, 10)), [[1.5, 1.5, 0.0]], max_range_cells=20)
+    1.0
+    """
+    truth = _check_truth(truth, grid)
+    max_range_cells = _check_positive("max_range_cells", max_range_cells)
+    route = np.atleast_2d(np.asarray(route, dtype=float))
+    if route.size == 0:
+        return 0.0
+    cells = grid.world_to_cell(route[:, :2])
+    target = _free_component(~truth, cells).ravel()
+    if not target.any():
+        raise ValueError("the route's poses all lie in occupied cells")
+    seen = _observe(grid, truth, route, max_range_cells)
+    return float((seen & target).sum() / target.sum())
+
+
+class _KnownFreeGraph:
+    """The 8-connected graph of the cells of ``mask`` (no corner cutting), in which a step costs its length
+    once both its cells are known free and ``_BIG`` before; distances below ``_BIG / 2`` are paths through
+    known-free cells only. Edge costs are updated in place as cells become known."""
+
+    def __init__(self, mask: np.ndarray):
+        rows, cols = mask.shape
+        n = int(mask.sum())
+        self.cell = np.flatnonzero(mask.ravel())  # node -> flat cell
+        self.node = np.full(mask.size, -1, dtype=np.int64)  # flat cell -> node
+        self.node[self.cell] = np.arange(n)
+        node = self.node.reshape(mask.shape)
+        src, dst, w = [], [], []
+        for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
+            c0, c1 = max(0, -dc), cols - max(0, dc)
+            a = node[0 : rows - dr, c0:c1]
+            b = node[dr:rows, c0 + dc : c1 + dc]
+            ok = (a >= 0) & (b >= 0)
+            if dr and dc:  # a diagonal step needs both side cells
+                ok &= mask[0 : rows - dr, c0 + dc : c1 + dc] & mask[dr:rows, c0:c1]
+            src.append(a[ok])
+            dst.append(b[ok])
+            w.append(np.full(int(ok.sum()), np.hypot(dr, dc)))
+        m = sum(x.size for x in src)
+        src, dst, w = np.concatenate(src + dst), np.concatenate(dst + src), np.concatenate(w + w)
+        rev = np.concatenate([np.arange(m, 2 * m), np.arange(m)])  # edge e and rev[e] join the same cells
+        order = np.lexsort((dst, src))  # canonical CSR: scipy would sort it in place otherwise
+        self.dst, self.w = dst[order], w[order]
+        self.rev = np.argsort(order)[rev[order]]
+        self.indptr = np.concatenate([[0], np.cumsum(np.bincount(src, minlength=n))])
+        self.known = np.zeros(n, dtype=bool)
+        self.graph = csr_matrix((np.full(self.w.size, _BIG), self.dst, self.indptr), shape=(n, n))
+
+    def update(self, known_free: np.ndarray) -> None:
+        """Open the steps between cells that ``known_free`` (flat bool over the grid) marks."""
+        new = np.flatnonzero(known_free[self.cell] & ~self.known)
+        if new.size == 0:
+            return
+        self.known[new] = True
+        lo, hi = self.indptr[new], self.indptr[new + 1]
+        pos = np.repeat(lo - np.concatenate([[0], np.cumsum(hi - lo)[:-1]]), hi - lo)
+        pos += np.arange(pos.size)
+        pos = pos[self.known[self.dst[pos]]]
+        self.graph.data[pos] = self.w[pos]
+        self.graph.data[self.rev[pos]] = self.w[pos]
+
+    def distances(self, source: int, limit: float) -> np.ndarray:
+        """Geodesic distance (cells) through known-free cells from node ``source``; inf beyond ``limit``."""
+        d = csgraph.dijkstra(self.graph, indices=source, limit=min(limit, _BIG / 2))
+        d[d >= _BIG / 2] = np.inf
+        return d
+
+
+def _frontier(known_free: np.ndarray, unknown: np.ndarray) -> np.ndarray:
+    """Known-free cells with an unknown 4-neighbour."""
+    near = np.zeros_like(unknown)
+    near[1:] |= unknown[:-1]
+    near[:-1] |= unknown[1:]
+    near[:, 1:] |= unknown[:, :-1]
+    near[:, :-1] |= unknown[:, 1:]
+    return known_free & near
+
+
+def _gains(grid: Grid, truth, cells: np.ndarray, unseen: np.ndarray, max_range_cells: float) -> np.ndarray:
+    """New cells of ``unseen`` (flat bool) that a noise-free scan (240 beams) from each cell centre would
+    observe (``len(cells)`` int64); all scans in one ray cast."""
+    B = 240
+    S = cells.size
+    rc = np.stack(np.divmod(cells, grid.cols), axis=1)
+    poses = np.column_stack([grid.cell_to_world(rc), np.zeros(S)])
+    max_range = max_range_cells * grid.resolution
+    angles = np.arange(B) * (2 * np.pi / B)
+    rays = raycast(grid, Scans(poses, angles, np.full((S, B), max_range), max_range))
+    f = first_hit(rays, truth)
+    keep = rays.kappa <= np.repeat(f, rays.lengths)
+    c = rays.cells[keep]
+    s = rays.ray_of_entry[keep] // B
+    new = unseen[c]
+    key = np.unique(s[new] * grid.num_cells + c[new])
+    return np.bincount(key // grid.num_cells, minlength=S)
+
+
+def _kill_near(dead, seen, free, grid: Grid, cell_flat: int, reach: float) -> None:
+    """Give up the frontier cells next to a stop that its scan did not resolve (a grazed wall, a gap the
+    robot cannot pass), so that no stop is chosen twice for the same reason."""
+    rr = int(np.ceil(reach)) + 2
+    r, c = divmod(int(cell_flat), grid.cols)
+    r0, r1 = max(0, r - rr), min(grid.rows, r + rr + 1)
+    c0, c1 = max(0, c - rr), min(grid.cols, c + rr + 1)
+    # the frontier of a window one cell larger than the disc, so the window edge makes no false frontier
+    R0, R1, C0, C1 = max(0, r0 - 1), min(grid.rows, r1 + 1), max(0, c0 - 1), min(grid.cols, c1 + 1)
+    sw = seen.reshape(grid.shape)[R0:R1, C0:C1]
+    f = _frontier(sw & free[R0:R1, C0:C1], ~sw)[r0 - R0 : r1 - R0, c0 - C0 : c1 - C0]
+    yy, xx = np.mgrid[r0:r1, c0:c1]
+    f &= np.hypot(yy - r, xx - c) <= reach + 1
+    dead[(yy * grid.cols + xx)[f]] = True
+
+
+def _next_goal(grid, truth, free, seen, dead, target, graph: _KnownFreeGraph, current, *,
+               reach, min_cluster, min_gain, max_range_cells, k_eval=6, share=0.25):  # fmt: skip
+    """The next stop (a graph node), -1 after giving up frontiers, or None when nothing is left.
+
+    Frontier cells are grouped in 8-connected clusters; clusters of at least ``min_cluster`` cells come
+    first. A cluster's goal is its geodesically nearest known-free node within ``reach`` cells (Chebyshev)
+    of it; of the ``k_eval`` nearest goals, the nearest whose scan would show at least ``share`` of the best
+    one's new free cells wins. Clusters whose goals would show fewer than ``min_gain`` cells are given up.
+    """
+    shape = grid.shape
+    known_free = seen & free.ravel()
+    frontier = _frontier(known_free.reshape(shape), (~seen).reshape(shape)) & ~dead.reshape(shape)
+    if not frontier.any():
+        return None
+    fl, nf = ndimage.label(frontier, structure=_EIGHT)
+    sizes = np.bincount(fl.ravel(), minlength=nf + 1)
+    sizes[0] = 0
+    # large clusters get the larger ids, so the maximum filter prefers them where clusters meet
+    ranked = np.where(sizes[fl] >= min_cluster, fl + nf, fl)
+    near = ndimage.maximum_filter(ranked, size=2 * int(reach) + 1, mode="constant").ravel()
+    cluster = near[graph.cell]  # per node: a frontier cluster within reach (0: none)
+    cand = graph.known & (cluster > 0)
+    cand[current] = False
+    if not cand.any():
+        return None
+    for limit in (max_range_cells, 4.0 * max_range_cells, np.inf):
+        d = np.where(cand, graph.distances(current, limit), np.inf)
+        if np.isfinite(d).any():
+            break
+    else:
+        return None  # the remaining frontiers lie beyond unseen space
+    ok = np.flatnonzero(np.isfinite(d))
+    order = ok[np.argsort(d[ok], kind="stable")]
+    _, first = np.unique(cluster[order], return_index=True)
+    reps = order[np.sort(first)]  # one goal per cluster, nearest first
+    large = cluster[reps] > nf
+    if large.any():
+        reps = reps[large]
+    reps = reps[:k_eval]
+    gains = _gains(grid, truth, graph.cell[reps], ~seen & target, max_range_cells)
+    if gains.max() < min_gain:
+        ids = cluster[reps]
+        dead[np.isin(fl.ravel(), np.where(ids > nf, ids - nf, ids))] = True
+        return -1
+    good = gains >= max(min_gain, share * gains.max())
+    return int(reps[np.argmax(good)])
+
+
+# --------------------------------------------------------------------------- route
+def plan_route(
+    truth,
+    grid: Grid,
+    *,
+    start=None,
+    num_poses: int | None = None,
+    coverage: float = 0.95,
+    max_range_cells: float = 75,
+    clearance_cells: float = 2,
+    seed: int = 0,
+) -> np.ndarray:
+    r"""A seeded exploration route over the free space of ``truth`` (greedy nearest-frontier exploration).
+
+    Args:
+        truth: ground-truth map, ``rows x cols`` bool (True = occupied), of ``grid.shape``.
+        grid: a 2D :class:`~ogm_ppl.grid.Grid`.
+        start: ``(x, y)`` or ``(x, y, yaw)`` in metres; default: a seeded random cell of the largest
+            connected region of cells with clearance.
+        num_poses: the most stops to place (default: no limit).
+        coverage: stop once this share of the free cells around the start (its 4-connected component)
+            has been observed, in ``(0, 1]``.
+        max_range_cells: range ``F`` of the simulated 360 degree sensor, in cells.
+        clearance_cells: every pose's cell centre lies more than this many cells (Euclidean, centre to
+            centre) from every occupied cell and from the outside of the grid.
+        seed: picks the default start and a sub-cell jitter (within a quarter cell of the cell centre).
+
+    Returns:
+        ``P x 3`` poses ``(x, y, yaw)`` in metres and radians; all lie in free cells with clearance, in one
+        8-connected region of such cells (each stop is reachable from the start). The route stops early
+        when no frontier can be reached any more, whatever ``coverage`` asks.
+
+    Raises:
+        ValueError: ``truth`` does not match the grid, has no free cell or no cell with clearance; the start
+            lies outside the grid, in an occupied cell or too close to a wall; a bad argument.
+    """
+    truth = _check_truth(truth, grid)
+    max_range_cells = _check_positive("max_range_cells", max_range_cells)
+    coverage = float(coverage)
+    if not 0 < coverage <= 1:
+        raise ValueError(f"coverage must lie in (0, 1], got {coverage!r}")
+    clearance_cells = float(clearance_cells)
+    if not np.isfinite(clearance_cells) or clearance_cells < 0:
+        raise ValueError(f"clearance_cells must be a finite number >= 0, got {clearance_cells!r}")
+    if num_poses is not None:
+        if int(num_poses) != num_poses or num_poses < 1:
+            raise ValueError(f"num_poses must be a positive integer or None, got {num_poses!r}")
+        num_poses = int(num_poses)
+    rng = np.random.default_rng(seed)
+    free = ~truth
+    clear = ndimage.distance_transform_edt(np.pad(free, 1))[1:-1, 1:-1]
+    valid = clear > clearance_cells
+    if not valid.any():
+        raise ValueError(
+            f"no free cell keeps clearance_cells = {clearance_cells} from the walls and the grid edge"
+        )
+    lab, _ = ndimage.label(valid, structure=_EIGHT)
+
+    # ---- start
+    if start is None:
+        sizes = np.bincount(lab.ravel())
+        sizes[0] = 0
+        cells = np.flatnonzero(lab.ravel() == np.argmax(sizes))
+        s = int(cells[rng.integers(cells.size)])
+        start_cell = np.array([s // grid.cols, s % grid.cols])
+        yaw0 = 0.0
+    else:
+        start = np.asarray(start, dtype=float).ravel()
+        if start.shape not in ((2,), (3,)) or not np.all(np.isfinite(start)):
+            raise ValueError(f"start must be finite (x, y) or (x, y, yaw), got {start.tolist()}")
+        if not grid.contains(start[None, :2])[0]:
+            raise ValueError(f"start {start[:2].tolist()} lies outside the grid (extent {grid.extent})")
+        start_cell = grid.world_to_cell(start[None, :2])[0]
+        if truth[tuple(start_cell)]:
+            raise ValueError(f"start {start[:2].tolist()} lies in an occupied cell (inside a wall)")
+        if not valid[tuple(start_cell)]:
+            raise ValueError(
+                f"start {start[:2].tolist()} lies within clearance_cells = {clearance_cells} of a wall"
+            )
+        yaw0 = float(start[2]) if start.shape == (3,) else 0.0
+    comp = lab == lab[tuple(start_cell)]
+    target = _free_component(free, start_cell[None, :]).ravel()
+    n_target = int(target.sum())
+
+    graph = _KnownFreeGraph(comp)
+    res = grid.resolution
+    reach = clearance_cells + 2.0  # a goal lies this close (cells) to a frontier cell
+    min_cluster = max(5, int(np.ceil(2 * clearance_cells + 1)))  # frontier cells; a door the robot fits
+    min_gain = max(1, int(round(0.001 * n_target)))  # a stop must show this many new free cells
+
+    def pose_at(cell_flat: int, yaw: float) -> np.ndarray:
+        r, c = divmod(int(cell_flat), grid.cols)
+        xy = grid.cell_to_world([[r, c]])[0] + rng.uniform(-0.25, 0.25, 2) * res
+        return np.array([xy[0], xy[1], yaw])
+
+    route = [pose_at(grid.flat_index(start_cell), yaw0)]
+    if start is not None:
+        route[0][:2] = start[:2]  # keep the caller's start exactly
+    seen = _observe(grid, truth, route[0], max_range_cells)
+    dead = np.zeros(grid.num_cells, dtype=bool)
+    current = int(graph.node[grid.flat_index(start_cell)])
+    _kill_near(dead, seen, free, grid, graph.cell[current], reach)
+    graph.update(seen & free.ravel())
+    while (num_poses is None or len(route) < num_poses) and (seen & target).sum() < coverage * n_target:
+        goal = _next_goal(
+            grid, truth, free, seen, dead, target, graph, current,
+            reach=reach, min_cluster=min_cluster, min_gain=min_gain, max_range_cells=max_range_cells,
+        )  # fmt: skip
+        if goal is None:
+            break
+        if goal < 0:  # frontiers given up; look again
+            continue
+        prev = route[-1]
+        cell = graph.cell[goal]
+        p = pose_at(cell, 0.0)
+        p[2] = float(np.arctan2(p[1] - prev[1], p[0] - prev[0]))
+        route.append(p)
+        seen |= _observe(grid, truth, p, max_range_cells)
+        graph.update(seen & free.ravel())
+        _kill_near(dead, seen, free, grid, cell, reach)
+        current = goal
+    return np.array(route)
+
+
+# --------------------------------------------------------------------------- dataset
+def _subset(n: int, fraction: float) -> np.ndarray:
+    k = max(1, int(round(fraction * n)))
+    return np.unique(np.round(np.linspace(0, n - 1, k)).astype(np.int64))
+
+
+def stop_and_scan(
+    truth,
+    grid: Grid,
+    *,
+    num_poses: int | None = None,
+    beams: int = 720,
+    max_range_cells: float = 75,
+    sigma_cells: float = 3.0,
+    seed: int = 0,
+    pose_fraction: float = 1.0,
+    beam_step: int = 1,
+    route=None,
+) -> StopAndScan:
+    r"""A simulated stop-and-scan dataset of ``truth`` (Section 6.1's setting by default).
+
+    Args:
+        truth, grid: the ground-truth map (``rows x cols`` bool, True = occupied) and its 2D grid.
+        num_poses: the most stops of the planned route (see :func:`plan_route`).
+        beams: beams per full scan, evenly spaced over 360 degrees (720 = 0.5 degree steps).
+        max_range_cells: the sensor's maximum range ``F`` in cells (``F * grid.resolution`` metres).
+        sigma_cells: standard deviation of the Gaussian range noise in cells (>= 0).
+        seed: seeds the route (when planned here) and the noise; the dataset is a function of it.
+        pose_fraction: scan at an evenly spaced subset of ``round(pose_fraction * P)`` stops (first and
+            last kept), in ``(0, 1]``.
+        beam_step: keep every ``beam_step``-th beam (angles ``beam_step * 360 / beams`` degrees apart).
+        route: a ``P x 3`` route to use instead of planning one.
+
+    >>> from ogm_ppl import Grid
+    >>> t = np.zeros((40, 40), bool); t[[0, -1], :] = t[:, [0, -1]] = True
+    >>> d = stop_and_scan(t, Grid((40, 40), 0.1), route=[[2.0, 2.0, 0.0], [1.0, 3.0, 0.0]], beam_step=4)
+    >>> d.scans.ranges.shape, d.settings["max_range"]
+    ((2, 180), 7.5)
+    """
+    truth = _check_truth(truth, grid)
+    max_range_cells = _check_positive("max_range_cells", max_range_cells)
+    sigma_cells = float(sigma_cells)
+    if not np.isfinite(sigma_cells) or sigma_cells < 0:
+        raise ValueError(f"sigma_cells must be a finite number >= 0, got {sigma_cells!r}")
+    if int(beams) != beams or beams < 1:
+        raise ValueError(f"beams must be a positive integer, got {beams!r}")
+    if int(beam_step) != beam_step or not 1 <= beam_step <= beams:
+        raise ValueError(f"beam_step must be an integer in [1, beams = {beams}], got {beam_step!r}")
+    pose_fraction = float(pose_fraction)
+    if not 0 < pose_fraction <= 1:
+        raise ValueError(f"pose_fraction must lie in (0, 1], got {pose_fraction!r}")
+    beams, beam_step = int(beams), int(beam_step)
+    if route is None:
+        route = plan_route(
+            truth,
+            grid,
+            num_poses=num_poses,
+            max_range_cells=max_range_cells,
+            seed=seed,
+        )
+        planned = True
+    else:
+        route = np.atleast_2d(np.asarray(route, dtype=float))
+        if route.ndim != 2 or route.shape[1] != 3 or route.shape[0] < 1:
+            raise ValueError(f"route must have shape P x 3 (x, y, yaw), got {np.shape(route)}")
+        if not np.all(np.isfinite(route)):
+            raise ValueError("route has a non-finite value")
+        if not grid.contains(route[:, :2]).all():
+            raise ValueError("route has a pose outside the grid")
+        cells = grid.world_to_cell(route[:, :2])
+        hit = truth[cells[:, 0], cells[:, 1]]
+        if hit.any():
+            raise ValueError(f"route pose {int(np.flatnonzero(hit)[0])} lies in an occupied cell")
+        planned = False
+    route = np.array(route, dtype=float)
+    route.setflags(write=False)
+    P = route.shape[0]
+    keep = _subset(P, pose_fraction)
+    angles = np.arange(beams) * (2 * np.pi / beams)
+    max_range = max_range_cells * grid.resolution
+    # one noise stream per stop of the full route, all beams drawn: sparser variants are exact subsets
+    streams = np.random.SeedSequence(seed).spawn(P)
+    ranges = np.empty((keep.size, beams))
+    for j, i in enumerate(keep):
+        s = simulate_scans(
+            grid, truth, route[i : i + 1], angles, max_range, sigma_cells, np.random.default_rng(streams[i])
+        )
+        ranges[j] = s.ranges[0]
+    b = np.arange(0, beams, beam_step)
+    scans = Scans(route[keep], angles[b], ranges[:, b], max_range)
+    settings = {
+        "beams": beams,
+        "beam_step": beam_step,
+        "max_range_cells": max_range_cells,
+        "max_range": max_range,
+        "sigma_cells": sigma_cells,
+        "seed": int(seed) if np.ndim(seed) == 0 else seed,
+        "num_poses": num_poses,
+        "pose_fraction": pose_fraction,
+        "route_planned": planned,
+        "pose_indices": keep.tolist(),
+        "beam_indices": b.tolist(),
+    }
+    return StopAndScan(scans=scans, route=route, truth=truth, grid=grid, settings=settings)
