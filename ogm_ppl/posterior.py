@@ -211,18 +211,26 @@ class ChainPosterior1D(MapPosterior):
         return pos
 
     def pair_joint(self, cells=None) -> torch.Tensor:
-        idx = self._cells(cells) if cells is not None else self.cells
-        pos = self._positions(idx)
+        """``P(m_i = 1, m_j = 1 | z)``, ``C x C``, in the order of ``cells`` (default: every cell of the
+        grid in cell order, as :func:`~ogm_ppl.inference.exact.brute_force` returns it). Cells off the
+        robot's ray are independent of the rest (no reading reaches them)."""
+        idx = self._cells(cells)
+        on = self._pos[idx] >= 0
+        pos = self._pos[idx].clamp(min=0)
         pf, C, b = self.pf[pos], self._before[pos], self.behind[pos]
         pi, pj = pos[:, None], pos[None, :]
         first_lo = torch.where(pi < pj, pf[:, None] * b[None, :], pf[None, :] * b[:, None])
         joint = first_lo + torch.where(pi < pj, C[:, None], C[None, :]) * b[:, None] * b[None, :]
-        diag = self.marginals[idx]
-        joint = torch.where(pi == pj, diag[:, None].expand_as(joint), joint)
+        m = self.marginals[idx]
+        joint = torch.where(on[:, None] & on[None, :], joint, m[:, None] * m[None, :])
+        same = idx[:, None] == idx[None, :]
+        joint = torch.where(same, m[:, None].expand_as(joint), joint)
         return _no_nan(joint, "pair joint")
 
     def mutual_information(self, cells=None) -> torch.Tensor:
-        idx = self._cells(cells) if cells is not None else self.cells
+        """Mutual information between every pair of ``cells``, ``C x C`` in nats, in the order of ``cells``
+        (default: every cell in cell order, as every other posterior returns it)."""
+        idx = self._cells(cells)
         return mutual_information_from_joint(self.marginals[idx], self.pair_joint(idx))
 
     def first_hit(self, ray: int = 0) -> torch.Tensor:

@@ -8,7 +8,10 @@ otherwise keeps every sample in memory.
 :func:`run_gibbs` drives any of our kernels for ``num_sweeps`` sweeps with a progress bar (sweeps/s),
 writes a checkpoint (map, torch RNG state, statistics; atomically) every ``checkpoint_every`` sweeps and
 when interrupted (Ctrl-C stops at the end of the current sweep), and resumes from it: an interrupted and
-resumed run gives bit for bit the result of an uninterrupted one with the same seed.
+resumed run gives bit for bit the result of an uninterrupted one with the same seed. A checkpoint carries
+a fingerprint of the model, kernel and statistics (:mod:`ogm_ppl.inference.fingerprint`); resuming it
+with anything else is refused with a message naming what differs, and an unreadable checkpoint gives
+one error naming the path.
 """
 
 from __future__ import annotations
@@ -24,10 +27,15 @@ import torch
 from tqdm.auto import tqdm
 
 from ..posterior import mutual_information_from_joint
+from .fingerprint import fingerprint
 
-__all__ = ["RunningStats", "GibbsRun", "run_gibbs"]
+__all__ = ["RunningStats", "GibbsRun", "run_gibbs", "CheckpointError"]
 
-_FORMAT = 1
+_FORMAT = 2
+
+
+class CheckpointError(ValueError):
+    """A checkpoint that cannot be resumed here: unreadable, foreign, or of another run."""
 
 
 class RunningStats:
@@ -143,7 +151,7 @@ class GibbsRun:
     state: np.ndarray
 
 
-def _save_checkpoint(path: Path, kernel, stats: RunningStats, sweep: int, seed: int) -> None:
+def _save_checkpoint(path: Path, kernel, stats: RunningStats, sweep: int, seed: int, fp: dict) -> None:
     payload = {f"kernel_{k}": np.asarray(v) for k, v in kernel.state_dict().items()}
     payload.update({f"stats_{k}": np.asarray(v) for k, v in stats.state_dict().items()})
     payload["rng"] = torch.get_rng_state().numpy()
@@ -151,23 +159,46 @@ def _save_checkpoint(path: Path, kernel, stats: RunningStats, sweep: int, seed: 
     payload["seed"] = np.int64(seed)
     payload["format"] = np.int64(_FORMAT)
     payload["num_cells"] = np.int64(kernel.model.num_cells)
+    for k, v in fp.items():
+        payload[f"fp_{k}"] = np.asarray(v)
     tmp = path.with_name(path.name + ".tmp.npz")
     np.savez(tmp, **payload)
     os.replace(tmp, path)
 
 
-def _load_checkpoint(path: Path, kernel, stats: RunningStats, seed: int) -> int:
-    with np.load(path, allow_pickle=False) as z:
-        if int(z["format"]) != _FORMAT:
-            raise ValueError(f"{path}: checkpoint format {int(z['format'])}, expected {_FORMAT}")
-        if int(z["num_cells"]) != kernel.model.num_cells:
-            raise ValueError(f"{path}: checkpoint of a map with {int(z['num_cells'])} cells")
-        if int(z["seed"]) != seed:
-            raise ValueError(f"{path}: checkpoint was written with seed {int(z['seed'])}, not {seed}")
-        kernel.load_state_dict({k[7:]: z[k] for k in z.files if k.startswith("kernel_")})
-        stats.load_state_dict({k[6:]: z[k] for k in z.files if k.startswith("stats_")})
-        torch.set_rng_state(torch.from_numpy(z["rng"].copy()))
-        return int(z["sweep"])
+_HINT = "delete it (or pass another checkpoint path) to start a fresh run"
+
+
+def _load_checkpoint(path: Path, kernel, stats: RunningStats, seed: int, fp: dict) -> int:
+    try:
+        z = np.load(path, allow_pickle=False)
+    except Exception as e:  # BadZipFile, OSError, ValueError (pickled or not an npz), EOFError
+        raise CheckpointError(f"{path}: not a readable checkpoint ({type(e).__name__}: {e}); {_HINT}") from None
+    with z:
+        try:
+            files = set(z.files)
+            missing = [k for k in ("format", "num_cells", "seed", "sweep", "rng") if k not in files]
+            if missing:
+                raise CheckpointError(f"{path}: not an ogm_ppl Gibbs checkpoint (no {', '.join(missing)}); {_HINT}")
+            if int(z["format"]) != _FORMAT:
+                raise CheckpointError(f"{path}: checkpoint format {int(z['format'])}, expected {_FORMAT}; {_HINT}")
+            if int(z["num_cells"]) != kernel.model.num_cells:
+                raise CheckpointError(f"{path}: checkpoint of a map with {int(z['num_cells'])} cells, this model "
+                                      f"has {kernel.model.num_cells}; {_HINT}")  # fmt: skip
+            if int(z["seed"]) != seed:
+                raise CheckpointError(f"{path}: checkpoint was written with seed {int(z['seed'])}, not {seed}; {_HINT}")
+            differ = [k for k, v in fp.items() if f"fp_{k}" not in files or str(z[f"fp_{k}"]) != v]
+            if differ:
+                raise CheckpointError(f"{path}: checkpoint belongs to another run: its {', '.join(differ)} "
+                                      f"differ from this run's; {_HINT}")  # fmt: skip
+            kernel.load_state_dict({k[7:]: z[k] for k in z.files if k.startswith("kernel_")})
+            stats.load_state_dict({k[6:]: z[k] for k in z.files if k.startswith("stats_")})
+            torch.set_rng_state(torch.from_numpy(z["rng"].copy()))
+            return int(z["sweep"])
+        except CheckpointError:
+            raise
+        except Exception as e:
+            raise CheckpointError(f"{path}: damaged checkpoint ({type(e).__name__}: {e}); {_HINT}") from None
 
 
 def run_gibbs(
@@ -202,8 +233,9 @@ def run_gibbs(
             raise ValueError("checkpoint must be an .npz path")
         ckpt.parent.mkdir(parents=True, exist_ok=True)
     start = 0
+    fp = fingerprint(kernel, stats) if ckpt is not None else {}
     if ckpt is not None and ckpt.exists():
-        start = _load_checkpoint(ckpt, kernel, stats, seed)
+        start = _load_checkpoint(ckpt, kernel, stats, seed, fp)
     else:
         torch.manual_seed(seed)  # before set-up: a drawn initial map ("prior") follows the seed too
         kernel.setup(warmup)
@@ -236,7 +268,7 @@ def run_gibbs(
             done = i + 1
             bar.update(1)
             if ckpt is not None and done % checkpoint_every == 0:
-                _save_checkpoint(ckpt, kernel, stats, done, seed)
+                _save_checkpoint(ckpt, kernel, stats, done, seed, fp)
             if stop["flag"] or (stop_after is not None and done - start >= stop_after):
                 stop["flag"] = True
                 break
@@ -245,7 +277,7 @@ def run_gibbs(
         if old is not None:
             signal.signal(signal.SIGINT, old)
         if ckpt is not None:
-            _save_checkpoint(ckpt, kernel, stats, done, seed)
+            _save_checkpoint(ckpt, kernel, stats, done, seed, fp)
     return GibbsRun(stats, done, time.perf_counter() - t0, bool(stop["flag"]) and done < total, kernel.state.copy())
 
 

@@ -4,11 +4,13 @@ from .delta import (
     PN,
     BorensteinKoren,
     DeltaFamily,
+    DeltaFileError,
     Elfes,
     MarshallBarfoot,
     Moravec,
     Stachniss,
     delta_by_name,
+    load_delta,
 )
 from .occupancy import MapDistribution, OccupancyModel
 
@@ -21,6 +23,8 @@ __all__ = [
     "Elfes",
     "PN",
     "delta_by_name",
+    "load_delta",
+    "DeltaFileError",
     "OccupancyModel",
     "MapDistribution",
 ]

@@ -33,6 +33,8 @@ __all__ = [
     "Elfes",
     "PN",
     "delta_by_name",
+    "load_delta",
+    "DeltaFileError",
     "THESIS_P21",
 ]
 
@@ -275,8 +277,17 @@ def family_to_dict(family: DeltaFamily) -> dict:
     return {"family": type(family).__name__, "params": params, "fixed": fixed}
 
 
+class DeltaFileError(ValueError):
+    """A Delta artefact (JSON) that cannot be loaded: the message names the path and what is wrong."""
+
+
 def family_from_dict(spec: dict) -> DeltaFamily:
-    """Rebuild a family from :func:`family_to_dict`'s output (no code is executed from the file)."""
+    """Rebuild a family from :func:`family_to_dict`'s output (no code is executed from the file).
+
+    Validated: a known family, parameters by name with the shapes the family expects, finite values.
+    """
+    if not isinstance(spec, dict) or not isinstance(spec.get("family"), str):
+        raise ValueError("'delta' must be an object with a 'family' name")
     name = spec["family"]
     if name == "NeuralDelta":
         from ..inference.delta_fit import NeuralDelta
@@ -285,15 +296,75 @@ def family_from_dict(spec: dict) -> DeltaFamily:
     else:
         cls = _FAMILIES.get(name)
     if cls is None:
-        raise ValueError(f"unknown Delta family {name!r} in artefact")
-    fixed = dict(spec.get("fixed", {}))
-    params = spec["params"]
+        raise ValueError(f"unknown Delta family {name!r} (known: {sorted(_FAMILIES) + ['NeuralDelta']})")
+    fixed = spec.get("fixed", {})
+    params = spec.get("params")
+    if not isinstance(fixed, dict) or not isinstance(params, dict):
+        raise ValueError("'params' and 'fixed' must be objects")
+    tensors = {}
+    for k, v in params.items():
+        try:
+            t = torch.as_tensor(v, dtype=torch.float64)
+        except (TypeError, ValueError, RuntimeError):
+            raise ValueError(f"parameter {k!r} is not numeric") from None
+        if not torch.isfinite(t).all():
+            raise ValueError(f"parameter {k!r} holds a non-finite value")
+        tensors[k] = t
+    for k, v in fixed.items():
+        if isinstance(v, bool) or not isinstance(v, (int, float, list)):
+            raise ValueError(f"fixed setting {k!r} must be a number, got {v!r}")
     if cls is PN:
-        fam = PN(params["values"])
-    else:
+        if set(tensors) != {"values"} or tensors["values"].dim() != 1 or len(tensors["values"]) < 1:
+            raise ValueError("PN needs one parameter 'values', a non-empty list")
+        return PN(tensors["values"].tolist())
+    try:
         fam = cls(**fixed) if fixed else cls()
-        fam.load_state_dict({k: torch.as_tensor(v, dtype=torch.float64) for k, v in params.items()})
+    except (TypeError, ValueError) as e:
+        raise ValueError(f"bad fixed settings for {name}: {e}") from None
+    expected = {k: tuple(v.shape) for k, v in fam.state_dict().items()}
+    got = {k: tuple(v.shape) for k, v in tensors.items()}
+    if expected != got:
+        raise ValueError(f"{name} expects parameters {expected}, the file has {got}")
+    fam.load_state_dict(tensors)
     return fam
+
+
+def load_delta(path) -> DeltaFamily:
+    """Load a Delta artefact written by ``experiments/fit_deltas.py`` (or any JSON of the same format)
+    from ``path``, validating keys, shapes and finiteness (:class:`DeltaFileError` names what is wrong)."""
+    import json
+    from pathlib import Path
+
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise DeltaFileError(f"{path}: no such file") from None
+    except (OSError, UnicodeDecodeError) as e:
+        raise DeltaFileError(f"{path}: cannot read it as text ({e})") from None
+    return _delta_from_record_text(text, str(path))[0]
+
+
+def _delta_from_record_text(text: str, where: str) -> tuple[DeltaFamily, dict]:
+    import json
+
+    if not text.strip():
+        raise DeltaFileError(f"{where}: empty file; expected a Delta artefact (JSON with 'format' and 'delta')")
+    try:
+        record = json.loads(text)
+    except json.JSONDecodeError as e:
+        raise DeltaFileError(f"{where}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg}); "
+                             "expected a Delta artefact written by experiments/fit_deltas.py") from None  # fmt: skip
+    if not isinstance(record, dict):
+        raise DeltaFileError(f"{where}: expected a JSON object, got {type(record).__name__}")
+    if record.get("format") != 1:
+        raise DeltaFileError(f"{where}: unknown artefact format {record.get('format')!r} (this version reads 1)")
+    if "delta" not in record:
+        raise DeltaFileError(f"{where}: no 'delta' entry: not a Delta artefact")
+    try:
+        return family_from_dict(record["delta"]), record
+    except ValueError as e:
+        raise DeltaFileError(f"{where}: {e}") from None
 
 
 def fitted_names() -> list[str]:
@@ -307,16 +378,12 @@ def fitted_names() -> list[str]:
 
 def load_fitted(name: str) -> tuple[DeltaFamily, dict]:
     """A shipped fitted family and its record (training settings, scores)."""
-    import json
     from importlib import resources
 
     path = resources.files("ogm_ppl") / "fitted" / f"delta_{name}.json"
     if not path.is_file():
         raise ValueError(f"no fitted Delta named {name!r}; shipped: {fitted_names()}")
-    record = json.loads(path.read_text())
-    if record.get("format") != 1:
-        raise ValueError(f"{path}: unknown artefact format {record.get('format')!r}")
-    return family_from_dict(record["delta"]), record
+    return _delta_from_record_text(path.read_text(encoding="utf-8"), str(path))
 
 
 def delta_by_name(name: str) -> DeltaFamily:

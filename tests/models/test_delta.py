@@ -114,3 +114,41 @@ def test_delta_by_name():
 def test_elfes_bad_parameters(kw):
     with pytest.raises(ValueError):
         Elfes(**kw)
+
+
+def test_load_delta_round_trip_and_malformed_files(tmp_path):
+    import json
+    from importlib import resources
+
+    from ogm_ppl.models import DeltaFileError, delta_by_name, load_delta
+
+    shipped = resources.files("ogm_ppl") / "fitted" / "delta_p21.json"
+    good = json.loads(shipped.read_text())
+    path = tmp_path / "p21.json"
+    path.write_text(json.dumps(good))
+    torch.testing.assert_close(load_delta(path).table(30, 30), delta_by_name("p21").table(30, 30))
+
+    def variant(f):
+        rec = json.loads(json.dumps(good))
+        f(rec)
+        return json.dumps(rec)
+
+    cases = {
+        "empty": ("", "empty file"),
+        "truncated": (json.dumps(good)[:50], "not valid JSON"),
+        "list": ("[1, 2]", "expected a JSON object"),
+        "no_delta": (variant(lambda r: r.pop("delta")), "no 'delta' entry"),
+        "format": (variant(lambda r: r.update(format=7)), "unknown artefact format 7"),
+        "family": (variant(lambda r: r["delta"].update(family="os.system")), "unknown Delta family"),
+        "nan": (variant(lambda r: r["delta"]["params"]["values"].__setitem__(3, float("nan"))), "non-finite"),
+        "text": (variant(lambda r: r["delta"]["params"].update(values="abc")), "not numeric"),
+        "shape": (variant(lambda r: r["delta"].update(family="Moravec", params={"l_occ": [1.0, 2.0]})), "expects parameters"),
+        "missing": (variant(lambda r: r["delta"].update(family="Moravec", params={"l_occ": 1.0})), "expects parameters"),
+    }
+    for name, (text, message) in cases.items():
+        p = tmp_path / f"{name}.json"
+        p.write_text(text)
+        with pytest.raises(DeltaFileError, match=rf"{name}\.json: .*{message}"):
+            load_delta(p)
+    with pytest.raises(DeltaFileError, match="no such file"):
+        load_delta(tmp_path / "absent.json")

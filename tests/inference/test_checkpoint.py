@@ -1,0 +1,68 @@
+"""A Gibbs checkpoint resumes only the run it belongs to; unreadable checkpoints name their path."""
+
+import numpy as np
+import pytest
+
+from ogm_ppl import GaussianRange, OccupancyModel, raycast
+from ogm_ppl.datasets import THESIS_TOY_READINGS, toy_1d
+from ogm_ppl.inference import CellGibbs, PatchGibbs, RunningStats, run_gibbs
+from ogm_ppl.inference.runner import CheckpointError
+from ogm_ppl.priors import IndependentPrior
+
+
+def _model(readings=THESIS_TOY_READINGS, lam=0.3, sigma=3.0, K=16):
+    toy = toy_1d(num_cells=K, readings=readings)
+    return OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(sigma), IndependentPrior(lam, K))
+
+
+def _interrupted(tmp_path, model):
+    ck = tmp_path / "ck.npz"
+    run = run_gibbs(CellGibbs(model), 200, RunningStats(model, rays=[0]), seed=3, checkpoint=ck,
+                    checkpoint_every=20, stop_after=50, progress=False)  # fmt: skip
+    assert run.interrupted and ck.exists()
+    return ck
+
+
+@pytest.mark.parametrize(
+    "other, kernel, stats, what",
+    [
+        # same K, other readings: resumed silently before and mixed two posteriors
+        (lambda: _model(readings=(10.0, 9.0, 9.0, 11.0, 12.0, 8.0)), None, None, "readings"),
+        (lambda: _model(sigma=2.0), None, None, "sensor"),
+        (lambda: _model(lam=0.5), None, None, "prior"),
+        (lambda: _model(), lambda m: CellGibbs(m, scan="random"), None, "kernel"),
+        (lambda: _model(), lambda m: PatchGibbs(m, 3), None, "kernel"),
+        (lambda: _model(), None, lambda m: RunningStats(m, rays=[0], pairs=[[3, 4]]), "stats"),
+    ],
+)
+def test_checkpoint_of_another_run_is_refused(tmp_path, other, kernel, stats, what):
+    ck = _interrupted(tmp_path, _model())
+    m = other()
+    k = kernel(m) if kernel else CellGibbs(m)
+    s = stats(m) if stats else RunningStats(m, rays=[0])
+    with pytest.raises(CheckpointError, match=rf"ck\.npz: checkpoint belongs to another run: its .*{what}"):
+        run_gibbs(k, 200, s, seed=3, checkpoint=ck, progress=False)
+    # the same run still resumes
+    m0 = _model()
+    done = run_gibbs(CellGibbs(m0), 200, RunningStats(m0, rays=[0]), seed=3, checkpoint=ck, progress=False)
+    assert done.sweeps == 200 and not done.interrupted
+
+
+@pytest.mark.parametrize(
+    "content",
+    [b"", b"not a zip at all", b"PK\x03\x04 truncated", "truncate", "foreign", "pickled"],
+)
+def test_unreadable_checkpoint_names_the_path(tmp_path, content):
+    model = _model()
+    ck = tmp_path / "bad.npz"
+    if content == "truncate":
+        good = _interrupted(tmp_path, model)
+        ck.write_bytes(good.read_bytes()[:300])
+    elif content == "foreign":
+        np.savez(ck, weights=np.ones(3))
+    elif content == "pickled":
+        np.savez(ck, format=np.array([{"a": 1}], dtype=object))
+    else:
+        ck.write_bytes(content)
+    with pytest.raises(CheckpointError, match=r"bad\.npz: .*(start a fresh run)"):
+        run_gibbs(CellGibbs(model), 100, RunningStats(model), seed=3, checkpoint=ck, progress=False)
