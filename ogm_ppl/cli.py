@@ -1,4 +1,24 @@
-"""Command line: ``python -m ogm_ppl run --out out`` (what ``make run`` calls).
+"""Command line ``ogm-ppl`` (also ``python -m ogm_ppl``): map a laser log, simulate or convert a dataset.
+
+Subcommands (``ogm-ppl SUBCOMMAND --help`` lists every option):
+
+``map INPUT --out DIR``
+    Occupancy grid map of a CARMEN log (plain or gzip) or an ogm_ppl dataset file (``.npz``, told apart
+    by its zip magic ``PK``). Writes ``map.npz`` (probabilities, observed mask, grid, settings),
+    ``map.png`` (thesis colour scale, one pixel per cell, unknown cells grey), a ROS ``map_server`` map in
+    ``ros/`` (``map.yaml`` + ``map.pgm`` + the exact-probability sidecar ``map.npz``, which would clash with
+    ours beside it), ``report.json`` and ``report.md``. Methods: ``ogm`` (Hähnel log-odds), ``p21`` / ``elfes`` (the thesis's update terms,
+    Table 2.1 / 2.2), ``gibbs`` (cell or patch Gibbs sampling of the full posterior, Chapter 4) and
+    ``patch`` (the offline patch map, Section 3.2).
+``simulate --map KIND|PNG --out FILE.npz``
+    A stop-and-scan dataset (Section 6.1) on a generated ground-truth map or a PNG floor plan.
+``convert LOG --out FILE.npz``
+    A CARMEN log as a dataset file.
+``run --out DIR``
+    The headline experiment (what ``make run`` calls), described below.
+
+Bad arguments and bad input files give one line ``ogm-ppl: error: ...`` on stderr and exit status 2
+(``--traceback`` shows the Python traceback instead).
 
 ``run`` is the headline experiment: on the simple 2D example (Fig. 2.8) traditional OGM (Hähnel), OGM with
 the thesis's and our fitted update terms (Table 2.1, 2.2, Section 2.5), the offline patch map with a 3 x 3
@@ -11,14 +31,20 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import os
+import sys
+import tempfile
 import time
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 
 from . import GaussianRange, OccupancyModel, raycast
 from .datasets import THESIS_TOY_READINGS, simple_2d_example, toy_1d
+from .datasets.mapgen import KINDS
+from .grid import Grid
 from .inference import CellGibbs, RunningStats, evidence_grid, run_gibbs
 from .inference.exact import pose_constrained_1d
 from .inference.patch_map import offline_patch_map
@@ -145,14 +171,756 @@ def run_headline(out: Path, seed: int = 0) -> dict:
     return report
 
 
-def main(argv: list[str] | None = None) -> int:
-    parser = argparse.ArgumentParser(prog="ogm-ppl", description=__doc__.splitlines()[0])
-    sub = parser.add_subparsers(dest="command", required=True)
+# =====================================================================================================
+# The `ogm-ppl` command: map / simulate / convert (and `run` above).
+# =====================================================================================================
+MAX_CELLS = 50_000_000
+METHODS = {
+    "ogm": "traditional OGM, Hähnel log-odds (Moravec.haehnel)",
+    "p21": "log-odds OGM with the p21 update term (delta_by_name('p21'))",
+    "elfes": "log-odds OGM with the thesis's optimised Elfes term (delta_by_name('elfes_thesis'))",
+    "gibbs": "Gibbs sampling of the full posterior (CellGibbs, or PatchGibbs with --patch)",
+    "patch": "offline patch map, a patch centred on every cell (Section 3.2)",
+}
+_DEFAULT_DELTA = {"ogm": "haehnel", "p21": "p21", "elfes": "elfes_thesis"}
+PRIORS = ("independent",)
+_PNG_UNKNOWN = (217, 217, 217)  # the light grey of viz.plot_map for unknown cells
+MAP_FORMAT = "ogm_ppl.map"
+MAP_FORMAT_VERSION = 1
+
+
+class CLIError(Exception):
+    """A user error: printed as one line ``ogm-ppl: error: ...``, exit status 2."""
+
+
+class _Parser(argparse.ArgumentParser):
+    """argparse that raises :class:`CLIError` instead of printing usage and exiting."""
+
+    def error(self, message: str):
+        raise CLIError(message)
+
+
+def _version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("ogm_ppl")
+    except metadata.PackageNotFoundError:  # pragma: no cover - running from a source tree
+        from . import __version__
+
+        return __version__
+
+
+# ---------------------------------------------------------------------------------- argument types
+def _number(kind, lo=None, lo_open=False, hi=None, hi_open=False):
+    """An argparse type: ``kind`` (int/float), finite, within ``[lo, hi]`` (open ends as flagged)."""
+
+    def parse(text: str):
+        try:
+            v = kind(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(
+                f"expected {'a whole number' if kind is int else 'a number'}, got {text!r}"
+            ) from None
+        if kind is float and not math.isfinite(v):
+            raise argparse.ArgumentTypeError(f"must be finite, got {text!r}")
+        if lo is not None and (v <= lo if lo_open else v < lo):
+            raise argparse.ArgumentTypeError(f"must be {'>' if lo_open else '>='} {lo}, got {text}")
+        if hi is not None and (v >= hi if hi_open else v > hi):
+            raise argparse.ArgumentTypeError(f"must be {'<' if hi_open else '<='} {hi}, got {text}")
+        return v
+
+    parse.__name__ = kind.__name__  # argparse names the type in "invalid <name> value" messages
+    return parse
+
+
+_pos_float = _number(float, 0, True)
+_nonneg_float = _number(float, 0)
+_pos_int = _number(int, 1)
+_nonneg_int = _number(int, 0)
+_fraction = _number(float, 0, True, 1)
+_probability = _number(float, 0, True, 1, True)
+_finite = _number(float)
+
+
+def _add_reader_options(p: argparse.ArgumentParser, carmen_only: bool) -> None:
+    note = " (CARMEN logs only)" if carmen_only else ""
+    p.add_argument("--lenient", action="store_true",
+                   help="skip malformed log lines (listed in the report) instead of stopping at the first "
+                        "one; by default a malformed line is an error naming file, line and field" + note)
+    p.add_argument("--max-usable-range", type=_pos_float, metavar="R",
+                   help="drop readings at or beyond R metres (the Intel protocol of thesis Section 6.2 is "
+                        "20); default: keep every reading" + note)
+    p.add_argument("--no-return", choices=("drop", "max"),
+                   help="what a no-return sentinel reading becomes: 'drop' (invalid beam, the default, as "
+                        "in the thesis) or 'max' (a max-range reading that clears the cells it crosses)" + note)
+    g = p.add_mutually_exclusive_group()
+    g.add_argument("--pose-step", type=_pos_int, default=1, metavar="K",
+                   help="keep every K-th scan (default 1: all)")
+    g.add_argument("--pose-fraction", type=_fraction, metavar="F",
+                   help="keep an evenly spaced fraction F in (0, 1] of the scans (Table 6.5 uses 0.1)")
+    p.add_argument("--beam-step", type=_pos_int, default=1, metavar="K",
+                   help="keep every K-th beam of each scan (default 1: all; 2 halves the beams)")
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``ogm-ppl`` argument parser (subcommands ``map``, ``simulate``, ``convert``, ``run``)."""
+    parser = _Parser(prog="ogm-ppl", description=__doc__.splitlines()[0])
+    parser.add_argument("--version", action="version", version=f"ogm-ppl {_version()}",
+                        help="print the version and exit")
+    parser.add_argument("--traceback", action="store_true",
+                        help="on an error, show the Python traceback instead of one line (for bug reports)")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
+                                help="map, simulate, convert or run (COMMAND --help for its options)")
+
+    # --------------------------------------------------------------------------------- map
+    m = sub.add_parser("map", help="occupancy grid map of a CARMEN log or a dataset file",
+                       description="Map INPUT (a CARMEN log, plain or gzip, or an ogm_ppl dataset .npz) into "
+                                   "DIR: map.npz, map.png, ros/map.yaml + ros/map.pgm (+ sidecar), "
+                                   "report.json, report.md.")  # fmt: skip
+    m.add_argument("input", type=Path, metavar="INPUT", help="a CARMEN log (.log / .log.gz) or a dataset .npz")
+    m.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory (created)")
+    m.add_argument("--resolution", type=_pos_float, metavar="M",
+                   help="cell size in metres (default 0.05; for a dataset file with a grid, its resolution)")
+    ext = m.add_mutually_exclusive_group()
+    ext.add_argument("--size", type=_pos_int, nargs=2, metavar=("W", "H"),
+                     help="grid of W columns x H rows cells with its lower-left corner at --origin (default "
+                          "origin 0 0); every pose must lie inside")
+    ext.add_argument("--auto-extent", action="store_true",
+                     help="(default) a grid covering every pose and hit end point plus --margin; for a dataset "
+                          "file with a grid and no --resolution/--margin/--origin, that grid")
+    m.add_argument("--origin", type=_finite, nargs=2, metavar=("X", "Y"),
+                   help="world coordinates (metres) of the grid's lower-left corner")
+    m.add_argument("--margin", type=_nonneg_float, metavar="M",
+                   help="metres added on every side of the automatic extent (default 1.0)")
+    m.add_argument("--max-cells", type=_pos_int, default=MAX_CELLS, metavar="N",
+                   help=f"refuse grids of more than N cells (default {MAX_CELLS:,})")
+    m.add_argument("--method", default="ogm", metavar="{" + ",".join(METHODS) + "}",
+                   help="mapping method (default ogm): " + "; ".join(f"{k}: {v}" for k, v in METHODS.items()))
+    m.add_argument("--delta", metavar="NAME",
+                   help="update term of the log-odds methods, any name delta_by_name knows (haehnel, "
+                        "elfes_thesis, p21_thesis, p21, moravec_opt, ...); default: haehnel for ogm, p21 "
+                        "for p21, elfes_thesis for elfes")
+    m.add_argument("--prior", default="independent", metavar="NAME",
+                   help="map prior of gibbs/patch: 'independent' (each cell occupied with probability "
+                        "--lambda), the only prior the command line offers so far")
+    m.add_argument("--lambda", dest="lam", type=_probability, default=0.234, metavar="P",
+                   help="cell prior occupancy of the independent prior (default 0.234, the thesis's value)")
+    m.add_argument("--sigma", type=_pos_float, metavar="CELLS",
+                   help="standard deviation of the Gaussian range model of gibbs/patch, in cells (default: "
+                        "the dataset's simulation sigma if recorded, else 1.0 cell, about the scatter of "
+                        "a corrected real log at 5 cm)")
+    m.add_argument("--sweeps", type=_pos_int, default=200, metavar="N",
+                   help="Gibbs sweeps counted in the marginals (default 200)")
+    m.add_argument("--warmup", type=_nonneg_int, metavar="N",
+                   help="Gibbs sweeps run before counting (default: sweeps // 10)")
+    m.add_argument("--patch", metavar="SHAPE",
+                   help="patch of gibbs (PatchGibbs instead of CellGibbs) and patch (default 3x3): HxW, "
+                        "an int L (a run of L cells), 'plus' or 'square'")
+    m.add_argument("--seed", type=_nonneg_int, default=0, metavar="S", help="random seed (>= 0, default 0)")
+    _add_reader_options(m, carmen_only=True)
+    m.add_argument("--thresholds", choices=("ros1", "nav2"), default="ros1",
+                   help="occupied/free thresholds of the ROS map: ros1 (0.65/0.196, default) or nav2 (0.65/0.25)")
+
+    # ---------------------------------------------------------------------------- simulate
+    s = sub.add_parser("simulate", help="a simulated stop-and-scan dataset (Section 6.1)",
+                       description="Simulate a stop-and-scan dataset (360 degree scans at the stops of a "
+                                   "frontier-exploration route) on a ground-truth map and save it as a "
+                                   "dataset file with the truth.")  # fmt: skip
+    s.add_argument("--map", nargs="+", required=True, metavar="SPEC",
+                   help="ground truth: 'generated KIND' (or just KIND, or generated:KIND), KIND one of "
+                        f"{', '.join(KINDS)}; or a PNG floor plan (dark pixels < 128 are occupied)")
+    s.add_argument("--out", type=Path, required=True, metavar="FILE.npz", help="dataset file to write")
+    s.add_argument("--size", type=_number(int, 60), default=500, metavar="N",
+                   help="generated map of N x N cells (default 500 as in Fig. 5.9; at least 60; outer wall "
+                        "min(20, N // 4) cells thick)")
+    s.add_argument("--resolution", type=_pos_float, default=0.05, metavar="M",
+                   help="metres per cell (default 0.05)")
+    s.add_argument("--poses", type=_pos_int, metavar="N",
+                   help="at most N stops (default: explore until 95 %% of the free space is seen)")
+    s.add_argument("--beams", type=_pos_int, default=720, metavar="B",
+                   help="beams per 360 degree scan (default 720)")
+    s.add_argument("--max-range-cells", type=_pos_float, default=75.0, metavar="F",
+                   help="sensor maximum range in cells (default 75)")
+    s.add_argument("--sigma", type=_nonneg_float, default=3.0, metavar="CELLS",
+                   help="Gaussian range noise in cells (default 3)")
+    s.add_argument("--seed", type=_nonneg_int, default=0, metavar="S", help="random seed (>= 0, default 0)")
+
+    # ----------------------------------------------------------------------------- convert
+    c = sub.add_parser("convert", help="a CARMEN log as a dataset file",
+                       description="Read a CARMEN log (plain or gzip) and save its scans as a dataset file.")
+    c.add_argument("log", type=Path, metavar="LOG", help="the CARMEN log")
+    c.add_argument("--out", type=Path, required=True, metavar="FILE.npz", help="dataset file to write")
+    c.add_argument("--resolution", type=_pos_float, metavar="M",
+                   help="also store a grid of this resolution covering the log (extent + 1 m margin)")
+    _add_reader_options(c, carmen_only=False)
+
+    # --------------------------------------------------------------------------------- run
     run = sub.add_parser("run", help="the headline experiment: maps, figures and a report")
-    run.add_argument("--out", type=Path, default=Path("out"))
-    run.add_argument("--seed", type=int, default=0)
-    args = parser.parse_args(argv)
-    if args.command == "run":
-        run_headline(args.out, seed=args.seed)
-        print((args.out / "report.md").read_text())
-    return 0
+    run.add_argument("--out", type=Path, default=Path("out"), help="output directory (default out)")
+    run.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    return parser
+
+
+# --------------------------------------------------------------------------------------- helpers
+def _progress() -> bool:
+    """Progress bars only on an interactive stderr (never in pipes, logs or tests)."""
+    try:
+        return sys.stderr.isatty()
+    except (AttributeError, ValueError):  # pragma: no cover
+        return False
+
+
+def _steps(total: int, desc: str):
+    from tqdm.auto import tqdm
+
+    return tqdm(total=total, desc=desc, unit="step", disable=not _progress(), leave=False)
+
+
+def _check_input(path: Path) -> bytes:
+    """The first bytes of ``path``; a clear error if it cannot be read."""
+    if not path.exists():
+        raise CLIError(f"{path}: no such file")
+    if path.is_dir():
+        raise CLIError(f"{path}: is a directory, not a log or dataset file")
+    try:
+        with open(path, "rb") as f:
+            return f.read(4)
+    except OSError as e:
+        raise CLIError(f"{path}: cannot read ({e.strerror or e})") from None
+
+
+def _prepare_out_dir(out: Path) -> None:
+    """Create ``out`` and make sure a file can be written there (before any long computation)."""
+    if out.exists() and not out.is_dir():
+        raise CLIError(f"--out {out}: exists and is not a directory")
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=out, prefix=".ogm-ppl-write-test.")
+        os.close(fd)
+        os.unlink(tmp)
+    except OSError as e:
+        raise CLIError(f"--out {out}: cannot write there ({e.strerror or e})") from None
+
+
+def _prepare_out_file(out: Path) -> None:
+    """Make sure ``out``'s directory exists and takes a file (before any long computation)."""
+    if out.is_dir():
+        raise CLIError(f"--out {out}: is a directory; give a file name such as data.npz")
+    parent = out.parent
+    if parent.exists() and not parent.is_dir():
+        raise CLIError(f"--out {out}: {parent} is not a directory")
+    try:
+        parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=parent, prefix=".ogm-ppl-write-test.")
+        os.close(fd)
+        os.unlink(tmp)
+    except OSError as e:
+        raise CLIError(f"--out {out}: cannot write there ({e.strerror or e})") from None
+
+
+def _reader_kwargs(args) -> dict:
+    return dict(strict=not args.lenient, max_usable_range=args.max_usable_range,
+                no_return=args.no_return or "drop", pose_step=args.pose_step,
+                pose_fraction=args.pose_fraction, beam_step=args.beam_step)  # fmt: skip
+
+
+def _jsonable(x):
+    """Paths, numpy scalars and tuples as plain JSON values."""
+    if isinstance(x, dict):
+        return {str(k): _jsonable(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_jsonable(v) for v in x]
+    if isinstance(x, Path):
+        return str(x)
+    if isinstance(x, np.generic):
+        return x.item()
+    if isinstance(x, float) and not math.isfinite(x):
+        return None
+    return x
+
+
+def _scan_extent(scans) -> tuple[float, float, float, float]:
+    """``(xmin, xmax, ymin, ymax)`` of the poses and the end points of every valid hit (not max range)."""
+    hit = scans.valid & ~scans.is_max
+    ang = scans.world_angles()
+    px = np.broadcast_to(scans.poses[:, :1], hit.shape)[hit]
+    py = np.broadcast_to(scans.poses[:, 1:2], hit.shape)[hit]
+    xs = np.concatenate([scans.poses[:, 0], px + scans.ranges[hit] * np.cos(ang[hit])])
+    ys = np.concatenate([scans.poses[:, 1], py + scans.ranges[hit] * np.sin(ang[hit])])
+    return float(xs.min()), float(xs.max()), float(ys.min()), float(ys.max())
+
+
+def _check_cells(rows: int, cols: int, limit: int) -> None:
+    n = rows * cols
+    if n > limit:
+        raise CLIError(f"the grid would have {cols} x {rows} = {n:,} cells, more than the limit of {limit:,} "
+                       "(--max-cells); use a coarser --resolution, a smaller --size or a larger --max-cells")  # fmt: skip
+
+
+@dataclass
+class _Input:
+    kind: str  # "carmen" or "dataset"
+    path: Path
+    scans: object
+    grid: Grid | None = None  # the dataset's own grid
+    truth: np.ndarray | None = None
+    log: object = None  # CarmenLog
+    settings: dict = field(default_factory=dict)
+
+
+def _read_input(args) -> _Input:
+    from .datasets import load_dataset, read_carmen
+
+    magic = _check_input(args.input)
+    if magic[:2] == b"PK":
+        for flag, value in (("--lenient", args.lenient), ("--max-usable-range", args.max_usable_range),
+                            ("--no-return", args.no_return)):  # fmt: skip
+            if value:
+                raise CLIError(f"{flag} applies to CARMEN logs; {args.input} is a dataset file")
+        ds = load_dataset(args.input)
+        scans = ds.scans
+        if args.pose_step != 1 or args.pose_fraction is not None or args.beam_step != 1:
+            scans = scans.subsample(args.pose_step, args.beam_step, args.pose_fraction)
+        return _Input("dataset", args.input, scans, ds.grid, ds.truth, settings=ds.settings or {})
+    log = read_carmen(args.input, **_reader_kwargs(args))
+    return _Input("carmen", args.input, log.scans, log=log)
+
+
+def _make_grid(args, inp: _Input) -> Grid:
+    scans = inp.scans
+    if args.size is not None:
+        res = args.resolution or (inp.grid.resolution if inp.grid is not None else 0.05)
+        cols, rows = args.size
+        _check_cells(rows, cols, args.max_cells)
+        grid = Grid((rows, cols), res, tuple(args.origin) if args.origin else (0.0, 0.0))
+    elif inp.grid is not None and inp.grid.ndim == 2 and args.resolution is None and args.margin is None \
+            and args.origin is None:  # fmt: skip
+        grid = inp.grid
+        _check_cells(grid.rows, grid.cols, args.max_cells)
+    else:
+        res = args.resolution or 0.05
+        margin = 1.0 if args.margin is None else args.margin
+        xmin, xmax, ymin, ymax = _scan_extent(scans)
+        if args.origin is not None:
+            ox, oy = args.origin
+            if ox > xmin or oy > ymin:
+                raise CLIError(f"--origin {ox} {oy} lies above/right of the data (poses and hits from x = "
+                               f"{xmin:.2f}, y = {ymin:.2f}); give a smaller origin or --size")  # fmt: skip
+        else:
+            ox, oy = xmin - margin, ymin - margin
+        cols = max(1, math.ceil((xmax + margin - ox) / res))
+        rows = max(1, math.ceil((ymax + margin - oy) / res))
+        _check_cells(rows, cols, args.max_cells)
+        grid = Grid((rows, cols), res, (ox, oy))
+    inside = grid.contains(scans.poses[:, :2])
+    if not inside.all():
+        s = int(np.flatnonzero(~inside)[0])
+        x, y = scans.poses[s, :2]
+        xa, xb, ya, yb = grid.extent
+        raise CLIError(f"pose of scan {s} at ({x:.3f}, {y:.3f}) lies outside the grid (x {xa:.3f} .. {xb:.3f}, "
+                       f"y {ya:.3f} .. {yb:.3f}); {(~inside).sum()} of {len(inside)} poses are outside")  # fmt: skip
+    return grid
+
+
+def _parse_patch(text: str | None, default="3x3"):
+    text = default if text is None else text
+    t = text.strip().lower()
+    if t in ("plus", "square"):
+        return t
+    if "x" in t:
+        parts = t.split("x")
+        if len(parts) == 2 and all(p.isdigit() and int(p) > 0 for p in parts):
+            return (int(parts[0]), int(parts[1]))
+    elif t.isdigit() and int(t) > 0:
+        return int(t)
+    raise CLIError(f"argument --patch: expected HxW, a positive int L, 'plus' or 'square', got {text!r}")
+
+
+def _make_prior(args, num_cells: int):
+    if args.prior != "independent":
+        raise CLIError(f"argument --prior: unknown prior {args.prior!r}; the command line offers: "
+                       f"{', '.join(PRIORS)} (use the Python API for correlated priors)")  # fmt: skip
+    return IndependentPrior(args.lam, num_cells)
+
+
+def _validate_method(args) -> None:
+    if args.method not in METHODS:
+        raise CLIError(f"argument --method: unknown method {args.method!r}; choose from {', '.join(METHODS)}")
+    if args.delta is not None:
+        if args.method not in _DEFAULT_DELTA:
+            raise CLIError(f"--delta applies to the log-odds methods ({', '.join(_DEFAULT_DELTA)}), "
+                           f"not to --method {args.method}")  # fmt: skip
+        try:
+            delta_by_name(args.delta)
+        except ValueError as e:
+            raise CLIError(f"argument --delta: {e}") from None
+    if args.method not in ("gibbs", "patch"):
+        for flag, v in (("--patch", args.patch), ("--sigma", args.sigma), ("--warmup", args.warmup)):
+            if v is not None:
+                raise CLIError(f"{flag} applies to --method gibbs/patch, not to --method {args.method}")
+        if args.prior != "independent":
+            raise CLIError(f"--prior applies to --method gibbs/patch, not to --method {args.method}")
+    else:
+        _make_prior(args, 1)
+        if args.patch is not None:
+            _parse_patch(args.patch)
+
+
+def _compute_map(args, inp: _Input, grid: Grid, times: dict) -> tuple[np.ndarray, np.ndarray, dict]:
+    """``(probabilities K float64, observed K bool, details)`` by ``args.method``."""
+    from .inference import PatchGibbs
+    from .inference.log_odds import evidence_grid_from_scans
+
+    details: dict = {}
+    if args.method in _DEFAULT_DELTA:
+        name = args.delta or _DEFAULT_DELTA[args.method]
+        details["delta"] = name
+        delta = delta_by_name(name)
+        t0 = time.perf_counter()
+        lo = evidence_grid_from_scans(grid, inp.scans, delta)  # traversal + update fused in one pass
+        times["ray_cast_s"] = None
+        times["map_s"] = time.perf_counter() - t0
+        details["ray_cast"] = "fused with the update (evidence_grid_from_scans)"
+        return lo.probabilities.numpy(), lo.observed.numpy(), details
+
+    sigma = args.sigma
+    if sigma is None:
+        sigma = float(inp.settings.get("sigma_cells") or 0) or 1.0
+    details.update(sigma_cells=sigma, prior=args.prior, **({"lambda": args.lam} if args.prior == "independent" else {}))
+    t0 = time.perf_counter()
+    rays = raycast(grid, inp.scans)
+    times["ray_cast_s"] = time.perf_counter() - t0
+    details["ray_cells"] = int(rays.nnz)
+    t0 = time.perf_counter()
+    model = OccupancyModel(grid, rays, GaussianRange(sigma), _make_prior(args, grid.num_cells))
+    if args.method == "gibbs":
+        if args.patch is None:
+            kernel = CellGibbs(model)
+            details["kernel"] = "CellGibbs"
+        else:
+            shape = _parse_patch(args.patch)
+            kernel = PatchGibbs(model, patch=shape)
+            details.update(kernel="PatchGibbs", patch=_jsonable(shape))
+        warmup = args.sweeps // 10 if args.warmup is None else args.warmup
+        stats = RunningStats(model)
+        res = run_gibbs(kernel, args.sweeps, stats, warmup=warmup, seed=args.seed, progress=_progress())
+        if res.interrupted:
+            raise KeyboardInterrupt
+        details.update(sweeps=args.sweeps, warmup=warmup, seed=args.seed)
+        probs = stats.marginals.numpy()
+    else:
+        shape = _parse_patch(args.patch)
+        probs = offline_patch_map(model, shape, overlap=True).marginals.numpy()
+        details.update(patch=_jsonable(shape), overlap=True, reference="MAP map")
+    times["map_s"] = time.perf_counter() - t0
+    return np.asarray(probs, dtype=np.float64), rays.reached(), details
+
+
+def _umask_mode() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+def _atomic_savez(path: Path, **arrays) -> None:
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.savez_compressed(f, **arrays)
+        os.chmod(tmp, _umask_mode())  # mkstemp makes 0600; give the usual mode of a new file
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def save_map_png(path: Path, probabilities: np.ndarray, observed: np.ndarray, grid: Grid) -> None:
+    """One pixel per cell on the thesis colour scale (:func:`ogm_ppl.viz.thesis_cmap`), unknown cells
+    grey, north (largest y) up. Uses a 256-entry lookup table, so large maps cost 3 bytes a cell."""
+    from PIL import Image
+
+    from .viz import thesis_cmap
+
+    lut = np.round(thesis_cmap()(np.linspace(0.0, 1.0, 256))[:, :3] * 255).astype(np.uint8)
+    p = np.nan_to_num(np.asarray(probabilities, dtype=np.float64).reshape(grid.shape), nan=0.5)
+    idx = np.clip(np.rint(p * 255), 0, 255).astype(np.uint8)
+    rgb = lut[idx]
+    rgb[~np.asarray(observed, bool).reshape(grid.shape)] = _PNG_UNKNOWN
+    img = Image.fromarray(np.ascontiguousarray(rgb[::-1]), "RGB")
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            img.save(f, "PNG", compress_level=3)
+        os.chmod(tmp, _umask_mode())
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+
+
+def load_map(path: str | os.PathLike) -> dict:
+    """Read a ``map.npz`` written by ``ogm-ppl map``: probabilities / observed (grid-shaped), grid, settings."""
+    with np.load(path, allow_pickle=False) as z:
+        if str(z["format"]) != MAP_FORMAT:
+            raise ValueError(f"{path}: not an {MAP_FORMAT} file")
+        g = z["grid"]
+        grid = Grid((int(g[0]), int(g[1])), float(g[2]), (float(g[3]), float(g[4])))
+        return {"probabilities": z["probabilities"], "observed": z["observed"], "grid": grid,
+                "method": str(z["method"]), "settings": json.loads(str(z["settings"]))}  # fmt: skip
+
+
+def _counts(inp: _Input) -> dict:
+    s = inp.scans
+    present = int(inp.log.counts["beams"]) if inp.log is not None else int(s.valid.size)
+    c = {"scans": s.num_scans, "beams": present, "valid_beams": s.num_valid,
+         "dropped_beams": present - s.num_valid, "max_range_readings": int(s.is_max.sum())}  # fmt: skip
+    if inp.log is not None:
+        for k in ("no_return", "beyond_usable", "below_min"):
+            c[k] = int(inp.log.counts.get(k, 0))
+        c["bad_lines"] = len(inp.log.bad_lines)
+        c["skipped_message_types"] = dict(inp.log.skipped_types)
+    return c
+
+
+def _scores(probs, observed, inp: _Input, grid: Grid) -> dict | None:
+    if inp.truth is None or inp.grid != grid:
+        return None
+    from .metrics import best_f1, near_mapped_mask, roc_auc
+
+    truth = np.asarray(inp.truth).astype(bool).ravel()
+    mask = near_mapped_mask(observed.reshape(grid.shape), 10.0).ravel()
+    if truth[mask].all() or not truth[mask].any():
+        return None
+    f1, thr = best_f1(probs, truth, mask=mask)
+    return {"best_f1": f1, "best_threshold": thr, "roc_auc": roc_auc(probs, truth, mask=mask),
+            "mask": "cells within 10 cells of an observed cell (Fig. 6.16b)"}  # fmt: skip
+
+
+def cmd_map(args) -> dict:
+    """``ogm-ppl map``: read, grid, map, write; returns the report."""
+    _validate_method(args)
+    created = not args.out.exists()
+    _prepare_out_dir(args.out)
+    try:
+        return _map(args)
+    except BaseException:
+        if created and args.out.is_dir() and not any(args.out.iterdir()):
+            args.out.rmdir()  # leave no empty directory behind after an error
+        raise
+
+
+def _map(args) -> dict:
+    from .rosmap import save_ros_map
+
+    times: dict = {}
+    with _steps(4, f"ogm-ppl map ({args.method})") as bar:
+        bar.set_postfix_str("reading")
+        t0 = time.perf_counter()
+        inp = _read_input(args)
+        times["read_s"] = time.perf_counter() - t0
+        bar.update()
+        bar.set_postfix_str("grid")
+        grid = _make_grid(args, inp)
+        bar.update()
+        bar.set_postfix_str("mapping")
+        probs, observed, details = _compute_map(args, inp, grid, times)
+        bar.update()
+        bar.set_postfix_str("writing")
+        t0 = time.perf_counter()
+        settings = _jsonable({k: v for k, v in vars(args).items() if k not in ("traceback",)})
+        settings["method_details"] = _jsonable(details)
+        out = args.out
+        _atomic_savez(out / "map.npz", format=np.array(MAP_FORMAT), format_version=np.int64(MAP_FORMAT_VERSION),
+                      probabilities=probs.reshape(grid.shape), observed=observed.reshape(grid.shape),
+                      grid=np.array([grid.rows, grid.cols, grid.resolution, *grid.origin], dtype=float),
+                      method=np.array(args.method), settings=np.array(json.dumps(settings)))  # fmt: skip
+        save_map_png(out / "map.png", probs, observed, grid)
+        (out / "ros").mkdir(exist_ok=True)
+        ros = save_ros_map(out / "ros" / "map.yaml", probs, grid, unknown=~observed, thresholds=args.thresholds)
+        times["write_s"] = time.perf_counter() - t0
+        bar.update()
+    report = {
+        "ogm_ppl_version": _version(),
+        "input": {"path": str(inp.path), "kind": inp.kind, "size_bytes": inp.path.stat().st_size},
+        "counts": _counts(inp),
+        "grid": {"rows": grid.rows, "cols": grid.cols, "cells": grid.num_cells, "resolution_m": grid.resolution,
+                 "origin_m": list(grid.origin), "extent_m": list(grid.extent),
+                 "observed_cells": int(observed.sum())},
+        "method": {"name": args.method, "description": METHODS[args.method], **_jsonable(details)},
+        "times_s": {"read": times["read_s"], "ray_cast": times["ray_cast_s"], "map": times["map_s"],
+                    "write": times["write_s"]},
+        "files": ["map.npz", "map.png", str(Path("ros") / ros.yaml.name), str(Path("ros") / ros.image.name),
+                  str(Path("ros") / ros.sidecar.name), "report.json", "report.md"],
+        "scores_vs_truth": _scores(probs, observed, inp, grid),
+        "settings": settings,
+    }  # fmt: skip
+    if inp.log is not None and args.lenient:
+        report["bad_lines"] = [{"line": n, "reason": r} for n, r in inp.log.bad_lines[:1000]]
+    atomic_write_text(out / "report.json", json.dumps(_jsonable(report), indent=2))
+    atomic_write_text(out / "report.md", _report_md(report))
+    return report
+
+
+def _fmt_s(x) -> str:
+    return "fused with map" if x is None else f"{x:.3f} s"
+
+
+def _report_md(r: dict) -> str:
+    c, g, t, m = r["counts"], r["grid"], r["times_s"], r["method"]
+    lines = [
+        f"# ogm-ppl map: {Path(r['input']['path']).name}",
+        "",
+        f"- input: `{r['input']['path']}` ({r['input']['kind']}, {r['input']['size_bytes']:,} bytes)",
+        f"- scans: {c['scans']:,}; beams: {c['beams']:,}; valid: {c['valid_beams']:,}; dropped: "
+        f"{c['dropped_beams']:,}; max-range readings: {c['max_range_readings']:,}",
+    ]
+    if "no_return" in c:
+        lines.append(f"- dropped by rule: no return {c['no_return']:,}, beyond usable range "
+                     f"{c['beyond_usable']:,}, below min range {c['below_min']:,}; bad lines: {c['bad_lines']}")  # fmt: skip
+    lines += [
+        f"- grid: {g['cols']} x {g['rows']} cells ({g['cells']:,}) at {g['resolution_m']} m, origin "
+        f"({g['origin_m'][0]:.3f}, {g['origin_m'][1]:.3f}); observed cells: {g['observed_cells']:,}",
+        f"- method: {m['name']} ({m['description']})"
+        + "".join(f"; {k} = {v}" for k, v in m.items() if k not in ("name", "description")),
+        f"- times: read {_fmt_s(t['read'])}, ray cast {_fmt_s(t['ray_cast'])}, map {_fmt_s(t['map'])}, "
+        f"write {_fmt_s(t['write'])}",
+    ]
+    if r.get("scores_vs_truth"):
+        sc = r["scores_vs_truth"]
+        lines.append(f"- against the truth ({sc['mask']}): best F1 {sc['best_f1']:.3f} at "
+                     f"{sc['best_threshold']:.2f}, ROC AUC {sc['roc_auc']:.3f}")  # fmt: skip
+    lines += ["", "Files: " + ", ".join(f"`{f}`" for f in r["files"]) + "."]
+    if r.get("bad_lines"):
+        lines += ["", "## Skipped lines (--lenient)", ""]
+        lines += [f"- line {b['line']}: {b['reason']}" for b in r["bad_lines"][:50]]
+        if len(r["bad_lines"]) > 50:
+            lines.append(f"- ... {len(r['bad_lines']) - 50} more in report.json")
+    return "\n".join(lines) + "\n"
+
+
+def _truth_from_spec(spec: list[str], size: int, seed: int) -> tuple[np.ndarray, dict]:
+    from .datasets.mapgen import generate_map
+
+    words = spec[1:] if spec[0] == "generated" else spec
+    if len(words) == 1 and words[0].startswith("generated:"):
+        words = [words[0][len("generated:"):]]
+    if len(words) == 1 and words[0] in KINDS:
+        border = min(20, size // 4)  # Fig. 5.9's 20-cell outer wall, thinner on small maps
+        truth = generate_map(words[0], (size, size), seed=seed, border=border)
+        return truth, {"map": "generated", "kind": words[0], "size": size, "border": border}
+    if len(words) == 1 and spec[0] != "generated" and (words[0].lower().endswith(".png") or Path(words[0]).exists()):
+        path = Path(words[0])
+        _check_input(path)
+        from PIL import Image, UnidentifiedImageError
+
+        try:
+            with Image.open(path) as im:
+                grey = np.asarray(im.convert("L"))
+        except (UnidentifiedImageError, OSError) as e:
+            raise CLIError(f"{path}: not a readable image ({e})") from None
+        occ = grey < 128
+        occ[[0, -1], :] = occ[:, [0, -1]] = True  # a closed outer wall: beams end inside the map
+        return occ[::-1].copy(), {"map": "png", "path": str(path)}  # image row 0 is the top (largest y)
+    raise CLIError(f"argument --map: expected 'generated KIND' with KIND one of {', '.join(KINDS)}, "
+                   f"or a PNG file; got {' '.join(spec)!r}")  # fmt: skip
+
+
+def cmd_simulate(args) -> dict:
+    """``ogm-ppl simulate``: stop-and-scan dataset on a generated map or PNG, saved with its truth."""
+    from .datasets import save_dataset
+    from .datasets.stop_and_scan import stop_and_scan
+
+    _prepare_out_file(args.out)
+    with _steps(3, "ogm-ppl simulate") as bar:
+        bar.set_postfix_str("ground truth")
+        truth, source = _truth_from_spec(args.map, args.size, args.seed)
+        grid = Grid(truth.shape, args.resolution)
+        bar.update()
+        bar.set_postfix_str("route and scans")
+        t0 = time.perf_counter()
+        data = stop_and_scan(truth, grid, num_poses=args.poses, beams=args.beams,
+                             max_range_cells=args.max_range_cells, sigma_cells=args.sigma, seed=args.seed)  # fmt: skip
+        seconds = time.perf_counter() - t0
+        bar.update()
+        bar.set_postfix_str("writing")
+        settings = dict(data.settings, **source, resolution=args.resolution, generator="stop_and_scan")
+        save_dataset(args.out, data.scans, grid=grid, truth=data.truth, settings=_jsonable(settings),
+                     provenance={"tool": "ogm-ppl simulate", "ogm_ppl_version": _version()})  # fmt: skip
+        bar.update()
+    return {"poses": data.scans.num_scans, "beams": data.scans.beams_per_scan, "grid": list(grid.shape),
+            "seconds": seconds}  # fmt: skip
+
+
+def cmd_convert(args) -> dict:
+    """``ogm-ppl convert``: CARMEN log -> dataset file."""
+    from .datasets import read_carmen, save_dataset
+
+    _check_input(args.log)
+    _prepare_out_file(args.out)
+    t0 = time.perf_counter()
+    log = read_carmen(args.log, **_reader_kwargs(args))
+    seconds = time.perf_counter() - t0
+    grid = log.grid(args.resolution) if args.resolution else None
+    provenance = {"tool": "ogm-ppl convert", "source": str(args.log), "reader": "ogm_ppl.datasets.read_carmen",
+                  "ogm_ppl_version": _version(), "num_lines": log.num_lines, "bad_lines": len(log.bad_lines),
+                  "counts": log.counts}  # fmt: skip
+    save_dataset(args.out, log.scans, grid=grid, settings=_jsonable(log.settings), provenance=_jsonable(provenance))
+    return {"scans": log.scans.num_scans, "beams": log.scans.beams_per_scan, "bad_lines": len(log.bad_lines),
+            "seconds": seconds}  # fmt: skip
+
+
+def _one_line(e: BaseException) -> str:
+    if isinstance(e, OSError) and not str(e).strip(": "):
+        text = type(e).__name__
+    elif isinstance(e, OSError) and e.strerror:
+        text = f"{e.filename}: {e.strerror}" if e.filename else e.strerror
+    else:
+        text = str(e) or type(e).__name__
+    return " ".join(text.split())
+
+
+def main(argv: list[str] | None = None) -> int:
+    """Entry point of ``ogm-ppl`` / ``python -m ogm_ppl``; returns the exit status (0 ok, 2 error)."""
+    from .datasets import CarmenFormatError, DatasetFileError
+    from .rosmap import RosMapError
+
+    argv = sys.argv[1:] if argv is None else list(argv)
+    show_tb = "--traceback" in argv
+    try:
+        try:
+            args = build_parser().parse_args(argv)
+        except SystemExit as e:  # --help, --version
+            return int(e.code or 0) if not isinstance(e.code, str) else 2
+        if args.command == "run":
+            _prepare_out_dir(args.out)
+            run_headline(args.out, seed=args.seed)
+            print((args.out / "report.md").read_text())
+        elif args.command == "map":
+            r = cmd_map(args)
+            t = r["times_s"]
+            print(f"ogm-ppl map: {r['grid']['cols']} x {r['grid']['rows']} cells, {r['counts']['scans']} scans, "
+                  f"method {args.method}; read {_fmt_s(t['read'])}, map {_fmt_s(t['map'])} -> {args.out}")  # fmt: skip
+        elif args.command == "simulate":
+            r = cmd_simulate(args)
+            print(f"ogm-ppl simulate: {r['poses']} poses x {r['beams']} beams on {r['grid'][1]} x {r['grid'][0]} "
+                  f"cells -> {args.out}")  # fmt: skip
+        elif args.command == "convert":
+            r = cmd_convert(args)
+            print(f"ogm-ppl convert: {r['scans']} scans x {r['beams']} beams ({r['bad_lines']} bad lines "
+                  f"skipped) -> {args.out}")  # fmt: skip
+        return 0
+    except (CLIError, CarmenFormatError, DatasetFileError, RosMapError, ValueError, OSError, MemoryError) as e:
+        if show_tb:
+            raise
+        if isinstance(e, MemoryError):
+            msg = "out of memory; use a coarser --resolution or fewer scans (--pose-step)"
+        else:
+            msg = _one_line(e)
+        print(f"ogm-ppl: error: {msg}", file=sys.stderr)
+        return 2
+    except KeyboardInterrupt:
+        if show_tb:
+            raise
+        print("ogm-ppl: interrupted", file=sys.stderr)
+        return 130

@@ -29,6 +29,11 @@ __all__ = [
     "best_f1",
     "roc_auc",
     "near_mapped_mask",
+    "nll_bits",
+    "brier_score",
+    "expected_calibration_error",
+    "occupied_iou",
+    "prediction_scores",
 ]
 
 
@@ -163,3 +168,68 @@ def near_mapped_mask(mapped, distance: float = 10.0) -> np.ndarray:
     if not mapped.any():
         return np.zeros_like(mapped)
     return distance_transform_edt(~mapped) <= distance
+
+
+# ----------------------------------------------------------------------------------- prediction scores
+# Scores of a map as a *predictor* of the true map (Chapter 5's question: does a prior fill in what was
+# not seen?). Each takes cell probabilities ``q``, the binary truth and an optional mask.
+
+
+def nll_bits(estimate, truth, mask=None, eps: float = 1e-6) -> float:
+    r"""Mean negative log-likelihood of the true map under the cell probabilities, in bits per cell:
+    :math:`-\frac{1}{|M|}\sum_{k \in M} \log_2 q_k^{m_k} (1 - q_k)^{1 - m_k}` (``q`` clipped to
+    ``[eps, 1 - eps]`` so that one confident mistake costs ``log2(1/eps)`` bits, not infinity)."""
+    est, tru = _flat(estimate, truth, mask)
+    if est.size == 0:
+        return float("nan")
+    q = np.clip(est, eps, 1 - eps)
+    return float(-np.mean(np.where(tru, np.log2(q), np.log2(1 - q))))
+
+
+def brier_score(estimate, truth, mask=None) -> float:
+    """Mean squared difference between the cell probabilities and the binary truth."""
+    est, tru = _flat(estimate, truth, mask)
+    return float(np.mean((est - tru) ** 2)) if est.size else float("nan")
+
+
+def expected_calibration_error(estimate, truth, mask=None, bins: int = 10) -> float:
+    r"""Expected calibration error over ``bins`` equal-width probability bins:
+    :math:`\sum_b \frac{n_b}{n} |\bar q_b - \bar m_b|` (mean probability vs occupied share per bin)."""
+    est, tru = _flat(estimate, truth, mask)
+    if est.size == 0:
+        return float("nan")
+    b = np.minimum((est * bins).astype(np.int64), bins - 1)
+    n = np.bincount(b, minlength=bins)
+    sq = np.bincount(b, weights=est, minlength=bins)
+    sm = np.bincount(b, weights=tru.astype(float), minlength=bins)
+    keep = n > 0
+    return float(np.sum(np.abs(sq[keep] - sm[keep])) / est.size)
+
+
+def occupied_iou(estimate, truth, mask=None, threshold: float = 0.5, unknown=None) -> float:
+    """Intersection over union of the occupied class at ``threshold``, with cells in ``unknown`` counted
+    free (the convention of learned map-prediction work, for comparability)."""
+    est = np.asarray(estimate.detach().cpu().numpy() if isinstance(estimate, torch.Tensor) else estimate, float)
+    est = est.ravel().copy()
+    if unknown is not None:
+        est[np.asarray(unknown, bool).ravel()] = 0.0
+    est, tru = _flat(est, truth, mask)
+    called = est > threshold
+    union = int((called | tru).sum())
+    return float((called & tru).sum() / union) if union else float("nan")
+
+
+def prediction_scores(estimate, truth, mask=None, unknown=None) -> dict[str, float]:
+    """All prediction scores of one map on one mask: NLL (bits/cell), ECE, Brier, best F1, ROC AUC
+    (NaN where the mask holds only one class) and occupied IoU at 0.5 with ``unknown`` counted free."""
+    est, tru = _flat(estimate, truth, mask)
+    out = {
+        "cells": int(est.size),
+        "nll_bits": nll_bits(estimate, truth, mask),
+        "ece": expected_calibration_error(estimate, truth, mask),
+        "brier": brier_score(estimate, truth, mask),
+        "best_f1": best_f1(estimate, truth, mask=mask)[0] if est.size else float("nan"),
+        "iou": occupied_iou(estimate, truth, mask, unknown=unknown),
+    }
+    out["auc"] = roc_auc(estimate, truth, mask) if 0 < tru.sum() < tru.size else float("nan")
+    return out

@@ -1,6 +1,81 @@
+import gzip
 import json
+import os
+import subprocess
+import sys
+from pathlib import Path
 
-from ogm_ppl.cli import main
+import numpy as np
+import pytest
+
+from ogm_ppl.cli import build_parser, load_map, main
+from ogm_ppl.datasets import load_dataset, read_carmen
+from ogm_ppl.rosmap import load_ros_map
+
+MAP_FILES = ("map.npz", "map.png", "ros/map.yaml", "ros/map.pgm", "ros/map.npz", "report.json", "report.md")
+ROOM = (0.0, 4.0, 0.0, 3.0)  # xmin xmax ymin ymax of the tiny log's box room
+POSES = [(1.0, 1.0, 0.0), (2.0, 1.5, 0.5), (1.5, 2.0, np.pi / 2), (3.0, 2.2, 2.5)]
+
+
+def _box_ranges(x, y, th, n=181):
+    ang = th + np.linspace(-np.pi / 2, np.pi / 2, n)
+    dx, dy = np.cos(ang), np.sin(ang)
+    with np.errstate(divide="ignore"):
+        tx = np.where(dx > 0, (ROOM[1] - x) / dx, np.where(dx < 0, (ROOM[0] - x) / dx, np.inf))
+        ty = np.where(dy > 0, (ROOM[3] - y) / dy, np.where(dy < 0, (ROOM[2] - y) / dy, np.inf))
+    return np.minimum(tx, ty)
+
+
+def flaser_line(x, y, th, ts=1.0, ranges=None):
+    r = _box_ranges(x, y, th) if ranges is None else ranges
+    vals = " ".join(f"{v:.3f}" for v in r)
+    return f"FLASER {len(r)} {vals} {x} {y} {th:.4f} {x} {y} {th:.4f} {ts} host {ts}\n"
+
+
+def write_log(path, extra_lines=(), gz=False):
+    text = "# a tiny CARMEN log: a 4 x 3 m box room\nPARAM robot_front_laser_max 20.0\n"
+    text += "".join(flaser_line(*p, ts=i + 1.0) for i, p in enumerate(POSES))
+    text += "".join(extra_lines)
+    if gz:
+        path.write_bytes(gzip.compress(text.encode()))
+    else:
+        path.write_text(text)
+    return path
+
+
+@pytest.fixture(scope="module")
+def tiny_log(tmp_path_factory):
+    return write_log(tmp_path_factory.mktemp("log") / "tiny.log")
+
+
+@pytest.fixture(scope="module")
+def sim_dataset(tmp_path_factory):
+    out = tmp_path_factory.mktemp("sim") / "sim.npz"
+    argv = ["simulate", "--map", "generated", "office", "--size", "80", "--poses", "3", "--beams", "120",
+            "--max-range-cells", "20", "--seed", "1", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    return out
+
+
+def _check_outputs(out: Path):
+    for name in MAP_FILES:
+        assert (out / name).stat().st_size > 0, name
+    assert not [p for p in out.rglob("*") if ".tmp" in p.name or p.name.startswith(".")]  # atomic writes
+    m = load_map(out / "map.npz")
+    ros = load_ros_map(out / "ros" / "map.yaml")
+    assert ros.grid == m["grid"]
+    assert ros.occupancy.size == m["grid"].num_cells
+    p = m["probabilities"]
+    assert p.shape == m["grid"].shape and np.all((p >= 0) & (p <= 1))
+    assert m["observed"].any() and not m["observed"].all()
+    report = json.loads((out / "report.json").read_text())
+    for k in ("read", "ray_cast", "map", "write"):
+        assert k in report["times_s"]
+    from PIL import Image
+
+    with Image.open(out / "map.png") as im:
+        assert im.size == (m["grid"].cols, m["grid"].rows)
+    return m, report
 
 
 def test_run_writes_figures_and_report(tmp_path, capsys):
@@ -18,3 +93,242 @@ def test_run_writes_figures_and_report(tmp_path, capsys):
     correlated = [r["roc_auc"] for k, r in maps.items() if "Gibbs" in k or "patch" in k]
     assert min(correlated) > max(independent)
     assert "| map | best F1" in capsys.readouterr().out
+
+
+def test_version(capsys):
+    from importlib.metadata import version
+
+    assert main(["--version"]) == 0
+    assert capsys.readouterr().out.strip() == f"ogm-ppl {version('ogm_ppl')}"
+
+
+def test_every_option_has_help():
+    parser = build_parser()
+    sub = next(a for a in parser._actions if a.dest == "command")
+    for name, p in [("ogm-ppl", parser), *sub.choices.items()]:
+        for a in p._actions:
+            assert a.help, (name, a.option_strings or a.dest)
+    assert set(sub.choices) == {"map", "simulate", "convert", "run"}
+
+
+def test_map_carmen_log(tmp_path, tiny_log, capsys):
+    out = tmp_path / "out"
+    assert main(["map", str(tiny_log), "--resolution", "0.1", "--out", str(out)]) == 0
+    m, report = _check_outputs(out)
+    assert report["counts"]["scans"] == len(POSES) and report["counts"]["beams"] == 181 * len(POSES)
+    assert report["input"]["kind"] == "carmen" and report["method"]["delta"] == "haehnel"
+    g = m["grid"]  # the room plus the 1 m margin
+    assert g.resolution == 0.1 and g.origin == pytest.approx((-1.0, -1.0), abs=0.01)
+    # the walls of the room are occupied, its inside free
+    p = m["probabilities"]
+    wall = g.world_to_cell([[4.02, 1.5], [2.0, 3.02]])
+    inside = g.world_to_cell([[2.0, 1.0], [3.0, 2.5]])
+    assert np.all(p[wall[:, 0], wall[:, 1]] > 0.6) and np.all(p[inside[:, 0], inside[:, 1]] < 0.3)
+    assert "ogm-ppl map:" in capsys.readouterr().out
+
+
+def test_map_gzip_log_and_lenient(tmp_path):
+    log = write_log(tmp_path / "bad.log.gz", ["FLASER 3 1.0 oops 2.0 0 0 0 0 0 0 9.0 host 9.0\n"], gz=True)
+    assert main(["map", str(log), "--out", str(tmp_path / "strict")]) == 2
+    assert not (tmp_path / "strict").exists()  # an error leaves no empty directory behind
+    assert main(["map", str(log), "--lenient", "--method", "p21", "--out", str(tmp_path / "o")]) == 0
+    report = json.loads((tmp_path / "o" / "report.json").read_text())
+    assert report["counts"]["bad_lines"] == 1 and report["bad_lines"][0]["line"] == 7
+    assert "line 7" in (tmp_path / "o" / "report.md").read_text()
+
+
+@pytest.mark.parametrize(
+    "method,extra",
+    [
+        ("ogm", []),
+        ("p21", []),
+        ("elfes", []),
+        ("ogm", ["--delta", "moravec_thesis"]),
+        ("gibbs", ["--sweeps", "5"]),
+        ("gibbs", ["--sweeps", "3", "--patch", "2x2", "--warmup", "1", "--seed", "3"]),
+        ("patch", ["--patch", "3", "--lambda", "0.5"]),
+    ],
+)
+def test_map_simulated_dataset_each_method(tmp_path, sim_dataset, method, extra):
+    out = tmp_path / method
+    assert main(["map", str(sim_dataset), "--method", method, *extra, "--out", str(out)]) == 0
+    m, report = _check_outputs(out)
+    ds = load_dataset(sim_dataset)
+    assert m["grid"] == ds.grid  # a dataset's own grid by default
+    assert report["method"]["name"] == method
+    sc = report["scores_vs_truth"]
+    assert sc is not None and sc["roc_auc"] > 0.6
+    if method == "gibbs":
+        assert report["method"]["kernel"] == ("PatchGibbs" if "--patch" in extra else "CellGibbs")
+        assert report["times_s"]["ray_cast"] is not None
+
+
+def test_map_subsampling_and_explicit_grid(tmp_path, sim_dataset):
+    out = tmp_path / "o"
+    argv = ["map", str(sim_dataset), "--beam-step", "2", "--pose-step", "2", "--size", "70", "65",
+            "--origin", "-0.1", "-0.2", "--resolution", "0.05", "--thresholds", "nav2", "--out", str(out)]  # fmt: skip
+    assert main(argv) == 0
+    m, report = _check_outputs(out)
+    assert m["grid"].shape == (65, 70) and m["grid"].origin == (-0.1, -0.2)
+    assert report["counts"]["scans"] == 2 and report["counts"]["beams"] == 2 * 60
+    assert load_ros_map(out / "ros" / "map.yaml").settings.free_thresh == 0.25
+
+
+def test_simulate_then_map_reproducible(tmp_path, sim_dataset):
+    again = tmp_path / "again.npz"
+    argv = ["simulate", "--map", "office", "--size", "80", "--poses", "3", "--beams", "120",
+            "--max-range-cells", "20", "--seed", "1", "--out", str(again)]  # fmt: skip
+    assert main(argv) == 0
+    a, b = load_dataset(sim_dataset), load_dataset(again)
+    assert np.array_equal(a.scans.ranges, b.scans.ranges) and np.array_equal(a.truth, b.truth)
+    assert a.truth.shape == (80, 80) and a.scans.num_scans == 3 and a.scans.beams_per_scan == 120
+    assert a.settings["sigma_cells"] == 3.0 and a.settings["kind"] == "office"
+
+
+def test_simulate_png_floor_plan(tmp_path):
+    from PIL import Image
+
+    img = np.full((70, 90), 255, np.uint8)
+    img[35, 10:80] = 0  # one dark wall across the middle
+    Image.fromarray(img).save(tmp_path / "plan.png")
+    out = tmp_path / "plan.npz"
+    assert main(["simulate", "--map", str(tmp_path / "plan.png"), "--poses", "2", "--beams", "60",
+                 "--max-range-cells", "20", "--out", str(out)]) == 0  # fmt: skip
+    d = load_dataset(out)
+    assert d.truth.shape == (70, 90) and d.truth[70 - 1 - 35, 40] and not d.truth[10, 40]
+
+
+def test_convert_round_trip(tmp_path, tiny_log):
+    out = tmp_path / "d.npz"
+    assert main(["convert", str(tiny_log), "--out", str(out), "--beam-step", "2"]) == 0
+    d = load_dataset(out)
+    log = read_carmen(tiny_log, beam_step=2)
+    for k in ("poses", "angles", "ranges", "valid"):
+        assert np.array_equal(getattr(d.scans, k), getattr(log.scans, k)), k
+    assert d.scans.max_range == log.scans.max_range and d.provenance["source"] == str(tiny_log)
+    # mapping the dataset gives the map of the log
+    assert main(["map", str(out), "--out", str(tmp_path / "a")]) == 0
+    assert main(["map", str(tiny_log), "--beam-step", "2", "--out", str(tmp_path / "b")]) == 0
+    a, b = load_map(tmp_path / "a" / "map.npz"), load_map(tmp_path / "b" / "map.npz")
+    assert a["grid"] == b["grid"] and np.array_equal(a["probabilities"], b["probabilities"])
+
+
+# ------------------------------------------------------------------------------- malformed input
+def _bad_files(d: Path, tiny_log: Path, sim: Path) -> dict[str, Path]:
+    files = {}
+    files["badnum"] = write_log(d / "badnum.log", ["FLASER 3 1.0 x 2.0 0 0 0 0 0 0 9.0 host 9.0\n"])
+    files["short"] = write_log(d / "short.log", ["FLASER 3 1.0 2.0 3.0 0 0\n"])
+    files["text"] = d / "text.txt"
+    files["text"].write_text("hello world\nthis is not a log\n")
+    files["binary"] = d / "binary.log"
+    files["binary"].write_bytes(bytes(range(256)) + b"\n")
+    files["empty"] = d / "empty.log"
+    files["empty"].write_bytes(b"")
+    full = gzip.compress(tiny_log.read_bytes())
+    files["truncgz"] = d / "trunc.log.gz"
+    files["truncgz"].write_bytes(full[: len(full) // 2])
+    files["foreign"] = d / "foreign.npz"
+    np.savez(files["foreign"], a=np.arange(3))
+    files["truncnpz"] = d / "trunc.npz"
+    files["truncnpz"].write_bytes(sim.read_bytes()[:200])
+    with np.load(sim, allow_pickle=False) as z:
+        arrays = {k: z[k] for k in z.files}
+    arrays["format_version"] = np.int64(99)
+    files["version"] = d / "version.npz"
+    np.savez(files["version"], **arrays)
+    files["regular"] = d / "regular_file"
+    files["regular"].write_text("x")
+    files["dir"] = d / "a_directory"
+    files["dir"].mkdir()
+    return files
+
+
+# (argv with {placeholders}, substring of the message)
+MALFORMED = [
+    ("map {d}/missing.log --out {d}/o", "no such file"),
+    ("map {dir} --out {d}/o", "is a directory"),
+    ("map {badnum} --out {d}/o", "line 7, field 'range[1]'"),
+    ("map {short} --out {d}/o", "line 7"),
+    ("map {text} --out {d}/o", "no readable laser scans"),
+    ("map {binary} --out {d}/o", "line 1, field 'message type'"),
+    ("map {empty} --out {d}/o", "no readable laser scans"),
+    ("map {truncgz} --out {d}/o", "corrupt or truncated gzip"),
+    ("map {foreign} --out {d}/o", "not an ogm_ppl dataset"),
+    ("map {truncnpz} --out {d}/o", "truncated or corrupt"),
+    ("map {version} --out {d}/o", "format version 99"),
+    ("map {log} --out {regular}/sub", "cannot write there"),
+    ("map {log} --out {regular}", "exists and is not a directory"),
+    ("map {log} --out {d}/o --seed -1", "argument --seed: must be >= 0, got -1"),
+    ("map {log} --out {d}/o --resolution 0", "argument --resolution: must be > 0"),
+    ("map {log} --out {d}/o --resolution -0.05", "argument --resolution: must be > 0"),
+    ("map {log} --out {d}/o --resolution nan", "must be finite"),
+    ("map {log} --out {d}/o --resolution abc", "expected a number, got 'abc'"),
+    ("map {sim} --out {d}/o --method gibbs --sweeps 0", "argument --sweeps: must be >= 1"),
+    ("map {log} --out {d}/o --method foo", "unknown method 'foo'"),
+    ("map {sim} --out {d}/o --method gibbs --prior mrf", "unknown prior 'mrf'"),
+    ("map {log} --out {d}/o --delta nope", "unknown Delta name 'nope'"),
+    ("map {log} --out {d}/o --method gibbs --delta p21", "--delta applies to the log-odds methods"),
+    ("map {log} --out {d}/o --sigma 2", "--sigma applies to --method gibbs/patch"),
+    ("map {sim} --out {d}/o --method patch --patch 2y3", "argument --patch"),
+    ("map {log} --out {d}/o --size 10000 10000", "more than the limit of 50,000,000"),
+    ("map {log} --out {d}/o --resolution 0.0005", "more than the limit of 50,000,000"),
+    ("map {log} --out {d}/o --size 10 10 --origin 100 100", "lies outside the grid"),
+    ("map {log} --out {d}/o --size 5 5 --auto-extent", "not allowed with argument"),
+    ("map {log} --out {d}/o --pose-fraction 1.5", "must be <= 1"),
+    ("map {log} --out {d}/o --pose-step 2 --pose-fraction 0.5", "not allowed with argument"),
+    ("map {log} --out {d}/o --no-return maybe", "invalid choice: 'maybe'"),
+    ("map {sim} --out {d}/o --lenient", "--lenient applies to CARMEN logs"),
+    ("map {log}", "the following arguments are required: --out"),
+    ("frobnicate", "invalid choice: 'frobnicate'"),
+    ("", "the following arguments are required: COMMAND"),
+    ("convert {log} --out {dir}", "is a directory"),
+    ("convert {badnum} --out {d}/c.npz", "line 7"),
+    ("simulate --map generated castle --out {d}/s.npz", "argument --map"),
+    ("simulate --map office --size 10 --out {d}/s.npz", "argument --size: must be >= 60"),
+    ("simulate --map {text} --out {d}/s.npz", "not a readable image"),
+    ("simulate --map office --size 60 --sigma -1 --out {d}/s.npz", "argument --sigma"),
+    ("run --out {regular}", "exists and is not a directory"),
+]
+
+
+def test_malformed_inputs_one_line_exit_2(tmp_path, tiny_log, sim_dataset, capsys):
+    files = _bad_files(tmp_path, tiny_log, sim_dataset)
+    names = {k: str(v) for k, v in files.items()}
+    names |= {"d": str(tmp_path), "log": str(tiny_log), "sim": str(sim_dataset)}
+    seen = []
+    for argv, expected in MALFORMED:
+        args = [a.format(**names) for a in argv.split()]
+        rc = main(args)
+        cap = capsys.readouterr()
+        lines = cap.err.strip("\n").split("\n")
+        seen.append((argv, cap.err.strip()))
+        assert rc == 2, (argv, cap.err)
+        assert len(lines) == 1 and lines[0].startswith("ogm-ppl: error: "), (argv, cap.err)
+        assert "Traceback" not in cap.err + cap.out, argv
+        assert expected in lines[0], (argv, lines[0])
+    assert len(seen) >= 20
+    assert not (tmp_path / "o").exists()  # failed maps leave no output directory
+
+
+@pytest.mark.skipif(os.name != "posix" or os.geteuid() == 0, reason="root can write to read-only directories")
+def test_read_only_out_dir(tmp_path, tiny_log, capsys):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    try:
+        assert main(["map", str(tiny_log), "--out", str(ro / "o")]) == 2
+        assert "cannot write there" in capsys.readouterr().err
+    finally:
+        ro.chmod(0o755)
+
+
+def test_console_entry_prints_no_traceback(tmp_path):
+    exe = Path(sys.executable).with_name("ogm-ppl")
+    cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "ogm_ppl"]
+    bad = tmp_path / "bad.log"
+    bad.write_text("FLASER 2 1.0 nope 0 0 0 0 0 0 1.0 host 1.0\n")
+    r = subprocess.run([*cmd, "map", str(bad), "--out", str(tmp_path / "o")], capture_output=True, text=True,
+                       timeout=120)  # fmt: skip
+    assert r.returncode == 2, r.stderr
+    assert "Traceback" not in r.stderr and r.stderr.count("\n") == 1
+    assert r.stderr.startswith("ogm-ppl: error: ") and "line 1, field 'range[1]'" in r.stderr

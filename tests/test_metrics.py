@@ -86,3 +86,21 @@ def test_near_mapped_mask_matches_brute_force():
 def test_shape_mismatch():
     with pytest.raises(ValueError, match="cells"):
         precision_recall([0.5, 0.5], [1, 0, 1])
+
+
+def test_prediction_scores_against_hand_computed_values():
+    from ogm_ppl.metrics import (brier_score, expected_calibration_error, nll_bits, occupied_iou,
+                                 prediction_scores)  # fmt: skip
+
+    q = np.array([0.9, 0.2, 0.5, 0.75])
+    m = np.array([True, False, True, False])
+    assert nll_bits(q, m) == pytest.approx(-(np.log2(0.9) + np.log2(0.8) + np.log2(0.5) + np.log2(0.25)) / 4)
+    assert brier_score(q, m) == pytest.approx((0.01 + 0.04 + 0.25 + 0.5625) / 4)
+    # bins of 0.1: {0.2}: |0.2 - 0|, {0.5}: |0.5 - 1|, {0.75}: |0.75 - 0|, {0.9}: |0.9 - 1|
+    assert expected_calibration_error(q, m) == pytest.approx((0.2 + 0.5 + 0.75 + 0.1) / 4)
+    # called occupied at 0.5: cells 0 and 3 (0.5 is not above 0.5); truth 0 and 2: IoU = 1 / 3
+    assert occupied_iou(q, m) == pytest.approx(1 / 3)
+    assert occupied_iou(q, m, unknown=[False, False, False, True]) == pytest.approx(1 / 2)
+    assert nll_bits(np.array([1.0, 0.0]), np.array([True, False])) == pytest.approx(0.0, abs=1e-5)
+    s = prediction_scores(q, m, mask=np.array([True, True, False, True]))
+    assert s["cells"] == 3 and s["auc"] == pytest.approx(1.0)

@@ -47,3 +47,8 @@ __all__ += [
     "generate_map",
     "generate_corpus",
 ]
+
+# Simulated stop-and-scan datasets on any ground-truth map (Section 6.1).
+from .stop_and_scan import StopAndScan, plan_route, route_coverage, stop_and_scan  # noqa: E402
+
+__all__ += ["StopAndScan", "plan_route", "route_coverage", "stop_and_scan"]

@@ -9,9 +9,13 @@ this module supplies one:
 :func:`plan_route`
     greedy frontier exploration. The robot knows what a noise-free 360 degree sensor of range ``F`` has
     shown it so far; a *frontier* is a known-free cell next to an unknown one. From each stop the robot
-    drives to the nearest (geodesic, through known-free cells that keep ``clearance_cells`` from every
-    wall and from the grid edge) pose within reach of a frontier, scans, and repeats until the share of
-    observed free cells reaches ``coverage``, ``num_poses`` stops are placed, or no frontier is reachable.
+    drives to a pose next to a frontier: of the goals (nearest pose within a few cells of a frontier
+    cluster) of the eight geodesically nearest clusters -- geodesic through known-free cells that keep
+    ``clearance_cells`` from every wall and from the grid edge -- the one with the most new free cells
+    per distance, :math:`\text{gain} / (d + F)`, where the gain is what its scan would show (predicted
+    from the ground truth, as the simulator can) and must be at least 2% of the disc :math:`\pi F^2`.
+    It scans there and repeats until the share of observed free cells reaches ``coverage``, ``num_poses``
+    stops are placed, or no frontier is left that is reachable and worth a stop.
 :func:`stop_and_scan`
     the route plus simulated scans (:func:`~ogm_ppl.datasets.simulate.simulate_scans`): 720 beams over
     360 degrees, ``F = 75`` cells, ``sigma = 3`` cells by default; sparser variants keep an evenly spaced
@@ -97,7 +101,9 @@ def _num_probe_beams(max_range_cells: float) -> int:
     return max(720, int(np.ceil(1.5 * 2 * np.pi * max_range_cells)))
 
 
-def _observe(grid: Grid, truth: np.ndarray, poses: np.ndarray, max_range_cells: float) -> np.ndarray:
+def _observe(
+    grid: Grid, truth: np.ndarray, poses: np.ndarray, max_range_cells: float
+) -> np.ndarray:
     """Flat boolean ``K``: cells a noise-free 360 degree scan from each pose reaches (up to and including
     the first occupied cell of each beam)."""
     B = _num_probe_beams(max_range_cells)
@@ -166,12 +172,16 @@ class _KnownFreeGraph:
             w.append(np.full(int(ok.sum()), np.hypot(dr, dc)))
         m = sum(x.size for x in src)
         src, dst, w = np.concatenate(src + dst), np.concatenate(dst + src), np.concatenate(w + w)
-        rev = np.concatenate([np.arange(m, 2 * m), np.arange(m)])  # edge e and rev[e] join the same cells
+        rev = np.concatenate(
+            [np.arange(m, 2 * m), np.arange(m)]
+        )  # e and rev[e] join the same cells
         order = np.lexsort((dst, src))  # canonical CSR: scipy would sort it in place otherwise
         self.dst, self.w = dst[order], w[order]
         self.rev = np.argsort(order)[rev[order]]
         self.indptr = np.concatenate([[0], np.cumsum(np.bincount(src, minlength=n))])
         self.known = np.zeros(n, dtype=bool)
+        self.version = 0
+        self._cache = None
         self.graph = csr_matrix((np.full(self.w.size, _BIG), self.dst, self.indptr), shape=(n, n))
 
     def update(self, known_free: np.ndarray) -> None:
@@ -180,6 +190,7 @@ class _KnownFreeGraph:
         if new.size == 0:
             return
         self.known[new] = True
+        self.version += 1
         lo, hi = self.indptr[new], self.indptr[new + 1]
         pos = np.repeat(lo - np.concatenate([[0], np.cumsum(hi - lo)[:-1]]), hi - lo)
         pos += np.arange(pos.size)
@@ -188,9 +199,15 @@ class _KnownFreeGraph:
         self.graph.data[self.rev[pos]] = self.w[pos]
 
     def distances(self, source: int, limit: float) -> np.ndarray:
-        """Geodesic distance (cells) through known-free cells from node ``source``; inf beyond ``limit``."""
+        """Geodesic distance (cells) through known-free cells from node ``source``; inf beyond ``limit``.
+        Cached until the source or the known cells change."""
+        key = (source, self.version)
+        if self._cache is not None and self._cache[0] == key and self._cache[1] >= limit:
+            d = self._cache[2]
+            return np.where(d <= limit, d, np.inf)
         d = csgraph.dijkstra(self.graph, indices=source, limit=min(limit, _BIG / 2))
         d[d >= _BIG / 2] = np.inf
+        self._cache = (key, limit, d)
         return d
 
 
@@ -204,7 +221,9 @@ def _frontier(known_free: np.ndarray, unknown: np.ndarray) -> np.ndarray:
     return known_free & near
 
 
-def _gains(grid: Grid, truth, cells: np.ndarray, unseen: np.ndarray, max_range_cells: float) -> np.ndarray:
+def _gains(
+    grid: Grid, truth, cells: np.ndarray, unseen: np.ndarray, max_range_cells: float
+) -> np.ndarray:
     """New cells of ``unseen`` (flat bool) that a noise-free scan (240 beams) from each cell centre would
     observe (``len(cells)`` int64); all scans in one ray cast."""
     B = 240
@@ -224,29 +243,29 @@ def _gains(grid: Grid, truth, cells: np.ndarray, unseen: np.ndarray, max_range_c
 
 
 def _kill_near(dead, seen, free, grid: Grid, cell_flat: int, reach: float) -> None:
-    """Give up the frontier cells next to a stop that its scan did not resolve (a grazed wall, a gap the
-    robot cannot pass), so that no stop is chosen twice for the same reason."""
-    rr = int(np.ceil(reach)) + 2
+    """Give up the frontier cells within ``reach`` (Chebyshev, as goals are chosen) of a stop whose scan did
+    not resolve them (a grazed wall, a gap the robot cannot pass), or of a goal that would show too little:
+    that cell stops being a goal for those frontier cells."""
+    rr = int(reach)
     r, c = divmod(int(cell_flat), grid.cols)
     r0, r1 = max(0, r - rr), min(grid.rows, r + rr + 1)
     c0, c1 = max(0, c - rr), min(grid.cols, c + rr + 1)
-    # the frontier of a window one cell larger than the disc, so the window edge makes no false frontier
+    # the frontier of a window one cell larger, so that the window's edge makes no false frontier
     R0, R1, C0, C1 = max(0, r0 - 1), min(grid.rows, r1 + 1), max(0, c0 - 1), min(grid.cols, c1 + 1)
     sw = seen.reshape(grid.shape)[R0:R1, C0:C1]
     f = _frontier(sw & free[R0:R1, C0:C1], ~sw)[r0 - R0 : r1 - R0, c0 - C0 : c1 - C0]
-    yy, xx = np.mgrid[r0:r1, c0:c1]
-    f &= np.hypot(yy - r, xx - c) <= reach + 1
-    dead[(yy * grid.cols + xx)[f]] = True
+    dead.reshape(grid.shape)[r0:r1, c0:c1] |= f
 
 
 def _next_goal(grid, truth, free, seen, dead, target, graph: _KnownFreeGraph, current, *,
-               reach, min_cluster, min_gain, max_range_cells, k_eval=6, share=0.25):  # fmt: skip
+               reach, min_cluster, min_gain, max_range_cells, k_eval=8):  # fmt: skip
     """The next stop (a graph node), -1 after giving up frontiers, or None when nothing is left.
 
     Frontier cells are grouped in 8-connected clusters; clusters of at least ``min_cluster`` cells come
     first. A cluster's goal is its geodesically nearest known-free node within ``reach`` cells (Chebyshev)
-    of it; of the ``k_eval`` nearest goals, the nearest whose scan would show at least ``share`` of the best
-    one's new free cells wins. Clusters whose goals would show fewer than ``min_gain`` cells are given up.
+    of it. Of the ``k_eval`` nearest goals, the one with the most new free cells per distance travelled,
+    ``gain / (distance + F)``, wins among those whose scan would show at least ``min_gain`` new free cells;
+    when none would, the frontier cells near them are given up and the next ``k_eval`` goals are tried.
     """
     shape = grid.shape
     known_free = seen & free.ravel()
@@ -275,16 +294,19 @@ def _next_goal(grid, truth, free, seen, dead, target, graph: _KnownFreeGraph, cu
     _, first = np.unique(cluster[order], return_index=True)
     reps = order[np.sort(first)]  # one goal per cluster, nearest first
     large = cluster[reps] > nf
-    if large.any():
-        reps = reps[large]
-    reps = reps[:k_eval]
-    gains = _gains(grid, truth, graph.cell[reps], ~seen & target, max_range_cells)
-    if gains.max() < min_gain:
-        ids = cluster[reps]
-        dead[np.isin(fl.ravel(), np.where(ids > nf, ids - nf, ids))] = True
-        return -1
-    good = gains >= max(min_gain, share * gains.max())
-    return int(reps[np.argmax(good)])
+    reps = np.concatenate([reps[large], reps[~large]])
+    unseen = ~seen & target
+    for i in range(
+        0, reps.size, k_eval
+    ):  # the next k_eval goals while those before show too little
+        chunk = reps[i : i + k_eval]
+        gains = _gains(grid, truth, graph.cell[chunk], unseen, max_range_cells)
+        if gains.max() >= min_gain:
+            score = np.where(gains >= min_gain, gains / (d[chunk] + max_range_cells), -1.0)
+            return int(chunk[np.argmax(score)])
+        for cell in graph.cell[chunk]:
+            _kill_near(dead, seen, free, grid, cell, reach)
+    return -1
 
 
 # --------------------------------------------------------------------------- route
@@ -358,7 +380,9 @@ def plan_route(
         if start.shape not in ((2,), (3,)) or not np.all(np.isfinite(start)):
             raise ValueError(f"start must be finite (x, y) or (x, y, yaw), got {start.tolist()}")
         if not grid.contains(start[None, :2])[0]:
-            raise ValueError(f"start {start[:2].tolist()} lies outside the grid (extent {grid.extent})")
+            raise ValueError(
+                f"start {start[:2].tolist()} lies outside the grid (extent {grid.extent})"
+            )
         start_cell = grid.world_to_cell(start[None, :2])[0]
         if truth[tuple(start_cell)]:
             raise ValueError(f"start {start[:2].tolist()} lies in an occupied cell (inside a wall)")
@@ -373,9 +397,9 @@ def plan_route(
 
     graph = _KnownFreeGraph(comp)
     res = grid.resolution
-    reach = clearance_cells + 2.0  # a goal lies this close (cells) to a frontier cell
-    min_cluster = max(5, int(np.ceil(2 * clearance_cells + 1)))  # frontier cells; a door the robot fits
-    min_gain = max(1, int(round(0.001 * n_target)))  # a stop must show this many new free cells
+    reach = clearance_cells + 2.0  # a goal lies this close (cells, Chebyshev) to a frontier cell
+    min_cluster = max(5, int(np.ceil(2 * clearance_cells + 1)))  # cells; a door the robot fits
+    min_gain = max(1, round(0.02 * np.pi * max_range_cells**2))  # new free cells a stop must show
 
     def pose_at(cell_flat: int, yaw: float) -> np.ndarray:
         r, c = divmod(int(cell_flat), grid.cols)
@@ -390,7 +414,8 @@ def plan_route(
     current = int(graph.node[grid.flat_index(start_cell)])
     _kill_near(dead, seen, free, grid, graph.cell[current], reach)
     graph.update(seen & free.ravel())
-    while (num_poses is None or len(route) < num_poses) and (seen & target).sum() < coverage * n_target:
+    need = coverage * n_target
+    while (seen & target).sum() < need and (num_poses is None or len(route) < num_poses):
         goal = _next_goal(
             grid, truth, free, seen, dead, target, graph, current,
             reach=reach, min_cluster=min_cluster, min_gain=min_gain, max_range_cells=max_range_cells,
@@ -413,7 +438,7 @@ def plan_route(
 
 # --------------------------------------------------------------------------- dataset
 def _subset(n: int, fraction: float) -> np.ndarray:
-    k = max(1, int(round(fraction * n)))
+    k = max(1, round(fraction * n))
     return np.unique(np.round(np.linspace(0, n - 1, k)).astype(np.int64))
 
 
@@ -496,7 +521,13 @@ def stop_and_scan(
     ranges = np.empty((keep.size, beams))
     for j, i in enumerate(keep):
         s = simulate_scans(
-            grid, truth, route[i : i + 1], angles, max_range, sigma_cells, np.random.default_rng(streams[i])
+            grid,
+            truth,
+            route[i : i + 1],
+            angles,
+            max_range,
+            sigma_cells,
+            np.random.default_rng(streams[i]),
         )
         ranges[j] = s.ranges[0]
     b = np.arange(0, beams, beam_step)

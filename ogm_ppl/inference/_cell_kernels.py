@@ -11,6 +11,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ..priors.local import STENCIL, stencil_cell_log_odds, tile_cell_log_odds
+
 
 @nb.njit(cache=True)
 def first_hits(m, offsets, cells):
@@ -82,6 +84,28 @@ def icm_sweeps(order, prior_log_odds, m, f, offsets, cells, c_off, c_ray, c_kapp
         for i in range(order.shape[0]):
             k = order[i]
             lo = prior_log_odds[k] + cell_log_lik_ratio(k, m, f, offsets, cells, c_off, c_ray, c_kappa, ll)
+            v = m[k]
+            if lo > 0.0:
+                v = 1
+            elif lo < 0.0:
+                v = 0
+            if v != m[k]:
+                set_cell(k, v, m, f, offsets, cells, c_off, c_ray, c_kappa)
+                changed += 1
+        if changed == 0:
+            return s + 1
+    return max_sweeps
+
+
+@nb.njit(cache=True)
+def local_icm_sweeps(order, lp, m, f, offsets, cells, c_off, c_ray, c_kappa, ll, max_sweeps):
+    """:func:`icm_sweeps` with a correlated prior's local log-odds (``ogm_ppl.priors.local``)."""
+    for s in range(max_sweeps):
+        changed = 0
+        for i in range(order.shape[0]):
+            k = order[i]
+            lo = stencil_cell_log_odds(lp, k, m) if lp.kind == STENCIL else tile_cell_log_odds(lp, k, m)
+            lo += cell_log_lik_ratio(k, m, f, offsets, cells, c_off, c_ray, c_kappa, ll)
             v = m[k]
             if lo > 0.0:
                 v = 1

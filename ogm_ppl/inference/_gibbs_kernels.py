@@ -18,6 +18,14 @@ import math
 import numba as nb
 import numpy as np
 
+from ..priors.local import (
+    STENCIL,
+    patch_prior_weights,
+    stencil_cell_log_odds,
+    tile_candidates,
+    tile_cell_log_odds,
+    tile_of_anchor,
+)
 from ._cell_kernels import cell_log_lik_ratio, set_cell
 
 
@@ -300,3 +308,159 @@ def gibbs_cell_marginals(order, prior_log_odds, m, f, offsets, cells, c_off, c_r
         for k in range(m.shape[0]):
             acc[k] += m[k]
     return acc
+
+
+# ---------------------------------------------------------------------------------------------------
+# Correlated priors: the prior's local conditional comes from a LocalPrior bundle (ogm_ppl.priors.local)
+
+
+@nb.njit(cache=True, inline="always")
+def _draw_log_odds(lo, u, cur):
+    """Occupied with probability ``sigmoid(lo)`` (stable for any ``lo``). ``nan`` means both values have
+    zero prior mass, so the state itself has none: any move is allowed there, and a fair coin lets the
+    chain leave it."""
+    if lo != lo:
+        return 1 if u < 0.5 else 0
+    if lo >= 0.0:
+        return 1 if u * (1.0 + math.exp(-lo)) < 1.0 else 0
+    e = math.exp(lo)
+    return 1 if u * (1.0 + e) < e else 0
+
+
+@nb.njit(cache=True)
+def local_cell_sweep(order, lp, m, f, offsets, cells, c_off, c_ray, c_kappa, ll, uniforms):
+    """Single-cell Gibbs (Eq. 4.2) with a correlated prior's local log-odds ``l(m_k | m_-k)``."""
+    flips = 0
+    for i in range(order.shape[0]):
+        k = order[i]
+        lo = (stencil_cell_log_odds(lp, k, m) if lp.kind == STENCIL else tile_cell_log_odds(lp, k, m))
+        lo += cell_log_lik_ratio(k, m, f, offsets, cells, c_off, c_ray, c_kappa, ll)
+        v = _draw_log_odds(lo, uniforms[i], m[k])
+        if v != m[k]:
+            set_cell(k, v, m, f, offsets, cells, c_off, c_ray, c_kappa)
+            flips += 1
+    return flips
+
+
+@nb.njit(cache=True)
+def patch_log_lik_list(patch, cands, n, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa,
+                       ll, out):  # fmt: skip
+    """``out[j] += log p(z | patch = cands[j], rest)`` (up to a constant in ``j``); skips ``-inf`` entries.
+    Bit ``b`` of a candidate is the ``b``-th live cell (as :func:`patch_log_lik`)."""
+    _L, n_slots, slot_ray, slot_n, ent_kappa, ent_bit = collect_patch_rays(patch, c_off, c_ray, c_kappa, ray_stamp, stamp)
+    for i in range(patch.shape[0]):
+        if patch[i] >= 0:
+            in_patch[patch[i]] = True
+    for s in range(n_slots):
+        r = slot_ray[s]
+        a = offsets[r]
+        nr = offsets[r + 1] - a
+        kmin = nr
+        for e in range(slot_n[s]):
+            if ent_kappa[s, e] < kmin:
+                kmin = ent_kappa[s, e]
+        fr = f[r]
+        if fr < kmin:
+            continue
+        if fr == nr:
+            f_out = nr
+        elif in_patch[cells[a + fr]]:
+            f_out = _first_outside(m, in_patch, offsets, cells, r, fr + 1)
+        else:
+            f_out = fr
+        for j in range(n):
+            if out[j] == -np.inf:
+                continue
+            w = cands[j]
+            fw = f_out
+            for e in range(slot_n[s]):
+                if (w >> ent_bit[s, e]) & 1 and ent_kappa[s, e] < fw:
+                    fw = ent_kappa[s, e]
+            out[j] += ll[r, fw]
+    for i in range(patch.shape[0]):
+        if patch[i] >= 0:
+            in_patch[patch[i]] = False
+
+
+@nb.njit(cache=True)
+def local_patch_candidates(anchor_r, anchor_c, h, w, lp, patch, n_live, pinned, m, cands):
+    """The configurations to weigh: the tile's sparse support when the patch is a tile of a table prior,
+    else all ``2^n_live``. Returns the count (``-1``: the dense set does not fit in ``cands``)."""
+    t = tile_of_anchor(lp, anchor_r, anchor_c, h, w)
+    if t >= 0:
+        return tile_candidates(lp, t, patch, pinned, m, cands)
+    if n_live > 62 or (np.int64(1) << n_live) > cands.shape[0]:
+        return -1
+    W = np.int64(1) << n_live
+    for j in range(W):
+        cands[j] = j
+    return W
+
+
+@nb.njit(cache=True)
+def local_patch_log_weights(patch, cands, n, lp, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray,
+                            c_kappa, ll, logw):  # fmt: skip
+    """``logw[j]``: unnormalised log conditional of ``cands[j]`` (prior first; the likelihood only for
+    candidates the prior allows)."""
+    patch_prior_weights(lp, patch, m, cands, n, logw)
+    patch_log_lik_list(patch, cands, n, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa, ll,
+                       logw)  # fmt: skip
+
+
+@nb.njit(cache=True)
+def local_patch_sweep(anchors, dr, dc, h, w, rows, cols, pinned, lp, m, f, offsets, cells, c_off, c_ray, c_kappa,
+                      ll, u_choice, u_rand, u_accept, p_rand_patch, thesis_random, ray_stamp, stamp0, capacity):  # fmt: skip
+    """Patch Gibbs (Algorithm 1; Algorithm 2 with ``p_rand_patch``) with a correlated prior.
+
+    Each update weighs only the configurations the prior allows given the rest (a tile's sparse support
+    for table priors whose tiles are the patches, else all ``2^L``), so it stays exact. Algorithm 2's
+    random configuration (uniform over all ``2^L``) is accepted by Metropolis-Hastings unless
+    ``thesis_random``. ``(h, w)``: the patch's rectangle (0 if not a rectangle). Returns
+    ``(changed, skipped)``: patches changed, and patches whose configurations did not fit ``capacity``.
+    """
+    K = m.shape[0]
+    L = dr.shape[0]
+    cands = np.empty(capacity, np.int64)
+    logw = np.empty(capacity, np.float64)
+    in_patch = np.zeros(K, np.bool_)
+    patch = np.empty(L, np.int64)
+    pair = np.empty(2, np.int64)
+    pw = np.empty(2, np.float64)
+    changed = 0
+    skipped = 0
+    for i in range(anchors.shape[0]):
+        n_live = build_patch(anchors[i, 0], anchors[i, 1], dr, dc, rows, cols, pinned, patch)
+        if n_live == 0:
+            continue
+        cur = patch_config(patch, m)
+        new = cur
+        if p_rand_patch > 0.0 and u_rand[i] < p_rand_patch:
+            Wl = np.int64(1) << n_live
+            prop = min(np.int64(u_choice[i] * Wl), Wl - 1)
+            if thesis_random:
+                new = prop
+            else:
+                pair[0] = cur
+                pair[1] = prop
+                local_patch_log_weights(patch, pair, 2, lp, m, f, in_patch, ray_stamp, stamp0 + i, offsets, cells,
+                                        c_off, c_ray, c_kappa, ll, pw)  # fmt: skip
+                d = pw[1] - pw[0]
+                if pw[0] == -np.inf or d >= 0.0 or (d > -np.inf and u_accept[i] < math.exp(d)):
+                    new = prop  # (a state without mass may move anywhere)
+        else:
+            n = local_patch_candidates(anchors[i, 0], anchors[i, 1], h, w, lp, patch, n_live, pinned, m, cands)
+            if n < 0:
+                skipped += 1
+                continue
+            if n == 0:
+                continue
+            local_patch_log_weights(patch, cands, n, lp, m, f, in_patch, ray_stamp, stamp0 + i, offsets, cells,
+                                    c_off, c_ray, c_kappa, ll, logw)  # fmt: skip
+            j = _categorical(logw, n, u_choice[i])
+            if j < 0:  # every candidate has zero mass, so has the current state: move to leave it
+                j = min(np.int64(u_choice[i] * n), n - 1)
+            new = cands[j]
+        if new != cur:
+            set_patch(patch, new, m, f, offsets, cells, c_off, c_ray, c_kappa)
+            changed += 1
+    return changed, skipped

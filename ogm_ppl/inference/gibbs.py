@@ -18,8 +18,13 @@ kernels. Random numbers come from torch's global generator, so ``pyro.set_rng_se
 Scans: ``"systematic"`` (default: a fixed order, the fastest), ``"permutation"`` (a fresh random order
 every sweep) or ``"random"`` (Algorithm 1 as printed: updates at uniformly random cells / patch
 positions, with replacement). All leave the posterior invariant.
-Priors with independent cells use the compiled path; any other :class:`~ogm_ppl.priors.MapPrior` goes
-through its ``log_prob_patch`` one update at a time (correct, but meant for small maps).
+Priors with independent cells use the compiled path; correlated priors that describe their local
+conditional (``prior.local()``, a :class:`~ogm_ppl.priors.LocalPrior`: a stencil of unary + pairwise
+weights such as :class:`~ogm_ppl.priors.MRFPrior` / :class:`~ogm_ppl.priors.StencilPrior`, or tiles of
+a table such as :class:`~ogm_ppl.priors.PatchTablePrior` / :class:`~ogm_ppl.priors.BorderPatchPrior`) use
+compiled sweeps that read it, and patch updates of table priors weigh only the configurations the table
+allows given the border (so 5 x 5 patches are possible). Any other :class:`~ogm_ppl.priors.MapPrior` goes
+through its ``log_prob_patch`` one update at a time (correct and overflow-free, but meant for small maps).
 
 .. note:: ``pyro.infer.MCMC`` keeps every sample in memory (``num_samples x K``). For large maps pass a
    :class:`~ogm_ppl.inference.runner.RunningStats` as ``hook_fn`` and few samples, or use ``run_gibbs``.
@@ -35,12 +40,17 @@ import torch
 from pyro.infer.mcmc.mcmc_kernel import MCMCKernel
 
 from ..models.occupancy import OccupancyModel
+from ..priors.local import TILES, local_of
+from ..priors.local import cell_log_odds as prior_cell_log_odds
 from ._cell_kernels import cell_log_lik_ratio, first_hits, set_cell
 from ._gibbs_kernels import (
     build_patch,
     gibbs_cell_marginals,
     gibbs_cell_sweep,
     gibbs_patch_sweep,
+    local_cell_sweep,
+    local_patch_log_weights,
+    local_patch_sweep,
     metropolis_cell_sweep,
     patch_config,
     patch_log_lik,
@@ -67,8 +77,8 @@ def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: f
             from .log_odds import evidence_grid
 
             lo = model.prior.cell_log_odds()
-            thr = threshold if threshold is not None else (
-                float(torch.sigmoid(lo).mean()) if lo is not None else 0.5)  # fmt: skip
+            mean = float(torch.sigmoid(lo).mean()) if lo is not None else getattr(model.prior, "mean_occupancy", 0.5)
+            thr = threshold if threshold is not None else mean
             d = delta_by_name(delta) if isinstance(delta, str) else delta
             m = (evidence_grid(model.rays, d).probabilities > thr).to(torch.float64)
         elif init == "prior":
@@ -108,12 +118,13 @@ def patch_cells(model: OccupancyModel, anchors: np.ndarray, dr: np.ndarray, dc: 
     return np.where(ok, k, -1)
 
 
-def patch_shape(shape, ndim: int) -> tuple[np.ndarray, np.ndarray]:
+def patch_shape(shape, ndim: int, max_cells: int = 20) -> tuple[np.ndarray, np.ndarray]:
     """Row and column offsets of a patch shape (Fig. 3.1).
 
     ``shape``: an int ``L`` (1D: a run of ``L`` cells; 2D: an ``L``-cell horizontal run), ``(h, w)`` (a
     rectangle, e.g. ``(3, 3)``), ``"plus"`` (the 4-neighbourhood, L = 5), ``"square"`` (3 x 3, the
-    8-neighbourhood, L = 9), or an ``L x 2`` array of offsets.
+    8-neighbourhood, L = 9), or an ``L x 2`` array of offsets. More than ``max_cells`` cells are refused
+    (``2^L`` configurations).
     """
     if isinstance(shape, str):
         if shape == "plus":
@@ -141,8 +152,9 @@ def patch_shape(shape, ndim: int) -> tuple[np.ndarray, np.ndarray]:
             raise ValueError(f"cannot read patch shape {shape!r}")
     if ndim == 1 and np.any(off[:, 0] != 0):
         raise ValueError("a 1D grid only takes patches along the row")
-    if len(off) > 20:
-        raise ValueError(f"patches of {len(off)} cells mean 2^{len(off)} configurations; at most 20")
+    if len(off) > max_cells:
+        raise ValueError(f"patches of {len(off)} cells mean 2^{len(off)} configurations; at most {max_cells} "
+                         "(more only for a table prior whose tiles are the patches)")  # fmt: skip
     return np.ascontiguousarray(off[:, 0], dtype=np.int64), np.ascontiguousarray(off[:, 1], dtype=np.int64)
 
 
@@ -179,6 +191,7 @@ class _MapKernel(MCMCKernel):
         self._ll = np.ascontiguousarray(model.loglik_table.numpy())
         lo = model.prior.cell_log_odds()
         self._prior_lo = None if lo is None else np.ascontiguousarray(lo.numpy(), dtype=np.float64)
+        self._local = None if lo is not None else local_of(model.prior)
         self._latent = model.latent.numpy().astype(np.int64)
         self._pinned = model.known_free.numpy().astype(np.uint8)
         self._ready = True
@@ -286,6 +299,9 @@ class CellGibbs(_MapKernel):
         if self._prior_lo is not None:
             return gibbs_cell_sweep(order, self._prior_lo, self._m, self._f, self._offsets, self._cells,
                                     self._c_off, self._c_ray, self._c_kappa, self._ll, u)  # fmt: skip
+        if self._local is not None:
+            return local_cell_sweep(order, self._local, self._m, self._f, self._offsets, self._cells, self._c_off,
+                                    self._c_ray, self._c_kappa, self._ll, u)  # fmt: skip
         return self._generic_sweep(order, u)
 
     def run_marginals(self, num_sweeps: int, seed: int = 0) -> torch.Tensor:
@@ -311,6 +327,8 @@ class CellGibbs(_MapKernel):
                                  self._c_ray, self._c_kappa, self._ll)  # fmt: skip
         if self._prior_lo is not None:
             return float(self._prior_lo[k] + lik)
+        if self._local is not None:
+            return float(prior_cell_log_odds(self._local, int(k), self._m) + lik)
         cur = torch.from_numpy(self._m.astype(np.float64))
         lp = self.model.prior.log_prob_patch(cur, torch.tensor([int(k)]), torch.tensor([[0.0], [1.0]]))
         if not torch.isfinite(lp).any():
@@ -325,12 +343,20 @@ class CellGibbs(_MapKernel):
             lo = self.cell_log_odds(int(k))
             if lo != lo:
                 continue
-            v = 1 if (lo == math.inf or (lo > -math.inf and uk * (1 + math.exp(-lo)) < 1)) else 0
+            v = 1 if uk < _sigmoid(lo) else 0
             if v != self._m[k]:
                 set_cell(int(k), v, self._m, self._f, self._offsets, self._cells, self._c_off, self._c_ray,
                          self._c_kappa)  # fmt: skip
                 changes += 1
         return changes
+
+
+def _sigmoid(lo: float) -> float:
+    """``1 / (1 + exp(-lo))`` without overflow for any ``lo`` (including +-inf)."""
+    if lo >= 0:
+        return 1.0 / (1.0 + math.exp(-lo))
+    e = math.exp(lo)
+    return e / (1.0 + e)
 
 
 class MetropolisCell(_MapKernel):
@@ -392,7 +418,9 @@ class PatchGibbs(_MapKernel):
     def __init__(self, model, patch=3, scan: str = "systematic", offset=0, p_rand_patch: float = 0.0,
                  random_patch: str = "mh", init="ogm", delta="haehnel") -> None:  # fmt: skip
         super().__init__(model, scan, init, delta)
-        self.dr, self.dc = patch_shape(patch, model.grid.ndim)
+        local = local_of(model.prior) if model.prior.cell_log_odds() is None else None
+        tiled = local is not None and local.kind == TILES and scan != "random"
+        self.dr, self.dc = patch_shape(patch, model.grid.ndim, max_cells=62 if tiled else 20)
         if not 0.0 <= p_rand_patch < 1.0:
             raise ValueError(f"p_rand_patch must lie in [0, 1), got {p_rand_patch}")
         if random_patch not in ("mh", "thesis"):
@@ -404,6 +432,29 @@ class PatchGibbs(_MapKernel):
         self._anchors = self._fixed_anchors()
         if self.scan != "random" and len(self._anchors) == 0:
             raise ValueError("no patch holds a latent cell")
+        self._hw = self._rectangle()
+        if self.L > 20 and not self._all_tiles(local):
+            raise ValueError(f"patches of {self.L} cells (2^{self.L} configurations) need a table prior whose "
+                             "tiles are the patches (same shape, aligned: offset = prior.origin)")  # fmt: skip
+
+    def _rectangle(self) -> tuple[int, int]:
+        if self.dr.min() == 0 and self.dc.min() == 0 and len(self.dr) == (self.dr.max() + 1) * (self.dc.max() + 1):
+            h, w = int(self.dr.max()) + 1, int(self.dc.max()) + 1
+            if np.array_equal(self.dr * w + self.dc, np.arange(h * w)):  # row-major, as tiles are
+                return h, w
+        return 0, 0
+
+    def _all_tiles(self, local) -> bool:
+        if local is None or local.kind != TILES or (local.t_h, local.t_w) != self._hw:
+            return False
+        a = self._anchors
+        return bool(((a[:, 0] - local.t_r0) % local.t_h == 0).all() and ((a[:, 1] - local.t_c0) % local.t_w == 0).all())
+
+    def _capacity(self) -> int:
+        lp = self._local
+        dense = 1 << self.L if self.L <= 20 else 0
+        seg = int(np.diff(lp.seg_off).max()) if lp.kind == TILES and len(lp.seg_off) > 1 else 0
+        return max(dense, seg, 2)
 
     @property
     def L(self) -> int:
@@ -443,6 +494,18 @@ class PatchGibbs(_MapKernel):
         u_choice, u_rand, u_accept = self._uniforms(n), self._uniforms(n), self._uniforms(n)
         self._updates += n
         rows, cols, pinned = g.rows, g.cols, self._pinned
+        if self._prior_lo is None and self._local is not None:
+            stamp0 = self._stamp
+            self._stamp += n
+            h, w = self._hw
+            changed, skipped = local_patch_sweep(anchors, self.dr, self.dc, h, w, rows, cols, pinned, self._local,
+                                                 self._m, self._f, self._offsets, self._cells, self._c_off,
+                                                 self._c_ray, self._c_kappa, self._ll, u_choice, u_rand, u_accept,
+                                                 self.p_rand_patch, self.thesis_random, self._ray_stamp(), stamp0,
+                                                 self._capacity())  # fmt: skip
+            if skipped:
+                raise RuntimeError(f"{skipped} patch updates had more configurations than fit")
+            return changed
         if self._prior_lo is not None:
             stamp0 = self._stamp
             self._stamp += n
@@ -462,15 +525,24 @@ class PatchGibbs(_MapKernel):
         at the current state: bit ``j`` of configuration ``w`` is the ``j``-th live cell."""
         self._prepare()
         patch = np.ascontiguousarray(patch, dtype=np.int64)
-        logw = np.empty(1 << self.L, np.float64)
         in_patch = np.zeros(self.model.num_cells, np.bool_)
         stamp = self._stamp
         self._stamp += 1
+        if self._local is None or self._prior_lo is not None:
+            logw = np.empty(1 << int((patch >= 0).sum()), np.float64)
         if self._prior_lo is not None:
             W = patch_log_weights(patch, self._prior_lo, self._m, self._f, in_patch, self._ray_stamp(),
                                   stamp, self._offsets, self._cells, self._c_off, self._c_ray,
                                   self._c_kappa, self._ll, logw)  # fmt: skip
             return logw[:W].copy()
+        if self._local is not None:
+            W = 1 << int((patch >= 0).sum())
+            cands = np.arange(W, dtype=np.int64)
+            out = np.empty(W, np.float64)
+            local_patch_log_weights(patch, cands, W, self._local, self._m, self._f, in_patch, self._ray_stamp(), stamp,
+                                    self._offsets, self._cells, self._c_off, self._c_ray, self._c_kappa, self._ll,
+                                    out)  # fmt: skip
+            return out
         W = patch_log_lik(patch, self._m, self._f, in_patch, self._ray_stamp(), stamp, self._offsets,
                           self._cells, self._c_off, self._c_ray, self._c_kappa, self._ll, logw)  # fmt: skip
         live = patch[patch >= 0]

@@ -18,7 +18,8 @@ import numpy as np
 import torch
 
 from ..models.occupancy import OccupancyModel
-from ._cell_kernels import first_hits, icm_sweeps
+from ..priors.local import local_of
+from ._cell_kernels import first_hits, icm_sweeps, local_icm_sweeps
 
 __all__ = ["MapEstimate", "map_estimate"]
 
@@ -58,7 +59,8 @@ def map_estimate(
     """Hill-climb to a local maximum of ``log p(m, z)``.
 
     Args:
-        model: the model; priors with independent cells run in the compiled kernel, others through the
+        model: the model; priors with independent cells, and correlated priors with a local conditional
+            (``prior.local()``: MRF / stencil / table priors), run in compiled kernels; others through the
             prior's ``log_prob_patch`` one cell at a time (small maps).
         init: ``"occupied"`` (thesis), ``"free"``, ``"random"`` (seeded) or a ``K`` map.
         max_sweeps: stop after this many sweeps even if cells still change.
@@ -73,6 +75,9 @@ def map_estimate(
     if prior_lo is not None:
         sweeps = icm_sweeps(order, prior_lo.numpy().astype(np.float64), m, f, r.offsets, r.cells,
                             idx.offsets, idx.ray, idx.kappa, ll, int(max_sweeps))  # fmt: skip
+    elif local_of(model.prior) is not None:
+        sweeps = local_icm_sweeps(order, local_of(model.prior), m, f, r.offsets, r.cells, idx.offsets, idx.ray,
+                                  idx.kappa, ll, int(max_sweeps))  # fmt: skip
     else:
         sweeps = _generic_icm(model, m, f, order, ll, idx, int(max_sweeps))
     mt = torch.from_numpy(m.astype(np.float64))

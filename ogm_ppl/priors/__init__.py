@@ -1,8 +1,18 @@
-"""Priors over binary maps: the interface (:class:`MapPrior`), the independent prior and the 1D
-data-driven prior; the higher-order MRF and learned patch priors plug into the same interface."""
+"""Priors over binary maps (Chapter 5) behind one interface (:class:`MapPrior`): the independent prior,
+the 1D data-driven prior, pairwise stencil priors and the higher-order MRF (Section 5.2.1), data-driven
+patch tables (5.2.2) and border-conditioned tables (5.2.3). The correlated priors give the compiled
+Gibbs kernels a local conditional (:class:`~ogm_ppl.priors.local.LocalPrior`)."""
 
 from .base import MapPrior
+from .border import BorderPatchPrior
 from .data_driven_1d import DataDriven1DPrior
 from .independent import IndependentPrior
+from .local import LocalMapPrior, LocalPrior
+from .mrf import MRFPrior, StencilPrior
+from .named import PRIOR_KINDS, prior_by_name
+from .patch_table import PatchTablePrior
+from .tables import PriorTables, available_tables, load_tables, tables_by_name
 
-__all__ = ["MapPrior", "IndependentPrior", "DataDriven1DPrior"]
+__all__ = ["MapPrior", "IndependentPrior", "DataDriven1DPrior", "StencilPrior", "MRFPrior", "PatchTablePrior",
+           "BorderPatchPrior", "LocalMapPrior", "LocalPrior", "prior_by_name", "PRIOR_KINDS", "PriorTables",
+           "available_tables", "load_tables", "tables_by_name"]  # fmt: skip

@@ -1,0 +1,168 @@
+"""Table 5.1 analogue: time per map sample with uniform, data-driven and border priors (Chapter 5).
+
+The simple 2D example scaled to the thesis's size (K = 64,000 cells: our 64 x 64 map stretched to
+200 x 320, the same three poses, 720 beams each, sigma = 3 cells). One map sample is one systematic sweep
+of K / L patch updates. Priors: uniform (independent 0.5; L = 9 weighs all 2^9 configurations, L = 25 is
+refused), data-driven (a patch table of the L-cell windows, truncated to 99.9% of the mass as in the
+thesis; L = 1 is the 1 x 1 table, i.e. the learned cell prior) and border (p(patch | border): one cell
+given its 8 neighbours, 3 x 3 given 16 border cells, and 5 x 5 given 24, which the thesis did not
+compute). Tables are counted here from the example's own ground truth with its 8 flips/rotations (the
+learned corpus tables arrive separately). Also: a 500 x 500 / 72,000-ray single-cell sweep with the MRF
+prior next to the independent prior (target: within 1.5x). Writes out/bench/bench_priors.json.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+
+import sys
+import time
+
+import numpy as np
+import torch
+
+sys.path.insert(0, os.path.dirname(__file__))
+from _common import best_time, sparse_scene, write_json
+
+from ogm_ppl import GaussianRange, Grid, OccupancyModel, raycast
+from ogm_ppl.datasets import simulate_scans
+from ogm_ppl.datasets.simple2d import _truth
+from ogm_ppl.inference.gibbs import CellGibbs, PatchGibbs
+from ogm_ppl.priors import BorderPatchPrior, IndependentPrior, MRFPrior, PatchTablePrior
+
+torch.set_default_dtype(torch.float64)
+THESIS = {  # Table 5.1, Matlab seconds per map sample (None: intractable / not computed)
+    1: {"uniform": 4.4, "data-driven": 5.1, "border": 6.6},
+    9: {"uniform": 38.3, "data-driven": 23.9, "border": 2.7},
+    25: {"uniform": None, "data-driven": 124.9, "border": None},
+}
+
+
+def scaled_example(rows=200, cols=320, seed=0):
+    """The simple 2D example stretched to ``rows x cols`` cells, same three poses (scaled)."""
+    small = _truth()
+    ri = (np.arange(rows) * small.shape[0]) // rows
+    ci = (np.arange(cols) * small.shape[1]) // cols
+    truth = small[ri][:, ci]
+    res = 0.05
+    grid = Grid(truth.shape, resolution=res)
+    sr, sc = rows / small.shape[0], cols / small.shape[1]
+    poses = np.array([[8.5 * sc, 30.5 * sr, 0.0], [22.5 * sc, 8.5 * sr, 0.0], [40.5 * sc, 14.5 * sr, 0.0]])
+    poses[:, :2] *= res
+    for p in poses:  # poses on free cells
+        r, c = int(p[1] / res), int(p[0] / res)
+        assert not truth[r, c]
+    angles = np.arange(720) * (2 * np.pi / 720)
+    scans = simulate_scans(grid, truth, poses, angles, 40.0 * max(sr, sc) * res, 3.0, seed)
+    return grid, truth, scans
+
+
+def window_codes(truth: np.ndarray, n: int) -> np.ndarray:
+    """Codes (bit i = cell i, row-major) of all n x n windows of the map and its 8 flips/rotations."""
+    out = []
+    for k in range(4):
+        for flip in (False, True):
+            t = np.rot90(truth, k)
+            t = np.fliplr(t) if flip else t
+            w = np.lib.stride_tricks.sliding_window_view(t.astype(np.int64), (n, n)).reshape(-1, n * n)
+            out.append((w << np.arange(n * n, dtype=np.int64)).sum(1))
+    return np.concatenate(out)
+
+
+def priors_for(shape, truth):
+    out = {}
+    for L, n in ((1, 1), (9, 3), (25, 5)):
+        codes, counts = np.unique(window_codes(truth, n), return_counts=True)
+        out[("data-driven", L)] = PatchTablePrior(shape, codes, counts, patch=(n, n), mass=0.999 if L > 1 else None)
+        w = np.unique(window_codes(truth, n + 2), return_counts=True)
+        full, cnt = w
+        # split each (n + 2)^2 window code into inner (row-major) and border (ring, row-major) codes
+        N = n + 2
+        pos = [(r, c) for r in range(N) for c in range(N)]
+        inner_pos = [i for i, (r, c) in enumerate(pos) if 0 < r < N - 1 and 0 < c < N - 1]
+        ring_pos = [i for i, (r, c) in enumerate(pos) if not (0 < r < N - 1 and 0 < c < N - 1)]
+        bits = (full[:, None] >> np.arange(N * N)) & 1
+        inner = (bits[:, inner_pos] << np.arange(len(inner_pos))).sum(1)
+        border = (bits[:, ring_pos] << np.arange(len(ring_pos))).sum(1)
+        out[("border", L)] = BorderPatchPrior(shape, border, inner, cnt, inner=(n, n))
+    return out
+
+
+def sweep_seconds(kernel, repeat=3) -> float:
+    torch.manual_seed(0)
+    kernel.setup()
+    state = {"p": {"m": torch.from_numpy(kernel.state.astype(np.float64))}}
+    kernel._last = state["p"]["m"]
+
+    def one():
+        state["p"] = kernel.sample(state["p"])
+
+    return best_time(one, repeat=repeat, warmup=1)
+
+
+def table_5_1() -> dict:
+    t0 = time.perf_counter()
+    grid, truth, scans = scaled_example()
+    rays = raycast(grid, scans)
+    sensor = GaussianRange(3.0)
+    priors = priors_for(grid.shape, truth)
+    priors.update({("uniform", L): IndependentPrior(0.5, grid.num_cells) for L in (1, 9, 25)})
+    print(f"simple 2D example at {grid.shape[0]} x {grid.shape[1]} = {grid.num_cells:,} cells, "
+          f"{rays.num_rays:,} rays; set-up {time.perf_counter() - t0:.1f} s")  # fmt: skip
+    for L, n in ((9, 3), (25, 5)):
+        p, b = priors[("data-driven", L)], priors[("border", L)]
+        print(f"  {n}x{n}: table keeps {p.num_configurations} configurations (99.9% of the mass); border table "
+              f"{b.num_borders} borders, at most {b.max_per_border} patches per border")  # fmt: skip
+    rows = {}
+    print(f"\n{'':8}{'prior':<13}{'ours [s]':>10}{'thesis [s]':>12}{'thesis/ours':>13}")
+    for L, patch in ((1, None), (9, (3, 3)), (25, (5, 5))):
+        for name in ("uniform", "data-driven", "border"):
+            model = OccupancyModel(grid, rays, sensor, priors[(name, L)])
+            thesis = THESIS[L][name]
+            try:
+                kern = CellGibbs(model) if patch is None else PatchGibbs(model, patch, p_rand_patch=0.001)
+                s = sweep_seconds(kern, repeat=3 if L < 25 or name != "uniform" else 1)
+            except ValueError as e:
+                s = None
+                print(f"  L={L:<4}{name:<13}{'refused':>10}{thesis or '-':>12}   ({str(e)[:60]}...)")
+            if s is not None:
+                ratio = f"{thesis / s:,.0f}x" if thesis else "-"
+                print(f"  L={L:<4}{name:<13}{s:>10.4f}{thesis or '-':>12}{ratio:>13}")
+            rows[f"L={L}/{name}"] = {"seconds": s, "thesis_seconds": thesis,
+                                     "speedup_vs_thesis": (thesis / s) if (s and thesis) else None}  # fmt: skip
+    r9 = [rows[f"L=9/{n}"]["seconds"] for n in ("border", "data-driven", "uniform")]
+    order_ok = r9[0] < r9[1] < r9[2]
+    speed_ok = all(v["speedup_vs_thesis"] >= 100 for v in rows.values() if v["speedup_vs_thesis"] is not None)
+    print(f"thesis ordering at L = 9 (border < data-driven < uniform): {'holds' if order_ok else 'DOES NOT hold'}")
+    print(f"every time at least 100x below the thesis's: {'yes' if speed_ok else 'NO'}")
+    return {"cells": grid.num_cells, "rays": rays.num_rays, "rows": rows, "ordering_at_L9_holds": order_ok,
+            "all_100x_faster": speed_ok}  # fmt: skip
+
+
+def mrf_overhead() -> dict:
+    grid, scans = sparse_scene(500, 100, walls=max(4, 500 * 500 // 6000), seed=0, res=0.05, max_range_cells=75,
+                               sigma_cells=3.0, beams=720)  # fmt: skip
+    rays = raycast(grid, scans)
+    base = OccupancyModel(grid, rays, GaussianRange(3.0), IndependentPrior(0.234, grid.num_cells))
+    s_ind = sweep_seconds(CellGibbs(base))
+    out = {"cells": grid.num_cells, "rays": rays.num_rays, "independent_seconds": s_ind}
+    print(f"\n500 x 500, {rays.num_rays:,} rays, L = 1 sweep: independent prior {s_ind:.4f} s")
+    for order in (1, 2):
+        model = OccupancyModel(grid, rays, GaussianRange(3.0), MRFPrior(grid.shape, order, 0.5, 0.234))
+        s = sweep_seconds(CellGibbs(model))
+        out[f"mrf{order}_seconds"] = s
+        out[f"mrf{order}_ratio"] = s / s_ind
+        print(f"  MRF order {order}: {s:.4f} s = {s / s_ind:.2f}x the independent sweep (target <= 1.5x)")
+    return out
+
+
+def main() -> dict:
+    payload = {"table_5_1": table_5_1(), "mrf_500": mrf_overhead()}
+    print("wrote", write_json("bench_priors", payload))
+    return payload
+
+
+if __name__ == "__main__":
+    main()

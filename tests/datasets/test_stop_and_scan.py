@@ -1,0 +1,158 @@
+"""Stop-and-scan datasets (Section 6.1): the exploration route and the simulated scans."""
+
+import numpy as np
+import pytest
+from scipy import ndimage
+
+from ogm_ppl import Grid
+from ogm_ppl.datasets.stop_and_scan import StopAndScan, plan_route, route_coverage, stop_and_scan
+
+F = 30  # a smaller range than the thesis's 75 cells, so that a 120 x 120 map needs several stops
+
+
+def rooms_map(n: int = 120) -> np.ndarray:
+    """Four rooms off a corridor, doors 10 cells wide, a block in one room and a closed closet."""
+    m = np.zeros((n, n), dtype=bool)
+    m[:3, :] = m[-3:, :] = m[:, :3] = m[:, -3:] = True  # outer wall
+    m[50:52, :] = m[68:70, :] = True  # corridor walls (rows 52..67 free)
+    m[:50, 60:62] = m[70:, 60:62] = True  # room partitions
+    for c in (20, 85):  # doors from the corridor into the four rooms
+        m[50:52, c : c + 10] = m[68:70, c : c + 10] = False
+    m[20:30, 20:28] = True  # a block in the lower-left room
+    m[95:, 100:102] = m[95:97, 100:] = True  # a closed closet (unreachable free space)
+    return m
+
+
+@pytest.fixture(scope="module")
+def world():
+    truth = rooms_map()
+    return truth, Grid(truth.shape, resolution=0.05)
+
+
+@pytest.fixture(scope="module")
+def route(world):
+    truth, grid = world
+    return plan_route(truth, grid, max_range_cells=F, seed=3)
+
+
+def test_route_is_seeded(world, route):
+    truth, grid = world
+    np.testing.assert_array_equal(route, plan_route(truth, grid, max_range_cells=F, seed=3))
+    other = plan_route(truth, grid, max_range_cells=F, seed=4)
+    assert not (other.shape == route.shape and np.array_equal(other, route))
+
+
+def test_poses_are_free_clear_inside_and_connected(world, route):
+    truth, grid = world
+    assert route.ndim == 2 and route.shape[1] == 3 and len(route) >= 4
+    assert grid.contains(route[:, :2]).all()
+    cells = grid.world_to_cell(route[:, :2])
+    assert not truth[cells[:, 0], cells[:, 1]].any()
+    clear = ndimage.distance_transform_edt(np.pad(~truth, 1))[1:-1, 1:-1]
+    assert (clear[cells[:, 0], cells[:, 1]] > 2).all()
+    lab, _ = ndimage.label(clear > 2, structure=np.ones((3, 3)))
+    assert len(np.unique(lab[cells[:, 0], cells[:, 1]])) == 1  # all reachable from the start
+    assert (
+        not (cells[:, 0] >= 97).__and__(cells[:, 1] >= 102).any()
+    )  # never inside the closed closet
+
+
+def test_coverage_is_reached(world, route):
+    truth, grid = world
+    assert route_coverage(truth, grid, route, max_range_cells=F) >= 0.95
+    # the route stops once covered: without its last stop the coverage was still short
+    assert route_coverage(truth, grid, route[:-1], max_range_cells=F) < 0.95
+
+
+def test_num_poses_and_start(world):
+    truth, grid = world
+    short = plan_route(truth, grid, max_range_cells=F, num_poses=3, seed=3)
+    assert len(short) == 3
+    r = plan_route(truth, grid, max_range_cells=F, start=(1.0, 3.0, 0.5), num_poses=2)
+    np.testing.assert_array_equal(r[0], [1.0, 3.0, 0.5])
+    low = plan_route(truth, grid, max_range_cells=F, coverage=0.3, seed=3)
+    assert route_coverage(truth, grid, low, max_range_cells=F) >= 0.3
+    assert route_coverage(truth, grid, low[:-1], max_range_cells=F) < 0.3
+
+
+def test_default_dataset_is_the_thesis_setting(world):
+    truth, grid = world
+    d = stop_and_scan(truth, grid, num_poses=2, seed=1)
+    assert isinstance(d, StopAndScan)
+    assert d.scans.beams_per_scan == 720 and d.scans.num_scans == len(d.route) == 2
+    np.testing.assert_allclose(np.diff(d.scans.angles[0]), np.deg2rad(0.5))
+    assert d.scans.max_range == pytest.approx(75 * 0.05)
+    assert d.settings["sigma_cells"] == 3.0 and d.settings["max_range_cells"] == 75
+    np.testing.assert_array_equal(d.scans.poses, d.route)
+
+
+def test_dataset_is_seeded(world, route):
+    truth, grid = world
+    a = stop_and_scan(truth, grid, route=route, max_range_cells=F, seed=5)
+    b = stop_and_scan(truth, grid, route=route, max_range_cells=F, seed=5)
+    c = stop_and_scan(truth, grid, route=route, max_range_cells=F, seed=6)
+    np.testing.assert_array_equal(a.scans.ranges, b.scans.ranges)
+    assert not np.array_equal(a.scans.ranges, c.scans.ranges)
+    planned = stop_and_scan(truth, grid, max_range_cells=F, seed=3, beam_step=8)
+    np.testing.assert_array_equal(planned.route, route)  # the route of the same seed
+
+
+def test_sparser_variants_are_subsets(world, route):
+    truth, grid = world
+    full = stop_and_scan(truth, grid, route=route, max_range_cells=F, seed=2)
+    sparse = stop_and_scan(
+        truth, grid, route=route, max_range_cells=F, seed=2, pose_fraction=0.5, beam_step=4
+    )
+    idx = np.asarray(sparse.settings["pose_indices"])
+    assert len(idx) == round(0.5 * len(route)) and idx[0] == 0 and idx[-1] == len(route) - 1
+    assert np.all(np.diff(idx) > 0)
+    np.testing.assert_array_equal(sparse.route, full.route)
+    np.testing.assert_array_equal(sparse.scans.poses, full.scans.poses[idx])
+    np.testing.assert_array_equal(sparse.scans.angles[0], full.scans.angles[0, ::4])
+    np.testing.assert_array_equal(sparse.scans.ranges, full.scans.ranges[idx][:, ::4])
+    assert sparse.scans.beams_per_scan == 180
+
+
+def test_readings_match_the_truth(world, route):
+    truth, grid = world
+    d = stop_and_scan(truth, grid, route=route, max_range_cells=F, sigma_cells=1e-6, seed=0)
+    s = d.scans
+    hit = ~s.is_max
+    assert hit.mean() > 0.5
+    theta = s.world_angles()[hit]
+    xy = np.repeat(s.poses[:, None, :2], s.beams_per_scan, 1)[hit]
+    end = xy + s.ranges[hit][:, None] * np.stack([np.cos(theta), np.sin(theta)], 1)
+    cells = np.clip(grid.world_to_cell(end), 0, np.array(truth.shape) - 1)
+    near_wall = ndimage.binary_dilation(truth, structure=np.ones((3, 3)))
+    assert near_wall[cells[:, 0], cells[:, 1]].all()
+    # a max-range reading is max-range because nothing is closer than F in that direction
+    assert s.ranges[s.is_max] == pytest.approx(F * grid.resolution)
+
+
+def test_bad_input_raises(world):
+    truth, grid = world
+    with pytest.raises(ValueError, match="shape"):
+        plan_route(truth[:-1], grid)
+    with pytest.raises(ValueError, match="shape"):
+        stop_and_scan(truth[:, :-1], grid)
+    with pytest.raises(ValueError, match="no free cell"):
+        plan_route(np.ones_like(truth), grid)
+    with pytest.raises(ValueError, match="occupied"):
+        plan_route(truth, grid, start=(0.05, 0.05))  # inside the outer wall
+    with pytest.raises(ValueError, match="clearance"):
+        plan_route(truth, grid, start=(0.2, 0.2))  # free, but beside the wall
+    with pytest.raises(ValueError, match="outside"):
+        plan_route(truth, grid, start=(-1.0, 2.0))
+    with pytest.raises(ValueError, match="sigma"):
+        stop_and_scan(truth, grid, num_poses=1, sigma_cells=-1.0)
+    with pytest.raises(ValueError, match="coverage"):
+        plan_route(truth, grid, coverage=1.5)
+    with pytest.raises(ValueError, match="pose_fraction"):
+        stop_and_scan(truth, grid, num_poses=1, pose_fraction=0.0)
+    with pytest.raises(ValueError, match="beam_step"):
+        stop_and_scan(truth, grid, num_poses=1, beam_step=0)
+    with pytest.raises(ValueError, match="occupied"):
+        stop_and_scan(truth, grid, route=[[0.05, 0.05, 0.0]])
+    tiny = np.zeros((4, 4), bool)
+    with pytest.raises(ValueError, match="clearance"):
+        plan_route(tiny, Grid((4, 4)))
