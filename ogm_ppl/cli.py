@@ -51,7 +51,7 @@ from .inference.patch_map import offline_patch_map
 from .io import atomic_write_text
 from .metrics import best_f1, near_mapped_mask, roc_auc
 from .models import delta_by_name
-from .priors import IndependentPrior
+from .priors import IndependentPrior, prior_by_name
 
 MAPS = {
     "haehnel": "traditional OGM (Hähnel 2004)",
@@ -183,7 +183,6 @@ METHODS = {
     "patch": "offline patch map, a patch centred on every cell (Section 3.2)",
 }
 _DEFAULT_DELTA = {"ogm": "haehnel", "p21": "p21", "elfes": "elfes_thesis"}
-PRIORS = ("independent",)
 _PNG_UNKNOWN = (217, 217, 217)  # the light grey of viz.plot_map for unknown cells
 MAP_FORMAT = "ogm_ppl.map"
 MAP_FORMAT_VERSION = 1
@@ -303,7 +302,8 @@ def build_parser() -> argparse.ArgumentParser:
                         "for p21, elfes_thesis for elfes")
     m.add_argument("--prior", default="independent", metavar="NAME",
                    help="map prior of gibbs/patch: 'independent' (each cell occupied with probability "
-                        "--lambda), the only prior the command line offers so far")
+                        "--lambda) or a learned prior KIND:CORPUS (ogm_ppl.priors.prior_by_name), e.g. "
+                        "mrf:houseexpo, patch3:houseexpo, border:houseexpo, border1:houseexpo")
     m.add_argument("--lambda", dest="lam", type=_probability, default=0.234, metavar="P",
                    help="cell prior occupancy of the independent prior (default 0.234, the thesis's value)")
     m.add_argument("--sigma", type=_pos_float, metavar="CELLS",
@@ -537,11 +537,14 @@ def _parse_patch(text: str | None, default="3x3"):
     raise CLIError(f"argument --patch: expected HxW, a positive int L, 'plus' or 'square', got {text!r}")
 
 
-def _make_prior(args, num_cells: int):
-    if args.prior != "independent":
-        raise CLIError(f"argument --prior: unknown prior {args.prior!r}; the command line offers: "
-                       f"{', '.join(PRIORS)} (use the Python API for correlated priors)")  # fmt: skip
-    return IndependentPrior(args.lam, num_cells)
+def _make_prior(args, shape):
+    shape = tuple(shape)
+    if args.prior == "independent":
+        return IndependentPrior(args.lam, int(np.prod(shape)))
+    try:
+        return prior_by_name(args.prior, shape)
+    except ValueError as e:
+        raise CLIError(f"argument --prior: {e}") from None
 
 
 def _validate_method(args) -> None:
@@ -562,7 +565,7 @@ def _validate_method(args) -> None:
         if args.prior != "independent":
             raise CLIError(f"--prior applies to --method gibbs/patch, not to --method {args.method}")
     else:
-        _make_prior(args, 1)
+        _make_prior(args, (8, 8))
         if args.patch is not None:
             _parse_patch(args.patch)
 
@@ -593,7 +596,7 @@ def _compute_map(args, inp: _Input, grid: Grid, times: dict) -> tuple[np.ndarray
     times["ray_cast_s"] = time.perf_counter() - t0
     details["ray_cells"] = int(rays.nnz)
     t0 = time.perf_counter()
-    model = OccupancyModel(grid, rays, GaussianRange(sigma), _make_prior(args, grid.num_cells))
+    model = OccupancyModel(grid, rays, GaussianRange(sigma), _make_prior(args, grid.shape))
     if args.method == "gibbs":
         if args.patch is None:
             kernel = CellGibbs(model)

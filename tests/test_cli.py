@@ -147,6 +147,8 @@ def test_map_gzip_log_and_lenient(tmp_path):
         ("gibbs", ["--sweeps", "5"]),
         ("gibbs", ["--sweeps", "3", "--patch", "2x2", "--warmup", "1", "--seed", "3"]),
         ("patch", ["--patch", "3", "--lambda", "0.5"]),
+        ("gibbs", ["--sweeps", "5", "--prior", "mrf:houseexpo"]),
+        ("gibbs", ["--sweeps", "3", "--prior", "border1:houseexpo"]),
     ],
 )
 def test_map_simulated_dataset_each_method(tmp_path, sim_dataset, method, extra):
@@ -265,7 +267,8 @@ MALFORMED = [
     ("map {log} --out {d}/o --resolution abc", "expected a number, got 'abc'"),
     ("map {sim} --out {d}/o --method gibbs --sweeps 0", "argument --sweeps: must be >= 1"),
     ("map {log} --out {d}/o --method foo", "unknown method 'foo'"),
-    ("map {sim} --out {d}/o --method gibbs --prior mrf", "unknown prior 'mrf'"),
+    ("map {sim} --out {d}/o --method gibbs --prior mrf:nowhere", "no shipped tables for corpus 'nowhere'"),
+    ("map {sim} --out {d}/o --method gibbs --prior crf:houseexpo", "unknown prior kind 'crf'"),
     ("map {log} --out {d}/o --delta nope", "unknown Delta name 'nope'"),
     ("map {log} --out {d}/o --method gibbs --delta p21", "--delta applies to the log-odds methods"),
     ("map {log} --out {d}/o --sigma 2", "--sigma applies to --method gibbs/patch"),
