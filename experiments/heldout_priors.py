@@ -24,14 +24,14 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ogm_ppl import GaussianRange, Grid, OccupancyModel, raycast  # noqa: E402
-from ogm_ppl.datasets.floorplans import heldout_plans, load_plan  # noqa: E402
-from ogm_ppl.datasets.stop_and_scan import stop_and_scan  # noqa: E402
-from ogm_ppl.inference import CellGibbs, RunningStats, evidence_grid, run_gibbs  # noqa: E402
-from ogm_ppl.io import atomic_write_text  # noqa: E402
-from ogm_ppl.metrics import near_mapped_mask, prediction_scores  # noqa: E402
-from ogm_ppl.models import delta_by_name  # noqa: E402
-from ogm_ppl.priors.named import prior_by_name  # noqa: E402
+from ogm_ppl import GaussianRange, Grid, OccupancyModel, raycast
+from ogm_ppl.datasets.floorplans import heldout_plans, load_plan
+from ogm_ppl.datasets.stop_and_scan import stop_and_scan
+from ogm_ppl.inference import CellGibbs, RunningStats, evidence_grid, run_gibbs
+from ogm_ppl.io import atomic_write_text
+from ogm_ppl.metrics import near_mapped_mask, prediction_scores
+from ogm_ppl.models import delta_by_name
+from ogm_ppl.priors.named import prior_by_name
 
 PRIORS = ["independent", "independent:{c}", "mrf:{c}", "patch3:{c}", "border:{c}", "border1:{c}"]
 METRICS = ["nll_bits", "ece", "brier", "best_f1", "auc", "iou"]

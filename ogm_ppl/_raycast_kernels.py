@@ -145,8 +145,8 @@ def entries_beyond(u0, v0, du, dv, length, skip):
         total += ray_capacity(length[r], du[r], dv[r])
     out = np.empty(total, np.float64)
     for r in range(R):
-        col, sx, bx = _axis_setup(u0[r], du[r])
-        row, sy, by = _axis_setup(v0[r], dv[r])
+        _, sx, bx = _axis_setup(u0[r], du[r])
+        _, sy, by = _axis_setup(v0[r], dv[r])
         tx = _t_cross(bx, u0[r], du[r], sx)
         ty = _t_cross(by, v0[r], dv[r], sy)
         t = 0.0

@@ -180,7 +180,7 @@ class Scans:
         if pose_fraction is not None:
             if not 0.0 < pose_fraction <= 1.0:
                 raise ValueError(f"pose_fraction must lie in (0, 1], got {pose_fraction}")
-            n = max(1, int(round(S * pose_fraction)))
+            n = max(1, round(S * pose_fraction))
             keep = np.unique(np.floor(np.arange(n) * (S / n)).astype(np.int64))
         else:
             keep = np.arange(0, S, pose_step)

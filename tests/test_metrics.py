@@ -89,8 +89,13 @@ def test_shape_mismatch():
 
 
 def test_prediction_scores_against_hand_computed_values():
-    from ogm_ppl.metrics import (brier_score, expected_calibration_error, nll_bits, occupied_iou,
-                                 prediction_scores)  # fmt: skip
+    from ogm_ppl.metrics import (
+        brier_score,
+        expected_calibration_error,
+        nll_bits,
+        occupied_iou,
+        prediction_scores,  # fmt: skip
+    )
 
     q = np.array([0.9, 0.2, 0.5, 0.75])
     m = np.array([True, False, True, False])

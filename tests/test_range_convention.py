@@ -58,7 +58,7 @@ def test_2d_simulated_readings_average_the_model_mean(angle):
     yy, xx = np.mgrid[0:161, 0:161]
     truth = np.hypot(xx - 80, yy - 80) >= 60
     n, sigma, max_range = 60_000, 2.0, 7.9
-    rays, f, z_c, f_c = _simulate(grid, truth, (0.013, -0.021, 0.0), angle, n, sigma, max_range)
+    _, _, z_c, f_c = _simulate(grid, truth, (0.013, -0.021, 0.0), angle, n, sigma, max_range)
     # standard error sigma / sqrt(n) = 0.008 cells
     assert abs(z_c.mean() - _model_mean(sigma, f_c, max_range / 0.1)) < 0.05
     rays0, f0, _, _ = _simulate(grid, truth, (0.013, -0.021, 0.0), angle, 200, 1e-4, max_range)

@@ -1,3 +1,4 @@
+import itertools
 import math
 
 import numpy as np
@@ -48,7 +49,7 @@ def test_traversal_properties(u0, v0, theta, frac, max_range):
     ts = [0.0] + sorted(_crossings(u0, math.cos(theta), max_range) + _crossings(v0, math.sin(theta), max_range))
     assert rays.range_len[0] == len(ts) >= len(cells)
     if rng < max_range:
-        mids = [0.5 * (a + b) for a, b in zip(ts[:-1], ts[1:])]
+        mids = [0.5 * (a + b) for a, b in itertools.pairwise(ts)]
         if min((abs(m - rng) for m in mids), default=1.0) > 1e-6:  # no floating-point tie
             z_ref = reading_kappa_reference(u0, v0, math.cos(theta), math.sin(theta), max_range, rng)
             assert rays.z[0] == z_ref

@@ -332,7 +332,6 @@ def family_from_dict(spec: dict) -> DeltaFamily:
 def load_delta(path) -> DeltaFamily:
     """Load a Delta artefact written by ``experiments/fit_deltas.py`` (or any JSON of the same format)
     from ``path``, validating keys, shapes and finiteness (:class:`DeltaFileError` names what is wrong)."""
-    import json
     from pathlib import Path
 
     path = Path(path)
