@@ -22,7 +22,11 @@ def test_readme_quick_start_runs(tmp_path, monkeypatch):
     text = (ROOT / "README.md").read_text()
     blocks = re.findall(r"```python\n(.*?)```", text, flags=re.S)
     assert blocks, "the README has a Python quick start"
-    monkeypatch.chdir(tmp_path)  # the examples write into out/
+    # the examples write into out/ and read the shared data as ../shared, as from the repository root
+    work = tmp_path / "work"
+    work.mkdir()
+    (tmp_path / "shared").symlink_to(ROOT.parent / "shared")
+    monkeypatch.chdir(work)
     namespace = {}
     for block in blocks:  # one namespace, top to bottom, as a reader would run them
         exec(compile(block, "README.md", "exec"), namespace)
