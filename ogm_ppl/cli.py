@@ -355,6 +355,18 @@ def build_parser() -> argparse.ArgumentParser:
                    help="also store a grid of this resolution covering the log (extent + 1 m margin)")
     _add_reader_options(c, carmen_only=False)
 
+    # --------------------------------------------------------------------------------- experiment
+    e = sub.add_parser("experiment", help="run an experiment spec (TOML): datasets x algorithms x chains",
+                       description="Run an experiment spec (ogm_ppl.experiment): every dataset x algorithm x "
+                                   "chain is a dask task; writes maps, metrics.json/.md and figures.")  # fmt: skip
+    e.add_argument("spec", type=Path, help="the spec file (see experiments/specs/*.toml)")
+    e.add_argument("--out", type=Path, default=None, help="output directory (default out/experiments/<name>)")
+    e.add_argument("--scheduler", default=None, metavar="ADDR",
+                   help="'serial' (no dask), a dask scheduler address tcp://..., or none for a LocalCluster")
+    e.add_argument("--workers", type=_pos_int, default=None, help="LocalCluster workers (default: one per core)")
+    e.add_argument("--no-resume", action="store_true", help="rerun tasks that are already done")
+    e.add_argument("--quiet", action="store_true", help="no progress output")
+
     # --------------------------------------------------------------------------------- run
     run = sub.add_parser("run", help="the headline experiment: maps, figures and a report")
     run.add_argument("--out", type=Path, default=Path("out"), help="output directory (default out)")
@@ -883,6 +895,26 @@ def _one_line(e: BaseException) -> str:
     return " ".join(text.split())
 
 
+def cmd_experiment(args) -> int:
+    """``ogm-ppl experiment SPEC``: 0 when every task finished, 1 when some failed (what finished is kept)."""
+    from .experiment import ExperimentError, SpecError, load_spec, run_experiment
+
+    try:
+        spec = load_spec(args.spec)
+    except SpecError as e:
+        raise CLIError(str(e)) from None
+    out = args.out if args.out is not None else Path("out") / "experiments" / spec.name
+    try:
+        r = run_experiment(spec, out, scheduler=args.scheduler, workers=args.workers, resume=not args.no_resume,
+                           progress=not args.quiet and _progress())  # fmt: skip
+    except ExperimentError as e:
+        print(f"ogm-ppl: error: {_one_line(e)}", file=sys.stderr)
+        return 1
+    print(r.table())
+    print(f"{len(r.executed)} tasks run, {len(r.skipped)} found done, {r.seconds:.1f} s; results in {out}")
+    return 0
+
+
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``ogm-ppl`` / ``python -m ogm_ppl``; returns the exit status (0 ok, 2 error)."""
     from .datasets import CarmenFormatError, DatasetFileError
@@ -908,6 +940,8 @@ def main(argv: list[str] | None = None) -> int:
             r = cmd_simulate(args)
             print(f"ogm-ppl simulate: {r['poses']} poses x {r['beams']} beams on {r['grid'][1]} x {r['grid'][0]} "
                   f"cells -> {args.out}")  # fmt: skip
+        elif args.command == "experiment":
+            return cmd_experiment(args)
         elif args.command == "convert":
             r = cmd_convert(args)
             print(f"ogm-ppl convert: {r['scans']} scans x {r['beams']} beams ({r['bad_lines']} bad lines "

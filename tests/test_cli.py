@@ -335,3 +335,15 @@ def test_console_entry_prints_no_traceback(tmp_path):
     assert r.returncode == 2, r.stderr
     assert "Traceback" not in r.stderr and r.stderr.count("\n") == 1
     assert r.stderr.startswith("ogm-ppl: error: ") and "line 1, field 'range[1]'" in r.stderr
+
+
+def test_experiment_subcommand(tmp_path, capsys):
+    spec = Path(__file__).resolve().parent.parent / "experiments" / "specs" / "smoke.toml"
+    out = tmp_path / "smoke"
+    assert main(["experiment", str(spec), "--scheduler", "serial", "--quiet", "--out", str(out)]) == 0
+    assert (out / "metrics.md").exists() and "tasks run" in capsys.readouterr().out
+    bad = tmp_path / "bad.toml"
+    bad.write_text("[experiment]\nname = 3\n")
+    assert main(["experiment", str(bad), "--out", str(tmp_path / "b")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("ogm-ppl: error: ") and "bad.toml" in err and "Traceback" not in err

@@ -1,0 +1,36 @@
+"""Experiments from a spec (Chapter 6): datasets x algorithms x chains as dask tasks, resumable,
+scored against the truth (simulated) or the thesis's benchmark map (logs), with tables and figures.
+
+>>> from ogm_ppl.experiment import load_spec, run_experiment      # doctest: +SKIP
+>>> result = run_experiment("experiments/specs/smoke.toml", "out/smoke", scheduler="serial")  # doctest: +SKIP
+>>> print(result.table())                                         # doctest: +SKIP
+"""
+
+from .runner import ExperimentError, ExperimentResult, plan_tasks, run_experiment
+from .spec import (
+    AlgorithmSpec,
+    DatasetSpec,
+    ExperimentSpec,
+    MetricsSpec,
+    OutputSpec,
+    SpecError,
+    derive_seed,
+    load_spec,
+    parse_spec,
+)
+
+__all__ = [
+    "load_spec",
+    "parse_spec",
+    "run_experiment",
+    "plan_tasks",
+    "derive_seed",
+    "ExperimentSpec",
+    "DatasetSpec",
+    "AlgorithmSpec",
+    "MetricsSpec",
+    "OutputSpec",
+    "ExperimentResult",
+    "ExperimentError",
+    "SpecError",
+]

@@ -1,0 +1,255 @@
+r"""Run an experiment spec: independent tasks on dask.distributed (or in this process), resumable.
+
+:func:`run_experiment` plans the tasks of :mod:`ogm_ppl.experiment.tasks` (a base per shared dataset
+part, a dataset per expanded entry, a run per dataset x algorithm x chain, a score per dataset x
+algorithm), skips those whose done-file is there with the same hash (``resume=True``; a Gibbs run that
+was stopped resumes from its checkpoint), runs the others, then writes ``metrics.json``, ``metrics.md``
+and the figures.
+
+Schedulers: ``None`` starts a ``LocalCluster`` (processes, ``workers`` of them, default one per core,
+one thread each), ``"serial"`` runs everything here without dask, ``"tcp://host:port"`` connects to a
+running scheduler (its workers must see ``out_dir`` at the same path, e.g. a shared file system, and
+should run one thread each), and a ``distributed.Client`` is used as it is. The seeds of the tasks do
+not depend on the scheduler, so every scheduler gives the same numbers.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import os
+import shutil
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from ..io import atomic_write_text
+from . import tasks as T
+from .spec import ExperimentSpec, derive_seed, load_spec
+
+__all__ = ["ExperimentResult", "ExperimentError", "run_experiment", "plan_tasks"]
+
+
+class ExperimentError(RuntimeError):
+    """Some tasks failed; the finished ones are kept (rerun to resume). ``result`` holds what was done."""
+
+    def __init__(self, msg, result=None):
+        super().__init__(msg)
+        self.result = result
+
+
+@dataclass
+class Task:
+    id: str
+    kind: str  # base | dataset | run | score
+    fn: object
+    args: tuple
+    kwargs: dict
+    deps: list
+    done_file: Path
+    hash: str
+
+
+@dataclass
+class ExperimentResult:
+    """What :func:`run_experiment` did and measured.
+
+    Attributes:
+        scores: one record per dataset x algorithm (``mask`` and ``touched`` blocks: best F1, threshold,
+            precision and recall at it, AUC, ..., and the P-R curve).
+        pooled: one record per condition x algorithm: counts summed over the condition's repeats.
+        runs: one record per run task (seconds, Gibbs F1-against-time trace).
+        executed / skipped: task ids run now / found done; failed: task id -> error.
+    """
+
+    spec: ExperimentSpec
+    out_dir: Path
+    scores: list = field(default_factory=list)
+    pooled: list = field(default_factory=list)
+    runs: list = field(default_factory=list)
+    datasets: list = field(default_factory=list)
+    executed: list = field(default_factory=list)
+    skipped: list = field(default_factory=list)
+    failed: dict = field(default_factory=dict)
+    seconds: float = 0.0
+    files: list = field(default_factory=list)
+
+    def table(self) -> str:
+        """The Markdown results table (as in ``metrics.md``)."""
+        from .report import markdown
+
+        return markdown(self)
+
+
+# ------------------------------------------------------------------------------------------ planning
+def plan_tasks(spec: ExperimentSpec, out: Path, resume: bool = True) -> list[Task]:
+    """The tasks of ``spec`` in dependency order."""
+    out = Path(out)
+    m, o = T.spec_entry(spec.metrics), T.spec_entry(spec.output)
+    tasks: list[Task] = []
+    base_h, ds_h, run_h = {}, {}, {}
+    for ds in spec.datasets:
+        if ds.base not in base_h:
+            h = T.task_hash("base", ds.base_params)
+            base_h[ds.base] = h
+            tasks.append(Task(f"base/{ds.base}", "base", T.run_base, (ds, str(out), h), {}, [],
+                              T.base_dir(out) / f"{ds.base}.json", h))  # fmt: skip
+        h = T.task_hash("dataset", ds.params, base_h[ds.base])
+        ds_h[ds.name] = h
+        tasks.append(Task(f"dataset/{ds.name}", "dataset", T.run_dataset, (ds, str(out), h), {},
+                          [f"base/{ds.base}"], out / "datasets" / f"{ds.name}.json", h))  # fmt: skip
+    for ds in spec.datasets:
+        for alg in spec.algorithms:
+            hs = []
+            for c in range(alg.chains):
+                seed = derive_seed(spec.seed, "run", ds.name, alg.name, c)
+                rec_metrics = (
+                    m if alg.kind == "gibbs" else None
+                )  # the F1 records depend on the metrics
+                h = T.task_hash(
+                    "run", ds_h[ds.name], T.spec_entry(alg), c, seed, rec_metrics, o["maps"]
+                )
+                hs.append(h)
+                tid = f"run/{ds.name}/{alg.name}/c{c}"
+                run_h[tid] = h
+                tasks.append(Task(tid, "run", T.run_algorithm, (ds, alg, c, seed, spec.metrics, spec.output, str(out), h),
+                                  {"resume": resume}, [f"dataset/{ds.name}"],
+                                  T.run_dir(out, ds, alg, c) / "result.json", h))  # fmt: skip
+            h = T.task_hash("score", hs, m, o["maps"])
+            tasks.append(Task(f"score/{ds.name}/{alg.name}", "score", T.run_score,
+                              (ds, alg, spec.metrics, spec.output, str(out), h), {},
+                              [f"run/{ds.name}/{alg.name}/c{c}" for c in range(alg.chains)],
+                              T.score_path(out, ds, alg), h))  # fmt: skip
+    return tasks
+
+
+# ------------------------------------------------------------------------------------------ executing
+def _execute_serial(todo: list[Task], progress: bool):
+    from tqdm.auto import tqdm
+
+    results, failed = {}, {}
+    for t in tqdm(todo, disable=not progress, desc="tasks", unit="task"):
+        bad = [d for d in t.deps if d in failed]
+        if bad:
+            failed[t.id] = f"dependency {bad[0]} failed"
+            continue
+        try:
+            results[t.id] = t.fn(*t.args, **t.kwargs)
+        except Exception as e:  # keep going: independent tasks still finish, and a rerun resumes
+            failed[t.id] = f"{type(e).__name__}: {e}"
+    return results, failed
+
+
+def _client(scheduler, workers):
+    """``(client, owned)``: a Client for ``scheduler`` and whether we must close it (and its cluster)."""
+    from distributed import Client, LocalCluster
+
+    if isinstance(scheduler, Client):
+        return scheduler, False
+    if scheduler is None:
+        n = int(workers) if workers else (os.cpu_count() or 1)
+        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
+                               silence_logs=logging.ERROR)  # fmt: skip
+        return Client(cluster), True
+    if isinstance(scheduler, str):
+        return Client(scheduler), True
+    raise TypeError(
+        f"scheduler must be None, 'serial', an address or a distributed.Client, got {scheduler!r}"
+    )
+
+
+def _execute_dask(todo: list[Task], client, progress: bool):
+    from distributed import as_completed
+    from tqdm.auto import tqdm
+
+    futures, by_future = {}, {}
+    token = f"{time.time_ns():x}"
+    for t in todo:
+        deps = [futures[d] for d in t.deps if d in futures]
+        kw = dict(t.kwargs)
+        if deps:
+            kw["_deps" if t.kind != "dataset" else "_base"] = deps
+        f = client.submit(t.fn, *t.args, key=f"{t.id}-{token}", pure=False, **kw)
+        futures[t.id] = f
+        by_future[f.key] = t.id
+    results, failed = {}, {}
+    bar = tqdm(total=len(todo), disable=not progress, desc="tasks", unit="task")
+    for f in as_completed(list(futures.values())):
+        tid = by_future[f.key]
+        if f.status == "finished":
+            results[tid] = f.result()
+        else:
+            e = f.exception()
+            failed[tid] = f"{type(e).__name__}: {e}"
+        bar.update(1)
+    bar.close()
+    return results, failed
+
+
+# ------------------------------------------------------------------------------------------ the API
+def run_experiment(spec_or_path, out_dir, *, scheduler=None, workers: int | None = None, resume: bool = True,
+                   progress: bool = True) -> ExperimentResult:  # fmt: skip
+    """Run an experiment spec (a path or an :class:`ExperimentSpec`) into ``out_dir``.
+
+    Args:
+        scheduler: ``None`` (a ``LocalCluster`` of ``workers`` processes, one thread each; default one
+            per core), ``"serial"`` (no dask), ``"tcp://..."`` (a running scheduler) or a ``Client``.
+        workers: LocalCluster size.
+        resume: skip tasks already done with the same settings and resume stopped Gibbs runs from their
+            checkpoints; ``False`` recomputes everything.
+        progress: a progress bar over tasks.
+
+    Returns:
+        an :class:`ExperimentResult`; raises :class:`ExperimentError` (with ``.result``) if tasks failed,
+        after writing what the finished tasks allow.
+    """
+    t0 = time.perf_counter()
+    spec = spec_or_path if isinstance(spec_or_path, ExperimentSpec) else load_spec(spec_or_path)
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    if spec.source != "<dict>" and Path(spec.source).exists():
+        shutil.copyfile(spec.source, out / "spec.toml")
+    atomic_write_text(out / "spec.json", json.dumps(spec.to_json(), indent=1, default=str))
+    tasks = plan_tasks(spec, out, resume)
+    todo, skipped, done_recs = [], [], {}
+    for t in tasks:
+        rec = T.read_done(t.done_file, t.hash) if resume else None
+        if rec is not None and all(d in done_recs for d in t.deps):
+            done_recs[t.id] = rec
+            skipped.append(t.id)
+        else:
+            todo.append(t)
+    if scheduler == "serial" or not todo:
+        results, failed = _execute_serial(todo, progress)
+    else:
+        client, owned = _client(scheduler, workers)
+        try:
+            results, failed = _execute_dask(todo, client, progress)
+        finally:
+            if owned:
+                cluster = client.cluster
+                client.close()
+                if cluster is not None:
+                    cluster.close()
+    recs = {**done_recs, **{k: v for k, v in results.items() if v is not None}}
+    result = ExperimentResult(spec, out, executed=[t.id for t in todo if t.id in results], skipped=skipped,
+                              failed=failed)  # fmt: skip
+    from .report import write_outputs
+
+    write_outputs(result, tasks, recs)
+    result.seconds = time.perf_counter() - t0
+    if failed:
+        first = next(iter(failed.items()))
+        raise ExperimentError(f"{len(failed)} of {len(todo)} tasks failed (first: {first[0]}: {first[1]}); "
+                              f"rerun to resume", result)  # fmt: skip
+    return result
+
+
+def _jsonable(x):
+    if isinstance(x, (np.floating, np.integer)):
+        return x.item()
+    if isinstance(x, Path):
+        return str(x)
+    raise TypeError(type(x).__name__)

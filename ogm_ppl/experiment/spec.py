@@ -1,0 +1,544 @@
+r"""Experiment specs (TOML): which datasets, which algorithms, which metrics, what to write.
+
+A spec is read with :func:`load_spec` (or built from a dict with :func:`parse_spec`) and validated as a
+whole: every error names the file, the table entry and the key (``smoke.toml: datasets[0] ('office')
+.sigma_cells: must be a number > 0, got -1``), and unknown keys are refused (a typo must not silently
+fall back to a default).
+
+Tables (every key optional unless marked *required*; defaults in brackets)::
+
+    [experiment]        name [file stem], seed [0], description [""]
+    [[datasets]]        kind = "simulated" | "log" (*required*), name (*required*, [A-Za-z0-9_.-]+)
+      simulated:        map ["office"; a mapgen kind or "mixed" = kinds in turn by map_seed],
+                        size [500] (int or [rows, cols]), border [20], resolution [0.05] (m/cell),
+                        map_seed [0], seed [derived], poses [route until coverage], beams [720],
+                        max_range_cells [75], sigma_cells [3.0], pose_fraction [1.0], beam_step [1]
+      log:              path (*required*; relative to the spec file; ~ and $VARS expanded),
+                        reader [{max_usable_range = 20.0}] (read_carmen options), resolution [0.05],
+                        extent [x0, y0, width, height] metres (else the log's extent + margin [1.0]),
+                        sigma_cells [3.0] (the models' range noise), pose_fraction [1.0], beam_step [1],
+                        benchmark [{delta = "haehnel", threshold = 0.20, prior = 0.5}]
+    [[algorithms]]      kind = "ogm" | "gibbs" | "patch_map" (*required*), name (*required*)
+      ogm:              delta ["haehnel"], prior [0.5], clamp [none: [lo, hi] log-odds]
+      gibbs:            prior ["independent"; see ogm_ppl.priors.named], patch [1; L = 9 is [3, 3]],
+                        sweeps [100], burn_in [0], chains [1], init ["ogm"], init_delta ["haehnel"],
+                        scan ["systematic"], p_rand_patch [0.0], sigma_cells [the dataset's],
+                        checkpoint_every [10], record [5] (F1 records of the running marginals)
+      patch_map:        patch [[3, 3]], mode ["offline" | "online"], overlap [false],
+                        prior ["independent"], sigma_cells [the dataset's]
+    [metrics]           mask ["auto": "all" for simulated, "near_mapped" for logs], near_mapped_distance
+                        [10.0] (cells), touched_only [true], thresholds [99: 0.01..0.99, or a list],
+                        scores [["f1", "auc", "max_precision"]; also "nll_bits", "brier", "ece"]
+    [output]            maps [true] (per-task npz + PNG), figures [true], fpfn ["first" | "all" |
+                        "none"], fpfn_thresholds [[0.1, 0.2, 0.6]], dpi [100]
+
+**Sweeps.** In a dataset entry, ``map_seed``, ``seed``, ``pose_fraction`` and ``beam_step`` may be lists:
+the entry expands into the Cartesian product, one dataset each, named ``NAME-m<map_seed>-s<seed>
+-pf<pose_fraction>-bs<beam_step>`` (only the swept keys appear). Datasets of one entry that differ only
+by ``map_seed`` / ``seed`` are *repeats* of one *condition*; their counts are pooled in the tables (as
+the thesis pooled its 100 datasets). Conditions that differ by ``pose_fraction`` / ``beam_step`` give the
+F1-against-sparsity figure.
+
+**Seeds.** :func:`derive_seed` turns the experiment seed and a task's names into a seed through
+``numpy.random.SeedSequence(seed, spawn_key=crc32 of each name)``: a task's seed depends on what it is,
+not on its position in the spec, so adding an algorithm or a dataset changes no other task's result.
+"""
+
+from __future__ import annotations
+
+import itertools
+import json
+import math
+import os
+import re
+import tomllib
+import zlib
+from dataclasses import asdict, dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = [
+    "SpecError",
+    "ExperimentSpec",
+    "DatasetSpec",
+    "AlgorithmSpec",
+    "MetricsSpec",
+    "OutputSpec",
+    "load_spec",
+    "parse_spec",
+    "derive_seed",
+]
+
+_NAME = re.compile(r"[A-Za-z0-9_.-]+\Z")
+MAP_KINDS = ("office", "corridor", "cluttered", "hall", "mixed")
+SWEEP_KEYS = {"map_seed": "m", "seed": "s", "pose_fraction": "pf", "beam_step": "bs"}
+REPEAT_KEYS = ("map_seed", "seed")
+READER_KEYS = ("strict", "max_usable_range", "usable_range_rule", "no_return", "no_return_threshold",
+               "min_range", "max_range", "messages", "apply_laser_offset")  # fmt: skip
+SCORES = ("f1", "auc", "max_precision", "nll_bits", "brier", "ece")
+INITS = ("ogm", "prior", "occupied", "free")
+
+
+class SpecError(ValueError):
+    """An invalid spec; the message names the file, the entry and the key."""
+
+
+def derive_seed(root: int, *parts, bits: int = 63) -> int:
+    """A seed for the task named by ``parts`` under the experiment seed ``root`` (``bits``-bit, >= 0).
+
+    ``SeedSequence(root, spawn_key=(crc32(part), ...))``: the same names give the same seed in any
+    process and on any machine (Python's ``hash`` of a string would not).
+
+    >>> derive_seed(0, "run", "office", "ogm", 0) == derive_seed(0, "run", "office", "ogm", 0)
+    True
+    """
+    key = tuple(zlib.crc32(str(p).encode()) for p in parts)
+    state = np.random.SeedSequence(int(root), spawn_key=key).generate_state(2, np.uint64)
+    return int(int(state[0]) >> (64 - bits))
+
+
+# ------------------------------------------------------------------------------------------ spec types
+@dataclass(frozen=True)
+class DatasetSpec:
+    """One dataset after expansion of the sweeps (``params`` holds scalars only)."""
+
+    name: str
+    entry: str
+    kind: str
+    params: dict
+    condition: str  # the entry plus its sparsity values: repeats of a condition are pooled
+    base: str  # datasets sharing a base share its expensive part (a planned route, a read log)
+    base_params: dict
+    measurement_fraction: float  # pose_fraction / beam_step (Fig. 6.17's x axis)
+
+
+@dataclass(frozen=True)
+class AlgorithmSpec:
+    name: str
+    kind: str
+    params: dict
+
+    @property
+    def chains(self) -> int:
+        return int(self.params.get("chains", 1))
+
+
+@dataclass(frozen=True)
+class MetricsSpec:
+    mask: str = "auto"
+    near_mapped_distance: float = 10.0
+    touched_only: bool = True
+    thresholds: tuple = tuple(np.round(np.linspace(0.01, 0.99, 99), 10).tolist())
+    scores: tuple = ("f1", "auc", "max_precision")
+
+    def mask_for(self, dataset_kind: str) -> str:
+        if self.mask != "auto":
+            return self.mask
+        return "near_mapped" if dataset_kind == "log" else "all"
+
+
+@dataclass(frozen=True)
+class OutputSpec:
+    maps: bool = True
+    figures: bool = True
+    fpfn: str = "first"
+    fpfn_thresholds: tuple = (0.1, 0.2, 0.6)
+    dpi: int = 100
+
+
+@dataclass(frozen=True)
+class ExperimentSpec:
+    """A validated experiment: expanded datasets, algorithms, metrics and output settings."""
+
+    name: str
+    seed: int
+    description: str
+    datasets: tuple
+    algorithms: tuple
+    metrics: MetricsSpec = field(default_factory=MetricsSpec)
+    output: OutputSpec = field(default_factory=OutputSpec)
+    source: str = "<dict>"
+    raw: dict = field(default_factory=dict, repr=False)
+
+    def to_json(self) -> dict:
+        """The normalised spec (JSON-able)."""
+        return {
+            "name": self.name, "seed": self.seed, "description": self.description, "source": self.source,
+            "datasets": [asdict(d) for d in self.datasets],
+            "algorithms": [asdict(a) for a in self.algorithms],
+            "metrics": asdict(self.metrics), "output": asdict(self.output),
+        }  # fmt: skip
+
+
+# ------------------------------------------------------------------------------------------ reading
+class _Table:
+    """Reads the keys of one TOML table; every error names the source, the table and the key."""
+
+    def __init__(self, source: str, where: str, table) -> None:
+        self.source, self.where = source, where
+        if not isinstance(table, dict):
+            self.fail(None, f"must be a table, got {type(table).__name__}")
+        self.table = table
+        self.used: set[str] = set()
+
+    def fail(self, key, msg):
+        loc = f"{self.where}.{key}" if key else self.where
+        raise SpecError(f"{self.source}: {loc}: {msg}")
+
+    def has(self, key) -> bool:
+        return key in self.table
+
+    def raw(self, key, default=None):
+        self.used.add(key)
+        return self.table.get(key, default)
+
+    def _one(self, key, v, kind, lo=None, hi=None, lo_open=False, choices=None):
+        if kind == "int":
+            if isinstance(v, bool) or not isinstance(v, int):
+                self.fail(key, f"must be an integer, got {v!r}")
+        elif kind == "float":
+            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+                self.fail(key, f"must be a finite number, got {v!r}")
+            v = float(v)
+        elif kind == "bool":
+            if not isinstance(v, bool):
+                self.fail(key, f"must be true or false, got {v!r}")
+        elif kind == "str":
+            if not isinstance(v, str) or not v:
+                self.fail(key, f"must be a non-empty string, got {v!r}")
+        if choices is not None and v not in choices:
+            self.fail(key, f"must be one of {', '.join(map(repr, choices))}, got {v!r}")
+        if lo is not None and (v <= lo if lo_open else v < lo):
+            self.fail(key, f"must be {'>' if lo_open else '>='} {lo}, got {v!r}")
+        if hi is not None and v > hi:
+            self.fail(key, f"must be <= {hi}, got {v!r}")
+        return v
+
+    def get(self, key, kind, default=None, required=False, sweep=False, **check):
+        if key not in self.table:
+            if required:
+                self.fail(key, "is required")
+            self.used.add(key)
+            return default
+        v = self.raw(key)
+        if sweep and isinstance(v, list):
+            if not v:
+                self.fail(key, "an empty list sweeps over nothing")
+            vals = [self._one(f"{key}[{i}]", x, kind, **check) for i, x in enumerate(v)]
+            if len(set(vals)) != len(vals):
+                self.fail(key, f"lists a value twice: {v!r}")
+            return vals
+        return self._one(key, v, kind, **check)
+
+    def finish(self):
+        unknown = sorted(set(self.table) - self.used)
+        if unknown:
+            self.fail(unknown[0], f"unknown key (known here: {', '.join(sorted(self.used))})")
+
+
+def _patch(t: _Table, key: str, default):
+    v = t.raw(key, default)
+    if isinstance(v, str):
+        if v not in ("plus", "square"):
+            t.fail(key, f"must be an int L, [h, w], 'plus' or 'square', got {v!r}")
+        return v
+    if isinstance(v, int) and not isinstance(v, bool):
+        if v < 1:
+            t.fail(key, f"must be >= 1, got {v}")
+        return v
+    if (
+        isinstance(v, list)
+        and len(v) == 2
+        and all(isinstance(x, int) and not isinstance(x, bool) and x >= 1 for x in v)
+    ):
+        if v[0] * v[1] > 25:
+            t.fail(key, f"{v[0]} x {v[1]} patches are too large (at most 25 cells)")
+        return [int(v[0]), int(v[1])]
+    t.fail(key, f"must be an int L, [h, w] (positive), 'plus' or 'square', got {v!r}")
+
+
+def _check_prior(t: _Table, key: str, default: str) -> str:
+    name = t.get(key, "str", default)
+    from ..priors.named import prior_by_name
+
+    try:
+        prior_by_name(name, (8, 8))
+    except (ValueError, KeyError, FileNotFoundError) as e:
+        t.fail(key, f"{e}")
+    return name
+
+
+def _check_delta(t: _Table, key: str, default: str) -> str:
+    name = t.get(key, "str", default)
+    from ..models import delta_by_name
+
+    try:
+        delta_by_name(name)
+    except (ValueError, KeyError, FileNotFoundError) as e:
+        t.fail(key, f"unknown update term ({e})")
+    return name
+
+
+def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[DatasetSpec]:
+    where = f"datasets[{i}]"
+    if isinstance(d, dict) and isinstance(d.get("name"), str):
+        where += f" ({d['name']!r})"
+    t = _Table(source, where, d)
+    name = t.get("name", "str", required=True)
+    if not _NAME.match(name):
+        t.fail("name", f"may hold only letters, digits, '_', '.', '-', got {name!r}")
+    kind = t.get("kind", "str", required=True, choices=("simulated", "log"))
+    p: dict = {}
+    if kind == "simulated":
+        p["map"] = t.get("map", "str", "office", choices=MAP_KINDS)
+        size = t.raw("size", 500)
+        if isinstance(size, int) and not isinstance(size, bool):
+            size = [size, size]
+        if not (
+            isinstance(size, list)
+            and len(size) == 2
+            and all(isinstance(s, int) and not isinstance(s, bool) for s in size)
+        ):
+            t.fail("size", f"must be an int or [rows, cols], got {size!r}")
+        if min(size) < 60:
+            t.fail("size", f"generated maps need at least 60 x 60 cells, got {size}")
+        p["size"] = [int(s) for s in size]
+        p["border"] = t.get("border", "int", 20, lo=1, hi=min(size) // 4)
+        p["resolution"] = t.get("resolution", "float", 0.05, lo=0, lo_open=True)
+        p["map_seed"] = t.get("map_seed", "int", 0, sweep=True, lo=0)
+        p["seed"] = t.get(
+            "seed", "int", derive_seed(seed, "dataset", name, bits=32), sweep=True, lo=0
+        )
+        p["poses"] = t.get("poses", "int", None, lo=1)
+        p["beams"] = t.get("beams", "int", 720, lo=1)
+        p["max_range_cells"] = t.get("max_range_cells", "float", 75.0, lo=0, lo_open=True)
+        p["sigma_cells"] = t.get("sigma_cells", "float", 3.0, lo=0, lo_open=True)
+        p["pose_fraction"] = t.get(
+            "pose_fraction", "float", 1.0, sweep=True, lo=0, lo_open=True, hi=1
+        )
+        p["beam_step"] = t.get("beam_step", "int", 1, sweep=True, lo=1)
+        for bs in np.atleast_1d(p["beam_step"]):
+            if bs > p["beams"]:
+                t.fail("beam_step", f"{bs} exceeds beams = {p['beams']}")
+        base_keys = (
+            "map",
+            "size",
+            "border",
+            "resolution",
+            "map_seed",
+            "seed",
+            "poses",
+            "max_range_cells",
+        )
+    else:
+        raw_path = t.get("path", "str", required=True)
+        path = Path(os.path.expandvars(os.path.expanduser(raw_path)))
+        if not path.is_absolute():
+            path = (base_dir / path).resolve()
+        if not path.exists():
+            t.fail("path", f"no such log file: {path}")
+        p["path"] = str(path)
+        reader = t.raw("reader", {"max_usable_range": 20.0})
+        rt = _Table(source, f"{where}.reader", reader)
+        r = {}
+        for k in READER_KEYS:
+            if rt.has(k):
+                r[k] = rt.raw(k)
+        rt.finish()
+        p["reader"] = r
+        p["resolution"] = t.get("resolution", "float", 0.05, lo=0, lo_open=True)
+        ext = t.raw("extent", None)
+        if ext is not None:
+            if not (
+                isinstance(ext, list)
+                and len(ext) == 4
+                and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in ext)
+            ):
+                t.fail("extent", f"must be [x0, y0, width, height] in metres, got {ext!r}")
+            if ext[2] <= 0 or ext[3] <= 0:
+                t.fail("extent", f"width and height must be > 0, got {ext!r}")
+            ext = [float(x) for x in ext]
+        p["extent"] = ext
+        p["margin"] = t.get("margin", "float", 1.0, lo=0)
+        p["sigma_cells"] = t.get("sigma_cells", "float", 3.0, lo=0, lo_open=True)
+        p["pose_fraction"] = t.get(
+            "pose_fraction", "float", 1.0, sweep=True, lo=0, lo_open=True, hi=1
+        )
+        p["beam_step"] = t.get("beam_step", "int", 1, sweep=True, lo=1)
+        bt = _Table(source, f"{where}.benchmark", t.raw("benchmark", {}))
+        p["benchmark"] = {
+            "delta": _check_delta(bt, "delta", "haehnel"),
+            "threshold": bt.get("threshold", "float", 0.20, lo=0, lo_open=True, hi=1),
+            "prior": bt.get("prior", "float", 0.5, lo=0, lo_open=True, hi=1),
+        }
+        bt.finish()
+        base_keys = ("path", "reader", "resolution", "extent", "margin", "benchmark")
+    t.finish()
+    swept = [k for k in SWEEP_KEYS if isinstance(p.get(k), list)]
+    out = []
+    for combo in itertools.product(*[p[k] for k in swept]):
+        q = dict(p)
+        q.update(zip(swept, combo))
+        suffix = "".join(f"-{SWEEP_KEYS[k]}{v:g}" for k, v in zip(swept, combo))
+        cond = "".join(
+            f"-{SWEEP_KEYS[k]}{v:g}" for k, v in zip(swept, combo) if k not in REPEAT_KEYS
+        )
+        base_sfx = "".join(
+            f"-{SWEEP_KEYS[k]}{v:g}" for k, v in zip(swept, combo) if k in REPEAT_KEYS
+        )
+        out.append(DatasetSpec(
+            name=name + suffix, entry=name, kind=kind, params=q, condition=name + cond, base=name + base_sfx,
+            base_params={"kind": kind, **{k: q[k] for k in base_keys}},
+            measurement_fraction=float(q["pose_fraction"]) / int(q["beam_step"]),
+        ))  # fmt: skip
+    return out
+
+
+def _algorithm(source: str, i: int, a) -> AlgorithmSpec:
+    where = f"algorithms[{i}]"
+    if isinstance(a, dict) and isinstance(a.get("name"), str):
+        where += f" ({a['name']!r})"
+    t = _Table(source, where, a)
+    name = t.get("name", "str", required=True)
+    if not _NAME.match(name):
+        t.fail("name", f"may hold only letters, digits, '_', '.', '-', got {name!r}")
+    kind = t.get("kind", "str", required=True, choices=("ogm", "gibbs", "patch_map"))
+    p: dict = {}
+    if kind == "ogm":
+        p["delta"] = _check_delta(t, "delta", "haehnel")
+        p["prior"] = t.get("prior", "float", 0.5, lo=0, lo_open=True, hi=1)
+        clamp = t.raw("clamp", None)
+        if clamp is not None and not (
+            isinstance(clamp, list) and len(clamp) == 2 and clamp[0] < clamp[1]
+        ):
+            t.fail("clamp", f"must be [lo, hi] log-odds with lo < hi, got {clamp!r}")
+        p["clamp"] = clamp
+    elif kind == "gibbs":
+        p["prior"] = _check_prior(t, "prior", "independent")
+        p["patch"] = _patch(t, "patch", 1)
+        p["sweeps"] = t.get("sweeps", "int", 100, lo=1)
+        p["burn_in"] = t.get("burn_in", "int", 0, lo=0)
+        p["chains"] = t.get("chains", "int", 1, lo=1)
+        p["init"] = t.get("init", "str", "ogm", choices=INITS)
+        p["init_delta"] = _check_delta(t, "init_delta", "haehnel")
+        p["scan"] = t.get(
+            "scan", "str", "systematic", choices=("systematic", "permutation", "random")
+        )
+        p["p_rand_patch"] = t.get("p_rand_patch", "float", 0.0, lo=0, hi=0.999)
+        p["sigma_cells"] = t.get("sigma_cells", "float", None, lo=0, lo_open=True)
+        p["checkpoint_every"] = t.get("checkpoint_every", "int", 10, lo=1)
+        p["record"] = t.get("record", "int", 5, lo=0)
+    else:
+        p["patch"] = _patch(t, "patch", [3, 3])
+        p["mode"] = t.get("mode", "str", "offline", choices=("offline", "online"))
+        p["overlap"] = t.get("overlap", "bool", False)
+        p["prior"] = _check_prior(t, "prior", "independent")
+        p["sigma_cells"] = t.get("sigma_cells", "float", None, lo=0, lo_open=True)
+        if p["overlap"] and p["mode"] != "offline":
+            t.fail("overlap", "only the offline patch map has an overlapping variant")
+    t.finish()
+    return AlgorithmSpec(name, kind, p)
+
+
+def parse_spec(
+    data: dict, source: str = "<dict>", base_dir: str | os.PathLike = "."
+) -> ExperimentSpec:
+    """Validate a spec given as a dict (the parsed TOML); ``source`` names it in errors."""
+    if not isinstance(data, dict):
+        raise SpecError(f"{source}: a spec is a table, got {type(data).__name__}")
+    unknown = sorted(set(data) - {"experiment", "datasets", "algorithms", "metrics", "output"})
+    if unknown:
+        raise SpecError(
+            f"{source}: {unknown[0]}: unknown table (known: experiment, datasets, algorithms, metrics, output)"
+        )
+    e = _Table(source, "experiment", data.get("experiment", {}))
+    stem = Path(source).stem if source != "<dict>" else "experiment"
+    name = e.get("name", "str", stem)
+    seed = e.get("seed", "int", 0, lo=0)
+    description = e.raw("description", "")
+    if not isinstance(description, str):
+        e.fail("description", "must be a string")
+    e.finish()
+    raw_ds = data.get("datasets")
+    if not isinstance(raw_ds, list) or not raw_ds:
+        raise SpecError(f"{source}: datasets: at least one [[datasets]] entry is required")
+    raw_alg = data.get("algorithms")
+    if not isinstance(raw_alg, list) or not raw_alg:
+        raise SpecError(f"{source}: algorithms: at least one [[algorithms]] entry is required")
+    datasets: list[DatasetSpec] = []
+    entries: set[str] = set()
+    for i, d in enumerate(raw_ds):
+        ds = _dataset_entry(source, Path(base_dir), i, d, seed)
+        if ds[0].entry in entries:
+            raise SpecError(f"{source}: datasets[{i}].name: {ds[0].entry!r} is used twice")
+        entries.add(ds[0].entry)
+        datasets += ds
+    names = [d.name for d in datasets]
+    dup = next((n for n in names if names.count(n) > 1), None)
+    if dup:
+        raise SpecError(
+            f"{source}: datasets: two entries expand to the dataset name {dup!r}; rename one"
+        )
+    algorithms = [_algorithm(source, i, a) for i, a in enumerate(raw_alg)]
+    anames = [a.name for a in algorithms]
+    dup = next((n for n in anames if anames.count(n) > 1), None)
+    if dup:
+        raise SpecError(f"{source}: algorithms: the name {dup!r} is used twice")
+    m = _Table(source, "metrics", data.get("metrics", {}))
+    thr = m.raw("thresholds", 99)
+    if isinstance(thr, int) and not isinstance(thr, bool):
+        if thr < 1:
+            m.fail("thresholds", f"must be >= 1, got {thr}")
+        thresholds = (
+            tuple(np.round(np.linspace(0.01, 0.99, thr), 10).tolist()) if thr > 1 else (0.5,)
+        )
+    elif (
+        isinstance(thr, list)
+        and thr
+        and all(isinstance(x, (int, float)) and not isinstance(x, bool) and 0 <= x < 1 for x in thr)
+    ):
+        thresholds = tuple(float(x) for x in thr)
+    else:
+        m.fail("thresholds", f"must be a count or a list of numbers in [0, 1), got {thr!r}")
+    scores = m.raw("scores", ["f1", "auc", "max_precision"])
+    if not isinstance(scores, list) or any(s not in SCORES for s in scores):
+        m.fail("scores", f"must be a list of {', '.join(map(repr, SCORES))}, got {scores!r}")
+    metrics = MetricsSpec(
+        mask=m.get("mask", "str", "auto", choices=("auto", "all", "near_mapped")),
+        near_mapped_distance=m.get("near_mapped_distance", "float", 10.0, lo=0),
+        touched_only=m.get("touched_only", "bool", True),
+        thresholds=thresholds,
+        scores=tuple(scores),
+    )
+    m.finish()
+    o = _Table(source, "output", data.get("output", {}))
+    fthr = o.raw("fpfn_thresholds", [0.1, 0.2, 0.6])
+    if not isinstance(fthr, list) or not all(
+        isinstance(x, (int, float)) and not isinstance(x, bool) and 0 <= x < 1 for x in fthr
+    ):
+        o.fail("fpfn_thresholds", f"must be a list of numbers in [0, 1), got {fthr!r}")
+    output = OutputSpec(
+        maps=o.get("maps", "bool", True),
+        figures=o.get("figures", "bool", True),
+        fpfn=o.get("fpfn", "str", "first", choices=("first", "all", "none")),
+        fpfn_thresholds=tuple(float(x) for x in fthr),
+        dpi=o.get("dpi", "int", 100, lo=20, hi=600),
+    )
+    o.finish()
+    return ExperimentSpec(name, seed, description, tuple(datasets), tuple(algorithms), metrics, output,
+                          source, json.loads(json.dumps(data, default=str)))  # fmt: skip
+
+
+def load_spec(path: str | os.PathLike) -> ExperimentSpec:
+    """Read and validate a TOML spec file (module docstring); raises :class:`SpecError`."""
+    path = Path(path)
+    try:
+        text = path.read_text()
+    except FileNotFoundError:
+        raise SpecError(f"{path}: no such spec file") from None
+    try:
+        data = tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise SpecError(f"{path}: not valid TOML ({e})") from None
+    return parse_spec(data, str(path), path.resolve().parent)

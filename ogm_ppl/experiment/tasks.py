@@ -1,0 +1,469 @@
+r"""The tasks of an experiment: pure functions of (spec entry, seed) that read and write files under the
+output folder, so that the same call gives the same files in this process or on any dask worker.
+
+=========  ============================================================  ==================================
+task       does                                                           done when (resume)
+=========  ============================================================  ==================================
+base       simulated: ground-truth map + planned route; log: the read     ``datasets/_base/B.json``
+           log, the benchmark map (traditional OGM of all readings > thr)
+dataset    the readings of one dataset (``save_dataset``) + what it is    ``datasets/D.json``
+           scored on (truth, mapped and touched cells: ``D.eval.npz``)
+run        one algorithm on one dataset (one chain): marginals            ``tasks/D/A/cN/result.json``
+           (npz + PNG); Gibbs checkpoints and F1-against-time records
+score      chains averaged; P-R curve, best F1, AUC, touched-only scores  ``maps/D/A.json``
+=========  ============================================================  ==================================
+
+Every done-file carries a hash of what the task was asked to do (``task_hash``); a rerun with a changed
+entry recomputes. Every file is written atomically. Each task runs with float64 as torch's default type,
+one torch thread and its own torch RNG state (:func:`task_env`), so the numbers do not depend on the
+process, the worker or what ran before.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import hashlib
+import json
+import math
+import os
+import tempfile
+import threading
+import time
+from dataclasses import asdict
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from ..io import atomic_write_text
+
+__all__ = ["TASK_VERSION", "task_hash", "task_env", "run_base", "run_dataset", "run_algorithm", "run_score",
+           "base_dir", "dataset_path", "run_dir", "score_path"]  # fmt: skip
+
+TASK_VERSION = 1
+_GIBBS_LOCK = (
+    threading.Lock()
+)  # torch's global RNG is per process: one Gibbs run at a time per process
+
+
+# ------------------------------------------------------------------------------------------ helpers
+def task_hash(*parts) -> str:
+    """A short hash of what a task is asked to do (JSON of ``parts`` and :data:`TASK_VERSION`)."""
+    text = json.dumps([TASK_VERSION, *parts], sort_keys=True, default=str)
+    return hashlib.sha256(text.encode()).hexdigest()[:16]
+
+
+@contextlib.contextmanager
+def task_env():
+    """float64 default dtype, one torch thread, and the caller's torch RNG state restored afterwards."""
+    dtype, threads = torch.get_default_dtype(), torch.get_num_threads()
+    torch.set_default_dtype(torch.float64)
+    torch.set_num_threads(1)
+    try:
+        with torch.random.fork_rng(devices=[]):
+            yield
+    finally:
+        torch.set_default_dtype(dtype)
+        torch.set_num_threads(threads)
+
+
+def _savez(path: Path, **arrays) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, "wb") as f:
+            np.savez_compressed(f, **arrays)
+        os.replace(tmp, path)
+    except BaseException:
+        Path(tmp).unlink(missing_ok=True)
+        raise
+    return path
+
+
+def _write_json(path: Path, obj) -> None:
+    atomic_write_text(path, json.dumps(obj, indent=1, sort_keys=True, allow_nan=True))
+
+
+def read_done(path: Path, expected_hash: str | None = None):
+    """The done-file at ``path`` if it exists, is readable and (if given) carries ``expected_hash``."""
+    try:
+        d = json.loads(Path(path).read_text())
+    except (FileNotFoundError, json.JSONDecodeError, OSError):
+        return None
+    if expected_hash is not None and d.get("hash") != expected_hash:
+        return None
+    return d
+
+
+def _grid_array(grid) -> np.ndarray:
+    return np.array([*grid.shape, grid.resolution, *grid.origin], dtype=float)
+
+
+def _grid_from(a):
+    from ..grid import Grid
+
+    a = np.asarray(a, float)
+    return Grid(tuple(int(s) for s in a[:-3]), float(a[-3]), (float(a[-2]), float(a[-1])))
+
+
+def base_dir(out: Path) -> Path:
+    return Path(out) / "datasets" / "_base"
+
+
+def dataset_path(out: Path, ds) -> Path:
+    return Path(out) / "datasets" / f"{ds.name}.npz"
+
+
+def run_dir(out: Path, ds, alg, chain: int) -> Path:
+    return Path(out) / "tasks" / ds.name / alg.name / f"c{chain}"
+
+
+def score_path(out: Path, ds, alg) -> Path:
+    return Path(out) / "maps" / ds.name / f"{alg.name}.json"
+
+
+def _png(path: Path, probs, grid, title: str, dpi: int) -> None:
+    from ..viz import _plt, plot_map
+
+    plt = _plt()
+    fig, ax = plt.subplots(figsize=(5, 5))
+    plot_map(np.asarray(probs).reshape(grid.shape), grid, ax=ax, title=title)
+    tmp = path.with_name(f".{path.stem}.tmp.png")
+    fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
+    plt.close(fig)
+    os.replace(tmp, path)
+
+
+# ------------------------------------------------------------------------------------------ base
+def run_base(ds, out: str, h: str) -> dict:
+    """Build the shared part of a dataset (see the module docstring); returns its done-record."""
+    from ..datasets.dataset_file import save_dataset
+    from ..grid import Grid
+    from ..inference import evidence_grid_from_scans
+    from ..models import delta_by_name
+
+    out = Path(out)
+    p = ds.base_params
+    t0 = time.perf_counter()
+    npz = base_dir(out) / f"{ds.base}.npz"
+    with task_env():
+        if ds.kind == "simulated":
+            from ..datasets.mapgen import KINDS, generate_map
+            from ..datasets.stop_and_scan import plan_route
+
+            kind = KINDS[p["map_seed"] % len(KINDS)] if p["map"] == "mixed" else p["map"]
+            truth = generate_map(kind, tuple(p["size"]), seed=p["map_seed"], border=p["border"])
+            grid = Grid(truth.shape, resolution=p["resolution"])
+            route = plan_route(
+                truth,
+                grid,
+                num_poses=p["poses"],
+                max_range_cells=p["max_range_cells"],
+                seed=p["seed"],
+            )
+            _savez(npz, grid=_grid_array(grid), truth=truth, route=route)
+            info = {
+                "map_kind": kind,
+                "route_poses": len(route),
+                "occupied_share": float(truth.mean()),
+            }
+        else:
+            from ..datasets.carmen import read_carmen
+
+            log = read_carmen(p["path"], **p["reader"])
+            if p["extent"] is not None:
+                x0, y0, w, hgt = p["extent"]
+                res = p["resolution"]
+                grid = Grid((round(hgt / res), round(w / res)), res, (x0, y0))
+            else:
+                grid = log.grid(p["resolution"], p["margin"])
+            b = p["benchmark"]
+            ev = evidence_grid_from_scans(
+                grid, log.scans, delta_by_name(b["delta"]), prior=b["prior"]
+            )
+            truth = (ev.probabilities.numpy() > b["threshold"]).reshape(grid.shape)
+            mapped = ev.observed.numpy().reshape(grid.shape)
+            save_dataset(base_dir(out) / f"{ds.base}.scans.npz", log.scans, grid=grid, truth=truth,
+                         settings={"reader": p["reader"]}, provenance={"log": p["path"]})  # fmt: skip
+            _savez(npz, grid=_grid_array(grid), truth=truth, mapped=mapped)
+            info = {"scans": int(log.scans.num_scans), "valid_readings": int(log.scans.num_valid),
+                    "benchmark_occupied": int(truth.sum()), "mapped_share": float(mapped.mean()),
+                    "log_counts": {k: int(v) for k, v in log.counts.items()}}  # fmt: skip
+    rec = {
+        "hash": h,
+        "base": ds.base,
+        "shape": list(grid.shape),
+        "seconds": time.perf_counter() - t0,
+        **info,
+    }
+    _write_json(base_dir(out) / f"{ds.base}.json", rec)
+    return rec
+
+
+# ------------------------------------------------------------------------------------------ dataset
+def run_dataset(ds, out: str, h: str, _base=None) -> dict:
+    """Build one dataset from its base: readings (``save_dataset``) + ``.eval.npz``; returns the record."""
+    from ..datasets.dataset_file import load_dataset, save_dataset
+    from ..inference import evidence_grid_from_scans
+    from ..models import delta_by_name
+
+    out = Path(out)
+    p = ds.params
+    t0 = time.perf_counter()
+    with task_env():
+        with np.load(base_dir(out) / f"{ds.base}.npz", allow_pickle=False) as z:
+            grid, truth = _grid_from(z["grid"]), z["truth"].astype(bool)
+            route = z["route"] if "route" in z.files else None
+            mapped = z["mapped"].astype(bool) if "mapped" in z.files else None
+        if ds.kind == "simulated":
+            from ..datasets.stop_and_scan import stop_and_scan
+
+            data = stop_and_scan(truth, grid, route=route, beams=p["beams"], max_range_cells=p["max_range_cells"],
+                                 sigma_cells=p["sigma_cells"], seed=p["seed"], pose_fraction=p["pose_fraction"],
+                                 beam_step=p["beam_step"])  # fmt: skip
+            scans = data.scans
+        else:
+            full = load_dataset(base_dir(out) / f"{ds.base}.scans.npz").scans
+            scans = full.subsample(pose_fraction=p["pose_fraction"], beam_step=p["beam_step"])
+        touched = (
+            evidence_grid_from_scans(grid, scans, delta_by_name("haehnel"))
+            .observed.numpy()
+            .reshape(grid.shape)
+        )
+        if mapped is None:  # simulated: the near-mapped mask grows from what this dataset touched
+            mapped = touched
+        save_dataset(dataset_path(out, ds), scans, grid=grid, truth=truth,
+                     settings={k: v for k, v in p.items() if k != "reader"} | {"reader": p.get("reader")},
+                     provenance={"experiment_dataset": ds.name, "base": ds.base})  # fmt: skip
+        _savez(
+            dataset_path(out, ds).with_suffix(".eval.npz"),
+            truth=truth,
+            mapped=mapped,
+            touched=touched,
+        )
+    rec = {"hash": h, "dataset": ds.name, "scans": int(scans.num_scans), "beams_per_scan": int(scans.beams_per_scan),
+           "valid_readings": int(scans.num_valid), "cells": int(grid.num_cells), "touched_share": float(touched.mean()),
+           "truth_occupied_share": float(truth.mean()), "seconds": time.perf_counter() - t0}  # fmt: skip
+    _write_json(out / "datasets" / f"{ds.name}.json", rec)
+    return rec
+
+
+def load_eval(out: Path, ds, metrics):
+    """``truth``, the scoring ``mask`` and the ``touched`` mask (flat bool) of a dataset."""
+    from ..metrics import near_mapped_mask
+
+    with np.load(dataset_path(out, ds).with_suffix(".eval.npz"), allow_pickle=False) as z:
+        truth, mapped, touched = (
+            z["truth"].astype(bool),
+            z["mapped"].astype(bool),
+            z["touched"].astype(bool),
+        )
+    if metrics.mask_for(ds.kind) == "near_mapped":
+        mask = near_mapped_mask(mapped, metrics.near_mapped_distance)
+    else:
+        mask = np.ones_like(truth)
+    return truth.ravel(), mask.ravel(), (mask & touched).ravel()
+
+
+def _quick_scores(q, truth, mask, thresholds) -> dict:
+    from ..metrics import best_f1, roc_auc
+
+    f1, thr = best_f1(q, truth, thresholds=np.asarray(thresholds), mask=mask)
+    t = truth[mask]
+    auc = roc_auc(q, truth, mask=mask) if 0 < t.sum() < t.size else float("nan")
+    return {"f1": f1, "threshold": thr, "auc": auc}
+
+
+# ------------------------------------------------------------------------------------------ run
+def _model(ds, alg, grid, scans):
+    from ..models.occupancy import OccupancyModel
+    from ..priors.named import prior_by_name
+    from ..raycast import raycast
+    from ..sensors import GaussianRange
+
+    sigma = alg.params.get("sigma_cells") or ds.params["sigma_cells"]
+    rays = raycast(grid, scans)
+    return OccupancyModel(
+        grid, rays, GaussianRange(float(sigma)), prior_by_name(alg.params["prior"], grid.shape)
+    )
+
+
+def _patch_arg(patch):
+    return tuple(patch) if isinstance(patch, list) else patch
+
+
+def _ckpt_sweep(path: Path) -> int:
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return int(z["sweep"])
+    except Exception:
+        return 0
+
+
+def _gibbs(ds, alg, model, seed, folder: Path, truth, mask, thresholds, resume, stop_after):
+    from ..inference import CellGibbs, PatchGibbs, RunningStats, run_gibbs
+
+    p = alg.params
+    ckpt, trace_path = folder / "gibbs.npz", folder / "trace.json"
+    if not resume:
+        ckpt.unlink(missing_ok=True)
+        trace_path.unlink(missing_ok=True)
+    trace = []
+    if ckpt.exists():
+        trace = (read_done(trace_path) or {}).get("trace", [])
+    elif trace_path.exists():
+        trace_path.unlink()
+    start = _ckpt_sweep(ckpt) if ckpt.exists() else 0
+    trace = [r for r in trace if r["sweep"] <= start]
+    warm, n = p["burn_in"], p["sweeps"]
+    total = warm + n
+    k = p["record"]
+    marks = (
+        sorted({warm + math.ceil(i * n / k) for i in range(1, k + 1)} | {total}) if k else [total]
+    )
+    if p["patch"] == 1:
+        kernel = CellGibbs(model, scan=p["scan"], init=p["init"], delta=p["init_delta"])
+    else:
+        kernel = PatchGibbs(model, patch=_patch_arg(p["patch"]), scan=p["scan"], p_rand_patch=p["p_rand_patch"],
+                            init=p["init"], delta=p["init_delta"])  # fmt: skip
+    stats = RunningStats(model)
+    done, seconds = start, (trace[-1]["seconds"] if trace else 0.0)
+    budget = stop_after
+    for mark in marks:
+        if mark <= done:
+            continue
+        step = mark - done
+        if budget is not None:
+            step = min(step, budget)
+        r = run_gibbs(kernel, n, stats, warmup=warm, seed=seed, checkpoint=ckpt,
+                      checkpoint_every=p["checkpoint_every"], progress=False, stop_after=step)  # fmt: skip
+        done, seconds = r.sweeps, seconds + r.seconds
+        if budget is not None:
+            budget -= step
+        if done == mark:
+            rec = {"sweep": done, "samples": int(stats.n), "seconds": seconds}
+            if stats.n:
+                rec.update(_quick_scores(stats.marginals.numpy(), truth, mask, thresholds))
+            trace.append(rec)
+            _write_json(trace_path, {"trace": trace})
+        if budget is not None and budget <= 0 and done < total:
+            return None, trace, start, done
+    if stats.n == 0:  # every mark was reached before (killed after the last checkpoint): load it
+        r = run_gibbs(kernel, n, stats, warmup=warm, seed=seed, checkpoint=ckpt,
+                      checkpoint_every=p["checkpoint_every"], progress=False)  # fmt: skip
+        done = r.sweeps
+    return stats.marginals.numpy(), trace, start, done
+
+
+def run_algorithm(ds, alg, chain: int, seed: int, metrics, output, out: str, h: str, resume: bool = True,
+                  stop_after: int | None = None, _deps=None) -> dict | None:  # fmt: skip
+    """Run one algorithm on one dataset (one chain); writes ``marginals.npz`` (+ ``map.png``) and
+    ``result.json`` under ``tasks/D/A/cN`` and returns the result record.
+
+    ``stop_after`` (tests, and a deliberate pause): stop a Gibbs run after that many sweeps of this
+    call, leaving its checkpoint and no result (returns None); the next call resumes it.
+    """
+    from ..datasets.dataset_file import load_dataset
+
+    out = Path(out)
+    folder = run_dir(out, ds, alg, chain)
+    folder.mkdir(parents=True, exist_ok=True)
+    data = load_dataset(dataset_path(out, ds))
+    grid, scans = data.grid, data.scans
+    truth, mask, _ = load_eval(out, ds, metrics)
+    t0 = time.perf_counter()
+    extra: dict = {}
+    with task_env():
+        p = alg.params
+        if alg.kind == "ogm":
+            from ..inference import evidence_grid_from_scans
+            from ..models import delta_by_name
+
+            ev = evidence_grid_from_scans(grid, scans, delta_by_name(p["delta"]), prior=p["prior"],
+                                          clamp=tuple(p["clamp"]) if p["clamp"] else None)  # fmt: skip
+            q = ev.probabilities.numpy()
+        elif alg.kind == "patch_map":
+            from ..inference.patch_map import offline_patch_map, online_patch_map
+
+            model = _model(ds, alg, grid, scans)
+            if p["mode"] == "offline":
+                pm = offline_patch_map(model, _patch_arg(p["patch"]), overlap=p["overlap"])
+            else:
+                pm = online_patch_map(model, _patch_arg(p["patch"]))
+            q = pm.marginals.numpy()
+        else:
+            model = _model(ds, alg, grid, scans)
+            with _GIBBS_LOCK:
+                q, trace, start, done = _gibbs(ds, alg, model, seed, folder, truth, mask, metrics.thresholds,
+                                               resume, stop_after)  # fmt: skip
+            if q is None:
+                return None
+            extra = {"trace": trace, "resumed_from_sweep": start, "sweeps_total": done}
+    seconds = time.perf_counter() - t0
+    q = np.asarray(q, dtype=np.float64)
+    _savez(folder / "marginals.npz", marginals=q.reshape(grid.shape), format_version=np.int64(1))
+    if output.maps:
+        _png(folder / "map.png", q, grid, f"{ds.name} / {alg.name} / chain {chain}", output.dpi)
+    rec = {"hash": h, "dataset": ds.name, "algorithm": alg.name, "chain": chain, "seed": seed, "seconds": seconds,
+           **_quick_scores(q, truth, mask, metrics.thresholds), **extra}  # fmt: skip
+    _write_json(folder / "result.json", rec)
+    (folder / "gibbs.npz").unlink(missing_ok=True)  # the result is final: the checkpoint is spent
+    return rec
+
+
+# ------------------------------------------------------------------------------------------ score
+def run_score(ds, alg, metrics, output, out: str, h: str, _deps=None) -> dict:
+    """Average the chains' marginals and score them; writes ``maps/D/A.{npz,png,json}``."""
+    from .. import metrics as M
+
+    out = Path(out)
+    qs = []
+    for c in range(alg.chains):
+        with np.load(run_dir(out, ds, alg, c) / "marginals.npz", allow_pickle=False) as z:
+            qs.append(z["marginals"].ravel())
+    q = np.mean(np.stack(qs), axis=0) if len(qs) > 1 else qs[0]
+    truth, mask, touched = load_eval(out, ds, metrics)
+    thr = np.asarray(metrics.thresholds)
+
+    def block(m):
+        c = M.precision_recall(q, truth, thresholds=thr, mask=m)
+        i = int(np.argmax(c.f1))
+        t = truth[m]
+        d = {"cells": int(m.sum()), "occupied": int(t.sum()), "best_f1": float(c.f1[i]),
+             "threshold": float(c.thresholds[i]), "precision": float(c.precision[i]), "recall": float(c.recall[i]),
+             "curve": {"thresholds": c.thresholds.tolist(), "precision": c.precision.tolist(),
+                       "recall": c.recall.tolist(), "f1": c.f1.tolist(), "tp": c.tp.tolist(), "fp": c.fp.tolist(),
+                       "fn": c.fn.tolist()}}  # fmt: skip
+        both = 0 < t.sum() < t.size
+        if "auc" in metrics.scores:
+            d["auc"] = M.roc_auc(q, truth, mask=m) if both else float("nan")
+        if "max_precision" in metrics.scores:
+            has = c.tp > 0
+            d["max_precision"] = float(c.precision[has].max()) if has.any() else float("nan")
+        if "nll_bits" in metrics.scores:
+            d["nll_bits"] = M.nll_bits(q, truth, m)
+        if "brier" in metrics.scores:
+            d["brier"] = M.brier_score(q, truth, m)
+        if "ece" in metrics.scores:
+            d["ece"] = M.expected_calibration_error(q, truth, m)
+        return d
+
+    rec = {"hash": h, "dataset": ds.name, "algorithm": alg.name, "condition": ds.condition, "entry": ds.entry,
+           "measurement_fraction": ds.measurement_fraction, "chains": alg.chains, "mask": block(mask)}  # fmt: skip
+    if metrics.touched_only:
+        rec["touched"] = block(touched)
+    path = score_path(out, ds, alg)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    from ..datasets.dataset_file import load_dataset
+
+    grid = load_dataset(dataset_path(out, ds)).grid
+    _savez(path.with_suffix(".npz"), marginals=q.reshape(grid.shape), format_version=np.int64(1))
+    if output.maps:
+        _png(path.with_suffix(".png"), q, grid, f"{ds.name} / {alg.name}", output.dpi)
+    _write_json(path, rec)
+    return rec
+
+
+def spec_entry(obj) -> dict:
+    """A spec dataclass as a plain dict (for hashes)."""
+    return asdict(obj)

@@ -1,0 +1,233 @@
+"""The experiment runner: spec validation, serial == dask bit for bit, resume, outputs."""
+
+import json
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ogm_ppl.experiment import SpecError, derive_seed, load_spec, parse_spec, run_experiment
+from ogm_ppl.experiment import tasks as T
+
+SMOKE = Path(__file__).resolve().parents[2] / "experiments" / "specs" / "smoke.toml"
+
+
+def tiny(**output) -> dict:
+    """The smoke spec cut down for tests: one dataset, OGM and a 2-chain border-prior Gibbs run."""
+    d = tomllib.loads(SMOKE.read_text())
+    d["datasets"][0]["pose_fraction"] = 1.0
+    d["algorithms"] = [d["algorithms"][0], d["algorithms"][1]]
+    d["output"] = {"maps": False, "figures": False, **output}
+    return d
+
+
+@pytest.fixture(scope="module")
+def serial_run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("serial")
+    return run_experiment(parse_spec(tiny(), "tiny.toml"), out, scheduler="serial", progress=False)
+
+
+def _numbers(out: Path) -> dict:
+    m = json.loads((out / "metrics.json").read_text())
+    runs = [
+        {k: v for k, v in r.items() if k not in ("seconds", "trace", "resumed_from_sweep")}
+        for r in m["runs"]
+    ]
+    traces = [
+        [{k: v for k, v in t.items() if k != "seconds"} for t in r.get("trace", [])]
+        for r in m["runs"]
+    ]
+    maps = {
+        str(p.relative_to(out)): np.load(p)["marginals"]
+        for p in sorted(out.glob("tasks/**/marginals.npz"))
+    }
+    return {
+        "scores": m["scores"],
+        "pooled": m["pooled"],
+        "runs": runs,
+        "traces": traces,
+        "maps": maps,
+    }
+
+
+def _same(a: dict, b: dict) -> None:
+    assert a["scores"] == b["scores"] and a["pooled"] == b["pooled"]
+    assert a["runs"] == b["runs"] and a["traces"] == b["traces"]
+    assert a["maps"].keys() == b["maps"].keys()
+    for k in a["maps"]:
+        assert np.array_equal(a["maps"][k], b["maps"][k]), k
+
+
+# ------------------------------------------------------------------------------------------ spec
+def test_smoke_spec_loads_and_expands():
+    spec = load_spec(SMOKE)
+    assert [d.name for d in spec.datasets] == ["office-pf1", "office-pf0.5"]
+    assert {d.condition for d in spec.datasets} == {"office-pf1", "office-pf0.5"}
+    assert [a.name for a in spec.algorithms] == ["ogm", "gibbs-border-L9", "patchmap-L9"]
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (
+            lambda d: d["datasets"][0].update(sigma_cells=-1),
+            "datasets[0] ('office').sigma_cells: must be > 0",
+        ),
+        (
+            lambda d: d["datasets"][0].update(sigma_cell=1.0),
+            "datasets[0] ('office').sigma_cell: unknown key",
+        ),
+        (lambda d: d["datasets"][0].pop("kind"), "datasets[0] ('office').kind: is required"),
+        (
+            lambda d: d["datasets"][0].update(kind="video"),
+            "kind: must be one of 'simulated', 'log'",
+        ),
+        (
+            lambda d: d["datasets"][0].update(pose_fraction=[0.5, 0.5]),
+            "pose_fraction: lists a value twice",
+        ),
+        (lambda d: d["datasets"][0].update(name="a b"), "name: may hold only"),
+        (
+            lambda d: d["algorithms"][1].update(prior="border:nowhere"),
+            "algorithms[1] ('gibbs-border-L9').prior:",
+        ),
+        (lambda d: d["algorithms"][1].update(patch=[9, 9]), "patch: 9 x 9 patches are too large"),
+        (lambda d: d["algorithms"][1].update(sweeps=0), "sweeps: must be >= 1"),
+        (
+            lambda d: d["algorithms"][0].update(delta="nonsense"),
+            "algorithms[0] ('ogm').delta: unknown update term",
+        ),
+        (
+            lambda d: d["algorithms"].append(dict(d["algorithms"][0])),
+            "the name 'ogm' is used twice",
+        ),
+        (lambda d: d["metrics"].update(mask="everything"), "metrics.mask: must be one of"),
+        (lambda d: d["output"].update(fpfn="some"), "output.fpfn: must be one of"),
+        (lambda d: d.update(extras={}), "extras: unknown table"),
+        (lambda d: d.update(datasets=[]), "datasets: at least one"),
+        (
+            lambda d: d["datasets"].append({"name": "x", "kind": "log", "path": "missing.log.gz"}),
+            "datasets[1] ('x').path: no such log file",
+        ),
+    ],
+)
+def test_spec_errors_name_file_and_key(edit, message):
+    d = tomllib.loads(SMOKE.read_text())
+    edit(d)
+    with pytest.raises(SpecError) as e:
+        parse_spec(d, "smoke.toml")
+    assert str(e.value).startswith("smoke.toml: ") and message in str(e.value), str(e.value)
+
+
+def test_bad_toml_and_missing_file(tmp_path):
+    p = tmp_path / "bad.toml"
+    p.write_text("[experiment\nname = 1")
+    with pytest.raises(SpecError, match=r"bad\.toml: not valid TOML"):
+        load_spec(p)
+    with pytest.raises(SpecError, match="no such spec file"):
+        load_spec(tmp_path / "none.toml")
+
+
+def test_seeds_depend_on_names_not_positions():
+    a = derive_seed(7, "run", "office", "ogm", 0)
+    assert a == derive_seed(7, "run", "office", "ogm", 0) and 0 <= a < 2**63
+    assert (
+        len(
+            {
+                a,
+                derive_seed(7, "run", "office", "ogm", 1),
+                derive_seed(8, "run", "office", "ogm", 0),
+            }
+        )
+        == 3
+    )
+    d = tiny()
+    d["algorithms"].reverse()  # reordering the spec changes no task's seed
+    s1 = {t.id: t.args[3] for t in _plan(tiny()) if t.kind == "run"}
+    s2 = {t.id: t.args[3] for t in _plan(d) if t.kind == "run"}
+    assert s1 == s2
+
+
+def _plan(d):
+    from ogm_ppl.experiment import plan_tasks
+
+    return plan_tasks(parse_spec(d, "tiny.toml"), Path("/nonexistent"))
+
+
+# ------------------------------------------------------------------------------------------ runs
+def test_serial_run_writes_outputs(serial_run, tmp_path):
+    out = serial_run.out_dir
+    for f in ("metrics.json", "metrics.md", "spec.json", "datasets/office.npz", "datasets/office.eval.npz",
+              "maps/office/ogm.npz", "tasks/office/gibbs-border-L9/c1/result.json"):  # fmt: skip
+        assert (out / f).exists(), f
+    assert not list(out.glob("tasks/**/gibbs.npz")), "spent checkpoints are removed"
+    s = {(r["dataset"], r["algorithm"]): r for r in serial_run.scores}
+    for r in s.values():
+        assert (
+            0.5 < r["mask"]["best_f1"] <= 1
+            and 0.5 < r["mask"]["auc"] <= 1
+            and "best_f1" in r["touched"]
+        )
+    g = next(r for r in serial_run.runs if r["algorithm"] == "gibbs-border-L9")
+    assert [t["sweep"] for t in g["trace"]] == [4, 6, 8] and all("f1" in t for t in g["trace"])
+    md = (out / "metrics.md").read_text()
+    assert "| ogm |" in md and "| gibbs-border-L9 |" in md
+
+
+def test_figures_and_maps(tmp_path):
+    d = tiny(maps=True, figures=True, dpi=30)
+    d["datasets"][0]["pose_fraction"] = [1.0, 0.5]
+    d["algorithms"][1].update(sweeps=2, burn_in=0, chains=1, record=2)
+    r = run_experiment(parse_spec(d, "fig.toml"), tmp_path, scheduler="serial", progress=False)
+    names = {p.name for p in (tmp_path / "figures").glob("*.png")}
+    for n in ("pr_office-pf1.png", "f1_threshold_office-pf0.5.png", "f1_sparsity_office.png",
+              "fpfn_office-pf1.png", "fpfn_thresholds_office-pf0.5.png", "f1_time_office-pf1.png"):  # fmt: skip
+        assert n in names, n
+    assert (tmp_path / "tasks/office-pf1/ogm/c0/map.png").exists() and (
+        tmp_path / "maps/office-pf1/ogm.png"
+    ).exists()
+    assert len(r.pooled) == 4
+
+
+def test_serial_equals_two_worker_local_cluster(serial_run, tmp_path):
+    r = run_experiment(parse_spec(tiny(), "tiny.toml"), tmp_path, workers=2, progress=False)
+    assert not r.failed and not r.skipped
+    _same(_numbers(serial_run.out_dir), _numbers(tmp_path))
+
+
+def test_resume_skips_finished_tasks_and_reruns_missing(serial_run, tmp_path):
+    import shutil
+
+    out = tmp_path / "copy"
+    shutil.copytree(serial_run.out_dir, out)
+    spec = parse_spec(tiny(), "tiny.toml")
+    r = run_experiment(spec, out, scheduler="serial", progress=False)
+    assert r.executed == [] and len(r.skipped) == 7
+    (out / "tasks/office/gibbs-border-L9/c1/result.json").unlink()
+    r = run_experiment(spec, out, scheduler="serial", progress=False)
+    assert r.executed == ["run/office/gibbs-border-L9/c1", "score/office/gibbs-border-L9"]
+    _same(_numbers(serial_run.out_dir), _numbers(out))
+    d = tiny()
+    d["algorithms"][0]["prior"] = 0.4  # a changed entry is recomputed, with its dependants only
+    r = run_experiment(parse_spec(d, "tiny.toml"), out, scheduler="serial", progress=False)
+    assert r.executed == ["run/office/ogm/c0", "score/office/ogm"]
+
+
+def test_interrupted_gibbs_task_resumes_bit_for_bit(serial_run, tmp_path):
+    import shutil
+
+    out = tmp_path / "copy"
+    shutil.copytree(serial_run.out_dir, out)
+    spec = parse_spec(tiny(), "tiny.toml")
+    task = next(t for t in __import__("ogm_ppl.experiment", fromlist=["plan_tasks"]).plan_tasks(spec, out)
+                if t.id == "run/office/gibbs-border-L9/c0")  # fmt: skip
+    task.done_file.unlink()
+    assert T.run_algorithm(*task.args, stop_after=3) is None  # "killed" after 3 of 8 sweeps
+    folder = task.done_file.parent
+    assert (folder / "gibbs.npz").exists() and not task.done_file.exists()
+    r = run_experiment(spec, out, scheduler="serial", progress=False)
+    assert r.executed == ["run/office/gibbs-border-L9/c0", "score/office/gibbs-border-L9"]
+    res = json.loads(task.done_file.read_text())
+    assert res["resumed_from_sweep"] == 3
+    _same(_numbers(serial_run.out_dir), _numbers(out))
