@@ -8,7 +8,12 @@ thesis; L = 1 is the 1 x 1 table, i.e. the learned cell prior) and border (p(pat
 given its 8 neighbours, 3 x 3 given 16 border cells, and 5 x 5 given 24, which the thesis did not
 compute). Tables are counted here from the example's own ground truth with its 8 flips/rotations (the
 learned corpus tables arrive separately). Also: a 500 x 500 / 72,000-ray single-cell sweep with the MRF
-prior next to the independent prior (target: within 1.5x). Writes out/bench/bench_priors.json.
+prior next to the independent prior (target: within 1.5x), and the border prior with 3 x 3 patches at the
+size of the thesis's Intel Lab experiment 1 (a 1500 x 1500 map, about 82,000 rays; 1518 s per sample in
+the thesis) on a simulated walled map. Writes out/bench/bench_priors.json.
+
+``--quick``: a smaller Table 5.1 map (100 x 160) and a 500 x 500 Intel-like map whose time is extrapolated
+to 1500 x 1500 (labelled as such), for iterating on a busy machine.
 """
 
 from __future__ import annotations
@@ -71,6 +76,72 @@ def window_codes(truth: np.ndarray, n: int) -> np.ndarray:
     return np.concatenate(out)
 
 
+def fast_window_codes(truth: np.ndarray, n: int) -> np.ndarray:
+    """Codes of all ``n x n`` windows of ``truth`` (no flips), by shifted slices: no ``n^2``-wide copy."""
+    t = truth.astype(np.int64)
+    R, C = t.shape[0] - n + 1, t.shape[1] - n + 1
+    code = np.zeros((R, C), np.int64)
+    for i in range(n * n):
+        code |= t[i // n : i // n + R, i % n : i % n + C] << i
+    return code.ravel()
+
+
+def border_table(truth: np.ndarray, n: int):
+    """(border, inner, count) of the ``(n + 2)^2`` windows of ``truth``: inner row-major, border the ring."""
+    full, cnt = np.unique(fast_window_codes(truth, n + 2), return_counts=True)
+    N = n + 2
+    pos = [(r, c) for r in range(N) for c in range(N)]
+    inner_pos = [i for i, (r, c) in enumerate(pos) if 0 < r < N - 1 and 0 < c < N - 1]
+    ring_pos = [i for i, (r, c) in enumerate(pos) if not (0 < r < N - 1 and 0 < c < N - 1)]
+    bits = (full[:, None] >> np.arange(N * N)) & 1
+    return ((bits[:, ring_pos] << np.arange(len(ring_pos))).sum(1), (bits[:, inner_pos] << np.arange(len(inner_pos))).sum(1),
+            cnt)  # fmt: skip
+
+
+def walled_map(n: int, seed: int = 0) -> np.ndarray:
+    """An ``n x n`` indoor-like map: outer walls and a grid of rooms (walls 1 cell thick) with doorways."""
+    rng = np.random.default_rng(seed)
+    truth = np.zeros((n, n), dtype=bool)
+    truth[0, :] = truth[-1, :] = truth[:, 0] = truth[:, -1] = True
+    room = 60
+    for x in range(room, n - 1, room):
+        truth[x, :] = True
+        truth[:, x] = True
+    for x in range(room, n - 1, room):  # doorways in every wall segment
+        for y in range(0, n - room, room):
+            d = y + int(rng.integers(8, room - 16))
+            truth[x, d : d + 8] = False
+            d = y + int(rng.integers(8, room - 16))
+            truth[d : d + 8, x] = False
+    return truth
+
+
+def intel_size(n: int = 1500, poses: int = 455, beams: int = 180, max_range_cells: int = 150) -> dict:
+    """Border prior, 3 x 3 patches, on an ``n x n`` walled map scanned with ``poses x beams`` rays (the
+    thesis's Intel Lab experiment 1: 1500 x 1500 cells, about 82,000 rays, 1518 s per map sample)."""
+    t0 = time.perf_counter()
+    truth = walled_map(n)
+    res = 0.05
+    grid = Grid(truth.shape, resolution=res)
+    rng = np.random.default_rng(1)
+    free = np.argwhere(~truth)
+    pick = free[rng.choice(len(free), poses, replace=False)]
+    xy = np.c_[(pick[:, 1] + 0.5) * res, (pick[:, 0] + 0.5) * res, rng.uniform(-np.pi, np.pi, poses)]
+    angles = np.linspace(-np.pi / 2, np.pi / 2, beams)  # a 180 degree scanner, as in the Intel data
+    scans = simulate_scans(grid, truth, xy, angles, max_range_cells * res, 3.0, 0)
+    rays = raycast(grid, scans)
+    prior = BorderPatchPrior(grid.shape, *border_table(truth, 3), inner=(3, 3))
+    model = OccupancyModel(grid, rays, GaussianRange(3.0), prior)
+    kern = PatchGibbs(model, (3, 3), p_rand_patch=0.001)
+    setup = time.perf_counter() - t0
+    s = sweep_seconds(kern, repeat=2)
+    out = {"cells": grid.num_cells, "rays": rays.num_rays, "seconds": s, "setup_seconds": setup,
+           "thesis_seconds": 1518.0}  # fmt: skip
+    print(f"\nIntel-size border prior, L = 9: {n} x {n} = {grid.num_cells:,} cells, {rays.num_rays:,} rays: "
+          f"{s:.3f} s per map sample (set-up {setup:.1f} s; thesis 1518 s)")  # fmt: skip
+    return out
+
+
 def priors_for(shape, truth):
     out = {}
     for L, n in ((1, 1), (9, 3), (25, 5)):
@@ -102,9 +173,9 @@ def sweep_seconds(kernel, repeat=3) -> float:
     return best_time(one, repeat=repeat, warmup=1)
 
 
-def table_5_1() -> dict:
+def table_5_1(rows: int = 200, cols: int = 320) -> dict:
     t0 = time.perf_counter()
-    grid, truth, scans = scaled_example()
+    grid, truth, scans = scaled_example(rows, cols)
     rays = raycast(grid, scans)
     sensor = GaussianRange(3.0)
     priors = priors_for(grid.shape, truth)
@@ -158,11 +229,20 @@ def mrf_overhead() -> dict:
     return out
 
 
-def main() -> dict:
-    payload = {"table_5_1": table_5_1(), "mrf_500": mrf_overhead()}
+def main(quick: bool = False) -> dict:
+    if quick:
+        payload = {"table_5_1_quick_100x160": table_5_1(100, 160)}
+        small = intel_size(500, poses=455, beams=180)
+        scale = 1500**2 / small["cells"]
+        small["extrapolated_1500x1500_seconds"] = small["seconds"] * scale
+        print(f"  extrapolated to 1500 x 1500 (x{scale:.0f} cells): {small['seconds'] * scale:.2f} s per sample")
+        payload["intel_size_quick_500"] = small
+        print("wrote", write_json("bench_priors_quick", payload))
+        return payload
+    payload = {"table_5_1": table_5_1(), "intel_size": intel_size(), "mrf_500": mrf_overhead()}
     print("wrote", write_json("bench_priors", payload))
     return payload
 
 
 if __name__ == "__main__":
-    main()
+    main(quick="--quick" in sys.argv[1:])

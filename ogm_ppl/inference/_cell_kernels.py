@@ -11,7 +11,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from ..priors.local import STENCIL, stencil_cell_log_odds, tile_cell_log_odds
+from ..priors.local import cell_log_odds
 
 
 @nb.njit(cache=True)
@@ -104,7 +104,7 @@ def local_icm_sweeps(order, lp, m, f, offsets, cells, c_off, c_ray, c_kappa, ll,
         changed = 0
         for i in range(order.shape[0]):
             k = order[i]
-            lo = stencil_cell_log_odds(lp, k, m) if lp.kind == STENCIL else tile_cell_log_odds(lp, k, m)
+            lo = cell_log_odds(lp, k, m)  # inlined
             lo += cell_log_lik_ratio(k, m, f, offsets, cells, c_off, c_ray, c_kappa, ll)
             v = m[k]
             if lo > 0.0:
