@@ -11,7 +11,6 @@ from ogm_ppl.datasets import THESIS_TOY_READINGS, toy_1d
 from ogm_ppl.inference.exact import brute_force, pose_constrained_1d
 from ogm_ppl.inference.gibbs import CellGibbs, MetropolisCell, PatchGibbs
 from ogm_ppl.inference.runner import RunningStats, run_gibbs
-from ogm_ppl.metrics import kl_divergence
 from ogm_ppl.priors import DataDriven1DPrior, IndependentPrior
 
 
