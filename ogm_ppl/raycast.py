@@ -21,7 +21,7 @@ cell holding the sensor) and cut at the grid edge. The rays are stored CSR-style
 first occupied cell, at its near face. A metric range ``r`` therefore becomes the kappa of the cell whose
 entry point is nearest to ``r``: ray cell ``kappa`` owns the ranges between the midpoints
 ``(t_{kappa-1} + t_kappa) / 2`` and ``(t_kappa + t_{kappa+1}) / 2`` of consecutive entry distances
-(ties go to the farther cell; a reading past the last entry midpoint inside the range belongs to the last
+(ties go to the nearer cell; a reading past the last entry midpoint inside the range belongs to the last
 cell). A noise-free reading of a wall entered at kappa ``f`` gives ``z = f`` exactly, and symmetric range
 noise gives readings whose kappa averages ``f``: the sensor models centre ``p(z | f)`` on ``f``
 (:mod:`ogm_ppl.sensors`), and :func:`~ogm_ppl.datasets.simulate_scans` measures ranges to the near face.

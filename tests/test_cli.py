@@ -108,7 +108,7 @@ def test_every_option_has_help():
     for name, p in [("ogm-ppl", parser), *sub.choices.items()]:
         for a in p._actions:
             assert a.help, (name, a.option_strings or a.dest)
-    assert set(sub.choices) == {"map", "simulate", "convert", "run"}
+    assert set(sub.choices) == {"map", "simulate", "convert", "experiment", "run"}
 
 
 def test_map_carmen_log(tmp_path, tiny_log, capsys):

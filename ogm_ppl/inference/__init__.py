@@ -2,9 +2,11 @@
 
 from . import exact, log_odds
 from .gibbs import CellGibbs, MetropolisCell, PatchGibbs
+from .guides import MeanFieldGuide, PatchGuide, fit_guide
 from .log_odds import LogOddsMap, evidence_grid, evidence_grid_from_scans
 from .map_estimate import MapEstimate, map_estimate
 from .runner import GibbsRun, RunningStats, run_gibbs
+from .structured_guides import ExactELBO, FirstHitGuide
 
 __all__ = [
     "exact",
@@ -20,4 +22,9 @@ __all__ = [
     "RunningStats",
     "GibbsRun",
     "run_gibbs",
+    "MeanFieldGuide",
+    "PatchGuide",
+    "FirstHitGuide",
+    "ExactELBO",
+    "fit_guide",
 ]

@@ -96,7 +96,7 @@ def kl_trace(kernel, exact_marginals: torch.Tensor, checkpoints: Sequence[int], 
     out = []
     for i in range(1, checkpoints[-1] + 1):
         params = kernel.sample(params)
-        acc += params["m"]
+        acc += kernel.model.full_map(params["m"])
         if i in checkpoints:
             out.append(float(kl_divergence(exact_marginals, (acc / i).clamp(eps, 1 - eps))))
     return torch.tensor(out, dtype=torch.float64)

@@ -90,10 +90,8 @@ def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: f
         else:
             raise ValueError(f"init must be 'ogm', 'prior', 'occupied', 'free' or a map, got {init!r}")
     else:
-        m = torch.as_tensor(init, dtype=torch.float64).flatten().clone()
-        if m.shape != (K,):
-            raise ValueError(f"init map must have {K} cells, got {tuple(m.shape)}")
-        m = (m != 0).to(torch.float64)
+        m = torch.as_tensor(init).flatten().clone()
+        m = model.check_maps(model.full_map(m) if m.shape != (K,) else m, what="init map").clone()
     m[model.known_free] = 0.0
     return m
 
@@ -196,16 +194,20 @@ class _MapKernel(MCMCKernel):
         self._pinned = model.known_free.numpy().astype(np.uint8)
         self._ready = True
 
+    def _latent_values(self, m: torch.Tensor) -> torch.Tensor:
+        """Site ``"m"`` holds the latent (not pinned) cells only (``L``), in ``model.latent`` order."""
+        return m[self.model.latent]
+
     def setup(self, warmup_steps=0, *args, **kwargs) -> None:
         self._prepare()
         if self._initial_params is None:
-            self._initial_params = {self.site: initial_map(self.model, self.init, self.delta)}
+            self._initial_params = {self.site: self._latent_values(initial_map(self.model, self.init, self.delta))}
         self._set_state(self._initial_params[self.site])
 
     @property
     def initial_params(self):
         if self._initial_params is None:
-            self._initial_params = {self.site: initial_map(self.model, self.init, self.delta)}
+            self._initial_params = {self.site: self._latent_values(initial_map(self.model, self.init, self.delta))}
         return self._initial_params
 
     @initial_params.setter
@@ -213,15 +215,15 @@ class _MapKernel(MCMCKernel):
         self._initial_params = params
 
     def _set_state(self, m) -> None:
-        m = torch.as_tensor(m)
-        self._m = np.ascontiguousarray((m.detach().cpu().numpy() != 0).astype(np.uint8))
+        m = self.model.check_maps(self.model.full_map(torch.as_tensor(m).detach().cpu()), what="kernel state")
+        self._m = np.ascontiguousarray((m.numpy() != 0).astype(np.uint8))
         self._m[self._pinned.astype(bool)] = 0
         self._f = first_hits(self._m, self._offsets, self._cells)
         self._last = None
 
     @property
     def state(self) -> np.ndarray:
-        """The current map (uint8, ``K``)."""
+        """The current full map (uint8, ``K``; site ``"m"`` carries its latent cells, ``model.full_map``)."""
         return self._m
 
     @property
@@ -237,7 +239,7 @@ class _MapKernel(MCMCKernel):
             self._set_state(m)
         self._changes += self._sweep()
         self.sweeps += 1
-        out = torch.from_numpy(self._m.astype(np.float64))
+        out = torch.from_numpy(self._m[self._latent].astype(np.float64))  # site "m": the latent cells
         self._last = out
         return {self.site: out}
 
@@ -288,7 +290,9 @@ class CellGibbs(_MapKernel):
     >>> model = OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0), IndependentPrior(0.5, 15))
     >>> mcmc = MCMC(CellGibbs(model), num_samples=50, warmup_steps=5, disable_progbar=True)
     >>> mcmc.run()
-    >>> mcmc.get_samples()["m"].shape
+    >>> mcmc.get_samples()["m"].shape  # the 14 latent cells (cell 0 holds the robot)
+    torch.Size([50, 14])
+    >>> model.full_map(mcmc.get_samples()["m"]).shape
     torch.Size([50, 15])
     """
 

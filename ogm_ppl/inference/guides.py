@@ -5,9 +5,15 @@ r"""Pyro guides for the occupancy model, so that VI and MCMC can be compared on 
 * :class:`PatchGuide` — a categorical over the ``2^L`` configurations of each non-overlapping patch (the
   patch-map family of Chapter 3, fitted variationally): cells within a patch are correlated.
 
-Both are Pyro guides for the site ``"m"`` of :meth:`OccupancyModel.model` and train with Pyro's
-``SVI`` and ``TraceGraph_ELBO`` (score-function gradients with vectorised particles; the discrete site is
-not reparameterisable): :func:`fit_guide`. Pinned (known-free) cells are fixed free.
+Both are Pyro guides (``PyroModule`` s) for the site ``"m"`` of :meth:`OccupancyModel.model` (the latent
+cells, event shape ``L``) and train with Pyro's ``SVI``: :func:`fit_guide` with ``loss="tracegraph"``
+(``TraceGraph_ELBO``, score-function gradients with vectorised particles; the discrete site is not
+reparameterisable), ``"rws"`` (``ReweightedWakeSleep``: importance-weighted wake-phi updates, which fit
+``KL(p || q)``) or ``"exact"`` (:class:`~ogm_ppl.inference.structured_guides.ExactELBO`, the ELBO in
+closed form where the guide and an independent prior allow it). Each instance has its own parameter
+names (``"<name>.logits"``, ``name`` defaulting to ``"<ClassName>_<n>"``, unique in the process). See
+:mod:`ogm_ppl.inference.structured_guides` for the first-hit guide, whose family holds the exact 1D
+posterior.
 
 Reverse-KL VI needs a likelihood without zeros: under ``GaussianRange(p_rand=0)`` a map with nothing on a
 ray that returned a hit is impossible, and every full-support guide samples such maps, so the ELBO is
@@ -16,6 +22,7 @@ ray that returned a hit is impossible, and every full-support guide samples such
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -23,34 +30,56 @@ import pyro
 import pyro.distributions as dist
 import torch
 from pyro.distributions.torch_distribution import TorchDistribution
+from pyro.nn import PyroModule, PyroParam
 from torch.distributions import constraints
 
 from ..models.occupancy import OccupancyModel
 from .patch_map import tile_patches
 
-__all__ = ["MeanFieldGuide", "PatchGuide", "PatchMapDistribution", "fit_guide"]
+__all__ = ["MeanFieldGuide", "PatchGuide", "PatchMapDistribution", "fit_guide", "guide_name"]
 
-_PINNED_LOGIT = -40.0
+_COUNTER = itertools.count()
 
 
-class MeanFieldGuide:
-    """``q(m) = prod_k Bernoulli(sigmoid(phi_k))`` with parameter ``"<name>.logits"``."""
+def guide_name(obj, name: str | None) -> str:
+    """``name``, or a fresh ``"<ClassName>_<n>"`` (unique in the process) when ``None``."""
+    return f"{type(obj).__name__}_{next(_COUNTER)}" if name is None else str(name)
 
-    def __init__(self, model: OccupancyModel, name: str = "mf", init_logits: torch.Tensor | None = None) -> None:
-        self.model = model
-        self.name = name
-        K = model.num_cells
-        self.init = torch.zeros(K, dtype=torch.float64) if init_logits is None else torch.as_tensor(init_logits, dtype=torch.float64).clone()
 
-    def logits(self) -> torch.Tensor:
-        phi = pyro.param(f"{self.name}.logits", self.init)
-        return torch.where(self.model.known_free, torch.tensor(_PINNED_LOGIT, dtype=phi.dtype), phi)
+class MeanFieldGuide(PyroModule):
+    """``q(m) = prod_k Bernoulli(sigmoid(phi_k))`` over the latent cells, parameter ``"<name>.logits"``
+    (``L``). ``init_logits``: ``K`` (pinned entries ignored) or ``L`` values."""
 
-    def __call__(self):
-        return pyro.sample("m", dist.Bernoulli(logits=self.logits()).to_event(1))
+    def __init__(self, model: OccupancyModel, name: str | None = None, init_logits: torch.Tensor | None = None) -> None:
+        super().__init__(guide_name(self, name))
+        self.occupancy = model
+        K, L = model.num_cells, len(model.latent)
+        init = torch.zeros(L, dtype=torch.float64) if init_logits is None else torch.as_tensor(init_logits, dtype=torch.float64).clone()
+        if init.shape == (K,) and K != L:
+            init = init[model.latent]
+        if init.shape != (L,) or not torch.isfinite(init).all():
+            raise ValueError(f"init_logits must be {L} (latent) or {K} finite values, got shape {tuple(init.shape)}")
+        self.logits = PyroParam(init)
+
+    @property
+    def name(self) -> str:
+        return self._pyro_name
+
+    def forward(self):
+        return pyro.sample("m", dist.Bernoulli(logits=self.logits).to_event(1))
+
+    def exact_elbo(self, model: OccupancyModel) -> torch.Tensor:
+        """The ELBO in closed form (independent prior, any rays): see :mod:`.structured_guides`."""
+        from .structured_guides import mean_field_elbo
+
+        with self._pyro_context:
+            return mean_field_elbo(model, self.logits)
 
     def marginals(self) -> torch.Tensor:
-        return torch.sigmoid(self.logits()).detach()
+        """``K`` occupancy probabilities (pinned cells 0)."""
+        out = torch.zeros(self.occupancy.num_cells, dtype=torch.float64)
+        out[self.occupancy.latent] = torch.sigmoid(self.logits).detach()
+        return out
 
 
 class PatchMapDistribution(TorchDistribution):
@@ -60,18 +89,25 @@ class PatchMapDistribution(TorchDistribution):
     arg_constraints: dict = {}
     support = constraints.independent(constraints.boolean, 1)
 
-    def __init__(self, logits: torch.Tensor, patches: torch.Tensor, num_cells: int, validate_args=None):
+    def __init__(self, logits: torch.Tensor, patches: torch.Tensor, num_cells: int, cells: torch.Tensor | None = None,
+                 validate_args=None):  # fmt: skip
         self.logits = logits - torch.logsumexp(logits, -1, keepdim=True)  # batch x P x W
         self.patches = patches
         self.num_cells = int(num_cells)
+        self.cells = cells  # event cells (e.g. the latent ones); None: all K
         self.bits = (torch.arange(logits.shape[-1])[:, None] >> torch.arange(patches.shape[1])) & 1  # W x L
-        super().__init__(logits.shape[:-2], torch.Size([num_cells]), validate_args=validate_args)
+        n = num_cells if cells is None else len(cells)
+        super().__init__(logits.shape[:-2], torch.Size([n]), validate_args=validate_args)
 
     def expand(self, batch_shape, _instance=None):
         logits = self.logits.expand(torch.Size(batch_shape) + self.logits.shape[-2:])
-        return PatchMapDistribution(logits, self.patches, self.num_cells)
+        return PatchMapDistribution(logits, self.patches, self.num_cells, self.cells)
 
     def _configs(self, value: torch.Tensor) -> torch.Tensor:
+        if self.cells is not None and value.shape[-1] != self.num_cells:
+            full = value.new_zeros(value.shape[:-1] + (self.num_cells,))
+            full[..., self.cells] = value
+            value = full
         live = self.patches >= 0
         cells = self.patches.clamp(min=0)
         v = value[..., cells].long() * live  # ... x P x L
@@ -84,7 +120,8 @@ class PatchMapDistribution(TorchDistribution):
         out = torch.zeros(shape + (self.num_cells + 1,), dtype=torch.float64)
         idx = torch.where(self.patches >= 0, self.patches, self.num_cells).expand(shape + self.patches.shape)
         out.scatter_(-1, idx.reshape(shape + (-1,)), bits.reshape(shape + (-1,)).to(torch.float64))
-        return out[..., : self.num_cells]
+        out = out[..., : self.num_cells]
+        return out if self.cells is None else out[..., self.cells]
 
     def log_prob(self, value):
         w = self._configs(value)
@@ -100,14 +137,14 @@ class PatchMapDistribution(TorchDistribution):
         return out[: self.num_cells]
 
 
-class PatchGuide:
+class PatchGuide(PyroModule):
     """Independent categoricals over the configurations of non-overlapping patches (a tiling of runs or
     rectangles, see :func:`~ogm_ppl.inference.gibbs.patch_shape`, in which a patch starts at column
-    ``offset``), parameter ``"<name>.logits"``."""
+    ``offset``), parameter ``"<name>.logits"`` (``P x 2^L``)."""
 
-    def __init__(self, model: OccupancyModel, patch=3, name: str = "patch", offset: int = 0) -> None:
-        self.model = model
-        self.name = name
+    def __init__(self, model: OccupancyModel, patch=3, name: str | None = None, offset: int = 0) -> None:
+        super().__init__(guide_name(self, name))
+        self.occupancy = model
         try:
             tiles = tile_patches(model, patch, offset)
         except ValueError as e:
@@ -119,21 +156,23 @@ class PatchGuide:
             live_first[i, : len(live)] = live
         self.patches = torch.from_numpy(live_first)
         self.L = self.patches.shape[1]
-
-    def _logits(self) -> torch.Tensor:
         P, W = self.patches.shape[0], 1 << self.L
-        init = torch.zeros(P, W, dtype=torch.float64)
         # configurations that switch on padding cells are impossible
         live = (self.patches >= 0).sum(1)
-        w = torch.arange(W)
-        valid = (w[None, :] >> live[:, None]) == 0
-        lg = pyro.param(f"{self.name}.logits", init)
-        return torch.where(valid, lg, torch.tensor(-math.inf, dtype=lg.dtype))
+        self._valid = (torch.arange(W)[None, :] >> live[:, None]) == 0
+        self.logits = PyroParam(torch.zeros(P, W, dtype=torch.float64))
+
+    @property
+    def name(self) -> str:
+        return self._pyro_name
 
     def distribution(self) -> PatchMapDistribution:
-        return PatchMapDistribution(self._logits(), self.patches, self.model.num_cells)
+        with self._pyro_context:
+            lg = self.logits
+        lg = torch.where(self._valid, lg, torch.tensor(-math.inf, dtype=lg.dtype))
+        return PatchMapDistribution(lg, self.patches, self.occupancy.num_cells, self.occupancy.latent)
 
-    def __call__(self):
+    def forward(self):
         return pyro.sample("m", self.distribution())
 
     def marginals(self) -> torch.Tensor:
@@ -142,27 +181,41 @@ class PatchGuide:
 
 
 def fit_guide(model: OccupancyModel, guide, steps: int = 1000, lr: float = 0.05, num_particles: int = 256,
-              seed: int = 0, progress: bool = False) -> list[float]:  # fmt: skip
-    """Train ``guide`` with ``SVI(model.model, guide, Adam(lr), TraceGraph_ELBO(num_particles, vectorised))``.
+              seed: int = 0, progress: bool = False, loss: str = "tracegraph") -> list[float]:  # fmt: skip
+    """Train ``guide`` with ``SVI(model.model, guide, Adam(lr), <loss>)``.
 
-    Returns the ELBO loss trace. Clears Pyro's parameter store first and seeds Pyro.
+    ``loss``: ``"tracegraph"`` (``TraceGraph_ELBO(num_particles, vectorised)``, score-function reverse
+    KL), ``"rws"`` (``ReweightedWakeSleep(num_particles)``, wake-phi only: importance-weighted
+    ``KL(p || q)``), or ``"exact"`` (:class:`~ogm_ppl.inference.structured_guides.ExactELBO`, for guides with
+    ``exact_elbo``). Returns the loss trace. Seeds Pyro; the guide's parameters live in the guide (a
+    ``PyroModule``), so other guides' parameters are untouched.
     """
-    from pyro.infer import SVI, TraceGraph_ELBO
+    from pyro.infer import SVI, ReweightedWakeSleep, TraceGraph_ELBO
     from pyro.optim import Adam
     from tqdm.auto import tqdm
 
+    from .structured_guides import ExactELBO
+
     valid = torch.arange(model.loglik_table.shape[1])[None, :] <= model.lengths[:, None]
-    if torch.isinf(model.loglik_table[valid]).any():
+    if loss != "exact" and torch.isinf(model.loglik_table[valid]).any():
         raise ValueError(
             "the model gives some maps zero likelihood (e.g. a hit on a ray with no occupied cell under "
             "GaussianRange(p_rand=0)); KL(q || p) is then infinite for any guide that can sample them. "
             "Use a sensor without zeros, e.g. GaussianRange(sigma, p_rand=1e-3)"
         )
-    pyro.clear_param_store()
+    if loss == "tracegraph":
+        objective = TraceGraph_ELBO(num_particles=num_particles, vectorize_particles=True, max_plate_nesting=0)
+    elif loss == "rws":
+        objective = ReweightedWakeSleep(num_particles=num_particles, insomnia=1.0, model_has_params=False,
+                                        vectorize_particles=True, max_plate_nesting=0)  # fmt: skip
+    elif loss == "exact":
+        objective = ExactELBO()
+    else:
+        raise ValueError(f"loss must be 'tracegraph', 'rws' or 'exact', got {loss!r}")
     pyro.set_rng_seed(seed)
-    svi = SVI(model.model, guide, Adam({"lr": lr}),
-              TraceGraph_ELBO(num_particles=num_particles, vectorize_particles=True, max_plate_nesting=0))  # fmt: skip
+    svi = SVI(model.model, guide, Adam({"lr": lr}), objective)
     losses = []
     for _ in tqdm(range(steps), disable=not progress, desc="svi"):
-        losses.append(float(svi.step()))
+        out = svi.step()
+        losses.append(float(out[1] if isinstance(out, tuple) else out))
     return losses

@@ -64,7 +64,18 @@ def delta_table_for(rays: Rays, delta: DeltaFamily) -> tuple[torch.Tensor, int]:
     n_kappa = int(rays.lengths.max()) if rays.num_rays else 1
     hits = rays.z[~rays.is_max]
     n_z = int(max(hits.max() + 1 if hits.size else 0, n_kappa))
-    return delta.table(n_kappa, n_z), n_z
+    return _checked(delta.table(n_kappa, n_z), delta), n_z
+
+
+def _checked(table: torch.Tensor, delta) -> torch.Tensor:
+    """The update-term table, refused when it holds NaN or infinity (a NaN parameter would silently
+    threshold to an all-free map)."""
+    bad = ~torch.isfinite(table.detach())
+    if bad.any():
+        k, z = (int(v) for v in bad.nonzero()[0])
+        raise ValueError(f"{delta!r} gives a non-finite update term at kappa {k}, reading column {z}; "
+                         "check its parameters for NaN or infinity")  # fmt: skip
+    return table
 
 
 def _logit(p: float) -> float:
@@ -149,7 +160,7 @@ def evidence_grid_from_scans(
     ri = ray_inputs(grid, scans)
     cap = ri.capacity()
     with torch.no_grad():
-        table = np.ascontiguousarray(delta.table(cap, cap).numpy())
+        table = np.ascontiguousarray(_checked(delta.table(cap, cap), delta).detach().numpy())
     ev = np.full(grid.num_cells, l0, dtype=np.float64)
     touched = np.zeros(grid.num_cells, dtype=np.bool_)
     evidence_from_scans(

@@ -65,8 +65,8 @@ class RunningStats:
         self._trace: list[np.ndarray] = []
 
     def update(self, m) -> None:
-        """Add one sample (``K``, 0/1)."""
-        mt = torch.as_tensor(m)
+        """Add one sample: a full map (``K``, 0/1) or site ``"m"``'s latent cells (``L``)."""
+        mt = self.model.full_map(torch.as_tensor(m))
         mn = mt.detach().cpu().numpy()
         self._sum += mn
         if len(self.rays):

@@ -20,6 +20,30 @@ occupied cell in the grid" column is
 and every column censors max range at the sensor's ``F_n``, not at the grid edge. Each ray's likelihood
 is thereby a normalised distribution over readings for every map (tested by summing it). Cells holding a
 sensor are known to be free (the robot is not inside a wall); they are pinned to 0 and are not latent.
+
+**The Pyro model** (:meth:`OccupancyModel.model`) has two sample sites:
+
+* ``"m"`` — the *latent* cells only (event shape ``L = len(model.latent)``, in the order of
+  ``model.latent``), drawn from the prior given that the pinned cells are free; :meth:`OccupancyModel.full_map`
+  turns values of ``"m"`` into ``K`` maps (the deterministic site ``"map"`` records the full map). For
+  compatibility a full ``K`` map is also accepted as the value of ``"m"`` (conditioning, MCMC kernels that
+  return ``K`` maps); its pinned cells must then be 0 (``-inf`` otherwise).
+* ``"z"`` — the readings, an observed :class:`ReadingsDistribution` site (event shape ``R``). A value is
+  each ray's measured range in cells; a max-range reading is encoded as the ray's maximum range
+  (``rays.max_range_cells()``), as in :class:`~ogm_ppl.scans.Scans`. ``model.model(readings=None)`` (or
+  ``poutine.uncondition``) simulates readings; ``pyro.condition(model.model, data={"z": new})`` scores new
+  readings of the same rays.
+
+>>> import pyro, torch
+>>> from pyro.infer import Predictive
+>>> from ogm_ppl import GaussianRange, OccupancyModel, raycast
+>>> from ogm_ppl.datasets import toy_1d
+>>> from ogm_ppl.priors import IndependentPrior
+>>> toy = toy_1d(num_cells=10, wall=5, readings=[5.0, 6.0])
+>>> model = OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(1.0, 1e-3), IndependentPrior(0.3, 10))
+>>> sim = Predictive(model.model, num_samples=4)(readings=None)
+>>> tuple(sim["m"].shape), tuple(sim["map"].shape), tuple(sim["z"].shape)
+((4, 9), (4, 10), (4, 2))
 """
 
 from __future__ import annotations
@@ -33,28 +57,132 @@ import torch
 from pyro.distributions.torch_distribution import TorchDistribution
 from torch.distributions import constraints
 
+from ..priors.base import MapPrior
 from ..raycast import Rays
 from ..sensors import SensorModel
 
-__all__ = ["OccupancyModel", "MapDistribution"]
+__all__ = ["OccupancyModel", "MapDistribution", "ReadingsDistribution", "OBSERVED"]
+
+#: default of ``OccupancyModel.model(readings=...)``: the model's own readings.
+OBSERVED = "observed"
 
 
 class MapDistribution(TorchDistribution):
-    """A Pyro distribution over whole binary maps (event shape ``K``) defined by a :class:`MapPrior`."""
+    """A Pyro distribution over binary maps defined by a :class:`MapPrior`, given that the ``known_free``
+    cells are free.
+
+    The event is the latent cells (event shape ``L``, those not in ``known_free``, in index order);
+    without ``known_free`` it is the whole map (``K``). ``sample`` draws from the prior conditioned on the
+    pinned cells being free (:meth:`~ogm_ppl.priors.MapPrior.sample_given_free`); ``log_prob`` is
+    ``log p(m_latent, m_pinned = 0)`` (the joint with the known-free observation, i.e. the conditional up
+    to the constant ``log P(m_pinned = 0)``), so a trace's ``log_prob_sum`` is the model's log joint.
+    ``log_prob`` also accepts full ``K`` maps (``-inf`` where a pinned cell is occupied) and raises on
+    values other than 0/1 or on NaN from the prior.
+    """
 
     arg_constraints: dict = {}
     support = constraints.independent(constraints.boolean, 1)
     has_enumerate_support = False
 
-    def __init__(self, prior, validate_args=None):
+    def __init__(self, prior, known_free: torch.Tensor | None = None, batch_shape=torch.Size(), validate_args=None):
         self.prior = prior
-        super().__init__(torch.Size(), torch.Size([prior.num_cells]), validate_args=validate_args)
+        K = prior.num_cells
+        self.known_free = torch.zeros(K, dtype=torch.bool) if known_free is None else torch.as_tensor(known_free, dtype=torch.bool)
+        if self.known_free.shape != (K,):
+            raise ValueError(f"known_free must be a boolean mask of {K} cells, got shape {tuple(self.known_free.shape)}")
+        self.latent = torch.nonzero(~self.known_free).flatten()
+        super().__init__(torch.Size(batch_shape), torch.Size([len(self.latent)]), validate_args=validate_args)
+
+    def expand(self, batch_shape, _instance=None):
+        return MapDistribution(self.prior, self.known_free, batch_shape)
+
+    def full_map(self, value: torch.Tensor) -> torch.Tensor:
+        """``... x L`` (or ``... x K``) values -> ``... x K`` maps (pinned cells 0)."""
+        value = torch.as_tensor(value)
+        K, L = self.prior.num_cells, len(self.latent)
+        if value.shape[-1:] == (K,):
+            return value
+        if value.shape[-1:] != (L,):
+            raise ValueError(f"site 'm' takes the {L} latent cells (or a full map of {K}), got shape {tuple(value.shape)}")
+        out = value.new_zeros(value.shape[:-1] + (K,))
+        out[..., self.latent] = value
+        return out
 
     def sample(self, sample_shape=torch.Size()):
-        return self.prior.sample(sample_shape)
+        shape = torch.Size(sample_shape) + self.batch_shape
+        if type(self.prior).sample is MapPrior.sample:
+            raise TypeError(
+                f"{type(self.prior).__name__} has no sample(): the model cannot draw maps from it (prior "
+                "predictive, Predictive, init_to_sample). Implement MapPrior.sample, or give MCMC/SVI an "
+                "initial map / a guide for site 'm'")
+        maps = self.prior.sample_given_free(self.known_free, shape)
+        maps = torch.as_tensor(maps, dtype=torch.float64)
+        if maps.shape != shape + (self.prior.num_cells,) or not ((maps == 0) | (maps == 1)).all():
+            raise ValueError(f"{type(self.prior).__name__}.sample returned values other than 0/1 maps of shape "
+                             f"{tuple(shape + (self.prior.num_cells,))} (NaN parameters?)")
+        return maps[..., self.latent]
 
     def log_prob(self, value):
-        return self.prior.log_prob(value)
+        value = torch.as_tensor(value)
+        full = self.full_map(value).to(torch.float64)
+        _check_binary(full, "value of site 'm'")
+        lp = self.prior.log_prob(full)
+        if torch.isnan(lp).any():
+            raise ValueError(f"{type(self.prior).__name__}.log_prob returned NaN")
+        if value.shape[-1] != len(self.latent):
+            lp = torch.where((full[..., self.known_free] == 0).all(-1), lp, -math.inf)
+        return lp
+
+
+def _check_binary(maps: torch.Tensor, what: str) -> None:
+    if maps.is_floating_point() and not torch.isfinite(maps).all():
+        raise ValueError(f"{what} holds NaN or infinite values")
+    bad = (maps != 0) & (maps != 1)
+    if bad.any():
+        raise ValueError(f"{what} must hold only 0 and 1, found {maps[bad].flatten()[0].item()!r}")
+
+
+class ReadingsDistribution(TorchDistribution):
+    r"""The readings given maps: ``prod_n p(z_n | f_n(m))`` (event shape ``R``, batch shape the maps').
+
+    A value is every ray's measured range in cells, max-range readings at the ray's maximum range
+    (``rays.max_range_cells()``). ``log_prob`` of the model's own readings reads the cached likelihood
+    table; for other readings of the same rays it builds their table (continuous kappa ``r + 1/2`` or the
+    kappa of the range, :mod:`ogm_ppl.raycast`). ``sample`` draws readings: the first hit of each ray
+    (past the grid edge: under ``lambda_out``), then the sensor's reading, converted back to a range.
+    """
+
+    arg_constraints: dict = {}
+    support = constraints.independent(constraints.real, 1)
+
+    def __init__(self, model: OccupancyModel, maps: torch.Tensor, validate_args=None):
+        self.model = model
+        self.maps = maps
+        super().__init__(maps.shape[:-1], torch.Size([model.rays.num_rays]), validate_args=validate_args)
+
+    def expand(self, batch_shape, _instance=None):
+        K = self.maps.shape[-1]
+        return ReadingsDistribution(self.model, self.maps.expand(torch.Size(batch_shape) + (K,)))
+
+    def log_prob(self, value):
+        m = self.model
+        value = torch.as_tensor(value, dtype=torch.float64)
+        R = m.rays.num_rays
+        if value.shape[-1:] != (R,):
+            raise ValueError(f"site 'z' takes one reading per ray ({R}), got shape {tuple(value.shape)}")
+        f = m.first_hits(self.maps)  # B x R
+        flat = value.reshape(-1, R)
+        tables = torch.stack([m.loglik_table if torch.equal(v, m.readings) else m.loglik_table_for(v) for v in flat])
+        tables = tables.reshape(value.shape[:-1] + tables.shape[-2:])
+        batch = torch.broadcast_shapes(value.shape[:-1], f.shape[:-1])
+        tables = tables.expand(batch + tables.shape[-2:])
+        f = f.expand(batch + f.shape[-1:])
+        return torch.gather(tables, -1, f[..., None])[..., 0].sum(-1)
+
+    def sample(self, sample_shape=torch.Size()):
+        shape = torch.Size(sample_shape) + self.batch_shape
+        maps = self.maps.expand(shape + self.maps.shape[-1:])
+        return self.model.simulate_readings(maps)
 
 
 class OccupancyModel:
@@ -98,31 +226,37 @@ class OccupancyModel:
         self.lengths = torch.from_numpy(rays.lengths)
         self.loglik_table = self._loglik_table()
         self._dense = None
+        self._readings = None
+        self._entries = None
 
     @property
     def num_cells(self) -> int:
         return self.grid.num_cells
 
-    def _loglik_table(self) -> torch.Tensor:
+    def _loglik_table(self, range_cells=None, z_kappa=None, is_max=None) -> torch.Tensor:
+        """``R x W`` table for the model's readings, or for other readings of the same rays (``R`` each:
+        range in cells, kappa of the reading, max-range flags)."""
         r = self.rays
         lengths = torch.from_numpy(r.lengths)
         range_len = torch.from_numpy(np.maximum(r.range_len, r.lengths))
         R, W = r.num_rays, int(lengths.max()) + 1
-        is_max = torch.from_numpy(r.is_max.copy())
-        bad = (torch.from_numpy(r.z) < 0) & ~is_max
+        if range_cells is None:
+            range_cells, z_kappa, is_max = r.range_cells, r.z, r.is_max.copy()
+        is_max = torch.as_tensor(is_max, dtype=torch.bool)
+        bad = (torch.as_tensor(z_kappa) < 0) & ~is_max
         if bad.any():
             raise ValueError(f"reading of ray {int(bad.nonzero()[0, 0])} lies before its ray")
         col = torch.arange(W, dtype=torch.float64)[None, :]
         none_col = col == lengths[:, None]
         if self.sensor.continuous_range:  # continuous kappa t + 1/2 (ogm_ppl.sensors)
-            z = torch.from_numpy(r.range_cells).to(torch.float64) + 0.5
+            z = torch.as_tensor(range_cells).to(torch.float64) + 0.5
             F = torch.from_numpy(r.max_range_cells()).to(torch.float64)
             t = torch.zeros(R, W, dtype=torch.float64)
             t[torch.from_numpy(r.ray_of_entry), torch.from_numpy(r.kappa)] = torch.from_numpy(r.t_enter).double()
             t[:, 0] = -0.5  # the sensor's own cell sits at kappa_c = 0 (ogm_ppl.sensors)
             f = torch.where(none_col, F[:, None] + 1, t + 0.5)
         else:
-            z = torch.from_numpy(r.z).to(torch.float64)
+            z = torch.as_tensor(z_kappa).to(torch.float64)
             F = (range_len - 1).to(torch.float64)  # the sensor's last kappa, beyond the grid edge if cut
             f = torch.where(none_col, F[:, None] + 1, col)
         table = self.sensor.log_prob(z[:, None].expand(-1, W), f, F[:, None], is_max[:, None].expand(-1, W))
@@ -170,6 +304,108 @@ class OccupancyModel:
             out[sl] = torch.logsumexp(lz.to(torch.float64) + lw, dim=-1)
         return out
 
+    # ------------------------------------------------------------ readings
+    @property
+    def readings(self) -> torch.Tensor:
+        """``R`` float64: the value of site ``"z"`` for the model's readings (range in cells; max-range
+        readings at the ray's maximum range)."""
+        if self._readings is None:
+            r = self.rays
+            F = torch.from_numpy(r.max_range_cells()).to(torch.float64)
+            self._readings = torch.where(torch.from_numpy(r.is_max.copy()), F, torch.from_numpy(r.range_cells).to(torch.float64))
+        return self._readings
+
+    def _entry_table(self) -> torch.Tensor:
+        """``R x W`` entry distances (cells) of every cell of every ray up to max range, past the grid edge
+        included (``+inf`` padding); entry 0 (the sensor's cell) is 0."""
+        if self._entries is None:
+            r = self.rays
+            range_len = np.maximum(r.range_len, r.lengths)
+            T = np.full((r.num_rays, int(range_len.max())), np.inf)
+            T[r.ray_of_entry, r.kappa] = r.t_enter
+            cut = np.flatnonzero(range_len > r.lengths)
+            if len(cut):
+                off, t = r.entries_beyond_edge(cut)
+                n = np.diff(off)
+                T[np.repeat(cut, n), np.repeat(r.lengths[cut], n) + np.arange(len(t)) - np.repeat(off[:-1], n)] = t
+            T[:, 0] = 0.0
+            self._entries = torch.from_numpy(T)
+        return self._entries
+
+    def range_to_kappa(self, ranges: torch.Tensor) -> torch.Tensor:
+        """The kappa of readings (``... x R`` ranges in cells) on the model's rays, by the range convention
+        of :mod:`ogm_ppl.raycast` (the cell whose entry distance is nearest; a tie goes to the nearer cell,
+        as the ray caster does)."""
+        T = self._entry_table()
+        mid = (T[:, :-1] + T[:, 1:]) / 2  # R x (W - 1), inf padding
+        ranges = torch.as_tensor(ranges, dtype=torch.float64)
+        return (mid < ranges[..., None]).sum(-1)  # as the ray caster: a tie goes to the nearer cell
+
+    def loglik_table_for(self, readings: torch.Tensor) -> torch.Tensor:
+        """The ``R x W`` likelihood table (as :attr:`loglik_table`) of other readings of the same rays
+        (``R``: values of site ``"z"``)."""
+        readings = torch.as_tensor(readings, dtype=torch.float64)
+        if readings.shape != (self.rays.num_rays,) or torch.isnan(readings).any():
+            raise ValueError(f"readings must be {self.rays.num_rays} numbers, one per ray")
+        F = torch.from_numpy(self.rays.max_range_cells()).to(torch.float64)
+        is_max = readings >= F
+        return self._loglik_table(readings, self.range_to_kappa(readings), is_max)
+
+    def simulate_readings(self, maps: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
+        """Readings (``... x R``, values of site ``"z"``) drawn from the sensor given maps ``... x K``: every
+        ray's first hit (a ray cut by the grid edge with no hit in the grid draws the cells beyond under
+        ``lambda_out``), the sensor's reading, converted back to a range in cells."""
+        r = self.rays
+        maps = torch.as_tensor(maps, dtype=torch.float64)
+        f = self.first_hits(maps)  # ... x R
+        lengths = self.lengths
+        range_len = torch.from_numpy(np.maximum(r.range_len, r.lengths))
+        T = self._entry_table()
+        lam = float(self.prior.outside_occupancy())
+        u = torch.rand(f.shape, generator=generator, dtype=torch.float64)
+        if lam <= 0:
+            extra = torch.full(f.shape, 1 << 40, dtype=torch.int64)
+        elif lam >= 1:
+            extra = torch.zeros(f.shape, dtype=torch.int64)
+        else:  # free cells past the edge before the first occupied one: geometric
+            extra = torch.floor(torch.log1p(-u) / math.log1p(-lam)).clamp(max=1 << 40).to(torch.int64)
+        f = torch.where(f >= lengths, lengths + extra, f)
+        none = f >= range_len
+        fc = f.clamp(max=T.shape[1] - 1)
+        Fm = torch.from_numpy(r.max_range_cells()).to(torch.float64)
+        if self.sensor.continuous_range:
+            F = Fm
+            coord = torch.gather(T.expand(f.shape[:-1] + T.shape), -1, fc[..., None])[..., 0] + 0.5
+            coord = torch.where(fc == 0, 0.0, coord)
+        else:
+            F = (range_len - 1).to(torch.float64)
+            coord = fc.to(torch.float64)
+        coord = torch.where(none, F + 1, coord)
+        y, is_max = self.sensor.sample(coord, F.expand(coord.shape), generator=generator)
+        if self.sensor.continuous_range:
+            out = y - 0.5
+        else:
+            k = y.round().clamp(0, T.shape[1] - 1).to(torch.int64)
+            out = torch.gather(T.expand(k.shape[:-1] + T.shape), -1, k[..., None])[..., 0]
+        return torch.where(is_max, Fm.expand(out.shape), out)
+
+    # ------------------------------------------------------------ maps
+    def full_map(self, m: torch.Tensor) -> torch.Tensor:
+        """Values of site ``"m"`` (``... x L`` latent cells, or already ``... x K``) -> maps ``... x K``."""
+        return MapDistribution(self.prior, self.known_free).full_map(m)
+
+    def check_maps(self, maps, what: str = "maps") -> torch.Tensor:
+        """Validate maps ``... x K`` (or ``K``): the right number of cells, values 0/1 only, no NaN.
+
+        Returns them as float64; raises ``ValueError`` naming ``what`` otherwise. Pinned cells are not
+        checked here (:meth:`log_joint` gives ``-inf`` where one is occupied)."""
+        maps = torch.as_tensor(maps)
+        if maps.dim() == 0 or maps.shape[-1] != self.num_cells:
+            raise ValueError(f"{what} must have {self.num_cells} cells in the last dimension (the grid's), "
+                             f"got shape {tuple(maps.shape)}")
+        _check_binary(maps, what)
+        return maps.to(torch.float64)
+
     def _dense_rays(self) -> torch.Tensor:
         """``R x Lmax`` cell indices, padded with ``K`` (a dummy always-free column)."""
         if self._dense is None:
@@ -204,20 +440,31 @@ class OccupancyModel:
         return ll.reshape(f.shape[:-1])
 
     def log_joint(self, maps: torch.Tensor) -> torch.Tensor:
-        """``log p(m) + log p(z | m)`` (``-inf`` where a pinned cell is occupied), ``... x K -> ...``."""
-        maps = torch.as_tensor(maps, dtype=torch.float64)
+        """``log p(m) + log p(z | m)`` (``-inf`` where a pinned cell is occupied), ``... x K -> ...``.
+
+        Raises ``ValueError`` for maps of the wrong length, values other than 0/1, or NaN from the prior."""
+        maps = self.check_maps(maps, "log_joint's maps")
         pinned_ok = (maps[..., self.known_free] == 0).all(-1)
-        lj = self.prior.log_prob(maps) + self.log_likelihood(maps)
+        lp = self.prior.log_prob(maps)
+        if torch.isnan(torch.as_tensor(lp)).any():
+            raise ValueError(f"{type(self.prior).__name__}.log_prob returned NaN")
+        lj = lp + self.log_likelihood(maps)
         return torch.where(pinned_ok, lj, -math.inf)
 
     # ------------------------------------------------------------------ Pyro
-    def model(self) -> torch.Tensor:
-        """Pyro model: one site ``"m"`` (the whole map, event shape ``K``) and the readings' factor."""
-        m = pyro.sample("m", MapDistribution(self.prior))
-        pinned_ok = (m[..., self.known_free] == 0).all(-1)
-        ll = torch.where(pinned_ok, self.log_likelihood(m), -math.inf)
-        pyro.factor("z", ll)
-        return m
+    def model(self, readings=OBSERVED) -> torch.Tensor:
+        """Pyro model: site ``"m"`` (the latent cells, event shape ``L``), the deterministic full map
+        ``"map"`` (``K``) and the observed readings ``"z"`` (event shape ``R``).
+
+        ``readings``: the value of ``"z"`` (default: the model's own readings, :attr:`readings`); ``None``
+        samples them (prior / posterior predictive). Returns the full map.
+        """
+        m = pyro.sample("m", MapDistribution(self.prior, self.known_free))
+        full = self.full_map(m)
+        pyro.deterministic("map", full, event_dim=1)
+        obs = self.readings if isinstance(readings, str) and readings == OBSERVED else readings
+        pyro.sample("z", ReadingsDistribution(self, full), obs=obs)
+        return full
 
     def model_per_cell(self) -> torch.Tensor:
         """Pyro model with one Bernoulli site ``"m_k"`` per latent cell, for exact enumeration.

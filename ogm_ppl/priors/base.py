@@ -64,3 +64,38 @@ class MapPrior:
     def sample(self, sample_shape=(), generator: torch.Generator | None = None) -> torch.Tensor:
         """Maps drawn from the prior, ``sample_shape x K`` (float 0/1)."""
         raise NotImplementedError  # pragma: no cover - interface
+
+    def sample_given_free(self, free: torch.Tensor, sample_shape=(), generator: torch.Generator | None = None,
+                          max_rounds: int = 200) -> torch.Tensor:  # fmt: skip
+        """Maps drawn from the prior conditioned on the ``free`` cells (boolean ``K``) being 0.
+
+        Independent priors (:meth:`cell_log_odds` not ``None``) draw and clear those cells (exact). Others
+        use rejection in rounds (exact); after ``max_rounds`` rounds the maps still missing are drawn and
+        cleared, with a warning (exact only if the cells are independent of the rest)."""
+        free = torch.as_tensor(free, dtype=torch.bool)
+        shape = torch.Size(sample_shape)
+        if not free.any() or self.cell_log_odds() is not None:
+            maps = torch.as_tensor(self.sample(shape, generator=generator), dtype=torch.float64).clone()
+            maps[..., free] = 0.0
+            return maps
+        n = shape.numel()
+        out = torch.empty(n, self.num_cells, dtype=torch.float64)
+        todo = torch.arange(n)
+        for _ in range(max_rounds):
+            if not len(todo):
+                break
+            draw = torch.as_tensor(self.sample((len(todo),), generator=generator), dtype=torch.float64)
+            if not ((draw == 0) | (draw == 1)).all():
+                raise ValueError(f"{type(self).__name__}.sample returned values other than 0/1 (NaN parameters?)")
+            ok = (draw[:, free] == 0).all(-1)
+            out[todo[ok]] = draw[ok]
+            todo = todo[~ok]
+        if len(todo):
+            import warnings
+
+            warnings.warn(f"{type(self).__name__}: {len(todo)} of {n} prior draws still occupied a known-free "
+                          "cell after rejection; those cells were cleared (approximate)", stacklevel=2)  # fmt: skip
+            draw = torch.as_tensor(self.sample((len(todo),), generator=generator), dtype=torch.float64).clone()
+            draw[:, free] = 0.0
+            out[todo] = draw
+        return out.reshape(shape + (self.num_cells,))

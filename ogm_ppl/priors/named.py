@@ -60,8 +60,8 @@ def prior_by_name(name: str, shape, tables=None) -> MapPrior:
         raise ValueError(f"unknown prior kind {kind!r} in {name!r}; kinds: {', '.join(PRIOR_KINDS)}")
     shape = _shape(shape)
     K = int(np.prod(shape))
-    if kind == "independent" and not corpus and tables is None:
-        return IndependentPrior(0.5, K)
+    if kind == "independent" and not corpus:
+        return IndependentPrior(0.5, K)  # the name alone is always the uniform prior
     if tables is None:
         corpus = corpus or DEFAULT_CORPUS
         if corpus not in available_tables():
@@ -72,7 +72,8 @@ def prior_by_name(name: str, shape, tables=None) -> MapPrior:
         return IndependentPrior(lam, K)
     if kind in ("mrf", "mrf8"):
         conn = 4 if kind == "mrf" else 8
-        return MRFPrior(shape, order=1 if conn == 4 else 2, psi=min(1.0, tables.psi(conn)), cell_prior=lam)
+        lam_c, psi = tables.mrf_fit(conn)
+        return MRFPrior(shape, order=1 if conn == 4 else 2, psi=min(1.0, psi), cell_prior=lam_c)
     if len(shape) != 2:
         raise ValueError(f"prior {name!r} is a 2D patch prior; the grid has shape {shape}")
     if kind in ("patch3", "patch3_999"):

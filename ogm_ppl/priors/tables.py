@@ -16,16 +16,18 @@ of the integer code, little-endian: ``code = sum_i m_i << i``. So for a 3 x 3 wi
 
 Arrays of a :class:`PriorTables` (all ``int64`` counts; ``N`` = distinct stored 5 x 5 codes)
 -----------------------------------------------------------------------------------------------
-``cell_counts``   ``(2,)``      free / occupied cells (known cells only); ``lam = cell_counts[1] / sum``.
-``counts3x3``     ``(512,)``    3 x 3 windows by code (all windows wholly inside known cells).
-``codes5x5``      ``(N,)``      sorted distinct 5 x 5 codes (25 bits);  ``counts5x5`` ``(N,)`` their counts.
-``pair_counts``   ``(4, 2, 2)`` joint counts ``[k, a, b]`` of the cell pair ``(r, c), (r + dr, c + dc)`` for the
-                                offsets ``PAIR_OFFSETS = ((0, 1), (1, 0), (1, 1), (1, -1))``.
-``line_counts``   ``(2**L,)``   ``1 x L`` windows along rows and along columns (read top-down), ``L = line_length``.
-``run_counts``    ``(2, R + 1)`` lengths of complete runs (bounded on both ends by known cells of the other
-                                value) of free (row 0) / occupied (row 1) cells along rows and columns;
-                                bin ``R`` holds runs of length ``>= R``; bin 0 is unused.
-``truncated_mass`` ``()``       count of 5 x 5 windows dropped by ``min_count_5x5`` (0 when nothing dropped).
+::
+
+    ``cell_counts``   ``(2,)``      free / occupied cells (known cells only); ``lam = cell_counts[1] / sum``.
+    ``counts3x3``     ``(512,)``    3 x 3 windows by code (all windows wholly inside known cells).
+    ``codes5x5``      ``(N,)``      sorted distinct 5 x 5 codes (25 bits);  ``counts5x5`` ``(N,)`` their counts.
+    ``pair_counts``   ``(4, 2, 2)`` joint counts ``[k, a, b]`` of the cell pair ``(r, c), (r + dr, c + dc)`` for the
+                                    offsets ``PAIR_OFFSETS = ((0, 1), (1, 0), (1, 1), (1, -1))``.
+    ``line_counts``   ``(2**L,)``   ``1 x L`` windows along rows and along columns (read top-down), ``L = line_length``.
+    ``run_counts``    ``(2, R + 1)`` lengths of complete runs (bounded on both ends by known cells of the other
+                                    value) of free (row 0) / occupied (row 1) cells along rows and columns;
+                                    bin ``R`` holds runs of length ``>= R``; bin 0 is unused.
+    ``truncated_mass`` ``()``       count of 5 x 5 windows dropped by ``min_count_5x5`` (0 when nothing dropped).
 
 Derived on demand (not stored; they re-index the arrays above exactly):
 :meth:`PriorTables.border_table` (3 x 3 given its 16-cell border, from the 5 x 5 table; CSR by border, and
@@ -206,6 +208,41 @@ class PriorTables:
         out = np.zeros((256, 2), dtype=np.int64)
         np.add.at(out, (border, centre), self.counts3x3)
         return out
+
+    def mrf_fit(self, connectivity: int = 4) -> tuple[float, float]:
+        r"""``(lambda, psi)`` of the MRF of Section 5.2.1 fitted to the corpus by maximum pseudo-likelihood.
+
+        The MRF's conditional is :math:`l(m_k \mid \text{nbrs}) = l(\lambda) + (n_0 - n_1) \log\psi`
+        (:class:`~ogm_ppl.priors.MRFPrior`); every 3 x 3 window of the corpus gives one centre cell and its
+        4 (or 8) neighbours, so the pseudo-likelihood is a logistic regression of the centre on
+        ``x = n0 - n1`` with intercept ``l(lambda)`` and slope ``log psi``, solved by Newton's method.
+        (The raw ratio of unequal to equal neighbour pairs, :meth:`psi`, is not this fit: it couples
+        neighbours far too strongly.)
+        """
+        c = self.counts1given8().astype(np.float64)  # 256 x 2
+        codes = np.arange(256, dtype=np.int64)
+        # border8 bit order: window positions 0, 1, 2, 3, 5, 6, 7, 8; the 4-neighbours are 1, 3, 5, 7
+        four = np.array([1, 3, 4, 6]) if connectivity == 4 else np.arange(8)
+        if connectivity not in (4, 8):
+            raise ValueError(f"connectivity must be 4 or 8, got {connectivity}")
+        n1 = ((codes[:, None] >> four[None, :]) & 1).sum(1).astype(np.float64)
+        x = (len(four) - n1) - n1
+        w0, w1 = c[:, 0], c[:, 1]
+        if w1.sum() == 0 or w0.sum() == 0:
+            raise ValueError("the corpus has only one cell value: no MRF to fit")
+        theta = np.array([np.log(w1.sum() / w0.sum()), 0.0])
+        X = np.stack([np.ones_like(x), x], 1)
+        for _ in range(100):
+            p = 1.0 / (1.0 + np.exp(-(X @ theta)))
+            n = w0 + w1
+            grad = X.T @ (w1 - n * p)
+            H = (X * (n * p * (1 - p))[:, None]).T @ X + 1e-9 * np.eye(2)
+            step = np.linalg.solve(H, grad)
+            theta += step
+            if np.abs(step).max() < 1e-12:
+                break
+        lam = float(1.0 / (1.0 + np.exp(-theta[0])))
+        return lam, float(np.exp(theta[1]))
 
     def border1_triples(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """``(border8_code, centre, count)`` of every observed (8-neighbour border, centre) pair."""

@@ -37,7 +37,7 @@ def states(model):
 
 
 def code_of(model, m) -> int:
-    bits = torch.as_tensor(m)[model.latent].long()
+    bits = model.full_map(torch.as_tensor(m))[model.latent].long()  # site "m" (L) or a full map (K)
     return int((bits << torch.arange(len(model.latent))).sum())
 
 
@@ -286,7 +286,8 @@ def test_pyro_mcmc_with_running_stats_hook():
     stats = RunningStats(model)
     mcmc = MCMC(PatchGibbs(model, 2), num_samples=3000, warmup_steps=50, hook_fn=stats, disable_progbar=True)
     mcmc.run()
-    samples = mcmc.get_samples()["m"]
+    assert mcmc.get_samples()["m"].shape == (3000, len(model.latent))  # site "m": the latent cells
+    samples = model.full_map(mcmc.get_samples()["m"])
     assert samples.shape == (3000, model.num_cells) and stats.n == 3000
     torch.testing.assert_close(samples.mean(0), stats.marginals)
     exact = brute_force(model).marginals

@@ -187,7 +187,7 @@ def test_user_prior_on_the_2d_example_generic_and_stencil_agree():
     a = ks.sample({"m": m})["m"]
     torch.manual_seed(3)
     b = kf.sample({"m": m})["m"]
-    assert torch.equal(a, b) and (a != m).any()
+    assert torch.equal(a, b) and (slow.full_map(a) != m).any()
     # and the log-odds of every cell agree
     for k in (0, 65, 1000, 2080, 4095):
         assert ks.cell_log_odds(k) == pytest.approx(kf.cell_log_odds(k), abs=1e-9)
@@ -214,7 +214,7 @@ def test_five_by_five_patches_with_a_table_prior():
     kernel.setup()
     m = torch.from_numpy(kernel.state.astype(np.float64))
     for _ in range(3):
-        m = kernel.sample({"m": m})["m"]
+        m = model.full_map(kernel.sample({"m": m})["m"])
     assert torch.isfinite(model.log_joint(m))
 
 

@@ -63,3 +63,113 @@ def test_refuses_models_with_impossible_maps():
 def test_patch_guide_needs_a_tiling():
     with pytest.raises(ValueError, match="tiling"):
         PatchGuide(model(), [[0, 0], [0, 2]])
+
+
+# ---------------------------------------------------------------- structured guides, exact ELBO (issue 12)
+from ogm_ppl.inference.exact import _bits, brute_force  # noqa: E402
+from ogm_ppl.inference.structured_guides import ExactELBO, FirstHitGuide, FirstHitMapDistribution  # noqa: E402
+
+
+def _toy(K=12, lam=0.5):
+    toy = toy_1d(num_cells=K, readings=THESIS_TOY_READINGS)
+    prior = IndependentPrior(torch.linspace(0.2, 0.6, K)) if lam is None else IndependentPrior(lam, K)
+    return OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0, p_rand=1e-3), prior)
+
+
+def _brute_elbo(model, dist_):
+    L = len(model.latent)
+    codes = torch.arange(1 << L)
+    vals = _bits(codes, L)
+    lq = dist_.log_prob(vals)
+    lj = model.log_joint(model.full_map(vals))
+    q = lq.exp()
+    return float(torch.where(q > 0, q * (lj - lq), 0.0).sum().detach()), float(torch.logsumexp(lq, 0).detach())
+
+
+def test_first_hit_distribution_normalises_and_samples():
+    g = torch.Generator().manual_seed(0)
+    order = torch.tensor([2, 0, 4, 1, 3])
+    d = FirstHitMapDistribution(torch.randn(6, generator=g), torch.randn(5, generator=g), order)
+    maps = _bits(torch.arange(32), 5)
+    lp = d.log_prob(maps)
+    assert abs(torch.logsumexp(lp, 0).item()) < 1e-12
+    torch.manual_seed(1)
+    s = d.sample((20000,))
+    counts = torch.bincount((s * (2 ** torch.arange(5))).sum(-1).long(), minlength=32).double()
+    assert multinomial_goodness_of_fit(lp.exp(), counts) > 1e-3
+    torch.testing.assert_close(d.marginals(), (lp.exp()[:, None] * maps).sum(0), rtol=0, atol=1e-12)
+
+
+@pytest.mark.parametrize("make", [FirstHitGuide, MeanFieldGuide])
+def test_closed_form_elbo_equals_the_enumerated_expectation(make):
+    model = _toy(K=9, lam=None)
+    guide = make(model)
+    g = torch.Generator().manual_seed(2)
+    with torch.no_grad():
+        for p in guide.parameters():
+            p.copy_(torch.randn(p.shape, generator=g))
+    d = guide.distribution() if isinstance(guide, FirstHitGuide) else __import__("pyro").distributions.Bernoulli(
+        logits=guide.logits).to_event(1)  # fmt: skip
+    expected, norm = _brute_elbo(model, d)
+    assert abs(norm) < 1e-12
+    assert guide.exact_elbo(model).item() == pytest.approx(expected, abs=1e-9)
+
+
+def test_mean_field_closed_form_elbo_on_2d_rays():
+    import math as _m
+
+    from ogm_ppl import Grid, Scans
+
+    grid = Grid((3, 3), resolution=1.0)
+    scans = Scans([[0.5, 0.5, 0.0], [0.5, 0.5, _m.pi / 2], [2.5, 2.5, _m.pi], [2.5, 1.5, _m.pi]],
+                  [0.0], [[1.2], [2.0], [1.5], [0.9]], max_range=2.5)  # fmt: skip
+    model = OccupancyModel(grid, raycast(grid, scans), GaussianRange(0.8, 1e-3), IndependentPrior(torch.linspace(0.2, 0.7, 9)))
+    guide = MeanFieldGuide(model)
+    with torch.no_grad():
+        guide.logits.copy_(torch.randn(len(model.latent), generator=torch.Generator().manual_seed(5)))
+    import pyro.distributions as pd
+
+    expected, _ = _brute_elbo(model, pd.Bernoulli(logits=guide.logits.detach()).to_event(1))
+    assert guide.exact_elbo(model).item() == pytest.approx(expected, abs=1e-9)
+    assert brute_force(model).log_evidence >= expected
+
+
+def test_first_hit_family_holds_the_exact_posterior_and_exact_elbo_finds_it():
+    model = _toy(K=21)
+    post = pose_constrained_1d(model)
+    exact = post.marginals
+    # the exact posterior, set by hand: q(f) = p(f | z) over the latent cells, cells behind at the prior
+    guide = FirstHitGuide(model)
+    with torch.no_grad():
+        guide.f_logits.copy_(post.log_pf[1:].clamp(min=-700))  # cell 0 (the robot) is pinned
+        guide.behind_logits.zero_()
+    torch.testing.assert_close(guide.marginals(), exact, rtol=0, atol=1e-9)
+    assert guide.exact_elbo(model).item() == pytest.approx(post.log_evidence, abs=1e-9)
+    fitted = FirstHitGuide(model)
+    fit_guide(model, fitted, steps=300, lr=0.1, loss="exact")
+    assert float(kl_divergence(exact[1:], fitted.marginals()[1:].clamp(1e-9, 1 - 1e-9))) < 0.01
+
+
+def test_rws_fits_the_first_hit_guide():
+    model = _toy(K=12)
+    exact = pose_constrained_1d(model).marginals
+    guide = FirstHitGuide(model)
+    fit_guide(model, guide, steps=150, lr=0.05, num_particles=128, loss="rws")
+    start = float(kl_divergence(exact[1:], torch.full((11,), 0.5)))
+    assert float(kl_divergence(exact[1:], guide.marginals()[1:].clamp(1e-9, 1 - 1e-9))) < 0.1 * start
+
+
+def test_exact_elbo_and_first_hit_guide_refuse_what_they_cannot_do():
+    class Correlated(IndependentPrior):
+        def cell_log_odds(self):
+            return None
+
+    toy = toy_1d(num_cells=8, wall=3, readings=[4.0])
+    m = OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(1.0, 1e-3), Correlated(0.5, 8))
+    with pytest.raises(TypeError, match="independent"):
+        fit_guide(m, FirstHitGuide(m), steps=1, loss="exact")
+    with pytest.raises(TypeError, match="exact_elbo"):
+        fit_guide(m, PatchGuide(m, 2), steps=1, loss="exact")
+    with pytest.raises(ValueError, match="loss"):
+        fit_guide(m, MeanFieldGuide(m), steps=1, loss="kl")
+    assert isinstance(ExactELBO(), __import__("pyro").infer.ELBO)

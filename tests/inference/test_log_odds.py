@@ -169,3 +169,15 @@ def test_named_thesis_maps_run_on_the_simple_example():
     for name in ("haehnel", "moravec_thesis", "p21_thesis", "elfes_thesis"):
         p = evidence_grid(rays, delta_by_name(name)).probabilities
         assert torch.isfinite(p).all() and ((p >= 0) & (p <= 1)).all()
+
+
+def test_nan_parameters_in_a_delta_are_refused():
+    from ogm_ppl.inference import evidence_grid_from_scans
+
+    grid = Grid.line(12)
+    scans = Scans.one_d([3.0, 7.0], max_range=10.0)
+    for delta in (Moravec(float("nan"), -1.0), PN([0.1, float("nan"), 0.2])):
+        with pytest.raises(ValueError, match="non-finite update term"):
+            evidence_grid(raycast(grid, scans), delta)
+        with pytest.raises(ValueError, match="non-finite update term"):
+            evidence_grid_from_scans(grid, scans, delta)

@@ -292,3 +292,20 @@ def test_shipped_tables():
     assert 0.15 < s["lambda"] < 0.35 and s["free3x3"] > 0.5
     with pytest.raises(KeyError, match="available"):
         tables_by_name("nope")
+
+
+def test_mrf_pseudolikelihood_fit_recovers_the_parameters_of_mrf_samples():
+    import torch
+
+    from ogm_ppl.priors import MRFPrior
+    from ogm_ppl.priors.learn import count_tables
+
+    torch.manual_seed(0)
+    lam, psi = 0.4, 0.6
+    maps = MRFPrior((80, 80), order=1, psi=psi, cell_prior=lam).sample((6,)).numpy().astype(bool)
+    # interior windows only (the MRF's border cells have fewer neighbours); no symmetries: the MRF is
+    # already symmetric
+    t = count_tables([m.reshape(80, 80) for m in maps], symmetries=False, progress=False)
+    lam_hat, psi_hat = t.mrf_fit(4)
+    # ~6 x 76^2 = 35k centre cells: the estimates are good to a few per cent
+    assert abs(lam_hat - lam) < 0.03 and abs(psi_hat - psi) < 0.05
