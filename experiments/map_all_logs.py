@@ -18,7 +18,7 @@ from pathlib import Path
 
 from ogm_ppl.cli import main as ogm_ppl
 
-DATA = Path("/work/shared/data")
+DATA = Path(__file__).resolve().parents[2] / "shared" / "data"  # shared/ beside the repository
 INTEL = DATA / "intel-lab" / "intel-corrected.log.gz"
 COMMON = ["--resolution", "0.05", "--auto-extent", "--method", "p21"]
 

@@ -13,7 +13,7 @@ from hypothesis import strategies as st
 from ogm_ppl.datasets import CarmenFormatError, read_carmen
 from ogm_ppl.datasets.carmen import flaser_angles
 
-DATA = Path("/work/shared/data")
+DATA = Path(__file__).resolve().parents[3] / "shared" / "data"  # shared/ beside the repository
 INTEL = DATA / "intel-lab" / "intel-corrected.log.gz"
 # file: (FLASER scans, beams, ODOM lines, no-return threshold) from carmen/PROVENANCE.md
 REAL = {
