@@ -1,33 +1,57 @@
 # Two commands do all set-up on a fresh machine: `make run` and `make test`.
+# Every install goes through constraints.txt (this machine's exact versions), so both commands are
+# reproducible and never pull a CUDA torch; the package's own metadata (pyproject.toml) has ranges.
 PY ?= python3.11
 VENV := .venv
 BIN := $(VENV)/bin
+PIP := $(BIN)/python -m pip install --quiet -c constraints.txt
 STAMP := $(VENV)/.installed
+DOCS_STAMP := $(VENV)/.installed-docs
 
-.PHONY: run test bench lint clean
+.PHONY: run test check lint types docs package-check bench clean
 
 $(BIN)/python:
 	$(PY) -m venv $(VENV) || python3 -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
 
-$(STAMP): pyproject.toml | $(BIN)/python
+$(STAMP): pyproject.toml constraints.txt | $(BIN)/python
 	# torch first, pinned, so that nothing pulls a multi-GB CUDA build
-	$(BIN)/python -m pip install --quiet "torch==2.13.0"
-	$(BIN)/python -m pip install --quiet -e ".[test]"
+	$(PIP) torch
+	$(PIP) -e ".[test]"
 	touch $(STAMP)
+
+$(DOCS_STAMP): $(STAMP)
+	$(PIP) -e ".[test,docs]"
+	touch $(DOCS_STAMP)
 
 run: $(STAMP)
 	$(BIN)/python -m ogm_ppl run --out out
 
-test: $(STAMP)
-	CI=1 $(BIN)/python -m pytest -q -p no:cacheprovider tests; rc=$$?; \
+# lint + types first (ruff ~1 s, mypy ~30 s from a cold cache), then the suite. The packaging test
+# (minutes: a venv, torch, the dependencies) is `make package-check`, which .ci/run runs after this.
+test: check
+	CI=1 $(BIN)/python -m pytest -q -p no:cacheprovider -m "not packaging" tests; rc=$$?; \
 	if [ $$rc -eq 5 ]; then echo "pytest collected no tests: failing on purpose"; exit 1; fi; exit $$rc
+
+check: lint types
+
+lint: $(STAMP)
+	$(BIN)/ruff check ogm_ppl tests benchmarks experiments
+
+types: $(STAMP)
+	$(BIN)/mypy
+
+# wheel + sdist built, the wheel installed into a fresh venv that already holds torch: torch kept,
+# README quick start runs from the installed wheel (tests/test_packaging.py)
+package-check: $(STAMP)
+	CI=1 $(BIN)/python -m pytest -q -p no:cacheprovider -m packaging tests/test_packaging.py
+
+# the API reference from the docstrings -> docs/_build/html/index.html; warnings are errors
+docs: $(DOCS_STAMP)
+	$(BIN)/sphinx-build -W --keep-going -q -b html docs docs/_build/html
 
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_ogm.py
 
-lint: $(STAMP)
-	$(BIN)/python -m pip install --quiet ruff && $(BIN)/ruff check ogm_ppl tests benchmarks
-
 clean:
-	rm -rf $(VENV) out
+	rm -rf $(VENV) out docs/_build build dist

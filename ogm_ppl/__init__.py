@@ -20,4 +20,15 @@ __all__ = [
     "PatternMatch",
     "OccupancyModel",
 ]
-__version__ = "0.1.0"
+
+
+def _installed_version() -> str:
+    from importlib import metadata
+
+    try:
+        return metadata.version("ogm_ppl")
+    except metadata.PackageNotFoundError:  # a source tree that was never installed
+        return "0.0.0+unknown"
+
+
+__version__ = _installed_version()

@@ -3,11 +3,13 @@ r"""Real and synthetic floor-plan corpora rasterised to occupancy grids (trainin
 Three corpora live under ``<root>/`` (``root`` = ``$OGM_PPL_FLOORPLANS`` or ``/work/shared/data/floorplans``);
 see each corpus's ``PROVENANCE.md`` there:
 
-``"houseexpo"``  100 HouseExpo plans, PNG mode L, 255 = free (inside), 0 = wall *or outside*; 1 px = 1 cm.
-``"ipa"``        IPA room-segmentation maps (Bormann et al. 2016): 0 = occupied, 255 = free, a grey background
-                 (205, 180, 178, 153, ...) = unknown; mixed PIL modes and anti-aliasing; 0.05 m/px.
-``"dungeon"``    DungeonMaps (synthetic): RGB(A) (127,127,127) = obstacle/outside, (195,195,194) = free,
-                 (255,216,0) = robot start (free); no metric scale (1 px = 1 cell); read straight from the tar.gz.
+::
+
+    ``"houseexpo"``  100 HouseExpo plans, PNG mode L, 255 = free (inside), 0 = wall *or outside*; 1 px = 1 cm.
+    ``"ipa"``        IPA room-segmentation maps (Bormann et al. 2016): 0 = occupied, 255 = free, a grey background
+                     (205, 180, 178, 153, ...) = unknown; mixed PIL modes and anti-aliasing; 0.05 m/px.
+    ``"dungeon"``    DungeonMaps (synthetic): RGB(A) (127,127,127) = obstacle/outside, (195,195,194) = free,
+                     (255,216,0) = robot start (free); no metric scale (1 px = 1 cell); read straight from the tar.gz.
 
 Rasterisation (:func:`load_plan`)
 ---------------------------------
@@ -115,14 +117,14 @@ class FloorPlan:
 
 # -- locating files --------------------------------------------------------------------------------------------
 def floorplan_root(root=None) -> Path:
-    """``root``, else ``$OGM_PPL_FLOORPLANS``, else ``<repo>/shared/data/floorplans`` or
-    ``/work/shared/data/floorplans`` (the first that exists)."""
+    """``root``, else ``$OGM_PPL_FLOORPLANS``, else ``shared/data/floorplans`` beside the repository (a source
+    checkout) or ``/work/shared/data/floorplans`` (the first that exists)."""
     if root is not None:
         return Path(root)
     env = os.environ.get("OGM_PPL_FLOORPLANS")
     if env:
         return Path(env)
-    here = Path(__file__).resolve().parents[2] / "shared" / "data" / "floorplans"
+    here = Path(__file__).resolve().parents[3] / "shared" / "data" / "floorplans"
     return here if here.is_dir() else Path("/work/shared/data/floorplans")
 
 

@@ -51,12 +51,17 @@ import json
 import math
 import os
 import re
-import tomllib
+import sys
 import zlib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
 import numpy as np
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # Python 3.10: the backport, the same parser (a dependency there)
+    import tomli as tomllib
 
 __all__ = [
     "SpecError",

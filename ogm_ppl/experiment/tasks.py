@@ -1,9 +1,9 @@
 r"""The tasks of an experiment: pure functions of (spec entry, seed) that read and write files under the
 output folder, so that the same call gives the same files in this process or on any dask worker.
 
-=========  ============================================================  ==================================
+=========  ============================================================== ==================================
 task       does                                                           done when (resume)
-=========  ============================================================  ==================================
+=========  ============================================================== ==================================
 base       simulated: ground-truth map + planned route; log: the read     ``datasets/_base/B.json``
            log, the benchmark map (traditional OGM of all readings > thr)
 dataset    the readings of one dataset (``save_dataset``) + what it is    ``datasets/D.json``
@@ -11,7 +11,7 @@ dataset    the readings of one dataset (``save_dataset``) + what it is    ``data
 run        one algorithm on one dataset (one chain): marginals            ``tasks/D/A/cN/result.json``
            (npz + PNG); Gibbs checkpoints and F1-against-time records
 score      chains averaged; P-R curve, best F1, AUC, touched-only scores  ``maps/D/A.json``
-=========  ============================================================  ==================================
+=========  ============================================================== ==================================
 
 Every done-file carries a hash of what the task was asked to do (``task_hash``); a rerun with a changed
 entry recomputes. Every file is written atomically. Each task runs with float64 as torch's default type,
