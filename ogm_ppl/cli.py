@@ -402,17 +402,22 @@ def _check_input(path: Path) -> bytes:
         raise CLIError(f"{path}: cannot read ({e.strerror or e})") from None
 
 
-def _prepare_out_dir(out: Path) -> None:
-    """Create ``out`` and make sure a file can be written there (before any long computation)."""
-    if out.exists() and not out.is_dir():
-        raise CLIError(f"--out {out}: exists and is not a directory")
+def _check_writable(directory: Path, out: Path) -> None:
+    """Create ``directory`` and write and remove a file there, naming ``--out`` on failure."""
     try:
-        out.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=out, prefix=".ogm-ppl-write-test.")
+        directory.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=directory, prefix=".ogm-ppl-write-test.")
         os.close(fd)
         os.unlink(tmp)
     except OSError as e:
         raise CLIError(f"--out {out}: cannot write there ({e.strerror or e})") from None
+
+
+def _prepare_out_dir(out: Path) -> None:
+    """Create ``out`` and make sure a file can be written there (before any long computation)."""
+    if out.exists() and not out.is_dir():
+        raise CLIError(f"--out {out}: exists and is not a directory")
+    _check_writable(out, out)
 
 
 def _prepare_out_file(out: Path) -> None:
@@ -422,13 +427,7 @@ def _prepare_out_file(out: Path) -> None:
     parent = out.parent
     if parent.exists() and not parent.is_dir():
         raise CLIError(f"--out {out}: {parent} is not a directory")
-    try:
-        parent.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=parent, prefix=".ogm-ppl-write-test.")
-        os.close(fd)
-        os.unlink(tmp)
-    except OSError as e:
-        raise CLIError(f"--out {out}: cannot write there ({e.strerror or e})") from None
+    _check_writable(parent, out)
 
 
 def _reader_kwargs(args) -> dict:
@@ -450,17 +449,6 @@ def _jsonable(x):
     if isinstance(x, float) and not math.isfinite(x):
         return None
     return x
-
-
-def _scan_extent(scans) -> tuple[float, float, float, float]:
-    """``(xmin, xmax, ymin, ymax)`` of the poses and the end points of every valid hit (not max range)."""
-    hit = scans.valid & ~scans.is_max
-    ang = scans.world_angles()
-    px = np.broadcast_to(scans.poses[:, :1], hit.shape)[hit]
-    py = np.broadcast_to(scans.poses[:, 1:2], hit.shape)[hit]
-    xs = np.concatenate([scans.poses[:, 0], px + scans.ranges[hit] * np.cos(ang[hit])])
-    ys = np.concatenate([scans.poses[:, 1], py + scans.ranges[hit] * np.sin(ang[hit])])
-    return float(xs.min()), float(xs.max()), float(ys.min()), float(ys.max())
 
 
 def _check_cells(rows: int, cols: int, limit: int) -> None:
@@ -513,7 +501,7 @@ def _make_grid(args, inp: _Input) -> Grid:
     else:
         res = args.resolution or 0.05
         margin = 1.0 if args.margin is None else args.margin
-        xmin, xmax, ymin, ymax = _scan_extent(scans)
+        xmin, xmax, ymin, ymax = scans.extent()
         if args.origin is not None:
             ox, oy = args.origin
             if ox > xmin or oy > ymin:

@@ -187,6 +187,16 @@ class Scans:
         return Scans(self.poses[keep], self.angles[keep, ::beam_step], self.ranges[keep, ::beam_step],
                      self.max_range, valid=self.valid[keep, ::beam_step], min_range=self.min_range)  # fmt: skip
 
+    def extent(self) -> tuple[float, float, float, float]:
+        """``(xmin, xmax, ymin, ymax)`` in metres of the poses and the end points of every valid hit."""
+        hit = self.valid & ~self.is_max
+        ang = self.world_angles()
+        px = np.broadcast_to(self.poses[:, :1], hit.shape)[hit]
+        py = np.broadcast_to(self.poses[:, 1:2], hit.shape)[hit]
+        xs = np.concatenate([self.poses[:, 0], px + self.ranges[hit] * np.cos(ang[hit])])
+        ys = np.concatenate([self.poses[:, 1], py + self.ranges[hit] * np.sin(ang[hit])])
+        return float(xs.min()), float(xs.max()), float(ys.min()), float(ys.max())
+
     def world_angles(self) -> np.ndarray:
         """Beam directions in the world frame, ``S x B`` (yaw + beam angle)."""
         return self.poses[:, 2:3] + self.angles

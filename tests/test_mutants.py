@@ -26,10 +26,11 @@ from ogm_ppl.inference.exact import brute_force, pose_constrained_1d
 from ogm_ppl.inference.gibbs import CellGibbs, MetropolisCell, PatchGibbs
 from ogm_ppl.inference.runner import RunningStats, run_gibbs
 from ogm_ppl.posterior import mutual_information_from_joint
-from ogm_ppl.priors import DataDriven1DPrior, IndependentPrior, MapPrior
+from ogm_ppl.priors import DataDriven1DPrior, IndependentPrior
 
 from .inference.test_exact import model_1d as exact_model_1d
-from .inference.test_gibbs import _lik, code_of, exact_pi, model_2d, states
+from .inference.test_gibbs import _lik, code_of, exact_pi, model_2d, patch_update_matrix, states
+from .inference.test_gibbs_priors import IsingByLogProbOnly
 from .inference.test_gibbs_priors import model_2d as prior_model_2d
 
 
@@ -208,47 +209,12 @@ def test_resume_restores_torch_rng(tmp_path, make):
 # ----------------------------------------------------------------------------- 5. Python-path patch MH
 
 
-class _IsingLogProbOnly(MapPrior):
-    """A prior that offers only ``log_prob`` (4-connected Ising), so PatchGibbs takes its Python path."""
-
-    def __init__(self, rows, cols, h, J):
-        self.rows, self.cols, self.h, self.J = rows, cols, h, J
-        self.num_cells = rows * cols
-
-    def log_prob(self, maps):
-        x = torch.as_tensor(maps, dtype=torch.float64)
-        g = x.reshape(*x.shape[:-1], self.rows, self.cols)
-        pair = (g[..., 1:, :] * g[..., :-1, :]).sum((-2, -1)) + (g[..., :, 1:] * g[..., :, :-1]).sum((-2, -1))
-        return self.h * x.sum(-1) + self.J * pair
+class _IsingLogProbOnly(IsingByLogProbOnly):
+    """The log_prob-only Ising prior with a ``sample``, so PatchGibbs takes its Python path."""
 
     def sample(self, sample_shape=(), generator=None):
         shape = torch.Size(sample_shape) + (self.num_cells,)
         return (torch.rand(shape, generator=generator) < 0.5).to(torch.float64)
-
-
-def _patch_matrix(kernel, model, patch, p_rand, sign=1.0):
-    """One patch update: Gibbs with probability ``1 - p_rand``, else a uniform proposal accepted by MH
-    with ``min(1, exp(sign * (logw[w] - logw[cur])))`` (``sign=-1``: the mutant)."""
-    S = states(model)
-    T = torch.zeros(len(S), len(S), dtype=torch.float64)
-    live = patch[patch >= 0]
-    for i, s in enumerate(S):
-        kernel._set_state(s)
-        logw = torch.from_numpy(kernel.patch_log_weights(patch))
-        W = len(logw)
-        gibbs = torch.softmax(logw, 0)
-        cur = int(sum(int(s[c]) << j for j, c in enumerate(live)))
-        mh = torch.zeros(W, dtype=torch.float64)
-        for w in range(W):
-            a = min(1.0, float(torch.exp(sign * (logw[w] - logw[cur]))))
-            mh[w] += a / W
-            mh[cur] += (1 - a) / W
-        row = (1 - p_rand) * gibbs + p_rand * mh
-        for w in range(W):
-            t = s.clone()
-            t[torch.from_numpy(live)] = torch.tensor([(w >> j) & 1 for j in range(len(live))], dtype=torch.float64)
-            T[i, code_of(model, t)] += row[w]
-    return T
 
 
 def test_python_patch_sweep_with_random_patch_mh_matches_brute_force():
@@ -268,7 +234,7 @@ def test_python_patch_sweep_with_random_patch_mh_matches_brute_force():
     # the inverted-ratio mutant's sweep has a stationary distribution whose marginals lie far outside
     sweep = torch.eye(2 ** len(model.latent), dtype=torch.float64)
     for p in kernel.patches():
-        sweep = sweep @ _patch_matrix(kernel, model, p, 0.5, sign=-1.0)
+        sweep = sweep @ patch_update_matrix(kernel, model, p, 0.5, sign=-1.0)
     pi_mut = torch.ones(len(sweep), dtype=torch.float64) / len(sweep)
     for _ in range(2000):
         pi_mut = pi_mut @ sweep

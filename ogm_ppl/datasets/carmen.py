@@ -123,14 +123,7 @@ class CarmenLog:
 
     def extent(self) -> tuple[float, float, float, float]:
         """``(xmin, xmax, ymin, ymax)`` in metres of the poses and the end points of all hits."""
-        s = self.scans
-        hit = s.valid & ~s.is_max
-        ang = s.world_angles()
-        px = np.broadcast_to(s.poses[:, :1], hit.shape)[hit]
-        py = np.broadcast_to(s.poses[:, 1:2], hit.shape)[hit]
-        xs = np.concatenate([s.poses[:, 0], px + s.ranges[hit] * np.cos(ang[hit])])
-        ys = np.concatenate([s.poses[:, 1], py + s.ranges[hit] * np.sin(ang[hit])])
-        return float(xs.min()), float(xs.max()), float(ys.min()), float(ys.max())
+        return self.scans.extent()
 
     def grid(self, resolution: float, margin: float = 1.0) -> Grid:
         """A 2D :class:`Grid` covering :meth:`extent` plus ``margin`` metres on every side."""

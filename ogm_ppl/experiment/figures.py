@@ -37,6 +37,21 @@ def _save(fig, path: Path, dpi: int) -> Path:
     return path
 
 
+def _line_plot(ax, xlabel: str, ylabel: str, title: str) -> None:
+    """Labels, a small title, legend and grid of the line figures."""
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=9)
+    ax.legend(fontsize=7)
+    ax.grid(alpha=0.3)
+
+
+def _save_closed(plt, fig, path: Path, dpi: int) -> Path:
+    out = _save(fig, path, dpi)
+    plt.close(fig)
+    return out
+
+
 def _curves(result, folder: Path, dpi: int) -> list[Path]:
     plt = _plt()
     files = []
@@ -50,24 +65,14 @@ def _curves(result, folder: Path, dpi: int) -> list[Path]:
                 c["precision"],
                 label=f"{p['algorithm']} (F1 {p['mask']['best_f1']:.3f})",
             )
-        ax.set_xlabel("recall")
-        ax.set_ylabel("precision")
-        ax.set_title(f"Precision-recall: {cond}", fontsize=9)
-        ax.legend(fontsize=7)
-        ax.grid(alpha=0.3)
-        files.append(_save(fig, folder / f"pr_{cond}.png", dpi))
-        plt.close(fig)
+        _line_plot(ax, "recall", "precision", f"Precision-recall: {cond}")
+        files.append(_save_closed(plt, fig, folder / f"pr_{cond}.png", dpi))
         fig, ax = plt.subplots(figsize=(5, 4))
         for p in rows:
             c = p["mask"]["curve"]
             ax.plot(c["thresholds"], c["f1"], label=p["algorithm"])
-        ax.set_xlabel("threshold (cell called occupied when p > threshold)")
-        ax.set_ylabel("F1")
-        ax.set_title(f"F1 against threshold: {cond}", fontsize=9)
-        ax.legend(fontsize=7)
-        ax.grid(alpha=0.3)
-        files.append(_save(fig, folder / f"f1_threshold_{cond}.png", dpi))
-        plt.close(fig)
+        _line_plot(ax, "threshold (cell called occupied when p > threshold)", "F1", f"F1 against threshold: {cond}")
+        files.append(_save_closed(plt, fig, folder / f"f1_threshold_{cond}.png", dpi))
     return files
 
 
@@ -93,13 +98,8 @@ def _sparsity(result, folder: Path, dpi: int) -> list[Path]:
                 axes[0, 1].plot(x, [p["touched"]["best_f1"] for p in ps], "o-", label=alg)
         for ax, what in zip(axes[0], ("scoring mask", "touched cells only")):
             ax.set_xscale("log")
-            ax.set_xlabel("readings used (% of all)")
-            ax.set_ylabel("best F1")
-            ax.set_title(f"{entry}: F1 against sparsity ({what})", fontsize=9)
-            ax.grid(alpha=0.3)
-            ax.legend(fontsize=7)
-        files.append(_save(fig, folder / f"f1_sparsity_{entry}.png", dpi))
-        plt.close(fig)
+            _line_plot(ax, "readings used (% of all)", "best F1", f"{entry}: F1 against sparsity ({what})")
+        files.append(_save_closed(plt, fig, folder / f"f1_sparsity_{entry}.png", dpi))
     return files
 
 
@@ -155,8 +155,7 @@ def _fpfn(result, folder: Path, dpi: int) -> list[Path]:
         for ax in axes.ravel():
             ax.set_xticks([])
             ax.set_yticks([])
-        files.append(_save(fig, folder / f"fpfn_{ds.name}.png", dpi))
-        plt.close(fig)
+        files.append(_save_closed(plt, fig, folder / f"fpfn_{ds.name}.png", dpi))
         thrs = spec.output.fpfn_thresholds
         if thrs:
             fig, axes = plt.subplots(
@@ -170,8 +169,7 @@ def _fpfn(result, folder: Path, dpi: int) -> list[Path]:
                     axes[i, j].set_title(f"{a.name}, p > {thr:g}", fontsize=8)
                     axes[i, j].set_xticks([])
                     axes[i, j].set_yticks([])
-            files.append(_save(fig, folder / f"fpfn_thresholds_{ds.name}.png", dpi))
-            plt.close(fig)
+            files.append(_save_closed(plt, fig, folder / f"fpfn_thresholds_{ds.name}.png", dpi))
     return files
 
 
@@ -187,13 +185,8 @@ def _time(result, folder: Path, dpi: int) -> list[Path]:
             if pts:
                 ax.plot([t["seconds"] for t in pts], [t["f1"] for t in pts], "o-", ms=3,
                         label=f"{r['algorithm']} c{r['chain']}")  # fmt: skip
-        ax.set_xlabel("wall-clock seconds (sampling)")
-        ax.set_ylabel("best F1 of the running marginals")
-        ax.set_title(f"Anytime F1: {ds}", fontsize=9)
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=7)
-        files.append(_save(fig, folder / f"f1_time_{ds}.png", dpi))
-        plt.close(fig)
+        _line_plot(ax, "wall-clock seconds (sampling)", "best F1 of the running marginals", f"Anytime F1: {ds}")
+        files.append(_save_closed(plt, fig, folder / f"f1_time_{ds}.png", dpi))
     return files
 
 

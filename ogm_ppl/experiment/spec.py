@@ -285,14 +285,20 @@ def _check_delta(t: _Table, key: str, default: str) -> str:
     return name
 
 
-def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[DatasetSpec]:
-    where = f"datasets[{i}]"
-    if isinstance(d, dict) and isinstance(d.get("name"), str):
-        where += f" ({d['name']!r})"
-    t = _Table(source, where, d)
+def _named_entry(source: str, section: str, i: int, entry) -> tuple[_Table, str]:
+    """The table of ``section[i]`` (named in errors by index and name) and its validated name."""
+    where = f"{section}[{i}]"
+    if isinstance(entry, dict) and isinstance(entry.get("name"), str):
+        where += f" ({entry['name']!r})"
+    t = _Table(source, where, entry)
     name = t.get("name", "str", required=True)
     if not _NAME.match(name):
         t.fail("name", f"may hold only letters, digits, '_', '.', '-', got {name!r}")
+    return t, name
+
+
+def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[DatasetSpec]:
+    t, name = _named_entry(source, "datasets", i, d)
     kind = t.get("kind", "str", required=True, choices=("simulated", "log"))
     p: dict = {}
     if kind == "simulated":
@@ -345,7 +351,7 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
             t.fail("path", f"no such log file: {path}")
         p["path"] = str(path)
         reader = t.raw("reader", {"max_usable_range": 20.0})
-        rt = _Table(source, f"{where}.reader", reader)
+        rt = _Table(source, f"{t.where}.reader", reader)
         r = {}
         for k in READER_KEYS:
             if rt.has(k):
@@ -371,7 +377,7 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
             "pose_fraction", "float", 1.0, sweep=True, lo=0, lo_open=True, hi=1
         )
         p["beam_step"] = t.get("beam_step", "int", 1, sweep=True, lo=1)
-        bt = _Table(source, f"{where}.benchmark", t.raw("benchmark", {}))
+        bt = _Table(source, f"{t.where}.benchmark", t.raw("benchmark", {}))
         p["benchmark"] = {
             "delta": _check_delta(bt, "delta", "haehnel"),
             "threshold": bt.get("threshold", "float", 0.20, lo=0, lo_open=True, hi=1),
@@ -401,13 +407,7 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
 
 
 def _algorithm(source: str, i: int, a) -> AlgorithmSpec:
-    where = f"algorithms[{i}]"
-    if isinstance(a, dict) and isinstance(a.get("name"), str):
-        where += f" ({a['name']!r})"
-    t = _Table(source, where, a)
-    name = t.get("name", "str", required=True)
-    if not _NAME.match(name):
-        t.fail("name", f"may hold only letters, digits, '_', '.', '-', got {name!r}")
+    t, name = _named_entry(source, "algorithms", i, a)
     kind = t.get("kind", "str", required=True, choices=("ogm", "gibbs", "patch_map"))
     p: dict = {}
     if kind == "ogm":

@@ -72,6 +72,21 @@ def set_cell(k, v, m, f, offsets, cells, c_off, c_ray, c_kappa):
             f[r] = _next_occupied(m, offsets, cells, r, kap + 1)
 
 
+@nb.njit(cache=True, inline="always")
+def _icm_set(k, lo, m, f, offsets, cells, c_off, c_ray, c_kappa) -> int:
+    """ICM's step for cell ``k`` with conditional log-odds ``lo``: set it to its more likely value (keep
+    it on a tie); returns 1 if it changed."""
+    v = m[k]
+    if lo > 0.0:
+        v = 1
+    elif lo < 0.0:
+        v = 0
+    if v == m[k]:
+        return 0
+    set_cell(k, v, m, f, offsets, cells, c_off, c_ray, c_kappa)
+    return 1
+
+
 @nb.njit(cache=True)
 def icm_sweeps(order, prior_log_odds, m, f, offsets, cells, c_off, c_ray, c_kappa, ll, max_sweeps):
     """Iterated conditional modes (the EM hill-climbing of Section 2.2) over ``order``.
@@ -84,14 +99,7 @@ def icm_sweeps(order, prior_log_odds, m, f, offsets, cells, c_off, c_ray, c_kapp
         for i in range(order.shape[0]):
             k = order[i]
             lo = prior_log_odds[k] + cell_log_lik_ratio(k, m, f, offsets, cells, c_off, c_ray, c_kappa, ll)
-            v = m[k]
-            if lo > 0.0:
-                v = 1
-            elif lo < 0.0:
-                v = 0
-            if v != m[k]:
-                set_cell(k, v, m, f, offsets, cells, c_off, c_ray, c_kappa)
-                changed += 1
+            changed += _icm_set(k, lo, m, f, offsets, cells, c_off, c_ray, c_kappa)
         if changed == 0:
             return s + 1
     return max_sweeps
@@ -106,14 +114,7 @@ def local_icm_sweeps(order, lp, m, f, offsets, cells, c_off, c_ray, c_kappa, ll,
             k = order[i]
             lo = cell_log_odds(lp, k, m)  # inlined
             lo += cell_log_lik_ratio(k, m, f, offsets, cells, c_off, c_ray, c_kappa, ll)
-            v = m[k]
-            if lo > 0.0:
-                v = 1
-            elif lo < 0.0:
-                v = 0
-            if v != m[k]:
-                set_cell(k, v, m, f, offsets, cells, c_off, c_ray, c_kappa)
-                changed += 1
+            changed += _icm_set(k, lo, m, f, offsets, cells, c_off, c_ray, c_kappa)
         if changed == 0:
             return s + 1
     return max_sweeps

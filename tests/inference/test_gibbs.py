@@ -63,7 +63,9 @@ def cell_update_matrix(kernel, model, k):
     return T
 
 
-def patch_update_matrix(kernel, model, patch, p_rand=0.0):
+def patch_update_matrix(kernel, model, patch, p_rand=0.0, sign=1.0):
+    """One patch update: Gibbs with probability ``1 - p_rand``, else a uniform proposal accepted by
+    Metropolis-Hastings with ``min(1, exp(sign * (logw[w] - logw[cur])))`` (``sign=-1``: an inverted ratio)."""
     S = states(model)
     T = torch.zeros(len(S), len(S), dtype=torch.float64)
     live = patch[patch >= 0]
@@ -78,7 +80,7 @@ def patch_update_matrix(kernel, model, patch, p_rand=0.0):
         cur = int(sum(int(s[c]) << j for j, c in enumerate(live)))
         mh = torch.zeros(W, dtype=torch.float64)
         for w in range(W):
-            a = 1.0 if logw[w] >= logw[cur] else float(torch.exp(logw[w] - logw[cur]))
+            a = min(1.0, float(torch.exp(sign * (logw[w] - logw[cur]))))
             mh[w] += a / W
             mh[cur] += (1 - a) / W
         row = (1 - p_rand) * gibbs + p_rand * mh
