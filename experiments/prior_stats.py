@@ -130,7 +130,9 @@ def report(table_dir: Path, out: Path, timings: dict | None) -> None:
         p = table_dir / f"prior_{name}.npz"
         if p.is_file():
             t = load_tables(p)
-            stats[name] = {"statistics": t.summary(), "provenance": t.provenance}
+            lam4, psi4 = t.mrf_fit(4)
+            summary = {**t.summary(), "mrf_lambda": lam4, "mrf_psi": psi4}  # pseudo-likelihood, 4-neighbours
+            stats[name] = {"statistics": summary, "provenance": t.provenance}
     names = list(stats)
     lines = [
         "# Patch statistics per corpus (thesis Section 5.2.2-5.2.3)",
@@ -147,6 +149,9 @@ def report(table_dir: Path, out: Path, timings: dict | None) -> None:
         lines.append(
             f"| {label} | {'' if th is None else fmt.format(th)} | " + " | ".join(cells) + " |"
         )
+    lines.append("| MRF (4-neighbour) lambda, psi by pseudo-likelihood |  | "
+                 + " | ".join(f"{stats[n]['statistics']['mrf_lambda']:.3f}, {stats[n]['statistics']['mrf_psi']:.4f}"
+                              for n in names) + " |")  # fmt: skip
     lines += ["", "Provenance:", ""]
     for n in names:
         p = stats[n]["provenance"]
