@@ -24,7 +24,7 @@ sys.path.insert(0, os.path.dirname(__file__))
 from _common import best_time, peak_rss_mb, sparse_scene, write_json
 
 from ogm_ppl import GaussianRange, OccupancyModel, raycast
-from ogm_ppl.inference.gibbs import CellGibbs, PatchGibbs
+from ogm_ppl.inference.mcmc.gibbs import CellGibbs, PatchGibbs
 from ogm_ppl.priors import IndependentPrior
 from ogm_ppl.reference import gibbs_cell_sweep_reference
 

@@ -34,7 +34,7 @@ from _common import best_time, sparse_scene, write_json
 from ogm_ppl import GaussianRange, Grid, OccupancyModel, raycast
 from ogm_ppl.datasets import simulate_scans
 from ogm_ppl.datasets.simple2d import _truth
-from ogm_ppl.inference.gibbs import CellGibbs, PatchGibbs
+from ogm_ppl.inference.mcmc.gibbs import CellGibbs, PatchGibbs
 from ogm_ppl.priors import BorderPatchPrior, IndependentPrior, MRFPrior, PatchTablePrior
 
 torch.set_default_dtype(torch.float64)

@@ -22,7 +22,7 @@ import numpy as np
 import torch
 
 from ogm_ppl.datasets import wall_datasets
-from ogm_ppl.inference.delta_fit import NeuralDelta, cross_entropy_loss, fit_delta, warm_start_pn
+from ogm_ppl.inference.variational.delta_fit import cross_entropy_loss, fit_delta, warm_start_pn
 from ogm_ppl.io import atomic_write_text as _write
 from ogm_ppl.models import (
     BorensteinKoren,
@@ -32,7 +32,7 @@ from ogm_ppl.models import (
     Stachniss,
     delta_by_name,
 )
-from ogm_ppl.models.delta import family_to_dict
+from ogm_ppl.models.delta import NeuralDelta, family_to_dict
 
 torch.set_default_dtype(torch.float64)
 ROOT = Path(__file__).resolve().parent.parent

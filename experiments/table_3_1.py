@@ -27,7 +27,7 @@ from ogm_ppl import GaussianRange, OccupancyModel, raycast
 from ogm_ppl.datasets import toy_1d
 from ogm_ppl.inference import evidence_grid
 from ogm_ppl.inference.exact import pose_constrained_1d
-from ogm_ppl.inference.gibbs import CellGibbs
+from ogm_ppl.inference.mcmc.gibbs import CellGibbs
 from ogm_ppl.inference.patch_map import offline_patch_map, online_patch_map, reference_map
 from ogm_ppl.io import atomic_write_text
 from ogm_ppl.metrics import kl_divergence

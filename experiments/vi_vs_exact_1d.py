@@ -21,8 +21,8 @@ import torch
 from ogm_ppl import GaussianRange, OccupancyModel, raycast
 from ogm_ppl.datasets import THESIS_TOY_READINGS, toy_1d
 from ogm_ppl.inference.exact import pose_constrained_1d
-from ogm_ppl.inference.guides import MeanFieldGuide, PatchGuide, fit_guide
-from ogm_ppl.inference.structured_guides import FirstHitGuide
+from ogm_ppl.inference.variational.guides import MeanFieldGuide, PatchGuide, fit_guide
+from ogm_ppl.inference.variational.structured_guides import FirstHitGuide
 from ogm_ppl.metrics import kl_divergence
 from ogm_ppl.priors import IndependentPrior
 

@@ -3,11 +3,11 @@
 Implements Merali (2020), "A Study of the Benefits of Cell Correlations in Occupancy Grid Mapping".
 """
 
-from .grid import Grid
-from .models.occupancy import OccupancyModel
-from .raycast import CellIndex, Rays, raycast
-from .scans import Scans
-from .sensors import GaussianRange, PatternMatch, SensorModel
+from ogm_ppl.grid import Grid
+from ogm_ppl.models.occupancy import OccupancyModel
+from ogm_ppl.raycast import CellIndex, Rays, raycast
+from ogm_ppl.scans import Scans
+from ogm_ppl.sensors import GaussianRange, PatternMatch, SensorModel
 
 __all__ = [
     "Grid",

@@ -1,6 +1,6 @@
 """``python -m ogm_ppl``: the ``ogm-ppl`` command (:mod:`ogm_ppl.cli`)."""
 
-from .cli import main
+from ogm_ppl.cli import main
 
 if __name__ == "__main__":
     raise SystemExit(main())

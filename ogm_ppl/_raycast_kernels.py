@@ -8,7 +8,7 @@ with rounding; ties (a ray through a grid corner) step the column first, which k
 4-connected.
 
 :func:`trace_ray` walks one ray into a small scratch buffer; :func:`traverse_all` (the CSR builder)
-and the fused traditional-OGM kernel in :mod:`ogm_ppl.inference._ogm_kernels` both use it.
+and the fused traditional-OGM kernel in :mod:`ogm_ppl.inference._kernels.log_odds` both use it.
 """
 
 from __future__ import annotations

@@ -41,17 +41,17 @@ from pathlib import Path
 
 import numpy as np
 
-from . import GaussianRange, OccupancyModel, raycast
-from .datasets import THESIS_TOY_READINGS, simple_2d_example, toy_1d
-from .datasets.mapgen import KINDS
-from .grid import Grid
-from .inference import CellGibbs, RunningStats, evidence_grid, run_gibbs
-from .inference.exact import pose_constrained_1d
-from .inference.patch_map import offline_patch_map
-from .io import atomic_write_text
-from .metrics import best_f1, near_mapped_mask, roc_auc
-from .models import delta_by_name
-from .priors import IndependentPrior, prior_by_name
+from ogm_ppl import GaussianRange, OccupancyModel, raycast
+from ogm_ppl.datasets import THESIS_TOY_READINGS, simple_2d_example, toy_1d
+from ogm_ppl.datasets.mapgen import KINDS
+from ogm_ppl.grid import Grid
+from ogm_ppl.inference import CellGibbs, RunningStats, evidence_grid, run_gibbs
+from ogm_ppl.inference.exact import pose_constrained_1d
+from ogm_ppl.inference.patch_map import offline_patch_map
+from ogm_ppl.io import atomic_write_text
+from ogm_ppl.metrics import best_f1, near_mapped_mask, roc_auc
+from ogm_ppl.models import delta_by_name
+from ogm_ppl.priors import IndependentPrior, prior_by_name
 
 MAPS = {
     "haehnel": "traditional OGM (Hähnel 2004)",
@@ -76,7 +76,7 @@ def run_headline(out: Path, seed: int = 0) -> dict:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .viz import plot_map, plot_marginals_1d
+    from ogm_ppl.viz import plot_map, plot_marginals_1d
 
     out.mkdir(parents=True, exist_ok=True)
     ex = simple_2d_example(seed=seed)
@@ -205,7 +205,7 @@ def _version() -> str:
     try:
         return metadata.version("ogm_ppl")
     except metadata.PackageNotFoundError:  # pragma: no cover - running from a source tree
-        from . import __version__
+        from ogm_ppl import __version__
 
         return __version__
 
@@ -470,7 +470,7 @@ class _Input:
 
 
 def _read_input(args) -> _Input:
-    from .datasets import load_dataset, read_carmen
+    from ogm_ppl.datasets import load_dataset, read_carmen
 
     magic = _check_input(args.input)
     if magic[:2] == b"PK":
@@ -572,8 +572,8 @@ def _validate_method(args) -> None:
 
 def _compute_map(args, inp: _Input, grid: Grid, times: dict) -> tuple[np.ndarray, np.ndarray, dict]:
     """``(probabilities K float64, observed K bool, details)`` by ``args.method``."""
-    from .inference import PatchGibbs
-    from .inference.log_odds import evidence_grid_from_scans
+    from ogm_ppl.inference import PatchGibbs
+    from ogm_ppl.inference.log_odds import evidence_grid_from_scans
 
     details: dict = {}
     if args.method in _DEFAULT_DELTA:
@@ -643,7 +643,7 @@ def save_map_png(path: Path, probabilities: np.ndarray, observed: np.ndarray, gr
     grey, north (largest y) up. Uses a 256-entry lookup table, so large maps cost 3 bytes a cell."""
     from PIL import Image
 
-    from .viz import thesis_cmap
+    from ogm_ppl.viz import thesis_cmap
 
     lut = np.round(thesis_cmap()(np.linspace(0.0, 1.0, 256))[:, :3] * 255).astype(np.uint8)
     p = np.nan_to_num(np.asarray(probabilities, dtype=np.float64).reshape(grid.shape), nan=0.5)
@@ -689,7 +689,7 @@ def _counts(inp: _Input) -> dict:
 def _scores(probs, observed, inp: _Input, grid: Grid) -> dict | None:
     if inp.truth is None or inp.grid != grid:
         return None
-    from .metrics import best_f1, near_mapped_mask, roc_auc
+    from ogm_ppl.metrics import best_f1, near_mapped_mask, roc_auc
 
     truth = np.asarray(inp.truth).astype(bool).ravel()
     mask = near_mapped_mask(observed.reshape(grid.shape), 10.0).ravel()
@@ -714,7 +714,7 @@ def cmd_map(args) -> dict:
 
 
 def _map(args) -> dict:
-    from .rosmap import save_ros_map
+    from ogm_ppl.rosmap import save_ros_map
 
     times: dict = {}
     with _steps(4, f"ogm-ppl map ({args.method})") as bar:
@@ -803,7 +803,7 @@ def _report_md(r: dict) -> str:
 
 
 def _truth_from_spec(spec: list[str], size: int, seed: int) -> tuple[np.ndarray, dict]:
-    from .datasets.mapgen import generate_map
+    from ogm_ppl.datasets.mapgen import generate_map
 
     words = spec[1:] if spec[0] == "generated" else spec
     if len(words) == 1 and words[0].startswith("generated:"):
@@ -831,8 +831,8 @@ def _truth_from_spec(spec: list[str], size: int, seed: int) -> tuple[np.ndarray,
 
 def cmd_simulate(args) -> dict:
     """``ogm-ppl simulate``: stop-and-scan dataset on a generated map or PNG, saved with its truth."""
-    from .datasets import save_dataset
-    from .datasets.stop_and_scan import stop_and_scan
+    from ogm_ppl.datasets import save_dataset
+    from ogm_ppl.datasets.stop_and_scan import stop_and_scan
 
     _prepare_out_file(args.out)
     with _steps(3, "ogm-ppl simulate") as bar:
@@ -857,7 +857,7 @@ def cmd_simulate(args) -> dict:
 
 def cmd_convert(args) -> dict:
     """``ogm-ppl convert``: CARMEN log -> dataset file."""
-    from .datasets import read_carmen, save_dataset
+    from ogm_ppl.datasets import read_carmen, save_dataset
 
     _check_input(args.log)
     _prepare_out_file(args.out)
@@ -885,7 +885,7 @@ def _one_line(e: BaseException) -> str:
 
 def cmd_experiment(args) -> int:
     """``ogm-ppl experiment SPEC``: 0 when every task finished, 1 when some failed (what finished is kept)."""
-    from .experiment import ExperimentError, SpecError, load_spec, run_experiment
+    from ogm_ppl.experiment import ExperimentError, SpecError, load_spec, run_experiment
 
     try:
         spec = load_spec(args.spec)
@@ -905,8 +905,8 @@ def cmd_experiment(args) -> int:
 
 def main(argv: list[str] | None = None) -> int:
     """Entry point of ``ogm-ppl`` / ``python -m ogm_ppl``; returns the exit status (0 ok, 2 error)."""
-    from .datasets import CarmenFormatError, DatasetFileError
-    from .rosmap import RosMapError
+    from ogm_ppl.datasets import CarmenFormatError, DatasetFileError
+    from ogm_ppl.rosmap import RosMapError
 
     argv = sys.argv[1:] if argv is None else list(argv)
     show_tb = "--traceback" in argv

@@ -212,7 +212,7 @@ class ChainPosterior1D(MapPosterior):
 
     def pair_joint(self, cells=None) -> torch.Tensor:
         """``P(m_i = 1, m_j = 1 | z)``, ``C x C``, in the order of ``cells`` (default: every cell of the
-        grid in cell order, as :func:`~ogm_ppl.inference.exact.brute_force` returns it). Cells off the
+        grid in cell order, as :func:`~ogm_ppl.inference.exact.posteriors.brute_force` returns it). Cells off the
         robot's ray are independent of the rest (no reading reaches them)."""
         idx = self._cells(cells)
         on = self._pos[idx] >= 0

@@ -42,9 +42,9 @@ from functools import cached_property
 
 import numpy as np
 
-from ._raycast_kernels import entries_beyond, entry_positions, transpose_csr, traverse_all
-from .grid import Grid
-from .scans import Scans
+from ogm_ppl._raycast_kernels import entries_beyond, entry_positions, transpose_csr, traverse_all
+from ogm_ppl.grid import Grid
+from ogm_ppl.scans import Scans
 
 __all__ = ["Rays", "CellIndex", "RayInputs", "ray_inputs", "raycast"]
 

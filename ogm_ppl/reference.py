@@ -15,8 +15,8 @@ import math
 
 import numpy as np
 
-from .grid import Grid
-from .scans import Scans
+from ogm_ppl.grid import Grid
+from ogm_ppl.scans import Scans
 
 __all__ = ["traverse_reference", "evidence_grid_reference", "evidence_grid_numpy"]
 

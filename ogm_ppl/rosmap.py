@@ -87,7 +87,7 @@ from typing import Any, Literal
 
 import numpy as np
 
-from .grid import Grid
+from ogm_ppl.grid import Grid
 
 __all__ = [
     "RosMapError",
@@ -409,7 +409,7 @@ def save_ros_map(
     Args:
         path: the YAML path (``.yaml``/``.yml``) or the stem; the directory is created.
         probabilities: ``K`` or grid-shaped ``p(m_k = 1 | z)`` (numpy or torch); NaN = unknown. A
-            :class:`~ogm_ppl.inference.log_odds.LogOddsMap` is accepted too (its grid, and
+            :class:`~ogm_ppl.inference.log_odds.maps.LogOddsMap` is accepted too (its grid, and
             ``~observed`` as the unknown mask).
         grid: the grid (its ``origin`` becomes the YAML origin; a 1D grid is one image row).
         unknown: ``K`` or grid-shaped bool mask of never-observed cells.

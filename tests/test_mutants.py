@@ -23,15 +23,22 @@ from pyro.distributions.testing.gof import multinomial_goodness_of_fit
 from ogm_ppl import OccupancyModel, raycast
 from ogm_ppl.datasets import toy_1d
 from ogm_ppl.inference.exact import brute_force, pose_constrained_1d
-from ogm_ppl.inference.gibbs import CellGibbs, MetropolisCell, PatchGibbs
-from ogm_ppl.inference.runner import RunningStats, run_gibbs
+from ogm_ppl.inference.mcmc.gibbs import CellGibbs, MetropolisCell, PatchGibbs
+from ogm_ppl.inference.mcmc.runner import RunningStats, run_gibbs
 from ogm_ppl.posterior import mutual_information_from_joint
 from ogm_ppl.priors import DataDriven1DPrior, IndependentPrior
 
-from .inference.test_exact import model_1d as exact_model_1d
-from .inference.test_gibbs import _lik, code_of, exact_pi, model_2d, patch_update_matrix, states
-from .inference.test_gibbs_priors import IsingByLogProbOnly
-from .inference.test_gibbs_priors import model_2d as prior_model_2d
+from .inference.exact.test_exact import model_1d as exact_model_1d
+from .inference.mcmc.test_gibbs import (
+    _lik,
+    code_of,
+    exact_pi,
+    model_2d,
+    patch_update_matrix,
+    states,
+)
+from .inference.mcmc.test_gibbs_priors import IsingByLogProbOnly
+from .inference.mcmc.test_gibbs_priors import model_2d as prior_model_2d
 
 
 def _mc_tol(n: int, tau: float) -> float:

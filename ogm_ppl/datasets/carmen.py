@@ -57,8 +57,8 @@ from pathlib import Path
 
 import numpy as np
 
-from ..grid import Grid
-from ..scans import Scans
+from ogm_ppl.grid import Grid
+from ogm_ppl.scans import Scans
 
 __all__ = ["CarmenFormatError", "CarmenLog", "read_carmen"]
 

@@ -13,9 +13,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..grid import Grid
-from ..scans import Scans
-from .simulate import simulate_scans
+from ogm_ppl.datasets.simulate import simulate_scans
+from ogm_ppl.grid import Grid
+from ogm_ppl.scans import Scans
 
 __all__ = ["SimpleExample2D", "simple_2d_example"]
 

@@ -10,9 +10,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..grid import Grid
-from ..raycast import Rays, raycast
-from ..scans import Scans
+from ogm_ppl.grid import Grid
+from ogm_ppl.raycast import Rays, raycast
+from ogm_ppl.scans import Scans
 
 __all__ = ["first_hit", "simulate_scans"]
 

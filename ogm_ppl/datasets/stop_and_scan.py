@@ -43,10 +43,10 @@ import numpy as np
 from scipy import ndimage
 from scipy.sparse import csgraph, csr_matrix
 
-from ..grid import Grid
-from ..raycast import raycast
-from ..scans import Scans
-from .simulate import first_hit, simulate_scans
+from ogm_ppl.datasets.simulate import first_hit, simulate_scans
+from ogm_ppl.grid import Grid
+from ogm_ppl.raycast import raycast
+from ogm_ppl.scans import Scans
 
 __all__ = ["StopAndScan", "plan_route", "route_coverage", "stop_and_scan"]
 

@@ -15,8 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..grid import Grid
-from ..scans import Scans
+from ogm_ppl.grid import Grid
+from ogm_ppl.scans import Scans
 
 __all__ = ["Toy1D", "toy_1d", "THESIS_TOY_READINGS"]
 

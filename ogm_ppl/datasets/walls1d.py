@@ -15,10 +15,10 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from ..models.occupancy import OccupancyModel
-from ..raycast import raycast
-from ..sensors import GaussianRange
-from .toy1d import toy_1d
+from ogm_ppl.datasets.toy1d import toy_1d
+from ogm_ppl.models.occupancy import OccupancyModel
+from ogm_ppl.raycast import raycast
+from ogm_ppl.sensors import GaussianRange
 
 __all__ = ["WallDatasets", "wall_datasets"]
 
@@ -59,8 +59,8 @@ def wall_datasets(
 
     ``prior``: ``"uniform"`` (``lambda = 0.5``) or ``"data_driven"`` (Section 5.1).
     """
-    from ..inference.exact import pose_constrained_1d
-    from ..priors import DataDriven1DPrior, IndependentPrior
+    from ogm_ppl.inference.exact import pose_constrained_1d
+    from ogm_ppl.priors import DataDriven1DPrior, IndependentPrior
 
     if prior not in ("uniform", "data_driven"):
         raise ValueError(f"prior must be 'uniform' or 'data_driven', got {prior!r}")

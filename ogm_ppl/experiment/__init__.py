@@ -6,8 +6,8 @@ scored against the truth (simulated) or the thesis's benchmark map (logs), with 
 >>> print(result.table())                                         # doctest: +SKIP
 """
 
-from .runner import ExperimentError, ExperimentResult, plan_tasks, run_experiment
-from .spec import (
+from ogm_ppl.experiment.runner import ExperimentError, ExperimentResult, plan_tasks, run_experiment
+from ogm_ppl.experiment.spec import (
     AlgorithmSpec,
     DatasetSpec,
     ExperimentSpec,

@@ -113,8 +113,8 @@ def _fpfn_image(q, truth, mask, thr):
 
 
 def _fpfn(result, folder: Path, dpi: int) -> list[Path]:
-    from ..viz import thesis_cmap
-    from .tasks import dataset_path, load_eval, score_path
+    from ogm_ppl.experiment.tasks import dataset_path, load_eval, score_path
+    from ogm_ppl.viz import thesis_cmap
 
     plt = _plt()
     spec, out = result.spec, result.out_dir

@@ -13,7 +13,7 @@ import math
 
 import numpy as np
 
-from ..io import atomic_write_text
+from ogm_ppl.io import atomic_write_text
 
 __all__ = ["pool", "markdown", "write_outputs"]
 
@@ -126,7 +126,7 @@ def write_outputs(result, tasks, recs: dict) -> None:
     files = [atomic_write_text(out / "metrics.json", json.dumps(doc, indent=1, allow_nan=True)),
              atomic_write_text(out / "metrics.md", markdown(result))]  # fmt: skip
     if spec.output.figures and result.scores:
-        from .figures import write_figures
+        from ogm_ppl.experiment.figures import write_figures
 
         files += write_figures(result)
     result.files = files

@@ -25,9 +25,9 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io import atomic_write_text
-from . import tasks as T
-from .spec import ExperimentSpec, derive_seed, load_spec
+from ogm_ppl.experiment import tasks as T
+from ogm_ppl.experiment.spec import ExperimentSpec, derive_seed, load_spec
+from ogm_ppl.io import atomic_write_text
 
 __all__ = ["ExperimentResult", "ExperimentError", "run_experiment", "plan_tasks"]
 
@@ -78,7 +78,7 @@ class ExperimentResult:
 
     def table(self) -> str:
         """The Markdown results table (as in ``metrics.md``)."""
-        from .report import markdown
+        from ogm_ppl.experiment.report import markdown
 
         return markdown(self)
 
@@ -236,7 +236,7 @@ def run_experiment(spec_or_path, out_dir, *, scheduler=None, workers: int | None
     recs = {**done_recs, **{k: v for k, v in results.items() if v is not None}}
     result = ExperimentResult(spec, out, executed=[t.id for t in todo if t.id in results], skipped=skipped,
                               failed=failed)  # fmt: skip
-    from .report import write_outputs
+    from ogm_ppl.experiment.report import write_outputs
 
     write_outputs(result, tasks, recs)
     result.seconds = time.perf_counter() - t0

@@ -265,7 +265,7 @@ def _patch(t: _Table, key: str, default):
 
 def _check_prior(t: _Table, key: str, default: str) -> str:
     name = t.get(key, "str", default)
-    from ..priors.named import prior_by_name
+    from ogm_ppl.priors.named import prior_by_name
 
     try:
         prior_by_name(name, (8, 8))
@@ -276,7 +276,7 @@ def _check_prior(t: _Table, key: str, default: str) -> str:
 
 def _check_delta(t: _Table, key: str, default: str) -> str:
     name = t.get(key, "str", default)
-    from ..models import delta_by_name
+    from ogm_ppl.models import delta_by_name
 
     try:
         delta_by_name(name)

@@ -35,7 +35,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ..io import atomic_write_text
+from ogm_ppl.io import atomic_write_text
 
 __all__ = ["TASK_VERSION", "task_hash", "task_env", "run_base", "run_dataset", "run_algorithm", "run_score",
            "base_dir", "dataset_path", "run_dir", "score_path"]  # fmt: skip
@@ -100,7 +100,7 @@ def _grid_array(grid) -> np.ndarray:
 
 
 def _grid_from(a):
-    from ..grid import Grid
+    from ogm_ppl.grid import Grid
 
     a = np.asarray(a, float)
     return Grid(tuple(int(s) for s in a[:-3]), float(a[-3]), (float(a[-2]), float(a[-1])))
@@ -123,7 +123,7 @@ def score_path(out: Path, ds, alg) -> Path:
 
 
 def _png(path: Path, probs, grid, title: str, dpi: int) -> None:
-    from ..viz import _plt, plot_map
+    from ogm_ppl.viz import _plt, plot_map
 
     plt = _plt()
     fig, ax = plt.subplots(figsize=(5, 5))
@@ -137,10 +137,10 @@ def _png(path: Path, probs, grid, title: str, dpi: int) -> None:
 # ------------------------------------------------------------------------------------------ base
 def run_base(ds, out: str, h: str) -> dict:
     """Build the shared part of a dataset (see the module docstring); returns its done-record."""
-    from ..datasets.dataset_file import save_dataset
-    from ..grid import Grid
-    from ..inference import evidence_grid_from_scans
-    from ..models import delta_by_name
+    from ogm_ppl.datasets.dataset_file import save_dataset
+    from ogm_ppl.grid import Grid
+    from ogm_ppl.inference import evidence_grid_from_scans
+    from ogm_ppl.models import delta_by_name
 
     out = Path(out)
     p = ds.base_params
@@ -148,8 +148,8 @@ def run_base(ds, out: str, h: str) -> dict:
     npz = base_dir(out) / f"{ds.base}.npz"
     with task_env():
         if ds.kind == "simulated":
-            from ..datasets.mapgen import KINDS, generate_map
-            from ..datasets.stop_and_scan import plan_route
+            from ogm_ppl.datasets.mapgen import KINDS, generate_map
+            from ogm_ppl.datasets.stop_and_scan import plan_route
 
             kind = KINDS[p["map_seed"] % len(KINDS)] if p["map"] == "mixed" else p["map"]
             truth = generate_map(kind, tuple(p["size"]), seed=p["map_seed"], border=p["border"])
@@ -168,7 +168,7 @@ def run_base(ds, out: str, h: str) -> dict:
                 "occupied_share": float(truth.mean()),
             }
         else:
-            from ..datasets.carmen import read_carmen
+            from ogm_ppl.datasets.carmen import read_carmen
 
             log = read_carmen(p["path"], **p["reader"])
             if p["extent"] is not None:
@@ -203,9 +203,9 @@ def run_base(ds, out: str, h: str) -> dict:
 # ------------------------------------------------------------------------------------------ dataset
 def run_dataset(ds, out: str, h: str, _base=None) -> dict:
     """Build one dataset from its base: readings (``save_dataset``) + ``.eval.npz``; returns the record."""
-    from ..datasets.dataset_file import load_dataset, save_dataset
-    from ..inference import evidence_grid_from_scans
-    from ..models import delta_by_name
+    from ogm_ppl.datasets.dataset_file import load_dataset, save_dataset
+    from ogm_ppl.inference import evidence_grid_from_scans
+    from ogm_ppl.models import delta_by_name
 
     out = Path(out)
     p = ds.params
@@ -216,7 +216,7 @@ def run_dataset(ds, out: str, h: str, _base=None) -> dict:
             route = z["route"] if "route" in z.files else None
             mapped = z["mapped"].astype(bool) if "mapped" in z.files else None
         if ds.kind == "simulated":
-            from ..datasets.stop_and_scan import stop_and_scan
+            from ogm_ppl.datasets.stop_and_scan import stop_and_scan
 
             data = stop_and_scan(truth, grid, route=route, beams=p["beams"], max_range_cells=p["max_range_cells"],
                                  sigma_cells=p["sigma_cells"], seed=p["seed"], pose_fraction=p["pose_fraction"],
@@ -250,7 +250,7 @@ def run_dataset(ds, out: str, h: str, _base=None) -> dict:
 
 def load_eval(out: Path, ds, metrics):
     """``truth``, the scoring ``mask`` and the ``touched`` mask (flat bool) of a dataset."""
-    from ..metrics import near_mapped_mask
+    from ogm_ppl.metrics import near_mapped_mask
 
     with np.load(dataset_path(out, ds).with_suffix(".eval.npz"), allow_pickle=False) as z:
         truth, mapped, touched = (
@@ -266,7 +266,7 @@ def load_eval(out: Path, ds, metrics):
 
 
 def _quick_scores(q, truth, mask, thresholds) -> dict:
-    from ..metrics import best_f1, roc_auc
+    from ogm_ppl.metrics import best_f1, roc_auc
 
     f1, thr = best_f1(q, truth, thresholds=np.asarray(thresholds), mask=mask)
     t = truth[mask]
@@ -276,10 +276,10 @@ def _quick_scores(q, truth, mask, thresholds) -> dict:
 
 # ------------------------------------------------------------------------------------------ run
 def _model(ds, alg, grid, scans):
-    from ..models.occupancy import OccupancyModel
-    from ..priors.named import prior_by_name
-    from ..raycast import raycast
-    from ..sensors import GaussianRange
+    from ogm_ppl.models.occupancy import OccupancyModel
+    from ogm_ppl.priors.named import prior_by_name
+    from ogm_ppl.raycast import raycast
+    from ogm_ppl.sensors import GaussianRange
 
     sigma = alg.params.get("sigma_cells") or ds.params["sigma_cells"]
     rays = raycast(grid, scans)
@@ -301,7 +301,7 @@ def _ckpt_sweep(path: Path) -> int:
 
 
 def _gibbs(ds, alg, model, seed, folder: Path, truth, mask, thresholds, resume, stop_after):
-    from ..inference import CellGibbs, PatchGibbs, RunningStats, run_gibbs
+    from ogm_ppl.inference import CellGibbs, PatchGibbs, RunningStats, run_gibbs
 
     p = alg.params
     ckpt, trace_path = folder / "gibbs.npz", folder / "trace.json"
@@ -363,7 +363,7 @@ def run_algorithm(ds, alg, chain: int, seed: int, metrics, output, out: str, h: 
     ``stop_after`` (tests, and a deliberate pause): stop a Gibbs run after that many sweeps of this
     call, leaving its checkpoint and no result (returns None); the next call resumes it.
     """
-    from ..datasets.dataset_file import load_dataset
+    from ogm_ppl.datasets.dataset_file import load_dataset
 
     out = Path(out)
     folder = run_dir(out, ds, alg, chain)
@@ -376,14 +376,14 @@ def run_algorithm(ds, alg, chain: int, seed: int, metrics, output, out: str, h: 
     with task_env():
         p = alg.params
         if alg.kind == "ogm":
-            from ..inference import evidence_grid_from_scans
-            from ..models import delta_by_name
+            from ogm_ppl.inference import evidence_grid_from_scans
+            from ogm_ppl.models import delta_by_name
 
             ev = evidence_grid_from_scans(grid, scans, delta_by_name(p["delta"]), prior=p["prior"],
                                           clamp=tuple(p["clamp"]) if p["clamp"] else None)  # fmt: skip
             q = ev.probabilities.numpy()
         elif alg.kind == "patch_map":
-            from ..inference.patch_map import offline_patch_map, online_patch_map
+            from ogm_ppl.inference.patch_map import offline_patch_map, online_patch_map
 
             model = _model(ds, alg, grid, scans)
             if p["mode"] == "offline":
@@ -414,7 +414,7 @@ def run_algorithm(ds, alg, chain: int, seed: int, metrics, output, out: str, h: 
 # ------------------------------------------------------------------------------------------ score
 def run_score(ds, alg, metrics, output, out: str, h: str, _deps=None) -> dict:
     """Average the chains' marginals and score them; writes ``maps/D/A.{npz,png,json}``."""
-    from .. import metrics as M
+    from ogm_ppl import metrics as M
 
     out = Path(out)
     qs = []
@@ -454,7 +454,7 @@ def run_score(ds, alg, metrics, output, out: str, h: str, _deps=None) -> dict:
         rec["touched"] = block(touched)
     path = score_path(out, ds, alg)
     path.parent.mkdir(parents=True, exist_ok=True)
-    from ..datasets.dataset_file import load_dataset
+    from ogm_ppl.datasets.dataset_file import load_dataset
 
     grid = load_dataset(dataset_path(out, ds)).grid
     _savez(path.with_suffix(".npz"), marginals=q.reshape(grid.shape), format_version=np.int64(1))

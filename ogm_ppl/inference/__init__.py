@@ -1,16 +1,41 @@
-"""Inference: traditional OGM (log-odds), exact posteriors, MAP, and MCMC over whole maps."""
+"""Inference, one folder per role:
 
-from . import exact, log_odds
-from .gibbs import CellGibbs, MetropolisCell, PatchGibbs
-from .guides import MeanFieldGuide, PatchGuide, fit_guide
-from .log_odds import LogOddsMap, evidence_grid, evidence_grid_from_scans
-from .map_estimate import MapEstimate, map_estimate
-from .runner import GibbsRun, RunningStats, run_gibbs
-from .structured_guides import ExactELBO, FirstHitGuide
+- :mod:`~ogm_ppl.inference.log_odds` — traditional OGM (Section 2.4);
+- :mod:`~ogm_ppl.inference.exact` — exact posteriors and the MAP map (Chapters 2-3);
+- :mod:`~ogm_ppl.inference.patch_map` — online and offline patch maps (Chapter 3);
+- :mod:`~ogm_ppl.inference.mcmc` — Gibbs kernels, the streaming runner, diagnostics (Chapter 4);
+- :mod:`~ogm_ppl.inference.variational` — Pyro guides and the Delta fit as amortised VI (Section 2.5).
+
+They share the patch geometry in :mod:`~ogm_ppl.inference.tiling` and the compiled kernels in
+``_kernels``; imports point down (roles use kernels and models, never each other's internals, except that
+MCMC starts from a log-odds map).
+"""
+
+from ogm_ppl.inference import exact, log_odds, mcmc, patch_map, variational
+from ogm_ppl.inference.exact import MapEstimate, map_estimate
+from ogm_ppl.inference.log_odds import LogOddsMap, evidence_grid, evidence_grid_from_scans
+from ogm_ppl.inference.mcmc import (
+    CellGibbs,
+    GibbsRun,
+    MetropolisCell,
+    PatchGibbs,
+    RunningStats,
+    run_gibbs,
+)
+from ogm_ppl.inference.variational import (
+    ExactELBO,
+    FirstHitGuide,
+    MeanFieldGuide,
+    PatchGuide,
+    fit_guide,
+)
 
 __all__ = [
     "exact",
     "log_odds",
+    "patch_map",
+    "mcmc",
+    "variational",
     "LogOddsMap",
     "evidence_grid",
     "evidence_grid_from_scans",

@@ -1,6 +1,6 @@
 """Models: the inverse-sensor-model update terms (Delta families) and, later, the Pyro map model."""
 
-from .delta import (
+from ogm_ppl.models.delta import (
     PN,
     BorensteinKoren,
     DeltaFamily,
@@ -12,7 +12,7 @@ from .delta import (
     delta_by_name,
     load_delta,
 )
-from .occupancy import MapDistribution, OccupancyModel
+from ogm_ppl.models.occupancy import MapDistribution, OccupancyModel
 
 __all__ = [
     "DeltaFamily",

@@ -22,9 +22,10 @@ import math
 import torch
 from torch import nn
 
-from ..sensors import GaussianRange
+from ogm_ppl.sensors import GaussianRange
 
 __all__ = [
+    "NeuralDelta",
     "DeltaFamily",
     "BorensteinKoren",
     "Moravec",
@@ -254,6 +255,42 @@ class PN(DeltaFamily):
         return f"N={self.N}, lo={self.lo}"
 
 
+class NeuralDelta(DeltaFamily):
+    """An MLP inverse sensor model: ``Delta(kappa, z) = g([(kappa - z) / 10, z / F, is_max])``.
+
+    Args:
+        F: the sensor's range in cells (to scale ``z``).
+        hidden: hidden units per layer (two ``tanh`` layers).
+        seed: initial weights (deterministic).
+    """
+
+    def __init__(self, F: int = 75, hidden: int = 16, seed: int = 0) -> None:
+        super().__init__()
+        g = torch.Generator().manual_seed(seed)
+        self.F = int(F)
+        self.hidden = int(hidden)
+        self.net = nn.Sequential(nn.Linear(3, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, 1))
+        with torch.no_grad():
+            for p in self.net.parameters():
+                p.copy_(torch.randn(p.shape, generator=g) * (0.5 / math.sqrt(max(p.shape[-1], 1))))
+        self.double()
+
+    def table(self, n_kappa: int, n_z: int) -> torch.Tensor:
+        kappa = torch.arange(n_kappa, dtype=torch.float64)[:, None].expand(n_kappa, n_z + 1)
+        z = torch.cat([torch.arange(n_z, dtype=torch.float64), torch.tensor([self.F + 1.0])])[None, :].expand(n_kappa, -1)
+        is_max = torch.zeros(n_kappa, n_z + 1, dtype=torch.float64)
+        is_max[:, -1] = 1.0
+        x = torch.stack([(kappa - z) / 10.0, z / self.F, is_max], -1)
+        return self.net(x)[..., 0]
+
+    def delta(self, d):  # pragma: no cover - not a function of d alone
+        raise TypeError("NeuralDelta depends on kappa and z; use table()")
+
+    def extra_repr(self) -> str:
+        return f"F={self.F}, hidden={self.hidden}"
+
+
+
 # Table 2.2: p21, offsets -11 (and below) .. 9; 0 from 10 on.
 THESIS_P21 = (
     -5.4028, -2.2993, -1.7025, -1.2979, -0.9722, -0.6836, -0.4341, -0.2476, -0.1083, 0.0051,
@@ -271,7 +308,7 @@ def family_to_dict(family: DeltaFamily) -> dict:
         fixed["beta"] = family.beta
     if isinstance(family, Elfes):
         fixed.update(prior=family.prior, max_kappa=family.max_kappa)
-    if type(family).__name__ == "NeuralDelta":
+    if isinstance(family, NeuralDelta):
         fixed.update(F=family.F, hidden=family.hidden)
     params = {k: v.detach().tolist() for k, v in family.state_dict().items()}
     return {"family": type(family).__name__, "params": params, "fixed": fixed}
@@ -289,14 +326,9 @@ def family_from_dict(spec: dict) -> DeltaFamily:
     if not isinstance(spec, dict) or not isinstance(spec.get("family"), str):
         raise ValueError("'delta' must be an object with a 'family' name")
     name = spec["family"]
-    if name == "NeuralDelta":
-        from ..inference.delta_fit import NeuralDelta
-
-        cls = NeuralDelta
-    else:
-        cls = _FAMILIES.get(name)
+    cls = _FAMILIES.get(name)
     if cls is None:
-        raise ValueError(f"unknown Delta family {name!r} (known: {sorted(_FAMILIES) + ['NeuralDelta']})")
+        raise ValueError(f"unknown Delta family {name!r} (known: {sorted(_FAMILIES)})")
     fixed = spec.get("fixed", {})
     params = spec.get("params")
     if not isinstance(fixed, dict) or not isinstance(params, dict):
@@ -409,4 +441,4 @@ def delta_by_name(name: str) -> DeltaFamily:
     raise ValueError(f"unknown Delta name {name!r}; known: {sorted(makers) + fitted_names()}")
 
 
-_FAMILIES.update({c.__name__: c for c in (BorensteinKoren, Moravec, MarshallBarfoot, Stachniss, Elfes, PN)})
+_FAMILIES.update({c.__name__: c for c in (BorensteinKoren, Moravec, MarshallBarfoot, Stachniss, Elfes, PN, NeuralDelta)})

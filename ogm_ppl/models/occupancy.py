@@ -57,9 +57,9 @@ import torch
 from pyro.distributions.torch_distribution import TorchDistribution
 from torch.distributions import constraints
 
-from ..priors.base import MapPrior
-from ..raycast import Rays
-from ..sensors import SensorModel
+from ogm_ppl.priors.base import MapPrior
+from ogm_ppl.raycast import Rays
+from ogm_ppl.sensors import SensorModel
 
 __all__ = ["OccupancyModel", "MapDistribution", "ReadingsDistribution", "OBSERVED"]
 

@@ -3,15 +3,15 @@ the 1D data-driven prior, pairwise stencil priors and the higher-order MRF (Sect
 patch tables (5.2.2) and border-conditioned tables (5.2.3). The correlated priors give the compiled
 Gibbs kernels a local conditional (:class:`~ogm_ppl.priors.local.LocalPrior`)."""
 
-from .base import MapPrior
-from .border import BorderPatchPrior
-from .data_driven_1d import DataDriven1DPrior
-from .independent import IndependentPrior
-from .local import LocalMapPrior, LocalPrior
-from .mrf import MRFPrior, StencilPrior
-from .named import PRIOR_KINDS, prior_by_name
-from .patch_table import PatchTablePrior
-from .tables import PriorTables, available_tables, load_tables, tables_by_name
+from ogm_ppl.priors.base import MapPrior
+from ogm_ppl.priors.border import BorderPatchPrior
+from ogm_ppl.priors.data_driven_1d import DataDriven1DPrior
+from ogm_ppl.priors.independent import IndependentPrior
+from ogm_ppl.priors.local import LocalMapPrior, LocalPrior
+from ogm_ppl.priors.mrf import MRFPrior, StencilPrior
+from ogm_ppl.priors.named import PRIOR_KINDS, prior_by_name
+from ogm_ppl.priors.patch_table import PatchTablePrior
+from ogm_ppl.priors.tables import PriorTables, available_tables, load_tables, tables_by_name
 
 __all__ = ["MapPrior", "IndependentPrior", "DataDriven1DPrior", "StencilPrior", "MRFPrior", "PatchTablePrior",
            "BorderPatchPrior", "LocalMapPrior", "LocalPrior", "prior_by_name", "PRIOR_KINDS", "PriorTables",

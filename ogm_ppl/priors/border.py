@@ -26,8 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .local import LocalMapPrior, grid_shape, tiles_local, tiles_log_prob, tiling
-from .patch_table import _patch_hw
+from ogm_ppl.priors.local import LocalMapPrior, grid_shape, tiles_local, tiles_log_prob, tiling
+from ogm_ppl.priors.patch_table import _patch_hw
 
 __all__ = ["BorderPatchPrior"]
 

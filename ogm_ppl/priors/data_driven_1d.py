@@ -11,7 +11,7 @@ import math
 
 import torch
 
-from .base import MapPrior
+from ogm_ppl.priors.base import MapPrior
 
 __all__ = ["DataDriven1DPrior"]
 

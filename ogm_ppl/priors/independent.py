@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import torch
 
-from .base import MapPrior
+from ogm_ppl.priors.base import MapPrior
 
 __all__ = ["IndependentPrior"]
 

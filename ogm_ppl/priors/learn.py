@@ -26,7 +26,7 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from .tables import PAIR_OFFSETS, PriorTables
+from ogm_ppl.priors.tables import PAIR_OFFSETS, PriorTables
 
 __all__ = [
     "count_tables",

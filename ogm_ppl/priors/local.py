@@ -43,7 +43,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from .base import MapPrior
+from ogm_ppl.priors.base import MapPrior
 
 __all__ = ["LocalPrior", "LocalMapPrior", "TileScratch", "STENCIL", "TILES", "cell_log_odds",
            "patch_prior_weights", "tile_candidates", "tile_patch_setup", "tile_patch_factors", "local_of"]  # fmt: skip

@@ -29,7 +29,7 @@ import math
 import numpy as np
 import torch
 
-from .local import LocalMapPrior, grid_shape, stencil_local
+from ogm_ppl.priors.local import LocalMapPrior, grid_shape, stencil_local
 
 __all__ = ["StencilPrior", "MRFPrior"]
 

@@ -28,7 +28,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .base import MapPrior
+from ogm_ppl.priors.base import MapPrior
 
 __all__ = ["prior_by_name", "PRIOR_KINDS"]
 
@@ -47,11 +47,11 @@ def prior_by_name(name: str, shape, tables=None) -> MapPrior:
     Args:
         tables: a :class:`~ogm_ppl.priors.tables.PriorTables` to use instead of the shipped corpus.
     """
-    from .border import BorderPatchPrior
-    from .independent import IndependentPrior
-    from .mrf import MRFPrior
-    from .patch_table import PatchTablePrior
-    from .tables import available_tables, tables_by_name
+    from ogm_ppl.priors.border import BorderPatchPrior
+    from ogm_ppl.priors.independent import IndependentPrior
+    from ogm_ppl.priors.mrf import MRFPrior
+    from ogm_ppl.priors.patch_table import PatchTablePrior
+    from ogm_ppl.priors.tables import available_tables, tables_by_name
 
     if not isinstance(name, str) or not name:
         raise ValueError(f"a prior name is a non-empty string, got {name!r}")

@@ -22,7 +22,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from .local import LocalMapPrior, grid_shape, tiles_local, tiles_log_prob, tiling
+from ogm_ppl.priors.local import LocalMapPrior, grid_shape, tiles_local, tiles_log_prob, tiling
 
 __all__ = ["PatchTablePrior", "truncate_mass"]
 

@@ -4,7 +4,7 @@ import pytest
 import torch
 
 from ogm_ppl import GaussianRange, Grid, OccupancyModel, PatternMatch, Scans, raycast
-from ogm_ppl.inference._cell_kernels import first_hits
+from ogm_ppl.inference._kernels.cells import first_hits
 from ogm_ppl.priors import IndependentPrior
 
 

@@ -10,7 +10,7 @@ from pyro.ops.stats import effective_sample_size
 
 from ogm_ppl import GaussianRange, Grid, OccupancyModel, PatternMatch, Scans, raycast
 from ogm_ppl.datasets import THESIS_TOY_READINGS, toy_1d
-from ogm_ppl.inference.guides import MeanFieldGuide, PatchGuide
+from ogm_ppl.inference.variational.guides import MeanFieldGuide, PatchGuide
 from ogm_ppl.priors import IndependentPrior
 from ogm_ppl.priors.base import MapPrior
 
@@ -124,9 +124,9 @@ def test_mcmc_site_m_over_latent_cells_gives_finite_ess():
 def test_mcmc_site_holds_the_latent_cells_only():
     # the pinned (sensor) cell is no longer a constant column of site "m"; cells the data make certain
     # still are, and Pyro's ESS turns NaN for every column when one is constant (pyro 1.9.2), so per-cell
-    # ESS comes from ogm_ppl.inference.diagnostics.ess, which is finite for every varying cell
+    # ESS comes from ogm_ppl.inference.mcmc.diagnostics.ess, which is finite for every varying cell
     from ogm_ppl.inference import CellGibbs
-    from ogm_ppl.inference.diagnostics import ess
+    from ogm_ppl.inference.mcmc.diagnostics import ess
 
     _, model = toy_model(GaussianRange(3.0, 1e-3))
     mcmc = MCMC(CellGibbs(model), num_samples=200, warmup_steps=5, disable_progbar=True)

@@ -12,9 +12,9 @@ from pyro.distributions.testing.gof import multinomial_goodness_of_fit
 from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
 from ogm_ppl.datasets import simple_2d_example
 from ogm_ppl.inference.exact import brute_force
-from ogm_ppl.inference.gibbs import CellGibbs, PatchGibbs
-from ogm_ppl.inference.map_estimate import map_estimate
-from ogm_ppl.inference.runner import RunningStats, run_gibbs
+from ogm_ppl.inference.exact.map_estimate import map_estimate
+from ogm_ppl.inference.mcmc.gibbs import CellGibbs, PatchGibbs
+from ogm_ppl.inference.mcmc.runner import RunningStats, run_gibbs
 from ogm_ppl.priors import BorderPatchPrior, MapPrior, MRFPrior, PatchTablePrior, StencilPrior
 
 from .test_gibbs import cell_update_matrix, code_of, exact_pi, model_1d, patch_update_matrix, states

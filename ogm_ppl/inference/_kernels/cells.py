@@ -11,7 +11,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from ..priors.local import cell_log_odds
+from ogm_ppl.priors.local import cell_log_odds
 
 
 @nb.njit(cache=True)

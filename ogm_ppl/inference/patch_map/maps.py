@@ -26,54 +26,13 @@ from functools import cached_property
 import numpy as np
 import torch
 
-from ..models.occupancy import OccupancyModel
-from ..posterior import MapPosterior
-from ._cell_kernels import first_hits
-from ._patch_kernels import INVERSE, OFFLINE, ONLINE, patch_map_all
-from .gibbs import patch_cells, patch_shape, tiling_starts
+from ogm_ppl.inference._kernels.cells import first_hits
+from ogm_ppl.inference._kernels.patches import INVERSE, OFFLINE, ONLINE, patch_map_all
+from ogm_ppl.inference.tiling import centred_patches, tile_patches
+from ogm_ppl.models.occupancy import OccupancyModel
+from ogm_ppl.posterior import MapPosterior
 
-__all__ = ["PatchMap", "online_patch_map", "offline_patch_map", "tile_patches", "centred_patches"]
-
-
-def _anchors(rows, cols) -> np.ndarray:
-    R, C = np.meshgrid(np.asarray(rows), np.asarray(cols), indexing="ij")
-    return np.stack([R.ravel(), C.ravel()], 1)
-
-
-def tile_patches(model: OccupancyModel, patch=3, offset=0) -> np.ndarray:
-    """Non-overlapping patches covering the grid, ``P x L`` cells with ``-1`` where cut off or pinned.
-
-    Runs and rectangles tile with a patch starting at column ``offset`` (or ``(row, col)``); the
-    plus-shaped 4-neighbourhood (``"plus"``, L = 5) tiles the plane with centres where
-    ``(col + 2 row - offset) mod 5 == 0``.
-    """
-    g = model.grid
-    if isinstance(patch, str) and patch == "plus":
-        dr, dc = patch_shape("plus", g.ndim)
-        anchors = _anchors(range(-1, g.rows + 1), range(-2, g.cols + 2))
-        anchors = anchors[(anchors[:, 1] + 2 * anchors[:, 0] - int(offset)) % 5 == 0]
-        arr = patch_cells(model, anchors, dr, dc)
-        return arr[(arr >= 0).any(1)]
-    dr, dc = patch_shape(patch, g.ndim)
-    if dr.min() != 0 or dc.min() != 0 or len(dr) != (dr.max() + 1) * (dc.max() + 1):
-        raise ValueError("non-overlapping patches must be runs, rectangles or 'plus'")
-    h, w = int(dr.max()) + 1, int(dc.max()) + 1
-    orow, ocol = (0, int(offset)) if np.isscalar(offset) else (int(o) for o in offset)
-    arr = patch_cells(model, _anchors(tiling_starts(orow, h, g.rows), tiling_starts(ocol, w, g.cols)), dr, dc)
-    return arr[(arr >= 0).any(1)]
-
-
-def centred_patches(model: OccupancyModel, patch=3) -> tuple[np.ndarray, int]:
-    """A patch centred on every latent cell (for the overlapping offline map) and the centre's column."""
-    dr, dc = patch_shape(patch, model.grid.ndim)
-    if isinstance(patch, str):
-        cr, cc = 0, 0
-    else:
-        cr, cc = int(dr.max()) // 2, int(dc.max()) // 2
-    dr, dc = dr - cr, dc - cc
-    centre = int(np.flatnonzero((dr == 0) & (dc == 0))[0])
-    anchors = np.stack(np.divmod(model.latent.numpy(), model.grid.cols), 1)
-    return patch_cells(model, anchors, dr, dc), centre
+__all__ = ["PatchMap", "online_patch_map", "offline_patch_map"]
 
 
 class PatchMap(MapPosterior):
@@ -210,7 +169,7 @@ def reference_map(model: OccupancyModel, reference="map") -> np.ndarray:
     if isinstance(reference, str):
         if reference != "map":
             raise ValueError(f"reference must be 'map' or a map, got {reference!r}")
-        from .map_estimate import map_estimate
+        from ogm_ppl.inference.exact.map_estimate import map_estimate
 
         ref = map_estimate(model, init="occupied").map.numpy()
     else:

@@ -20,9 +20,9 @@ import math
 
 import torch
 
-from ..models.occupancy import OccupancyModel
-from ..posterior import ChainPosterior1D, WeightedMaps
-from ..priors import DataDriven1DPrior, IndependentPrior
+from ogm_ppl.models.occupancy import OccupancyModel
+from ogm_ppl.posterior import ChainPosterior1D, WeightedMaps
+from ogm_ppl.priors import DataDriven1DPrior, IndependentPrior
 
 __all__ = ["brute_force", "pose_constrained_1d", "pyro_enumeration", "MAX_BRUTE_FORCE_CELLS"]
 

@@ -5,7 +5,7 @@ import torch
 from ogm_ppl import GaussianRange, OccupancyModel, raycast
 from ogm_ppl.datasets import THESIS_TOY_READINGS, simple_2d_example, toy_1d
 from ogm_ppl.inference.exact import brute_force
-from ogm_ppl.inference.map_estimate import map_estimate
+from ogm_ppl.inference.exact.map_estimate import map_estimate
 from ogm_ppl.priors import DataDriven1DPrior, IndependentPrior
 
 

@@ -17,9 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from ..models.occupancy import OccupancyModel
-from ..priors.local import local_of
-from ._cell_kernels import first_hits, icm_sweeps, local_icm_sweeps
+from ogm_ppl.inference._kernels.cells import first_hits, icm_sweeps, local_icm_sweeps
+from ogm_ppl.models.occupancy import OccupancyModel
+from ogm_ppl.priors.local import local_of
 
 __all__ = ["MapEstimate", "map_estimate"]
 
@@ -87,7 +87,7 @@ def map_estimate(
 
 def _generic_icm(model, m, f, order, ll, idx, max_sweeps) -> int:
     """ICM for priors without independent cells: the prior's patch conditional, cell by cell."""
-    from ._cell_kernels import cell_log_lik_ratio, set_cell
+    from ogm_ppl.inference._kernels.cells import cell_log_lik_ratio, set_cell
 
     r = model.rays
     configs = torch.tensor([[0.0], [1.0]], dtype=torch.float64)

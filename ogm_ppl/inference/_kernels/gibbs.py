@@ -1,7 +1,7 @@
 """Compiled Gibbs / Metropolis sweeps over binary maps (Sections 4.1, 4.2; Algorithms 1 and 2).
 
 The state is the map ``m`` (uint8, ``K``) and every ray's first occupied kappa ``f`` (kept in step with
-``m`` by :func:`~ogm_ppl.inference._cell_kernels.set_cell`). Random numbers come in as arrays drawn
+``m`` by :func:`~ogm_ppl.inference._kernels.cells.set_cell`). Random numbers come in as arrays drawn
 outside (from torch's generator), so a run is reproducible from a seed and resumable from a checkpoint.
 
 Patches are rows of a ``P x L`` int64 array (``-1`` pads patches cut by the grid edge or pinned cells).
@@ -22,7 +22,8 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from ..priors.local import (
+from ogm_ppl.inference._kernels.cells import cell_log_lik_ratio, set_cell
+from ogm_ppl.priors.local import (
     STENCIL,
     TILES,
     patch_prior_weights_ws,
@@ -34,7 +35,6 @@ from ..priors.local import (
     tile_patch_setup,
     tile_scratch,
 )
-from ._cell_kernels import cell_log_lik_ratio, set_cell
 
 
 @nb.njit(cache=True, inline="always")

@@ -9,7 +9,7 @@ otherwise keeps every sample in memory.
 writes a checkpoint (map, torch RNG state, statistics; atomically) every ``checkpoint_every`` sweeps and
 when interrupted (Ctrl-C stops at the end of the current sweep), and resumes from it: an interrupted and
 resumed run gives bit for bit the result of an uninterrupted one with the same seed. A checkpoint carries
-a fingerprint of the model, kernel and statistics (:mod:`ogm_ppl.inference.fingerprint`); resuming it
+a fingerprint of the model, kernel and statistics (:mod:`ogm_ppl.inference.mcmc.fingerprint`); resuming it
 with anything else is refused with a message naming what differs, and an unreadable checkpoint gives
 one error naming the path.
 """
@@ -26,8 +26,8 @@ import numpy as np
 import torch
 from tqdm.auto import tqdm
 
-from ..posterior import mutual_information_from_joint
-from .fingerprint import fingerprint
+from ogm_ppl.inference.mcmc.fingerprint import fingerprint
+from ogm_ppl.posterior import mutual_information_from_joint
 
 __all__ = ["RunningStats", "GibbsRun", "run_gibbs", "CheckpointError"]
 

@@ -10,66 +10,43 @@ robot the logits are one matrix product, ``counts @ T^T``, of the datasets' read
 ``(kappa, z)`` table, so a fit over 900 datasets costs milliseconds per evaluation; we use L-BFGS with a
 strong-Wolfe line search (the thesis: BFGS with a mixed quadratic/cubic line search).
 
-:class:`NeuralDelta` is a further variational family: a small network mapping ``(kappa - z_n, z_n,
-max-range flag)`` to Delta.
+Fitting takes any data with ``counts`` (``D x (F + 2)`` readings per dataset, max range last), ``exact``
+(``D x (F + 1)`` exact marginals), ``F`` and ``subset(index)``: the :class:`FitData` protocol, met by
+:class:`~ogm_ppl.datasets.walls1d.FitData` (this module imports no dataset code).
 """
 
 from __future__ import annotations
 
-import math
 from dataclasses import dataclass
+from typing import Protocol
 
 import torch
 from torch import nn
 
-from ..datasets.walls1d import WallDatasets
-from ..models.delta import PN, DeltaFamily
+from ogm_ppl.models.delta import PN, DeltaFamily
 
-__all__ = ["NeuralDelta", "cross_entropy_loss", "fit_delta", "FitResult", "cross_validate", "warm_start_pn"]
-
-
-class NeuralDelta(DeltaFamily):
-    """An MLP inverse sensor model: ``Delta(kappa, z) = g([(kappa - z) / 10, z / F, is_max])``.
-
-    Args:
-        F: the sensor's range in cells (to scale ``z``).
-        hidden: hidden units per layer (two ``tanh`` layers).
-        seed: initial weights (deterministic).
-    """
-
-    def __init__(self, F: int = 75, hidden: int = 16, seed: int = 0) -> None:
-        super().__init__()
-        g = torch.Generator().manual_seed(seed)
-        self.F = int(F)
-        self.hidden = int(hidden)
-        self.net = nn.Sequential(nn.Linear(3, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, 1))
-        with torch.no_grad():
-            for p in self.net.parameters():
-                p.copy_(torch.randn(p.shape, generator=g) * (0.5 / math.sqrt(max(p.shape[-1], 1))))
-        self.double()
-
-    def table(self, n_kappa: int, n_z: int) -> torch.Tensor:
-        kappa = torch.arange(n_kappa, dtype=torch.float64)[:, None].expand(n_kappa, n_z + 1)
-        z = torch.cat([torch.arange(n_z, dtype=torch.float64), torch.tensor([self.F + 1.0])])[None, :].expand(n_kappa, -1)
-        is_max = torch.zeros(n_kappa, n_z + 1, dtype=torch.float64)
-        is_max[:, -1] = 1.0
-        x = torch.stack([(kappa - z) / 10.0, z / self.F, is_max], -1)
-        return self.net(x)[..., 0]
-
-    def delta(self, d):  # pragma: no cover - not a function of d alone
-        raise TypeError("NeuralDelta depends on kappa and z; use table()")
-
-    def extra_repr(self) -> str:
-        return f"F={self.F}, hidden={self.hidden}"
+__all__ = ["FitData", "cross_entropy_loss", "fit_delta", "FitResult", "cross_validate", "warm_start_pn"]
 
 
-def logits(family: DeltaFamily, data: WallDatasets) -> torch.Tensor:
+class FitData(Protocol):
+    """What the fit needs of a set of 1D datasets (all tensors float64)."""
+
+    F: int
+    counts: torch.Tensor  # D x (F + 2): how often each kappa reading 0..F and max range occurred
+    exact: torch.Tensor  # D x (F + 1): exact posterior marginals of cells 0..F
+
+    def subset(self, index: torch.Tensor) -> FitData: ...
+
+    def __len__(self) -> int: ...
+
+
+def logits(family: DeltaFamily, data: FitData) -> torch.Tensor:
     """``D x (F + 1)`` evidence of every cell of every dataset (prior 0.5): ``counts @ T^T``."""
     T = family.table(data.F + 1, data.F + 1)  # (F + 1) x (F + 2)
     return data.counts @ T.T
 
 
-def cross_entropy_loss(family: DeltaFamily, data: WallDatasets) -> torch.Tensor:
+def cross_entropy_loss(family: DeltaFamily, data: FitData) -> torch.Tensor:
     """Mean over datasets of the summed cell cross-entropy ``H(p_exact, q_Delta)`` over cells 1..F (nats)."""
     lg = logits(family, data)[:, 1:]
     p = data.exact[:, 1:]
@@ -85,7 +62,7 @@ class FitResult:
     iterations: int
 
 
-def fit_delta(family: DeltaFamily, data: WallDatasets, max_iter: int = 500, tol: float = 1e-10) -> FitResult:
+def fit_delta(family: DeltaFamily, data: FitData, max_iter: int = 500, tol: float = 1e-10) -> FitResult:
     """Minimise :func:`cross_entropy_loss` over the family's parameters with L-BFGS (deterministic)."""
     params = [p for p in family.parameters() if p.requires_grad]
     if not params:
@@ -121,7 +98,7 @@ def warm_start_pn(previous: PN | None, N: int) -> PN:
     return new
 
 
-def cross_validate(make_family, data: WallDatasets, folds: int = 10, **fit_kwargs) -> dict:
+def cross_validate(make_family, data: FitData, folds: int = 10, **fit_kwargs) -> dict:
     """``folds``-fold cross-validation: fit on all but one fold, score the held-out fold.
 
     ``make_family(fold)`` returns a fresh family. Returns train/test losses per fold and the families.

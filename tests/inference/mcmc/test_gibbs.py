@@ -9,8 +9,8 @@ from pyro.distributions.testing.gof import multinomial_goodness_of_fit
 from ogm_ppl import GaussianRange, Grid, OccupancyModel, PatternMatch, Scans, raycast
 from ogm_ppl.datasets import THESIS_TOY_READINGS, toy_1d
 from ogm_ppl.inference.exact import brute_force, pose_constrained_1d
-from ogm_ppl.inference.gibbs import CellGibbs, MetropolisCell, PatchGibbs
-from ogm_ppl.inference.runner import RunningStats, run_gibbs
+from ogm_ppl.inference.mcmc.gibbs import CellGibbs, MetropolisCell, PatchGibbs
+from ogm_ppl.inference.mcmc.runner import RunningStats, run_gibbs
 from ogm_ppl.priors import DataDriven1DPrior, IndependentPrior
 
 
@@ -177,7 +177,7 @@ def test_metropolis_cell_is_stationary(proposal):
 
 
 def _lik(kernel, k):
-    from ogm_ppl.inference._cell_kernels import cell_log_lik_ratio
+    from ogm_ppl.inference._kernels.cells import cell_log_lik_ratio
 
     return cell_log_lik_ratio(k, kernel._m, kernel._f, kernel._offsets, kernel._cells, kernel._c_off,
                               kernel._c_ray, kernel._c_kappa, kernel._ll)  # fmt: skip
@@ -215,7 +215,7 @@ def test_kl_to_exact_falls_as_one_over_n():
     toy = toy_1d(num_cells=21, readings=THESIS_TOY_READINGS)
     model = OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0), IndependentPrior(0.5, 21))
     exact = pose_constrained_1d(model).marginals
-    from ogm_ppl.inference.diagnostics import kl_trace
+    from ogm_ppl.inference.mcmc.diagnostics import kl_trace
 
     checkpoints = [250, 1000, 4000, 16000]
     kls = np.stack([kl_trace(CellGibbs(model), exact, checkpoints, seed=c).numpy() for c in range(8)])
@@ -311,7 +311,7 @@ def test_bad_arguments():
 
 
 def test_chains_diagnostics():
-    from ogm_ppl.inference.diagnostics import kl_trace, run_chains
+    from ogm_ppl.inference.mcmc.diagnostics import kl_trace, run_chains
 
     model = model_1d(8, readings=(4.0, 5.0, 4.0, 6.0))
     res = run_chains(lambda: CellGibbs(model, init="prior"), num_chains=4, num_sweeps=800, trace_cells=[3, 4, 5],
@@ -325,7 +325,7 @@ def test_chains_diagnostics():
     kl = kl_trace(CellGibbs(model), exact, [100, 1000])
     assert kl[1] < kl[0]
     # a constant cell (pinned cell 0) gets NaN and leaves the others intact
-    from ogm_ppl.inference.diagnostics import ess
+    from ogm_ppl.inference.mcmc.diagnostics import ess
 
     res0 = run_chains(lambda: CellGibbs(model), num_chains=2, num_sweeps=300, trace_cells=[0, 4])
     e = ess(res0.traces())
@@ -338,7 +338,7 @@ def test_table_3_1_setup_subsample():
     import importlib.util
     from pathlib import Path
 
-    path = Path(__file__).resolve().parents[2] / "experiments" / "table_3_1.py"
+    path = Path(__file__).resolve().parents[3] / "experiments" / "table_3_1.py"
     spec = importlib.util.spec_from_file_location("table_3_1", path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

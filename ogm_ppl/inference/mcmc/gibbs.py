@@ -9,7 +9,7 @@ r"""Gibbs sampling of whole maps as Pyro ``MCMCKernel``\ s (Chapter 4; Algorithm
   ("heat map", Dhiman et al. 2014) cell proposals, for comparing samplers on the same model.
 
 Each kernel runs through ``pyro.infer.MCMC`` (site ``"m"``: the whole map as float 0/1) or through
-:func:`~ogm_ppl.inference.runner.run_gibbs` (streamed statistics, checkpoints). One ``sample`` call is one
+:func:`~ogm_ppl.inference.mcmc.runner.run_gibbs` (streamed statistics, checkpoints). One ``sample`` call is one
 *sweep*: as many cell / patch updates as there are latent cells / patches. The likelihood of a flip costs
 only the rays through the cell, and rays blocked before it are skipped (Section 4.1.2), in compiled
 kernels. Random numbers come from torch's global generator, so ``pyro.set_rng_seed`` (or
@@ -27,7 +27,7 @@ allows given the border (so 5 x 5 patches are possible). Any other :class:`~ogm_
 through its ``log_prob_patch`` one update at a time (correct and overflow-free, but meant for small maps).
 
 .. note:: ``pyro.infer.MCMC`` keeps every sample in memory (``num_samples x K``). For large maps pass a
-   :class:`~ogm_ppl.inference.runner.RunningStats` as ``hook_fn`` and few samples, or use ``run_gibbs``.
+   :class:`~ogm_ppl.inference.mcmc.runner.RunningStats` as ``hook_fn`` and few samples, or use ``run_gibbs``.
 """
 
 from __future__ import annotations
@@ -39,11 +39,8 @@ import numpy as np
 import torch
 from pyro.infer.mcmc.mcmc_kernel import MCMCKernel
 
-from ..models.occupancy import OccupancyModel
-from ..priors.local import TILES, local_of
-from ..priors.local import cell_log_odds as prior_cell_log_odds
-from ._cell_kernels import cell_log_lik_ratio, first_hits, set_cell
-from ._gibbs_kernels import (
+from ogm_ppl.inference._kernels.cells import cell_log_lik_ratio, first_hits, set_cell
+from ogm_ppl.inference._kernels.gibbs import (
     build_patch,
     gibbs_cell_marginals,
     gibbs_cell_sweep,
@@ -57,8 +54,12 @@ from ._gibbs_kernels import (
     patch_log_weights,
     set_patch,
 )
+from ogm_ppl.inference.tiling import patch_cells, patch_shape, tiling_starts
+from ogm_ppl.models.occupancy import OccupancyModel
+from ogm_ppl.priors.local import TILES, local_of
+from ogm_ppl.priors.local import cell_log_odds as prior_cell_log_odds
 
-__all__ = ["CellGibbs", "PatchGibbs", "MetropolisCell", "patch_shape", "patch_cells", "initial_map", "tiling_starts"]
+__all__ = ["CellGibbs", "PatchGibbs", "MetropolisCell", "initial_map"]
 
 _SCANS = ("random", "permutation", "systematic")
 
@@ -73,8 +74,8 @@ def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: f
     K = model.num_cells
     if isinstance(init, str):
         if init == "ogm":
-            from ..models.delta import delta_by_name
-            from .log_odds import evidence_grid
+            from ogm_ppl.inference.log_odds.maps import evidence_grid
+            from ogm_ppl.models.delta import delta_by_name
 
             lo = model.prior.cell_log_odds()
             mean = float(torch.sigmoid(lo).mean()) if lo is not None else getattr(model.prior, "mean_occupancy", 0.5)
@@ -94,66 +95,6 @@ def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: f
         m = model.check_maps(model.full_map(m) if m.shape != (K,) else m, what="init map").clone()
     m[model.known_free] = 0.0
     return m
-
-
-def tiling_starts(offset: int, size: int, n: int) -> np.ndarray:
-    """Start positions of a tiling of ``0..n-1`` by runs of ``size`` in which a run starts at ``offset``
-    (a partial run may start before 0)."""
-    start = int(offset) % size
-    return np.arange(start - size if start else 0, n, size)
-
-
-def patch_cells(model: OccupancyModel, anchors: np.ndarray, dr: np.ndarray, dc: np.ndarray) -> np.ndarray:
-    """Cells of the patch ``(dr, dc)`` placed at each ``(row, col)`` anchor (``n x 2``), vectorised:
-    ``n x L`` with ``-1`` where a cell is off the grid or pinned (the rule of the compiled ``build_patch``)."""
-    g = model.grid
-    anchors = np.asarray(anchors, dtype=np.int64).reshape(-1, 2)
-    r = anchors[:, :1] + dr[None, :]
-    c = anchors[:, 1:] + dc[None, :]
-    inside = (r >= 0) & (r < g.rows) & (c >= 0) & (c < g.cols)
-    k = np.where(inside, r * g.cols + c, 0)
-    ok = inside & ~model.known_free.numpy()[k]
-    return np.where(ok, k, -1)
-
-
-def patch_shape(shape, ndim: int, max_cells: int = 20) -> tuple[np.ndarray, np.ndarray]:
-    """Row and column offsets of a patch shape (Fig. 3.1).
-
-    ``shape``: an int ``L`` (1D: a run of ``L`` cells; 2D: an ``L``-cell horizontal run), ``(h, w)`` (a
-    rectangle, e.g. ``(3, 3)``), ``"plus"`` (the 4-neighbourhood, L = 5), ``"square"`` (3 x 3, the
-    8-neighbourhood, L = 9), or an ``L x 2`` array of offsets. More than ``max_cells`` cells are refused
-    (``2^L`` configurations).
-    """
-    if isinstance(shape, str):
-        if shape == "plus":
-            off = [(0, 0), (-1, 0), (1, 0), (0, -1), (0, 1)]
-        elif shape == "square":
-            off = [(r, c) for r in (-1, 0, 1) for c in (-1, 0, 1)]
-        else:
-            raise ValueError(f"unknown patch shape {shape!r}; use an int, (h, w), 'plus' or 'square'")
-        off = np.array(off)
-    elif np.isscalar(shape):
-        L = int(shape)
-        if L < 1:
-            raise ValueError(f"patch length must be >= 1, got {shape}")
-        off = np.stack([np.zeros(L, int), np.arange(L)], 1)
-    else:
-        arr = np.asarray(shape)
-        if arr.shape == (2,) and np.issubdtype(arr.dtype, np.integer):
-            h, w = int(arr[0]), int(arr[1])
-            if h < 1 or w < 1:
-                raise ValueError(f"patch (h, w) must be positive, got {shape}")
-            off = np.array([(r, c) for r in range(h) for c in range(w)])
-        elif arr.ndim == 2 and arr.shape[1] == 2:
-            off = arr.astype(int)
-        else:
-            raise ValueError(f"cannot read patch shape {shape!r}")
-    if ndim == 1 and np.any(off[:, 0] != 0):
-        raise ValueError("a 1D grid only takes patches along the row")
-    if len(off) > max_cells:
-        raise ValueError(f"patches of {len(off)} cells mean 2^{len(off)} configurations; at most {max_cells} "
-                         "(more only for a table prior whose tiles are the patches)")  # fmt: skip
-    return np.ascontiguousarray(off[:, 0], dtype=np.int64), np.ascontiguousarray(off[:, 1], dtype=np.int64)
 
 
 class _MapKernel(MCMCKernel):

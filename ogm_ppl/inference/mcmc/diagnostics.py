@@ -14,8 +14,8 @@ import numpy as np
 import torch
 from pyro.ops.stats import effective_sample_size, split_gelman_rubin
 
-from ..metrics import kl_divergence
-from .runner import RunningStats, run_gibbs
+from ogm_ppl.inference.mcmc.runner import RunningStats, run_gibbs
+from ogm_ppl.metrics import kl_divergence
 
 __all__ = ["ChainsResult", "run_chains", "split_rhat", "ess", "kl_trace"]
 

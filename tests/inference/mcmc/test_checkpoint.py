@@ -6,7 +6,7 @@ import pytest
 from ogm_ppl import GaussianRange, OccupancyModel, raycast
 from ogm_ppl.datasets import THESIS_TOY_READINGS, toy_1d
 from ogm_ppl.inference import CellGibbs, PatchGibbs, RunningStats, run_gibbs
-from ogm_ppl.inference.runner import CheckpointError
+from ogm_ppl.inference.mcmc.runner import CheckpointError
 from ogm_ppl.priors import IndependentPrior
 
 

@@ -20,7 +20,7 @@ import math
 import numba as nb
 import numpy as np
 
-from ._gibbs_kernels import add_patch_prior, collect_patch_rays, patch_log_weights
+from ogm_ppl.inference._kernels.gibbs import add_patch_prior, collect_patch_rays, patch_log_weights
 
 OFFLINE, ONLINE, INVERSE = 0, 1, 2
 

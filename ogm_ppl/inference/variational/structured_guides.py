@@ -1,7 +1,7 @@
 r"""A guide whose family holds the exact 1D posterior, and the ELBO in closed form.
 
 **First-hit guide** (:class:`FirstHitGuide`). On a common ray (a stationary robot, as
-:func:`~ogm_ppl.inference.exact.pose_constrained_1d` needs) the map enters the likelihood only through
+:func:`~ogm_ppl.inference.exact.posteriors.pose_constrained_1d` needs) the map enters the likelihood only through
 the first occupied cell ``f``. The guide is the posterior's own structure (Section 2.3.1):
 
 .. math:: q(m) = q(f(m)) \prod_{k > f(m)} \mathrm{Bernoulli}(m_k; \sigma(\psi_k))
@@ -11,7 +11,7 @@ a categorical over the ``L + 1`` first hits (the latent cells in ray order, and 
 ``q(f) = p(f | z)``, ``sigma(psi_k) = lambda_k``: inside the family.
 
 **Exact ELBO** (:class:`ExactELBO`, a Pyro ``ELBO`` for ``SVI``). Under an independent prior the ELBO of
-both the first-hit guide and :class:`~ogm_ppl.inference.guides.MeanFieldGuide` is a finite sum:
+both the first-hit guide and :class:`~ogm_ppl.inference.variational.guides.MeanFieldGuide` is a finite sum:
 
 .. math::
     \mathcal{L}_{FH} = \sum_j q_j \Bigl[\ell_j + \log p(f = j) - \log q_j
@@ -24,7 +24,7 @@ both the first-hit guide and :class:`~ogm_ppl.inference.guides.MeanFieldGuide` i
 >>> from ogm_ppl import GaussianRange, OccupancyModel, raycast
 >>> from ogm_ppl.datasets import toy_1d, THESIS_TOY_READINGS
 >>> from ogm_ppl.priors import IndependentPrior
->>> from ogm_ppl.inference.guides import fit_guide
+>>> from ogm_ppl.inference.variational.guides import fit_guide
 >>> toy = toy_1d(num_cells=21, readings=THESIS_TOY_READINGS)
 >>> model = OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0, 1e-3), IndependentPrior(0.5, 21))
 >>> guide = FirstHitGuide(model)
@@ -45,8 +45,8 @@ from pyro.infer import ELBO
 from pyro.nn import PyroModule, PyroParam
 from torch.distributions import constraints
 
-from ..models.occupancy import OccupancyModel
-from .guides import guide_name
+from ogm_ppl.inference.variational.guides import guide_name
+from ogm_ppl.models.occupancy import OccupancyModel
 
 __all__ = ["FirstHitGuide", "FirstHitMapDistribution", "ExactELBO", "mean_field_elbo", "first_hit_elbo"]
 
@@ -110,7 +110,7 @@ class FirstHitMapDistribution(TorchDistribution):
 
 def _ray_order(model: OccupancyModel):
     """Latent cells in ray order on a common ray: (positions along the ray ``L``, latent indices ``L``)."""
-    from .exact import _common_ray
+    from ogm_ppl.inference.exact.posteriors import _common_ray
 
     cells = _common_ray(model)  # raises unless every reading shares one ray holding every latent cell
     lat_index = torch.full((model.num_cells,), -1, dtype=torch.long)
@@ -219,7 +219,7 @@ def mean_field_elbo(model: OccupancyModel, logits: torch.Tensor) -> torch.Tensor
 
 class ExactELBO(ELBO):
     """The ELBO in closed form for guides with ``exact_elbo(model)`` (:class:`FirstHitGuide`,
-    :class:`~ogm_ppl.inference.guides.MeanFieldGuide`) on an :class:`OccupancyModel` with an independent
+    :class:`~ogm_ppl.inference.variational.guides.MeanFieldGuide`) on an :class:`OccupancyModel` with an independent
     prior: use as ``SVI(model.model, guide, optim, ExactELBO())``. Deterministic and exact."""
 
     def __init__(self):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
-from .._raycast_kernels import ray_capacity, trace_ray
+from ogm_ppl._raycast_kernels import ray_capacity, trace_ray
 
 
 @nb.njit(cache=True)

@@ -7,7 +7,7 @@ from pyro.distributions.testing.gof import multinomial_goodness_of_fit
 from ogm_ppl import GaussianRange, OccupancyModel, raycast
 from ogm_ppl.datasets import THESIS_TOY_READINGS, toy_1d
 from ogm_ppl.inference.exact import pose_constrained_1d
-from ogm_ppl.inference.guides import MeanFieldGuide, PatchGuide, fit_guide
+from ogm_ppl.inference.variational.guides import MeanFieldGuide, PatchGuide, fit_guide
 from ogm_ppl.metrics import kl_divergence
 from ogm_ppl.priors import IndependentPrior
 
@@ -25,7 +25,7 @@ def test_patch_distribution_normalises_and_samples():
     assert guide.patches.tolist() == [[1, 2, 3], [4, 5, 6]]
     torch.manual_seed(0)
     logits = torch.randn(2, 8, dtype=torch.float64)
-    from ogm_ppl.inference.guides import PatchMapDistribution
+    from ogm_ppl.inference.variational.guides import PatchMapDistribution
 
     d = PatchMapDistribution(logits, guide.patches, 7)
     maps = torch.tensor(list(itertools.product([0.0, 1.0], repeat=6)), dtype=torch.float64)
@@ -66,8 +66,12 @@ def test_patch_guide_needs_a_tiling():
 
 
 # ---------------------------------------------------------------- structured guides, exact ELBO (issue 12)
-from ogm_ppl.inference.exact import _bits, brute_force  # noqa: E402
-from ogm_ppl.inference.structured_guides import ExactELBO, FirstHitGuide, FirstHitMapDistribution  # noqa: E402
+from ogm_ppl.inference.exact.posteriors import _bits, brute_force  # noqa: E402
+from ogm_ppl.inference.variational.structured_guides import (  # noqa: E402
+    ExactELBO,
+    FirstHitGuide,
+    FirstHitMapDistribution,
+)
 
 
 def _toy(K=12, lam=0.5):

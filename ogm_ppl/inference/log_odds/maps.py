@@ -19,11 +19,11 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from ..grid import Grid
-from ..models.delta import DeltaFamily
-from ..raycast import Rays, ray_inputs
-from ..scans import Scans
-from ._ogm_kernels import evidence_from_scans, evidence_update
+from ogm_ppl.grid import Grid
+from ogm_ppl.inference._kernels.log_odds import evidence_from_scans, evidence_update
+from ogm_ppl.models.delta import DeltaFamily
+from ogm_ppl.raycast import Rays, ray_inputs
+from ogm_ppl.scans import Scans
 
 __all__ = ["LogOddsMap", "evidence_grid", "evidence_grid_from_scans", "delta_table_for", "OCTOMAP_CLAMP"]
 

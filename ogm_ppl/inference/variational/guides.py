@@ -9,10 +9,10 @@ Both are Pyro guides (``PyroModule`` s) for the site ``"m"`` of :meth:`Occupancy
 cells, event shape ``L``) and train with Pyro's ``SVI``: :func:`fit_guide` with ``loss="tracegraph"``
 (``TraceGraph_ELBO``, score-function gradients with vectorised particles; the discrete site is not
 reparameterisable), ``"rws"`` (``ReweightedWakeSleep``: importance-weighted wake-phi updates, which fit
-``KL(p || q)``) or ``"exact"`` (:class:`~ogm_ppl.inference.structured_guides.ExactELBO`, the ELBO in
+``KL(p || q)``) or ``"exact"`` (:class:`~ogm_ppl.inference.variational.structured_guides.ExactELBO`, the ELBO in
 closed form where the guide and an independent prior allow it). Each instance has its own parameter
 names (``"<name>.logits"``, ``name`` defaulting to ``"<ClassName>_<n>"``, unique in the process). See
-:mod:`ogm_ppl.inference.structured_guides` for the first-hit guide, whose family holds the exact 1D
+:mod:`ogm_ppl.inference.variational.structured_guides` for the first-hit guide, whose family holds the exact 1D
 posterior.
 
 Reverse-KL VI needs a likelihood without zeros: under ``GaussianRange(p_rand=0)`` a map with nothing on a
@@ -33,8 +33,8 @@ from pyro.distributions.torch_distribution import TorchDistribution
 from pyro.nn import PyroModule, PyroParam
 from torch.distributions import constraints
 
-from ..models.occupancy import OccupancyModel
-from .patch_map import tile_patches
+from ogm_ppl.inference.tiling import tile_patches
+from ogm_ppl.models.occupancy import OccupancyModel
 
 __all__ = ["MeanFieldGuide", "PatchGuide", "PatchMapDistribution", "fit_guide", "guide_name"]
 
@@ -70,7 +70,7 @@ class MeanFieldGuide(PyroModule):
 
     def exact_elbo(self, model: OccupancyModel) -> torch.Tensor:
         """The ELBO in closed form (independent prior, any rays): see :mod:`.structured_guides`."""
-        from .structured_guides import mean_field_elbo
+        from ogm_ppl.inference.variational.structured_guides import mean_field_elbo
 
         with self._pyro_context:
             return mean_field_elbo(model, self.logits)
@@ -139,7 +139,7 @@ class PatchMapDistribution(TorchDistribution):
 
 class PatchGuide(PyroModule):
     """Independent categoricals over the configurations of non-overlapping patches (a tiling of runs or
-    rectangles, see :func:`~ogm_ppl.inference.gibbs.patch_shape`, in which a patch starts at column
+    rectangles, see :func:`~ogm_ppl.inference.tiling.patch_shape`, in which a patch starts at column
     ``offset``), parameter ``"<name>.logits"`` (``P x 2^L``)."""
 
     def __init__(self, model: OccupancyModel, patch=3, name: str | None = None, offset: int = 0) -> None:
@@ -186,7 +186,7 @@ def fit_guide(model: OccupancyModel, guide, steps: int = 1000, lr: float = 0.05,
 
     ``loss``: ``"tracegraph"`` (``TraceGraph_ELBO(num_particles, vectorised)``, score-function reverse
     KL), ``"rws"`` (``ReweightedWakeSleep(num_particles)``, wake-phi only: importance-weighted
-    ``KL(p || q)``), or ``"exact"`` (:class:`~ogm_ppl.inference.structured_guides.ExactELBO`, for guides with
+    ``KL(p || q)``), or ``"exact"`` (:class:`~ogm_ppl.inference.variational.structured_guides.ExactELBO`, for guides with
     ``exact_elbo``). Returns the loss trace. Seeds Pyro; the guide's parameters live in the guide (a
     ``PyroModule``), so other guides' parameters are untouched.
     """
@@ -194,7 +194,7 @@ def fit_guide(model: OccupancyModel, guide, steps: int = 1000, lr: float = 0.05,
     from pyro.optim import Adam
     from tqdm.auto import tqdm
 
-    from .structured_guides import ExactELBO
+    from ogm_ppl.inference.variational.structured_guides import ExactELBO
 
     valid = torch.arange(model.loglik_table.shape[1])[None, :] <= model.lengths[:, None]
     if loss != "exact" and torch.isinf(model.loglik_table[valid]).any():

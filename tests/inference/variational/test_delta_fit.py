@@ -5,9 +5,15 @@ import pytest
 import torch
 
 from ogm_ppl.datasets import wall_datasets
-from ogm_ppl.inference.delta_fit import NeuralDelta, cross_entropy_loss, fit_delta, warm_start_pn
+from ogm_ppl.inference.variational.delta_fit import cross_entropy_loss, fit_delta, warm_start_pn
 from ogm_ppl.models import PN, Elfes, MarshallBarfoot, Moravec, delta_by_name
-from ogm_ppl.models.delta import family_from_dict, family_to_dict, fitted_names, load_fitted
+from ogm_ppl.models.delta import (
+    NeuralDelta,
+    family_from_dict,
+    family_to_dict,
+    fitted_names,
+    load_fitted,
+)
 
 
 @pytest.fixture(scope="module")
