@@ -39,16 +39,13 @@ import numpy as np
 import torch
 from pyro.infer.mcmc.mcmc_kernel import MCMCKernel
 
-from ogm_ppl.inference._kernels.cells import cell_log_lik_ratio, first_hits, set_cell
+from ogm_ppl.inference._kernels import cell_sweep as cs
+from ogm_ppl.inference._kernels.cells import first_hits
 from ogm_ppl.inference._kernels.gibbs import (
     build_patch,
-    gibbs_cell_marginals,
-    gibbs_cell_sweep,
     gibbs_patch_sweep,
-    local_cell_sweep,
     local_patch_log_weights,
     local_patch_sweep,
-    metropolis_cell_sweep,
     patch_config,
     patch_log_lik,
     patch_log_weights,
@@ -62,6 +59,7 @@ from ogm_ppl.priors.local import cell_log_odds as prior_cell_log_odds
 __all__ = ["CellGibbs", "PatchGibbs", "MetropolisCell", "initial_map"]
 
 _SCANS = ("random", "permutation", "systematic")
+_UPDATES = {"gibbs": cs.HEAT_BATH, "metropolised": cs.METROPOLISED}
 
 
 def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: float | None = None) -> torch.Tensor:
@@ -219,7 +217,11 @@ class CellGibbs(_MapKernel):
 
     Args:
         model: an :class:`~ogm_ppl.OccupancyModel`.
-        scan: ``"systematic"`` (default; the fastest, cache-friendly), ``"permutation"`` or ``"random"``.
+        scan: ``"systematic"`` (default; the fastest, cache-friendly), ``"permutation"`` (a fresh random
+            order each sweep) or ``"random"`` (cells drawn with replacement).
+        update: ``"gibbs"`` (the thesis's heat bath, ``m_k ~ p(m_k | m_-k, z)``, Eq. 4.2) or
+            ``"metropolised"`` (Liu 1996: propose the flip, accept with ``min(1, p(flip) / p(stay))``;
+            it moves at least as often, so it is no worse in Peskun's order; see ``benchmarks/bench_mixing.py``).
         init: starting map, see :func:`initial_map` (default: thresholded traditional OGM).
 
     >>> import pyro
@@ -237,16 +239,37 @@ class CellGibbs(_MapKernel):
     torch.Size([50, 15])
     """
 
+    def __init__(self, model: OccupancyModel, scan: str = "systematic", update: str = "gibbs", init="ogm",
+                 delta="haehnel") -> None:  # fmt: skip
+        if update not in _UPDATES:
+            raise ValueError(f"update must be one of {tuple(_UPDATES)}, got {update!r}")
+        super().__init__(model, scan, init, delta)
+        self.update = update
+        self._rule = _UPDATES[update]
+
+    def _prepare(self) -> None:
+        if self._ready:
+            return
+        super()._prepare()
+        self._pairs = cs.pair_index(self._c_ray, self._c_kappa, self._ll)
+
+    def _set_state(self, m) -> None:
+        super()._set_state(m)
+        self._rays = cs.ray_state(self._f, self._ll)
+        self._f = self._rays["f"]  # a view: the compiled sweeps keep it in step with the map
+        self._st = cs.CellState(self._m, self._rays, self._offsets, self._cells, self._c_off, self._pairs, self._ll)
+
+    def _sweep_order(self) -> np.ndarray:
+        return self._order(self._latent)
+
     def _sweep(self) -> int:
-        order = self._order(self._latent)
+        order = self._sweep_order()
         u = self._uniforms(len(order))
         self._updates += len(order)
         if self._prior_lo is not None:
-            return gibbs_cell_sweep(order, self._prior_lo, self._m, self._f, self._offsets, self._cells,
-                                    self._c_off, self._c_ray, self._c_kappa, self._ll, u)  # fmt: skip
+            return cs.sweep_independent(self._st, order, self._prior_lo, u, self._rule)
         if self._local is not None:
-            return local_cell_sweep(order, self._local, self._m, self._f, self._offsets, self._cells, self._c_off,
-                                    self._c_ray, self._c_kappa, self._ll, u)  # fmt: skip
+            return cs.sweep_local(self._st, order, self._local, u, self._rule)
         return self._generic_sweep(order, u)
 
     def run_marginals(self, num_sweeps: int, seed: int = 0) -> torch.Tensor:
@@ -258,9 +281,8 @@ class CellGibbs(_MapKernel):
             raise ValueError("run_marginals needs a prior with independent cells")
         if not hasattr(self, "_m"):
             self.setup()
-        acc = gibbs_cell_marginals(self._latent, self._prior_lo, self._m, self._f, self._offsets, self._cells,
-                                   self._c_off, self._c_ray, self._c_kappa, self._ll, int(num_sweeps),
-                                   int(seed))  # fmt: skip
+        acc = cs.marginals_independent(self._st, self._latent, self._prior_lo, int(num_sweeps), int(seed),
+                                       self._rule)  # fmt: skip
         self.sweeps += int(num_sweeps)
         self._last = None
         return torch.from_numpy(acc / max(int(num_sweeps), 1))
@@ -268,8 +290,7 @@ class CellGibbs(_MapKernel):
     def cell_log_odds(self, k: int) -> float:
         """``l(m_k | z, m_{-k})`` at the current state (Eq. 4.2)."""
         self._prepare()
-        lik = cell_log_lik_ratio(int(k), self._m, self._f, self._offsets, self._cells, self._c_off,
-                                 self._c_ray, self._c_kappa, self._ll)  # fmt: skip
+        lik = cs.log_lik_ratio(self._st, int(k))
         if self._prior_lo is not None:
             return float(self._prior_lo[k] + lik)
         if self._local is not None:
@@ -284,49 +305,39 @@ class CellGibbs(_MapKernel):
 
     def _generic_sweep(self, order, u) -> int:
         changes = 0
-        for k, uk in zip(order, u):
-            lo = self.cell_log_odds(int(k))
-            if lo != lo:
-                continue
-            v = 1 if uk < _sigmoid(lo) else 0
+        for k, uk in zip(order.tolist(), u.tolist()):
+            v = cs.new_value(self.cell_log_odds(k), uk, int(self._m[k]), self._rule)
             if v != self._m[k]:
-                set_cell(int(k), v, self._m, self._f, self._offsets, self._cells, self._c_off, self._c_ray,
-                         self._c_kappa)  # fmt: skip
+                cs.set_cell(self._st, k, v)
                 changes += 1
         return changes
 
 
-def _sigmoid(lo: float) -> float:
-    """``1 / (1 + exp(-lo))`` without overflow for any ``lo`` (including +-inf)."""
-    if lo >= 0:
-        return 1.0 / (1.0 + math.exp(-lo))
-    e = math.exp(lo)
-    return e / (1.0 + e)
-
-
-class MetropolisCell(_MapKernel):
+class MetropolisCell(CellGibbs):
     """Single-cell Metropolis-Hastings: propose flipping a cell, accept with ``min(1, ratio)``.
 
-    ``proposal="uniform"`` picks latent cells uniformly; ``"endpoint"`` picks cells holding a laser end
-    point ``endpoint_weight`` times as often (the "heat map" proposal of Dhiman et al., ICRA 2014). Cell
-    choices do not depend on the state, so the flip proposal is symmetric. Independent priors only.
+    ``proposal="uniform"`` visits latent cells in the order ``scan`` (``"random"``, the default: drawn
+    with replacement; ``"permutation"``; ``"systematic"``, which is ``CellGibbs(update="metropolised")``);
+    ``"endpoint"`` draws cells holding a laser end point ``endpoint_weight`` times as often (the "heat
+    map" proposal of Dhiman et al., ICRA 2014; random scan only). Cell choices do not depend on the
+    state, so the flip proposal is symmetric and any prior works.
     """
 
-    def __init__(self, model, proposal: str = "uniform", endpoint_weight: float = 4.0, init="ogm",
-                 delta="haehnel") -> None:  # fmt: skip
-        super().__init__(model, "random", init, delta)
+    def __init__(self, model, proposal: str = "uniform", endpoint_weight: float = 4.0, scan: str = "random",
+                 init="ogm", delta="haehnel") -> None:  # fmt: skip
+        super().__init__(model, scan, "metropolised", init, delta)
         if proposal not in ("uniform", "endpoint"):
             raise ValueError(f"proposal must be 'uniform' or 'endpoint', got {proposal!r}")
+        if proposal == "endpoint" and scan != "random":
+            raise ValueError("the endpoint proposal draws cells at random: use scan='random'")
         if not endpoint_weight > 0:
             raise ValueError(f"endpoint_weight must be positive, got {endpoint_weight}")
-        if model.prior.cell_log_odds() is None:
-            raise ValueError("MetropolisCell needs a prior with independent cells")
         self.proposal = proposal
         self.endpoint_weight = float(endpoint_weight)
         self._weights = None
 
     def proposal_probs(self) -> torch.Tensor:
-        """Probability of proposing each latent cell (in ``model.latent`` order)."""
+        """Probability of proposing each latent cell (in ``model.latent`` order) in a random scan."""
         if self._weights is None:
             w = torch.ones(len(self.model.latent), dtype=torch.float64)
             if self.proposal == "endpoint":
@@ -336,14 +347,12 @@ class MetropolisCell(_MapKernel):
             self._weights = w / w.sum()
         return self._weights
 
-    def _sweep(self) -> int:
+    def _sweep_order(self) -> np.ndarray:
         n = len(self._latent)
-        picks = torch.multinomial(self.proposal_probs(), n, replacement=True).numpy() if n else np.zeros(0, int)
-        order = self._latent[picks]
-        u = self._uniforms(n)
-        self._updates += n
-        return metropolis_cell_sweep(order, self._prior_lo, self._m, self._f, self._offsets, self._cells,
-                                     self._c_off, self._c_ray, self._c_kappa, self._ll, u)  # fmt: skip
+        if self.scan != "random" or n == 0:
+            return self._order(self._latent)
+        picks = torch.multinomial(self.proposal_probs(), n, replacement=True).numpy()
+        return np.ascontiguousarray(self._latent[picks])
 
 
 class PatchGibbs(_MapKernel):

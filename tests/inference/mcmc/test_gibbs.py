@@ -306,8 +306,10 @@ def test_bad_arguments():
         PatchGibbs(model, (2, 2))  # a 1D grid takes runs only
     with pytest.raises(ValueError, match="init"):
         CellGibbs(model, init="zeros").setup()
-    with pytest.raises(ValueError, match="independent"):
-        MetropolisCell(model_1d(5, prior=DataDriven1DPrior(6, 1)))
+    with pytest.raises(ValueError, match="update"):
+        CellGibbs(model, update="heat")
+    with pytest.raises(ValueError, match="scan='random'"):
+        MetropolisCell(model, proposal="endpoint", scan="systematic")
 
 
 def test_chains_diagnostics():
