@@ -3,7 +3,7 @@
 Each test runs the real code against an answer it does not share a formula with:
 
 * ``test_metropolis_cell_run_matches_brute_force`` and ``test_metropolis_cell_sweep_draws_from_its_row``:
-  the compiled ``metropolis_cell_sweep`` (acceptance sign swapped);
+  the compiled metropolised cell update (``_kernels.cell_sweep.new_value``; acceptance sign swapped);
 * ``test_data_driven_log_evidence_matches_brute_force``: ``pose_constrained_1d``'s evidence
   (``log(n + 1)`` -> ``log(n)``);
 * ``test_mutual_information_of_a_hand_computed_joint`` and ``test_mi_diagonal_is_cell_entropy``:

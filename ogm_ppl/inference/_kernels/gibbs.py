@@ -1,4 +1,5 @@
-"""Compiled Gibbs / Metropolis sweeps over binary maps (Sections 4.1, 4.2; Algorithms 1 and 2).
+"""Compiled patch Gibbs sweeps over binary maps (Section 4.2; Algorithms 1 and 2), heat bath or metropolised;
+the single-cell sweeps are in :mod:`~ogm_ppl.inference._kernels.cell_sweep`.
 
 The state is the map ``m`` (uint8, ``K``) and every ray's first occupied kappa ``f`` (kept in step with
 ``m`` by :func:`~ogm_ppl.inference._kernels.cells.set_cell`). Random numbers come in as arrays drawn
@@ -22,59 +23,15 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from ogm_ppl.inference._kernels.cells import cell_log_lik_ratio, set_cell
+from ogm_ppl.inference._kernels.cells import set_cell
 from ogm_ppl.priors.local import (
-    STENCIL,
-    TILES,
     patch_prior_weights_ws,
-    stencil_cell_log_odds,
     tile_candidates,
-    tile_cell_log_odds,
     tile_of_anchor,
     tile_patch_factors,
     tile_patch_setup,
     tile_scratch,
 )
-
-
-@nb.njit(cache=True, inline="always")
-def _sigmoid_draw(lo: float, u: float) -> int:
-    # occupied with probability sigmoid(lo): log(u / (1 - u)) < lo  (Section 4.1.1)
-    if lo == np.inf:
-        return 1
-    if lo == -np.inf:
-        return 0
-    return 1 if u * (1.0 + math.exp(-lo)) < 1.0 else 0
-
-
-@nb.njit(cache=True)
-def gibbs_cell_sweep(order, prior_log_odds, m, f, offsets, cells, c_off, c_ray, c_kappa, ll, uniforms):
-    """One pass of single-cell Gibbs updates over ``order`` (Eq. 4.2). Returns the number of flips."""
-    flips = 0
-    for i in range(order.shape[0]):
-        k = order[i]
-        lo = prior_log_odds[k] + cell_log_lik_ratio(k, m, f, offsets, cells, c_off, c_ray, c_kappa, ll)
-        v = _sigmoid_draw(lo, uniforms[i])
-        if v != m[k]:
-            set_cell(k, v, m, f, offsets, cells, c_off, c_ray, c_kappa)
-            flips += 1
-    return flips
-
-
-@nb.njit(cache=True)
-def metropolis_cell_sweep(order, prior_log_odds, m, f, offsets, cells, c_off, c_ray, c_kappa, ll, uniforms):
-    """Metropolis-Hastings single-cell flips: propose ``m_k -> 1 - m_k`` for each proposed cell in
-    ``order`` (drawn independently of the state, so the proposal is symmetric), accept with
-    ``min(1, p(flipped) / p(current))``. Returns the number of accepted flips."""
-    acc = 0
-    for i in range(order.shape[0]):
-        k = order[i]
-        lo = prior_log_odds[k] + cell_log_lik_ratio(k, m, f, offsets, cells, c_off, c_ray, c_kappa, ll)
-        delta = -lo if m[k] else lo  # log p(flipped) - log p(current)
-        if delta >= 0.0 or (delta > -np.inf and uniforms[i] < math.exp(delta)):
-            set_cell(k, 1 - m[k], m, f, offsets, cells, c_off, c_ray, c_kappa)
-            acc += 1
-    return acc
 
 
 @nb.njit(cache=True)
@@ -368,6 +325,48 @@ def _categorical_ws(logw, W, u, ew):
 
 
 @nb.njit(cache=True)
+def metropolised_pick(logw, n, jc, u_choice, u_accept, ew):
+    """Liu's metropolised Gibbs over ``n`` candidates with the current one at index ``jc``: propose
+    ``j != jc`` with probability ``p_j / (1 - p_jc)`` and accept with ``min(1, (1 - p_jc) / (1 - p_j))``,
+    which leaves ``p`` invariant and moves at least as often as a heat-bath draw (Peskun's order).
+
+    ``p = softmax(logw[:n])``; ``jc = -1`` (the current configuration is not a candidate: it has no prior
+    mass) falls back to a heat-bath draw. Returns the chosen index (``jc`` when staying; ``-1`` if no
+    candidate has mass). ``ew`` (``>= n``) is scratch.
+    """
+    if jc < 0:
+        return _categorical_ws(logw, n, u_choice, ew)
+    mx = -np.inf
+    for j in range(n):
+        if logw[j] > mx:
+            mx = logw[j]
+    if mx == -np.inf:
+        return -1
+    other = 0.0
+    for j in range(n):
+        e = math.exp(logw[j] - mx)
+        ew[j] = e
+        if j != jc:
+            other += e
+    if other == 0.0:
+        return jc  # no other configuration has mass
+    t = u_choice * other
+    acc = 0.0
+    pick = -1
+    for j in range(n):
+        if j == jc or ew[j] == 0.0:
+            continue
+        pick = j  # (rounding: the last one with mass)
+        acc += ew[j]
+        if t < acc:
+            break
+    denom = other + ew[jc] - ew[pick]  # = total - e_pick, so the ratio is (1 - p_jc) / (1 - p_pick)
+    if denom <= 0.0 or u_accept * denom < other:
+        return pick
+    return jc
+
+
+@nb.njit(cache=True)
 def _categorical(logw, W, u):
     return _categorical_ws(logw, W, u, np.empty(W, np.float64))
 
@@ -446,7 +445,7 @@ def patch_log_weights(patch, prior_log_odds, m, f, in_patch, ray_stamp, stamp, o
 @nb.njit(cache=True)
 def gibbs_patch_sweep(anchors, dr, dc, rows, cols, pinned, prior_log_odds, m, f, offsets, cells, c_off,
                       c_ray, c_kappa, ll, u_choice, u_rand, u_accept, p_rand_patch, thesis_random,
-                      ray_stamp, stamp0):  # fmt: skip
+                      ray_stamp, stamp0, metropolised):  # fmt: skip
     """One pass of patch Gibbs updates at ``anchors`` (Algorithm 1; Algorithm 2 when
     ``p_rand_patch > 0``) with an independent cell prior. Returns the number of patches changed.
 
@@ -454,7 +453,8 @@ def gibbs_patch_sweep(anchors, dr, dc, rows, cols, pinned, prior_log_odds, m, f,
     (:func:`collect_rays`, :func:`lik_all`: ``O(W)`` per ray) plus the cells' prior log-odds.
     Algorithm 2's random configuration is accepted with the Metropolis-Hastings probability
     ``min(1, p(w') / p(w))``, which keeps the posterior invariant, unless ``thesis_random`` (always
-    accepted, as printed in the thesis; not exact).
+    accepted, as printed in the thesis; not exact). ``metropolised``: the other updates are Liu's
+    metropolised Gibbs (:func:`metropolised_pick`) instead of heat-bath draws.
     """
     K = m.shape[0]
     L = dr.shape[0]
@@ -477,6 +477,10 @@ def gibbs_patch_sweep(anchors, dr, dc, rows, cols, pinned, prior_log_odds, m, f,
             else:
                 d = logw[prop] - logw[cur]
                 new = prop if (d >= 0.0 or (d > -np.inf and u_accept[i] < math.exp(d))) else cur
+        elif metropolised:
+            new = metropolised_pick(logw, W, cur, u_choice[i], u_accept[i], sc.ew)
+            if new < 0:
+                new = cur
         else:
             new = _categorical_ws(logw, W, u_choice[i], sc.ew)
             if new < 0:
@@ -487,67 +491,8 @@ def gibbs_patch_sweep(anchors, dr, dc, rows, cols, pinned, prior_log_odds, m, f,
     return changed
 
 
-@nb.njit(cache=True)
-def gibbs_cell_marginals(order, prior_log_odds, m, f, offsets, cells, c_off, c_ray, c_kappa, ll, num_sweeps, seed):
-    """``num_sweeps`` systematic single-cell sweeps in one compiled call, with numba's own generator
-    seeded by ``seed``; returns the running sum of the sampled maps (``K`` float64). For long runs of
-    small problems (e.g. the 10^5-sweep column of Table 3.1) where one Python call per sweep would dominate.
-    """
-    np.random.seed(seed)
-    acc = np.zeros(m.shape[0], np.float64)
-    for _ in range(num_sweeps):
-        for i in range(order.shape[0]):
-            k = order[i]
-            lo = prior_log_odds[k] + cell_log_lik_ratio(k, m, f, offsets, cells, c_off, c_ray, c_kappa, ll)
-            v = _sigmoid_draw(lo, np.random.random())
-            if v != m[k]:
-                set_cell(k, v, m, f, offsets, cells, c_off, c_ray, c_kappa)
-        for k in range(m.shape[0]):
-            acc[k] += m[k]
-    return acc
-
-
 # ---------------------------------------------------------------------------------------------------
 # Correlated priors: the prior's local conditional comes from a LocalPrior bundle (ogm_ppl.priors.local)
-
-
-@nb.njit(cache=True, inline="always")
-def _draw_log_odds(lo, u, cur):
-    """Occupied with probability ``sigmoid(lo)`` (stable for any ``lo``). ``nan`` means both values have
-    zero prior mass, so the state itself has none: any move is allowed there, and a fair coin lets the
-    chain leave it."""
-    if lo != lo:
-        return 1 if u < 0.5 else 0
-    if lo >= 0.0:
-        return 1 if u * (1.0 + math.exp(-lo)) < 1.0 else 0
-    e = math.exp(lo)
-    return 1 if u * (1.0 + e) < e else 0
-
-
-@nb.njit(cache=True, inline="always")
-def _local_cell_pass(order, lp, m, f, offsets, cells, c_off, c_ray, c_kappa, ll, uniforms, kind):
-    flips = 0
-    for i in range(order.shape[0]):
-        k = order[i]
-        if kind == STENCIL:
-            lo = stencil_cell_log_odds(lp, k, m)
-        else:
-            lo = tile_cell_log_odds(lp, k, m)
-        lo += cell_log_lik_ratio(k, m, f, offsets, cells, c_off, c_ray, c_kappa, ll)
-        v = _draw_log_odds(lo, uniforms[i], m[k])
-        if v != m[k]:
-            set_cell(k, v, m, f, offsets, cells, c_off, c_ray, c_kappa)
-            flips += 1
-    return flips
-
-
-@nb.njit(cache=True)
-def local_cell_sweep(order, lp, m, f, offsets, cells, c_off, c_ray, c_kappa, ll, uniforms):
-    """Single-cell Gibbs (Eq. 4.2) with a correlated prior's local log-odds ``l(m_k | m_-k)`` (one loop
-    per prior kind, so that each inlines only its own conditional)."""
-    if lp.kind == STENCIL:
-        return _local_cell_pass(order, lp, m, f, offsets, cells, c_off, c_ray, c_kappa, ll, uniforms, STENCIL)
-    return _local_cell_pass(order, lp, m, f, offsets, cells, c_off, c_ray, c_kappa, ll, uniforms, TILES)
 
 
 @nb.njit(cache=True)
@@ -597,7 +542,8 @@ def local_patch_log_weights(patch, cands, n, lp, m, f, in_patch, ray_stamp, stam
 
 @nb.njit(cache=True)
 def local_patch_sweep(anchors, dr, dc, h, w, rows, cols, pinned, lp, m, f, offsets, cells, c_off, c_ray, c_kappa,
-                      ll, u_choice, u_rand, u_accept, p_rand_patch, thesis_random, ray_stamp, stamp0, capacity):  # fmt: skip
+                      ll, u_choice, u_rand, u_accept, p_rand_patch, thesis_random, ray_stamp, stamp0, capacity,
+                      metropolised):  # fmt: skip
     """Patch Gibbs (Algorithm 1; Algorithm 2 with ``p_rand_patch``) with a correlated prior.
 
     Each update weighs only the configurations the prior allows given the rest (a tile's sparse support
@@ -607,7 +553,8 @@ def local_patch_sweep(anchors, dr, dc, h, w, rows, cols, pinned, lp, m, f, offse
     windows hold patch cells (:func:`~ogm_ppl.priors.local.tile_patch_factors`) plus the likelihood of
     the rays through the patch. Algorithm 2's random configuration (uniform over all ``2^L``) is
     accepted by Metropolis-Hastings unless ``thesis_random``. ``(h, w)``: the patch's rectangle (0 if
-    not a rectangle). Returns ``(changed, skipped)``: patches changed, and patches whose configurations
+    not a rectangle). ``metropolised``: Liu's metropolised Gibbs over the candidates instead of a
+    heat-bath draw. Returns ``(changed, skipped)``: patches changed, and patches whose configurations
     did not fit ``capacity``.
     """
     K = m.shape[0]
@@ -666,7 +613,15 @@ def local_patch_sweep(anchors, dr, dc, h, w, rows, cols, pinned, lp, m, f, offse
                     lik_all(sc, ns, ll, n_live, logw)  # the dense set: all 2^n_live codes, in order
                 else:
                     lik_list(sc, ns, ll, cands, n, logw)
-                j = _categorical_ws(logw, n, u_choice[i], sc.ew)
+                if metropolised:
+                    jc = -1
+                    for x in range(n):
+                        if cands[x] == cur:
+                            jc = x
+                            break
+                    j = metropolised_pick(logw, n, jc, u_choice[i], u_accept[i], sc.ew)
+                else:
+                    j = _categorical_ws(logw, n, u_choice[i], sc.ew)
                 if j < 0:  # every candidate has zero mass, so has the current state: move to leave it
                     j = min(np.int64(u_choice[i] * n), n - 1)
             new = cands[j]

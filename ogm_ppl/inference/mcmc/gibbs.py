@@ -46,6 +46,7 @@ from ogm_ppl.inference._kernels.gibbs import (
     gibbs_patch_sweep,
     local_patch_log_weights,
     local_patch_sweep,
+    metropolised_pick,
     patch_config,
     patch_log_lik,
     patch_log_weights,
@@ -367,11 +368,18 @@ class PatchGibbs(_MapKernel):
             per sweep.
         p_rand_patch: Algorithm 2's probability of proposing a random configuration instead (0.001 in the
             thesis), accepted by Metropolis-Hastings unless ``random_patch="thesis"``.
+        update: ``"gibbs"`` (the thesis's heat bath: draw the patch from its conditional) or
+            ``"metropolised"`` (propose one of the *other* configurations in proportion to its
+            conditional, accept by Metropolis-Hastings with ``min(1, (1 - p_cur) / (1 - p_new))``).
     """
 
     def __init__(self, model, patch=3, scan: str = "systematic", offset=0, p_rand_patch: float = 0.0,
-                 random_patch: str = "mh", init="ogm", delta="haehnel") -> None:  # fmt: skip
+                 random_patch: str = "mh", update: str = "gibbs", init="ogm", delta="haehnel") -> None:  # fmt: skip
+        if update not in _UPDATES:
+            raise ValueError(f"update must be one of {tuple(_UPDATES)}, got {update!r}")
         super().__init__(model, scan, init, delta)
+        self.update = update
+        self._metropolised = update == "metropolised"
         local = local_of(model.prior) if model.prior.cell_log_odds() is None else None
         tiled = local is not None and local.kind == TILES and scan != "random"
         self.dr, self.dc = patch_shape(patch, model.grid.ndim, max_cells=62 if tiled else 20)
@@ -456,7 +464,7 @@ class PatchGibbs(_MapKernel):
                                                  self._m, self._f, self._offsets, self._cells, self._c_off,
                                                  self._c_ray, self._c_kappa, self._ll, u_choice, u_rand, u_accept,
                                                  self.p_rand_patch, self.thesis_random, self._ray_stamp(), stamp0,
-                                                 self._capacity())  # fmt: skip
+                                                 self._capacity(), self._metropolised)  # fmt: skip
             if skipped:
                 raise RuntimeError(f"{skipped} patch updates had more configurations than fit")
             return changed
@@ -466,7 +474,7 @@ class PatchGibbs(_MapKernel):
             return gibbs_patch_sweep(anchors, self.dr, self.dc, rows, cols, pinned, self._prior_lo, self._m,
                                      self._f, self._offsets, self._cells, self._c_off, self._c_ray,
                                      self._c_kappa, self._ll, u_choice, u_rand, u_accept, self.p_rand_patch,
-                                     self.thesis_random, self._ray_stamp(), stamp0)  # fmt: skip
+                                     self.thesis_random, self._ray_stamp(), stamp0, self._metropolised)  # fmt: skip
         return self._python_sweep(anchors, u_choice, u_rand, u_accept)
 
     def _ray_stamp(self) -> np.ndarray:
@@ -519,6 +527,10 @@ class PatchGibbs(_MapKernel):
                 prop = min(int(u_choice[i] * W), W - 1)
                 d = logw[prop] - logw[cur]
                 new = prop if (self.thesis_random or d >= 0 or (d > -np.inf and u_accept[i] < math.exp(d))) else cur
+            elif self._metropolised:
+                new = metropolised_pick(np.ascontiguousarray(logw), W, cur, u_choice[i], u_accept[i], np.empty(W))
+                if new < 0:
+                    continue
             else:
                 mx = logw.max()
                 if mx == -np.inf:

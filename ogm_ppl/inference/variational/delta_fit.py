@@ -107,7 +107,7 @@ def cross_validate(make_family, data: FitData, folds: int = 10, **fit_kwargs) ->
     if D % folds:
         raise ValueError(f"{D} datasets do not split into {folds} equal folds")
     size = D // folds
-    out = {"train": [], "test": [], "families": []}
+    out: dict[str, list] = {"train": [], "test": [], "families": []}
     for k in range(folds):
         test = torch.arange(k * size, (k + 1) * size)
         train = torch.cat([torch.arange(0, k * size), torch.arange((k + 1) * size, D)])

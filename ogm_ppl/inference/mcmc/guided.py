@@ -1,0 +1,339 @@
+r"""Data-driven MCMC: Gibbs sweeps mixed with independence Metropolis-Hastings moves proposed by an
+amortised guide (Chapter 4 with the guide of :mod:`ogm_ppl.inference.variational.amortised`).
+
+A guide ``q(m | z) = prod_k q_k^{m_k} (1 - q_k)^{1 - m_k}`` (mean field, a function of the readings only)
+proposes a whole block ``B`` of cells at once (a window of a tiling with a random offset, or every latent
+cell), independently of the block's current values; the rest of the map is kept. The move
+``m -> m' = (m'_B, m_{-B})`` is accepted with
+
+.. math::
+    \alpha(m, m') = \min\Bigl(1,\ \frac{p(m') \, p(z \mid m') \, q_B(m_B)}
+                                     {p(m) \, p(z \mid m) \, q_B(m'_B)}\Bigr),
+
+an independence Metropolis-Hastings step within Gibbs (Metropolis-within-Gibbs on block ``B``;
+Tierney 1994), so the exact posterior ``p(m | z)`` is stationary for each block move, hence for a pass
+over a tiling, for the mixture over random offsets, and for its mixture with any Gibbs sweep that leaves
+it stationary (Section 4.1, 4.2). Only what changes is computed: the prior through
+``prior.log_prob_patch`` (exact differences between configurations of the block; the whole ``log_prob``
+for blocks of more than 48 cells) and the likelihood through the rays that cross the block
+(``sum_{n: B cap ray_n != {}} log p(z_n | f_n(m))``, Eq. 2.6).
+
+:class:`GuidedGibbs` is a ``pyro.infer.mcmc.MCMCKernel`` like :class:`~ogm_ppl.inference.mcmc.gibbs.CellGibbs`
+(one ``sample`` call is one sweep: with probability ``p_guide`` a pass of guide moves over the blocks,
+otherwise one sweep of the wrapped base kernel) and runs under ``pyro.infer.MCMC`` or
+:func:`~ogm_ppl.inference.mcmc.runner.run_gibbs`. By default it also starts from the guide's mode
+(``init="guide"``), the second use of the guide.
+"""
+
+from __future__ import annotations
+
+import math
+from collections import OrderedDict
+
+import numpy as np
+import torch
+from pyro.infer.mcmc.mcmc_kernel import MCMCKernel
+
+from ogm_ppl.inference.tiling import patch_cells, tiling_starts
+
+__all__ = ["GuidedGibbs"]
+
+_INITS = ("guide", "guide_sample", "base")
+_MAX_PATCH_PRIOR = 48
+
+
+class GuidedGibbs(MCMCKernel):
+    """Gibbs sweeps of a base kernel mixed with block proposals from an amortised guide (module docstring).
+
+    Args:
+        base: the Gibbs kernel to wrap (:class:`~ogm_ppl.inference.mcmc.gibbs.CellGibbs`, ``PatchGibbs``,
+            ``MetropolisCell``; a kernel with ``model``, ``setup``, ``sample``, ``state`` and the
+            ``initial_params`` setter).
+        guide: an :class:`~ogm_ppl.inference.variational.amortised.AmortisedGuide` (anything with
+            ``cell_logits(model)``: ``K`` logits of ``q(m_k = 1 | z)``).
+        block: the proposal block: ``(h, w)`` windows of a tiling (an int ``w``: ``(1, w)``), or ``"all"``
+            (every latent cell at once: an independence sampler, for small maps).
+        p_guide: probability that a sweep is a pass of guide moves instead of a base sweep (``1``: guide
+            moves only).
+        init: ``"guide"`` (the guide's mode, :func:`guide_initial_map`), ``"guide_sample"`` (a draw from
+            the guide) or ``"base"`` (the base kernel's own initialisation).
+        random_offset: draw the tiling's offset uniformly at every pass (blocks then straddle every
+            boundary); ``False`` keeps offset ``(0, 0)``.
+    """
+
+    site = "m"
+
+    def __init__(self, base, guide, block=(6, 6), p_guide: float = 0.5, init: str = "guide",
+                 random_offset: bool = True) -> None:  # fmt: skip
+        if not 0.0 <= float(p_guide) <= 1.0:
+            raise ValueError(f"p_guide must lie in [0, 1], got {p_guide}")
+        if init not in _INITS:
+            raise ValueError(f"init must be one of {_INITS}, got {init!r}")
+        self.base = base
+        self.model = base.model
+        self.guide = guide
+        self.p_guide = float(p_guide)
+        self.init = init
+        self.random_offset = bool(random_offset)
+        self.block = self._check_block(block)
+        self.base_kind = type(base).__qualname__ + repr(sorted((k, v) for k, v in vars(base).items()
+                                                            if not k.startswith("_") and isinstance(v, (int, float, str, tuple))))  # fmt: skip
+        self.transforms = {}
+        self.sweeps = 0
+        self.guide_sweeps = 0
+        self._proposed = 0
+        self._same = 0
+        self._accepted = 0
+        self._initial_params = None
+        self._last = None
+        self._base_out = None
+        self._blocks: dict = {}
+        self._m: torch.Tensor | None = None
+        with torch.no_grad():
+            lg = torch.as_tensor(guide.cell_logits(self.model), dtype=torch.float64).detach().clone()
+        if lg.shape != (self.model.num_cells,) or torch.isnan(lg).any():
+            raise ValueError(f"the guide's cell_logits must be {self.model.num_cells} numbers (no NaN)")
+        self.guide_logits = lg  # public: a run's fingerprint sees the proposal
+        self._q = torch.sigmoid(lg)
+        self._log_q1 = torch.nn.functional.logsigmoid(lg)
+        self._log_q0 = torch.nn.functional.logsigmoid(-lg)
+        self._lq1, self._lq0 = self._log_q1.numpy(), self._log_q0.numpy()
+        r = self.model.rays
+        dense = np.full((r.num_rays, int(r.lengths.max())), self.model.num_cells, dtype=np.int64)
+        dense[r.ray_of_entry, r.kappa] = r.cells  # padded with K: a cell that is always free
+        self._dense, self._lengths = dense, r.lengths.astype(np.int64)
+        self._ll = np.ascontiguousarray(self.model.loglik_table.numpy())
+        self._pinned = self.model.known_free.numpy()
+        lo = self.model.prior.cell_log_odds()
+        self._prior_lo = None if lo is None else torch.as_tensor(lo, dtype=torch.float64).numpy()
+        super().__init__()
+
+    # ------------------------------------------------------------------ blocks
+    def _check_block(self, block):
+        g = self.model.grid
+        if isinstance(block, str):
+            if block != "all":
+                raise ValueError(f"block must be (h, w), an int or 'all', got {block!r}")
+            return "all"
+        hw = (1, int(block)) if np.isscalar(block) else tuple(int(v) for v in block)
+        if len(hw) != 2 or hw[0] < 1 or hw[1] < 1:
+            raise ValueError(f"block must be (h, w) of positive sizes, got {block!r}")
+        if g.ndim == 1 and hw[0] != 1:
+            raise ValueError("a 1D grid takes blocks (1, w)")
+        return hw
+
+    def offsets(self) -> list[tuple[int, int]]:
+        """The tiling offsets a pass draws from (uniformly), or ``[(0, 0)]``."""
+        if self.block == "all" or not self.random_offset:
+            return [(0, 0)]
+        h, w = self.block
+        return [(a, b) for a in range(h) for b in range(w)]
+
+    def blocks(self, offset: tuple[int, int] = (0, 0)) -> list[tuple[np.ndarray, np.ndarray]]:
+        """The blocks of a pass at ``offset``: ``(cells, rays)`` pairs, the latent cells of each window (in
+        tiling order) and the rays crossing them."""
+        key = tuple(offset)
+        if key in self._blocks:
+            return self._blocks[key]
+        model = self.model
+        if self.block == "all":
+            groups = [model.latent.numpy()]
+        else:
+            g = model.grid
+            rows, cols = (g.rows, g.cols) if g.ndim == 2 else (1, g.num_cells)
+            h, w = self.block
+            r0, c0 = tiling_starts(key[0], h, rows), tiling_starts(key[1], w, cols)
+            R, C = np.meshgrid(r0, c0, indexing="ij")
+            anchors = np.stack([R.ravel(), C.ravel()], 1)
+            dr, dc = np.divmod(np.arange(h * w), w)
+            if g.ndim == 1:
+                k = anchors[:, 1:] + dc[None, :]
+                inside = (k >= 0) & (k < cols)
+                ok = inside & ~model.known_free.numpy()[np.where(inside, k, 0)]
+                cells = np.where(ok, k, -1)
+            else:
+                cells = patch_cells(model, anchors, dr, dc)
+            groups = [row[row >= 0] for row in cells if (row >= 0).any()]
+        out = []
+        for cells in groups:
+            rays = self._rays_of(cells)
+            out.append((np.sort(cells).astype(np.int64), rays.astype(np.int64)))
+        self._blocks[key] = out
+        return out
+
+    # ------------------------------------------------------------------ the MH ratio
+    def proposal_log_prob(self, cells, values) -> torch.Tensor:
+        """``log q_B(values)`` of configurations ``... x |B|`` of the block's ``cells``."""
+        cells = torch.as_tensor(cells, dtype=torch.int64)
+        v = torch.as_tensor(values, dtype=torch.float64)
+        return (v * self._log_q1[cells] + (1 - v) * self._log_q0[cells]).sum(-1)
+
+    def _rays_of(self, cells: np.ndarray) -> np.ndarray:
+        idx = self.model.rays.by_cell
+        parts = [idx.ray[idx.offsets[k]:idx.offsets[k + 1]] for k in cells.tolist()]
+        return np.unique(np.concatenate(parts + [np.zeros(0, np.int64)])).astype(np.int64)
+
+    def _lik(self, m: np.ndarray, rays: np.ndarray) -> float:
+        """``sum_{n in rays} log p(z_n | f_n(m))`` (``m``: ``K + 1`` with a trailing 0)."""
+        occ = m[self._dense[rays]] != 0  # |rays| x Lmax
+        first = np.where(occ.any(1), occ.argmax(1), self._lengths[rays])
+        return float(self._ll[rays, first].sum())
+
+    def log_ratio(self, m, cells, new, rays=None) -> float:
+        r"""``log [p(m') p(z | m') q_B(m_B)] - log [p(m) p(z | m) q_B(m'_B)]`` for ``m' = m`` with
+        ``m'_B = new`` (``m``: a full ``K`` map; ``rays``: those crossing ``cells``, found if ``None``).
+
+        ``+inf`` if ``m`` has zero posterior mass and ``m'`` has some (the move is always taken), ``-inf``
+        if ``m'`` has none (or ``new`` occupies a pinned cell)."""
+        model = self.model
+        K = model.num_cells
+        m = np.asarray(m.detach().cpu().numpy() if isinstance(m, torch.Tensor) else m, dtype=np.float64)
+        cells = np.asarray(cells.numpy() if isinstance(cells, torch.Tensor) else cells, dtype=np.int64)
+        new = np.asarray(new.numpy() if isinstance(new, torch.Tensor) else new, dtype=np.float64)
+        if m.shape != (K,) or new.shape != cells.shape:
+            raise ValueError(f"log_ratio takes a {K}-cell map and one value per block cell")
+        if (new[self._pinned[cells]] != 0).any():
+            return -math.inf
+        old = m[cells]
+        a = np.zeros(K + 1)
+        a[:K] = m
+        b = a.copy()
+        b[cells] = new
+        if self._prior_lo is not None:  # independent cells: the prior ratio is local and exact
+            lp0 = 0.0
+            lp1 = float(((new - old) * self._prior_lo[cells]).sum())
+        elif len(cells) <= _MAX_PATCH_PRIOR:  # exact differences between configurations of the block
+            lp = model.prior.log_prob_patch(torch.from_numpy(m), torch.from_numpy(cells),
+                                            torch.from_numpy(np.stack([old, new])))  # fmt: skip
+            lp0, lp1 = (float(v) for v in torch.as_tensor(lp))
+        else:
+            lp = model.prior.log_prob(torch.from_numpy(np.stack([a[:K], b[:K]])))
+            lp0, lp1 = (float(v) for v in torch.as_tensor(lp))
+        rays = self._rays_of(cells) if rays is None else np.asarray(rays.numpy() if isinstance(rays, torch.Tensor) else rays, np.int64)
+        cur, prop = lp0 + self._lik(a, rays), lp1 + self._lik(b, rays)
+        if math.isnan(cur) or math.isnan(prop):
+            raise FloatingPointError("the log joint of a block move is NaN")
+        if prop == -math.inf:
+            return -math.inf
+        if cur == -math.inf:
+            return math.inf
+        lq1, lq0 = self._lq1[cells], self._lq0[cells]
+        lq_old = float((old * lq1 + (1 - old) * lq0).sum())
+        lq_new = float((new * lq1 + (1 - new) * lq0).sum())
+        return prop - cur + lq_old - lq_new
+
+    # ------------------------------------------------------------------ Pyro's kernel interface
+    def _init_map(self) -> torch.Tensor | None:
+        if self.init == "base":
+            return None
+        if self.init == "guide":
+            m = (self._q > 0.5).to(torch.float64)
+        else:
+            m = (torch.rand(self.model.num_cells, dtype=torch.float64) < self._q).to(torch.float64)
+        m[self.model.known_free] = 0.0
+        return m
+
+    @property
+    def initial_params(self):
+        if self._initial_params is None:
+            m = self._init_map()
+            if m is not None:
+                self.base.initial_params = {self.site: m[self.model.latent]}
+            self._initial_params = self.base.initial_params
+        return self._initial_params
+
+    @initial_params.setter
+    def initial_params(self, params):
+        self._initial_params = params
+        self.base.initial_params = params
+
+    def setup(self, warmup_steps=0, *args, **kwargs) -> None:
+        params = self.initial_params
+        self.base.initial_params = params
+        self.base.setup(warmup_steps, *args, **kwargs)
+        self._m = torch.from_numpy(np.asarray(self.base.state).astype(np.float64))
+        self._last = None
+        self._base_out = None
+
+    @property
+    def state(self) -> np.ndarray:
+        """The current full map (uint8, ``K``)."""
+        if self._m is None:
+            self.setup()
+        return self._m.numpy().astype(np.uint8)
+
+    def sample(self, params):
+        m_in = params[self.site]
+        if self._m is None:
+            self.setup()
+        if m_in is not self._last:
+            self._m = self.model.check_maps(self.model.full_map(torch.as_tensor(m_in).detach()), "kernel state").clone()
+            self._m[self.model.known_free] = 0.0
+            self._base_out = None
+        if self.p_guide >= 1.0 or (self.p_guide > 0.0 and float(torch.rand(())) < self.p_guide):
+            if self.mh_pass():
+                self._base_out = None
+            out = self._m[self.model.latent].clone()
+            self.guide_sweeps += 1
+        else:
+            inp = self._base_out if self._base_out is not None else self._m[self.model.latent].clone()
+            out = self.base.sample({self.site: inp})[self.site]
+            self._base_out = out
+            self._m = self.model.full_map(out).to(torch.float64).clone()
+        self.sweeps += 1
+        self._last = out
+        return {self.site: out}
+
+    def mh_pass(self, offset: tuple[int, int] | None = None) -> int:
+        """One pass of guide moves over the blocks of a tiling (offset drawn uniformly unless given), on
+        the current state; returns the number of blocks that changed."""
+        if self._m is None:
+            self.setup()
+        offs = self.offsets()
+        if offset is None:
+            offset = offs[int(torch.randint(len(offs), ()))] if len(offs) > 1 else offs[0]
+        moved = 0
+        mn, q = self._m.numpy(), self._q.numpy()  # views: moves write into the state
+        for cells, rays in self.blocks(offset):
+            new = (torch.rand(len(cells), dtype=torch.float64).numpy() < q[cells]).astype(np.float64)
+            self._proposed += 1
+            if np.array_equal(new, mn[cells]):
+                self._same += 1
+                continue
+            lr = self.log_ratio(mn, cells, new, rays)
+            a = float(torch.rand((), dtype=torch.float64))
+            if lr >= 0 or (lr > -math.inf and a < math.exp(lr)):
+                mn[cells] = new
+                self._accepted += 1
+                moved += 1
+        return moved
+
+    @property
+    def acceptance_rate(self) -> float:
+        """Accepted share of the guide's proposals that differed from the current block."""
+        return self._accepted / max(self._proposed - self._same, 1)
+
+    def logging(self):
+        return OrderedDict([("sweeps", self.sweeps), ("guide accept", f"{self.acceptance_rate:.3f}")])
+
+    def diagnostics(self):
+        return {"sweeps": self.sweeps, "guide_sweeps": self.guide_sweeps, "proposed": self._proposed,
+                "unchanged_proposals": self._same, "accepted": self._accepted,
+                "acceptance_rate": self.acceptance_rate}  # fmt: skip
+
+    # ------------------------------------------------------------------ checkpoints (run_gibbs)
+    def state_dict(self) -> dict:
+        d = dict(self.base.state_dict()) if hasattr(self.base, "state_dict") else {}
+        d.update({"m": self.state, "guided_sweeps": self.sweeps, "guided_guide_sweeps": self.guide_sweeps,
+                  "guided_counts": np.array([self._proposed, self._same, self._accepted], np.int64)})  # fmt: skip
+        return d
+
+    def load_state_dict(self, state: dict) -> None:
+        if hasattr(self.base, "load_state_dict"):
+            self.base.load_state_dict(state)
+        self._m = self.model.check_maps(torch.as_tensor(np.asarray(state["m"]), dtype=torch.float64), "checkpoint map").clone()
+        self.sweeps = int(state["guided_sweeps"])
+        self.guide_sweeps = int(state["guided_guide_sweeps"])
+        self._proposed, self._same, self._accepted = (int(v) for v in np.asarray(state["guided_counts"]))
+        self._last = None
+        self._base_out = None

@@ -1,0 +1,208 @@
+"""Metropolised Gibbs (cells and patches) and scan orders: exact stationarity, the compiled sweeps against
+their transition rows, and long runs against brute force."""
+
+import itertools
+import math
+
+import pytest
+import torch
+from pyro.distributions.testing.gof import multinomial_goodness_of_fit
+
+from ogm_ppl.inference.exact import brute_force
+from ogm_ppl.inference.mcmc.gibbs import CellGibbs, MetropolisCell, PatchGibbs
+from ogm_ppl.inference.mcmc.runner import RunningStats, run_gibbs
+from ogm_ppl.priors import DataDriven1DPrior
+
+from .test_gibbs import MODELS, cell_update_matrix, code_of, exact_pi, model_1d, states
+from .test_gibbs_priors import ALL, LONG_RUN, PATCH, make, scene_3x4
+
+
+def _flip(s, k):
+    t = s.clone()
+    t[k] = 1 - s[k]
+    return t
+
+
+def metropolised_cell_matrix(kernel, model, k):
+    """One metropolised update of cell ``k``: flip with ``min(1, exp(+-lo))``; a state without mass
+    (``lo`` nan) moves by a fair coin."""
+    S = states(model)
+    T = torch.zeros(len(S), len(S), dtype=torch.float64)
+    for i, s in enumerate(S):
+        kernel._set_state(s)
+        lo = kernel.cell_log_odds(int(k))
+        if lo != lo:
+            a = 0.5
+        else:
+            d = -lo if s[k] else lo
+            a = 1.0 if d >= 0 else (math.exp(d) if d > -math.inf else 0.0)
+        T[i, code_of(model, _flip(s, k))] += a
+        T[i, i] += 1 - a
+    return T
+
+
+def metropolised_patch_matrix(kernel, model, patch, p_rand=0.0):
+    """One metropolised patch update: another configuration ``w`` with probability
+    ``p_w / (1 - p_cur) * min(1, (1 - p_cur) / (1 - p_w))``; with ``p_rand`` a uniform proposal accepted
+    by Metropolis-Hastings instead."""
+    S = states(model)
+    T = torch.zeros(len(S), len(S), dtype=torch.float64)
+    live = patch[patch >= 0]
+    for i, s in enumerate(S):
+        kernel._set_state(s)
+        logw = torch.from_numpy(kernel.patch_log_weights(patch))
+        W = len(logw)
+        if not torch.isfinite(logw).any():
+            T[i, i] = 1.0
+            continue
+        p = torch.softmax(logw, 0)
+        cur = int(sum(int(s[c]) << j for j, c in enumerate(live)))
+        row = torch.zeros(W, dtype=torch.float64)
+        rest = 1.0 - float(p[cur])
+        for w in range(W):
+            if w != cur and rest > 0:
+                row[w] = p[w] / rest * min(1.0, rest / (1.0 - float(p[w]))) if p[w] < 1 else 1.0
+        row[cur] = 1.0 - (row.sum() - row[cur])
+        mh = torch.zeros(W, dtype=torch.float64)
+        for w in range(W):
+            a = min(1.0, float(torch.exp(logw[w] - logw[cur])))
+            mh[w] += a / W
+            mh[cur] += (1 - a) / W
+        row = (1 - p_rand) * row + p_rand * mh
+        for w in range(W):
+            t = s.clone()
+            t[torch.from_numpy(live)] = torch.tensor([(w >> j) & 1 for j in range(len(live))], dtype=torch.float64)
+            T[i, code_of(model, t)] += row[w]
+    return T
+
+
+def _all_models():
+    return {**{n: MODELS[n] for n in MODELS}, **{n: (lambda n=n: make(n)) for n in ALL}}
+
+
+@pytest.mark.parametrize("name", list(MODELS) + ALL)
+def test_metropolised_cell_update_is_stationary_and_dominates_heat_bath(name):
+    model = _all_models()[name]()
+    pi = exact_pi(model)
+    kernel = CellGibbs(model, update="metropolised")
+    kernel.setup()
+    eye = torch.eye(len(pi), dtype=torch.float64)
+    for k in model.latent.tolist():
+        T = metropolised_cell_matrix(kernel, model, k)
+        torch.testing.assert_close(T.sum(1), torch.ones(len(pi), dtype=torch.float64), rtol=0, atol=1e-12)
+        torch.testing.assert_close(pi @ T, pi, rtol=0, atol=1e-12)
+        # Peskun: every off-diagonal move (on states with mass) at least as likely as under heat bath
+        H = cell_update_matrix(kernel, model, k)
+        live = pi > 0
+        assert ((T - H)[live][:, live] * (1 - eye[live][:, live]) >= -1e-12).all()
+
+
+@pytest.mark.parametrize("name, patch, p_rand", [("1d_gauss", 3, 0.0), ("1d_pattern", 2, 0.3), ("2d_gauss", "plus", 0.0),
+                                                 ("1d_wall_prior", 3, 0.2)] + [(n, PATCH[n], 0.0) for n in ALL])  # fmt: skip
+def test_metropolised_patch_update_is_stationary(name, patch, p_rand):
+    model = _all_models()[name]()
+    pi = exact_pi(model)
+    kernel = PatchGibbs(model, patch, p_rand_patch=p_rand, update="metropolised")
+    kernel.setup()
+    for p in kernel.patches():
+        T = metropolised_patch_matrix(kernel, model, p, p_rand)
+        torch.testing.assert_close(T.sum(1), torch.ones(len(pi), dtype=torch.float64), rtol=0, atol=1e-12)
+        torch.testing.assert_close(pi @ T, pi, rtol=0, atol=1e-12)
+
+
+def _draws(kernel, model, start_code, n, seed=5):
+    start = states(model)[start_code]
+    torch.manual_seed(seed)
+    counts = torch.zeros(2 ** len(model.latent), dtype=torch.float64)
+    for _ in range(n):
+        kernel._set_state(start)
+        counts[code_of(model, kernel.sample({"m": start})["m"])] += 1
+    return counts
+
+
+def _check_row(row, counts):
+    n = int(counts.sum())
+    assert counts[row <= 1e-15].sum() == 0
+    big = row * n >= 5  # chi-square needs expected counts of about 5 or more
+    assert multinomial_goodness_of_fit(row[big], counts[big], total_count=int(counts[big].sum())) > 1e-3
+
+
+@pytest.mark.parametrize("name, kind", [("1d_gauss", "cell"), ("mrf8", "cell"), ("border8", "cell"),
+                                        ("1d_gauss", "patch"), ("table2x2", "patch"), ("border2x2", "patch"),
+                                        ("mrf4", "patch"), ("1d_wall_prior", "cell")])  # fmt: skip
+def test_compiled_metropolised_sweep_draws_from_its_transition_row(name, kind):
+    """One compiled systematic sweep, repeated from the posterior mode: the next states follow the product
+    of the hand-built update matrices (chi-square)."""
+    model = _all_models()[name]()
+    if kind == "cell":
+        kernel = CellGibbs(model, update="metropolised")
+        kernel.setup()
+        mats = [metropolised_cell_matrix(kernel, model, k) for k in model.latent.tolist()]
+    else:
+        patch = 3 if name == "1d_gauss" else PATCH[name]
+        kernel = PatchGibbs(model, patch, p_rand_patch=0.3, update="metropolised")
+        kernel.setup()
+        mats = [metropolised_patch_matrix(kernel, model, p, 0.3) for p in kernel.patches()]
+    sweep = torch.eye(2 ** len(model.latent), dtype=torch.float64)
+    for T in mats:
+        sweep = sweep @ T
+    i0 = int(torch.argmax(exact_pi(model)))
+    _check_row(sweep[i0], _draws(kernel, model, i0, 6000))
+
+
+@pytest.mark.parametrize("make_kernel, rule", [(lambda m: MetropolisCell(m, scan="permutation"), "metropolised"),
+                                               (lambda m: CellGibbs(m, scan="permutation"), "gibbs"),
+                                               (lambda m: CellGibbs(m, scan="random", update="metropolised"), "metropolised")],
+                         ids=["metropolis-permutation", "gibbs-permutation", "metropolised-random"])  # fmt: skip
+def test_scan_orders_draw_from_the_averaged_row(make_kernel, rule):
+    """A permutation scan is the average over all orders of the product of cell updates; a random scan
+    the ``L``-th power of the average update."""
+    model = model_1d(5)
+    kernel = make_kernel(model)
+    kernel.setup()
+    build = metropolised_cell_matrix if rule == "metropolised" else cell_update_matrix
+    cells = model.latent.tolist()
+    mats = {k: build(kernel, model, k) for k in cells}
+    n_states = 2 ** len(cells)
+    if kernel.scan == "permutation":
+        row_mat = torch.zeros(n_states, n_states, dtype=torch.float64)
+        orders = list(itertools.permutations(cells))
+        for order in orders:
+            prod = torch.eye(n_states, dtype=torch.float64)
+            for k in order:
+                prod = prod @ mats[k]
+            row_mat += prod / len(orders)
+    else:
+        mean = sum(mats.values()) / len(cells)
+        row_mat = torch.linalg.matrix_power(mean, len(cells))
+    pi = exact_pi(model)
+    torch.testing.assert_close(pi @ row_mat, pi, rtol=0, atol=1e-12)
+    i0 = int(torch.argmax(pi))
+    _check_row(row_mat[i0], _draws(kernel, model, i0, 6000))
+
+
+@pytest.mark.parametrize("name", list(LONG_RUN))
+def test_metropolised_long_run_matches_brute_force(name):
+    make_prior, patch = LONG_RUN[name]
+    model = scene_3x4(make_prior())
+    exact = brute_force(model).marginals
+    if patch is None:
+        kernel = CellGibbs(model, update="metropolised", init="free")
+    else:
+        kernel = PatchGibbs(model, patch, p_rand_patch=0.05, update="metropolised", init="free")
+    n = 4000
+    stats = RunningStats(model)
+    run_gibbs(kernel, n, stats, warmup=100, seed=2, progress=False)
+    # sd of a marginal estimate is at most 0.5 sqrt(tau / n); we allow tau = 20 and 4 sd
+    assert (stats.marginals - exact).abs().max() < 4 * 0.5 * math.sqrt(20 / n)
+
+
+def test_metropolis_cell_takes_any_prior():
+    """Flip proposals are symmetric for every prior: with the 1D data-driven prior (generic path) the
+    long-run marginals match brute force."""
+    model = model_1d(5, prior=DataDriven1DPrior(6, 1))
+    exact = brute_force(model).marginals
+    n = 3000
+    stats = RunningStats(model)
+    run_gibbs(MetropolisCell(model, scan="systematic", init="free"), n, stats, warmup=50, seed=4, progress=False)
+    assert (stats.marginals - exact).abs().max() < 4 * 0.5 * math.sqrt(20 / n)
