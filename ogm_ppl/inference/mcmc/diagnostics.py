@@ -7,12 +7,16 @@ to the per-sweep values of chosen cells (``RunningStats(trace_cells=...)``).
 
 from __future__ import annotations
 
+import multiprocessing
+import pickle
 from collections.abc import Callable, Sequence
+from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 from pyro.ops.stats import effective_sample_size, split_gelman_rubin
+from tqdm.auto import tqdm
 
 from ogm_ppl.inference.mcmc.runner import RunningStats, run_gibbs
 from ogm_ppl.metrics import kl_divergence
@@ -63,6 +67,13 @@ class ChainsResult:
         return ess(self.traces())
 
 
+def _run_chain(make_kernel, num_sweeps, trace_cells, warmup, seed) -> dict:
+    kernel = make_kernel()
+    stats = RunningStats(kernel.model, trace_cells=trace_cells)
+    run_gibbs(kernel, num_sweeps, stats, warmup=warmup, seed=seed, progress=False)
+    return stats.state_dict()
+
+
 def run_chains(
     make_kernel: Callable[[], object],
     num_chains: int,
@@ -71,15 +82,45 @@ def run_chains(
     warmup: int = 0,
     seed: int = 0,
     progress: bool = False,
+    processes: int = 1,
+    mp_context: str = "spawn",
 ) -> ChainsResult:
-    """Independent chains (seeds ``seed, seed + 1, ...``), one after another in this process."""
+    """Independent chains with seeds ``seed, seed + 1, ...``: one after another in this process
+    (``processes=1``), or on ``processes`` worker processes (one chain per task). Chain ``c`` draws the
+    same numbers either way, so the results are identical, serial or parallel.
+
+    With ``processes > 1``, ``make_kernel`` must be picklable: a class or ``functools.partial``, e.g.
+    ``partial(CellGibbs, model, update="metropolised")``, not a lambda. Workers start with ``mp_context``
+    (``"spawn"`` by default: safe with torch's thread pools; each worker pays the imports once).
+    """
     if num_chains < 1:
         raise ValueError("num_chains must be >= 1")
+    if processes < 1:
+        raise ValueError("processes must be >= 1")
+    trace_cells = [int(c) for c in trace_cells]
+    if processes == 1 or num_chains == 1:
+        out = []
+        for c in range(num_chains):
+            kernel = make_kernel()
+            stats = RunningStats(kernel.model, trace_cells=trace_cells)
+            run_gibbs(kernel, num_sweeps, stats, warmup=warmup, seed=seed + c, progress=progress)
+            out.append(stats)
+        return ChainsResult(out)
+    try:
+        pickle.dumps(make_kernel)
+    except Exception as e:
+        raise ValueError("make_kernel must be picklable to run chains in processes (use a class or "
+                         f"functools.partial, not a lambda): {e}") from None  # fmt: skip
+    ctx = multiprocessing.get_context(mp_context)
+    with ProcessPoolExecutor(max_workers=min(processes, num_chains), mp_context=ctx) as pool:
+        futures = [pool.submit(_run_chain, make_kernel, num_sweeps, trace_cells, warmup, seed + c)
+                   for c in range(num_chains)]  # fmt: skip
+        states = [f.result() for f in tqdm(futures, desc="chains", disable=not progress)]
+    model = make_kernel().model
     out = []
-    for c in range(num_chains):
-        kernel = make_kernel()
-        stats = RunningStats(kernel.model, trace_cells=trace_cells)
-        run_gibbs(kernel, num_sweeps, stats, warmup=warmup, seed=seed + c, progress=progress)
+    for state in states:
+        stats = RunningStats(model, trace_cells=trace_cells)
+        stats.load_state_dict(state)
         out.append(stats)
     return ChainsResult(out)
 

@@ -206,3 +206,45 @@ def test_metropolis_cell_takes_any_prior():
     stats = RunningStats(model)
     run_gibbs(MetropolisCell(model, scan="systematic", init="free"), n, stats, warmup=50, seed=4, progress=False)
     assert (stats.marginals - exact).abs().max() < 4 * 0.5 * math.sqrt(20 / n)
+
+
+def test_parallel_chains_equal_serial_chains():
+    """Chain ``c`` is seeded ``seed + c`` in any process: two worker processes give the same statistics
+    as one process, bit for bit, and the pooled marginals match brute force."""
+    from functools import partial
+
+    from ogm_ppl.inference.mcmc.diagnostics import run_chains
+
+    model = model_1d(6, readings=(3.0, 4.0, 3.0))
+    make_kernel = partial(CellGibbs, model, update="metropolised", scan="permutation", init="prior")
+    serial = run_chains(make_kernel, num_chains=3, num_sweeps=400, trace_cells=[2, 3], warmup=10, seed=11)
+    parallel = run_chains(make_kernel, num_chains=3, num_sweeps=400, trace_cells=[2, 3], warmup=10, seed=11,
+                          processes=2)  # fmt: skip
+    for a, b in zip(serial.stats, parallel.stats):
+        assert torch.equal(a.marginals, b.marginals)
+        assert (a.trace() == b.trace()).all()
+    assert (serial.rhat() - 1).abs().max() < 0.05
+    exact = brute_force(model).marginals
+    assert (parallel.marginals - exact).abs().max() < 4 * 0.5 * math.sqrt(10 / 1200)
+    with pytest.raises(ValueError, match="picklable"):
+        run_chains(lambda: CellGibbs(model), num_chains=2, num_sweeps=5, trace_cells=[2], processes=2)
+
+
+def test_pyro_mcmc_runs_several_chains_with_a_summary(capsys):
+    """``pyro.infer.MCMC(num_chains=2)`` (sequential on a small machine) with the metropolised kernel."""
+    import warnings
+
+    import pyro
+    from pyro.infer import MCMC
+
+    model = model_1d(6, readings=(3.0, 4.0, 3.0))
+    pyro.set_rng_seed(0)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", UserWarning)  # "Chains will be drawn sequentially" on 2 cores
+        mcmc = MCMC(CellGibbs(model, update="metropolised"), num_samples=300, warmup_steps=10, num_chains=2,
+                    disable_progbar=True)  # fmt: skip
+        mcmc.run()
+    s = mcmc.get_samples(group_by_chain=True)["m"]
+    assert s.shape == (2, 300, len(model.latent)) and (s[0] != s[1]).any()
+    mcmc.summary()
+    assert "r_hat" in capsys.readouterr().out
