@@ -7,6 +7,7 @@ to the per-sweep values of chosen cells (``RunningStats(trace_cells=...)``).
 
 from __future__ import annotations
 
+import math
 import multiprocessing
 import pickle
 from collections.abc import Callable, Sequence
@@ -43,8 +44,18 @@ def split_rhat(traces: np.ndarray | torch.Tensor) -> torch.Tensor:
 
 
 def ess(traces: np.ndarray | torch.Tensor) -> torch.Tensor:
-    """Effective sample size per traced cell, over all chains (NaN for constant cells)."""
-    return _per_cell(effective_sample_size, traces)
+    """Effective sample size per traced cell, over all chains (NaN for constant cells).
+
+    Anti-correlated chains (metropolised Gibbs flips a cell whose conditional is near 1/2 nearly every
+    sweep) are more efficient than independent draws; Pyro's estimate then comes out negative or
+    unbounded, so, as Stan does, the autocorrelation time is bounded below by ``1 / log10(N)``: at most
+    ``N log10(N)`` for ``N`` draws in all chains.
+    """
+    e = _per_cell(effective_sample_size, traces)
+    x = np.asarray(traces)
+    n = x.shape[0] * x.shape[1]
+    cap = n * math.log10(max(n, 10))
+    return torch.where(torch.isfinite(e) & ((e <= 0) | (e > cap)), torch.full_like(e, cap), e)
 
 
 @dataclass

@@ -1,0 +1,250 @@
+"""Effective samples per second and time to exact-posterior accuracy for every map sampler (Chapter 4).
+
+Problems with exact answers: the thesis toy (K = 14 and 21 latent cells, the readings of Fig. 2.1), K = 200
+with 30 readings of a wall at cell 100, and a 4 x 4 grid seen by three poses (brute force). For each
+kernel and update rule: ESS per second (Pyro's ``effective_sample_size`` on the cells whose exact marginal
+lies in [0.05, 0.95], median over those cells; anti-correlated chains are capped at N log10 N, as in
+Stan, see ``ogm_ppl.inference.mcmc.diagnostics.ess``), and the wall-clock time until the summed cell KL of the
+running marginals to the exact ones falls below 0.01 and 0.001. Then the 500 x 500 reference scene of
+``bench_gibbs.py``: 4 chains, split R-hat (the finish line: < 1.01) and ESS/s on traced cells, serial and
+on 2 worker processes (the parallel speed-up).
+
+NumPyro's ``DiscreteGibbs`` (plain and ``modified=True``, Liu's metropolised Gibbs) runs as a peer on the
+same problems when ``numpyro`` is installed (``pip install "ogm_ppl[peers]"``); its compile time is
+reported apart. Ratios are ours / NumPyro's modified sampler. Writes ``out/bench/bench_mixing.json``.
+``--quick``: fewer sweeps and no reference scene (a smoke run).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+
+import argparse
+import math
+import sys
+import time
+from functools import partial
+
+import numpy as np
+import torch
+
+sys.path.insert(0, os.path.dirname(__file__))
+from _common import write_json
+
+from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
+from ogm_ppl.datasets import THESIS_TOY_READINGS, toy_1d
+from ogm_ppl.inference.exact import brute_force, pose_constrained_1d
+from ogm_ppl.inference.mcmc import CellGibbs, MetropolisCell, PatchGibbs, run_chains
+from ogm_ppl.inference.mcmc.diagnostics import ess as ess_of
+from ogm_ppl.priors import IndependentPrior
+
+torch.set_default_dtype(torch.float64)
+UNCERTAIN = (0.05, 0.95)
+
+
+# ----------------------------------------------------------------------------------------- problems
+def toy(K: int):
+    t = toy_1d(num_cells=K + 1, readings=THESIS_TOY_READINGS)
+    model = OccupancyModel(t.grid, raycast(t.grid, t.scans), GaussianRange(3.0), IndependentPrior(0.5, K + 1))
+    return model, pose_constrained_1d(model).marginals
+
+
+def wall200():
+    t = toy_1d(num_cells=201, wall=100, num_readings=30, sigma=3.0, seed=0)
+    model = OccupancyModel(t.grid, raycast(t.grid, t.scans), GaussianRange(3.0), IndependentPrior(0.5, 201))
+    return model, pose_constrained_1d(model).marginals
+
+
+def grid4x4():
+    grid = Grid((4, 4), resolution=1.0)
+    scans = Scans([[0.5, 0.5, 0.0], [0.5, 0.5, 0.7], [3.5, 3.5, math.pi], [3.5, 3.5, -2.0], [0.5, 3.5, -0.6]],
+                  [0.0], [[2.6], [3.3], [2.2], [1.3], [2.9]], max_range=4.0, over_range="max")  # fmt: skip
+    model = OccupancyModel(grid, raycast(grid, scans), GaussianRange(0.8), IndependentPrior(0.4, 16))
+    return model, brute_force(model).marginals
+
+
+PROBLEMS = {"toy K=14": partial(toy, 14), "toy K=21": partial(toy, 21), "wall K=200": wall200,
+            "grid 4x4": grid4x4}  # fmt: skip
+
+
+def kernels(model) -> dict:
+    patch = 3 if model.grid.ndim == 1 else (2, 2)
+    out = {}
+    for update in ("gibbs", "metropolised"):
+        for scan in ("systematic", "permutation", "random"):
+            out[f"cell {update} {scan}"] = partial(CellGibbs, model, scan=scan, update=update, init="free")
+    out["MetropolisCell uniform random"] = partial(MetropolisCell, model, init="free")
+    for update in ("gibbs", "metropolised"):
+        out[f"patch {patch} {update}"] = partial(PatchGibbs, model, patch, update=update, init="free")
+    return out
+
+
+# ----------------------------------------------------------------------------------------- measures
+def kl_sum(p: np.ndarray, q: np.ndarray, eps: float = 1e-9) -> np.ndarray:
+    """Summed cell KL(p || q) for each row of q."""
+    q = np.clip(q, eps, 1 - eps)
+    p = np.clip(p, 0.0, 1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        a = np.where(p > 0, p * np.log(p / q), 0.0)
+        b = np.where(p < 1, (1 - p) * np.log((1 - p) / (1 - q)), 0.0)
+    return (a + b).sum(-1)
+
+
+def measure(trace: np.ndarray, seconds: float, exact: np.ndarray, uncertain: np.ndarray) -> dict:
+    """``trace``: sweeps x latent cells (0/1); ``seconds``: wall time of those sweeps."""
+    n = len(trace)
+    per_sweep = seconds / n
+    ess = ess_of(trace[None, :, uncertain])
+    ess_med = float(np.nanmedian(ess.numpy())) if uncertain.any() else float("nan")
+    running = np.cumsum(trace, 0) / np.arange(1, n + 1)[:, None]
+    checkpoints = np.unique(np.geomspace(1, n, 400).astype(int)) - 1
+    kl = kl_sum(exact[None, :], running[checkpoints])
+    out = {"sweeps": n, "ms_per_sweep": 1e3 * per_sweep, "ess_median": ess_med,
+           "ess_per_sweep": ess_med / n, "ess_per_s": ess_med / seconds, "final_kl": float(kl[-1])}  # fmt: skip
+    for thr in (0.01, 0.001):
+        hit = np.flatnonzero(kl < thr)
+        # the first checkpoint after which the KL stays below the threshold
+        stay = next((i for i in hit if (kl[i:] < thr).all()), None)
+        out[f"s_to_kl_{thr}"] = None if stay is None else float((checkpoints[stay] + 1) * per_sweep)
+    return out
+
+
+def run_ours(make, num_sweeps: int, seed: int = 0) -> tuple[np.ndarray, float]:
+    kernel = make()
+    torch.manual_seed(seed)
+    kernel.setup()
+    params = kernel.initial_params
+    for _ in range(20):  # compile and warm up
+        params = kernel.sample(params)
+    trace = np.empty((num_sweeps, len(kernel.model.latent)), np.uint8)
+    t = time.perf_counter()
+    for i in range(num_sweeps):
+        params = kernel.sample(params)
+        trace[i] = params["m"].numpy()
+    return trace, time.perf_counter() - t
+
+
+# ----------------------------------------------------------------------------------------- NumPyro peer
+def numpyro_peer(model, num_samples: int, modified: bool, seed: int = 0):
+    """NumPyro's DiscreteGibbs on the same model (cells Bernoulli, one factor per ray from our likelihood
+    table), one sample = one sweep. Returns (trace, seconds without compilation, compile seconds)."""
+    import jax
+    import jax.numpy as jnp
+    import numpyro
+    import numpyro.distributions as ndist
+    from numpyro.infer import MCMC, DiscreteGibbs
+
+    r = model.rays
+    R, K = r.num_rays, model.num_cells
+    lengths = np.diff(r.offsets)
+    Lmax = int(lengths.max())
+    ray_cells = np.full((R, Lmax), K, np.int64)  # K: a dummy cell that is always free
+    for i in range(R):
+        ray_cells[i, : lengths[i]] = r.cells[r.offsets[i] : r.offsets[i + 1]]
+    ll = jnp.asarray(model.loglik_table.numpy()[:, : Lmax + 1])
+    latent = jnp.asarray(model.latent.numpy())
+    probs = jnp.asarray(torch.sigmoid(model.prior.cell_log_odds()).numpy()[model.latent.numpy()])
+    ray_cells_j, lengths_j, rows = jnp.asarray(ray_cells), jnp.asarray(lengths), jnp.arange(R)
+
+    def np_model():
+        with numpyro.plate("cells", len(latent)):
+            m = numpyro.sample("m", ndist.Bernoulli(probs=probs))
+        full = jnp.zeros(K + 1).at[latent].set(m)
+        occ = full[ray_cells_j] > 0
+        first = jnp.where(occ.any(1), jnp.argmax(occ, 1), lengths_j)
+        numpyro.factor("z", ll[rows, first].sum())
+
+    mcmc = MCMC(DiscreteGibbs(np_model, modified=modified), num_warmup=20, num_samples=num_samples,
+                progress_bar=False)  # fmt: skip
+    key = jax.random.PRNGKey(seed)
+    t = time.perf_counter()
+    mcmc.run(key)
+    first = time.perf_counter() - t
+    t = time.perf_counter()
+    mcmc.run(jax.random.PRNGKey(seed + 1))  # same shapes: the compiled sampler is reused
+    steady = time.perf_counter() - t
+    trace = np.asarray(mcmc.get_samples()["m"]).astype(np.uint8)
+    return trace, steady, max(first - steady, 0.0)
+
+
+# ----------------------------------------------------------------------------------------- reference scene
+def reference_scene(num_sweeps: int) -> dict:
+    from bench_gibbs import build
+
+    model = build(500, 100)
+    rng = np.random.default_rng(0)
+    touched = np.flatnonzero(np.diff(model.rays.by_cell.offsets) > 0)
+    trace_cells = np.sort(rng.choice(touched, 300, replace=False))
+    res = {"K": model.num_cells, "rays": model.rays.num_rays, "chains": 4, "sweeps_per_chain": num_sweeps,
+           "traced_cells": len(trace_cells)}  # fmt: skip
+    for update in ("gibbs", "metropolised"):
+        make = partial(CellGibbs, model, scan="systematic", update=update)
+        for processes in (1, 2) if update == "metropolised" else (1,):
+            t = time.perf_counter()
+            chains = run_chains(make, 4, num_sweeps, trace_cells, warmup=20, seed=0, processes=processes)
+            sec = time.perf_counter() - t
+            rhat = chains.rhat().numpy()
+            ess = chains.ess().numpy()
+            ok = np.isfinite(rhat)
+            row = {"seconds": sec, "ess_median": float(np.nanmedian(ess)), "ess_per_s": float(np.nanmedian(ess)) / sec,
+                   "rhat_max": float(np.nanmax(rhat)), "rhat_median": float(np.nanmedian(rhat)),
+                   "frac_rhat_below_1.01": float((rhat[ok] < 1.01).mean()), "varying_cells": int(ok.sum())}  # fmt: skip
+            res[f"{update}, {processes} process(es)"] = row
+            print(f"  reference scene {update:12s} processes={processes}: {sec:6.1f} s, ESS/s {row['ess_per_s']:.1f}, "
+                  f"R-hat max {row['rhat_max']:.3f}, {row['frac_rhat_below_1.01']:.0%} of {ok.sum()} varying cells < 1.01")  # fmt: skip
+    res["parallel speed-up (metropolised)"] = (res["metropolised, 1 process(es)"]["seconds"]
+                                               / res["metropolised, 2 process(es)"]["seconds"])  # fmt: skip
+    print(f"  4 chains on 2 processes: {res['parallel speed-up (metropolised)']:.2f}x faster than one after another")
+    return res
+
+
+def main(quick: bool = False) -> dict:
+    out: dict = {"problems": {}}
+    try:
+        import numpyro  # noqa: F401
+
+        have_peer = True
+    except ImportError:
+        have_peer = False
+        print("numpyro not installed: the NumPyro peer is skipped (pip install 'ogm_ppl[peers]')")
+    for pname, build in PROBLEMS.items():
+        model, exact = build()
+        exact_l = exact.numpy()[model.latent.numpy()]
+        uncertain = (exact_l > UNCERTAIN[0]) & (exact_l < UNCERTAIN[1])
+        n = 2000 if quick else (30000 if len(model.latent) < 100 else 50000)
+        rows = {}
+        print(f"{pname}: {len(model.latent)} latent cells, {int(uncertain.sum())} uncertain, {n} sweeps")
+        for kname, make in kernels(model).items():
+            trace, sec = run_ours(make, n)
+            rows[kname] = measure(trace, sec, exact_l, uncertain)
+        if have_peer:
+            n_peer = 500 if quick else (3000 if len(model.latent) < 100 else 1000)
+            for modified in (False, True):
+                trace, sec, compile_s = numpyro_peer(model, n_peer, modified)
+                row = measure(trace, sec, exact_l, uncertain)
+                row["compile_s"] = compile_s
+                rows[f"NumPyro DiscreteGibbs{' modified' if modified else ''}"] = row
+        peer = rows.get("NumPyro DiscreteGibbs modified")
+        for kname, row in rows.items():
+            if peer and peer["ess_per_s"] > 0:
+                row["ess_per_s_vs_numpyro_modified"] = row["ess_per_s"] / peer["ess_per_s"]
+            t1 = row["s_to_kl_0.01"]
+            print(f"  {kname:34s} {row['ms_per_sweep']:8.3f} ms/sweep  ESS/sweep {row['ess_per_sweep']:5.2f}  "
+                  f"ESS/s {row['ess_per_s']:10.1f}  KL<0.01 in {'-' if t1 is None else f'{t1:.3g} s':>9s}"
+                  + (f"  x{row['ess_per_s_vs_numpyro_modified']:.1f} vs NumPyro modified" if "ess_per_s_vs_numpyro_modified" in row else ""))  # fmt: skip
+        out["problems"][pname] = rows
+    if not quick:
+        out["reference_scene"] = reference_scene(150)
+    return out
+
+
+if __name__ == "__main__":
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--quick", action="store_true")
+    args = ap.parse_args()
+    t0 = time.perf_counter()
+    res = main(args.quick)
+    res["total_s"] = time.perf_counter() - t0
+    print(f"total {res['total_s']:.0f} s; wrote {write_json('bench_mixing' + ('_quick' if args.quick else ''), res)}")
