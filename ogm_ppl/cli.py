@@ -38,6 +38,7 @@ import tempfile
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
@@ -52,6 +53,10 @@ from ogm_ppl.io import atomic_write_text
 from ogm_ppl.metrics import best_f1, near_mapped_mask, roc_auc
 from ogm_ppl.models import delta_by_name
 from ogm_ppl.priors import IndependentPrior, prior_by_name
+
+if TYPE_CHECKING:
+    from ogm_ppl.datasets.carmen import CarmenLog
+    from ogm_ppl.scans import Scans
 
 MAPS = {
     "haehnel": "traditional OGM (Hähnel 2004)",
@@ -462,10 +467,10 @@ def _check_cells(rows: int, cols: int, limit: int) -> None:
 class _Input:
     kind: str  # "carmen" or "dataset"
     path: Path
-    scans: object
+    scans: Scans
     grid: Grid | None = None  # the dataset's own grid
     truth: np.ndarray | None = None
-    log: object = None  # CarmenLog
+    log: CarmenLog | None = None
     settings: dict = field(default_factory=dict)
 
 
@@ -675,8 +680,8 @@ def load_map(path: str | os.PathLike) -> dict:
 
 def _counts(inp: _Input) -> dict:
     s = inp.scans
-    present = int(inp.log.counts["beams"]) if inp.log is not None else int(s.valid.size)
-    c = {"scans": s.num_scans, "beams": present, "valid_beams": s.num_valid,
+    present = int(inp.log.counts["beams"]) if inp.log is not None else int(s.num_readings)  # S x B
+    c: dict[str, int | dict[str, int]] = {"scans": s.num_scans, "beams": present, "valid_beams": s.num_valid,
          "dropped_beams": present - s.num_valid, "max_range_readings": int(s.is_max.sum())}  # fmt: skip
     if inp.log is not None:
         for k in ("no_return", "beyond_usable", "below_min"):
@@ -741,6 +746,7 @@ def _map(args) -> dict:
         save_map_png(out / "map.png", probs, observed, grid)
         (out / "ros").mkdir(exist_ok=True)
         ros = save_ros_map(out / "ros" / "map.yaml", probs, grid, unknown=~observed, thresholds=args.thresholds)
+        assert ros.sidecar is not None  # save_ros_map writes one by default (sidecar=True)
         times["write_s"] = time.perf_counter() - t0
         bar.update()
     report = {

@@ -17,8 +17,12 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterator
 from functools import cached_property
+from typing import TYPE_CHECKING
 
 import torch
+
+if TYPE_CHECKING:
+    from ogm_ppl.models.occupancy import OccupancyModel
 
 __all__ = [
     "MapPosterior",
@@ -56,7 +60,7 @@ def first_hit_independent(marginals_along_ray: torch.Tensor) -> torch.Tensor:
 class MapPosterior:
     """Interface of posterior results over the maps of an :class:`~ogm_ppl.OccupancyModel`."""
 
-    model = None
+    model: OccupancyModel  # set by every subclass's __init__
 
     @property
     def marginals(self) -> torch.Tensor:  # pragma: no cover - interface
@@ -109,6 +113,9 @@ class WeightedMaps(MapPosterior):
             over all chunks sum to one.
         num_maps: how many maps the chunks hold (for display).
     """
+
+    log_probs: torch.Tensor  # normalised log-probability of every map (set by ``brute_force``)
+    log_evidence: float  # log p(z) (set by ``brute_force``)
 
     def __init__(self, model, chunks: Callable[[], Iterator[tuple[torch.Tensor, torch.Tensor]]],
                  num_maps: int) -> None:  # fmt: skip
@@ -181,6 +188,8 @@ class ChainPosterior1D(MapPosterior):
     With ``C(i) = P(f < i)``: ``p(m_i) = P(f = i) + C(i) beta_i`` and, for ``i < j``,
     ``P(m_i = 1, m_j = 1) = P(f = i) beta_j + C(i) beta_i beta_j``.
     """
+
+    log_evidence: float  # log p(z) (set by ``pose_constrained_1d``)
 
     def __init__(self, model, log_pf: torch.Tensor, behind: torch.Tensor) -> None:
         self.model = model

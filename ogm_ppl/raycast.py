@@ -205,6 +205,7 @@ def ray_inputs(grid: Grid, scans: Scans) -> RayInputs:
         du = np.sign(du)
     B = scans.beams_per_scan
     uv = grid.world_to_continuous(xy)
+    assert scans.valid is not None  # Scans.__post_init__ always sets the S x B mask
     keep = np.flatnonzero(scans.valid.ravel())
     n = keep.shape[0]
     return RayInputs(

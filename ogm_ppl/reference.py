@@ -26,7 +26,7 @@ def _crossings(p0: float, d: float, length: float) -> list[float]:
         return []
     c = math.floor(p0)
     step, b = (1, c + 1.0) if d > 0 else (-1, float(c))
-    out = []
+    out: list[float] = []
     while True:
         t = (b - p0) / d
         if t >= length:
@@ -67,6 +67,7 @@ def _rays_of(grid: Grid, scans: Scans):
     du, dv = np.cos(theta), np.sin(theta)
     if grid.ndim == 1:
         du, dv = np.sign(du), np.zeros_like(dv)
+    assert scans.valid is not None  # Scans.__post_init__ always sets the S x B mask
     keep = scans.valid.ravel()
     return (
         np.repeat(uv[:, 0], B)[keep],

@@ -303,7 +303,7 @@ def _interpret(pixels: np.ndarray, s: RosMapSettings, flavor: str) -> np.ndarray
     alpha = px[..., -1] if has_alpha else None
     chans = (
         np.concatenate([colour, alpha[..., None]], -1)
-        if (has_alpha and s.mode == "trinary")
+        if (alpha is not None and s.mode == "trinary")
         else colour
     )
     avg = chans.mean(axis=-1)
@@ -643,7 +643,8 @@ def _settings(doc: dict, path: Path) -> RosMapSettings:
         raise RosMapError(path, "'origin' must be a list of 3 numbers [x, y, yaw]")
     if not all(isinstance(v, str) for v in origin):
         raise RosMapError(path, "'origin' must be a list of 3 numbers [x, y, yaw]")
-    origin_t = tuple(_to_float(v, "origin", path) for v in origin)
+    ox, oy, oyaw = (_to_float(v, "origin", path) for v in origin)
+    origin_t = (ox, oy, oyaw)
     occ, free = _get_float(doc, "occupied_thresh", path), _get_float(doc, "free_thresh", path)
     if not 0.0 <= free < occ <= 1.0:
         raise RosMapError(
@@ -662,13 +663,14 @@ def _settings(doc: dict, path: Path) -> RosMapSettings:
     if mode not in _MODES:
         raise RosMapError(path, f"'mode' must be one of {', '.join(_MODES)}, got {mode!r}")
     extra = {k: v for k, v in doc.items() if k not in (*_REQUIRED, "mode")}
-    return RosMapSettings(image, res, origin_t, negate, occ, free, mode, extra)  # type: ignore[arg-type]
+    return RosMapSettings(image, res, origin_t, negate, occ, free, mode, extra)
 
 
 # --------------------------------------------------------------------------- image reading
 def _read_pnm(data: bytes, path: Path) -> np.ndarray:
     magic = data[:2]
-    pos, tokens, n = 2, [], len(data)
+    pos, n = 2, len(data)
+    tokens: list[int] = []
     if n < 3 or not (data[2:3].isspace() or data[2] == ord("#")):
         raise RosMapError(path, "PGM bad header (magic number must be followed by whitespace)")
     while len(tokens) < 3:
@@ -693,6 +695,7 @@ def _read_pnm(data: bytes, path: Path) -> np.ndarray:
         raise RosMapError(path, f"PGM size {w} x {h} is not a usable image size")
     if not 1 <= maxval <= 255:
         raise RosMapError(path, f"PGM maxval {maxval} unsupported (need 1..255, 8-bit)")
+    px: np.ndarray
     if magic == b"P5":
         if pos >= n:
             raise RosMapError(path, "PGM truncated: no pixel data")
@@ -729,6 +732,7 @@ def _read_image(path: Path) -> tuple[np.ndarray, bytes]:
     try:
         from PIL import Image
 
+        im: Image.Image  # convert() below returns a plain Image
         with Image.open(io.BytesIO(data)) as im:
             if im.size[0] * im.size[1] > _MAX_PIXELS:
                 raise RosMapError(path, f"image size {im.size} too large")

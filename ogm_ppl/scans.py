@@ -169,6 +169,7 @@ class Scans:
     @property
     def num_valid(self) -> int:
         """Beams that are readings (hits or max range)."""
+        assert self.valid is not None  # Scans.__post_init__ always sets the S x B mask
         return int(self.valid.sum())
 
     def subsample(self, pose_step: int = 1, beam_step: int = 1, pose_fraction: float | None = None) -> Scans:
@@ -184,6 +185,7 @@ class Scans:
             keep = np.unique(np.floor(np.arange(n) * (S / n)).astype(np.int64))
         else:
             keep = np.arange(0, S, pose_step)
+        assert self.valid is not None  # Scans.__post_init__ always sets the S x B mask
         return Scans(self.poses[keep], self.angles[keep, ::beam_step], self.ranges[keep, ::beam_step],
                      self.max_range, valid=self.valid[keep, ::beam_step], min_range=self.min_range)  # fmt: skip
 

@@ -40,6 +40,7 @@ import zipfile
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -109,7 +110,8 @@ def save_dataset(
         raise TypeError(f"save_dataset: scans must be a Scans, got {type(scans).__name__}")
     if grid is not None and not isinstance(grid, Grid):
         raise TypeError(f"save_dataset: grid must be a Grid or None, got {type(grid).__name__}")
-    arrays = {
+    assert scans.valid is not None  # Scans.__post_init__ always sets the S x B mask
+    arrays: dict[str, np.ndarray] = {
         "format": np.array(FORMAT),
         "format_version": np.array(FORMAT_VERSION, dtype=np.int64),
         "poses": scans.poses, "angles": scans.angles, "ranges": scans.ranges, "valid": scans.valid,
@@ -131,7 +133,8 @@ def save_dataset(
     fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     try:
         with os.fdopen(fd, "wb") as f:
-            np.savez_compressed(f, **arrays)
+            # numpy's stub: **kwds might also bind its `allow_pickle: bool`; our keys are array names
+            np.savez_compressed(f, **arrays)  # type: ignore[arg-type]
             f.flush()
             os.fsync(f.fileno())
         os.replace(tmp, path)
@@ -170,7 +173,7 @@ def _read_arrays(path: Path) -> dict[str, np.ndarray]:
         ) from None
 
 
-def _scalar(path: Path, a: dict, key: str, kind: str) -> object:
+def _scalar(path: Path, a: dict, key: str, kind: str) -> Any:  # the Python scalar (str, int, float, bool)
     v = a[key]
     if v.shape != () or v.dtype.kind not in kind:
         raise DatasetFileError(

@@ -292,12 +292,12 @@ def _pixels(corpus: str, name: str, root) -> tuple[np.ndarray, np.ndarray]:
         return _classify_binary(_open_image(path, str(path)))
     if corpus == "ipa":
         d = base / _IPA_DIR
-        path = next(
+        found = next(
             (d / f"{name}{ext}" for ext in (".png", ".pgm") if (d / f"{name}{ext}").is_file()), None
         )
-        if path is None:
+        if found is None:
             raise KeyError(f"no IPA plan {name!r} under {d}")
-        return _classify_ipa(_open_image(path, str(path)))
+        return _classify_ipa(_open_image(found, str(found)))
     data, where = _dungeon_bytes([name], root)[name]
     return _classify_dungeon(_open_image(data, where), where)
 

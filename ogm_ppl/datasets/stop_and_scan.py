@@ -159,7 +159,7 @@ class _KnownFreeGraph:
         self.node = np.full(mask.size, -1, dtype=np.int64)  # flat cell -> node
         self.node[self.cell] = np.arange(n)
         node = self.node.reshape(mask.shape)
-        src, dst, w = [], [], []
+        srcs, dsts, ws = [], [], []
         for dr, dc in ((0, 1), (1, 0), (1, 1), (1, -1)):
             c0, c1 = max(0, -dc), cols - max(0, dc)
             a = node[0 : rows - dr, c0:c1]
@@ -167,11 +167,11 @@ class _KnownFreeGraph:
             ok = (a >= 0) & (b >= 0)
             if dr and dc:  # a diagonal step needs both side cells
                 ok &= mask[0 : rows - dr, c0 + dc : c1 + dc] & mask[dr:rows, c0:c1]
-            src.append(a[ok])
-            dst.append(b[ok])
-            w.append(np.full(int(ok.sum()), np.hypot(dr, dc)))
-        m = sum(x.size for x in src)
-        src, dst, w = np.concatenate(src + dst), np.concatenate(dst + src), np.concatenate(w + w)
+            srcs.append(a[ok])
+            dsts.append(b[ok])
+            ws.append(np.full(int(ok.sum()), np.hypot(dr, dc)))
+        m = sum(x.size for x in srcs)
+        src, dst, w = np.concatenate(srcs + dsts), np.concatenate(dsts + srcs), np.concatenate(ws + ws)
         rev = np.concatenate(
             [np.arange(m, 2 * m), np.arange(m)]
         )  # e and rev[e] join the same cells
@@ -181,7 +181,7 @@ class _KnownFreeGraph:
         self.indptr = np.concatenate([[0], np.cumsum(np.bincount(src, minlength=n))])
         self.known = np.zeros(n, dtype=bool)
         self.version = 0
-        self._cache = None
+        self._cache: tuple[tuple[int, int], float, np.ndarray] | None = None
         self.graph = csr_matrix((np.full(self.w.size, _BIG), self.dst, self.indptr), shape=(n, n))
 
     def update(self, known_free: np.ndarray) -> None:
@@ -401,9 +401,9 @@ def plan_route(
     min_cluster = max(5, int(np.ceil(2 * clearance_cells + 1)))  # cells; a door the robot fits
     min_gain = max(1, round(0.02 * np.pi * max_range_cells**2))  # new free cells a stop must show
 
-    def pose_at(cell_flat: int, yaw: float) -> np.ndarray:
+    def pose_at(cell_flat: int | np.ndarray, yaw: float) -> np.ndarray:
         r, c = divmod(int(cell_flat), grid.cols)
-        xy = grid.cell_to_world([[r, c]])[0] + rng.uniform(-0.25, 0.25, 2) * res
+        xy = grid.cell_to_world(np.array([[r, c]]))[0] + rng.uniform(-0.25, 0.25, 2) * res
         return np.array([xy[0], xy[1], yaw])
 
     route = [pose_at(grid.flat_index(start_cell), yaw0)]

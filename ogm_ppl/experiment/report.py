@@ -77,7 +77,7 @@ def markdown(result) -> str:
     }
     lines += ["Best F1 over thresholds, precision and recall at that threshold, ROC AUC; *touched*: only cells the",
               "dataset's readings reached. Repeats of a condition (map / noise seeds) are pooled by summing counts.", ""]  # fmt: skip
-    sec = {}
+    sec: dict[str, list[float]] = {}
     for r in result.runs:
         sec.setdefault(r["algorithm"], []).append(r["seconds"])
     for cond in dict.fromkeys(p["condition"] for p in result.pooled):

@@ -164,7 +164,8 @@ def _execute_dask(todo: list[Task], client, progress: bool):
     from distributed import as_completed
     from tqdm.auto import tqdm
 
-    futures, by_future = {}, {}
+    futures: dict[str, object] = {}  # task id -> dask Future
+    by_future: dict[str, str] = {}  # Future key -> task id
     token = f"{time.time_ns():x}"
     for t in todo:
         deps = [futures[d] for d in t.deps if d in futures]

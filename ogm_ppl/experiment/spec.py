@@ -332,7 +332,7 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
         for bs in np.atleast_1d(p["beam_step"]):
             if bs > p["beams"]:
                 t.fail("beam_step", f"{bs} exceeds beams = {p['beams']}")
-        base_keys = (
+        base_keys: tuple[str, ...] = (
             "map",
             "size",
             "border",

@@ -135,7 +135,7 @@ def _png(path: Path, probs, grid, title: str, dpi: int) -> None:
 
 
 # ------------------------------------------------------------------------------------------ base
-def run_base(ds, out: str, h: str) -> dict:
+def run_base(ds, out: str | Path, h: str) -> dict:
     """Build the shared part of a dataset (see the module docstring); returns its done-record."""
     from ogm_ppl.datasets.dataset_file import save_dataset
     from ogm_ppl.grid import Grid
@@ -201,7 +201,7 @@ def run_base(ds, out: str, h: str) -> dict:
 
 
 # ------------------------------------------------------------------------------------------ dataset
-def run_dataset(ds, out: str, h: str, _base=None) -> dict:
+def run_dataset(ds, out: str | Path, h: str, _base=None) -> dict:
     """Build one dataset from its base: readings (``save_dataset``) + ``.eval.npz``; returns the record."""
     from ogm_ppl.datasets.dataset_file import load_dataset, save_dataset
     from ogm_ppl.inference import evidence_grid_from_scans
@@ -355,7 +355,7 @@ def _gibbs(ds, alg, model, seed, folder: Path, truth, mask, thresholds, resume, 
     return stats.marginals.numpy(), trace, start, done
 
 
-def run_algorithm(ds, alg, chain: int, seed: int, metrics, output, out: str, h: str, resume: bool = True,
+def run_algorithm(ds, alg, chain: int, seed: int, metrics, output, out: str | Path, h: str, resume: bool = True,
                   stop_after: int | None = None, _deps=None) -> dict | None:  # fmt: skip
     """Run one algorithm on one dataset (one chain); writes ``marginals.npz`` (+ ``map.png``) and
     ``result.json`` under ``tasks/D/A/cN`` and returns the result record.
@@ -370,6 +370,7 @@ def run_algorithm(ds, alg, chain: int, seed: int, metrics, output, out: str, h: 
     folder.mkdir(parents=True, exist_ok=True)
     data = load_dataset(dataset_path(out, ds))
     grid, scans = data.grid, data.scans
+    assert grid is not None  # run_dataset saves every dataset with its grid
     truth, mask, _ = load_eval(out, ds, metrics)
     t0 = time.perf_counter()
     extra: dict = {}
@@ -412,7 +413,7 @@ def run_algorithm(ds, alg, chain: int, seed: int, metrics, output, out: str, h: 
 
 
 # ------------------------------------------------------------------------------------------ score
-def run_score(ds, alg, metrics, output, out: str, h: str, _deps=None) -> dict:
+def run_score(ds, alg, metrics, output, out: str | Path, h: str, _deps=None) -> dict:
     """Average the chains' marginals and score them; writes ``maps/D/A.{npz,png,json}``."""
     from ogm_ppl import metrics as M
 
@@ -457,6 +458,7 @@ def run_score(ds, alg, metrics, output, out: str, h: str, _deps=None) -> dict:
     from ogm_ppl.datasets.dataset_file import load_dataset
 
     grid = load_dataset(dataset_path(out, ds)).grid
+    assert grid is not None  # run_dataset saves every dataset with its grid
     _savez(path.with_suffix(".npz"), marginals=q.reshape(grid.shape), format_version=np.int64(1))
     if output.maps:
         _png(path.with_suffix(".png"), q, grid, f"{ds.name} / {alg.name}", output.dpi)

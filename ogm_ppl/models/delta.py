@@ -298,12 +298,12 @@ THESIS_P21 = (
 )  # fmt: skip
 
 
-_FAMILIES = {}  # filled below: class name -> class, for artefacts
+_FAMILIES: dict[str, type[DeltaFamily]] = {}  # filled below: class name -> class, for artefacts
 
 
 def family_to_dict(family: DeltaFamily) -> dict:
     """A JSON-able description of a family and its parameter values (see :func:`family_from_dict`)."""
-    fixed = {}
+    fixed: dict[str, object] = {}
     if isinstance(family, MarshallBarfoot):
         fixed["beta"] = family.beta
     if isinstance(family, Elfes):

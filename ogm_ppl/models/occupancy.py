@@ -237,6 +237,7 @@ class OccupancyModel:
         """``R x W`` table for the model's readings, or for other readings of the same rays (``R`` each:
         range in cells, kappa of the reading, max-range flags)."""
         r = self.rays
+        assert r.range_len is not None  # Rays.__post_init__ always fills it
         lengths = torch.from_numpy(r.lengths)
         range_len = torch.from_numpy(np.maximum(r.range_len, r.lengths))
         R, W = r.num_rays, int(lengths.max()) + 1
@@ -320,6 +321,7 @@ class OccupancyModel:
         included (``+inf`` padding); entry 0 (the sensor's cell) is 0."""
         if self._entries is None:
             r = self.rays
+            assert r.range_len is not None  # Rays.__post_init__ always fills it
             range_len = np.maximum(r.range_len, r.lengths)
             T = np.full((r.num_rays, int(range_len.max())), np.inf)
             T[r.ray_of_entry, r.kappa] = r.t_enter
@@ -359,6 +361,7 @@ class OccupancyModel:
         maps = torch.as_tensor(maps, dtype=torch.float64)
         f = self.first_hits(maps)  # ... x R
         lengths = self.lengths
+        assert r.range_len is not None  # Rays.__post_init__ always fills it
         range_len = torch.from_numpy(np.maximum(r.range_len, r.lengths))
         T = self._entry_table()
         lam = float(self.prior.outside_occupancy())

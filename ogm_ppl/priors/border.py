@@ -87,7 +87,7 @@ class BorderPatchPrior(LocalMapPrior):
         tot = np.bincount(binv, weights=cnt)
         logp = np.log(cnt / tot[binv])
         self.outside, self.unseen, self.pad = int(outside), unseen, pad
-        origin = (0, int(origin)) if np.isscalar(origin) else tuple(int(o) for o in origin)
+        origin = (0, int(origin)) if np.isscalar(origin) else tuple(int(o) for o in origin)  # type: ignore[arg-type]  # numpy's isscalar TypeGuard narrows to generic | complex | bytes
         self.origin = origin
         geo = tiling(self.rows, self.cols, self.inner, pad, origin)
         fill = geo[6] if outside else np.zeros_like(geo[6])

@@ -654,7 +654,7 @@ def grid_shape(shape) -> tuple[int, int, int]:
     """``(rows, cols, ndim)`` of a grid shape ``K``, ``(K,)`` or ``(rows, cols)`` (or a Grid)."""
     shape = getattr(shape, "shape", shape)
     if np.isscalar(shape):
-        shape = (int(shape),)
+        shape = (int(shape),)  # type: ignore[arg-type]  # numpy's isscalar TypeGuard narrows to generic | complex | bytes
     shape = tuple(int(s) for s in shape)
     if len(shape) == 1:
         return 1, shape[0], 1

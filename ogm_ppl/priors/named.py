@@ -26,9 +26,14 @@ excluded (:data:`~ogm_ppl.datasets.floorplans.REAL_LOG_BUILDINGS`): evaluate on 
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from ogm_ppl.priors.base import MapPrior
+
+if TYPE_CHECKING:
+    from ogm_ppl.priors.tables import PriorTables
 
 __all__ = ["prior_by_name", "PRIOR_KINDS"]
 
@@ -41,7 +46,7 @@ def _shape(shape) -> tuple[int, ...]:
     return tuple(int(v) for v in (s if np.ndim(s) else (s,)))
 
 
-def prior_by_name(name: str, shape, tables=None) -> MapPrior:
+def prior_by_name(name: str, shape, tables: PriorTables | None = None) -> MapPrior:
     """The prior called ``name`` (module docstring) over a grid of ``shape`` (a tuple or a ``Grid``).
 
     Args:

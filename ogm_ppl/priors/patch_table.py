@@ -28,8 +28,9 @@ __all__ = ["PatchTablePrior", "truncate_mass"]
 
 
 def _patch_hw(patch, ndim: int) -> tuple[int, int]:
+    hw: tuple[int, ...]
     if np.isscalar(patch):
-        hw = (1, int(patch))
+        hw = (1, int(patch))  # type: ignore[arg-type]  # numpy's isscalar TypeGuard narrows to generic | complex | bytes
     else:
         hw = tuple(int(v) for v in patch)
         if len(hw) == 1:
@@ -38,7 +39,7 @@ def _patch_hw(patch, ndim: int) -> tuple[int, int]:
         raise ValueError(f"patch must be an int L (a run) or (h, w), got {patch!r}")
     if ndim == 1 and hw[0] != 1:
         raise ValueError("a 1D grid takes runs (1, L) only")
-    return hw
+    return hw[0], hw[1]
 
 
 def _table(codes, weights, nbits: int) -> tuple[np.ndarray, np.ndarray]:
@@ -103,7 +104,7 @@ class PatchTablePrior(LocalMapPrior):
         if mass is not None:
             c, p = truncate_mass(c, p, float(mass))
         self.codes, self.probs = c, p
-        origin = (0, int(origin)) if np.isscalar(origin) else tuple(int(o) for o in origin)
+        origin = (0, int(origin)) if np.isscalar(origin) else tuple(int(o) for o in origin)  # type: ignore[arg-type]  # numpy's isscalar TypeGuard narrows to generic | complex | bytes
         self.origin = origin
         geo = tiling(self.rows, self.cols, self.patch, (0, 0), origin)
         off_mask = geo[6]

@@ -385,7 +385,8 @@ def save_tables(tables: PriorTables, path) -> Path:
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
-            np.savez_compressed(f, meta=np.array(meta), **arrays)
+            # numpy's stub: **kwds might also bind its `allow_pickle: bool`; our keys are table names
+            np.savez_compressed(f, meta=np.array(meta), **arrays)  # type: ignore[arg-type]
         os.chmod(tmp, 0o644)
         os.replace(tmp, path)
     except BaseException:
