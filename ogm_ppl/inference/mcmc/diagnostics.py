@@ -13,6 +13,7 @@ import pickle
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import torch
@@ -86,7 +87,7 @@ def _run_chain(make_kernel, num_sweeps, trace_cells, warmup, seed) -> dict:
 
 
 def run_chains(
-    make_kernel: Callable[[], object],
+    make_kernel: Callable[[], Any],
     num_chains: int,
     num_sweeps: int,
     trace_cells: Sequence[int],

@@ -108,8 +108,8 @@ class _MapKernel(MCMCKernel):
         self.scan = scan
         self.init = init
         self.delta = delta
-        self.transforms = {}
-        self._initial_params = None
+        self.transforms: dict = {}
+        self._initial_params: dict[str, torch.Tensor] | None = None
         self._ready = False
         self._last = None
         self.sweeps = 0
@@ -414,6 +414,7 @@ class PatchGibbs(_MapKernel):
 
     def _capacity(self) -> int:
         lp = self._local
+        assert lp is not None  # only the local path asks
         dense = 1 << self.L if self.L <= 20 else 0
         seg = int(np.diff(lp.seg_off).max()) if lp.kind == TILES and len(lp.seg_off) > 1 else 0
         return max(dense, seg, 2)
@@ -430,7 +431,7 @@ class PatchGibbs(_MapKernel):
                    and len(self.dr) == (self.dr.max() + 1) * (self.dc.max() + 1))  # fmt: skip
         if is_rect:
             h, w = int(self.dr.max()) + 1, int(self.dc.max()) + 1
-            orow, ocol = (0, int(self.offset)) if np.isscalar(self.offset) else (int(o) for o in self.offset)
+            orow, ocol = (0, int(self.offset)) if isinstance(self.offset, (int, np.integer)) else (int(o) for o in self.offset)
             r0 = tiling_starts(orow, h, rows)
             c0 = tiling_starts(ocol, w, cols)
         else:

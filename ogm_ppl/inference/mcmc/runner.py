@@ -152,17 +152,17 @@ class GibbsRun:
 
 
 def _save_checkpoint(path: Path, kernel, stats: RunningStats, sweep: int, seed: int, fp: dict) -> None:
-    payload = {f"kernel_{k}": np.asarray(v) for k, v in kernel.state_dict().items()}
+    payload: dict[str, np.ndarray] = {f"kernel_{k}": np.asarray(v) for k, v in kernel.state_dict().items()}
     payload.update({f"stats_{k}": np.asarray(v) for k, v in stats.state_dict().items()})
     payload["rng"] = torch.get_rng_state().numpy()
-    payload["sweep"] = np.int64(sweep)
-    payload["seed"] = np.int64(seed)
-    payload["format"] = np.int64(_FORMAT)
-    payload["num_cells"] = np.int64(kernel.model.num_cells)
+    payload["sweep"] = np.asarray(sweep, np.int64)
+    payload["seed"] = np.asarray(seed, np.int64)
+    payload["format"] = np.asarray(_FORMAT, np.int64)
+    payload["num_cells"] = np.asarray(kernel.model.num_cells, np.int64)
     for k, v in fp.items():
         payload[f"fp_{k}"] = np.asarray(v)
     tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, **payload)
+    np.savez(tmp, **payload)  # type: ignore[arg-type]  # numpy stub: **arrays could fill allow_pickle
     os.replace(tmp, path)
 
 
@@ -241,8 +241,9 @@ def run_gibbs(
         kernel.setup(warmup)
     if store_every and store_dir is None:
         raise ValueError("store_every needs store_dir")
-    if store_dir is not None:
-        Path(store_dir).mkdir(parents=True, exist_ok=True)
+    store = Path(store_dir) if store_dir is not None else None
+    if store is not None:
+        store.mkdir(parents=True, exist_ok=True)
     total = warmup + num_sweeps
     stop = {"flag": False}
 
@@ -260,8 +261,8 @@ def run_gibbs(
             params = kernel.sample(params)
             if i >= warmup:
                 stats.update(params[kernel.site])
-                if store_every and (i - warmup) % store_every == 0:
-                    out = Path(store_dir) / f"sweep_{i:09d}.npy"
+                if store is not None and store_every and (i - warmup) % store_every == 0:
+                    out = store / f"sweep_{i:09d}.npy"
                     tmp = out.with_name(out.stem + ".tmp.npy")
                     np.save(tmp, np.packbits(kernel.state))
                     os.replace(tmp, out)
