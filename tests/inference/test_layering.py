@@ -1,0 +1,73 @@
+"""Imports point down (issue 12, item 5): the inference roles sit on the compiled kernels and the model;
+a role never reaches into a role above it, and the model layer never imports inference or datasets."""
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PKG = Path(__file__).resolve().parents[2] / "ogm_ppl"
+
+# rank of each inference part: imports must go to a lower rank (or stay inside the part)
+# (offline patch maps condition on the MAP map; MCMC starts from a log-odds map and may propose from a guide)
+RANK = {"_kernels": 0, "tiling": 1, "log_odds": 2, "exact": 2, "patch_map": 3, "variational": 4, "mcmc": 5}
+# below inference: may not import ogm_ppl.inference, datasets, experiment or the CLI
+LOWER = ("models", "priors", "grid", "raycast", "scans", "sensors", "posterior", "metrics", "_raycast_kernels")
+
+
+def _imports(path: Path) -> set[str]:
+    """Absolute ``ogm_ppl.*`` modules imported anywhere in the file (also inside functions)."""
+    tree = ast.parse(path.read_text(), filename=str(path))
+    parts = path.relative_to(PKG.parent).with_suffix("").parts
+    package = parts[:-1] if parts[-1] != "__init__" else parts[:-1]
+    out = set()
+    for node in ast.walk(tree):
+        if isinstance(node, ast.Import):
+            out |= {a.name for a in node.names if a.name.startswith("ogm_ppl")}
+        elif isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[: len(package) - (node.level - 1)]
+                mod = ".".join(base + ((node.module,) if node.module else ()))
+            else:
+                mod = node.module or ""
+            if mod.startswith("ogm_ppl"):
+                out.add(mod)
+                out |= {f"{mod}.{a.name}" for a in node.names}
+    return out
+
+
+def _part(module: str) -> str | None:
+    bits = module.split(".")
+    if len(bits) >= 3 and bits[1] == "inference" and bits[2] in RANK:
+        return bits[2]
+    return None
+
+
+INFERENCE_FILES = sorted(p for p in (PKG / "inference").rglob("*.py") if p.parent != PKG / "inference" or p.stem != "__init__")
+
+
+@pytest.mark.parametrize("path", INFERENCE_FILES, ids=lambda p: str(p.relative_to(PKG)))
+def test_inference_imports_point_down(path):
+    rel = path.relative_to(PKG / "inference").with_suffix("").parts
+    here = rel[0]
+    assert here in RANK, f"{path}: every inference module belongs to one of {sorted(RANK)}"
+    for mod in _imports(path):
+        there = _part(mod)
+        if there is None or there == here:
+            continue
+        assert RANK[there] < RANK[here], f"{path.relative_to(PKG)} imports {mod}: {here} may not use {there}"
+
+
+@pytest.mark.parametrize("name", LOWER)
+def test_model_layer_imports_nothing_above_it(name):
+    files = sorted((PKG / name).rglob("*.py")) if (PKG / name).is_dir() else [PKG / f"{name}.py"]
+    for path in files:
+        for mod in _imports(path):
+            assert not mod.startswith(("ogm_ppl.inference", "ogm_ppl.datasets", "ogm_ppl.experiment", "ogm_ppl.cli")), (
+                f"{path.relative_to(PKG)} imports {mod}"
+            )
+
+
+def test_delta_fitting_takes_tensors_not_datasets():
+    mods = _imports(PKG / "inference" / "variational" / "delta_fit.py")
+    assert not any(m.startswith("ogm_ppl.datasets") for m in mods)
