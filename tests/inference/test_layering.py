@@ -19,7 +19,7 @@ def _imports(path: Path) -> set[str]:
     """Absolute ``ogm_ppl.*`` modules imported anywhere in the file (also inside functions)."""
     tree = ast.parse(path.read_text(), filename=str(path))
     parts = path.relative_to(PKG.parent).with_suffix("").parts
-    package = parts[:-1] if parts[-1] != "__init__" else parts[:-1]
+    package = parts[:-1]  # a module's package (for __init__.py: the package itself)
     out = set()
     for node in ast.walk(tree):
         if isinstance(node, ast.Import):

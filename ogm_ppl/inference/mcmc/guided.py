@@ -104,6 +104,7 @@ class GuidedGibbs(MCMCKernel):
         self._dense, self._lengths = dense, r.lengths.astype(np.int64)
         self._ll = np.ascontiguousarray(self.model.loglik_table.numpy())
         self._pinned = self.model.known_free.numpy()
+        self._K = int(self.model.num_cells)
         lo = self.model.prior.cell_log_odds()
         self._prior_lo = None if lo is None else torch.as_tensor(lo, dtype=torch.float64).numpy()
         super().__init__()
@@ -173,11 +174,11 @@ class GuidedGibbs(MCMCKernel):
         parts = [idx.ray[idx.offsets[k]:idx.offsets[k + 1]] for k in cells.tolist()]
         return np.unique(np.concatenate(parts + [np.zeros(0, np.int64)])).astype(np.int64)
 
-    def _lik(self, m: np.ndarray, rays: np.ndarray) -> float:
-        """``sum_{n in rays} log p(z_n | f_n(m))`` (``m``: ``K + 1`` with a trailing 0)."""
-        occ = m[self._dense[rays]] != 0  # |rays| x Lmax
-        first = np.where(occ.any(1), occ.argmax(1), self._lengths[rays])
-        return float(self._ll[rays, first].sum())
+    def _lik(self, maps: np.ndarray, rays: np.ndarray) -> np.ndarray:
+        """``sum_{n in rays} log p(z_n | f_n(m))`` of maps ``W x (K + 1)`` (a trailing 0 column) -> ``W``."""
+        occ = maps[:, self._dense[rays]] != 0  # W x |rays| x Lmax
+        first = np.where(occ.any(2), occ.argmax(2), self._lengths[rays][None, :])
+        return self._ll[rays[None, :], first].sum(1)
 
     def log_ratio(self, m, cells, new, rays=None) -> float:
         r"""``log [p(m') p(z | m') q_B(m_B)] - log [p(m) p(z | m) q_B(m'_B)]`` for ``m' = m`` with
@@ -185,42 +186,43 @@ class GuidedGibbs(MCMCKernel):
 
         ``+inf`` if ``m`` has zero posterior mass and ``m'`` has some (the move is always taken), ``-inf``
         if ``m'`` has none (or ``new`` occupies a pinned cell)."""
+        new = np.asarray(new.numpy() if isinstance(new, torch.Tensor) else new, dtype=np.float64)
+        return float(self.log_ratios(m, cells, new[None, :], rays)[0])
+
+    def log_ratios(self, m, cells, news, rays=None) -> np.ndarray:
+        """:meth:`log_ratio` of ``W`` proposals at once (``news``: ``W x |B|``) -> ``W`` float64; the
+        sampler calls it with ``W = 1``."""
         model = self.model
-        K = model.num_cells
+        K = self._K
         m = np.asarray(m.detach().cpu().numpy() if isinstance(m, torch.Tensor) else m, dtype=np.float64)
         cells = np.asarray(cells.numpy() if isinstance(cells, torch.Tensor) else cells, dtype=np.int64)
-        new = np.asarray(new.numpy() if isinstance(new, torch.Tensor) else new, dtype=np.float64)
-        if m.shape != (K,) or new.shape != cells.shape:
-            raise ValueError(f"log_ratio takes a {K}-cell map and one value per block cell")
-        if (new[self._pinned[cells]] != 0).any():
-            return -math.inf
+        news = np.asarray(news.numpy() if isinstance(news, torch.Tensor) else news, dtype=np.float64)
+        if m.shape != (K,) or news.ndim != 2 or news.shape[1] != len(cells):
+            raise ValueError(f"log_ratios takes a {K}-cell map and W x {len(cells)} block values")
+        W = news.shape[0]
         old = m[cells]
-        a = np.zeros(K + 1)
-        a[:K] = m
-        b = a.copy()
-        b[cells] = new
+        maps = np.zeros((W + 1, K + 1))
+        maps[:, :K] = m
+        maps[1:, cells] = news
         if self._prior_lo is not None:  # independent cells: the prior ratio is local and exact
-            lp0 = 0.0
-            lp1 = float(((new - old) * self._prior_lo[cells]).sum())
+            lp = np.concatenate([[0.0], ((news - old) * self._prior_lo[cells]).sum(1)])
         elif len(cells) <= _MAX_PATCH_PRIOR:  # exact differences between configurations of the block
-            lp = model.prior.log_prob_patch(torch.from_numpy(m), torch.from_numpy(cells),
-                                            torch.from_numpy(np.stack([old, new])))  # fmt: skip
-            lp0, lp1 = (float(v) for v in torch.as_tensor(lp))
+            configs = torch.from_numpy(np.concatenate([old[None, :], news]))
+            lp = torch.as_tensor(model.prior.log_prob_patch(torch.from_numpy(m), torch.from_numpy(cells), configs),
+                                 dtype=torch.float64).numpy()  # fmt: skip
         else:
-            lp = model.prior.log_prob(torch.from_numpy(np.stack([a[:K], b[:K]])))
-            lp0, lp1 = (float(v) for v in torch.as_tensor(lp))
+            lp = torch.as_tensor(model.prior.log_prob(torch.from_numpy(maps[:, :K])), dtype=torch.float64).numpy()
         rays = self._rays_of(cells) if rays is None else np.asarray(rays.numpy() if isinstance(rays, torch.Tensor) else rays, np.int64)
-        cur, prop = lp0 + self._lik(a, rays), lp1 + self._lik(b, rays)
-        if math.isnan(cur) or math.isnan(prop):
+        lj = lp + self._lik(maps, rays)
+        if np.isnan(lj).any():
             raise FloatingPointError("the log joint of a block move is NaN")
-        if prop == -math.inf:
-            return -math.inf
-        if cur == -math.inf:
-            return math.inf
         lq1, lq0 = self._lq1[cells], self._lq0[cells]
-        lq_old = float((old * lq1 + (1 - old) * lq0).sum())
-        lq_new = float((new * lq1 + (1 - new) * lq0).sum())
-        return prop - cur + lq_old - lq_new
+        lq = np.concatenate([old[None, :], news]) @ lq1 + (1 - np.concatenate([old[None, :], news])) @ lq0
+        with np.errstate(invalid="ignore"):
+            out = lj[1:] - lj[0] + lq[0] - lq[1:]
+        out = np.where(lj[1:] == -np.inf, -np.inf, np.where(lj[0] == -np.inf, np.inf, out))
+        pinned = (news[:, self._pinned[cells]] != 0).any(1)
+        return np.where(pinned, -np.inf, out)
 
     # ------------------------------------------------------------------ Pyro's kernel interface
     def _init_map(self) -> torch.Tensor | None:

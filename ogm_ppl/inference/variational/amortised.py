@@ -445,6 +445,11 @@ def _read_artefact(path: Path) -> tuple[GuideArchitecture, dict[str, torch.Tenso
     with z:
         try:
             arrays = {k: z[k] for k in z.files}
+        except ValueError as e:
+            if "pickle" in str(e):
+                raise GuideFileError(f"{path}: holds pickled Python objects; refused (a guide artefact is "
+                                     "plain arrays)") from None  # fmt: skip
+            raise GuideFileError(f"{path}: damaged archive ({type(e).__name__}: {e})") from None
         except Exception as e:
             raise GuideFileError(f"{path}: damaged archive ({type(e).__name__}: {e})") from None
     fields = ("kind", "format", "feature_version", "channels", "dilations", "phase", "delta", "meta")
