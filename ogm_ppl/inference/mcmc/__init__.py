@@ -10,3 +10,8 @@ __all__ = [
     "RunningStats", "GibbsRun", "run_gibbs", "CheckpointError",
     "ChainsResult", "run_chains", "split_rhat", "ess", "kl_trace",
 ]  # fmt: skip
+
+# data-driven MCMC: Gibbs mixed with block proposals from an amortised guide (issue #12 item 3)
+from ogm_ppl.inference.mcmc.guided import GuidedGibbs
+
+__all__ += ["GuidedGibbs"]

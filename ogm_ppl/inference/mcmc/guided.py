@@ -59,12 +59,20 @@ class GuidedGibbs(MCMCKernel):
             the guide) or ``"base"`` (the base kernel's own initialisation).
         random_offset: draw the tiling's offset uniformly at every pass (blocks then straddle every
             boundary); ``False`` keeps offset ``(0, 0)``.
+        proposal: ``"bernoulli"`` (the guide's independent cells) or ``"tiles"``, for a tile prior
+            (:class:`~ogm_ppl.priors.PatchTablePrior`) and blocks made of whole tiles: each tile of the block
+            drawn from its table tilted by the guide,
+            ``q_t(c) ∝ p_t(c) prod_{k in t} exp(c_k [logit q_k - logit lambda_k])`` (``lambda_k``: the
+            table's occupancy at the tile position), which keeps the guide's evidence and the table's
+            support (independent cells rarely hit one of a sparse table's configurations). Offsets are
+            then multiples of the tile size; ``init="guide"`` starts from every tile's most likely tilted
+            configuration.
     """
 
     site = "m"
 
     def __init__(self, base, guide, block=(6, 6), p_guide: float = 0.5, init: str = "guide",
-                 random_offset: bool = True) -> None:  # fmt: skip
+                 random_offset: bool = True, proposal: str = "bernoulli") -> None:  # fmt: skip
         if not 0.0 <= float(p_guide) <= 1.0:
             raise ValueError(f"p_guide must lie in [0, 1], got {p_guide}")
         if init not in _INITS:
@@ -75,10 +83,13 @@ class GuidedGibbs(MCMCKernel):
         self.p_guide = float(p_guide)
         self.init = init
         self.random_offset = bool(random_offset)
+        if proposal not in ("bernoulli", "tiles"):
+            raise ValueError(f"proposal must be 'bernoulli' or 'tiles', got {proposal!r}")
+        self.proposal = proposal
         self.block = self._check_block(block)
         self.base_kind = type(base).__qualname__ + repr(sorted((k, v) for k, v in vars(base).items()
                                                             if not k.startswith("_") and isinstance(v, (int, float, str, tuple))))  # fmt: skip
-        self.transforms = {}
+        self.transforms: dict = {}
         self.sweeps = 0
         self.guide_sweeps = 0
         self._proposed = 0
@@ -107,6 +118,9 @@ class GuidedGibbs(MCMCKernel):
         self._K = int(self.model.num_cells)
         lo = self.model.prior.cell_log_odds()
         self._prior_lo = None if lo is None else torch.as_tensor(lo, dtype=torch.float64).numpy()
+        self._tiles: dict = {}  # block cells (bytes) -> tile proposals, for proposal="tiles"
+        if proposal == "tiles":
+            self._check_tiles()
         super().__init__()
 
     # ------------------------------------------------------------------ blocks
@@ -125,6 +139,12 @@ class GuidedGibbs(MCMCKernel):
 
     def offsets(self) -> list[tuple[int, int]]:
         """The tiling offsets a pass draws from (uniformly), or ``[(0, 0)]``."""
+        if self.proposal == "tiles":
+            (th, tw), (orow, ocol) = self.model.prior.patch, self.model.prior.origin
+            h, w = self.block
+            rows = [(orow + i * th) % h for i in range(h // th)]
+            cols = [(ocol + j * tw) % w for j in range(w // tw)]
+            return [(a, b) for a in rows for b in cols] if self.random_offset else [(rows[0], cols[0])]
         if self.block == "all" or not self.random_offset:
             return [(0, 0)]
         h, w = self.block
@@ -154,20 +174,109 @@ class GuidedGibbs(MCMCKernel):
                 cells = np.where(ok, k, -1)
             else:
                 cells = patch_cells(model, anchors, dr, dc)
-            groups = [row[row >= 0] for row in cells if (row >= 0).any()]
+            i_live = [i for i, row in enumerate(cells) if (row >= 0).any()]
+            groups = [cells[i][cells[i] >= 0] for i in i_live]
         out = []
-        for cells in groups:
+        for i, cells in enumerate(groups):
             rays = self._rays_of(cells)
-            out.append((np.sort(cells).astype(np.int64), rays.astype(np.int64)))
+            cells = np.sort(cells).astype(np.int64)
+            out.append((cells, rays.astype(np.int64)))
+            if self.proposal == "tiles":
+                self._tiles[cells.tobytes()] = self._tile_proposals(anchors[i_live[i]], cells)
         self._blocks[key] = out
         return out
 
     # ------------------------------------------------------------------ the MH ratio
+    def _check_tiles(self) -> None:
+        prior = self.model.prior
+        if not all(hasattr(prior, k) for k in ("codes", "probs", "patch", "origin")) or self.model.grid.ndim != 2:
+            raise ValueError("proposal='tiles' needs a 2D tile prior (PatchTablePrior: codes, probs, patch, origin)")
+        th, tw = prior.patch
+        if th * tw > 16:
+            raise ValueError(f"proposal='tiles' tabulates every configuration of a tile: up to 16 cells, not {th} x {tw}")
+        if self.block == "all" or self.block[0] % th or self.block[1] % tw:
+            raise ValueError(f"proposal='tiles' needs blocks of whole {th} x {tw} tiles, got {self.block!r}")
+
+    def _tile_proposals(self, anchor, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The tilted tables of the ``T`` tiles of the block at ``anchor``, packed: ``pos`` (``T x n``, the
+        positions in ``cells`` of each tile's latent cells in row-major order, ``len(cells)`` padding),
+        ``logq`` (``T x 2^n``, log proposal probability of each configuration code over those cells,
+        bit ``j`` = ``j``-th, ``-inf`` off the table) and ``cdf`` (its cumulative sums)."""
+        prior, g = self.model.prior, self.model.grid
+        th, tw = prior.patch
+        h, w = self.block
+        pos = {int(c): i for i, c in enumerate(cells)}
+        codes = np.asarray(prior.codes, dtype=np.int64)
+        probs = np.asarray(prior.probs, dtype=np.float64)
+        n = th * tw
+        P, Q = [], []
+        for r0 in range(int(anchor[0]), int(anchor[0]) + h, th):
+            for c0 in range(int(anchor[1]), int(anchor[1]) + w, tw):
+                bits, where = [], []
+                in_mask = pin_mask = 0
+                for i in range(n):
+                    r, c = r0 + i // tw, c0 + i % tw
+                    if 0 <= r < g.rows and 0 <= c < g.cols:
+                        in_mask |= 1 << i
+                        k = r * g.cols + c
+                        if self._pinned[k]:
+                            pin_mask |= 1 << i
+                        else:
+                            bits.append(i)
+                            where.append(pos[k])
+                if not bits:
+                    continue
+                keys, inv = np.unique(codes & in_mask, return_inverse=True)  # off-grid cells summed out
+                p = np.bincount(inv.ravel(), weights=probs)
+                keep = ((keys & pin_mask) == 0) & (p > 0)  # given the pinned cells are free
+                keys, p = keys[keep], p[keep] / p[keep].sum()
+                b = np.asarray(bits, dtype=np.int64)
+                on = (keys[:, None] >> b[None, :]) & 1  # configurations x latent bits
+                lam = np.clip(p @ on, 1e-12, 1 - 1e-12)
+                k_cells = cells[np.asarray(where)]
+                tilt = self._lq1[k_cells] - self._lq0[k_cells] - (np.log(lam) - np.log1p(-lam))
+                tilt = np.where((lam <= 1e-12) | (lam >= 1 - 1e-12), 0.0, tilt)
+                logw = np.log(p) + on @ tilt
+                table = np.full(1 << n, -np.inf)
+                table[(on << np.arange(len(b))[None, :]).sum(1)] = logw - np.logaddexp.reduce(logw)
+                P.append(np.r_[where, np.full(n - len(where), len(cells))])
+                Q.append(table)
+        logq = np.array(Q)
+        return np.array(P, dtype=np.int64), logq, np.cumsum(np.exp(logq), 1)
+
+    def _tiles_of(self, cells: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        t = self._tiles.get(np.asarray(cells, dtype=np.int64).tobytes())
+        if t is None:
+            raise ValueError("proposal='tiles' scores only the blocks of its own tilings (see blocks())")
+        return t
+
     def proposal_log_prob(self, cells, values) -> torch.Tensor:
         """``log q_B(values)`` of configurations ``... x |B|`` of the block's ``cells``."""
-        cells = torch.as_tensor(cells, dtype=torch.int64)
-        v = torch.as_tensor(values, dtype=torch.float64)
-        return (v * self._log_q1[cells] + (1 - v) * self._log_q0[cells]).sum(-1)
+        cells = np.asarray(cells.numpy() if isinstance(cells, torch.Tensor) else cells, dtype=np.int64)
+        v = np.asarray(values.numpy() if isinstance(values, torch.Tensor) else values, dtype=np.float64)
+        return torch.from_numpy(self._proposal_lq(cells, v))
+
+    def _proposal_lq(self, cells: np.ndarray, v: np.ndarray) -> np.ndarray:
+        v2 = np.asarray(v, dtype=np.float64).reshape(-1, len(cells))
+        if self.proposal == "bernoulli":
+            out = v2 @ self._lq1[cells] + (1 - v2) @ self._lq0[cells]
+        else:
+            pos, logq, _ = self._tiles_of(cells)
+            vv = np.concatenate([v2, np.zeros((len(v2), 1))], 1).astype(np.int64)  # padding column: 0
+            code = (vv[:, pos] << np.arange(pos.shape[1])).sum(2)  # W x T
+            out = logq[np.arange(len(pos))[None, :], code].sum(1)
+        return out.reshape(np.shape(v)[:-1])
+
+    def _propose(self, cells: np.ndarray) -> np.ndarray:
+        """A draw of the block's cells from the proposal."""
+        if self.proposal == "bernoulli":
+            return (torch.rand(len(cells), dtype=torch.float64).numpy() < self._q.numpy()[cells]).astype(np.float64)
+        pos, _, cdf = self._tiles_of(cells)
+        u = torch.rand(len(pos), dtype=torch.float64).numpy() * cdf[:, -1]
+        code = np.minimum((cdf <= u[:, None]).sum(1), cdf.shape[1] - 1)  # inverse CDF
+        new = np.zeros(len(cells) + 1)
+        new[pos] = (code[:, None] >> np.arange(pos.shape[1])) & 1
+        return new[:-1]
 
     def _rays_of(self, cells: np.ndarray) -> np.ndarray:
         idx = self.model.rays.by_cell
@@ -216,11 +325,11 @@ class GuidedGibbs(MCMCKernel):
         lj = lp + self._lik(maps, rays)
         if np.isnan(lj).any():
             raise FloatingPointError("the log joint of a block move is NaN")
-        lq1, lq0 = self._lq1[cells], self._lq0[cells]
-        lq = np.concatenate([old[None, :], news]) @ lq1 + (1 - np.concatenate([old[None, :], news])) @ lq0
+        lq = self._proposal_lq(cells, np.concatenate([old[None, :], news]))
         with np.errstate(invalid="ignore"):
             out = lj[1:] - lj[0] + lq[0] - lq[1:]
-        out = np.where(lj[1:] == -np.inf, -np.inf, np.where(lj[0] == -np.inf, np.inf, out))
+        # q(old) = 0 (the move could not be undone): never taken; a state of zero mass: always left
+        out = np.where((lj[1:] == -np.inf) | (lq[0] == -np.inf), -np.inf, np.where(lj[0] == -np.inf, np.inf, out))
         pinned = (news[:, self._pinned[cells]] != 0).any(1)
         return np.where(pinned, -np.inf, out)
 
@@ -228,7 +337,14 @@ class GuidedGibbs(MCMCKernel):
     def _init_map(self) -> torch.Tensor | None:
         if self.init == "base":
             return None
-        if self.init == "guide":
+        if self.init == "guide" and self.proposal == "tiles":
+            m = torch.zeros(self.model.num_cells, dtype=torch.float64)
+            for cells, _ in self.blocks(self.offsets()[0]):  # blocks of one offset cover every latent cell
+                pos, logq, _ = self._tiles_of(cells)
+                v = np.zeros(len(cells) + 1)
+                v[pos] = (np.argmax(logq, 1)[:, None] >> np.arange(pos.shape[1])) & 1
+                m[torch.from_numpy(cells)] = torch.from_numpy(v[:-1])
+        elif self.init == "guide":
             m = (self._q > 0.5).to(torch.float64)
         else:
             m = (torch.rand(self.model.num_cells, dtype=torch.float64) < self._q).to(torch.float64)
@@ -260,9 +376,13 @@ class GuidedGibbs(MCMCKernel):
     @property
     def state(self) -> np.ndarray:
         """The current full map (uint8, ``K``)."""
+        return self._state().numpy().astype(np.uint8)
+
+    def _state(self) -> torch.Tensor:
         if self._m is None:
             self.setup()
-        return self._m.numpy().astype(np.uint8)
+        assert self._m is not None
+        return self._m
 
     def sample(self, params):
         m_in = params[self.site]
@@ -295,9 +415,9 @@ class GuidedGibbs(MCMCKernel):
         if offset is None:
             offset = offs[int(torch.randint(len(offs), ()))] if len(offs) > 1 else offs[0]
         moved = 0
-        mn, q = self._m.numpy(), self._q.numpy()  # views: moves write into the state
+        mn = self._state().numpy()  # a view: moves write into the state
         for cells, rays in self.blocks(offset):
-            new = (torch.rand(len(cells), dtype=torch.float64).numpy() < q[cells]).astype(np.float64)
+            new = self._propose(cells)
             self._proposed += 1
             if np.array_equal(new, mn[cells]):
                 self._same += 1

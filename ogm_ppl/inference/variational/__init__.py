@@ -14,3 +14,16 @@ __all__ = [
     "MeanFieldGuide", "PatchGuide", "FirstHitGuide", "ExactELBO", "fit_guide",
     "fit_delta", "cross_entropy_loss", "cross_validate", "FitResult",
 ]  # fmt: skip
+
+# amortised inference compiled from the model (inference compilation; issue #12 item 3)
+from ogm_ppl.inference.variational.amortised import (
+    AmortisedGuide,
+    GuideFileError,
+    evidence_features,
+    guide_initial_map,
+    random_scene,
+    shipped_guide,
+)
+
+__all__ += ["AmortisedGuide", "GuideFileError", "evidence_features", "guide_initial_map", "random_scene",
+            "shipped_guide"]  # fmt: skip

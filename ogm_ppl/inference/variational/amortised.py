@@ -59,8 +59,11 @@ from pyro.nn import PyroModule
 from pyro.nn.module import to_pyro_module_
 from torch import nn
 
+from ogm_ppl.grid import Grid
 from ogm_ppl.inference.variational.guides import guide_name
 from ogm_ppl.models.occupancy import OBSERVED, OccupancyModel
+from ogm_ppl.priors.base import MapPrior
+from ogm_ppl.sensors import SensorModel
 
 __all__ = [
     "AmortisedGuide",
@@ -282,7 +285,10 @@ class AmortisedGuide(PyroModule):
                  name: str | None = None, seed: int = 0) -> None:  # fmt: skip
         super().__init__(guide_name(self, name))
         self.occupancy = model
-        self.arch = GuideArchitecture(channels, tuple(dilations), tuple(phase), delta)
+        ph = tuple(phase)
+        if len(ph) != 2:
+            raise ValueError(f"bad guide architecture: phase must be (h, w), got {phase!r}")
+        self.arch = GuideArchitecture(channels, tuple(dilations), (ph[0], ph[1]), delta)
         with torch.random.fork_rng(devices=[]):
             torch.manual_seed(int(seed))
             net = GuideNet(self.arch)
@@ -399,7 +405,7 @@ class AmortisedGuide(PyroModule):
             payload[f"param/{k}"] = v.detach().cpu().to(torch.float32).numpy()
         path.parent.mkdir(parents=True, exist_ok=True)
         tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez_compressed(tmp, **payload)
+        np.savez_compressed(tmp, **payload)  # type: ignore[arg-type]  # numpy stub: **arrays could fill allow_pickle
         os.replace(tmp, path)
         return path
 
@@ -479,7 +485,10 @@ def _read_artefact(path: Path) -> tuple[GuideArchitecture, dict[str, torch.Tenso
                              f"computes {FEATURE_VERSION}: the weights would read other inputs")  # fmt: skip
     channels = int(ints("channels", 0))
     dilations = tuple(int(d) for d in ints("dilations", 1))
-    phase = tuple(int(p) for p in ints("phase", 1))
+    ph = ints("phase", 1)
+    if ph.shape != (2,):
+        raise GuideFileError(f"{path}: field 'phase' must hold 2 integers, got {ph.shape[0]}")
+    phase = (int(ph[0]), int(ph[1]))
     delta = text("delta")
     problems = _architecture_problems(channels, dilations, phase, delta)
     if problems:
@@ -549,12 +558,12 @@ class Scene:
     and :meth:`OccupancyModel.simulate_readings`).
     """
 
-    grid: object
+    grid: Grid
     poses: np.ndarray
     angles: np.ndarray
     max_range_cells: float
-    sensor: object
-    prior: object
+    sensor: SensorModel
+    prior: MapPrior
 
     def model(self, readings: torch.Tensor | None = None) -> OccupancyModel:
         """The model of these poses with ``readings`` (``R = poses x beams`` values of site ``"z"``, scan by
@@ -579,12 +588,13 @@ class Scene:
         return model
 
 
-def random_scene(prior, shape: tuple[int, int], num_poses: int, beams: int = 120, max_range_cells: float = 12.0,
-                 sensor=None, rng: np.random.Generator | None = None, free: np.ndarray | None = None) -> Scene:  # fmt: skip
+def random_scene(prior: MapPrior, shape: tuple[int, int], num_poses: int, beams: int = 120,
+                 max_range_cells: float = 12.0, sensor: SensorModel | None = None,
+                 rng: np.random.Generator | None = None, free: np.ndarray | None = None) -> Scene:  # fmt: skip
     """``num_poses`` 360 degree scans (``beams`` each, range ``max_range_cells``) from poses drawn uniformly
     over the grid (over the ``free`` cells of a ``rows x cols`` mask when given), yaw 0, resolution 1.
     ``sensor`` defaults to ``GaussianRange(1.0)``."""
-    from ogm_ppl import GaussianRange, Grid
+    from ogm_ppl import GaussianRange
 
     rng = np.random.default_rng() if rng is None else rng
     grid = Grid(tuple(int(s) for s in shape), resolution=1.0)
