@@ -213,7 +213,8 @@ def mean_field_elbo(model: OccupancyModel, logits: torch.Tensor) -> torch.Tensor
     lpf = torch.cat([lpf, torch.full((len(dense), max(W - lpf.shape[1], 0)), -math.inf, dtype=torch.float64)], 1)[:, :W]
     lpf = lpf.scatter(1, lengths[:, None], none[:, None])
     p = lpf.exp()
-    ll = torch.where(p > 0, p * model.loglik_table, 0.0).sum()
+    # mask the table, not the product: 0 * -inf in the padding would make the gradient NaN
+    ll = (p * torch.where(p > 0, model.loglik_table, 0.0)).sum()
     return ll + prior_term
 
 

@@ -177,3 +177,20 @@ def test_exact_elbo_and_first_hit_guide_refuse_what_they_cannot_do():
     with pytest.raises(ValueError, match="loss"):
         fit_guide(m, MeanFieldGuide(m), steps=1, loss="kl")
     assert isinstance(ExactELBO(), __import__("pyro").infer.ELBO)
+
+
+def test_mean_field_closed_form_elbo_has_finite_gradients_with_padded_rays():
+    """Rays of unequal length pad the likelihood table with -inf; the ELBO's gradient stays finite
+    (it was NaN: 0 * -inf in the padding)."""
+    import math as _m
+
+    from ogm_ppl import Grid, Scans
+
+    grid = Grid((4, 4), resolution=1.0)
+    scans = Scans([[0.5, 0.5, 0.0], [0.5, 0.5, 0.7], [3.5, 3.5, _m.pi], [3.5, 3.5, -2.0], [0.5, 3.5, -0.6]],
+                  [0.0], [[2.6], [3.3], [2.2], [1.3], [2.9]], max_range=4.0, over_range="max")  # fmt: skip
+    model = OccupancyModel(grid, raycast(grid, scans), GaussianRange(0.8, 1e-3), IndependentPrior(0.4, 16))
+    assert torch.isinf(model.loglik_table).any()
+    guide = MeanFieldGuide(model)
+    guide.exact_elbo(model).backward()
+    assert torch.isfinite(guide.logits.grad).all()
