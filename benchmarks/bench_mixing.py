@@ -190,9 +190,10 @@ def reference_scene(num_sweeps: int) -> dict:
            "traced_cells": len(trace_cells)}  # fmt: skip
     for update in ("gibbs", "metropolised"):
         make = partial(CellGibbs, model, scan="systematic", update=update)
-        for processes in (1, 2) if update == "metropolised" else (1,):
+        for processes, ctx in ((1, None), (2, "fork"), (2, "spawn")) if update == "metropolised" else ((1, None),):
             t = time.perf_counter()
-            chains = run_chains(make, 4, num_sweeps, trace_cells, warmup=20, seed=0, processes=processes)
+            chains = run_chains(make, 4, num_sweeps, trace_cells, warmup=20, seed=0, processes=processes,
+                                mp_context=ctx)  # fmt: skip
             sec = time.perf_counter() - t
             rhat = chains.rhat().numpy()
             ess = chains.ess().numpy()
@@ -200,12 +201,15 @@ def reference_scene(num_sweeps: int) -> dict:
             row = {"seconds": sec, "ess_median": float(np.nanmedian(ess)), "ess_per_s": float(np.nanmedian(ess)) / sec,
                    "rhat_max": float(np.nanmax(rhat)), "rhat_median": float(np.nanmedian(rhat)),
                    "frac_rhat_below_1.01": float((rhat[ok] < 1.01).mean()), "varying_cells": int(ok.sum())}  # fmt: skip
-            res[f"{update}, {processes} process(es)"] = row
-            print(f"  reference scene {update:12s} processes={processes}: {sec:6.1f} s, ESS/s {row['ess_per_s']:.1f}, "
+            key = f"{update}, {processes} process(es)" + (f", {ctx}" if processes > 1 else "")
+            res[key] = row
+            print(f"  reference scene {update:12s} processes={processes} {ctx or '':5s}: {sec:6.1f} s, ESS/s {row['ess_per_s']:.1f}, "
                   f"R-hat max {row['rhat_max']:.3f}, {row['frac_rhat_below_1.01']:.0%} of {ok.sum()} varying cells < 1.01")  # fmt: skip
-    res["parallel speed-up (metropolised)"] = (res["metropolised, 1 process(es)"]["seconds"]
-                                               / res["metropolised, 2 process(es)"]["seconds"])  # fmt: skip
-    print(f"  4 chains on 2 processes: {res['parallel speed-up (metropolised)']:.2f}x faster than one after another")
+    for ctx in ("fork", "spawn"):
+        res[f"parallel speed-up (metropolised, {ctx})"] = (res["metropolised, 1 process(es)"]["seconds"]
+                                                            / res[f"metropolised, 2 process(es), {ctx}"]["seconds"])  # fmt: skip
+        print(f"  4 chains on 2 processes ({ctx}): {res[f'parallel speed-up (metropolised, {ctx})']:.2f}x "
+              "the speed of one after another")  # fmt: skip
     return res
 
 

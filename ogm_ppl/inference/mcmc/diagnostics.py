@@ -128,7 +128,7 @@ def run_chains(
     seed: int = 0,
     progress: bool = False,
     processes: int = 1,
-    mp_context: str = "spawn",
+    mp_context: str | None = None,
 ) -> ChainsResult:
     """Independent chains with seeds ``seed, seed + 1, ...``: one after another in this process
     (``processes=1``), or on ``processes`` worker processes (one chain per task). Chain ``c`` draws the
@@ -136,9 +136,11 @@ def run_chains(
 
     With ``processes > 1``, ``make_kernel`` must be picklable: a class or ``functools.partial``, e.g.
     ``partial(CellGibbs, model, update="metropolised")``, not a lambda; it is sent once to each worker.
-    Workers start with ``mp_context`` (``"spawn"`` by default: safe with torch's thread pools; each worker
-    pays the imports and the model's transfer once; ``"fork"`` starts faster on Linux). A sweep is
-    memory-bound, so chains sharing a machine's memory bandwidth speed up less than the core count.
+    Workers start with ``mp_context``: ``"fork"`` where the platform has it (as ``pyro.infer.MCMC`` does;
+    workers inherit the model and run torch on one thread), else ``"spawn"`` (each worker pays the imports
+    and the model's transfer once: 13 s for the 500 x 500 reference scene here). A sweep is memory-bound,
+    so chains sharing a machine's memory bandwidth speed up less than the core count (4 chains of 100
+    sweeps on that scene: 1.7x on 2 cores with fork, ``benchmarks/bench_mixing.py``).
     """
     if num_chains < 1:
         raise ValueError("num_chains must be >= 1")
@@ -158,6 +160,8 @@ def run_chains(
     except Exception as e:
         raise ValueError("make_kernel must be picklable to run chains in processes (use a class or "
                          f"functools.partial, not a lambda): {e}") from None  # fmt: skip
+    if mp_context is None:
+        mp_context = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
     ctx = multiprocessing.get_context(mp_context)
     with ProcessPoolExecutor(max_workers=min(processes, num_chains), mp_context=ctx, initializer=_init_worker,
                              initargs=(make_kernel,)) as pool:  # fmt: skip
