@@ -297,21 +297,34 @@ def set_patch(patch, w, m, f, offsets, cells, c_off, c_ray, c_kappa):
         bit += 1
 
 
+@nb.njit(cache=True, inline="always")
+def _exp_weights(logw, n, ew, skip):
+    """``ew[j] = exp(logw[j] - max logw)`` for ``j < n``; returns ``(sum, sum without entry skip)``, each
+    summed directly (no cancellation), or ``(-1, -1)`` if no entry has mass."""
+    mx = -np.inf
+    for j in range(n):
+        if logw[j] > mx:
+            mx = logw[j]
+    if mx == -np.inf:
+        return -1.0, -1.0
+    total = 0.0
+    other = 0.0
+    for j in range(n):
+        e = math.exp(logw[j] - mx)
+        ew[j] = e
+        total += e
+        if j != skip:
+            other += e
+    return total, other
+
+
 @nb.njit(cache=True)
 def _categorical_ws(logw, W, u, ew):
     """Index drawn by inverse CDF from ``softmax(logw[:W])`` with the uniform ``u`` (``-1`` if no entry
     has mass); ``ew`` (``>= W``) holds the exponentials, so each is computed once."""
-    mx = -np.inf
-    for w in range(W):
-        if logw[w] > mx:
-            mx = logw[w]
-    if mx == -np.inf:
+    total, _ = _exp_weights(logw, W, ew, -1)
+    if total < 0.0:
         return -1
-    total = 0.0
-    for w in range(W):
-        e = math.exp(logw[w] - mx)
-        ew[w] = e
-        total += e
     t = u * total
     acc = 0.0
     for w in range(W):
@@ -336,18 +349,9 @@ def metropolised_pick(logw, n, jc, u_choice, u_accept, ew):
     """
     if jc < 0:
         return _categorical_ws(logw, n, u_choice, ew)
-    mx = -np.inf
-    for j in range(n):
-        if logw[j] > mx:
-            mx = logw[j]
-    if mx == -np.inf:
+    total, other = _exp_weights(logw, n, ew, jc)
+    if total < 0.0:
         return -1
-    other = 0.0
-    for j in range(n):
-        e = math.exp(logw[j] - mx)
-        ew[j] = e
-        if j != jc:
-            other += e
     if other == 0.0:
         return jc  # no other configuration has mass
     t = u_choice * other

@@ -63,9 +63,11 @@ def cell_update_matrix(kernel, model, k):
     return T
 
 
-def patch_update_matrix(kernel, model, patch, p_rand=0.0, sign=1.0):
+def patch_update_matrix(kernel, model, patch, p_rand=0.0, sign=1.0, rule="gibbs"):
     """One patch update: Gibbs with probability ``1 - p_rand``, else a uniform proposal accepted by
-    Metropolis-Hastings with ``min(1, exp(sign * (logw[w] - logw[cur])))`` (``sign=-1``: an inverted ratio)."""
+    Metropolis-Hastings with ``min(1, exp(sign * (logw[w] - logw[cur])))`` (``sign=-1``: an inverted ratio).
+    ``rule="metropolised"``: instead of the Gibbs draw, another configuration ``w`` with probability
+    ``p_w / (1 - p_cur) * min(1, (1 - p_cur) / (1 - p_w))`` (Liu's metropolised Gibbs)."""
     S = states(model)
     T = torch.zeros(len(S), len(S), dtype=torch.float64)
     live = patch[patch >= 0]
@@ -78,6 +80,13 @@ def patch_update_matrix(kernel, model, patch, p_rand=0.0, sign=1.0):
             continue
         gibbs = torch.softmax(logw, 0)
         cur = int(sum(int(s[c]) << j for j, c in enumerate(live)))
+        if rule == "metropolised":
+            p, rest = gibbs, 1.0 - float(gibbs[cur])
+            gibbs = torch.zeros(W, dtype=torch.float64)
+            for w in range(W):
+                if w != cur and rest > 0:
+                    gibbs[w] = p[w] / rest * min(1.0, rest / (1.0 - float(p[w]))) if p[w] < 1 else 1.0
+            gibbs[cur] = 1.0 - (gibbs.sum() - gibbs[cur])
         mh = torch.zeros(W, dtype=torch.float64)
         for w in range(W):
             a = min(1.0, float(torch.exp(sign * (logw[w] - logw[cur]))))

@@ -13,7 +13,15 @@ from ogm_ppl.inference.mcmc.gibbs import CellGibbs, MetropolisCell, PatchGibbs
 from ogm_ppl.inference.mcmc.runner import RunningStats, run_gibbs
 from ogm_ppl.priors import DataDriven1DPrior
 
-from .test_gibbs import MODELS, cell_update_matrix, code_of, exact_pi, model_1d, states
+from .test_gibbs import (
+    MODELS,
+    cell_update_matrix,
+    code_of,
+    exact_pi,
+    model_1d,
+    patch_update_matrix,
+    states,
+)
 from .test_gibbs_priors import ALL, LONG_RUN, PATCH, make, scene_3x4
 
 
@@ -42,38 +50,8 @@ def metropolised_cell_matrix(kernel, model, k):
 
 
 def metropolised_patch_matrix(kernel, model, patch, p_rand=0.0):
-    """One metropolised patch update: another configuration ``w`` with probability
-    ``p_w / (1 - p_cur) * min(1, (1 - p_cur) / (1 - p_w))``; with ``p_rand`` a uniform proposal accepted
-    by Metropolis-Hastings instead."""
-    S = states(model)
-    T = torch.zeros(len(S), len(S), dtype=torch.float64)
-    live = patch[patch >= 0]
-    for i, s in enumerate(S):
-        kernel._set_state(s)
-        logw = torch.from_numpy(kernel.patch_log_weights(patch))
-        W = len(logw)
-        if not torch.isfinite(logw).any():
-            T[i, i] = 1.0
-            continue
-        p = torch.softmax(logw, 0)
-        cur = int(sum(int(s[c]) << j for j, c in enumerate(live)))
-        row = torch.zeros(W, dtype=torch.float64)
-        rest = 1.0 - float(p[cur])
-        for w in range(W):
-            if w != cur and rest > 0:
-                row[w] = p[w] / rest * min(1.0, rest / (1.0 - float(p[w]))) if p[w] < 1 else 1.0
-        row[cur] = 1.0 - (row.sum() - row[cur])
-        mh = torch.zeros(W, dtype=torch.float64)
-        for w in range(W):
-            a = min(1.0, float(torch.exp(logw[w] - logw[cur])))
-            mh[w] += a / W
-            mh[cur] += (1 - a) / W
-        row = (1 - p_rand) * row + p_rand * mh
-        for w in range(W):
-            t = s.clone()
-            t[torch.from_numpy(live)] = torch.tensor([(w >> j) & 1 for j in range(len(live))], dtype=torch.float64)
-            T[i, code_of(model, t)] += row[w]
-    return T
+    """One metropolised patch update (see ``patch_update_matrix``)."""
+    return patch_update_matrix(kernel, model, patch, p_rand, rule="metropolised")
 
 
 def _all_models():
