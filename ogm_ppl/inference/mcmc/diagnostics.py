@@ -138,9 +138,10 @@ def run_chains(
     ``partial(CellGibbs, model, update="metropolised")``, not a lambda; it is sent once to each worker.
     Workers start with ``mp_context``: ``"fork"`` where the platform has it (as ``pyro.infer.MCMC`` does;
     workers inherit the model and run torch on one thread), else ``"spawn"`` (each worker pays the imports
-    and the model's transfer once: 13 s for the 500 x 500 reference scene here). A sweep is memory-bound,
-    so chains sharing a machine's memory bandwidth speed up less than the core count (4 chains of 100
-    sweeps on that scene: 1.7x on 2 cores with fork, ``benchmarks/bench_mixing.py``).
+    and the model's transfer once: about 9 s for the 500 x 500 reference scene here). A sweep is
+    memory-bound, so chains sharing a machine's memory bandwidth speed up less than the core count (4
+    chains of 100 sweeps on that scene: 1.74x on 2 cores with fork, 1.07x with spawn;
+    ``benchmarks/bench_mixing.py``).
     """
     if num_chains < 1:
         raise ValueError("num_chains must be >= 1")
