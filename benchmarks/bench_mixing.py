@@ -12,7 +12,7 @@ on 2 worker processes (the parallel speed-up).
 NumPyro's ``DiscreteGibbs`` (plain and ``modified=True``, Liu's metropolised Gibbs) runs as a peer on the
 same problems when ``numpyro`` is installed (``pip install "ogm_ppl[peers]"``); its compile time is
 reported apart. Ratios are ours / NumPyro's modified sampler. Writes ``out/bench/bench_mixing.json``.
-``--quick``: fewer sweeps and no reference scene (a smoke run).
+``--quick``: fewer sweeps and no reference scene (a smoke run); ``--reference-only``: the reference scene alone.
 """
 
 from __future__ import annotations
@@ -256,8 +256,13 @@ def main(quick: bool = False) -> dict:
 if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--reference-only", action="store_true", help="only the 4-chain reference-scene part")
     args = ap.parse_args()
     t0 = time.perf_counter()
+    if args.reference_only:
+        res = {"reference_scene": reference_scene(100), "total_s": time.perf_counter() - t0}
+        print(f"wrote {write_json('bench_mixing_reference_scene', res)}")
+        raise SystemExit(0)
     res = main(args.quick)
     res["total_s"] = time.perf_counter() - t0
     print(f"total {res['total_s']:.0f} s; wrote {write_json('bench_mixing' + ('_quick' if args.quick else ''), res)}")

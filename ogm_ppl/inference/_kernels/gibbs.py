@@ -371,11 +371,6 @@ def metropolised_pick(logw, n, jc, u_choice, u_accept, ew):
 
 
 @nb.njit(cache=True)
-def _categorical(logw, W, u):
-    return _categorical_ws(logw, W, u, np.empty(W, np.float64))
-
-
-@nb.njit(cache=True)
 def patch_config(patch, m):
     w = 0
     bit = 0
