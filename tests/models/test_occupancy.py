@@ -102,3 +102,26 @@ def test_model_validation():
         OccupancyModel(grid, rays, GaussianRange(1.0), IndependentPrior(0.5, 6), known_free=[9])
     m = OccupancyModel(grid, rays, GaussianRange(1.0), IndependentPrior(0.5, 6), known_free=None)
     assert len(m.latent) == 6
+
+
+@pytest.mark.parametrize("sensor", [GaussianRange(1.5, 1e-3), PatternMatch(0.8)])
+def test_likelihood_table_built_in_blocks_equals_one_block(monkeypatch, sensor):
+    """The table is built in blocks of rays (bounded memory on 2 cm Intel); any block size gives the same
+    table, cut rays and max-range readings included."""
+    import ogm_ppl.models.occupancy as occ
+
+    grid = Grid((30, 40), resolution=0.1, origin=(0.0, 0.0))
+    rng = np.random.default_rng(3)
+    angles = np.linspace(-np.pi, np.pi, 45, endpoint=False)
+    ranges = rng.uniform(0.2, 2.9, size=(3, 45))
+    ranges[:, ::7] = 3.0  # max range
+    scans = Scans(poses=[[1.0, 1.5, 0.0], [2.0, 1.0, 1.0], [3.5, 2.5, -2.0]], angles=angles, ranges=ranges,
+                  max_range=3.0)  # fmt: skip
+    rays = raycast(grid, scans)
+    assert (rays.range_len > rays.lengths).any()  # some rays leave the grid
+    whole = OccupancyModel(grid, rays, sensor, IndependentPrior(0.3, grid.num_cells)).loglik_table
+    monkeypatch.setattr(occ, "_TABLE_BLOCK", 7 * int(rays.lengths.max()))  # 7 rays a block, many blocks
+    blocked = OccupancyModel(grid, rays, sensor, IndependentPrior(0.3, grid.num_cells)).loglik_table
+    assert torch.equal(torch.isinf(whole), torch.isinf(blocked))
+    fin = torch.isfinite(whole)
+    assert torch.equal(whole[fin], blocked[fin])
