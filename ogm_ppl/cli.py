@@ -20,7 +20,10 @@ Subcommands (``ogm-ppl SUBCOMMAND --help`` lists every option):
 Bad arguments and bad input files give one line ``ogm-ppl: error: ...`` on stderr and exit status 2
 (``--traceback`` shows the Python traceback instead).
 
-``run`` is the headline experiment: on the simple 2D example (Fig. 2.8) traditional OGM (Hähnel), OGM with
+``run`` is the headline experiment. On real data (:mod:`ogm_ppl.experiment.headline`): the Intel Lab log at
+5 cm with half the beams and half / 10 % of the poses, traditional OGM, OGM with p21 and Gibbs sampling with
+the border prior learned from HouseExpo, scored against the thesis's benchmark (Table 6.5 / Fig. 6.17,
+reduced; a few minutes on 2 cores). Then, simulated: on the simple 2D example (Fig. 2.8) traditional OGM (Hähnel), OGM with
 the thesis's and our fitted update terms (Table 2.1, 2.2, Section 2.5), the offline patch map with a 3 x 3
 patch centred on every cell (Section 3.2) and Gibbs sampling of the full posterior (Chapter 4, cell prior
 0.234); on the 1D toy (Fig. 2.1) the same update terms beside the exact posterior. Written as PNG figures
@@ -74,8 +77,9 @@ def _savefig(fig, path: Path) -> None:
     os.replace(tmp, path)
 
 
-def run_headline(out: Path, seed: int = 0) -> dict:
-    """Build the maps, write figures and ``report.md`` / ``report.json`` into ``out``."""
+def run_simple2d(out: Path, seed: int = 0) -> dict:
+    """The simple 2D example and the 1D toy: figures into ``out``; returns the report dict, its Markdown
+    lines under ``"markdown"``."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -141,7 +145,7 @@ def run_headline(out: Path, seed: int = 0) -> dict:
     _savefig(fig, out / "toy1d_marginals.png")
     plt.close(fig)
 
-    report = {
+    report: dict = {
         "simple2d": {
             "grid": list(ex.grid.shape),
             "resolution_m": ex.grid.resolution,
@@ -154,9 +158,8 @@ def run_headline(out: Path, seed: int = 0) -> dict:
         },
         "toy1d": {k: np.asarray(v).round(4).tolist() for k, v in series.items()},
     }
-    atomic_write_text(out / "report.json", json.dumps(report, indent=2))
     lines = [
-        "# ogm_ppl headline run",
+        "## Simulated: the simple 2D example and the 1D toy",
         "",
         f"Simple 2D example (Fig. 2.8 setting): {ex.grid.shape[0]}x{ex.grid.shape[1]} cells at "
         f"{ex.grid.resolution} m, 3 poses x 720 beams, sigma = 3 cells; "
@@ -172,6 +175,41 @@ def run_headline(out: Path, seed: int = 0) -> dict:
         lines.append(f"| {r['label']} | {r['best_f1']:.3f} | {r['best_threshold']:.2f} | "
                      f"{r['roc_auc']:.3f} | {r['seconds']:.3f} |")  # fmt: skip
     lines += ["", "Figures: `simple2d_maps.png` (Fig. 1.10 / 2.8 style), `toy1d_marginals.png` (Fig. 2.1 style).", ""]
+    report["markdown"] = lines
+    return report
+
+
+def run_headline(out: Path, seed: int = 0, log: Path | None = None, quick: bool = False, scheduler=None,
+                 workers: int | None = None) -> dict:  # fmt: skip
+    """What ``make run`` does: the real-data headline (:mod:`ogm_ppl.experiment.headline`: the Intel Lab
+    log, sparse, traditional OGM against Gibbs with a learned border prior) and the simulated examples;
+    writes the figures, ``report.md`` and ``report.json`` into ``out``.
+
+    Without the Intel log (no ``log`` and none under the shared data folder) the report says so and holds
+    the simulated part only.
+    """
+    from ogm_ppl.experiment.headline import run_intel_headline
+
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    lines = ["# ogm_ppl headline run", ""]
+    report: dict = {}
+    try:
+        intel = run_intel_headline(out, log, quick=quick, scheduler=scheduler, workers=workers, progress=_progress())
+        lines += intel["markdown"]
+        report["intel"] = intel["json"]
+    except FileNotFoundError as e:
+        if log is not None:
+            raise
+        lines += ["## Real data: skipped", "", f"{e}.", ""]
+        report["intel"] = {"skipped": str(e)}
+        print(f"ogm-ppl run: {e}; running the simulated part only", file=sys.stderr)
+    simple = run_simple2d(out, seed)
+    lines += simple.pop("markdown")
+    report.update(simple)
+    report["seconds"] = time.perf_counter() - t0
+    lines += [f"Total {report['seconds']:.0f} s.", ""]
+    atomic_write_text(out / "report.json", json.dumps(report, indent=2, default=str, allow_nan=True))
     atomic_write_text(out / "report.md", "\n".join(lines))
     return report
 
@@ -375,7 +413,13 @@ def build_parser() -> argparse.ArgumentParser:
     # --------------------------------------------------------------------------------- run
     run = sub.add_parser("run", help="the headline experiment: maps, figures and a report")
     run.add_argument("--out", type=Path, default=Path("out"), help="output directory (default out)")
-    run.add_argument("--seed", type=_nonneg_int, default=0, help="random seed (default 0)")
+    run.add_argument("--seed", type=_nonneg_int, default=0, help="random seed of the simulated part (default 0)")
+    run.add_argument("--log", type=Path, default=None,
+                     help="the Intel Lab log (default: intel-lab/intel-corrected.log.gz under $OGM_PPL_DATA or the "
+                          "shared data folder)")
+    run.add_argument("--quick", action="store_true", help="a small version (10 cm, 10 %% of poses, 6 sweeps)")
+    run.add_argument("--scheduler", default=None, help="'serial', a dask scheduler address, or none for a LocalCluster")
+    run.add_argument("--workers", type=_pos_int, default=None, help="LocalCluster workers (default: one per core)")
     return parser
 
 
@@ -923,7 +967,8 @@ def main(argv: list[str] | None = None) -> int:
             return int(e.code or 0) if not isinstance(e.code, str) else 2
         if args.command == "run":
             _prepare_out_dir(args.out)
-            run_headline(args.out, seed=args.seed)
+            run_headline(args.out, seed=args.seed, log=args.log, quick=args.quick, scheduler=args.scheduler,
+                         workers=args.workers)
             print((args.out / "report.md").read_text())
         elif args.command == "map":
             r = cmd_map(args)

@@ -79,11 +79,22 @@ def _check_outputs(out: Path):
 
 
 def test_run_writes_figures_and_report(tmp_path, capsys):
-    assert main(["run", "--out", str(tmp_path)]) == 0
-    for name in ("simple2d_maps.png", "toy1d_marginals.png", "report.md", "report.json"):
+    from ogm_ppl.experiment.headline import INTEL_LOG, find_shared_file
+
+    log = find_shared_file(INTEL_LOG)
+    if log is None:
+        pytest.skip("the shared Intel Lab log is not here")
+    assert main(["run", "--out", str(tmp_path), "--quick", "--scheduler", "serial", "--log", str(log)]) == 0
+    for name in ("simple2d_maps.png", "toy1d_marginals.png", "intel_maps.png", "report.md", "report.json"):
         assert (tmp_path / name).stat().st_size > 0
     assert not list(tmp_path.glob("*.tmp*"))  # atomic writes leave nothing behind
     report = json.loads((tmp_path / "report.json").read_text())
+    intel = {r["algorithm"]: r for r in report["intel"]["pooled"]}
+    assert set(intel) == {"ogm", "p21", "border-L9"}
+    for r in intel.values():  # the real-data part: scores that mean something, on both masks
+        assert 0.5 < r["mask"]["best_f1"] <= 1 and 0.7 < r["mask"]["auc"] <= 1
+        assert 0.3 < r["touched"]["best_f1"] <= 1
+    assert "Real data: the Intel Lab log" in (tmp_path / "report.md").read_text()
     maps = report["simple2d"]["maps"]
     assert len(maps) == 7
     for r in maps.values():
@@ -93,6 +104,22 @@ def test_run_writes_figures_and_report(tmp_path, capsys):
     correlated = [r["roc_auc"] for k, r in maps.items() if "Gibbs" in k or "patch" in k]
     assert min(correlated) > max(independent)
     assert "| map | best F1" in capsys.readouterr().out
+
+
+def test_run_without_the_log_runs_the_simulated_part(tmp_path, monkeypatch, capsys):
+    import ogm_ppl.experiment.headline as headline
+
+    monkeypatch.setattr(headline, "find_shared_file", lambda rel: None)
+    monkeypatch.setattr("ogm_ppl.cli.run_simple2d", lambda out, seed: {"markdown": ["simulated part"]})
+    assert main(["run", "--out", str(tmp_path)]) == 0
+    text = (tmp_path / "report.md").read_text()
+    assert "Real data: skipped" in text and "pass --log PATH" in text and "simulated part" in text
+    assert "running the simulated part only" in capsys.readouterr().err
+
+
+def test_run_with_a_missing_log_is_an_error(tmp_path, capsys):
+    assert main(["run", "--out", str(tmp_path), "--log", str(tmp_path / "nope.log")]) == 2
+    assert "nope.log" in capsys.readouterr().err
 
 
 def test_version(capsys):

@@ -1,0 +1,171 @@
+r"""The headline experiment of ``make run`` / ``ogm-ppl run``: the thesis's claim on real, sparse data.
+
+A reduced Table 6.5 / Fig. 6.17 (Section 6.2.1): the Intel Lab log at 5 cm on the thesis's 30 m x 30 m
+window, half the beams and half / 10 % of the poses (the thesis's Experiments 2 and 3), scored against the
+thesis's benchmark (traditional OGM from all readings, thresholded at p > 0.20) on the near-mapped mask
+(Fig. 6.16b), and on the cells each experiment's own readings touched. Algorithms: traditional OGM
+(Hähnel), log-odds OGM with the p21 update term (Table 2.2 form, Section 2.5) and Gibbs sampling with the
+border-conditioned data-driven patch prior at L = 9 (Section 5.2.3, learned from the HouseExpo floor
+plans, which do not hold the Intel building).
+
+It is an ordinary experiment spec (:func:`headline_spec`) run by :func:`~ogm_ppl.experiment.run_experiment`
+(dask, resumable); :func:`run_intel_headline` adds the summary table and a figure of the sparsest maps.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ogm_ppl.io import atomic_write_text
+
+__all__ = ["INTEL_LOG", "find_shared_file", "headline_spec", "run_intel_headline"]
+
+#: the Intel Lab log, relative to the shared data folder
+INTEL_LOG = "intel-lab/intel-corrected.log.gz"
+
+
+def find_shared_file(relative: str) -> Path | None:
+    """``relative`` under the shared data folder: ``$OGM_PPL_DATA``, else ``shared/data`` beside the
+    repository (a source checkout), else ``/work/shared/data``; ``None`` if none holds it."""
+    roots = []
+    if os.environ.get("OGM_PPL_DATA"):
+        roots.append(Path(os.environ["OGM_PPL_DATA"]))
+    roots += [Path(__file__).resolve().parents[3] / "shared" / "data", Path("/work/shared/data")]
+    for root in roots:
+        if (root / relative).is_file():
+            return root / relative
+    return None
+
+
+def headline_spec(log: str | os.PathLike, *, quick: bool = False, sigma_cells: float = 1.0,
+                  sweeps: int = 60) -> dict:  # fmt: skip
+    """The headline spec as a dict (:func:`~ogm_ppl.experiment.parse_spec` validates it).
+
+    ``quick`` (tests): 10 cm cells, only the 10 % subset, 6 sweeps. ``sigma_cells``: range noise of the
+    Gibbs sensor model in cells (default 1 cell = 5 cm; see the README's Intel section for why not 3).
+    """
+    res, fractions, n = (0.10, [0.1], 6) if quick else (0.05, [0.5, 0.1], sweeps)
+    gibbs = {"kind": "gibbs", "patch": [3, 3], "sweeps": n, "burn_in": max(1, n // 6), "checkpoint_every": 5,
+             "record": 3, "sigma_cells": float(sigma_cells)}  # fmt: skip
+    return {
+        "experiment": {
+            "name": "intel_headline",
+            "seed": 2020,
+            "description": ("Real, sparse data (thesis Table 6.5 / Fig. 6.17, reduced): Intel Lab, half the beams "
+                            "with half / 10 % of the poses, against the p > 0.20 benchmark from all readings."),
+        },  # fmt: skip
+        "datasets": [{
+            "name": "intel", "kind": "log", "path": str(Path(log).resolve()),
+            "reader": {"max_usable_range": 20.0}, "resolution": res, "extent": [-10.9, -23.65, 30.0, 30.0],
+            "sigma_cells": float(sigma_cells), "pose_fraction": fractions, "beam_step": 2,
+            "benchmark": {"delta": "haehnel", "threshold": 0.20, "prior": 0.5},
+        }],  # fmt: skip
+        "algorithms": [
+            {"name": "ogm", "kind": "ogm", "delta": "haehnel"},
+            {"name": "p21", "kind": "ogm", "delta": "p21"},
+            {"name": "border-L9", "prior": "border:houseexpo", **gibbs},
+        ],
+        "metrics": {"mask": "near_mapped", "near_mapped_distance": 10.0, "touched_only": True, "thresholds": 99,
+                    "scores": ["f1", "auc", "max_precision"]},  # fmt: skip
+        "output": {"maps": True, "figures": True, "fpfn": "none", "dpi": 90},
+    }
+
+
+LABELS = {"ogm": "traditional OGM (Hähnel)", "p21": "log-odds OGM, p21 update term",
+          "border-L9": "Gibbs, border prior, L = 9"}  # fmt: skip
+
+
+def _maps_figure(result, out: Path) -> Path:
+    """The sparsest experiment's maps beside the benchmark (Fig. 6.13-6.15 style)."""
+    from ogm_ppl.experiment.figures import _plt, _save_closed
+    from ogm_ppl.experiment.tasks import base_dir, score_path
+    from ogm_ppl.viz import plot_map
+
+    plt = _plt()
+    spec = result.spec
+    ds = min(spec.datasets, key=lambda d: d.measurement_fraction)
+    with np.load(base_dir(result.out_dir) / f"{ds.base}.npz", allow_pickle=False) as z:
+        truth = z["truth"].astype(float)
+    algs = [a for a in spec.algorithms if score_path(result.out_dir, ds, a).with_suffix(".npz").exists()]
+    fig, axes = plt.subplots(1, 1 + len(algs), figsize=(4.2 * (1 + len(algs)), 4.4))
+    plot_map(truth, None, axes[0], "benchmark (all readings, p > 0.20)", colorbar=False)
+    for ax, a in zip(axes[1:], algs):
+        with np.load(score_path(result.out_dir, ds, a).with_suffix(".npz"), allow_pickle=False) as z:
+            q = z["marginals"]
+        plot_map(q, None, ax, f"{LABELS.get(a.name, a.name)}\n{100 * ds.measurement_fraction:.3g} % of readings",
+                 colorbar=False)  # fmt: skip
+    fig.tight_layout()
+    return _save_closed(plt, fig, out / "intel_maps.png", 90)
+
+
+def _table(result) -> list[str]:
+    conds = list(dict.fromkeys(p["condition"] for p in result.pooled))
+    frac = {p["condition"]: p["measurement_fraction"] for p in result.pooled}
+    head = "| map | " + " | ".join(f"{100 * frac[c]:.3g} % of readings: F1 / AUC / touched F1" for c in conds) + " |"
+    lines = [head, "|---" * (1 + len(conds)) + "|"]
+    for a in result.spec.algorithms:
+        cells = []
+        for c in conds:
+            p = next((p for p in result.pooled if p["condition"] == c and p["algorithm"] == a.name), None)
+            if p is None:
+                cells.append("–")
+                continue
+            m, t = p["mask"], p.get("touched", {})
+            cells.append(f"{m['best_f1']:.3f} / {m.get('auc', float('nan')):.3f} / {t.get('best_f1', float('nan')):.3f}")
+        lines.append(f"| {LABELS.get(a.name, a.name)} | " + " | ".join(cells) + " |")
+    return lines
+
+
+def run_intel_headline(out: str | os.PathLike, log: str | os.PathLike | None = None, *, quick: bool = False,
+                       scheduler=None, workers: int | None = None, progress: bool = False) -> dict:  # fmt: skip
+    """Run the headline spec into ``out/intel`` and return ``{"markdown": [...], "json": {...}}`` for the report.
+
+    ``log``: the Intel Lab log (default: :func:`find_shared_file` of :data:`INTEL_LOG`); raises
+    ``FileNotFoundError`` naming the places searched if there is none.
+    """
+    from ogm_ppl.experiment import parse_spec, run_experiment
+
+    out = Path(out)
+    if log is None:
+        log = find_shared_file(INTEL_LOG)
+        if log is None:
+            raise FileNotFoundError(f"the Intel Lab log ({INTEL_LOG}) is not under $OGM_PPL_DATA, shared/data beside "
+                                    "the repository, or /work/shared/data; pass --log PATH")  # fmt: skip
+    spec = parse_spec(headline_spec(log, quick=quick), "<headline>")
+    t0 = time.perf_counter()
+    result = run_experiment(spec, out / "intel", scheduler=scheduler, workers=workers, progress=progress)
+    seconds = time.perf_counter() - t0
+    fig = _maps_figure(result, out)
+    ds0 = spec.datasets[0]
+    p = ds0.params
+    gib = next(a for a in spec.algorithms if a.kind == "gibbs").params
+    md = [
+        "## Real data: the Intel Lab log, sparse (thesis Table 6.5 / Fig. 6.17, reduced)",
+        "",
+        f"{p['resolution'] * 100:g} cm cells on the thesis's 30 m x 30 m window, half the beams, "
+        + ", ".join(f"{100 * d.params['pose_fraction']:g} %" for d in spec.datasets)
+        + " of the poses. Benchmark: traditional OGM from all readings, p > 0.20; scored over the cells within "
+        "10 cells of a benchmark-mapped cell (Fig. 6.16b) and over the cells the experiment's readings touched. "
+        f"Gibbs: {gib['sweeps']} sweeps after {gib['burn_in']} burn-in from the thresholded OGM map, "
+        f"sigma {p['sigma_cells']:g} cell(s), border prior learned from HouseExpo (not the Intel building).",
+        "",
+        *_table(result),
+        "",
+        f"Run time {seconds:.0f} s. Figures: `intel_maps.png` (the sparsest experiment's maps beside the benchmark), "
+        "`intel/figures/` (P-R curves, F1 against threshold, sparsity and time); tables: `intel/metrics.md`.",
+        "",
+    ]
+    doc = {"seconds": seconds, "pooled": [{k: v for k, v in r.items() if k not in ("mask", "touched")}
+                                          | {"mask": _summary(r["mask"]), "touched": _summary(r.get("touched", {}))}
+                                          for r in result.pooled], "figure": str(fig)}  # fmt: skip
+    atomic_write_text(out / "intel_headline.json", json.dumps(doc, indent=1, default=str, allow_nan=True))
+    return {"markdown": md, "json": doc}
+
+
+def _summary(block: dict) -> dict:
+    return {k: block[k] for k in ("best_f1", "threshold", "precision", "recall", "auc", "max_precision") if k in block}
