@@ -4,8 +4,10 @@ Units are cells along the ray (kappa units, Section 2.4): ``z`` is the reading, 
 first occupied cell, ``F`` the last kappa of the ray (the maximum range in kappa units). Two events are
 explicit:
 
-* **no occupied cell within the ray** (``f > F``; pass ``f = F + 1``): the beam has nothing to reflect
-  off inside the sensor's range;
+* **no occupied cell within the ray** (``f > F + 1/2``; pass ``f = F + 1``): the beam has nothing to
+  reflect off inside the sensor's range. (In the continuous coordinate below a cell of the ray entered at
+  ``t_f < L`` has ``f = t_f + 1/2 < F + 1/2``, so it is a hit even when ``f > F``; for integer ``f`` the
+  test is ``f > F``);
 * **a max-range reading** (``is_max``): the sensor reported no return.
 
 Both models are normalised over the outcome space ``{hit at z} U {max-range}``; ``ogm_ppl.testing``
@@ -47,7 +49,7 @@ def _common(z, f, F):
     z = _as_tensor(z)
     f = _as_tensor(f, z.dtype)
     F = _as_tensor(F, z.dtype)
-    return z, f, F, f > F
+    return z, f, F, f > F + 0.5  # module docstring: a ray's last cell may sit at F < f < F + 1/2
 
 
 def _check_prob(name: str, value: float, open_right: bool = True) -> float:
@@ -63,7 +65,7 @@ class SensorModel:
 
     Args of ``log_prob``:
         z: readings in kappa units (ignored where ``is_max``).
-        f: kappa of the first occupied cell; any value ``> F`` means none within the ray.
+        f: kappa of the first occupied cell; any value ``> F + 1/2`` means none within the ray.
         F: last kappa of the ray.
         is_max: True where the reading is a max-range reading (default: none are).
     """
@@ -87,7 +89,8 @@ class GaussianRange(SensorModel):
         \quad (z_n \le F + \tfrac12), \qquad
         P(\text{max} \mid f) = (1 - p_{rand})\,\bigl(1 - \Phi(\tfrac{F + 1/2 - f}{\sigma})\bigr)
 
-    for ``f <= F``: a noisy range beyond the far edge of cell ``F`` is reported as max range. With no
+    for a first hit within the ray (``f <= F + 1/2``): a noisy range beyond ``F + 1/2`` is reported as max
+    range. With no
     occupied cell in the ray the reading is max range with probability ``1 - p_rand`` and a uniform
     random hit on ``[-1/2, F + 1/2]`` otherwise (the ``p_rand`` term lives on that interval only). ``p_rand = 0`` (default) is the thesis's model
     ``N(f, sigma^2)`` (Section 2.6); a hit then has zero likelihood under a map with nothing to reflect it.
@@ -135,7 +138,7 @@ class GaussianRange(SensorModel):
     def sample(self, f, F, generator: torch.Generator | None = None):
         f = _as_tensor(f)
         F = _as_tensor(F, f.dtype).expand_as(f)
-        none = f > F
+        none = f > F + 0.5
         y = f + float(self.sigma) * torch.randn(f.shape, generator=generator, dtype=f.dtype)
         if self.p_rand > 0:
             rand = torch.rand(f.shape, generator=generator, dtype=f.dtype) < self.p_rand

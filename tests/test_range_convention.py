@@ -69,3 +69,29 @@ def test_reading_exactly_at_a_cell_centre_goes_to_the_nearer_cell():
     # the thesis's integer toy readings from a robot in the middle of cell 0 are the kappa values
     rays = raycast(Grid.line(12), Scans.one_d([3.0, 7.5, 7.49, 8.0], max_range=11.0))
     assert rays.z.tolist() == [3, 8, 8, 8]
+
+
+def test_a_wall_in_the_last_half_cell_of_the_range_can_be_seen():
+    """A cell entered at t in (L - 1/2, L) is in the ray (entered before max range L) and the simulator makes
+    hits off it; the model must give them a positive likelihood (its continuous kappa t + 1/2 lies in
+    (F, F + 1/2], which once read as "no occupied cell": -inf for every such hit, 98 of 55,440 rays of a
+    Table 6.4 dataset, and Gibbs then invented walls in front of the true one to explain them)."""
+    from ogm_ppl import OccupancyModel
+    from ogm_ppl.priors import IndependentPrior
+
+    grid = Grid((121, 121), resolution=0.1, origin=(-6.05, -6.05))
+    yy, xx = np.mgrid[0:121, 0:121]
+    truth = np.hypot(xx - 60, yy - 60) >= 49.8  # a circular wall about 4.98 m out
+    angles = np.linspace(-np.pi, np.pi, 720, endpoint=False)
+    scans = simulate_scans(grid, truth, np.array([[0.0, 0.0, 0.0]]), angles, max_range=5.0, sigma_cells=1.0, seed=1)
+    rays = raycast(grid, scans)
+    model = OccupancyModel(grid, rays, GaussianRange(1.0), IndependentPrior(0.3, grid.num_cells))
+    f = model.first_hits(torch.from_numpy(truth.ravel().astype(np.float64))[None])[0]
+    R = torch.arange(rays.num_rays)
+    t_f = torch.from_numpy(rays.t_enter[rays.offsets[:-1] + np.minimum(f.numpy(), rays.lengths - 1)]).double()
+    last_half = (f < torch.from_numpy(rays.lengths)) & (t_f > 49.5)
+    assert last_half.sum() > 20 and (~torch.from_numpy(rays.is_max) & last_half).sum() > 5  # the case occurs
+    assert torch.isfinite(model.loglik_table[R, f]).all()
+    # and the sensor's own definition: f in (F, F + 1/2] is a hit, beyond F + 1/2 is "none"
+    s = GaussianRange(1.0)
+    assert math.isfinite(float(s.log_prob(49.8, 50.3, 50.0))) and s.log_prob(49.8, 51.0, 50.0) == -math.inf

@@ -40,7 +40,7 @@ from ogm_ppl.io import atomic_write_text
 __all__ = ["TASK_VERSION", "task_hash", "task_env", "run_base", "run_dataset", "run_algorithm", "run_score",
            "base_dir", "dataset_path", "run_dir", "score_path"]  # fmt: skip
 
-TASK_VERSION = 1
+TASK_VERSION = 2  # 2: the sensor model sees walls in the last half cell of the range (sensors._common)
 _GIBBS_LOCK = (
     threading.Lock()
 )  # torch's global RNG is per process: one Gibbs run at a time per process
