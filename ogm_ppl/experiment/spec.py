@@ -19,7 +19,11 @@ Tables (every key optional unless marked *required*; defaults in brackets)::
                         sigma_cells [3.0] (the models' range noise), pose_fraction [1.0], beam_step [1],
                         benchmark [{delta = "haehnel", threshold = 0.20, prior = 0.5}]
     [[algorithms]]      kind = "ogm" | "gibbs" | "patch_map" (*required*), name (*required*)
-      ogm:              delta ["haehnel"], prior [0.5], clamp [none: [lo, hi] log-odds]
+      ogm:              delta ["haehnel"], prior [0.5], clamp [none: [lo, hi] log-odds],
+                        fit ["none"; "setting": refit the named term (pN, moravec_opt, ...) for the dataset's
+                        sigma_cells and max range in cells, Section 2.5; a shipped fitted term used
+                        outside its setting warns, and the warning is kept in the run's result],
+                        sigma_cells [the dataset's]
       gibbs:            prior ["independent"; see ogm_ppl.priors.named], patch [1; L = 9 is [3, 3]],
                         sweeps [100], burn_in [0], chains [1], init ["ogm"], init_delta ["haehnel"],
                         scan ["systematic"], p_rand_patch [0.0], sigma_cells [the dataset's],
@@ -406,6 +410,19 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
     return out
 
 
+def fit_name(delta: str) -> str | None:
+    """The family :func:`~ogm_ppl.inference.variational.fit_delta_for_setting` refits for the spec's
+    ``delta`` (``"p21"``, ``"p21_thesis"`` -> ``"p21"``; ``"moravec_opt"``), or ``None`` if it cannot."""
+    from ogm_ppl.inference.variational.setting_fit import _check_name
+
+    base = delta.removesuffix("_thesis").removesuffix("_dd")
+    try:
+        _check_name(base)
+    except ValueError:
+        return None
+    return base
+
+
 def _algorithm(source: str, i: int, a) -> AlgorithmSpec:
     t, name = _named_entry(source, "algorithms", i, a)
     kind = t.get("kind", "str", required=True, choices=("ogm", "gibbs", "patch_map"))
@@ -419,6 +436,12 @@ def _algorithm(source: str, i: int, a) -> AlgorithmSpec:
         ):
             t.fail("clamp", f"must be [lo, hi] log-odds with lo < hi, got {clamp!r}")
         p["clamp"] = clamp
+        p["fit"] = t.get("fit", "str", "none", choices=("none", "setting"))
+        p["sigma_cells"] = t.get("sigma_cells", "float", None, lo=0, lo_open=True)
+        if p["fit"] == "setting" and fit_name(p["delta"]) is None:
+            from ogm_ppl.inference.variational.setting_fit import setting_family_names
+
+            t.fail("fit", f"cannot refit {p['delta']!r} for a sensor setting; fittable: {setting_family_names()}")
     elif kind == "gibbs":
         p["prior"] = _check_prior(t, "prior", "independent")
         p["patch"] = _patch(t, "patch", 1)

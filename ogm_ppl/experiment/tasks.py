@@ -355,6 +355,39 @@ def _gibbs(ds, alg, model, seed, folder: Path, truth, mask, thresholds, resume, 
     return stats.marginals.numpy(), trace, start, done
 
 
+def _ogm_delta(ds, p: dict, grid, scans, out: Path):
+    """The update term of an ``ogm`` run and what to record about its sensor setting.
+
+    The setting is the dataset's range noise (``sigma_cells``, or the algorithm's) and its maximum range in
+    cells (``scans.max_range / resolution``). ``fit = "setting"`` refits the term there (Section 2.5,
+    :func:`~ogm_ppl.inference.variational.fit_delta_for_setting`, cached under ``out/deltas``); otherwise a
+    shipped fitted term used outside the setting it was fitted for warns (``FittedSettingWarning``) and the
+    warning goes into the result.
+    """
+    import warnings
+
+    from ogm_ppl.experiment.spec import fit_name
+    from ogm_ppl.inference.variational import check_delta_setting, fit_delta_for_setting
+    from ogm_ppl.models import delta_by_name
+
+    sigma = float(p.get("sigma_cells") or ds.params["sigma_cells"])
+    F = round(float(np.max(scans.max_range)) / grid.resolution)
+    setting = {"sigma_cells": sigma, "F_cells": F}
+    if p.get("fit", "none") == "setting":
+        name = fit_name(p["delta"])
+        assert name is not None  # the spec parser refuses terms it cannot refit
+        delta, training = fit_delta_for_setting(name, sigma, F, cache_dir=Path(out) / "deltas")
+        return delta, {"delta_setting": setting, "delta_fitted": {k: training.get(k) for k in
+                       ("F", "wall", "sigma", "num", "train_cross_entropy")}}  # fmt: skip
+    delta = delta_by_name(p["delta"])
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_delta_setting(delta, sigma, F, where=f"experiment dataset {ds.name}")
+    for w in caught:
+        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+    return delta, {"delta_setting": setting, "warnings": [str(w.message) for w in caught]}
+
+
 def run_algorithm(ds, alg, chain: int, seed: int, metrics, output, out: str | Path, h: str, resume: bool = True,
                   stop_after: int | None = None, _deps=None) -> dict | None:  # fmt: skip
     """Run one algorithm on one dataset (one chain); writes ``marginals.npz`` (+ ``map.png``) and
@@ -378,9 +411,9 @@ def run_algorithm(ds, alg, chain: int, seed: int, metrics, output, out: str | Pa
         p = alg.params
         if alg.kind == "ogm":
             from ogm_ppl.inference import evidence_grid_from_scans
-            from ogm_ppl.models import delta_by_name
 
-            ev = evidence_grid_from_scans(grid, scans, delta_by_name(p["delta"]), prior=p["prior"],
+            delta, extra = _ogm_delta(ds, p, grid, scans, out)
+            ev = evidence_grid_from_scans(grid, scans, delta, prior=p["prior"],
                                           clamp=tuple(p["clamp"]) if p["clamp"] else None)  # fmt: skip
             q = ev.probabilities.numpy()
         elif alg.kind == "patch_map":

@@ -37,6 +37,8 @@ __all__ = [
     "load_delta",
     "DeltaFileError",
     "THESIS_P21",
+    "THESIS_SETTING",
+    "fitted_setting",
 ]
 
 
@@ -45,7 +47,16 @@ def _param(value: float) -> nn.Parameter:
 
 
 class DeltaFamily(nn.Module):
-    """Base class. Subclasses of the offset form implement ``delta(d)`` and ``far()``."""
+    """Base class. Subclasses of the offset form implement ``delta(d)`` and ``far()``.
+
+    ``fitted_setting``: for a term fitted to 1D data (Section 2.5), the sensor setting it was fitted for
+    (the artefact's ``training`` block: ``sigma``, ``F``, ``wall`` in cells, ..., plus its ``name``);
+    ``None`` for a term that holds no setting (hand-set values such as Hähnel's, or a fresh family).
+    Set by :func:`load_delta`, :func:`delta_by_name` and the setting fit; read it with
+    :func:`fitted_setting`. (Not ``training``: that is ``nn.Module``'s train/eval flag.)
+    """
+
+    fitted_setting: dict | None = None
 
     def delta(self, d: torch.Tensor) -> torch.Tensor:  # pragma: no cover - interface
         """Delta at integer offsets ``d = kappa - z_n`` (float64 tensor of any shape)."""
@@ -298,6 +309,12 @@ THESIS_P21 = (
 )  # fmt: skip
 
 
+#: The 1D setting of the thesis's fits (Section 2.5: ``F = 75`` cells, wall at ``f = 60``, ``sigma = 3``
+#: cells, 1000 datasets): the ``fitted_setting`` of the ``*_thesis`` terms of :func:`delta_by_name`.
+THESIS_SETTING = {"F": 75, "wall": 60, "sigma": 3.0, "num": 1000, "prior": "uniform",
+                  "source": "Merali 2020, Section 2.5 (Tables 2.1, 2.2)"}  # fmt: skip
+
+
 _FAMILIES: dict[str, type[DeltaFamily]] = {}  # filled below: class name -> class, for artefacts
 
 
@@ -392,10 +409,17 @@ def _delta_from_record_text(text: str, where: str) -> tuple[DeltaFamily, dict]:
         raise DeltaFileError(f"{where}: unknown artefact format {record.get('format')!r} (this version reads 1)")
     if "delta" not in record:
         raise DeltaFileError(f"{where}: no 'delta' entry: not a Delta artefact")
+    training = record.get("training")
+    if training is not None and not isinstance(training, dict):
+        raise DeltaFileError(f"{where}: 'training' must be an object, got {type(training).__name__}")
     try:
-        return family_from_dict(record["delta"]), record
+        family = family_from_dict(record["delta"])
     except ValueError as e:
         raise DeltaFileError(f"{where}: {e}") from None
+    if training is not None:
+        name = record.get("name")
+        family.fitted_setting = {**training, **({"name": name} if isinstance(name, str) else {})}
+    return family, record
 
 
 def fitted_names() -> list[str]:
@@ -424,6 +448,8 @@ def delta_by_name(name: str) -> DeltaFamily:
     ``"borenstein_koren_thesis"``, ``"moravec_thesis"``, ``"marshall_barfoot_thesis"``,
     ``"stachniss_thesis"``, ``"elfes_thesis"``, ``"p21_thesis"``; and our fits shipped with the library
     (:func:`fitted_names`: ``"moravec_opt"``, ``"elfes_opt"``, ``"p1"`` .. ``"p21"``, ``"neural_opt"``, ...).
+
+    Fitted and thesis terms carry the setting they were fitted for (:func:`fitted_setting`).
     """
     makers = {
         "haehnel": Moravec.haehnel,
@@ -435,10 +461,27 @@ def delta_by_name(name: str) -> DeltaFamily:
         "p21_thesis": lambda: PN(THESIS_P21),
     }
     if name in makers:
-        return makers[name]()
+        family = makers[name]()
+        if name.endswith("_thesis"):
+            family.fitted_setting = {**THESIS_SETTING, "name": name}
+        return family
     if name in fitted_names():
         return load_fitted(name)[0]
     raise ValueError(f"unknown Delta name {name!r}; known: {sorted(makers) + fitted_names()}")
+
+
+def fitted_setting(delta_or_name: DeltaFamily | str) -> dict | None:
+    """The 1D sensor setting a term was fitted for, or ``None`` if it holds none (Section 2.5).
+
+    For a shipped artefact (``ogm_ppl/fitted/delta_<name>.json``) or a file read by :func:`load_delta`:
+    its ``training`` block (``sigma``, ``F``, ``wall``, ``num``, ``seed``, ... in cells) plus ``name``.
+    For the thesis's published values (``*_thesis``): :data:`THESIS_SETTING`, which Section 2.5 states
+    (sigma 3, F 75, wall 60). ``"haehnel"`` (hand-set ``p = 0.8 / 0.2``) and a fresh family: ``None``.
+    A copy: changing it changes nothing.
+    """
+    fam = delta_by_name(delta_or_name) if isinstance(delta_or_name, str) else delta_or_name
+    setting = fam.fitted_setting
+    return None if setting is None else dict(setting)
 
 
 _FAMILIES.update({c.__name__: c for c in (BorensteinKoren, Moravec, MarshallBarfoot, Stachniss, Elfes, PN, NeuralDelta)})

@@ -231,3 +231,23 @@ def test_interrupted_gibbs_task_resumes_bit_for_bit(serial_run, tmp_path):
     res = json.loads(task.done_file.read_text())
     assert res["resumed_from_sweep"] == 3
     _same(_numbers(serial_run.out_dir), _numbers(out))
+
+
+def test_ogm_update_terms_fitted_for_the_sensor_setting_or_warned(tmp_path):
+    """The smoke dataset's sensor (sigma 1 cell, 30-cell range) is not the shipped p21's (sigma 3, F 75):
+    used as shipped it warns and the warning is kept; ``fit = "setting"`` refits p21 there (Section 2.5)."""
+    from ogm_ppl.inference.variational import FittedSettingWarning
+
+    d = tiny()
+    d["algorithms"] = [{"name": "p21", "kind": "ogm", "delta": "p21"},
+                       {"name": "p21-fit", "kind": "ogm", "delta": "p21", "fit": "setting"}]  # fmt: skip
+    with pytest.warns(FittedSettingWarning, match="p21"):
+        r = run_experiment(parse_spec(d, "fit.toml"), tmp_path, scheduler="serial", progress=False)
+    runs = {x["algorithm"]: x for x in r.runs}
+    assert runs["p21"]["delta_setting"] == {"sigma_cells": 1.0, "F_cells": 30}
+    assert any("sigma" in w for w in runs["p21"]["warnings"])
+    fitted = runs["p21-fit"]["delta_fitted"]
+    assert (fitted["sigma"], fitted["F"]) == (1.0, 30) and "warnings" not in runs["p21-fit"]
+    assert len(list((tmp_path / "deltas").glob("delta_p21_sigma1_F30_*.json"))) == 1  # cached for reruns
+    with pytest.raises(SpecError, match="cannot refit 'haehnel'"):
+        parse_spec({**d, "algorithms": [{"name": "h", "kind": "ogm", "delta": "haehnel", "fit": "setting"}]}, "x")

@@ -25,5 +25,21 @@ from ogm_ppl.inference.variational.amortised import (
     shipped_guide,
 )
 
+# update terms fitted for a sensor setting, and the warning for a term used outside its own (issue #11 item 4)
+from ogm_ppl.inference.variational.setting_fit import (
+    F_FACTOR,
+    SIGMA_TOLERANCE,
+    FittedSettingWarning,
+    check_delta_setting,
+    fit_delta_for_setting,
+    fit_deltas_for_setting,
+    fit_on_data,
+    load_setting_fit,
+    save_setting_fit,
+    setting_file_name,
+)
+
 __all__ += ["AmortisedGuide", "GuideFileError", "evidence_features", "guide_initial_map", "random_scene",
             "shipped_guide"]  # fmt: skip
+__all__ += ["fit_delta_for_setting", "fit_deltas_for_setting", "fit_on_data", "check_delta_setting", "FittedSettingWarning",
+            "save_setting_fit", "load_setting_fit", "setting_file_name", "SIGMA_TOLERANCE", "F_FACTOR"]  # fmt: skip

@@ -17,6 +17,7 @@ Fitting takes any data with ``counts`` (``D x (F + 2)`` readings per dataset, ma
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Protocol
 
@@ -25,17 +26,25 @@ from torch import nn
 
 from ogm_ppl.models.delta import PN, DeltaFamily
 
-__all__ = ["FitData", "cross_entropy_loss", "fit_delta", "FitResult", "cross_validate", "warm_start_pn"]
+__all__ = ["FitData", "cross_entropy_loss", "fit_delta", "FitResult", "cross_validate", "warm_start_pn",
+           "minimise"]
 
 
 class FitData(Protocol):
     """What the fit needs of a set of 1D datasets (all tensors float64)."""
 
-    F: int
-    counts: torch.Tensor  # D x (F + 2): how often each kappa reading 0..F and max range occurred
-    exact: torch.Tensor  # D x (F + 1): exact posterior marginals of cells 0..F
+    @property
+    def F(self) -> int: ...
 
-    def subset(self, index: torch.Tensor) -> FitData: ...
+    @property
+    def counts(self) -> torch.Tensor:
+        """D x (F + 2): how often each kappa reading 0..F and max range occurred."""
+
+    @property
+    def exact(self) -> torch.Tensor:
+        """D x (F + 1): exact posterior marginals of cells 0..F."""
+
+    def subset(self, index: torch.Tensor, /) -> FitData: ...
 
     def __len__(self) -> int: ...
 
@@ -64,22 +73,30 @@ class FitResult:
 
 def fit_delta(family: DeltaFamily, data: FitData, max_iter: int = 500, tol: float = 1e-10) -> FitResult:
     """Minimise :func:`cross_entropy_loss` over the family's parameters with L-BFGS (deterministic)."""
+    return minimise(family, lambda: cross_entropy_loss(family, data), max_iter=max_iter, tol=tol)
+
+
+def minimise(family: DeltaFamily, objective: Callable[[], torch.Tensor], max_iter: int = 500,
+             tol: float = 1e-10) -> FitResult:  # fmt: skip
+    """Minimise ``objective()`` (a scalar of the family's parameters) with the L-BFGS of :func:`fit_delta`:
+    strong-Wolfe line search, gradient tolerance ``tol``; ``train_loss`` is ``objective()`` at the end."""
     params = [p for p in family.parameters() if p.requires_grad]
     if not params:
-        return FitResult(family, float(cross_entropy_loss(family, data)), 0)
+        with torch.no_grad():
+            return FitResult(family, float(objective()), 0)
     opt = torch.optim.LBFGS(params, lr=1.0, max_iter=max_iter, max_eval=2 * max_iter, tolerance_grad=tol,
                             tolerance_change=1e-14, history_size=50, line_search_fn="strong_wolfe")  # fmt: skip
 
     def closure():
         opt.zero_grad()
-        loss = cross_entropy_loss(family, data)
+        loss = objective()
         loss.backward()
         return loss
 
     opt.step(closure)
     state = opt.state[opt._params[0]]
     with torch.no_grad():
-        final = float(cross_entropy_loss(family, data))
+        final = float(objective())
     return FitResult(family, final, int(state.get("n_iter", 0)))
 
 
