@@ -5,7 +5,9 @@ Matlab needed 10.3 s per sweep at this size, the target here is under 0.1 s on o
 a plain-Python implementation of the same sweep (``ogm_ppl.reference.gibbs_cell_sweep_reference``, timed
 on a subset of cells and scaled). Also: patch sweeps (1D runs are not used in 2D: 3 x 3 and plus),
 scaling of sweep time with K and with the number of readings, the index memory for 2.25 M cells and
-200,000 rays (target < 2 GB), and peak RSS. Writes out/bench/bench_gibbs.json.
+200,000 rays (target < 2 GB), and peak RSS. The single-cell sweeps are also timed against the sweep before
+issue 14's item 3 (kept in ``sweep_before_after.py``), interleaved in this process, with the floor (one
+pass over the same pair records). Writes out/bench/bench_gibbs.json.
 """
 
 from __future__ import annotations
@@ -22,6 +24,7 @@ import torch
 
 sys.path.insert(0, os.path.dirname(__file__))
 from _common import best_time, peak_rss_mb, sparse_scene, write_json
+from sweep_before_after import floors, interleaved, report
 
 from ogm_ppl import GaussianRange, OccupancyModel, raycast
 from ogm_ppl.inference.mcmc.gibbs import CellGibbs, PatchGibbs
@@ -83,6 +86,9 @@ def main() -> dict:
         print(f"  {name:<32} {res[name]:8.4f} s per sweep")
     print(f"targets (issue 14): systematic < 20 ms: {res['cell, systematic'] * 1e3:.1f} ms; "
           f"random < 60 ms: {res['cell, random'] * 1e3:.1f} ms (permutation {res['cell, permutation'] * 1e3:.1f} ms)")
+    before_after = interleaved(model, repeat=7)
+    floor = floors(model)
+    report(before_after, floor)
     # plain Python reference on a subset of cells, scaled by the cell count
     k = CellGibbs(model, scan="systematic")
     torch.manual_seed(0)
@@ -119,7 +125,8 @@ def main() -> dict:
     payload = {
         "map_500": {"cells": K, "rays": R, "ray_cells": nnz, "seconds_per_sweep": res,
                     "python_reference_seconds_per_sweep": ref_full, "speedup_vs_python": ref_full / ours,
-                    "speedup_vs_thesis_matlab": 10.3 / ours},  # fmt: skip
+                    "speedup_vs_thesis_matlab": 10.3 / ours, "before_after_interleaved": before_after,
+                    "floor_seconds": floor},  # fmt: skip
         "scaling": scaling,
         "map_1500": {"cells": big.num_cells, "rays": big.rays.num_rays, "index_mib": nbytes / 2**20,
                      "seconds_per_sweep": big_sweep, "setup_seconds": big_setup},  # fmt: skip

@@ -1,20 +1,40 @@
-"""Single-cell sweep times of the 500 x 500 reference scene (``bench_gibbs.py``) for the code in a given
-checkout, so that two versions can be timed in the same session:
+"""Single-cell sweep times of the 500 x 500 reference scene (``bench_gibbs.py``), before and after.
+
+In one process, interleaved (the fair comparison on a shared machine)::
+
+    python benchmarks/sweep_before_after.py --interleaved
+
+times ``CellGibbs.sample`` (heat bath) with the compiled sweep of this checkout against the same kernel
+running the sweep as it was before issue 14's "sweep toward the floor" (kept below: 16-byte pair records,
+a walk along the ray for every first hit, signed indexing, a branch per blocked ray, no prefetching),
+alternating one sweep of each, for the systematic, permutation and random scans; both chains start
+from the same map. Prints the best of N sweeps (ms) of each, their ratio, the load average, and the floor:
+one pass over the same 100 MB of pair records (alone, and with the gather of every pair's ray record, in
+systematic and in random order). :func:`interleaved` is what ``bench_gibbs.py`` calls.
+
+For the code in another checkout (one after the other, so only on a quiet machine)::
 
     git worktree add /tmp/before 3967c49
     python benchmarks/sweep_before_after.py /tmp/before
     python benchmarks/sweep_before_after.py .
 
-Prints the best of 7 sweeps (ms) for the systematic, permutation and random scans, heat bath. Works with
+prints the best of 7 sweeps (ms) for the systematic, permutation and random scans, heat bath. Works with
 the flat (before issue 12) and the role-grouped ``ogm_ppl.inference`` layout.
 """
 
 from __future__ import annotations
 
+import math
 import os
 import sys
+from typing import NamedTuple
 
 os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+
+import numba as nb
+import numpy as np
+
+SCANS = ("systematic", "permutation", "random")
 
 
 def main(root: str) -> dict:
@@ -32,10 +52,241 @@ def main(root: str) -> dict:
     except ImportError:  # the layout before issue 12
         from ogm_ppl.inference.gibbs import CellGibbs  # type: ignore[no-redef]
     model = build(500, 100)
-    out = {scan: 1e3 * sweep_time(CellGibbs(model, scan=scan), repeat=7) for scan in ("systematic", "permutation", "random")}
+    out = {scan: 1e3 * sweep_time(CellGibbs(model, scan=scan), repeat=7) for scan in SCANS}
     print(root, "  ".join(f"{k} {v:.1f} ms" for k, v in out.items()))
     return out
 
 
+# ----------------------------------------------------------------------------------------------------
+# The baseline: the compiled single-cell sweep before issue 14's item 3 (commit 9f68076), verbatim but
+# for names (heat bath, independent prior: the reference scene's), and a CellGibbs that runs it.
+_BASE_PAIR = np.dtype([("ll", np.float64), ("ray", np.int32), ("kappa", np.int32)], align=True)
+
+
+class _BaseState(NamedTuple):
+    m: np.ndarray
+    rays: np.ndarray
+    offsets: np.ndarray
+    cells: np.ndarray
+    c_off: np.ndarray
+    pairs: np.ndarray
+    ll: np.ndarray
+
+
+@nb.njit(cache=True, inline="always")
+def _base_next_occupied(st, r, start):
+    a = st.offsets[r]
+    n = st.offsets[r + 1] - a
+    for j in range(start, n):
+        if st.m[st.cells[a + j]]:
+            return j
+    return n
+
+
+@nb.njit(cache=True)
+def _base_log_lik_ratio(st, k):
+    d = 0.0
+    pairs = st.pairs
+    rays = st.rays
+    for p in range(st.c_off[k], st.c_off[k + 1]):
+        kap = pairs[p].kappa
+        r = pairs[p].ray
+        fr = rays[r].f
+        if fr < kap:
+            continue
+        if fr > kap:
+            t = pairs[p].ll - rays[r].ll_hit
+        else:
+            t = pairs[p].ll - st.ll[r, _base_next_occupied(st, r, kap + 1)]
+        if t == t:
+            d += t
+    return d
+
+
+@nb.njit(cache=True)
+def _base_set_cell(st, k, v):
+    if st.m[k] == v:
+        return
+    st.m[k] = v
+    pairs = st.pairs
+    rays = st.rays
+    for p in range(st.c_off[k], st.c_off[k + 1]):
+        kap = pairs[p].kappa
+        r = pairs[p].ray
+        if v:
+            if kap < rays[r].f:
+                rays[r].f = kap
+                rays[r].ll_hit = pairs[p].ll
+        elif rays[r].f == kap:
+            n = _base_next_occupied(st, r, kap + 1)
+            rays[r].f = n
+            rays[r].ll_hit = st.ll[r, n]
+
+
+@nb.njit(cache=True, inline="always")
+def _base_new_value(lo, u, cur):
+    if lo != lo:
+        return 1 if u < 0.5 else 0
+    if lo >= 0.0:
+        return 1 if u * (1.0 + math.exp(-lo)) < 1.0 else 0
+    e = math.exp(lo)
+    return 1 if u * (1.0 + e) < e else 0
+
+
+@nb.njit(cache=True)
+def _base_sweep(st, order, prior_log_odds, uniforms):
+    flips = 0
+    for i in range(order.shape[0]):
+        k = order[i]
+        lo = prior_log_odds[k] + _base_log_lik_ratio(st, k)
+        v = _base_new_value(lo, uniforms[i], st.m[k])
+        if v != st.m[k]:
+            _base_set_cell(st, k, v)
+            flips += 1
+    return flips
+
+
+def _baseline():
+    from ogm_ppl.inference.mcmc.gibbs import CellGibbs
+
+    class BaselineCellGibbs(CellGibbs):
+        """:class:`CellGibbs` (heat bath, independent prior) running the sweep before issue 14's item 3."""
+
+        def _prepare(self) -> None:
+            if self._ready:
+                return
+            super()._prepare()
+            pairs = np.empty(len(self._c_ray), _BASE_PAIR)
+            pairs["ll"], pairs["ray"], pairs["kappa"] = self._ll[self._c_ray, self._c_kappa], self._c_ray, self._c_kappa
+            self._base_pairs = pairs
+
+        def _set_state(self, m) -> None:
+            super()._set_state(m)
+            self._base = _BaseState(self._m, self._rays, self._offsets, self._cells, self._c_off, self._base_pairs,
+                                    self._ll)  # fmt: skip
+
+        def _sweep(self) -> int:
+            assert self._prior_lo is not None and self.update == "gibbs"
+            order = self._sweep_order()
+            u = self._uniforms(len(order))
+            self._updates += len(order)
+            return _base_sweep(self._base, order, self._prior_lo, u)
+
+    return BaselineCellGibbs
+
+
+def interleaved(model, repeat: int = 7, scans=SCANS) -> dict:
+    """Best-of-``repeat`` ``sample`` times (seconds) of :class:`CellGibbs` and of the baseline kernel, one
+    sweep of each in turn after one warm-up sweep each, per scan; both start from the same map (the
+    thresholded OGM). Returns ``{scan: {"before": s, "after": s, "ratio": before / after}}`` and the load
+    average (``/proc/loadavg``, where there is one) at the start and at the end."""
+    import time
+
+    import torch
+
+    from ogm_ppl.inference.mcmc.gibbs import CellGibbs
+
+    Baseline = _baseline()
+    out: dict = {"loadavg_start": _loadavg()}
+    for scan in scans:
+        pair = {}
+        for name, cls in (("before", Baseline), ("after", CellGibbs)):
+            torch.manual_seed(0)
+            k = cls(model, scan=scan)
+            k.setup()
+            p = {"m": torch.from_numpy(k.state[k.model.latent.numpy()].astype(np.float64))}
+            k._last = p["m"]
+            pair[name] = [k, k.sample(p), float("inf")]  # one warm-up sweep (and compilation)
+        for _ in range(repeat):
+            for entry in pair.values():
+                t = time.perf_counter()
+                entry[1] = entry[0].sample(entry[1])
+                entry[2] = min(entry[2], time.perf_counter() - t)
+        b, a = pair["before"][2], pair["after"][2]
+        out[scan] = {"before": b, "after": a, "ratio": b / a}
+    out["loadavg_end"] = _loadavg()
+    return out
+
+
+def floors(model, repeat: int = 7) -> dict:
+    """The floor of a sweep: best-of-``repeat`` times (seconds) of one pass over the single-cell sweep's
+    pair records (16 bytes a (ray, cell) pair, by cell): ``"stream"`` sums their likelihoods;
+    ``"stream + rays, systematic"`` also reads every pair's ray record, cell by cell in the systematic
+    scan's order, and ``"... random"`` in a random scan's order (with the sweep's prefetching)."""
+    import time
+
+    from ogm_ppl.inference._kernels import cell_sweep as cs
+    from ogm_ppl.inference.mcmc.gibbs import CellGibbs
+
+    @nb.njit
+    def stream(pairs):
+        s = 0.0
+        for p in range(pairs.shape[0]):
+            s += pairs[p].ll
+        return s
+
+    @nb.njit
+    def gather(st, order, prefetch):
+        s = 0.0
+        pairs, rays, c_off = st.pairs, st.rays, st.c_off
+        for i in range(order.shape[0]):
+            if prefetch:
+                cs._prefetch_ahead(c_off, st.m, pairs, rays, order, i, cs.PREFETCH_AHEAD, c_off)
+            k = order[i]
+            d = 0.0
+            for p in range(np.uint64(c_off[k]), np.uint64(c_off[k + 1])):
+                d += pairs[p].ll - rays[np.uint64(pairs[p].ray)].ll_hit
+            s += d
+        return s
+
+    k = CellGibbs(model)
+    k.setup()
+    st = k._st
+    latent = k._latent
+    rand = np.ascontiguousarray(latent[np.random.default_rng(0).integers(0, len(latent), len(latent))])
+    runs = {"stream": lambda: stream(st.pairs), "stream + rays, systematic": lambda: gather(st, latent, False),
+            "stream + rays, random": lambda: gather(st, rand, True)}  # fmt: skip
+    best = {}
+    for name, fn in runs.items():
+        fn()
+        best[name] = float("inf")
+        for _ in range(repeat):
+            t = time.perf_counter()
+            fn()
+            best[name] = min(best[name], time.perf_counter() - t)
+    best["bytes"] = st.pairs.nbytes
+    return best
+
+
+def _loadavg() -> str:
+    try:
+        with open("/proc/loadavg") as fh:
+            return " ".join(fh.read().split()[:3])
+    except OSError:
+        return "n/a"
+
+
+def report(res: dict, floor: dict | None = None) -> None:
+    print(f"single-cell sweep, best of N, interleaved in one process (load average {res['loadavg_start']} -> "
+          f"{res['loadavg_end']}):")  # fmt: skip
+    for scan in SCANS:
+        if scan in res:
+            r = res[scan]
+            print(f"  {scan:<12} before {r['before'] * 1e3:7.1f} ms   after {r['after'] * 1e3:6.1f} ms   "
+                  f"{r['ratio']:4.1f}x")  # fmt: skip
+    if floor:
+        print(f"  floor: one pass over the {floor['bytes'] / 1e6:.0f} MB of pair records "
+              f"{floor['stream'] * 1e3:.1f} ms; with the ray records, systematic order "
+              f"{floor['stream + rays, systematic'] * 1e3:.1f} ms, random order "
+              f"{floor['stream + rays, random'] * 1e3:.1f} ms")  # fmt: skip
+
+
 if __name__ == "__main__":
-    main(sys.argv[1] if len(sys.argv) > 1 else ".")
+    if len(sys.argv) > 1 and sys.argv[1] == "--interleaved":
+        sys.path.insert(0, os.path.dirname(__file__))
+        from bench_gibbs import build
+
+        mdl = build(500, 100)
+        report(interleaved(mdl, repeat=int(sys.argv[2]) if len(sys.argv) > 2 else 9), floors(mdl))
+    else:
+        main(sys.argv[1] if len(sys.argv) > 1 else ".")

@@ -621,8 +621,20 @@ def local_patch_sweep(anchors, dr, dc, h, w, rows, cols, pinned, lp, m, f, offse
                     j = metropolised_pick(logw, n, jc, u_choice[i], u_accept[i], sc.ew)
                 else:
                     j = _categorical_ws(logw, n, u_choice[i], sc.ew)
-                if j < 0:  # every candidate has zero mass, so has the current state: move to leave it
-                    j = min(np.int64(u_choice[i] * n), n - 1)
+                if j < 0:  # every candidate has zero mass, so has the current state: move to leave it,
+                    # led by the data: drawn by the likelihood alone (the prior is zero for each). Any
+                    # rule is exact here: the states with mass are closed under the update, so how a chain
+                    # leaves a massless state does not change the posterior it samples, only how soon it
+                    # gets there. (A uniform pick among the candidates filled 500 x 500 maps with noise.)
+                    for x in range(n):
+                        logw[x] = 0.0
+                    if t < 0 and n <= sc.fw.shape[0]:
+                        lik_all(sc, ns, ll, n_live, logw)
+                    else:
+                        lik_list(sc, ns, ll, cands, n, logw)
+                    j = _categorical_ws(logw, n, u_choice[i], sc.ew)
+                    if j < 0:  # the data rule out every candidate too
+                        j = min(np.int64(u_choice[i] * n), n - 1)
             new = cands[j]
         if new != cur:
             set_patch(patch, new, m, f, offsets, cells, c_off, c_ray, c_kappa)

@@ -18,6 +18,14 @@ kernels. Random numbers come from torch's global generator, so ``pyro.set_rng_se
 Scans: ``"systematic"`` (default: a fixed order, the fastest), ``"permutation"`` (a fresh random order
 every sweep) or ``"random"`` (Algorithm 1 as printed: updates at uniformly random cells / patch
 positions, with replacement). All leave the posterior invariant.
+
+``region=`` (every kernel) restricts sampling to part of the map, the speed-up the thesis suggests after
+Table 6.6 (Section 6.2.1: sample only mapped cells or cells near them, Fig. 6.16b; see
+:func:`~ogm_ppl.metrics.near_mapped_mask`). The other cells keep their initial / current values, so the
+chain samples the *conditional* ``p(m_R' | m_rest, z)``, not the full posterior, where ``R'``
+(:meth:`~_MapKernel.sampled_cells`) is the set of cells the kernel can change: the latent region cells for
+single-cell kernels, every latent cell of the visited patches for :class:`PatchGibbs`.
+
 Priors with independent cells use the compiled path; correlated priors that describe their local
 conditional (``prior.local()``, a :class:`~ogm_ppl.priors.LocalPrior`: a stencil of unary + pairwise
 weights such as :class:`~ogm_ppl.priors.MRFPrior` / :class:`~ogm_ppl.priors.StencilPrior`, or tiles of
@@ -96,15 +104,47 @@ def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: f
     return m
 
 
+def _region_cells(model: OccupancyModel, region) -> np.ndarray | None:
+    """``region`` (``None``; a boolean mask of ``K`` cells or of the grid's shape; or cell indices) as sorted
+    unique cell indices, checked: right shape, boolean or integer, in range, non-empty, holding a latent cell."""
+    if region is None:
+        return None
+    r = region.detach().cpu().numpy() if isinstance(region, torch.Tensor) else np.asarray(region)
+    K = model.num_cells
+    if r.size == 0:
+        raise ValueError("region is empty")
+    if r.dtype == np.bool_:
+        if r.shape not in ((K,), tuple(model.grid.shape)):
+            raise ValueError(f"region mask must have shape ({K},) or {tuple(model.grid.shape)}, got {r.shape}")
+        cells = np.flatnonzero(r.ravel())
+    elif np.issubdtype(r.dtype, np.integer):
+        if r.ndim != 1:
+            raise ValueError(f"region indices must be a 1D array of cells, got shape {r.shape}")
+        if r.size and (r.min() < 0 or r.max() >= K):
+            raise ValueError(f"region indices must lie in [0, {K}), got {int(r.min())}..{int(r.max())}")
+        cells = np.unique(r)
+    else:
+        raise ValueError(f"region must be a boolean mask or integer cell indices, got dtype {r.dtype}")
+    if cells.size == 0:
+        raise ValueError("region is empty")
+    if model.known_free.numpy()[cells].all():
+        raise ValueError("region holds no latent cell (every region cell is pinned known-free)")
+    return np.ascontiguousarray(cells, dtype=np.int64)
+
+
 class _MapKernel(MCMCKernel):
     """Shared state handling: the map, every ray's first hit, and sync with Pyro's ``params``."""
 
     site = "m"
 
-    def __init__(self, model: OccupancyModel, scan: str = "systematic", init="ogm", delta="haehnel") -> None:
+    def __init__(self, model: OccupancyModel, scan: str = "systematic", init="ogm", delta="haehnel",
+                 region=None) -> None:  # fmt: skip
         if scan not in _SCANS:
             raise ValueError(f"scan must be one of {_SCANS}, got {scan!r}")
         self.model = model
+        self.region = _region_cells(model, region)  # sorted cell indices, or None: every cell
+        latent = model.latent.numpy().astype(np.int64)
+        self._visit = latent if self.region is None else latent[np.isin(latent, self.region)]  # latent ∩ region
         self.scan = scan
         self.init = init
         self.delta = delta
@@ -171,6 +211,11 @@ class _MapKernel(MCMCKernel):
         """Every ray's current first-occupied kappa (``R``)."""
         return self._f
 
+    def sampled_cells(self) -> np.ndarray:
+        """The cells ``R'`` the kernel can change (sorted): with ``region``, the chain samples
+        ``p(m_R' | m_rest, z)`` and every other cell keeps its value. Latent ∩ region for cell kernels."""
+        return self._visit
+
     # --------------------------------------------------------------- sampling
     def sample(self, params):
         self._prepare()
@@ -224,6 +269,10 @@ class CellGibbs(_MapKernel):
             ``"metropolised"`` (Liu 1996: propose the flip, accept with ``min(1, p(flip) / p(stay))``;
             it moves at least as often, so it is no worse in Peskun's order; see ``benchmarks/bench_mixing.py``).
         init: starting map, see :func:`initial_map` (default: thresholded traditional OGM).
+        region: ``None`` (every latent cell) or the cells to update (boolean mask of ``K`` cells or of the
+            grid's shape, or cell indices): only the latent region cells change, the rest stay at their
+            initial / current values, so the chain samples ``p(m_region | m_rest, z)`` (the speed-up the thesis
+            suggests after Table 6.6: sample only cells near mapped cells).
 
     >>> import pyro
     >>> from pyro.infer import MCMC
@@ -241,10 +290,10 @@ class CellGibbs(_MapKernel):
     """
 
     def __init__(self, model: OccupancyModel, scan: str = "systematic", update: str = "gibbs", init="ogm",
-                 delta="haehnel") -> None:  # fmt: skip
+                 delta="haehnel", region=None) -> None:  # fmt: skip
         if update not in _UPDATES:
             raise ValueError(f"update must be one of {tuple(_UPDATES)}, got {update!r}")
-        super().__init__(model, scan, init, delta)
+        super().__init__(model, scan, init, delta, region)
         self.update = update
         self._rule = _UPDATES[update]
 
@@ -258,10 +307,12 @@ class CellGibbs(_MapKernel):
         super()._set_state(m)
         self._rays = cs.ray_state(self._f, self._ll)
         self._f = self._rays["f"]  # a view: the compiled sweeps keep it in step with the map
-        self._st = cs.CellState(self._m, self._rays, self._offsets, self._cells, self._c_off, self._pairs, self._ll)
+        nexts = cs.next_state(self._m, self._f, self._offsets, self._cells, self._ll)  # second hits (a cache)
+        self._st = cs.CellState(self._m, self._rays, nexts, self._offsets, self._cells, self._c_off, self._pairs,
+                                self._ll)  # fmt: skip
 
     def _sweep_order(self) -> np.ndarray:
-        return self._order(self._latent)
+        return self._order(self._latent if self.region is None else self._visit)
 
     def _sweep(self) -> int:
         order = self._sweep_order()
@@ -282,7 +333,8 @@ class CellGibbs(_MapKernel):
             raise ValueError("run_marginals needs a prior with independent cells")
         if not hasattr(self, "_m"):
             self.setup()
-        acc = cs.marginals_independent(self._st, self._latent, self._prior_lo, int(num_sweeps), int(seed),
+        order = self._latent if self.region is None else self._visit
+        acc = cs.marginals_independent(self._st, order, self._prior_lo, int(num_sweeps), int(seed),
                                        self._rule)  # fmt: skip
         self.sweeps += int(num_sweeps)
         self._last = None
@@ -321,12 +373,13 @@ class MetropolisCell(CellGibbs):
     with replacement; ``"permutation"``; ``"systematic"``, which is ``CellGibbs(update="metropolised")``);
     ``"endpoint"`` draws cells holding a laser end point ``endpoint_weight`` times as often (the "heat
     map" proposal of Dhiman et al., ICRA 2014; random scan only). Cell choices do not depend on the
-    state, so the flip proposal is symmetric and any prior works.
+    state, so the flip proposal is symmetric and any prior works. ``region``: as in :class:`CellGibbs`
+    (proposals only at latent region cells, ``len(latent ∩ region)`` per sweep).
     """
 
     def __init__(self, model, proposal: str = "uniform", endpoint_weight: float = 4.0, scan: str = "random",
-                 init="ogm", delta="haehnel") -> None:  # fmt: skip
-        super().__init__(model, scan, "metropolised", init, delta)
+                 init="ogm", delta="haehnel", region=None) -> None:  # fmt: skip
+        super().__init__(model, scan, "metropolised", init, delta, region)
         if proposal not in ("uniform", "endpoint"):
             raise ValueError(f"proposal must be 'uniform' or 'endpoint', got {proposal!r}")
         if proposal == "endpoint" and scan != "random":
@@ -345,13 +398,15 @@ class MetropolisCell(CellGibbs):
                 ends = torch.zeros(self.model.num_cells, dtype=torch.bool)
                 ends[torch.from_numpy(self.model.rays.endpoint_cells())] = True
                 w[ends[self.model.latent]] = self.endpoint_weight
+            if self.region is not None:
+                w[~torch.from_numpy(np.isin(self.model.latent.numpy(), self.region))] = 0.0
             self._weights = w / w.sum()
         return self._weights
 
     def _sweep_order(self) -> np.ndarray:
-        n = len(self._latent)
+        n = len(self._visit)
         if self.scan != "random" or n == 0:
-            return self._order(self._latent)
+            return super()._sweep_order()
         picks = torch.multinomial(self.proposal_probs(), n, replacement=True).numpy()
         return np.ascontiguousarray(self._latent[picks])
 
@@ -371,13 +426,21 @@ class PatchGibbs(_MapKernel):
         update: ``"gibbs"`` (the thesis's heat bath: draw the patch from its conditional) or
             ``"metropolised"`` (propose one of the *other* configurations in proportion to its
             conditional, accept by Metropolis-Hastings with ``min(1, (1 - p_cur) / (1 - p_new))``).
+        region: ``None`` (the whole map) or cells (boolean mask of ``K`` cells or of the grid's shape, or
+            cell indices): the systematic / permutation scans visit only the fixed patches that hold a
+            latent region cell; the random scan places patches at latent region cells,
+            ``ceil(|latent ∩ region| / L)`` per sweep. Cells outside those patches keep their initial /
+            current values, so the chain samples exactly ``p(m_R' | m_rest, z)`` with ``R'`` the cells the
+            visited patches cover (:meth:`sampled_cells`; it may reach a little past the region). This is the
+            speed-up the thesis suggests after Table 6.6 (Section 6.2.1): sample only cells near mapped cells.
     """
 
     def __init__(self, model, patch=3, scan: str = "systematic", offset=0, p_rand_patch: float = 0.0,
-                 random_patch: str = "mh", update: str = "gibbs", init="ogm", delta="haehnel") -> None:  # fmt: skip
+                 random_patch: str = "mh", update: str = "gibbs", init="ogm", delta="haehnel",
+                 region=None) -> None:  # fmt: skip
         if update not in _UPDATES:
             raise ValueError(f"update must be one of {tuple(_UPDATES)}, got {update!r}")
-        super().__init__(model, scan, init, delta)
+        super().__init__(model, scan, init, delta, region)
         self.update = update
         self._metropolised = update == "metropolised"
         local = local_of(model.prior) if model.prior.cell_log_odds() is None else None
@@ -438,8 +501,25 @@ class PatchGibbs(_MapKernel):
             r0, c0 = np.arange(rows), np.arange(cols)
         R, C = np.meshgrid(r0, c0, indexing="ij")
         anchors = np.stack([R.ravel(), C.ravel()], 1).astype(np.int64)
-        live = (patch_cells(self.model, anchors, self.dr, self.dc) >= 0).any(1)
+        pc = patch_cells(self.model, anchors, self.dr, self.dc)
+        live = (pc >= 0).any(1)
+        if self.region is not None:  # only the patches that hold a (latent) region cell
+            in_region = np.zeros(self.model.num_cells + 1, np.bool_)  # index -1 (no cell) reads the last: False
+            in_region[self.region] = True
+            live &= in_region[pc].any(1)
         return np.ascontiguousarray(anchors[live])
+
+    def sampled_cells(self) -> np.ndarray:
+        """The cells ``R'`` the visited patches cover (sorted; every latent cell without ``region``)."""
+        if self.region is None:
+            return super().sampled_cells()
+        if self.scan == "random":
+            g = self.model.grid
+            anchors = np.stack(np.divmod(self._visit, g.cols), 1)
+        else:
+            anchors = self._anchors
+        pc = patch_cells(self.model, anchors, self.dr, self.dc)
+        return np.unique(pc[pc >= 0])
 
     def patches(self) -> list[np.ndarray]:
         """The fixed patch positions as arrays of cells (``-1`` where cut off or pinned)."""
@@ -448,8 +528,9 @@ class PatchGibbs(_MapKernel):
     def _sweep(self) -> int:
         g = self.model.grid
         if self.scan == "random":
-            n = math.ceil(len(self._latent) / self.L)
-            cells = self._latent[torch.randint(0, len(self._latent), (n,)).numpy()] if n else self._latent
+            pool = self._latent if self.region is None else self._visit
+            n = math.ceil(len(pool) / self.L)
+            cells = pool[torch.randint(0, len(pool), (n,)).numpy()] if n else pool
             anchors = np.ascontiguousarray(np.stack(np.divmod(cells, g.cols), 1).astype(np.int64))
         else:
             anchors = self._order(self._anchors)
