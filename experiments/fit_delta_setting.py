@@ -41,12 +41,12 @@ def main() -> None:
     wall = round(0.8 * args.F) if args.wall is None else args.wall
     t0 = time.perf_counter()
     fits = fit_deltas_for_setting(args.names, args.sigma, args.F, wall=wall, num=args.num, seed=args.seed,
-                                  heldout=args.heldout, cache_dir=args.out)  # fmt: skip
+                                  cache_dir=args.out)  # fmt: skip
     total = time.perf_counter() - t0
-    held = wall_datasets(num=args.heldout, F=args.F, wall=wall, sigma=args.sigma, seed=args.seed + 1)
+    held = wall_datasets(num=args.heldout, F=args.F, wall=wall, sigma=args.sigma, seed=args.seed + 1)  # as heldout= would
     print(f"setting: sigma {args.sigma:g} cells, F {args.F}, wall {wall}, {args.num} training / {args.heldout} "
           f"held-out datasets; fit_deltas_for_setting {total:.1f} s in all")
-    print("| term | data s (train + held-out) | fit s | train CE | held-out CE (fit) | held-out CE (shipped) |")
+    print("| term | data s (training) | fit s | train CE | held-out CE (fit) | held-out CE (shipped) |")
     print("|---|---|---|---|---|---|")
     for name, (fam, tr) in fits.items():
         with torch.no_grad():

@@ -410,19 +410,6 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
     return out
 
 
-def fit_name(delta: str) -> str | None:
-    """The family :func:`~ogm_ppl.inference.variational.fit_delta_for_setting` refits for the spec's
-    ``delta`` (``"p21"``, ``"p21_thesis"`` -> ``"p21"``; ``"moravec_opt"``), or ``None`` if it cannot."""
-    from ogm_ppl.inference.variational.setting_fit import _check_name
-
-    base = delta.removesuffix("_thesis").removesuffix("_dd")
-    try:
-        _check_name(base)
-    except ValueError:
-        return None
-    return base
-
-
 def _algorithm(source: str, i: int, a) -> AlgorithmSpec:
     t, name = _named_entry(source, "algorithms", i, a)
     kind = t.get("kind", "str", required=True, choices=("ogm", "gibbs", "patch_map"))
@@ -438,10 +425,14 @@ def _algorithm(source: str, i: int, a) -> AlgorithmSpec:
         p["clamp"] = clamp
         p["fit"] = t.get("fit", "str", "none", choices=("none", "setting"))
         p["sigma_cells"] = t.get("sigma_cells", "float", None, lo=0, lo_open=True)
-        if p["fit"] == "setting" and fit_name(p["delta"]) is None:
-            from ogm_ppl.inference.variational.setting_fit import setting_family_names
+        if p["fit"] == "setting":
+            from ogm_ppl.inference.variational.setting_fit import (
+                fit_family_for,
+                setting_family_names,
+            )
 
-            t.fail("fit", f"cannot refit {p['delta']!r} for a sensor setting; fittable: {setting_family_names()}")
+            if fit_family_for(p["delta"]) is None:
+                t.fail("fit", f"cannot refit {p['delta']!r} for a sensor setting; fittable: {setting_family_names()}")
     elif kind == "gibbs":
         p["prior"] = _check_prior(t, "prior", "independent")
         p["patch"] = _patch(t, "patch", 1)

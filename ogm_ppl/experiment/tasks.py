@@ -366,19 +366,22 @@ def _ogm_delta(ds, p: dict, grid, scans, out: Path):
     """
     import warnings
 
-    from ogm_ppl.experiment.spec import fit_name
-    from ogm_ppl.inference.variational import check_delta_setting, fit_delta_for_setting
+    from ogm_ppl.inference.variational import (
+        check_delta_setting,
+        fit_delta_for_setting,
+        fit_family_for,
+    )
     from ogm_ppl.models import delta_by_name
 
     sigma = float(p.get("sigma_cells") or ds.params["sigma_cells"])
     F = round(float(np.max(scans.max_range)) / grid.resolution)
     setting = {"sigma_cells": sigma, "F_cells": F}
     if p.get("fit", "none") == "setting":
-        name = fit_name(p["delta"])
-        assert name is not None  # the spec parser refuses terms it cannot refit
-        delta, training = fit_delta_for_setting(name, sigma, F, cache_dir=Path(out) / "deltas")
+        family = fit_family_for(p["delta"])
+        assert family is not None  # the spec parser refuses terms it cannot refit
+        delta, training = fit_delta_for_setting(family[0], sigma, F, prior=family[1], cache_dir=Path(out) / "deltas")
         return delta, {"delta_setting": setting, "delta_fitted": {k: training.get(k) for k in
-                       ("F", "wall", "sigma", "num", "train_cross_entropy")}}  # fmt: skip
+                       ("F", "wall", "sigma", "num", "prior", "train_cross_entropy")}}  # fmt: skip
     delta = delta_by_name(p["delta"])
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")

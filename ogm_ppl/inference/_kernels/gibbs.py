@@ -539,6 +539,16 @@ def local_patch_log_weights(patch, cands, n, lp, m, f, in_patch, ray_stamp, stam
                                 c_ray, c_kappa, ll, logw, sc, ts)  # fmt: skip
 
 
+@nb.njit(cache=True, inline="always")
+def _add_lik(sc, ns, ll, n_live, cands, n, dense, logw):
+    """Add the likelihood of the rays collected in ``sc`` to ``logw`` of the ``n`` candidates: by
+    :func:`lik_all` when they are the dense set (all ``2^n_live`` codes, in order), else :func:`lik_list`."""
+    if dense and n <= sc.fw.shape[0]:
+        lik_all(sc, ns, ll, n_live, logw)
+    else:
+        lik_list(sc, ns, ll, cands, n, logw)
+
+
 @nb.njit(cache=True)
 def local_patch_sweep(anchors, dr, dc, h, w, rows, cols, pinned, lp, m, f, offsets, cells, c_off, c_ray, c_kappa,
                       ll, u_choice, u_rand, u_accept, p_rand_patch, thesis_random, ray_stamp, stamp0, capacity,
@@ -608,10 +618,7 @@ def local_patch_sweep(anchors, dr, dc, h, w, rows, cols, pinned, lp, m, f, offse
                 else:
                     patch_prior_weights_ws(lp, patch, m, cands, n, logw, ts)
                 ns = collect_rays(patch, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa, sc)
-                if t < 0 and n <= sc.fw.shape[0]:
-                    lik_all(sc, ns, ll, n_live, logw)  # the dense set: all 2^n_live codes, in order
-                else:
-                    lik_list(sc, ns, ll, cands, n, logw)
+                _add_lik(sc, ns, ll, n_live, cands, n, t < 0, logw)
                 if metropolised:
                     jc = -1
                     for x in range(n):
@@ -628,10 +635,7 @@ def local_patch_sweep(anchors, dr, dc, h, w, rows, cols, pinned, lp, m, f, offse
                     # gets there. (A uniform pick among the candidates filled 500 x 500 maps with noise.)
                     for x in range(n):
                         logw[x] = 0.0
-                    if t < 0 and n <= sc.fw.shape[0]:
-                        lik_all(sc, ns, ll, n_live, logw)
-                    else:
-                        lik_list(sc, ns, ll, cands, n, logw)
+                    _add_lik(sc, ns, ll, n_live, cands, n, t < 0, logw)
                     j = _categorical_ws(logw, n, u_choice[i], sc.ew)
                     if j < 0:  # the data rule out every candidate too
                         j = min(np.int64(u_choice[i] * n), n - 1)

@@ -312,7 +312,7 @@ class CellGibbs(_MapKernel):
                                 self._ll)  # fmt: skip
 
     def _sweep_order(self) -> np.ndarray:
-        return self._order(self._latent if self.region is None else self._visit)
+        return self._order(self._visit)
 
     def _sweep(self) -> int:
         order = self._sweep_order()
@@ -333,8 +333,7 @@ class CellGibbs(_MapKernel):
             raise ValueError("run_marginals needs a prior with independent cells")
         if not hasattr(self, "_m"):
             self.setup()
-        order = self._latent if self.region is None else self._visit
-        acc = cs.marginals_independent(self._st, order, self._prior_lo, int(num_sweeps), int(seed),
+        acc = cs.marginals_independent(self._st, self._visit, self._prior_lo, int(num_sweeps), int(seed),
                                        self._rule)  # fmt: skip
         self.sweeps += int(num_sweeps)
         self._last = None
@@ -528,7 +527,7 @@ class PatchGibbs(_MapKernel):
     def _sweep(self) -> int:
         g = self.model.grid
         if self.scan == "random":
-            pool = self._latent if self.region is None else self._visit
+            pool = self._visit  # latent cells (of the region)
             n = math.ceil(len(pool) / self.L)
             cells = pool[torch.randint(0, len(pool), (n,)).numpy()] if n else pool
             anchors = np.ascontiguousarray(np.stack(np.divmod(cells, g.cols), 1).astype(np.int64))

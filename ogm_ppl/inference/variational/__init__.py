@@ -33,6 +33,7 @@ from ogm_ppl.inference.variational.setting_fit import (
     check_delta_setting,
     fit_delta_for_setting,
     fit_deltas_for_setting,
+    fit_family_for,
     fit_on_data,
     load_setting_fit,
     save_setting_fit,
@@ -41,5 +42,5 @@ from ogm_ppl.inference.variational.setting_fit import (
 
 __all__ += ["AmortisedGuide", "GuideFileError", "evidence_features", "guide_initial_map", "random_scene",
             "shipped_guide"]  # fmt: skip
-__all__ += ["fit_delta_for_setting", "fit_deltas_for_setting", "fit_on_data", "check_delta_setting", "FittedSettingWarning",
+__all__ += ["fit_delta_for_setting", "fit_deltas_for_setting", "fit_family_for", "fit_on_data", "check_delta_setting", "FittedSettingWarning",
             "save_setting_fit", "load_setting_fit", "setting_file_name", "SIGMA_TOLERANCE", "F_FACTOR"]  # fmt: skip

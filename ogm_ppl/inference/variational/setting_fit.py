@@ -67,6 +67,7 @@ from ogm_ppl.models.delta import (
 
 __all__ = [
     "fit_delta_for_setting",
+    "fit_family_for",
     "fit_deltas_for_setting",
     "fit_on_data",
     "check_delta_setting",
@@ -336,11 +337,9 @@ def fit_deltas_for_setting(
                "seed": seed, "prior": prior}  # fmt: skip
     out: dict[str, tuple[DeltaFamily, dict]] = {}
     paths: dict[str, Path] = {}
-    for name in names:
-        if cache_dir is None:
-            continue
-        paths[name] = path = Path(cache_dir) / setting_file_name(name, sigma, F, wall=wall, num=num,
-                                                                 num_readings=num_readings, seed=seed, prior=prior)  # fmt: skip
+    for name in names if cache_dir is not None else ():
+        paths[name] = path = Path(str(cache_dir)) / setting_file_name(
+            name, sigma, F, wall=wall, num=num, num_readings=num_readings, seed=seed, prior=prior)  # fmt: skip
         if path.exists():
             family, training = load_setting_fit(path)
             differs = {k: (training.get(k), v) for k, v in setting.items() if training.get(k) != v}
@@ -433,17 +432,34 @@ class FittedSettingWarning(UserWarning):
     """A fitted update term used at a sensor setting far from the one it was fitted for (Section 2.5)."""
 
 
-def _fit_hint(name: str, sigma: float, F: float | None) -> str:
-    base, extra = name, ""
+def fit_family_for(delta_name: str) -> tuple[str, str] | None:
+    """What :func:`fit_delta_for_setting` refits for the named term, as ``(name, prior)``: ``"p21"`` and
+    ``"p21_thesis"`` -> ``("p21", "uniform")``, ``"p21_dd"`` -> ``("p21", "data_driven")``,
+    ``"moravec_thesis"`` -> ``("moravec_opt", "uniform")``; ``None`` for a term it cannot fit (``"haehnel"``,
+    Elfes, the neural terms).
+
+    >>> fit_family_for("p21_dd"), fit_family_for("moravec_thesis"), fit_family_for("haehnel")
+    (('p21', 'data_driven'), ('moravec_opt', 'uniform'), None)
+    """
+    base, prior = delta_name, "uniform"
     if base.endswith("_dd"):
-        base, extra = base[: -len("_dd")], ", prior='data_driven'"
+        base, prior = base[: -len("_dd")], "data_driven"
     if base.endswith("_thesis"):
         base = base[: -len("_thesis")]
-        base = base if base.startswith("p") and base[1:].isdigit() else base + "_opt"
+        base = base if re.fullmatch(r"p\d+", base) else base + "_opt"
     try:
         _check_name(base)
     except ValueError:
-        base, extra = "p21", extra + "  # the closest family it fits"
+        return None
+    return base, prior
+
+
+def _fit_hint(name: str, sigma: float, F: float | None) -> str:
+    fam = fit_family_for(name)
+    base, prior = fam if fam is not None else ("p21", "data_driven" if name.endswith("_dd") else "uniform")
+    extra = "" if prior == "uniform" else f", prior={prior!r}"
+    if fam is None:
+        extra += "  # the closest family it fits"
     f = "" if F is None else f", F={round(F)}"
     return f"fit_delta_for_setting({base!r}, sigma={sigma:g}{f}{extra})"
 
