@@ -6,8 +6,8 @@ a plain-Python implementation of the same sweep (``ogm_ppl.reference.gibbs_cell_
 on a subset of cells and scaled). Also: patch sweeps (1D runs are not used in 2D: 3 x 3 and plus),
 scaling of sweep time with K and with the number of readings, the index memory for 2.25 M cells and
 200,000 rays (target < 2 GB), and peak RSS. The single-cell sweeps are also timed against the sweep before
-issue 14's item 3 (kept in ``sweep_before_after.py``), interleaved in this process, with the floor (one
-pass over the same pair records). Writes out/bench/bench_gibbs.json.
+issue 14's item 3 (kept in ``sweep_before_after.py``), interleaved in this process after 20 warm-up
+sweeps, with the floor of that pair-summing sweep (one pass over its pair records). Writes out/bench/bench_gibbs.json.
 """
 
 from __future__ import annotations
@@ -65,8 +65,8 @@ def index_bytes(model) -> int:
     idx = r.by_cell
     arrays = [r.offsets, r.cells, r.t_enter, r.z, r.is_max, r.endpoint_in_grid, r.range_cells,
               idx.offsets, idx.ray, idx.kappa]  # fmt: skip
-    # + the cell kernels' compact by-cell (ll, ray, kappa) records (16 bytes a pair)
-    return sum(a.nbytes for a in arrays) + model.loglik_table.numel() * 8 + 16 * idx.ray.size
+    # + the cell kernels' state: a kept sum and two counts a cell (16 bytes), first and second hits a ray (16)
+    return sum(a.nbytes for a in arrays) + model.loglik_table.numel() * 8 + 16 * model.num_cells + 16 * r.num_rays
 
 
 def main() -> dict:

@@ -4,13 +4,16 @@ In one process, interleaved (the fair comparison on a shared machine)::
 
     python benchmarks/sweep_before_after.py --interleaved
 
-times ``CellGibbs.sample`` (heat bath) with the compiled sweep of this checkout against the same kernel
-running the sweep as it was before issue 14's "sweep toward the floor" (kept below: 16-byte pair records,
-a walk along the ray for every first hit, signed indexing, a branch per blocked ray, no prefetching),
-alternating one sweep of each, for the systematic, permutation and random scans; both chains start
-from the same map. Prints the best of N sweeps (ms) of each, their ratio, the load average, and the floor:
-one pass over the same 100 MB of pair records (alone, and with the gather of every pair's ray record, in
-systematic and in random order). :func:`interleaved` is what ``bench_gibbs.py`` calls.
+times ``CellGibbs.sample`` (heat bath) with the compiled sweep of this checkout (every cell's likelihood
+ratio kept in fixed point, updated when a flip moves a ray's first or second hit; order and uniforms drawn
+in compiled code) against the same kernel running the sweep as it was before issue 14's "sweep toward
+the floor" (kept below: 16-byte pair records summed at every visit, a walk along the ray for every first
+hit, torch's generator), alternating one sweep of each after 20 warm-up sweeps each, for the
+systematic, permutation and random scans; both chains start from the same map. Prints the best and
+the median of N sweeps (ms) of each, their ratio, the load average, and the floor *of the pair-summing
+sweep*: one pass over the same 100 MB of pair records (alone, and with the gather of every pair's ray
+record, in systematic and in random order); the kept-sum sweep reads no pair at a visit, so it can go
+below it. :func:`interleaved` is what ``bench_gibbs.py`` calls.
 
 For the code in another checkout (one after the other, so only on a quiet machine)::
 
@@ -18,7 +21,8 @@ For the code in another checkout (one after the other, so only on a quiet machin
     python benchmarks/sweep_before_after.py /tmp/before
     python benchmarks/sweep_before_after.py .
 
-prints the best of 7 sweeps (ms) for the systematic, permutation and random scans, heat bath. Works with
+prints the best and the median of 15 sweeps (ms), after 20 warm-up sweeps, for the systematic,
+permutation and random scans, heat bath. Works with
 the flat (before issue 12) and the role-grouped ``ogm_ppl.inference`` layout.
 """
 
@@ -37,7 +41,7 @@ import numpy as np
 SCANS = ("systematic", "permutation", "random")
 
 
-def main(root: str) -> dict:
+def main(root: str, repeat: int = 15) -> dict:
     root = os.path.abspath(root)
     sys.path.insert(0, root)
     sys.path.insert(0, os.path.join(root, "benchmarks"))
@@ -45,15 +49,32 @@ def main(root: str) -> dict:
 
     if not ogm_ppl.__file__.startswith(root):
         raise SystemExit(f"imported {ogm_ppl.__file__}, not the checkout at {root}")
-    from bench_gibbs import build, sweep_time
+    from bench_gibbs import build
 
     try:
         from ogm_ppl.inference.mcmc.gibbs import CellGibbs
     except ImportError:  # the layout before issue 12
         from ogm_ppl.inference.gibbs import CellGibbs  # type: ignore[no-redef]
+    import time
+
+    import torch
+
     model = build(500, 100)
-    out = {scan: 1e3 * sweep_time(CellGibbs(model, scan=scan), repeat=7) for scan in SCANS}
-    print(root, "  ".join(f"{k} {v:.1f} ms" for k, v in out.items()))
+    out = {}
+    for scan in SCANS:
+        torch.manual_seed(0)
+        k = CellGibbs(model, scan=scan)
+        k.setup()
+        p = {"m": torch.from_numpy(k.state[k.model.latent.numpy()].astype(np.float64))}
+        k._last = p["m"]
+        times = []
+        for i in range(20 + repeat):  # 20 warm-up sweeps, as in interleaved()
+            t = time.perf_counter()
+            p = k.sample(p)
+            if i >= 20:
+                times.append(time.perf_counter() - t)
+        out[scan] = {"best": 1e3 * min(times), "median": 1e3 * float(np.median(times))}
+    print(root, "  ".join(f"{k} best {v['best']:.1f} / median {v['median']:.1f} ms" for k, v in out.items()))
     return out
 
 
@@ -61,6 +82,7 @@ def main(root: str) -> dict:
 # The baseline: the compiled single-cell sweep before issue 14's item 3 (commit 9f68076), verbatim but
 # for names (heat bath, independent prior: the reference scene's), and a CellGibbs that runs it.
 _BASE_PAIR = np.dtype([("ll", np.float64), ("ray", np.int32), ("kappa", np.int32)], align=True)
+_BASE_RAY = np.dtype([("ll_hit", np.float64), ("f", np.int64)], align=True)
 
 
 class _BaseState(NamedTuple):
@@ -147,7 +169,7 @@ def _base_sweep(st, order, prior_log_odds, uniforms):
 
 
 def _baseline():
-    from ogm_ppl.inference.mcmc.gibbs import CellGibbs
+    from ogm_ppl.inference.mcmc.gibbs import CellGibbs, _MapKernel
 
     class BaselineCellGibbs(CellGibbs):
         """:class:`CellGibbs` (heat bath, independent prior) running the sweep before issue 14's item 3."""
@@ -161,13 +183,16 @@ def _baseline():
             self._base_pairs = pairs
 
         def _set_state(self, m) -> None:
-            super()._set_state(m)
-            self._base = _BaseState(self._m, self._rays, self._offsets, self._cells, self._c_off, self._base_pairs,
+            _MapKernel._set_state(self, m)  # the map and every ray's first hit self._f, not CellGibbs's state
+            rays = np.empty(len(self._f), _BASE_RAY)
+            rays["f"], rays["ll_hit"] = self._f, self._ll[np.arange(len(self._f)), self._f]
+            self._base = _BaseState(self._m, rays, self._offsets, self._cells, self._c_off, self._base_pairs,
                                     self._ll)  # fmt: skip
+            self._f = rays["f"]
 
         def _sweep(self) -> int:
             assert self._prior_lo is not None and self.update == "gibbs"
-            order = self._sweep_order()
+            order = self._order(self._visit)  # torch's generator, as before
             u = self._uniforms(len(order))
             self._updates += len(order)
             return _base_sweep(self._base, order, self._prior_lo, u)
@@ -175,10 +200,11 @@ def _baseline():
     return BaselineCellGibbs
 
 
-def interleaved(model, repeat: int = 7, scans=SCANS) -> dict:
-    """Best-of-``repeat`` ``sample`` times (seconds) of :class:`CellGibbs` and of the baseline kernel, one
-    sweep of each in turn after one warm-up sweep each, per scan; both start from the same map (the
-    thresholded OGM). Returns ``{scan: {"before": s, "after": s, "ratio": before / after}}`` and the load
+def interleaved(model, repeat: int = 7, scans=SCANS, warmup: int = 20) -> dict:
+    """Best-of-``repeat`` (and median) ``sample`` times (seconds) of :class:`CellGibbs` and of the baseline kernel, one
+    sweep of each in turn after ``warmup`` sweeps each (the chains' steady state: nearly all of a long
+    chain's sweeps are like these; the first sweeps from the OGM map move more cells), per scan; both start
+    from the same map (the thresholded OGM). Returns ``{scan: {"before": s, "after": s, "ratio": before / after, "before_median": s, "after_median": s}}`` and the load
     average (``/proc/loadavg``, where there is one) at the start and at the end."""
     import time
 
@@ -196,27 +222,28 @@ def interleaved(model, repeat: int = 7, scans=SCANS) -> dict:
             k.setup()
             p = {"m": torch.from_numpy(k.state[k.model.latent.numpy()].astype(np.float64))}
             k._last = p["m"]
-            pair[name] = [k, k.sample(p), float("inf")]  # one warm-up sweep (and compilation)
+            for _ in range(warmup):  # past the first sweeps from the OGM map, where most cells still move
+                p = k.sample(p)
+            pair[name] = [k, p, []]
         for _ in range(repeat):
             for entry in pair.values():
                 t = time.perf_counter()
                 entry[1] = entry[0].sample(entry[1])
-                entry[2] = min(entry[2], time.perf_counter() - t)
-        b, a = pair["before"][2], pair["after"][2]
-        out[scan] = {"before": b, "after": a, "ratio": b / a}
+                entry[2].append(time.perf_counter() - t)
+        b, a = min(pair["before"][2]), min(pair["after"][2])
+        bm, am = float(np.median(pair["before"][2])), float(np.median(pair["after"][2]))
+        out[scan] = {"before": b, "after": a, "ratio": b / a, "before_median": bm, "after_median": am}
     out["loadavg_end"] = _loadavg()
     return out
 
 
 def floors(model, repeat: int = 7) -> dict:
-    """The floor of a sweep: best-of-``repeat`` times (seconds) of one pass over the single-cell sweep's
-    pair records (16 bytes a (ray, cell) pair, by cell): ``"stream"`` sums their likelihoods;
-    ``"stream + rays, systematic"`` also reads every pair's ray record, cell by cell in the systematic
-    scan's order, and ``"... random"`` in a random scan's order (with the sweep's prefetching)."""
+    """The floor of a sweep that sums every cell's rays (the "before" kernel's and issue 14's earlier
+    ones): best-of-``repeat`` times (seconds) of one pass over the pair records (16 bytes a (ray, cell)
+    pair, by cell): ``"stream"`` sums their likelihoods; ``"stream + rays, systematic"`` also reads every
+    pair's ray record, cell by cell in the systematic scan's order, and ``"... random"`` in a random
+    scan's order. The kept-sum sweep of this checkout reads no pairs at a visit, so it can go below it."""
     import time
-
-    from ogm_ppl.inference._kernels import cell_sweep as cs
-    from ogm_ppl.inference.mcmc.gibbs import CellGibbs
 
     @nb.njit
     def stream(pairs):
@@ -226,12 +253,10 @@ def floors(model, repeat: int = 7) -> dict:
         return s
 
     @nb.njit
-    def gather(st, order, prefetch):
+    def gather(st, order):
         s = 0.0
         pairs, rays, c_off = st.pairs, st.rays, st.c_off
         for i in range(order.shape[0]):
-            if prefetch:
-                cs._prefetch_ahead(c_off, st.m, pairs, rays, order, i, cs.PREFETCH_AHEAD, c_off)
             k = order[i]
             d = 0.0
             for p in range(np.uint64(c_off[k]), np.uint64(c_off[k + 1])):
@@ -239,13 +264,13 @@ def floors(model, repeat: int = 7) -> dict:
             s += d
         return s
 
-    k = CellGibbs(model)
+    k = _baseline()(model)
     k.setup()
-    st = k._st
+    st = k._base
     latent = k._latent
     rand = np.ascontiguousarray(latent[np.random.default_rng(0).integers(0, len(latent), len(latent))])
-    runs = {"stream": lambda: stream(st.pairs), "stream + rays, systematic": lambda: gather(st, latent, False),
-            "stream + rays, random": lambda: gather(st, rand, True)}  # fmt: skip
+    runs = {"stream": lambda: stream(st.pairs), "stream + rays, systematic": lambda: gather(st, latent),
+            "stream + rays, random": lambda: gather(st, rand)}  # fmt: skip
     best = {}
     for name, fn in runs.items():
         fn()
@@ -273,7 +298,7 @@ def report(res: dict, floor: dict | None = None) -> None:
         if scan in res:
             r = res[scan]
             print(f"  {scan:<12} before {r['before'] * 1e3:7.1f} ms   after {r['after'] * 1e3:6.1f} ms   "
-                  f"{r['ratio']:4.1f}x")  # fmt: skip
+                  f"{r['ratio']:4.1f}x   (medians {r['before_median'] * 1e3:.1f} -> {r['after_median'] * 1e3:.1f} ms)")  # fmt: skip
     if floor:
         print(f"  floor: one pass over the {floor['bytes'] / 1e6:.0f} MB of pair records "
               f"{floor['stream'] * 1e3:.1f} ms; with the ray records, systematic order "

@@ -12,7 +12,8 @@ Each kernel runs through ``pyro.infer.MCMC`` (site ``"m"``: the whole map as flo
 :func:`~ogm_ppl.inference.mcmc.runner.run_gibbs` (streamed statistics, checkpoints). One ``sample`` call is one
 *sweep*: as many cell / patch updates as there are latent cells / patches. The likelihood of a flip costs
 only the rays through the cell, and rays blocked before it are skipped (Section 4.1.2), in compiled
-kernels. Random numbers come from torch's global generator, so ``pyro.set_rng_seed`` (or
+kernels. Random numbers come from torch's global generator (the single-cell kernels draw one seed a sweep
+from it, for a compiled SplitMix64 stream of the order and the uniforms), so ``pyro.set_rng_seed`` (or
 ``torch.manual_seed``) makes a run reproducible.
 
 Scans: ``"systematic"`` (default: a fixed order, the fastest), ``"permutation"`` (a fresh random order
@@ -69,6 +70,7 @@ __all__ = ["CellGibbs", "PatchGibbs", "MetropolisCell", "initial_map"]
 
 _SCANS = ("random", "permutation", "systematic")
 _UPDATES = {"gibbs": cs.HEAT_BATH, "metropolised": cs.METROPOLISED}
+_SCAN_CODES = {"systematic": cs.SYSTEMATIC, "permutation": cs.PERMUTATION, "random": cs.RANDOM}
 
 
 def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: float | None = None) -> torch.Tensor:
@@ -301,22 +303,27 @@ class CellGibbs(_MapKernel):
         if self._ready:
             return
         super()._prepare()
-        self._pairs = cs.pair_index(self._c_ray, self._c_kappa, self._ll)
+        self._bits = cs.fixed_point_bits(self._ll, self._c_off)
 
     def _set_state(self, m) -> None:
         super()._set_state(m)
-        self._rays = cs.ray_state(self._f, self._ll)
-        self._f = self._rays["f"]  # a view: the compiled sweeps keep it in step with the map
-        nexts = cs.next_state(self._m, self._f, self._offsets, self._cells, self._ll)  # second hits (a cache)
-        self._st = cs.CellState(self._m, self._rays, nexts, self._offsets, self._cells, self._c_off, self._pairs,
-                                self._ll)  # fmt: skip
+        self._st = cs.cell_state(self._m, self._offsets, self._cells, self._c_off, self._c_ray, self._c_kappa,
+                                 self._ll, self._bits)  # fmt: skip
+        self._f = self._st.rays["f"]  # a view: the compiled sweeps keep it in step with the map
 
-    def _sweep_order(self) -> np.ndarray:
-        return self._order(self._visit)
+    def _sweep_order(self) -> np.ndarray | None:
+        """The cells to visit this sweep, in order, if drawn here; ``None``: by ``scan``, in compiled code."""
+        return None
 
     def _sweep(self) -> int:
+        # One seed a sweep from torch's generator (so torch.manual_seed / pyro.set_rng_seed fix the chain);
+        # the order and the uniforms come from the compiled SplitMix64 stream it seeds (cs.draws).
+        seed = np.uint64(int(torch.randint(0, 2**63 - 1, (), dtype=torch.int64)))
         order = self._sweep_order()
-        u = self._uniforms(len(order))
+        if order is None:
+            order, u = cs.draws(self._visit, _SCAN_CODES[self.scan], seed)
+        else:
+            u = cs.draws(order, cs.SYSTEMATIC, seed)[1]
         self._updates += len(order)
         if self._prior_lo is not None:
             return cs.sweep_independent(self._st, order, self._prior_lo, u, self._rule)
@@ -402,9 +409,9 @@ class MetropolisCell(CellGibbs):
             self._weights = w / w.sum()
         return self._weights
 
-    def _sweep_order(self) -> np.ndarray:
+    def _sweep_order(self) -> np.ndarray | None:
         n = len(self._visit)
-        if self.scan != "random" or n == 0:
+        if self.proposal != "endpoint" or n == 0:  # uniform over the visited cells: drawn by scan
             return super()._sweep_order()
         picks = torch.multinomial(self.proposal_probs(), n, replacement=True).numpy()
         return np.ascontiguousarray(self._latent[picks])

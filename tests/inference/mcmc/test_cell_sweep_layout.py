@@ -1,10 +1,13 @@
-"""The compiled single-cell sweeps (``_kernels.cell_sweep``: cached second hits, branch-free sums,
-prefetching for jumping scans, ``exp``-free decisions far from 0) are bit-for-bit the straightforward
-sweep, which this file keeps as plain Python: same flips, same map, same first hits and likelihoods,
+"""The compiled single-cell sweeps (``_kernels.cell_sweep``: every cell's likelihood ratio kept in fixed
+point and updated when a ray's first or second hit moves, ``exp``-free decisions far from 0) are
+bit-for-bit the straightforward sweep, which this file keeps as plain Python (it sums the rays through
+the cell from scratch at every visit, in the same fixed point): same flips, same map, same first hits,
 for every scan, both update rules, an independent and a correlated prior, from ordinary and from
-impossible states (``-inf`` likelihoods), and the second-hit cache never holds a stale entry."""
+impossible states (``-inf`` likelihoods). The kept sums equal the sums from scratch after every flip,
+and differ from the floating-point sums by no more than the rounding bound."""
 
 import math
+from itertools import permutations
 
 import numpy as np
 import pytest
@@ -17,8 +20,6 @@ from ogm_ppl.priors import IndependentPrior, MRFPrior
 from ogm_ppl.priors.local import cell_log_odds, local_of
 
 N = 24
-
-
 def scene(prior):
     rng = np.random.default_rng(5)
     truth = np.zeros((N, N), bool)
@@ -34,37 +35,55 @@ def scene(prior):
 
 def arrays(model, holes=0.0):
     """The index and the likelihood table; ``holes``: the share of table entries set to ``-inf``
-    (impossible readings, which a sensor model with bounded support has)."""
+    (impossible readings, which a sensor model with bounded support has); ``None``: every entry a ray
+    uses made finite (the kernels' path for tables without impossible readings)."""
     r = model.rays
     idx = r.by_cell
     ll = model.loglik_table.numpy().copy()
-    ll[np.random.default_rng(9).random(ll.shape) < holes] = -np.inf
+    if holes is None:
+        ll[np.isneginf(ll)] = -1e3
+    else:
+        ll[np.random.default_rng(9).random(ll.shape) < holes] = -np.inf
     return r.offsets, r.cells, idx.offsets, idx.ray, idx.kappa, ll
 
 
-def plain_sweep(arr, m, f, order, uniforms, update, prior_lo=None, lp=None):
-    """The straightforward single-cell sweep: walk the rays through the cell, skip those blocked before it,
-    look the next occupied cell up along the ray when the cell is a first hit. Mutates ``m`` and ``f``."""
-    offsets, cells, c_off, c_ray, c_kappa, ll = arr
+def next_occupied(arr, m, r, start):
+    offsets, cells = arr[0], arr[1]
+    a, n = offsets[r], offsets[r + 1] - offsets[r]
+    for j in range(start, n):
+        if m[cells[a + j]]:
+            return j
+    return n
 
-    def next_occupied(r, start):
-        a, n = offsets[r], offsets[r + 1] - offsets[r]
-        for j in range(start, n):
-            if m[cells[a + j]]:
-                return j
-        return n
 
+def plain_ratio(arr, m, f, k, scale):
+    """The likelihood ratio of cell ``k`` summed from scratch: rays blocked before ``k`` skipped, the next
+    occupied cell looked up along the ray when ``k`` is its first hit; each finite entry rounded to
+    ``rint(x * scale)`` (Python integers: no overflow), infinite terms counted, ``-inf - -inf`` skipped."""
+    _, _, c_off, c_ray, c_kappa, ll = arr
+    total, pos, neg = 0, 0, 0
+    for p in range(c_off[k], c_off[k + 1]):
+        r, kap = c_ray[p], c_kappa[p]
+        if f[r] < kap:
+            continue
+        x, y = float(ll[r, kap]), float(ll[r, f[r] if f[r] > kap else next_occupied(arr, m, r, kap + 1)])
+        if x > -math.inf and y > -math.inf:
+            total += int(np.rint(x * scale)) - int(np.rint(y * scale))
+        elif x > -math.inf:
+            pos += 1
+        elif y > -math.inf:
+            neg += 1
+    if pos:
+        return math.nan if neg else math.inf
+    return -math.inf if neg else total / scale
+
+
+def plain_sweep(arr, m, f, order, uniforms, update, scale, prior_lo=None, lp=None):
+    """The straightforward single-cell sweep (:func:`plain_ratio` at every visit). Mutates ``m`` and ``f``."""
+    _, _, c_off, c_ray, c_kappa, _ = arr
     flips = 0
     for i, k in enumerate(order):
-        d = 0.0  # (Python floats: -inf - -inf is a quiet nan)
-        for p in range(c_off[k], c_off[k + 1]):
-            r, kap = c_ray[p], c_kappa[p]
-            if f[r] < kap:
-                continue
-            t = float(ll[r, kap]) - float(ll[r, f[r]] if f[r] > kap else ll[r, next_occupied(r, kap + 1)])
-            if t == t:
-                d += t
-        lo = (prior_lo[k] if lp is None else cell_log_odds(lp, k, m)) + d
+        lo = (prior_lo[k] if lp is None else cell_log_odds(lp, k, m)) + plain_ratio(arr, m, f, k, scale)
         v = plain_new_value(lo, uniforms[i], int(m[k]), update)
         if v != m[k]:
             m[k] = v
@@ -74,7 +93,7 @@ def plain_sweep(arr, m, f, order, uniforms, update, prior_lo=None, lp=None):
                 if v and kap < f[r]:
                     f[r] = kap
                 elif not v and f[r] == kap:
-                    f[r] = next_occupied(r, kap + 1)
+                    f[r] = next_occupied(arr, m, r, kap + 1)
     return flips
 
 
@@ -90,16 +109,19 @@ def plain_new_value(lo, u, cur, update):
     return 1 if u * (1.0 + e) < e else 0
 
 
-def compiled_state(arr, m, f):
+def compiled_state(arr, m):
     offsets, cells, c_off, c_ray, c_kappa, ll = arr
-    rays = cs.ray_state(f, ll)
-    return cs.CellState(m, rays, cs.next_state(m, rays["f"], offsets, cells, ll), offsets, cells, c_off,
-                        cs.pair_index(c_ray, c_kappa, ll), ll)  # fmt: skip
+    return cs.cell_state(m, offsets, cells, c_off, c_ray, c_kappa, ll)
 
 
 def orders(latent, rng):
     return {"systematic": latent, "permutation": np.ascontiguousarray(latent[rng.permutation(len(latent))]),
             "random": np.ascontiguousarray(latent[rng.integers(0, len(latent), len(latent))])}  # fmt: skip
+
+
+def second_hits(arr, m, f):
+    lengths = np.diff(arr[0])
+    return np.array([next_occupied(arr, m, r, f[r] + 1) if f[r] < lengths[r] else lengths[r] for r in range(len(f))])
 
 
 @pytest.mark.parametrize("update", [cs.HEAT_BATH, cs.METROPOLISED])
@@ -118,51 +140,116 @@ def test_compiled_sweeps_are_the_plain_sweep_bit_for_bit(update, prior, start):
     m0[model.known_free.numpy()] = 0
     f0 = first_hits(m0, offsets, cells)
     assert start == "ogm-like" or np.isinf(ll[np.arange(len(f0)), f0]).any()  # impossible readings present
-    assert np.isinf(cs.pair_index(c_ray, c_kappa, ll)["ll"]).any()  # and impossible first hits
+    assert np.isinf(ll[c_ray, c_kappa]).any()  # and impossible first hits
     for name, order in orders(latent, rng).items():
         m_plain, f_plain = m0.copy(), f0.copy()
-        st = compiled_state(arr, m0.copy(), f0)
+        st = compiled_state(arr, m0.copy())
+        assert st.any_inf
         for sweep in range(4):
             u = rng.random(len(order))
             if sweep == 3:
                 u[::7] = 0.0  # the smallest uniforms: the exp-free shortcuts must not decide these
-            a = plain_sweep(arr, m_plain, f_plain, order, u, update, prior_lo, lp)
+            a = plain_sweep(arr, m_plain, f_plain, order, u, update, st.scale, prior_lo, lp)
             if lp is None:
                 b = cs.sweep_independent(st, order, prior_lo, u, update)
             else:
                 b = cs.sweep_local(st, order, lp, u, update)
             assert a == b, (name, sweep)
             assert np.array_equal(st.m, m_plain) and np.array_equal(st.rays["f"], f_plain), (name, sweep)
-            np.testing.assert_array_equal(st.rays["ll_hit"], ll[np.arange(len(f_plain)), f_plain])
-            known = st.nexts["s"] >= 0
-            fresh = cs.next_state(st.m, st.rays["f"], offsets, cells, ll)
-            assert np.array_equal(st.nexts[known], fresh[known]), (name, sweep)
+            assert np.array_equal(st.rays["s"], second_hits(arr, m_plain, f_plain)), (name, sweep)
         assert a > 0
 
 
-def test_log_lik_ratio_matches_the_plain_sum_and_fills_the_cache():
+@pytest.mark.parametrize("holes", [None, 0.0, 0.03])
+def test_kept_sums_are_the_sums_from_scratch_after_every_flip(holes):
+    """Exact arithmetic: whatever sequence of flips, each kept ``d_k`` (and count of infinite terms) is
+    the one a fresh state computes, and the ratio is :func:`plain_ratio`'s."""
     model = scene(IndependentPrior(0.3, N * N))
-    arr = arrays(model, holes=0.03)
+    arr = arrays(model, holes=holes)
+    offsets, cells = arr[:2]
+    rng = np.random.default_rng(3)
+    m = (rng.random(N * N) < 0.25).astype(np.uint8)
+    m[model.known_free.numpy()] = 0
+    st = compiled_state(arr, m.copy())
+    assert st.any_inf == (holes is not None)  # the model's own table has impossible readings (a hit read as none)
+    latent = model.latent.numpy()
+    for step, k in enumerate(rng.choice(latent, 400)):
+        cs.set_cell(st, int(k), 1 - int(st.m[k]))
+        fresh = compiled_state(arr, st.m.copy())
+        assert np.array_equal(st.d, fresh.d) and np.array_equal(st.inf, fresh.inf), step
+        assert np.array_equal(st.rays, fresh.rays), step
+    f = first_hits(st.m, offsets, cells)
+    for k in range(N * N):
+        got, want = cs.log_lik_ratio(st, k), plain_ratio(arr, st.m, f, k, st.scale)
+        assert got == want or (got != got and want != want), k
+
+
+def test_ratios_are_within_the_rounding_bound_of_the_floating_point_sum():
+    """``|kept - float sum| <= n_k 2^-S`` (each of a term's two entries rounds by at most 2^-S / 2), plus
+    the float sum's own rounding."""
+    model = scene(IndependentPrior(0.3, N * N))
+    arr = arrays(model, holes=None)
     offsets, cells, c_off, c_ray, c_kappa, ll = arr
     m = (np.random.default_rng(2).random(N * N) < 0.2).astype(np.uint8)
     m[model.known_free.numpy()] = 0
+    st = compiled_state(arr, m)
     f = first_hits(m, offsets, cells)
-    st = compiled_state(arr, m, f)
-    st.nexts["s"] = -1  # nothing known
     for k in range(N * N):
-        d = 0.0
+        d, mag = 0.0, 0.0
         for p in range(c_off[k], c_off[k + 1]):
             r, kap = c_ray[p], c_kappa[p]
             if f[r] < kap:
                 continue
-            nxt = kap + 1 + int(np.flatnonzero(np.r_[m[cells[offsets[r] + kap + 1:offsets[r + 1]]], 1])[0])
-            t = float(ll[r, kap]) - float(ll[r, f[r] if f[r] > kap else nxt])
-            if t == t:
-                d += t
-        got = cs.log_lik_ratio(st, k)
-        assert got == d or (got != got and d != d), k
-    first = np.unique(c_ray[f[c_ray] == c_kappa])  # rays whose first hit some cell is: now cached
-    assert (st.nexts["s"][first] >= 0).all()
+            y = ll[r, f[r]] if f[r] > kap else ll[r, next_occupied(arr, m, r, kap + 1)]
+            d += ll[r, kap] - y
+            mag += abs(ll[r, kap]) + abs(y)
+        n = c_off[k + 1] - c_off[k]
+        assert abs(cs.log_lik_ratio(st, k) - d) <= n / st.scale + 4 * n * np.finfo(float).eps * mag, k
+
+
+def test_fixed_point_bits_refuses_what_it_cannot_hold():
+    c_off = np.array([0, 2, 3])
+    ll = np.zeros((2, 3))
+    assert cs.fixed_point_bits(ll, c_off) == 60  # nothing to hold: as fine as the format allows
+    ll[0, 0] = -300.0
+    bits = cs.fixed_point_bits(ll, c_off)
+    assert 2 * (2 * 300 * 2.0**bits + 1) + 1 <= 2.0**62 < 2 * (2 * 300 * 2.0 ** (bits + 1) + 1) + 1
+    ll[1, 2] = -np.inf  # an impossible reading is fine
+    assert cs.fixed_point_bits(ll, c_off) == bits
+    for bad in (np.inf, np.nan):
+        ll[1, 1] = bad
+        with pytest.raises(ValueError, match="ray 1, kappa 1"):
+            cs.fixed_point_bits(ll, c_off)
+    ll[1, 1] = -1e40
+    with pytest.raises(ValueError, match="fraction bits"):
+        cs.fixed_point_bits(ll, c_off)
+
+
+def test_draws_orders_and_uniforms():
+    cells = np.array([3, 7, 11, 20], dtype=np.int64)
+    seed = np.uint64(12345)
+    order, u = cs.draws(cells, cs.SYSTEMATIC, seed)
+    assert order is cells or np.array_equal(order, cells)
+    o2, u2 = cs.draws(cells, cs.PERMUTATION, seed)
+    assert np.array_equal(u, u2) and sorted(o2) == sorted(cells)  # same seed, same uniforms
+    assert np.array_equal(cs.draws(cells, cs.PERMUTATION, seed)[0], o2)  # and the same order
+    o3 = cs.draws(cells, cs.RANDOM, seed)[0]
+    assert np.isin(o3, cells).all()
+    # uniforms: mean and variance of 10^6 draws within 6 standard errors of 1/2 and 1/12
+    big = cs.draws(np.arange(10**6), cs.SYSTEMATIC, np.uint64(7))[1]
+    assert ((big >= 0) & (big < 1)).all()
+    assert abs(big.mean() - 0.5) < 6 * math.sqrt(1 / 12 / 1e6)
+    assert abs(big.var() - 1 / 12) < 6 * math.sqrt(1 / 180 / 1e6)
+    # every permutation of 4 cells, and every cell of a random scan, about equally often over 24,000 seeds
+    T = 24_000
+    perms = {p: 0 for p in permutations(range(4))}
+    picks = np.zeros(4)
+    for s in range(T):
+        perms[tuple(cs.draws(np.arange(4), cs.PERMUTATION, np.uint64(s))[0])] += 1
+        picks += np.bincount(cs.draws(np.arange(4), cs.RANDOM, np.uint64(s + T))[0], minlength=4)
+    p = 1 / 24
+    assert all(abs(c - T * p) < 6 * math.sqrt(T * p * (1 - p)) for c in perms.values()), perms
+    assert np.all(np.abs(picks - T) < 6 * math.sqrt(4 * T * 0.25 * 0.75)), picks
 
 
 def test_new_value_shortcuts_are_exact():
