@@ -73,8 +73,14 @@ def main(root: str, repeat: int = 15) -> dict:
             p = k.sample(p)
             if i >= 20:
                 times.append(time.perf_counter() - t)
-        out[scan] = {"best": 1e3 * min(times), "median": 1e3 * float(np.median(times))}
-    print(root, "  ".join(f"{k} best {v['best']:.1f} / median {v['median']:.1f} ms" for k, v in out.items()))
+        out[scan] = {"best": 1e3 * min(times), "median": 1e3 * float(np.median(times)),
+                     "change rate": k.diagnostics()["change rate"]}  # fmt: skip
+        if getattr(k, "_bits", None) is not None:
+            out["fixed-point bits"] = k._bits
+    print(root, "  ".join(f"{k} best {v['best']:.1f} / median {v['median']:.1f} ms (change rate {v['change rate']:.3f})"
+                          for k, v in out.items() if k in SCANS))  # fmt: skip
+    if "fixed-point bits" in out:
+        print("fixed-point bits S =", out["fixed-point bits"])
     return out
 
 

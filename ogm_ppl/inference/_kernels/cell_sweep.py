@@ -26,8 +26,8 @@ the order of the updates. ``d_k`` is therefore held in fixed point: every finite
 every update is exact and the kept value always *equals* the sum from scratch, whatever happened before
 (``tests/inference/mcmc/test_cell_sweep_layout.py`` checks it after every flip). ``S`` is chosen per model
 (:func:`fixed_point_bits`) so that no cell's sum can leave the int64 range; the conditional log-odds differ
-from the floating-point sum of the table by at most ``n_k 2^-S`` (``n_k``: rays through ``k``; ``S = 40``,
-a bound of about 1e-11, in the reference scene). Impossible readings (``-inf`` entries) are counted
+from the floating-point sum of the table by at most ``n_k 2^-S`` (``n_k``: rays through ``k``; ``S = 43``
+in the 500 x 500 reference scene, where a cell has up to 778 rays: a bound of 9e-11). Impossible readings (``-inf`` entries) are counted
 apart: a term ``x - (-inf)`` adds to ``pos_k``, ``-inf - y`` to ``neg_k``, and ``-inf - -inf`` counts as no
 preference; ``d_k`` is then ``+inf`` (``pos_k > 0``), ``-inf`` (``neg_k > 0``) or ``nan`` (both: the state
 has no mass either way and the cell moves by a fair coin, see :func:`new_value`).
