@@ -75,12 +75,14 @@ def main(root: str, repeat: int = 15) -> dict:
                 times.append(time.perf_counter() - t)
         out[scan] = {"best": 1e3 * min(times), "median": 1e3 * float(np.median(times)),
                      "change rate": k.diagnostics()["change rate"]}  # fmt: skip
-        if getattr(k, "_bits", None) is not None:
+        if getattr(k, "_bits", None) is not None:  # the kept-sum kernel: its fixed point and rounding bound
             out["fixed-point bits"] = k._bits
+            out["rounding bound"] = int(np.diff(k._c_off).max()) * 2.0 ** -k._bits
     print(root, "  ".join(f"{k} best {v['best']:.1f} / median {v['median']:.1f} ms (change rate {v['change rate']:.3f})"
                           for k, v in out.items() if k in SCANS))  # fmt: skip
     if "fixed-point bits" in out:
-        print("fixed-point bits S =", out["fixed-point bits"])
+        print(f"fixed-point bits S = {out['fixed-point bits']}; log-odds within {out['rounding bound']:.2g} of the "
+              "floating-point sum (the most rays a cell has x 2^-S)")  # fmt: skip
     return out
 
 

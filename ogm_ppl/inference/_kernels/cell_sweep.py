@@ -15,10 +15,11 @@ ray's first and second occupied positions ``f_r < s_r`` (``len(r)`` where there 
 with ``ll[r, kappa] = log p(z_r | first hit at kappa)`` (column ``len(r)``: no hit). Rather than summing the
 rays through ``k`` at every visit (about 25 (ray, cell) pairs a cell, 6.3 M a sweep of the 500 x 500
 reference scene), the state holds ``d_k`` for every cell and updates it only when a ray's ``f`` or ``s``
-changes, i.e. when a cell flips: a visit reads one record, and a flip walks the rays whose first or second
-hit it moves (:func:`_retarget`). Once a chain has burnt in, few cells flip (about 2 % a sweep in the
-reference scene), so a sweep costs a fraction of the pair sum, and the visit order no longer matters for
-memory traffic: permutation and random scans cost what a systematic one does.
+changes, i.e. when a cell flips: a visit reads the cell's kept sum (and its counts of infinite terms), and a
+flip walks the rays whose first or second hit it moves (:func:`_retarget`). Once a chain has burnt in, few
+cells flip (about 2 % a sweep in the reference scene), so a sweep costs a fraction of the pair sum, and a
+visit in a scan that jumps about the map misses the cache a few times instead of once for every ray
+(``benchmarks/sweep_before_after.py`` measures both).
 
 **Exact arithmetic.** An updated floating-point sum would drift from the sum it stands for and depend on
 the order of the updates. ``d_k`` is therefore held in fixed point: every finite table entry counts as
@@ -46,6 +47,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from ogm_ppl.inference._kernels.cells import _next_occupied
 from ogm_ppl.priors.local import STENCIL, TILES, stencil_cell_log_odds, tile_cell_log_odds
 
 HEAT_BATH = 0
@@ -74,7 +76,7 @@ class CellState(NamedTuple):
     rays: np.ndarray  # R RAY records: first and second occupied kappa
     d: np.ndarray  # K int64: the fixed-point sum of each cell's finite terms
     inf: np.ndarray  # K INF records: the counts of each cell's infinite terms (kept only if any_inf)
-    any_inf: bool  # whether the table has a -inf entry (if not, no term is infinite: the counts stay 0)
+    any_inf: bool  # whether an entry a ray uses is -inf (if not, no term is infinite: the counts stay 0)
     offsets: np.ndarray  # R + 1 int64: CSR along rays
     cells: np.ndarray  # nnz int64: cells of each ray in kappa order
     c_off: np.ndarray  # K + 1 int64: CSR by cell
@@ -116,13 +118,9 @@ def cell_state(m: np.ndarray, offsets, cells, c_off, c_ray, c_kappa, ll: np.ndar
     return st
 
 
-def _any_impossible(ll: np.ndarray, offsets: np.ndarray) -> bool:
-    """Whether an entry a ray can use (``kappa <= len(ray)``; the rest of the row is padding) is ``-inf``."""
-    return bool(_any_impossible_in(ll, offsets))
-
-
 @nb.njit(cache=True)
-def _any_impossible_in(ll, offsets):
+def _any_impossible(ll, offsets):
+    """Whether an entry a ray can use (``kappa <= len(ray)``; the rest of the row is ``-inf`` padding) is ``-inf``."""
     for r in range(offsets.shape[0] - 1):
         for j in range(offsets[r + 1] - offsets[r] + 1):
             if ll[r, j] == -np.inf:
@@ -134,22 +132,12 @@ def _any_impossible_in(ll, offsets):
 def _fill(st):
     for r in range(st.rays.shape[0]):
         n = st.offsets[r + 1] - st.offsets[r]
-        f = _next_occupied(st, r, 0)
-        s = _next_occupied(st, r, f + 1) if f < n else n
+        f = _next_occupied(st.m, st.offsets, st.cells, r, 0)
+        s = _next_occupied(st.m, st.offsets, st.cells, r, f + 1) if f < n else n
         st.rays[r].f = f
         st.rays[r].s = s
         for kap in range(min(f, n - 1) + 1):
             _ray_term(st, r, kap, f, s, 1)
-
-
-@nb.njit(cache=True, inline="always")
-def _next_occupied(st, r, start):
-    a = st.offsets[r]
-    n = st.offsets[r + 1] - a
-    for j in range(start, n):
-        if st.m[st.cells[a + j]]:
-            return j
-    return n
 
 
 @nb.njit(cache=True, inline="always")
@@ -262,9 +250,9 @@ def _set_cell(st, k, v):
                 _retarget(st, r, f, kap)
         elif kap == f:  # the first hit freed: the second takes over, the next occupied after it is second
             n = st.offsets[r + 1] - st.offsets[r]
-            _retarget(st, r, s, _next_occupied(st, r, s + 1) if s < n else n)
+            _retarget(st, r, s, _next_occupied(st.m, st.offsets, st.cells, r, s + 1) if s < n else n)
         elif kap == s:  # the second hit freed
-            _retarget(st, r, f, _next_occupied(st, r, kap + 1))
+            _retarget(st, r, f, _next_occupied(st.m, st.offsets, st.cells, r, kap + 1))
 
 
 @nb.njit(cache=True, inline="always")
