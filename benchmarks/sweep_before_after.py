@@ -177,7 +177,8 @@ def _base_sweep(st, order, prior_log_odds, uniforms):
 
 
 def _baseline():
-    from ogm_ppl.inference.mcmc.gibbs import CellGibbs, _MapKernel
+    from ogm_ppl.inference.mcmc.gibbs import CellGibbs
+    from ogm_ppl.inference.mcmc.kernel import MapKernel
 
     class BaselineCellGibbs(CellGibbs):
         """:class:`CellGibbs` (heat bath, independent prior) running the sweep before issue 14's item 3."""
@@ -191,7 +192,7 @@ def _baseline():
             self._base_pairs = pairs
 
         def _set_state(self, m) -> None:
-            _MapKernel._set_state(self, m)  # the map and every ray's first hit self._f, not CellGibbs's state
+            MapKernel._set_state(self, m)  # the map and every ray's first hit self._f, not CellGibbs's state
             rays = np.empty(len(self._f), _BASE_RAY)
             rays["f"], rays["ll_hit"] = self._f, self._ll[np.arange(len(self._f)), self._f]
             self._base = _BaseState(self._m, rays, self._offsets, self._cells, self._c_off, self._base_pairs,
