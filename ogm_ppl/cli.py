@@ -58,9 +58,15 @@ _PNG_UNKNOWN = (217, 217, 217)  # the light grey of viz.plot_map for unknown cel
 MAP_FORMAT = "ogm_ppl.map"
 MAP_FORMAT_VERSION = 1
 #: flags of ``ogm-ppl map`` that set a method parameter: flag -> (parameter, argparse dest)
-METHOD_FLAGS = {"--delta": ("delta", "delta"), "--prior": ("prior", "prior"), "--lambda": ("lam", "lam"),
-                "--sigma": ("sigma_cells", "sigma"), "--sweeps": ("sweeps", "sweeps"),
-                "--warmup": ("burn_in", "warmup"), "--patch": ("patch", "patch")}  # fmt: skip
+METHOD_FLAGS = {
+    "--delta": ("delta", "delta"),
+    "--prior": ("prior", "prior"),
+    "--lambda": ("lam", "lam"),
+    "--sigma": ("sigma_cells", "sigma"),
+    "--sweeps": ("sweeps", "sweeps"),
+    "--warmup": ("burn_in", "warmup"),
+    "--patch": ("patch", "patch"),
+}
 #: the command line's own defaults (``--help`` states them): sweeps, burn-in = sweeps // 10, and the
 #: thesis's cell prior 0.234 for the prior "independent"
 CLI_SWEEPS, CLI_LAMBDA = 200, 0.234
@@ -148,8 +154,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--traceback", action="store_true",
                         help="on an error, show the Python traceback instead of one line (for bug reports)")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
-                                help="map, methods, simulate, convert, experiment or run (COMMAND --help for its "
-                                     "options)")
+                                help="map, methods, simulate, convert, experiment or run "
+                                "(COMMAND --help for its options)")
 
     # --------------------------------------------------------------------------------- map
     m = sub.add_parser("map", help="occupancy grid map of a CARMEN log or a dataset file",
@@ -190,19 +196,19 @@ def build_parser() -> argparse.ArgumentParser:
                         "KIND:CORPUS (ogm_ppl.priors.prior_by_name), e.g. mrf:houseexpo, patch3:houseexpo, "
                         "border:houseexpo, border1:houseexpo")
     m.add_argument("--lambda", dest="lam", type=_probability, metavar="P",
-                   help=f"parameter lam: cell prior occupancy of the independent prior (default {CLI_LAMBDA}, "
-                        "the thesis's value)")
+                   help="parameter lam: cell prior occupancy of the independent prior "
+                        f"(default {CLI_LAMBDA}, the thesis's value)")
     m.add_argument("--sigma", type=_pos_float, metavar="CELLS",
                    help="parameter sigma_cells: standard deviation of the Gaussian range model in cells "
-                        "(default: the dataset's simulation sigma if recorded, else 1.0 cell, about the scatter "
-                        "of a corrected real log at 5 cm)")
+                        "(default: the dataset's simulation sigma if recorded, else 1.0 cell, about the "
+                        "scatter of a corrected real log at 5 cm)")
     m.add_argument("--sweeps", type=_pos_int, metavar="N",
                    help=f"parameter sweeps: MCMC sweeps counted in the marginals (default {CLI_SWEEPS})")
     m.add_argument("--warmup", type=_nonneg_int, metavar="N",
                    help="parameter burn_in: MCMC sweeps run before counting (default: sweeps // 10)")
     m.add_argument("--patch", metavar="SHAPE",
-                   help="parameter patch: of gibbs (PatchGibbs instead of CellGibbs) and patch (default 3x3): "
-                        "HxW, an int L (a run of L cells), 'plus' or 'square'")
+                   help="parameter patch: of gibbs (PatchGibbs instead of CellGibbs) and patch "
+                        "(default 3x3): HxW, an int L (a run of L cells), 'plus' or 'square'")
     m.add_argument("--seed", type=_nonneg_int, default=0, metavar="S", help="random seed (>= 0, default 0)")
     _add_reader_options(m, carmen_only=True)
     m.add_argument("--thresholds", choices=("ros1", "nav2"), default="ros1",
@@ -242,9 +248,12 @@ def build_parser() -> argparse.ArgumentParser:
     _add_reader_options(c, carmen_only=False)
 
     # --------------------------------------------------------------------------------- methods
-    ms = sub.add_parser("methods", help="list the map methods and their parameters",
-                        description="List the registered map methods (ogm_ppl.methods): name, one line, "
-                                    "and each parameter with its default, kind and meaning.")  # fmt: skip
+    ms = sub.add_parser(
+        "methods",
+        help="list the map methods and their parameters",
+        description="List the registered map methods (ogm_ppl.methods): name, one line, and each parameter "
+        "with its default, kind and meaning.",
+    )
     ms.add_argument("name", nargs="?", metavar="NAME", help="show this method only")
 
     # --------------------------------------------------------------------------------- experiment
@@ -438,8 +447,10 @@ def _method_params(args) -> tuple[MapMethod, object]:
             continue
         if key not in names:
             having = [m.name for m in methods() if key in m.param_names() and m.alias_of is None]
-            raise CLIError(f"{flag} sets the parameter {key!r} of {', '.join(having) or 'no method'}; "
-                           f"--method {method.name} has none")  # fmt: skip
+            raise CLIError(
+                f"{flag} sets the parameter {key!r} of {', '.join(having) or 'no method'}; "
+                f"--method {method.name} has none"
+            )
         values[key], source[key] = v, f"argument {flag}"
     for item in args.param:
         key, eq, v = item.partition("=")
@@ -466,7 +477,9 @@ def _method_params(args) -> tuple[MapMethod, object]:
         raise CLIError(f"{where}: {e.message}") from None
 
 
-def _compute_map(args, method, params, inp: _Input, grid: Grid, times: dict) -> tuple[np.ndarray, np.ndarray, dict]:
+def _compute_map(
+    args, method: MapMethod, params, inp: _Input, grid: Grid, times: dict
+) -> tuple[np.ndarray, np.ndarray, dict]:
     """``(probabilities K float64, observed K bool, details)`` of ``method``: the marginals averaged over
     its ``chains`` (chain ``c`` seeded ``--seed + c``); warnings become lines ``ogm-ppl: warning: ...``."""
     sigma = float(inp.settings.get("sigma_cells") or 0) or None
@@ -476,8 +489,8 @@ def _compute_map(args, method, params, inp: _Input, grid: Grid, times: dict) -> 
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         for c in range(chains):
-            ctx = RunContext(seed=args.seed + c, cache_dir=args.out, progress=_progress(),
-                             where=f"ogm-ppl map {args.input}")  # fmt: skip
+            where = f"ogm-ppl map {args.input}"
+            ctx = RunContext(seed=args.seed + c, cache_dir=args.out, progress=_progress(), where=where)
             result = method.run(params, problem, ctx)
             assert result.probabilities is not None  # no stop_after on the command line
             probs.append(result.probabilities)

@@ -138,8 +138,10 @@ def run_intel_headline(out: str | os.PathLike, log: str | os.PathLike | None = N
     if log is None:
         log = find_shared_file(INTEL_LOG)
         if log is None:
-            raise FileNotFoundError(f"the Intel Lab log ({INTEL_LOG}) is not under $OGM_PPL_DATA or ../shared/data "
-                                    "beside the checkout; pass --log PATH")  # fmt: skip
+            raise FileNotFoundError(
+                f"the Intel Lab log ({INTEL_LOG}) is not under $OGM_PPL_DATA or ../shared/data beside the "
+                "checkout; pass --log PATH"
+            )
     spec = parse_spec(headline_spec(log, quick=quick), "<headline>")
     t0 = time.perf_counter()
     result = run_experiment(spec, out / "intel", scheduler=scheduler, workers=workers, progress=progress)
@@ -175,8 +177,15 @@ def _summary(block: dict) -> dict:
     return {k: block[k] for k in ("best_f1", "threshold", "precision", "recall", "auc", "max_precision") if k in block}
 
 
-def run_headline(out: str | os.PathLike, seed: int = 0, log: str | os.PathLike | None = None, quick: bool = False,
-                 scheduler=None, workers: int | None = None, progress: bool = False) -> dict:  # fmt: skip
+def run_headline(
+    out: str | os.PathLike,
+    seed: int = 0,
+    log: str | os.PathLike | None = None,
+    quick: bool = False,
+    scheduler=None,
+    workers: int | None = None,
+    progress: bool = False,
+) -> dict:
     """What ``make run`` does: the real-data headline (:mod:`ogm_ppl.experiment.headline`: the Intel Lab
     log, sparse, traditional OGM against Gibbs with a learned border prior) and the simulated examples;
     writes the figures, ``report.md`` and ``report.json`` into ``out``.
@@ -190,7 +199,9 @@ def run_headline(out: str | os.PathLike, seed: int = 0, log: str | os.PathLike |
     lines = ["# ogm_ppl headline run", ""]
     report: dict = {}
     try:
-        intel = run_intel_headline(out, log, quick=quick, scheduler=scheduler, workers=workers, progress=progress)
+        intel = run_intel_headline(
+            out, log, quick=quick, scheduler=scheduler, workers=workers, progress=progress
+        )
         lines += intel["markdown"]
         report["intel"] = intel["json"]
     except FileNotFoundError as e:

@@ -66,12 +66,16 @@ def run_simple2d(out: Path, seed: int = 0) -> dict:
         seconds[label] = time.perf_counter() - t0
         probs[label] = m.probabilities.numpy()
     observed = rays.reached()  # cells some beam reached: the mask does not depend on the update term
-    uniform = OccupancyModel(ex.grid, rays, GaussianRange(ex.sigma_cells), IndependentPrior(0.5, ex.grid.num_cells))
+    uniform = OccupancyModel(
+        ex.grid, rays, GaussianRange(ex.sigma_cells), IndependentPrior(0.5, ex.grid.num_cells)
+    )
     t0 = time.perf_counter()
     label = "offline patch map, 3x3 centred (Sec. 3.2)"
     probs[label] = offline_patch_map(uniform, (3, 3), overlap=True).marginals.numpy()
     seconds[label] = time.perf_counter() - t0
-    realistic = OccupancyModel(ex.grid, rays, GaussianRange(ex.sigma_cells), IndependentPrior(0.234, ex.grid.num_cells))
+    realistic = OccupancyModel(
+        ex.grid, rays, GaussianRange(ex.sigma_cells), IndependentPrior(0.234, ex.grid.num_cells)
+    )
     stats = RunningStats(realistic)
     t0 = time.perf_counter()
     run_gibbs(CellGibbs(realistic), GIBBS_SWEEPS, stats, warmup=50, seed=seed, progress=False)
@@ -82,8 +86,13 @@ def run_simple2d(out: Path, seed: int = 0) -> dict:
     results = {}
     for label, p in probs.items():
         f1, thr = best_f1(p, truth, mask=mask)
-        results[label] = {"label": label, "best_f1": f1, "best_threshold": thr, "roc_auc": roc_auc(p, truth, mask=mask),
-                          "seconds": seconds[label]}  # fmt: skip
+        results[label] = {
+            "label": label,
+            "best_f1": f1,
+            "best_threshold": thr,
+            "roc_auc": roc_auc(p, truth, mask=mask),
+            "seconds": seconds[label],
+        }
     n = len(probs) + 1
     cols = 4
     rows = -(-n // cols)
@@ -100,8 +109,13 @@ def run_simple2d(out: Path, seed: int = 0) -> dict:
 
     toy = toy_1d(num_cells=20, readings=THESIS_TOY_READINGS)
     trays = raycast(toy.grid, toy.scans)
-    exact = pose_constrained_1d(OccupancyModel(toy.grid, trays, GaussianRange(3.0), IndependentPrior(0.5, 20)))
-    series = {"ground truth": toy.truth.astype(float), "exact posterior (Sec. 2.3.1)": exact.marginals.numpy()}
+    exact = pose_constrained_1d(
+        OccupancyModel(toy.grid, trays, GaussianRange(3.0), IndependentPrior(0.5, 20))
+    )
+    series = {
+        "ground truth": toy.truth.astype(float),
+        "exact posterior (Sec. 2.3.1)": exact.marginals.numpy(),
+    }
     for name, label in MAPS.items():
         series[label] = evidence_grid(trays, delta_by_name(name)).probabilities.numpy()
     fig, ax = plt.subplots(figsize=(11, 3.2))
@@ -136,8 +150,14 @@ def run_simple2d(out: Path, seed: int = 0) -> dict:
         "|---|---|---|---|---|",
     ]
     for r in results.values():
-        lines.append(f"| {r['label']} | {r['best_f1']:.3f} | {r['best_threshold']:.2f} | "
-                     f"{r['roc_auc']:.3f} | {r['seconds']:.3f} |")  # fmt: skip
-    lines += ["", "Figures: `simple2d_maps.png` (Fig. 1.10 / 2.8 style), `toy1d_marginals.png` (Fig. 2.1 style).", ""]
+        lines.append(
+            f"| {r['label']} | {r['best_f1']:.3f} | {r['best_threshold']:.2f} | "
+            f"{r['roc_auc']:.3f} | {r['seconds']:.3f} |"
+        )
+    lines += [
+        "",
+        "Figures: `simple2d_maps.png` (Fig. 1.10 / 2.8 style), `toy1d_marginals.png` (Fig. 2.1 style).",
+        "",
+    ]
     report["markdown"] = lines
     return report

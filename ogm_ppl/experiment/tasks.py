@@ -287,9 +287,15 @@ def run_algorithm(ds, alg, chain: int, seed: int, metrics, output, out: str | Pa
     truth, mask, _ = load_eval(out, ds, metrics)
     method = alg.method
     problem = MapProblem(grid, scans, sigma_cells=float(ds.params["sigma_cells"]))
-    ctx = RunContext(seed=seed, checkpoint_dir=folder, cache_dir=out, resume=resume, stop_after=stop_after,
-                     score=lambda q: _quick_scores(q, truth, mask, metrics.thresholds),
-                     where=f"experiment dataset {ds.name}")  # fmt: skip
+    ctx = RunContext(
+        seed=seed,
+        checkpoint_dir=folder,
+        cache_dir=out,
+        resume=resume,
+        stop_after=stop_after,
+        score=lambda q: _quick_scores(q, truth, mask, metrics.thresholds),
+        where=f"experiment dataset {ds.name}",
+    )
     t0 = time.perf_counter()
     with task_env(), (_RNG_LOCK if method.stochastic else contextlib.nullcontext()):
         result = method.run(alg.method_params(), problem, ctx)
@@ -301,8 +307,16 @@ def run_algorithm(ds, alg, chain: int, seed: int, metrics, output, out: str | Pa
     _savez(folder / "marginals.npz", marginals=q.reshape(grid.shape), format_version=np.int64(1))
     if output.maps:
         _png(folder / "map.png", q, grid, f"{ds.name} / {alg.name} / chain {chain}", output.dpi)
-    rec = {"hash": h, "dataset": ds.name, "algorithm": alg.name, "chain": chain, "seed": seed, "seconds": seconds,
-           **_quick_scores(q, truth, mask, metrics.thresholds), **result.details}  # fmt: skip
+    rec = {
+        "hash": h,
+        "dataset": ds.name,
+        "algorithm": alg.name,
+        "chain": chain,
+        "seed": seed,
+        "seconds": seconds,
+        **_quick_scores(q, truth, mask, metrics.thresholds),
+        **result.details,
+    }
     _write_json(folder / "result.json", rec)
     (folder / "gibbs.npz").unlink(missing_ok=True)  # the result is final: a sampler's checkpoint is spent
     return rec

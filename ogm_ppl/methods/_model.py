@@ -14,12 +14,21 @@ __all__ = ["ModelParams", "patch_arg"]
 class ModelParams:
     """The model ``p(m) p(z | m)``: a prior by name and ``GaussianRange(sigma_cells)``."""
 
-    prior: str = param("independent", PriorName(), "map prior (prior_by_name: independent, mrf:houseexpo, "
-                                                   "border:houseexpo, ...)")  # fmt: skip
-    lam: float | None = param(None, Optional(Float(0, 1, lo_open=True, hi_open=True)),
-                              "cell occupancy of the prior 'independent' (default 0.5)")  # fmt: skip
-    sigma_cells: float | None = param(None, Optional(Float(0, lo_open=True)),
-                                      "range noise of the sensor model in cells (default: the data's)")  # fmt: skip
+    prior: str = param(
+        "independent",
+        PriorName(),
+        "map prior (prior_by_name: independent, mrf:houseexpo, border:houseexpo, ...)",
+    )
+    lam: float | None = param(
+        None,
+        Optional(Float(0, 1, lo_open=True, hi_open=True)),
+        "cell occupancy of the prior 'independent' (default 0.5)",
+    )
+    sigma_cells: float | None = param(
+        None,
+        Optional(Float(0, lo_open=True)),
+        "range noise of the sensor model in cells (default: the data's)",
+    )
 
     def check(self) -> None:
         if self.lam is not None and self.prior != "independent":

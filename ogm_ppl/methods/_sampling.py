@@ -53,7 +53,9 @@ def _ckpt_sweep(path) -> int:
         return 0
 
 
-def run_kernel(kernel, params: SamplingParams, problem: MapProblem, ctx: RunContext, details: dict) -> MapResult:
+def run_kernel(
+    kernel, params: SamplingParams, problem: MapProblem, ctx: RunContext, details: dict
+) -> MapResult:
     """Run ``kernel`` as the module docstring says; ``details`` (the kernel's) go into the result."""
     from ogm_ppl.inference.mcmc import RunningStats, run_gibbs
 
@@ -68,7 +70,9 @@ def run_kernel(kernel, params: SamplingParams, problem: MapProblem, ctx: RunCont
             raise KeyboardInterrupt
         q = stats.marginals.numpy()
         if ctx.score is not None:
-            details["trace"] = [{"sweep": r.sweeps, "samples": int(stats.n), "seconds": r.seconds, **ctx.score(q)}]
+            details["trace"] = [
+                {"sweep": r.sweeps, "samples": int(stats.n), "seconds": r.seconds, **ctx.score(q)}
+            ]
         return MapResult(q, observed, details)
 
     folder = ctx.checkpoint_dir
@@ -96,8 +100,17 @@ def run_kernel(kernel, params: SamplingParams, problem: MapProblem, ctx: RunCont
         step = mark - done
         if budget is not None:
             step = min(step, budget)
-        r = run_gibbs(kernel, n, stats, warmup=warm, seed=ctx.seed, checkpoint=ckpt,
-                      checkpoint_every=params.checkpoint_every, progress=ctx.progress, stop_after=step)  # fmt: skip
+        r = run_gibbs(
+            kernel,
+            n,
+            stats,
+            warmup=warm,
+            seed=ctx.seed,
+            checkpoint=ckpt,
+            checkpoint_every=params.checkpoint_every,
+            progress=ctx.progress,
+            stop_after=step,
+        )
         done, seconds = r.sweeps, seconds + r.seconds
         if budget is not None:
             budget -= step
@@ -106,13 +119,23 @@ def run_kernel(kernel, params: SamplingParams, problem: MapProblem, ctx: RunCont
             if stats.n and ctx.score is not None:
                 rec.update(ctx.score(stats.marginals.numpy()))
             trace.append(rec)
-            atomic_write_text(trace_path, json.dumps({"trace": trace}, indent=1, sort_keys=True, allow_nan=True))
+            atomic_write_text(
+                trace_path, json.dumps({"trace": trace}, indent=1, sort_keys=True, allow_nan=True)
+            )
         elif budget is None or budget > 0:
             raise KeyboardInterrupt  # interrupted (SIGINT): the checkpoint is kept for a resume
         if budget is not None and budget <= 0 and done < total:
             return MapResult(None, observed, {**details, "trace": trace, "sweeps_total": done})
     if stats.n == 0:  # every mark was reached before (killed after the last checkpoint): load it
-        r = run_gibbs(kernel, n, stats, warmup=warm, seed=ctx.seed, checkpoint=ckpt,
-                      checkpoint_every=params.checkpoint_every, progress=False)  # fmt: skip
+        r = run_gibbs(
+            kernel,
+            n,
+            stats,
+            warmup=warm,
+            seed=ctx.seed,
+            checkpoint=ckpt,
+            checkpoint_every=params.checkpoint_every,
+            progress=False,
+        )
         done = r.sweeps
     return MapResult(stats.marginals.numpy(), observed, {**details, "trace": trace, "sweeps_total": done})

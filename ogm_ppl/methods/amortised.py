@@ -33,5 +33,6 @@ def amortised(params: AmortisedParams, problem: MapProblem, ctx: RunContext) -> 
     model = problem.model()
     guide = load_guide(params.guide, model)
     q = guide.marginals(model).numpy()
-    return MapResult(q, problem.rays.reached(), {"ray_cells": int(problem.rays.nnz),
-                                                  "trained_for": guide.trained_for})  # fmt: skip
+    return MapResult(
+        q, problem.rays.reached(), {"ray_cells": int(problem.rays.nnz), "trained_for": guide.trained_for}
+    )

@@ -26,9 +26,14 @@ class GibbsParams(SamplingParams):
     patch: object = param(1, Patch(), "1: CellGibbs; a larger patch: PatchGibbs")
     scan: str = param("systematic", Choice(*SCANS), "order of the cells / patches in a sweep")
     update: str = param("gibbs", Choice("gibbs", "metropolised"), "heat bath or metropolised update")
-    p_rand_patch: float = param(0.0, Float(0, 0.999), "PatchGibbs: probability of a random configuration (Alg. 2)")
-    random_patch: str = param("mh", Choice("mh", "thesis"), "PatchGibbs: random configurations accepted by MH "
-                                                           "or always (the thesis)")  # fmt: skip
+    p_rand_patch: float = param(
+        0.0, Float(0, 0.999), "PatchGibbs: probability of a random configuration (Alg. 2)"
+    )
+    random_patch: str = param(
+        "mh",
+        Choice("mh", "thesis"),
+        "PatchGibbs: random configurations accepted by MH or always (the thesis)",
+    )
     offset: int = param(0, Int(lo=0), "PatchGibbs: column of the tiling's first patch")
 
 
@@ -39,20 +44,33 @@ def gibbs(params: GibbsParams, problem: MapProblem, ctx: RunContext) -> MapResul
 
     model = params.model(problem)
     if params.patch == 1:
-        kernel = CellGibbs(model, scan=params.scan, update=params.update, init=params.init, delta=params.init_delta)
+        kernel = CellGibbs(
+            model, scan=params.scan, update=params.update, init=params.init, delta=params.init_delta
+        )
         details: dict = {"kernel": "CellGibbs"}
     else:
-        kernel = PatchGibbs(model, patch=patch_arg(params.patch), scan=params.scan, offset=params.offset,
-                            p_rand_patch=params.p_rand_patch, random_patch=params.random_patch,
-                            update=params.update, init=params.init, delta=params.init_delta)  # fmt: skip
+        kernel = PatchGibbs(
+            model,
+            patch=patch_arg(params.patch),
+            scan=params.scan,
+            offset=params.offset,
+            p_rand_patch=params.p_rand_patch,
+            random_patch=params.random_patch,
+            update=params.update,
+            init=params.init,
+            delta=params.init_delta,
+        )
         details = {"kernel": "PatchGibbs", "patch": params.patch}
     return run_kernel(kernel, params, problem, ctx, details)
 
 
 @dataclass(frozen=True)
 class MetropolisParams(SamplingParams):
-    proposal: str = param("uniform", Choice("uniform", "endpoint"), "cells proposed uniformly, or end-point "
-                                                                    "cells endpoint_weight times as often")  # fmt: skip
+    proposal: str = param(
+        "uniform",
+        Choice("uniform", "endpoint"),
+        "cells proposed uniformly, or end-point cells endpoint_weight times as often",
+    )
     endpoint_weight: float = param(4.0, Float(0, lo_open=True), "weight of cells holding a beam's end point")
     scan: str = param("random", Choice(*SCANS), "order of the proposed cells")
 
@@ -67,7 +85,12 @@ def metropolis(params: MetropolisParams, problem: MapProblem, ctx: RunContext) -
     """Single-cell Metropolis-Hastings flips (MetropolisCell: uniform or end-point proposals)."""
     from ogm_ppl.inference.mcmc import MetropolisCell
 
-    kernel = MetropolisCell(params.model(problem), proposal=params.proposal,
-                            endpoint_weight=params.endpoint_weight, scan=params.scan, init=params.init,
-                            delta=params.init_delta)  # fmt: skip
+    kernel = MetropolisCell(
+        params.model(problem),
+        proposal=params.proposal,
+        endpoint_weight=params.endpoint_weight,
+        scan=params.scan,
+        init=params.init,
+        delta=params.init_delta,
+    )
     return run_kernel(kernel, params, problem, ctx, {"kernel": "MetropolisCell"})

@@ -26,11 +26,17 @@ class GuidedGibbsParams(SamplingParams):
     guide: str = param("shipped", GuideFile(), "the proposing guide: 'shipped' or a saved guide (.npz)")
     block: object = param([6, 6], Block(), "proposal block: [h, w] windows of a tiling, or 'all'")
     p_guide: float = param(0.5, Float(0, 1), "probability that a sweep is a pass of guide moves")
-    start: str = param("guide", Choice("guide", "guide_sample", "base"),
-                       "start from the guide's mode, a draw from it, or the base kernel's init")  # fmt: skip
+    start: str = param(
+        "guide",
+        Choice("guide", "guide_sample", "base"),
+        "start from the guide's mode, a draw from it, or the base kernel's init",
+    )
     random_offset: bool = param(True, Bool(), "draw the tiling's offset at every pass")
-    proposal: str = param("bernoulli", Choice("bernoulli", "tiles"), "independent cells, or whole tiles of a "
-                                                                     "table prior tilted by the guide")  # fmt: skip
+    proposal: str = param(
+        "bernoulli",
+        Choice("bernoulli", "tiles"),
+        "independent cells, or whole tiles of a table prior tilted by the guide",
+    )
     patch: object = param(1, Patch(), "base kernel: 1 CellGibbs, a larger patch PatchGibbs")
     scan: str = param("systematic", Choice(*SCANS), "scan of the base kernel")
 
@@ -45,11 +51,19 @@ def guided_gibbs(params: GuidedGibbsParams, problem: MapProblem, ctx: RunContext
     if params.patch == 1:
         base = CellGibbs(model, scan=params.scan, init=params.init, delta=params.init_delta)
     else:
-        base = PatchGibbs(model, patch=patch_arg(params.patch), scan=params.scan, init=params.init,
-                          delta=params.init_delta)  # fmt: skip
-    block = params.block if params.block == "all" else tuple(params.block)
-    kernel = GuidedGibbs(base, load_guide(params.guide, model), block=block, p_guide=params.p_guide,
-                         init=params.start, random_offset=params.random_offset, proposal=params.proposal)  # fmt: skip
+        base = PatchGibbs(
+            model, patch=patch_arg(params.patch), scan=params.scan, init=params.init, delta=params.init_delta
+        )
+    block = patch_arg(params.block)
+    kernel = GuidedGibbs(
+        base,
+        load_guide(params.guide, model),
+        block=block,
+        p_guide=params.p_guide,
+        init=params.start,
+        random_offset=params.random_offset,
+        proposal=params.proposal,
+    )
     result = run_kernel(kernel, params, problem, ctx, {"kernel": "GuidedGibbs", "base": type(base).__name__})
     result.details["acceptance_rate"] = float(kernel.acceptance_rate)
     return result

@@ -20,12 +20,21 @@ __all__ = ["OGMParams", "ogm"]
 
 @dataclass(frozen=True)
 class OGMParams:
-    delta: str = param("haehnel", DeltaName(), "the update term (delta_by_name: haehnel, p21, elfes_thesis, ...)")
+    delta: str = param(
+        "haehnel", DeltaName(), "the update term (delta_by_name: haehnel, p21, elfes_thesis, ...)"
+    )
     prior: float = param(0.5, Float(0, 1, lo_open=True), "prior occupancy l_0 = logit(prior) of every cell")
-    clamp: object = param(None, Optional(Pair("log-odds")), "clamp the log-odds to [lo, hi] after each update")
-    fit: str = param("none", Choice("none", "setting"), "'setting': refit the term for the data's sigma and range")
-    sigma_cells: float | None = param(None, Optional(Float(0, lo_open=True)),
-                                      "the sensor setting's range noise in cells (default: the data's)")  # fmt: skip
+    clamp: object = param(
+        None, Optional(Pair("log-odds")), "clamp the log-odds to [lo, hi] after each update"
+    )
+    fit: str = param(
+        "none", Choice("none", "setting"), "'setting': refit the term for the data's sigma and range"
+    )
+    sigma_cells: float | None = param(
+        None,
+        Optional(Float(0, lo_open=True)),
+        "the sensor setting's range noise in cells (default: the data's)",
+    )
 
     def check(self) -> None:
         if self.fit == "setting":
@@ -35,8 +44,10 @@ class OGMParams:
             )
 
             if fit_family_for(self.delta) is None:
-                raise ParamError("fit", f"cannot refit {self.delta!r} for a sensor setting; "
-                                        f"fittable: {setting_family_names()}")  # fmt: skip
+                raise ParamError(
+                    "fit",
+                    f"cannot refit {self.delta!r} for a sensor setting; fittable: {setting_family_names()}",
+                )
 
 
 def _delta(params: OGMParams, problem: MapProblem, ctx: RunContext):
@@ -70,13 +81,22 @@ def _delta(params: OGMParams, problem: MapProblem, ctx: RunContext):
     return delta, {"delta_setting": setting, "warnings": [str(w.message) for w in caught]}
 
 
+def _clamp(clamp) -> tuple[float, float] | None:
+    return None if clamp is None else (float(clamp[0]), float(clamp[1]))
+
+
 @register_method("ogm", OGMParams, aliases={"p21": {"delta": "p21"}, "elfes": {"delta": "elfes_thesis"}})
 def ogm(params: OGMParams, problem: MapProblem, ctx: RunContext) -> MapResult:
     """Log-odds occupancy grid mapping with an update term Delta (traditional OGM: haehnel; Section 2.4)."""
     from ogm_ppl.inference.log_odds import evidence_grid_from_scans
 
     delta, details = _delta(params, problem, ctx)
-    ev = evidence_grid_from_scans(problem.grid, problem.scans, delta, prior=params.prior,
-                                  clamp=tuple(params.clamp) if params.clamp else None)  # fmt: skip
+    ev = evidence_grid_from_scans(
+        problem.grid,
+        problem.scans,
+        delta,
+        prior=params.prior,
+        clamp=_clamp(params.clamp),
+    )
     details = {"ray_cast": "fused with the update (evidence_grid_from_scans)", **details}
     return MapResult(ev.probabilities.numpy(), ev.observed.numpy(), details)

@@ -280,7 +280,9 @@ class Pair(Kind):
 
     def value(self, v):
         ok = isinstance(v, (list, tuple)) and len(v) == 2
-        ok = ok and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)
+        ok = ok and all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v
+        )
         if not ok or not v[0] < v[1]:
             raise _Bad(f"must be [lo, hi]{' ' + self.what if self.what else ''} with lo < hi, got {v!r}")
         return [float(v[0]), float(v[1])]
@@ -360,12 +362,14 @@ def param_fields(cls) -> list[tuple[str, Kind, Any, str]]:
     for f in dataclasses.fields(cls):
         if "kind" not in f.metadata:
             raise TypeError(f"{cls.__name__}.{f.name}: make parameter fields with param(default, kind, doc)")
-        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc]
+        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc,operator]
         out.append((f.name, f.metadata["kind"], default, f.metadata["doc"]))
     return out
 
 
-def parse_params(cls, values: Mapping[str, Any], *, text: bool = False, defaults: Mapping[str, Any] | None = None):
+def parse_params(
+    cls, values: Mapping[str, Any], *, text: bool = False, defaults: Mapping[str, Any] | None = None
+):
     """The dataclass ``cls`` from ``values`` (``text``: command-line strings), over ``defaults`` (values
     replacing the fields' own defaults, already valid). Unknown keys and bad values raise
     :class:`ParamError` naming the key; then ``cls.check(self)``, if defined, checks rules between fields."""

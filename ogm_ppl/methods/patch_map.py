@@ -39,5 +39,8 @@ def patch_map(params: PatchMapParams, problem: MapProblem, ctx: RunContext) -> M
         pm = offline_patch_map(model, patch_arg(params.patch), overlap=params.overlap)
     else:
         pm = online_patch_map(model, patch_arg(params.patch))
-    details = {**params.model_details(problem), "reference": "MAP map" if params.mode == "offline" else "online"}
+    details = {
+        **params.model_details(problem),
+        "reference": "MAP map" if params.mode == "offline" else "online",
+    }
     return MapResult(pm.marginals.numpy(), problem.rays.reached(), details)

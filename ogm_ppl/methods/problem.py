@@ -79,14 +79,20 @@ class MapProblem:
             return IndependentPrior(float(lam), self.grid.num_cells)
         return prior_by_name(name, self.grid.shape)
 
-    def model(self, prior: str = "independent", lam: float | None = None, sigma_cells: float | None = None,
-              p_rand: float = 0.0) -> OccupancyModel:  # fmt: skip
+    def model(
+        self,
+        prior: str = "independent",
+        lam: float | None = None,
+        sigma_cells: float | None = None,
+        p_rand: float = 0.0,
+    ) -> OccupancyModel:
         """The occupancy model of :meth:`prior` and ``GaussianRange(sigma(sigma_cells), p_rand)``."""
         from ogm_ppl.models.occupancy import OccupancyModel
         from ogm_ppl.sensors import GaussianRange
 
-        return OccupancyModel(self.grid, self.rays, GaussianRange(self.sigma(sigma_cells), p_rand),
-                              self.prior(prior, lam))  # fmt: skip
+        return OccupancyModel(
+            self.grid, self.rays, GaussianRange(self.sigma(sigma_cells), p_rand), self.prior(prior, lam)
+        )
 
 
 @dataclass

@@ -116,8 +116,10 @@ class MapMethod:
 
             result.probabilities = np.asarray(result.probabilities, dtype=np.float64).ravel()
             if result.probabilities.shape != (problem.grid.num_cells,):
-                raise ValueError(f"method {self.name!r} returned {result.probabilities.shape} probabilities "
-                                 f"for {problem.grid.num_cells} cells")  # fmt: skip
+                raise ValueError(
+                    f"method {self.name!r} returned {result.probabilities.shape} probabilities "
+                    f"for {problem.grid.num_cells} cells"
+                )
         return result
 
     def describe(self) -> list[str]:
@@ -138,8 +140,15 @@ def _first_line(fn) -> str:
     return doc.splitlines()[0].strip() if doc else fn.__name__
 
 
-def register_method(name: str, params: type, *, aliases: Mapping[str, Mapping[str, Any]] | None = None,
-                    stochastic: bool = False, sampler: bool = False, doc: str | None = None):  # fmt: skip
+def register_method(
+    name: str,
+    params: type,
+    *,
+    aliases: Mapping[str, Mapping[str, Any]] | None = None,
+    stochastic: bool = False,
+    sampler: bool = False,
+    doc: str | None = None,
+):
     """Decorator: register ``run(params, problem, ctx) -> MapResult`` as the method ``name`` with the
     parameter dataclass ``params`` (fields made with :func:`~.params.param`).
 
@@ -152,6 +161,7 @@ def register_method(name: str, params: type, *, aliases: Mapping[str, Mapping[st
     param_fields(params)  # every field made with param()
 
     def deco(fn: RunFunction) -> RunFunction:
+        _discover()  # the library's own methods first, whoever registers
         line = doc or _first_line(fn)
         new = [MapMethod(name, params, fn, line, stochastic=stochastic, sampler=sampler)]
         for alias, preset in (aliases or {}).items():
@@ -162,10 +172,13 @@ def register_method(name: str, params: type, *, aliases: Mapping[str, Mapping[st
         for m in new:
             old = _METHODS.get(m.name)
             if old is not None and (old.function.__module__, old.function.__qualname__) != (
-                fn.__module__, fn.__qualname__
+                fn.__module__,
+                fn.__qualname__,
             ):
-                raise ValueError(f"a map method named {m.name!r} is already registered "
-                                 f"({old.function.__module__}.{old.function.__qualname__})")  # fmt: skip
+                raise ValueError(
+                    f"a map method named {m.name!r} is already registered "
+                    f"({old.function.__module__}.{old.function.__qualname__})"
+                )
         for m in new:
             _METHODS[m.name] = m
         return fn
