@@ -70,15 +70,15 @@ else:  # Python 3.10: the backport, the same parser (a dependency there)
     import tomli as tomllib
 
 __all__ = [
-    "SpecError",
-    "ExperimentSpec",
-    "DatasetSpec",
     "AlgorithmSpec",
+    "DatasetSpec",
+    "ExperimentSpec",
     "MetricsSpec",
     "OutputSpec",
+    "SpecError",
+    "derive_seed",
     "load_spec",
     "parse_spec",
-    "derive_seed",
 ]
 
 _NAME = re.compile(r"[A-Za-z0-9_.-]+\Z")

@@ -34,8 +34,19 @@ import torch
 
 from ogm_ppl.io import atomic_write, atomic_write_text
 
-__all__ = ["TASK_VERSION", "task_hash", "task_env", "run_base", "run_dataset", "run_algorithm", "run_score",
-           "base_dir", "dataset_path", "run_dir", "score_path"]  # fmt: skip
+__all__ = [
+    "TASK_VERSION",
+    "base_dir",
+    "dataset_path",
+    "run_algorithm",
+    "run_base",
+    "run_dataset",
+    "run_dir",
+    "run_score",
+    "score_path",
+    "task_env",
+    "task_hash",
+]
 
 TASK_VERSION = 2  # 2: the sensor model sees walls in the last half cell of the range (sensors._common)
 _RNG_LOCK = threading.Lock()  # torch's global RNG is per process: one stochastic run at a time per process

@@ -25,7 +25,9 @@ environment variable ``OGM_PPL_METHODS`` (comma-separated modules), or as an ent
         p[problem.rays.endpoint_cells()] = params.level
         return MapResult(p, problem.rays.reached())
 
-The first docstring line is the method's one-line description (``ogm-ppl methods``).
+The first docstring line is the method's one-line description (``ogm-ppl methods``). An experiment run
+on dask workers (other processes) finds a method outside this package only through ``OGM_PPL_METHODS``
+or an entry point, which every process reads; a module imported by hand registers in its own process.
 """
 
 from __future__ import annotations
