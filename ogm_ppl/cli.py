@@ -7,228 +7,69 @@ Subcommands (``ogm-ppl SUBCOMMAND --help`` lists every option):
     by its zip magic ``PK``). Writes ``map.npz`` (probabilities, observed mask, grid, settings),
     ``map.png`` (thesis colour scale, one pixel per cell, unknown cells grey), a ROS ``map_server`` map in
     ``ros/`` (``map.yaml`` + ``map.pgm`` + the exact-probability sidecar ``map.npz``, which would clash with
-    ours beside it), ``report.json`` and ``report.md``. Methods: ``ogm`` (Hähnel log-odds), ``p21`` / ``elfes`` (the thesis's update terms,
-    Table 2.1 / 2.2), ``gibbs`` (cell or patch Gibbs sampling of the full posterior, Chapter 4) and
-    ``patch`` (the offline patch map, Section 3.2).
+    ours beside it), ``report.json`` and ``report.md``. ``--method NAME`` is any registered map method
+    (:mod:`ogm_ppl.methods`: ``ogm``, ``p21``, ``elfes``, ``gibbs``, ``patch``, ``vi``, ...), its
+    parameters set by ``--param KEY=VALUE`` or the flags mapped onto them (``--delta``, ``--prior``,
+    ``--lambda``, ``--sigma``, ``--sweeps``, ``--warmup``, ``--patch``).
+``methods [NAME]``
+    The registered map methods, one line each, with their parameters (``NAME``: that method only).
 ``simulate --map KIND|PNG --out FILE.npz``
     A stop-and-scan dataset (Section 6.1) on a generated ground-truth map or a PNG floor plan.
 ``convert LOG --out FILE.npz``
     A CARMEN log as a dataset file.
+``experiment SPEC``
+    An experiment spec (TOML, :mod:`ogm_ppl.experiment`).
 ``run --out DIR``
-    The headline experiment (what ``make run`` calls), described below.
+    The headline experiment (what ``make run`` calls): :func:`ogm_ppl.experiment.headline.run_headline`.
 
 Bad arguments and bad input files give one line ``ogm-ppl: error: ...`` on stderr and exit status 2
 (``--traceback`` shows the Python traceback instead).
-
-``run`` is the headline experiment. On real data (:mod:`ogm_ppl.experiment.headline`): the Intel Lab log at
-5 cm with half the beams and half / 10 % of the poses, traditional OGM, OGM with p21 and Gibbs sampling with
-the border prior learned from HouseExpo, scored against the thesis's benchmark (Table 6.5 / Fig. 6.17,
-reduced; a few minutes on 2 cores). Then, simulated: on the simple 2D example (Fig. 2.8) traditional OGM (Hähnel), OGM with
-the thesis's and our fitted update terms (Table 2.1, 2.2, Section 2.5), the offline patch map with a 3 x 3
-patch centred on every cell (Section 3.2) and Gibbs sampling of the full posterior (Chapter 4, cell prior
-0.234); on the 1D toy (Fig. 2.1) the same update terms beside the exact posterior. Written as PNG figures
-and a short Markdown report with precision/recall/F1 and ROC AUC.
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import json
 import math
 import os
 import sys
 import tempfile
 import time
+import warnings
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ogm_ppl import GaussianRange, OccupancyModel, raycast
-from ogm_ppl.datasets import THESIS_TOY_READINGS, simple_2d_example, toy_1d
 from ogm_ppl.datasets.mapgen import KINDS
 from ogm_ppl.grid import Grid
-from ogm_ppl.inference import CellGibbs, RunningStats, evidence_grid, run_gibbs
-from ogm_ppl.inference.exact import pose_constrained_1d
-from ogm_ppl.inference.patch_map import offline_patch_map
-from ogm_ppl.io import atomic_write_text
-from ogm_ppl.metrics import best_f1, near_mapped_mask, roc_auc
-from ogm_ppl.models import delta_by_name
-from ogm_ppl.priors import IndependentPrior, prior_by_name
+from ogm_ppl.io import atomic_write, atomic_write_text
+from ogm_ppl.methods import MapProblem, ParamError, RunContext, get_method, method_names, methods
 
 if TYPE_CHECKING:
     from ogm_ppl.datasets.carmen import CarmenLog
+    from ogm_ppl.methods import MapMethod
     from ogm_ppl.scans import Scans
 
-MAPS = {
-    "haehnel": "traditional OGM (Hähnel 2004)",
-    "moravec_thesis": "Moravec, optimised (Table 2.1)",
-    "elfes_thesis": "Elfes 1989, optimised (Table 2.1)",
-    "p21_thesis": "p21, optimised (Table 2.2)",
-    "p21": "p21, our fit (Section 2.5)",
-}
-GIBBS_SWEEPS = 2000
-
-
-def _savefig(fig, path: Path) -> None:
-    tmp = path.with_name(path.stem + ".tmp.png")
-    fig.savefig(tmp, dpi=110, bbox_inches="tight")
-    os.replace(tmp, path)
-
-
-def run_simple2d(out: Path, seed: int = 0) -> dict:
-    """The simple 2D example and the 1D toy: figures into ``out``; returns the report dict, its Markdown
-    lines under ``"markdown"``."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
-    from ogm_ppl.viz import plot_map, plot_marginals_1d
-
-    out.mkdir(parents=True, exist_ok=True)
-    ex = simple_2d_example(seed=seed)
-    t0 = time.perf_counter()
-    rays = raycast(ex.grid, ex.scans)
-    t_ray = time.perf_counter() - t0
-    truth = ex.truth.ravel()
-    truth = ex.truth.ravel()
-    probs = {}
-    seconds = {}
-    for name, label in MAPS.items():
-        t0 = time.perf_counter()
-        m = evidence_grid(rays, delta_by_name(name))
-        seconds[label] = time.perf_counter() - t0
-        probs[label] = m.probabilities.numpy()
-    observed = rays.reached()  # cells some beam reached: the mask does not depend on the update term
-    uniform = OccupancyModel(ex.grid, rays, GaussianRange(ex.sigma_cells), IndependentPrior(0.5, ex.grid.num_cells))
-    t0 = time.perf_counter()
-    label = "offline patch map, 3x3 centred (Sec. 3.2)"
-    probs[label] = offline_patch_map(uniform, (3, 3), overlap=True).marginals.numpy()
-    seconds[label] = time.perf_counter() - t0
-    realistic = OccupancyModel(ex.grid, rays, GaussianRange(ex.sigma_cells), IndependentPrior(0.234, ex.grid.num_cells))
-    stats = RunningStats(realistic)
-    t0 = time.perf_counter()
-    run_gibbs(CellGibbs(realistic), GIBBS_SWEEPS, stats, warmup=50, seed=seed, progress=False)
-    label = f"Gibbs, {GIBBS_SWEEPS} sweeps, prior 0.234 (Ch. 4)"
-    probs[label] = stats.marginals.numpy()
-    seconds[label] = time.perf_counter() - t0
-    mask = near_mapped_mask(observed.reshape(ex.grid.shape), 10.0).ravel()
-    results = {}
-    for label, p in probs.items():
-        f1, thr = best_f1(p, truth, mask=mask)
-        results[label] = {"label": label, "best_f1": f1, "best_threshold": thr, "roc_auc": roc_auc(p, truth, mask=mask),
-                          "seconds": seconds[label]}  # fmt: skip
-    n = len(probs) + 1
-    cols = 4
-    rows = -(-n // cols)
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 4 * rows))
-    axes = axes.ravel()
-    plot_map(ex.truth, ex.grid, axes[0], "ground truth and scan poses", poses=ex.scans.poses, colorbar=False)
-    for ax, (label, p) in zip(axes[1:], probs.items()):
-        plot_map(p, ex.grid, ax, label, colorbar=False)
-    for ax in axes[n:]:
-        ax.axis("off")
-    fig.tight_layout()
-    _savefig(fig, out / "simple2d_maps.png")
-    plt.close(fig)
-
-    toy = toy_1d(num_cells=20, readings=THESIS_TOY_READINGS)
-    trays = raycast(toy.grid, toy.scans)
-    exact = pose_constrained_1d(OccupancyModel(toy.grid, trays, GaussianRange(3.0), IndependentPrior(0.5, 20)))
-    series = {"ground truth": toy.truth.astype(float), "exact posterior (Sec. 2.3.1)": exact.marginals.numpy()}
-    for name, label in MAPS.items():
-        series[label] = evidence_grid(trays, delta_by_name(name)).probabilities.numpy()
-    fig, ax = plt.subplots(figsize=(11, 3.2))
-    plot_marginals_1d(series, ax, title="1D toy: robot at cell 0, wall at f = 8, z = {11, 7, 8, 8, 5, 9}")
-    _savefig(fig, out / "toy1d_marginals.png")
-    plt.close(fig)
-
-    report: dict = {
-        "simple2d": {
-            "grid": list(ex.grid.shape),
-            "resolution_m": ex.grid.resolution,
-            "readings": ex.scans.num_readings,
-            "max_range_readings": int(ex.scans.is_max.sum()),
-            "ray_cells": rays.nnz,
-            "raycast_seconds": t_ray,
-            "observed_cells": int(observed.sum()),
-            "maps": results,
-        },
-        "toy1d": {k: np.asarray(v).round(4).tolist() for k, v in series.items()},
-    }
-    lines = [
-        "## Simulated: the simple 2D example and the 1D toy",
-        "",
-        f"Simple 2D example (Fig. 2.8 setting): {ex.grid.shape[0]}x{ex.grid.shape[1]} cells at "
-        f"{ex.grid.resolution} m, 3 poses x 720 beams, sigma = 3 cells; "
-        f"{report['simple2d']['max_range_readings']} max-range readings; {rays.nnz} ray-cell entries "
-        f"traversed in {t_ray * 1e3:.1f} ms.",
-        "",
-        "Scores against the ground truth over cells within 10 cells of an observed cell (Fig. 6.16b):",
-        "",
-        "| map | best F1 | at threshold | ROC AUC | seconds |",
-        "|---|---|---|---|---|",
-    ]
-    for r in results.values():
-        lines.append(f"| {r['label']} | {r['best_f1']:.3f} | {r['best_threshold']:.2f} | "
-                     f"{r['roc_auc']:.3f} | {r['seconds']:.3f} |")  # fmt: skip
-    lines += ["", "Figures: `simple2d_maps.png` (Fig. 1.10 / 2.8 style), `toy1d_marginals.png` (Fig. 2.1 style).", ""]
-    report["markdown"] = lines
-    return report
-
-
-def run_headline(out: Path, seed: int = 0, log: Path | None = None, quick: bool = False, scheduler=None,
-                 workers: int | None = None) -> dict:  # fmt: skip
-    """What ``make run`` does: the real-data headline (:mod:`ogm_ppl.experiment.headline`: the Intel Lab
-    log, sparse, traditional OGM against Gibbs with a learned border prior) and the simulated examples;
-    writes the figures, ``report.md`` and ``report.json`` into ``out``.
-
-    Without the Intel log (no ``log`` and none under the shared data folder) the report says so and holds
-    the simulated part only.
-    """
-    from ogm_ppl.experiment.headline import run_intel_headline
-
-    out.mkdir(parents=True, exist_ok=True)
-    t0 = time.perf_counter()
-    lines = ["# ogm_ppl headline run", ""]
-    report: dict = {}
-    try:
-        intel = run_intel_headline(out, log, quick=quick, scheduler=scheduler, workers=workers, progress=_progress())
-        lines += intel["markdown"]
-        report["intel"] = intel["json"]
-    except FileNotFoundError as e:
-        if log is not None:
-            raise
-        lines += ["## Real data: skipped", "", f"{e}.", ""]
-        report["intel"] = {"skipped": str(e)}
-        print(f"ogm-ppl run: {e}; running the simulated part only", file=sys.stderr)
-    simple = run_simple2d(out, seed)
-    lines += simple.pop("markdown")
-    report.update(simple)
-    report["seconds"] = time.perf_counter() - t0
-    lines += [f"Total {report['seconds']:.0f} s.", ""]
-    atomic_write_text(out / "report.json", json.dumps(report, indent=2, default=str, allow_nan=True))
-    atomic_write_text(out / "report.md", "\n".join(lines))
-    return report
-
-
-# =====================================================================================================
-# The `ogm-ppl` command: map / simulate / convert (and `run` above).
-# =====================================================================================================
 MAX_CELLS = 50_000_000
-METHODS = {
-    "ogm": "traditional OGM, Hähnel log-odds (Moravec.haehnel)",
-    "p21": "log-odds OGM with the p21 update term (delta_by_name('p21'))",
-    "elfes": "log-odds OGM with the thesis's optimised Elfes term (delta_by_name('elfes_thesis'))",
-    "gibbs": "Gibbs sampling of the full posterior (CellGibbs, or PatchGibbs with --patch)",
-    "patch": "offline patch map, a patch centred on every cell (Section 3.2)",
-}
-_DEFAULT_DELTA = {"ogm": "haehnel", "p21": "p21", "elfes": "elfes_thesis"}
 _PNG_UNKNOWN = (217, 217, 217)  # the light grey of viz.plot_map for unknown cells
 MAP_FORMAT = "ogm_ppl.map"
 MAP_FORMAT_VERSION = 1
+#: flags of ``ogm-ppl map`` that set a method parameter: flag -> (parameter, argparse dest)
+METHOD_FLAGS = {
+    "--delta": ("delta", "delta"),
+    "--prior": ("prior", "prior"),
+    "--lambda": ("lam", "lam"),
+    "--sigma": ("sigma_cells", "sigma"),
+    "--sweeps": ("sweeps", "sweeps"),
+    "--warmup": ("burn_in", "warmup"),
+    "--patch": ("patch", "patch"),
+}
+#: the command line's own defaults (``--help`` states them): sweeps, burn-in = sweeps // 10, and the
+#: thesis's cell prior 0.234 for the prior "independent"
+CLI_SWEEPS, CLI_LAMBDA = 200, 0.234
 
 
 class CLIError(Exception):
@@ -313,7 +154,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--traceback", action="store_true",
                         help="on an error, show the Python traceback instead of one line (for bug reports)")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
-                                help="map, simulate, convert or run (COMMAND --help for its options)")
+                                help="map, methods, simulate, convert, experiment or run "
+                                "(COMMAND --help for its options)")
 
     # --------------------------------------------------------------------------------- map
     m = sub.add_parser("map", help="occupancy grid map of a CARMEN log or a dataset file",
@@ -337,29 +179,36 @@ def build_parser() -> argparse.ArgumentParser:
                    help="metres added on every side of the automatic extent (default 1.0)")
     m.add_argument("--max-cells", type=_pos_int, default=MAX_CELLS, metavar="N",
                    help=f"refuse grids of more than N cells (default {MAX_CELLS:,})")
-    m.add_argument("--method", default="ogm", metavar="{" + ",".join(METHODS) + "}",
-                   help="mapping method (default ogm): " + "; ".join(f"{k}: {v}" for k, v in METHODS.items()))
+    m.add_argument("--method", default="ogm", metavar="NAME",
+                   help="map method (default ogm), any registered one (ogm-ppl methods lists them with their "
+                        "parameters): " + ", ".join(method_names()))
+    m.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
+                   help="set a parameter of the method (repeatable), e.g. --param scan=random; "
+                        "'ogm-ppl methods NAME' lists them")
     m.add_argument("--delta", metavar="NAME",
-                   help="update term of the log-odds methods, any name delta_by_name knows (haehnel, "
-                        "elfes_thesis, p21_thesis, p21, moravec_opt, ...); default: haehnel for ogm, p21 "
-                        "for p21, elfes_thesis for elfes")
-    m.add_argument("--prior", default="independent", metavar="NAME",
-                   help="map prior of gibbs/patch: 'independent' (each cell occupied with probability "
-                        "--lambda) or a learned prior KIND:CORPUS (ogm_ppl.priors.prior_by_name), e.g. "
-                        "mrf:houseexpo, patch3:houseexpo, border:houseexpo, border1:houseexpo")
-    m.add_argument("--lambda", dest="lam", type=_probability, default=0.234, metavar="P",
-                   help="cell prior occupancy of the independent prior (default 0.234, the thesis's value)")
+                   help="parameter delta: the update term of the log-odds methods, any name delta_by_name "
+                        "knows (haehnel, elfes_thesis, p21_thesis, p21, moravec_opt, ...); default: haehnel "
+                        "for ogm, p21 for p21, elfes_thesis for elfes")
+    m.add_argument("--prior", metavar="NAME",
+                   help="parameter prior of the model-based methods (gibbs, patch, ...; of ogm: the cells' "
+                        "prior occupancy, a number): 'independent' (each "
+                        "cell occupied with probability --lambda, the default) or a learned prior "
+                        "KIND:CORPUS (ogm_ppl.priors.prior_by_name), e.g. mrf:houseexpo, patch3:houseexpo, "
+                        "border:houseexpo, border1:houseexpo")
+    m.add_argument("--lambda", dest="lam", type=_probability, metavar="P",
+                   help="parameter lam: cell prior occupancy of the independent prior "
+                        f"(default {CLI_LAMBDA}, the thesis's value)")
     m.add_argument("--sigma", type=_pos_float, metavar="CELLS",
-                   help="standard deviation of the Gaussian range model of gibbs/patch, in cells (default: "
-                        "the dataset's simulation sigma if recorded, else 1.0 cell, about the scatter of "
-                        "a corrected real log at 5 cm)")
-    m.add_argument("--sweeps", type=_pos_int, default=200, metavar="N",
-                   help="Gibbs sweeps counted in the marginals (default 200)")
+                   help="parameter sigma_cells: standard deviation of the Gaussian range model in cells "
+                        "(default: the dataset's simulation sigma if recorded, else 1.0 cell, about the "
+                        "scatter of a corrected real log at 5 cm)")
+    m.add_argument("--sweeps", type=_pos_int, metavar="N",
+                   help=f"parameter sweeps: MCMC sweeps counted in the marginals (default {CLI_SWEEPS})")
     m.add_argument("--warmup", type=_nonneg_int, metavar="N",
-                   help="Gibbs sweeps run before counting (default: sweeps // 10)")
+                   help="parameter burn_in: MCMC sweeps run before counting (default: sweeps // 10)")
     m.add_argument("--patch", metavar="SHAPE",
-                   help="patch of gibbs (PatchGibbs instead of CellGibbs) and patch (default 3x3): HxW, "
-                        "an int L (a run of L cells), 'plus' or 'square'")
+                   help="parameter patch: of gibbs (PatchGibbs instead of CellGibbs) and patch "
+                        "(default 3x3): HxW, an int L (a run of L cells), 'plus' or 'square'")
     m.add_argument("--seed", type=_nonneg_int, default=0, metavar="S", help="random seed (>= 0, default 0)")
     _add_reader_options(m, carmen_only=True)
     m.add_argument("--thresholds", choices=("ros1", "nav2"), default="ros1",
@@ -397,6 +246,15 @@ def build_parser() -> argparse.ArgumentParser:
     c.add_argument("--resolution", type=_pos_float, metavar="M",
                    help="also store a grid of this resolution covering the log (extent + 1 m margin)")
     _add_reader_options(c, carmen_only=False)
+
+    # --------------------------------------------------------------------------------- methods
+    ms = sub.add_parser(
+        "methods",
+        help="list the map methods and their parameters",
+        description="List the registered map methods (ogm_ppl.methods): name, one line, and each parameter "
+        "with its default, kind and meaning.",
+    )
+    ms.add_argument("name", nargs="?", metavar="NAME", help="show this method only")
 
     # --------------------------------------------------------------------------------- experiment
     e = sub.add_parser("experiment", help="run an experiment spec (TOML): datasets x algorithms x chains",
@@ -572,101 +430,77 @@ def _make_grid(args, inp: _Input) -> Grid:
     return grid
 
 
-def _parse_patch(text: str | None, default="3x3"):
-    text = default if text is None else text
-    t = text.strip().lower()
-    if t in ("plus", "square"):
-        return t
-    if "x" in t:
-        parts = t.split("x")
-        if len(parts) == 2 and all(p.isdigit() and int(p) > 0 for p in parts):
-            return (int(parts[0]), int(parts[1]))
-    elif t.isdigit() and int(t) > 0:
-        return int(t)
-    raise CLIError(f"argument --patch: expected HxW, a positive int L, 'plus' or 'square', got {text!r}")
-
-
-def _make_prior(args, shape):
-    shape = tuple(shape)
-    if args.prior == "independent":
-        return IndependentPrior(args.lam, int(np.prod(shape)))
+def _method_params(args) -> tuple[MapMethod, object]:
+    """The method of ``--method`` and its parameters: the flags of :data:`METHOD_FLAGS` that were given,
+    then the command line's defaults (:data:`CLI_SWEEPS`, burn-in ``sweeps // 10``, :data:`CLI_LAMBDA`)
+    where the method has those parameters, then ``--param KEY=VALUE`` (command-line strings)."""
     try:
-        return prior_by_name(args.prior, shape)
-    except ValueError as e:
-        raise CLIError(f"argument --prior: {e}") from None
-
-
-def _validate_method(args) -> None:
-    if args.method not in METHODS:
-        raise CLIError(f"argument --method: unknown method {args.method!r}; choose from {', '.join(METHODS)}")
-    if args.delta is not None:
-        if args.method not in _DEFAULT_DELTA:
-            raise CLIError(f"--delta applies to the log-odds methods ({', '.join(_DEFAULT_DELTA)}), "
-                           f"not to --method {args.method}")  # fmt: skip
+        method = get_method(args.method)
+    except ParamError as e:
+        raise CLIError(f"argument --method: {e.message}") from None
+    names = method.param_names()
+    values: dict = {}
+    source: dict = {}
+    for flag, (key, dest) in METHOD_FLAGS.items():
+        v = getattr(args, dest)
+        if v is None:
+            continue
+        if key not in names:
+            having = [m.name for m in methods() if key in m.param_names() and m.alias_of is None]
+            raise CLIError(
+                f"{flag} sets the parameter {key!r} of {', '.join(having) or 'no method'}; "
+                f"--method {method.name} has none"
+            )
+        values[key], source[key] = v, f"argument {flag}"
+    for item in args.param:
+        key, eq, v = item.partition("=")
+        if not eq or not key.strip():
+            raise CLIError(f"argument --param: expected KEY=VALUE, got {item!r}")
+        key = key.strip()
+        if key in values:
+            raise CLIError(f"--param {key} repeats {source[key]}")
+        values[key], source[key] = v, f"--param {key}"
+    if "sweeps" in names:
+        values.setdefault("sweeps", str(CLI_SWEEPS))
+    if "burn_in" in names and "burn_in" not in values:
         try:
-            delta_by_name(args.delta)
-        except ValueError as e:
-            raise CLIError(f"argument --delta: {e}") from None
-    if args.method not in ("gibbs", "patch"):
-        for flag, v in (("--patch", args.patch), ("--sigma", args.sigma), ("--warmup", args.warmup)):
-            if v is not None:
-                raise CLIError(f"{flag} applies to --method gibbs/patch, not to --method {args.method}")
-        if args.prior != "independent":
-            raise CLIError(f"--prior applies to --method gibbs/patch, not to --method {args.method}")
-    else:
-        _make_prior(args, (8, 8))
-        if args.patch is not None:
-            _parse_patch(args.patch)
+            values["burn_in"] = str(int(values["sweeps"]) // 10)
+        except ValueError:
+            pass  # a bad --param sweeps is reported below
+    if "lam" in names and values.get("prior", method.default_params().prior) == "independent":
+        values.setdefault("lam", str(CLI_LAMBDA))
+    text = {k: str(v) for k, v in values.items()}
+    try:
+        return method, method.parse(text, text=True)
+    except ParamError as e:
+        where = source.get(e.key, f"parameter {e.key}")
+        raise CLIError(f"{where}: {e.message}") from None
 
 
-def _compute_map(args, inp: _Input, grid: Grid, times: dict) -> tuple[np.ndarray, np.ndarray, dict]:
-    """``(probabilities K float64, observed K bool, details)`` by ``args.method``."""
-    from ogm_ppl.inference import PatchGibbs
-    from ogm_ppl.inference.log_odds import evidence_grid_from_scans
-
-    details: dict = {}
-    if args.method in _DEFAULT_DELTA:
-        name = args.delta or _DEFAULT_DELTA[args.method]
-        details["delta"] = name
-        delta = delta_by_name(name)
-        t0 = time.perf_counter()
-        lo = evidence_grid_from_scans(grid, inp.scans, delta)  # traversal + update fused in one pass
-        times["ray_cast_s"] = None
-        times["map_s"] = time.perf_counter() - t0
-        details["ray_cast"] = "fused with the update (evidence_grid_from_scans)"
-        return lo.probabilities.numpy(), lo.observed.numpy(), details
-
-    sigma = args.sigma
-    if sigma is None:
-        sigma = float(inp.settings.get("sigma_cells") or 0) or 1.0
-    details.update(sigma_cells=sigma, prior=args.prior, **({"lambda": args.lam} if args.prior == "independent" else {}))
-    t0 = time.perf_counter()
-    rays = raycast(grid, inp.scans)
-    times["ray_cast_s"] = time.perf_counter() - t0
-    details["ray_cells"] = int(rays.nnz)
-    t0 = time.perf_counter()
-    model = OccupancyModel(grid, rays, GaussianRange(sigma), _make_prior(args, grid.shape))
-    if args.method == "gibbs":
-        if args.patch is None:
-            kernel = CellGibbs(model)
-            details["kernel"] = "CellGibbs"
-        else:
-            shape = _parse_patch(args.patch)
-            kernel = PatchGibbs(model, patch=shape)
-            details.update(kernel="PatchGibbs", patch=_jsonable(shape))
-        warmup = args.sweeps // 10 if args.warmup is None else args.warmup
-        stats = RunningStats(model)
-        res = run_gibbs(kernel, args.sweeps, stats, warmup=warmup, seed=args.seed, progress=_progress())
-        if res.interrupted:
-            raise KeyboardInterrupt
-        details.update(sweeps=args.sweeps, warmup=warmup, seed=args.seed)
-        probs = stats.marginals.numpy()
-    else:
-        shape = _parse_patch(args.patch)
-        probs = offline_patch_map(model, shape, overlap=True).marginals.numpy()
-        details.update(patch=_jsonable(shape), overlap=True, reference="MAP map")
-    times["map_s"] = time.perf_counter() - t0
-    return np.asarray(probs, dtype=np.float64), rays.reached(), details
+def _compute_map(
+    args, method: MapMethod, params, inp: _Input, grid: Grid, times: dict
+) -> tuple[np.ndarray, np.ndarray, dict]:
+    """``(probabilities K float64, observed K bool, details)`` of ``method``: the marginals averaged over
+    its ``chains`` (chain ``c`` seeded ``--seed + c``); warnings become lines ``ogm-ppl: warning: ...``."""
+    sigma = float(inp.settings.get("sigma_cells") or 0) or None
+    problem = MapProblem(grid, inp.scans, sigma_cells=sigma)
+    chains = int(getattr(params, "chains", 1))
+    probs, ray, total = [], None, 0.0
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        for c in range(chains):
+            where = f"ogm-ppl map {args.input}"
+            ctx = RunContext(seed=args.seed + c, cache_dir=args.out, progress=_progress(), where=where)
+            result = method.run(params, problem, ctx)
+            assert result.probabilities is not None  # no stop_after on the command line
+            probs.append(result.probabilities)
+            ray = result.seconds["ray_cast"] if ray is None else ray
+            total += result.seconds["map"] or 0.0
+    for w in {str(w.message): w for w in caught}.values():
+        print(f"ogm-ppl: warning: {_one_line(w.message)}", file=sys.stderr)  # type: ignore[arg-type]
+    times["ray_cast_s"], times["map_s"] = ray, total
+    details = {**dataclasses.asdict(params), **result.details, "seed": args.seed, "chains": chains}
+    return np.mean(probs, axis=0) if chains > 1 else probs[0], result.observed, details
 
 
 def _umask_mode() -> int:
@@ -676,15 +510,9 @@ def _umask_mode() -> int:
 
 
 def _atomic_savez(path: Path, **arrays) -> None:
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez_compressed(f, **arrays)
-        os.chmod(tmp, _umask_mode())  # mkstemp makes 0600; give the usual mode of a new file
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_write(path) as f:
+        np.savez_compressed(f, **arrays)
+    os.chmod(path, _umask_mode())  # atomic_write's temporary file is 0600; give the usual mode of a new file
 
 
 def save_map_png(path: Path, probabilities: np.ndarray, observed: np.ndarray, grid: Grid) -> None:
@@ -700,15 +528,9 @@ def save_map_png(path: Path, probabilities: np.ndarray, observed: np.ndarray, gr
     rgb = lut[idx]
     rgb[~np.asarray(observed, bool).reshape(grid.shape)] = _PNG_UNKNOWN
     img = Image.fromarray(np.ascontiguousarray(rgb[::-1]), "RGB")
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            img.save(f, "PNG", compress_level=3)
-        os.chmod(tmp, _umask_mode())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_write(path) as f:
+        img.save(f, "PNG", compress_level=3)
+    os.chmod(path, _umask_mode())
 
 
 def load_map(path: str | os.PathLike) -> dict:
@@ -751,18 +573,18 @@ def _scores(probs, observed, inp: _Input, grid: Grid) -> dict | None:
 
 def cmd_map(args) -> dict:
     """``ogm-ppl map``: read, grid, map, write; returns the report."""
-    _validate_method(args)
+    method, params = _method_params(args)
     created = not args.out.exists()
     _prepare_out_dir(args.out)
     try:
-        return _map(args)
+        return _map(args, method, params)
     except BaseException:
         if created and args.out.is_dir() and not any(args.out.iterdir()):
             args.out.rmdir()  # leave no empty directory behind after an error
         raise
 
 
-def _map(args) -> dict:
+def _map(args, method, params) -> dict:
     from ogm_ppl.rosmap import save_ros_map
 
     times: dict = {}
@@ -776,7 +598,7 @@ def _map(args) -> dict:
         grid = _make_grid(args, inp)
         bar.update()
         bar.set_postfix_str("mapping")
-        probs, observed, details = _compute_map(args, inp, grid, times)
+        probs, observed, details = _compute_map(args, method, params, inp, grid, times)
         bar.update()
         bar.set_postfix_str("writing")
         t0 = time.perf_counter()
@@ -800,7 +622,7 @@ def _map(args) -> dict:
         "grid": {"rows": grid.rows, "cols": grid.cols, "cells": grid.num_cells, "resolution_m": grid.resolution,
                  "origin_m": list(grid.origin), "extent_m": list(grid.extent),
                  "observed_cells": int(observed.sum())},
-        "method": {"name": args.method, "description": METHODS[args.method], **_jsonable(details)},
+        "method": {"name": method.name, "description": method.doc, **_jsonable(details)},
         "times_s": {"read": times["read_s"], "ray_cast": times["ray_cast_s"], "map": times["map_s"],
                     "write": times["write_s"]},
         "files": ["map.npz", "map.png", str(Path("ros") / ros.yaml.name), str(Path("ros") / ros.image.name),
@@ -933,6 +755,19 @@ def _one_line(e: BaseException) -> str:
     return " ".join(text.split())
 
 
+def cmd_methods(args) -> str:
+    """``ogm-ppl methods [NAME]``: each method's name, one line and parameters (default, kind, meaning)."""
+    if args.name is not None:
+        try:
+            return "\n".join(get_method(args.name).describe())
+        except ParamError as e:
+            raise CLIError(f"argument NAME: {e.message}") from None
+    lines = []
+    for m in methods():
+        lines += [f"{m.name}: {m.doc}"] if m.alias_of else m.describe()
+    return "\n".join(lines)
+
+
 def cmd_experiment(args) -> int:
     """``ogm-ppl experiment SPEC``: 0 when every task finished, 1 when some failed (what finished is kept)."""
     from ogm_ppl.experiment import ExperimentError, SpecError, load_spec, run_experiment
@@ -967,8 +802,10 @@ def main(argv: list[str] | None = None) -> int:
             return int(e.code or 0) if not isinstance(e.code, str) else 2
         if args.command == "run":
             _prepare_out_dir(args.out)
+            from ogm_ppl.experiment.headline import run_headline
+
             run_headline(args.out, seed=args.seed, log=args.log, quick=args.quick, scheduler=args.scheduler,
-                         workers=args.workers)
+                         workers=args.workers, progress=_progress())
             print((args.out / "report.md").read_text())
         elif args.command == "map":
             r = cmd_map(args)
@@ -981,6 +818,8 @@ def main(argv: list[str] | None = None) -> int:
                   f"cells -> {args.out}")  # fmt: skip
         elif args.command == "experiment":
             return cmd_experiment(args)
+        elif args.command == "methods":
+            print(cmd_methods(args))
         elif args.command == "convert":
             r = cmd_convert(args)
             print(f"ogm-ppl convert: {r['scans']} scans x {r['beams']} beams ({r['bad_lines']} bad lines "

@@ -110,7 +110,8 @@ def test_run_without_the_log_runs_the_simulated_part(tmp_path, monkeypatch, caps
     import ogm_ppl.experiment.headline as headline
 
     monkeypatch.setattr(headline, "find_shared_file", lambda rel: None)
-    monkeypatch.setattr("ogm_ppl.cli.run_simple2d", lambda out, seed: {"markdown": ["simulated part"]})
+    simulated = {"markdown": ["simulated part"]}
+    monkeypatch.setattr("ogm_ppl.experiment.headline.run_simple2d", lambda out, seed: simulated)
     assert main(["run", "--out", str(tmp_path)]) == 0
     text = (tmp_path / "report.md").read_text()
     assert "Real data: skipped" in text and "pass --log PATH" in text and "simulated part" in text
@@ -135,7 +136,7 @@ def test_every_option_has_help():
     for name, p in [("ogm-ppl", parser), *sub.choices.items()]:
         for a in p._actions:
             assert a.help, (name, a.option_strings or a.dest)
-    assert set(sub.choices) == {"map", "simulate", "convert", "experiment", "run"}
+    assert set(sub.choices) == {"map", "methods", "simulate", "convert", "experiment", "run"}
 
 
 def test_map_carmen_log(tmp_path, tiny_log, capsys):
@@ -297,8 +298,14 @@ MALFORMED = [
     ("map {sim} --out {d}/o --method gibbs --prior mrf:nowhere", "no shipped tables for corpus 'nowhere'"),
     ("map {sim} --out {d}/o --method gibbs --prior crf:houseexpo", "unknown prior kind 'crf'"),
     ("map {log} --out {d}/o --delta nope", "unknown Delta name 'nope'"),
-    ("map {log} --out {d}/o --method gibbs --delta p21", "--delta applies to the log-odds methods"),
-    ("map {log} --out {d}/o --sigma 2", "--sigma applies to --method gibbs/patch"),
+    ("map {log} --out {d}/o --method gibbs --delta p21", "--delta sets the parameter 'delta' of ogm"),
+    ("map {log} --out {d}/o --warmup 2", "--warmup sets the parameter 'burn_in' of gibbs"),
+    ("map {log} --out {d}/o --param sweeps=3", "--param sweeps: unknown key (known here: clamp, delta"),
+    ("map {sim} --out {d}/o --method gibbs --param scan=diagonal", "--param scan: must be one of"),
+    ("map {sim} --out {d}/o --method gibbs --param sweeps", "expected KEY=VALUE"),
+    ("map {sim} --out {d}/o --method gibbs --sweeps 3 --param sweeps=4", "--param sweeps repeats"),
+    ("map {sim} --out {d}/o --method gibbs --prior mrf:houseexpo --lambda 0.3", "--lambda: applies to"),
+    ("methods nope", "unknown method 'nope'"),
     ("map {sim} --out {d}/o --method patch --patch 2y3", "argument --patch"),
     ("map {log} --out {d}/o --size 10000 10000", "more than the limit of 50,000,000"),
     ("map {log} --out {d}/o --resolution 0.0005", "more than the limit of 50,000,000"),

@@ -1,4 +1,5 @@
-r"""The headline experiment of ``make run`` / ``ogm-ppl run``: the thesis's claim on real, sparse data.
+r"""The headline experiment of ``make run`` / ``ogm-ppl run`` (:func:`run_headline`): the thesis's claim on
+real, sparse data, then the simulated examples (:mod:`ogm_ppl.experiment.simple2d`).
 
 A reduced Table 6.5 / Fig. 6.17 (Section 6.2.1): the Intel Lab log at 5 cm on the thesis's 30 m x 30 m
 window, half the beams and half / 10 % of the poses (the thesis's Experiments 2 and 3), scored against the
@@ -17,26 +18,28 @@ from __future__ import annotations
 
 import json
 import os
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
 
+from ogm_ppl.experiment.simple2d import run_simple2d
 from ogm_ppl.io import atomic_write_text
 
-__all__ = ["INTEL_LOG", "find_shared_file", "headline_spec", "run_intel_headline"]
+__all__ = ["INTEL_LOG", "find_shared_file", "headline_spec", "run_headline", "run_intel_headline"]
 
 #: the Intel Lab log, relative to the shared data folder
 INTEL_LOG = "intel-lab/intel-corrected.log.gz"
 
 
 def find_shared_file(relative: str) -> Path | None:
-    """``relative`` under the shared data folder: ``$OGM_PPL_DATA``, else ``shared/data`` beside the
-    repository (a source checkout), else ``/work/shared/data``; ``None`` if none holds it."""
+    """``relative`` under the shared data folder: ``$OGM_PPL_DATA``, else ``../shared/data`` beside the
+    checkout (``shared/data`` in the folder that holds the repository); ``None`` if neither holds it."""
     roots = []
     if os.environ.get("OGM_PPL_DATA"):
         roots.append(Path(os.environ["OGM_PPL_DATA"]))
-    roots += [Path(__file__).resolve().parents[3] / "shared" / "data", Path("/work/shared/data")]
+    roots.append(Path(__file__).resolve().parents[3] / "shared" / "data")
     for root in roots:
         if (root / relative).is_file():
             return root / relative
@@ -135,8 +138,10 @@ def run_intel_headline(out: str | os.PathLike, log: str | os.PathLike | None = N
     if log is None:
         log = find_shared_file(INTEL_LOG)
         if log is None:
-            raise FileNotFoundError(f"the Intel Lab log ({INTEL_LOG}) is not under $OGM_PPL_DATA, shared/data beside "
-                                    "the repository, or /work/shared/data; pass --log PATH")  # fmt: skip
+            raise FileNotFoundError(
+                f"the Intel Lab log ({INTEL_LOG}) is not under $OGM_PPL_DATA or ../shared/data beside the "
+                "checkout; pass --log PATH"
+            )
     spec = parse_spec(headline_spec(log, quick=quick), "<headline>")
     t0 = time.perf_counter()
     result = run_experiment(spec, out / "intel", scheduler=scheduler, workers=workers, progress=progress)
@@ -144,7 +149,7 @@ def run_intel_headline(out: str | os.PathLike, log: str | os.PathLike | None = N
     fig = _maps_figure(result, out)
     ds0 = spec.datasets[0]
     p = ds0.params
-    gib = next(a for a in spec.algorithms if a.kind == "gibbs").params
+    gib = next(a for a in spec.algorithms if a.records_metrics).params  # the sampler of the spec
     md = [
         "## Real data: the Intel Lab log, sparse (thesis Table 6.5 / Fig. 6.17, reduced)",
         "",
@@ -170,3 +175,46 @@ def run_intel_headline(out: str | os.PathLike, log: str | os.PathLike | None = N
 
 def _summary(block: dict) -> dict:
     return {k: block[k] for k in ("best_f1", "threshold", "precision", "recall", "auc", "max_precision") if k in block}
+
+
+def run_headline(
+    out: str | os.PathLike,
+    seed: int = 0,
+    log: str | os.PathLike | None = None,
+    quick: bool = False,
+    scheduler=None,
+    workers: int | None = None,
+    progress: bool = False,
+) -> dict:
+    """What ``make run`` does: the real-data headline (:mod:`ogm_ppl.experiment.headline`: the Intel Lab
+    log, sparse, traditional OGM against Gibbs with a learned border prior) and the simulated examples;
+    writes the figures, ``report.md`` and ``report.json`` into ``out``.
+
+    Without the Intel log (no ``log`` and none under the shared data folder) the report says so and holds
+    the simulated part only.
+    """
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    lines = ["# ogm_ppl headline run", ""]
+    report: dict = {}
+    try:
+        intel = run_intel_headline(
+            out, log, quick=quick, scheduler=scheduler, workers=workers, progress=progress
+        )
+        lines += intel["markdown"]
+        report["intel"] = intel["json"]
+    except FileNotFoundError as e:
+        if log is not None:
+            raise
+        lines += ["## Real data: skipped", "", f"{e}.", ""]
+        report["intel"] = {"skipped": str(e)}
+        print(f"ogm-ppl run: {e}; running the simulated part only", file=sys.stderr)
+    simple = run_simple2d(out, seed)
+    lines += simple.pop("markdown")
+    report.update(simple)
+    report["seconds"] = time.perf_counter() - t0
+    lines += [f"Total {report['seconds']:.0f} s.", ""]
+    atomic_write_text(out / "report.json", json.dumps(report, indent=2, default=str, allow_nan=True))
+    atomic_write_text(out / "report.md", "\n".join(lines))
+    return report

@@ -18,7 +18,8 @@ Tables (every key optional unless marked *required*; defaults in brackets)::
                         extent [x0, y0, width, height] metres (else the log's extent + margin [1.0]),
                         sigma_cells [3.0] (the models' range noise), pose_fraction [1.0], beam_step [1],
                         benchmark [{delta = "haehnel", threshold = 0.20, prior = 0.5}]
-    [[algorithms]]      kind = "ogm" | "gibbs" | "patch_map" (*required*), name (*required*)
+    [[algorithms]]      kind = a map method (*required*; ``ogm-ppl methods`` lists them with their
+                        parameters), name (*required*), and the method's parameters (ogm_ppl.methods):
       ogm:              delta ["haehnel"], prior [0.5], clamp [none: [lo, hi] log-odds],
                         fit ["none"; "setting": refit the named term (pN, moravec_opt, ...) for the dataset's
                         sigma_cells and max range in cells, Section 2.5; a shipped fitted term used
@@ -26,10 +27,11 @@ Tables (every key optional unless marked *required*; defaults in brackets)::
                         sigma_cells [the dataset's]
       gibbs:            prior ["independent"; see ogm_ppl.priors.named], patch [1; L = 9 is [3, 3]],
                         sweeps [100], burn_in [0], chains [1], init ["ogm"], init_delta ["haehnel"],
-                        scan ["systematic"], p_rand_patch [0.0], sigma_cells [the dataset's],
-                        checkpoint_every [10], record [5] (F1 records of the running marginals)
+                        scan ["systematic"], update ["gibbs"], p_rand_patch [0.0], sigma_cells [the
+                        dataset's], checkpoint_every [10], record [5] (F1 records of the running marginals)
       patch_map:        patch [[3, 3]], mode ["offline" | "online"], overlap [false],
                         prior ["independent"], sigma_cells [the dataset's]
+      also:             metropolis, vi, amortised, guided_gibbs, and the aliases p21, elfes, patch
     [metrics]           mask ["auto": "all" for simulated, "near_mapped" for logs], near_mapped_distance
                         [10.0] (cells), touched_only [true], thresholds [99: 0.01..0.99, or a list],
                         scores [["f1", "auc", "max_precision"]; also "nll_bits", "brier", "ece"]
@@ -68,15 +70,15 @@ else:  # Python 3.10: the backport, the same parser (a dependency there)
     import tomli as tomllib
 
 __all__ = [
-    "SpecError",
-    "ExperimentSpec",
-    "DatasetSpec",
     "AlgorithmSpec",
+    "DatasetSpec",
+    "ExperimentSpec",
     "MetricsSpec",
     "OutputSpec",
+    "SpecError",
+    "derive_seed",
     "load_spec",
     "parse_spec",
-    "derive_seed",
 ]
 
 _NAME = re.compile(r"[A-Za-z0-9_.-]+\Z")
@@ -86,7 +88,6 @@ REPEAT_KEYS = ("map_seed", "seed")
 READER_KEYS = ("strict", "max_usable_range", "usable_range_rule", "no_return", "no_return_threshold",
                "min_range", "max_range", "messages", "apply_laser_offset")  # fmt: skip
 SCORES = ("f1", "auc", "max_precision", "nll_bits", "brier", "ece")
-INITS = ("ogm", "prior", "occupied", "free")
 
 
 class SpecError(ValueError):
@@ -124,6 +125,8 @@ class DatasetSpec:
 
 @dataclass(frozen=True)
 class AlgorithmSpec:
+    """One algorithm: a registered map method (``kind``) and its validated parameters (a plain dict)."""
+
     name: str
     kind: str
     params: dict
@@ -131,6 +134,22 @@ class AlgorithmSpec:
     @property
     def chains(self) -> int:
         return int(self.params.get("chains", 1))
+
+    @property
+    def method(self):
+        """The :class:`~ogm_ppl.methods.MapMethod` of ``kind``."""
+        from ogm_ppl.methods import get_method
+
+        return get_method(self.kind)
+
+    def method_params(self):
+        """The method's parameter dataclass of :attr:`params`."""
+        return self.method.params(**self.params)
+
+    @property
+    def records_metrics(self) -> bool:
+        """Whether a run records scores of its running marginals (its result depends on the metrics)."""
+        return self.method.sampler
 
 
 @dataclass(frozen=True)
@@ -244,38 +263,6 @@ class _Table:
         unknown = sorted(set(self.table) - self.used)
         if unknown:
             self.fail(unknown[0], f"unknown key (known here: {', '.join(sorted(self.used))})")
-
-
-def _patch(t: _Table, key: str, default):
-    v = t.raw(key, default)
-    if isinstance(v, str):
-        if v not in ("plus", "square"):
-            t.fail(key, f"must be an int L, [h, w], 'plus' or 'square', got {v!r}")
-        return v
-    if isinstance(v, int) and not isinstance(v, bool):
-        if v < 1:
-            t.fail(key, f"must be >= 1, got {v}")
-        return v
-    if (
-        isinstance(v, list)
-        and len(v) == 2
-        and all(isinstance(x, int) and not isinstance(x, bool) and x >= 1 for x in v)
-    ):
-        if v[0] * v[1] > 25:
-            t.fail(key, f"{v[0]} x {v[1]} patches are too large (at most 25 cells)")
-        return [int(v[0]), int(v[1])]
-    t.fail(key, f"must be an int L, [h, w] (positive), 'plus' or 'square', got {v!r}")
-
-
-def _check_prior(t: _Table, key: str, default: str) -> str:
-    name = t.get(key, "str", default)
-    from ogm_ppl.priors.named import prior_by_name
-
-    try:
-        prior_by_name(name, (8, 8))
-    except (ValueError, KeyError, FileNotFoundError) as e:
-        t.fail(key, f"{e}")
-    return name
 
 
 def _check_delta(t: _Table, key: str, default: str) -> str:
@@ -411,53 +398,19 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
 
 
 def _algorithm(source: str, i: int, a) -> AlgorithmSpec:
-    t, name = _named_entry(source, "algorithms", i, a)
-    kind = t.get("kind", "str", required=True, choices=("ogm", "gibbs", "patch_map"))
-    p: dict = {}
-    if kind == "ogm":
-        p["delta"] = _check_delta(t, "delta", "haehnel")
-        p["prior"] = t.get("prior", "float", 0.5, lo=0, lo_open=True, hi=1)
-        clamp = t.raw("clamp", None)
-        if clamp is not None and not (
-            isinstance(clamp, list) and len(clamp) == 2 and clamp[0] < clamp[1]
-        ):
-            t.fail("clamp", f"must be [lo, hi] log-odds with lo < hi, got {clamp!r}")
-        p["clamp"] = clamp
-        p["fit"] = t.get("fit", "str", "none", choices=("none", "setting"))
-        p["sigma_cells"] = t.get("sigma_cells", "float", None, lo=0, lo_open=True)
-        if p["fit"] == "setting":
-            from ogm_ppl.inference.variational.setting_fit import (
-                fit_family_for,
-                setting_family_names,
-            )
+    """An ``[[algorithms]]`` entry: ``name``, ``kind`` (a registered map method, :mod:`ogm_ppl.methods`)
+    and that method's parameters, validated by its parameter dataclass."""
+    from ogm_ppl.methods import ParamError, get_method, method_names
 
-            if fit_family_for(p["delta"]) is None:
-                t.fail("fit", f"cannot refit {p['delta']!r} for a sensor setting; fittable: {setting_family_names()}")
-    elif kind == "gibbs":
-        p["prior"] = _check_prior(t, "prior", "independent")
-        p["patch"] = _patch(t, "patch", 1)
-        p["sweeps"] = t.get("sweeps", "int", 100, lo=1)
-        p["burn_in"] = t.get("burn_in", "int", 0, lo=0)
-        p["chains"] = t.get("chains", "int", 1, lo=1)
-        p["init"] = t.get("init", "str", "ogm", choices=INITS)
-        p["init_delta"] = _check_delta(t, "init_delta", "haehnel")
-        p["scan"] = t.get(
-            "scan", "str", "systematic", choices=("systematic", "permutation", "random")
-        )
-        p["p_rand_patch"] = t.get("p_rand_patch", "float", 0.0, lo=0, hi=0.999)
-        p["sigma_cells"] = t.get("sigma_cells", "float", None, lo=0, lo_open=True)
-        p["checkpoint_every"] = t.get("checkpoint_every", "int", 10, lo=1)
-        p["record"] = t.get("record", "int", 5, lo=0)
-    else:
-        p["patch"] = _patch(t, "patch", [3, 3])
-        p["mode"] = t.get("mode", "str", "offline", choices=("offline", "online"))
-        p["overlap"] = t.get("overlap", "bool", False)
-        p["prior"] = _check_prior(t, "prior", "independent")
-        p["sigma_cells"] = t.get("sigma_cells", "float", None, lo=0, lo_open=True)
-        if p["overlap"] and p["mode"] != "offline":
-            t.fail("overlap", "only the offline patch map has an overlapping variant")
-    t.finish()
-    return AlgorithmSpec(name, kind, p)
+    t, name = _named_entry(source, "algorithms", i, a)
+    kind = t.get("kind", "str", required=True, choices=tuple(method_names()))
+    method = get_method(kind)
+    values = {k: t.raw(k) for k in t.table if k not in ("name", "kind")}
+    try:
+        params = method.parse(values)
+    except ParamError as e:
+        t.fail(e.key, e.message)
+    return AlgorithmSpec(name, kind, asdict(params))
 
 
 def parse_spec(

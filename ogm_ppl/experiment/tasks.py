@@ -24,9 +24,6 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
-import math
-import os
-import tempfile
 import threading
 import time
 from dataclasses import asdict
@@ -35,15 +32,24 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ogm_ppl.io import atomic_write_text
+from ogm_ppl.io import atomic_write, atomic_write_text
 
-__all__ = ["TASK_VERSION", "task_hash", "task_env", "run_base", "run_dataset", "run_algorithm", "run_score",
-           "base_dir", "dataset_path", "run_dir", "score_path"]  # fmt: skip
+__all__ = [
+    "TASK_VERSION",
+    "base_dir",
+    "dataset_path",
+    "run_algorithm",
+    "run_base",
+    "run_dataset",
+    "run_dir",
+    "run_score",
+    "score_path",
+    "task_env",
+    "task_hash",
+]
 
 TASK_VERSION = 2  # 2: the sensor model sees walls in the last half cell of the range (sensors._common)
-_GIBBS_LOCK = (
-    threading.Lock()
-)  # torch's global RNG is per process: one Gibbs run at a time per process
+_RNG_LOCK = threading.Lock()  # torch's global RNG is per process: one stochastic run at a time per process
 
 
 # ------------------------------------------------------------------------------------------ helpers
@@ -68,15 +74,8 @@ def task_env():
 
 
 def _savez(path: Path, **arrays) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            np.savez_compressed(f, **arrays)
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_write(path) as f:
+        np.savez_compressed(f, **arrays)
     return path
 
 
@@ -128,10 +127,11 @@ def _png(path: Path, probs, grid, title: str, dpi: int) -> None:
     plt = _plt()
     fig, ax = plt.subplots(figsize=(5, 5))
     plot_map(np.asarray(probs).reshape(grid.shape), grid, ax=ax, title=title)
-    tmp = path.with_name(f".{path.stem}.tmp.png")
-    fig.savefig(tmp, dpi=dpi, bbox_inches="tight")
-    plt.close(fig)
-    os.replace(tmp, path)
+    try:
+        with atomic_write(path) as f:
+            fig.savefig(f, format="png", dpi=dpi, bbox_inches="tight")
+    finally:
+        plt.close(fig)
 
 
 # ------------------------------------------------------------------------------------------ base
@@ -275,131 +275,19 @@ def _quick_scores(q, truth, mask, thresholds) -> dict:
 
 
 # ------------------------------------------------------------------------------------------ run
-def _model(ds, alg, grid, scans):
-    from ogm_ppl.models.occupancy import OccupancyModel
-    from ogm_ppl.priors.named import prior_by_name
-    from ogm_ppl.raycast import raycast
-    from ogm_ppl.sensors import GaussianRange
-
-    sigma = alg.params.get("sigma_cells") or ds.params["sigma_cells"]
-    rays = raycast(grid, scans)
-    return OccupancyModel(
-        grid, rays, GaussianRange(float(sigma)), prior_by_name(alg.params["prior"], grid.shape)
-    )
-
-
-def _patch_arg(patch):
-    return tuple(patch) if isinstance(patch, list) else patch
-
-
-def _ckpt_sweep(path: Path) -> int:
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            return int(z["sweep"])
-    except Exception:
-        return 0
-
-
-def _gibbs(ds, alg, model, seed, folder: Path, truth, mask, thresholds, resume, stop_after):
-    from ogm_ppl.inference import CellGibbs, PatchGibbs, RunningStats, run_gibbs
-
-    p = alg.params
-    ckpt, trace_path = folder / "gibbs.npz", folder / "trace.json"
-    if not resume:
-        ckpt.unlink(missing_ok=True)
-        trace_path.unlink(missing_ok=True)
-    trace = []
-    if ckpt.exists():
-        trace = (read_done(trace_path) or {}).get("trace", [])
-    elif trace_path.exists():
-        trace_path.unlink()
-    start = _ckpt_sweep(ckpt) if ckpt.exists() else 0
-    trace = [r for r in trace if r["sweep"] <= start]
-    warm, n = p["burn_in"], p["sweeps"]
-    total = warm + n
-    k = p["record"]
-    marks = (
-        sorted({warm + math.ceil(i * n / k) for i in range(1, k + 1)} | {total}) if k else [total]
-    )
-    if p["patch"] == 1:
-        kernel = CellGibbs(model, scan=p["scan"], init=p["init"], delta=p["init_delta"])
-    else:
-        kernel = PatchGibbs(model, patch=_patch_arg(p["patch"]), scan=p["scan"], p_rand_patch=p["p_rand_patch"],
-                            init=p["init"], delta=p["init_delta"])  # fmt: skip
-    stats = RunningStats(model)
-    done, seconds = start, (trace[-1]["seconds"] if trace else 0.0)
-    budget = stop_after
-    for mark in marks:
-        if mark <= done:
-            continue
-        step = mark - done
-        if budget is not None:
-            step = min(step, budget)
-        r = run_gibbs(kernel, n, stats, warmup=warm, seed=seed, checkpoint=ckpt,
-                      checkpoint_every=p["checkpoint_every"], progress=False, stop_after=step)  # fmt: skip
-        done, seconds = r.sweeps, seconds + r.seconds
-        if budget is not None:
-            budget -= step
-        if done == mark:
-            rec = {"sweep": done, "samples": int(stats.n), "seconds": seconds}
-            if stats.n:
-                rec.update(_quick_scores(stats.marginals.numpy(), truth, mask, thresholds))
-            trace.append(rec)
-            _write_json(trace_path, {"trace": trace})
-        if budget is not None and budget <= 0 and done < total:
-            return None, trace, start, done
-    if stats.n == 0:  # every mark was reached before (killed after the last checkpoint): load it
-        r = run_gibbs(kernel, n, stats, warmup=warm, seed=seed, checkpoint=ckpt,
-                      checkpoint_every=p["checkpoint_every"], progress=False)  # fmt: skip
-        done = r.sweeps
-    return stats.marginals.numpy(), trace, start, done
-
-
-def _ogm_delta(ds, p: dict, grid, scans, out: Path):
-    """The update term of an ``ogm`` run and what to record about its sensor setting.
-
-    The setting is the dataset's range noise (``sigma_cells``, or the algorithm's) and its maximum range in
-    cells (``scans.max_range / resolution``). ``fit = "setting"`` refits the term there (Section 2.5,
-    :func:`~ogm_ppl.inference.variational.fit_delta_for_setting`, cached under ``out/deltas``); otherwise a
-    shipped fitted term used outside the setting it was fitted for warns (``FittedSettingWarning``) and the
-    warning goes into the result.
-    """
-    import warnings
-
-    from ogm_ppl.inference.variational import (
-        check_delta_setting,
-        fit_delta_for_setting,
-        fit_family_for,
-    )
-    from ogm_ppl.models import delta_by_name
-
-    sigma = float(p.get("sigma_cells") or ds.params["sigma_cells"])
-    F = round(float(np.max(scans.max_range)) / grid.resolution)
-    setting = {"sigma_cells": sigma, "F_cells": F}
-    if p.get("fit", "none") == "setting":
-        family = fit_family_for(p["delta"])
-        assert family is not None  # the spec parser refuses terms it cannot refit
-        delta, training = fit_delta_for_setting(family[0], sigma, F, prior=family[1], cache_dir=Path(out) / "deltas")
-        return delta, {"delta_setting": setting, "delta_fitted": {k: training.get(k) for k in
-                       ("F", "wall", "sigma", "num", "prior", "train_cross_entropy")}}  # fmt: skip
-    delta = delta_by_name(p["delta"])
-    with warnings.catch_warnings(record=True) as caught:
-        warnings.simplefilter("always")
-        check_delta_setting(delta, sigma, F, where=f"experiment dataset {ds.name}")
-    for w in caught:
-        warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    return delta, {"delta_setting": setting, "warnings": [str(w.message) for w in caught]}
-
-
 def run_algorithm(ds, alg, chain: int, seed: int, metrics, output, out: str | Path, h: str, resume: bool = True,
                   stop_after: int | None = None, _deps=None) -> dict | None:  # fmt: skip
-    """Run one algorithm on one dataset (one chain); writes ``marginals.npz`` (+ ``map.png``) and
-    ``result.json`` under ``tasks/D/A/cN`` and returns the result record.
+    """Run one algorithm (a registered map method, :mod:`ogm_ppl.methods`) on one dataset (one chain);
+    writes ``marginals.npz`` (+ ``map.png``) and ``result.json`` under ``tasks/D/A/cN`` and returns the
+    result record (the method's details, and the quick scores).
 
-    ``stop_after`` (tests, and a deliberate pause): stop a Gibbs run after that many sweeps of this
-    call, leaving its checkpoint and no result (returns None); the next call resumes it.
+    A sampling method checkpoints into that folder and resumes from it; its F1-against-time records are
+    scored on the dataset's mask. ``stop_after`` (tests, and a deliberate pause): stop a sampling run after
+    that many sweeps of this call, leaving its checkpoint and no result (returns None); the next call
+    resumes it.
     """
     from ogm_ppl.datasets.dataset_file import load_dataset
+    from ogm_ppl.methods import MapProblem, RunContext
 
     out = Path(out)
     folder = run_dir(out, ds, alg, chain)
@@ -408,43 +296,40 @@ def run_algorithm(ds, alg, chain: int, seed: int, metrics, output, out: str | Pa
     grid, scans = data.grid, data.scans
     assert grid is not None  # run_dataset saves every dataset with its grid
     truth, mask, _ = load_eval(out, ds, metrics)
+    method = alg.method
+    problem = MapProblem(grid, scans, sigma_cells=float(ds.params["sigma_cells"]))
+    ctx = RunContext(
+        seed=seed,
+        checkpoint_dir=folder,
+        cache_dir=out,
+        resume=resume,
+        stop_after=stop_after,
+        score=lambda q: _quick_scores(q, truth, mask, metrics.thresholds),
+        where=f"experiment dataset {ds.name}",
+    )
     t0 = time.perf_counter()
-    extra: dict = {}
-    with task_env():
-        p = alg.params
-        if alg.kind == "ogm":
-            from ogm_ppl.inference import evidence_grid_from_scans
-
-            delta, extra = _ogm_delta(ds, p, grid, scans, out)
-            ev = evidence_grid_from_scans(grid, scans, delta, prior=p["prior"],
-                                          clamp=tuple(p["clamp"]) if p["clamp"] else None)  # fmt: skip
-            q = ev.probabilities.numpy()
-        elif alg.kind == "patch_map":
-            from ogm_ppl.inference.patch_map import offline_patch_map, online_patch_map
-
-            model = _model(ds, alg, grid, scans)
-            if p["mode"] == "offline":
-                pm = offline_patch_map(model, _patch_arg(p["patch"]), overlap=p["overlap"])
-            else:
-                pm = online_patch_map(model, _patch_arg(p["patch"]))
-            q = pm.marginals.numpy()
-        else:
-            model = _model(ds, alg, grid, scans)
-            with _GIBBS_LOCK:
-                q, trace, start, done = _gibbs(ds, alg, model, seed, folder, truth, mask, metrics.thresholds,
-                                               resume, stop_after)  # fmt: skip
-            if q is None:
-                return None
-            extra = {"trace": trace, "resumed_from_sweep": start, "sweeps_total": done}
+    with task_env(), (_RNG_LOCK if method.stochastic else contextlib.nullcontext()):
+        result = method.run(alg.method_params(), problem, ctx)
+    if not result.complete:
+        return None
     seconds = time.perf_counter() - t0
-    q = np.asarray(q, dtype=np.float64)
+    q = result.probabilities
+    assert q is not None
     _savez(folder / "marginals.npz", marginals=q.reshape(grid.shape), format_version=np.int64(1))
     if output.maps:
         _png(folder / "map.png", q, grid, f"{ds.name} / {alg.name} / chain {chain}", output.dpi)
-    rec = {"hash": h, "dataset": ds.name, "algorithm": alg.name, "chain": chain, "seed": seed, "seconds": seconds,
-           **_quick_scores(q, truth, mask, metrics.thresholds), **extra}  # fmt: skip
+    rec = {
+        "hash": h,
+        "dataset": ds.name,
+        "algorithm": alg.name,
+        "chain": chain,
+        "seed": seed,
+        "seconds": seconds,
+        **_quick_scores(q, truth, mask, metrics.thresholds),
+        **result.details,
+    }
     _write_json(folder / "result.json", rec)
-    (folder / "gibbs.npz").unlink(missing_ok=True)  # the result is final: the checkpoint is spent
+    (folder / "gibbs.npz").unlink(missing_ok=True)  # the result is final: a sampler's checkpoint is spent
     return rec
 
 

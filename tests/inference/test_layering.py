@@ -71,3 +71,17 @@ def test_model_layer_imports_nothing_above_it(name):
 def test_delta_fitting_takes_tensors_not_datasets():
     mods = _imports(PKG / "inference" / "variational" / "delta_fit.py")
     assert not any(m.startswith("ogm_ppl.datasets") for m in mods)
+
+
+def test_map_methods_sit_between_inference_and_the_experiments():
+    """``methods`` may use inference, models and priors; the CLI and experiments use ``methods``; nothing
+    below it imports it, and it imports neither the experiments nor the CLI."""
+    for path in sorted((PKG / "methods").rglob("*.py")):
+        for mod in _imports(path):
+            bad = mod.startswith(("ogm_ppl.experiment", "ogm_ppl.cli"))
+            assert not bad, f"{path.relative_to(PKG)} imports {mod}"
+    below = [PKG / "inference", PKG / "datasets", *(PKG / n for n in LOWER)]
+    for root in below:
+        for path in sorted(root.rglob("*.py")) if root.is_dir() else [root.with_suffix(".py")]:
+            for mod in _imports(path):
+                assert not mod.startswith("ogm_ppl.methods"), f"{path.relative_to(PKG)} imports {mod}"

@@ -1,0 +1,141 @@
+r"""The run of a sampling method: ``burn_in + sweeps`` sweeps of a map kernel under
+:func:`~ogm_ppl.inference.mcmc.run_gibbs`, the marginals of the last ``sweeps`` as the map.
+
+With a checkpoint folder (``ctx.checkpoint_dir``) the run checkpoints every ``checkpoint_every`` sweeps
+and resumes from the checkpoint; it records the running marginals' scores (``ctx.score``) at ``record``
+evenly spaced sweeps after burn-in (``trace.json``, kept across resumes), and ``ctx.stop_after`` stops it
+after that many sweeps of this call with the checkpoint kept and no map. The caller removes the spent checkpoint once it has stored the map.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from dataclasses import dataclass
+
+from ogm_ppl.io import atomic_write_text
+from ogm_ppl.methods._model import ModelParams
+from ogm_ppl.methods.params import Choice, DeltaName, Int, param
+from ogm_ppl.methods.problem import MapProblem, MapResult, RunContext
+
+__all__ = ["INITS", "SamplingParams", "run_kernel"]
+
+INITS = ("ogm", "prior", "occupied", "free")
+
+
+@dataclass(frozen=True)
+class SamplingParams(ModelParams):
+    """The model's parameters and the length, chains, checkpoints and records of the run."""
+
+    sweeps: int = param(100, Int(lo=1), "sweeps counted in the marginals")
+    burn_in: int = param(0, Int(lo=0), "sweeps run before counting")
+    chains: int = param(1, Int(lo=1), "independent chains, their marginals averaged")
+    init: str = param("ogm", Choice(*INITS), "starting map (initial_map: thresholded OGM, a prior draw, ...)")
+    init_delta: str = param("haehnel", DeltaName(), "update term of the 'ogm' starting map")
+    checkpoint_every: int = param(10, Int(lo=1), "sweeps between checkpoints (with a checkpoint folder)")
+    record: int = param(5, Int(lo=0), "scores of the running marginals recorded after burn-in")
+
+
+def _read_json(path):
+    try:
+        return json.loads(path.read_text())
+    except (FileNotFoundError, json.JSONDecodeError, OSError):
+        return None
+
+
+def _ckpt_sweep(path) -> int:
+    import numpy as np
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            return int(z["sweep"])
+    except Exception:
+        return 0
+
+
+def run_kernel(
+    kernel, params: SamplingParams, problem: MapProblem, ctx: RunContext, details: dict
+) -> MapResult:
+    """Run ``kernel`` as the module docstring says; ``details`` (the kernel's) go into the result."""
+    from ogm_ppl.inference.mcmc import RunningStats, run_gibbs
+
+    model = kernel.model
+    details = {**params.model_details(problem), **details}
+    observed = problem.rays.reached()
+    warm, n = params.burn_in, params.sweeps
+    stats = RunningStats(model)
+    if ctx.checkpoint_dir is None:
+        r = run_gibbs(kernel, n, stats, warmup=warm, seed=ctx.seed, progress=ctx.progress)
+        if r.interrupted:
+            raise KeyboardInterrupt
+        q = stats.marginals.numpy()
+        if ctx.score is not None:
+            details["trace"] = [
+                {"sweep": r.sweeps, "samples": int(stats.n), "seconds": r.seconds, **ctx.score(q)}
+            ]
+        return MapResult(q, observed, details)
+
+    folder = ctx.checkpoint_dir
+    folder.mkdir(parents=True, exist_ok=True)
+    ckpt, trace_path = folder / "gibbs.npz", folder / "trace.json"
+    if not ctx.resume:
+        ckpt.unlink(missing_ok=True)
+        trace_path.unlink(missing_ok=True)
+    trace = []
+    if ckpt.exists():
+        trace = (_read_json(trace_path) or {}).get("trace", [])
+    elif trace_path.exists():
+        trace_path.unlink()
+    start = _ckpt_sweep(ckpt) if ckpt.exists() else 0
+    trace = [r for r in trace if r["sweep"] <= start]
+    total = warm + n
+    k = params.record
+    marks = sorted({warm + math.ceil(i * n / k) for i in range(1, k + 1)} | {total}) if k else [total]
+    done, seconds = start, (trace[-1]["seconds"] if trace else 0.0)
+    budget = ctx.stop_after
+    details.update(resumed_from_sweep=start)
+    for mark in marks:
+        if mark <= done:
+            continue
+        step = mark - done
+        if budget is not None:
+            step = min(step, budget)
+        r = run_gibbs(
+            kernel,
+            n,
+            stats,
+            warmup=warm,
+            seed=ctx.seed,
+            checkpoint=ckpt,
+            checkpoint_every=params.checkpoint_every,
+            progress=ctx.progress,
+            stop_after=step,
+        )
+        done, seconds = r.sweeps, seconds + r.seconds
+        if budget is not None:
+            budget -= step
+        if done == mark:
+            rec = {"sweep": done, "samples": int(stats.n), "seconds": seconds}
+            if stats.n and ctx.score is not None:
+                rec.update(ctx.score(stats.marginals.numpy()))
+            trace.append(rec)
+            atomic_write_text(
+                trace_path, json.dumps({"trace": trace}, indent=1, sort_keys=True, allow_nan=True)
+            )
+        elif budget is None or budget > 0:
+            raise KeyboardInterrupt  # interrupted (SIGINT): the checkpoint is kept for a resume
+        if budget is not None and budget <= 0 and done < total:
+            return MapResult(None, observed, {**details, "trace": trace, "sweeps_total": done})
+    if stats.n == 0:  # every mark was reached before (killed after the last checkpoint): load it
+        r = run_gibbs(
+            kernel,
+            n,
+            stats,
+            warmup=warm,
+            seed=ctx.seed,
+            checkpoint=ckpt,
+            checkpoint_every=params.checkpoint_every,
+            progress=False,
+        )
+        done = r.sweeps
+    return MapResult(stats.marginals.numpy(), observed, {**details, "trace": trace, "sweeps_total": done})

@@ -1,0 +1,38 @@
+r"""``amortised``: the amortised guide's one-pass map (inference compilation).
+
+``q(m_k = 1 | z) = sigmoid(g(x(z))_k)``, a network ``g`` of the evidence features ``x(z)``
+(:mod:`ogm_ppl.inference.variational.amortised`), trained on draws from the model's joint; no iteration.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ogm_ppl.methods.params import GuideFile, param
+from ogm_ppl.methods.problem import MapProblem, MapResult, RunContext
+from ogm_ppl.methods.registry import register_method
+
+__all__ = ["AmortisedParams", "amortised", "load_guide"]
+
+
+@dataclass(frozen=True)
+class AmortisedParams:
+    guide: str = param("shipped", GuideFile(), "the trained guide: 'shipped' or a saved guide (.npz)")
+
+
+def load_guide(name: str, model):
+    """The guide ``name`` (``"shipped"`` or a path) for ``model``."""
+    from ogm_ppl.inference.variational.amortised import AmortisedGuide, shipped_guide
+
+    return shipped_guide(model) if name == "shipped" else AmortisedGuide.load(name, model)
+
+
+@register_method("amortised", AmortisedParams)
+def amortised(params: AmortisedParams, problem: MapProblem, ctx: RunContext) -> MapResult:
+    """The amortised guide's one-pass map q(m_k = 1 | z) (a network of the evidence features)."""
+    model = problem.model()
+    guide = load_guide(params.guide, model)
+    q = guide.marginals(model).numpy()
+    return MapResult(
+        q, problem.rays.reached(), {"ray_cells": int(problem.rays.nnz), "trained_for": guide.trained_for}
+    )

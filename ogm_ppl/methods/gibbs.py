@@ -1,0 +1,96 @@
+r"""``gibbs`` and ``metropolis``: MCMC over the full posterior ``p(m | z)`` (Chapter 4).
+
+``gibbs``: single-cell Gibbs (:class:`~ogm_ppl.inference.mcmc.CellGibbs`, ``patch = 1``) or patch Gibbs
+(:class:`~ogm_ppl.inference.mcmc.PatchGibbs`, Algorithm 1; Algorithm 2 with ``p_rand_patch``), heat-bath or
+metropolised updates. ``metropolis``: single-cell Metropolis-Hastings
+(:class:`~ogm_ppl.inference.mcmc.MetropolisCell`) with uniform or end-point proposals.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from ogm_ppl.methods._model import patch_arg
+from ogm_ppl.methods._sampling import SamplingParams, run_kernel
+from ogm_ppl.methods.params import Choice, Float, Int, ParamError, Patch, param
+from ogm_ppl.methods.problem import MapProblem, MapResult, RunContext
+from ogm_ppl.methods.registry import register_method
+
+__all__ = ["GibbsParams", "MetropolisParams", "gibbs", "metropolis"]
+
+SCANS = ("systematic", "permutation", "random")
+
+
+@dataclass(frozen=True)
+class GibbsParams(SamplingParams):
+    patch: object = param(1, Patch(), "1: CellGibbs; a larger patch: PatchGibbs")
+    scan: str = param("systematic", Choice(*SCANS), "order of the cells / patches in a sweep")
+    update: str = param("gibbs", Choice("gibbs", "metropolised"), "heat bath or metropolised update")
+    p_rand_patch: float = param(
+        0.0, Float(0, 0.999), "PatchGibbs: probability of a random configuration (Alg. 2)"
+    )
+    random_patch: str = param(
+        "mh",
+        Choice("mh", "thesis"),
+        "PatchGibbs: random configurations accepted by MH or always (the thesis)",
+    )
+    offset: int = param(0, Int(lo=0), "PatchGibbs: column of the tiling's first patch")
+
+
+@register_method("gibbs", GibbsParams, stochastic=True, sampler=True)
+def gibbs(params: GibbsParams, problem: MapProblem, ctx: RunContext) -> MapResult:
+    """Gibbs sampling of the full posterior (Chapter 4): CellGibbs, or PatchGibbs for patches."""
+    from ogm_ppl.inference.mcmc import CellGibbs, PatchGibbs
+
+    model = params.model(problem)
+    if params.patch == 1:
+        kernel = CellGibbs(
+            model, scan=params.scan, update=params.update, init=params.init, delta=params.init_delta
+        )
+        details: dict = {"kernel": "CellGibbs"}
+    else:
+        kernel = PatchGibbs(
+            model,
+            patch=patch_arg(params.patch),
+            scan=params.scan,
+            offset=params.offset,
+            p_rand_patch=params.p_rand_patch,
+            random_patch=params.random_patch,
+            update=params.update,
+            init=params.init,
+            delta=params.init_delta,
+        )
+        details = {"kernel": "PatchGibbs", "patch": params.patch}
+    return run_kernel(kernel, params, problem, ctx, details)
+
+
+@dataclass(frozen=True)
+class MetropolisParams(SamplingParams):
+    proposal: str = param(
+        "uniform",
+        Choice("uniform", "endpoint"),
+        "cells proposed uniformly, or end-point cells endpoint_weight times as often",
+    )
+    endpoint_weight: float = param(4.0, Float(0, lo_open=True), "weight of cells holding a beam's end point")
+    scan: str = param("random", Choice(*SCANS), "order of the proposed cells")
+
+    def check(self) -> None:
+        super().check()
+        if self.proposal == "endpoint" and self.scan != "random":
+            raise ParamError("scan", "the endpoint proposal draws cells at random: use scan = 'random'")
+
+
+@register_method("metropolis", MetropolisParams, stochastic=True, sampler=True)
+def metropolis(params: MetropolisParams, problem: MapProblem, ctx: RunContext) -> MapResult:
+    """Single-cell Metropolis-Hastings flips (MetropolisCell: uniform or end-point proposals)."""
+    from ogm_ppl.inference.mcmc import MetropolisCell
+
+    kernel = MetropolisCell(
+        params.model(problem),
+        proposal=params.proposal,
+        endpoint_weight=params.endpoint_weight,
+        scan=params.scan,
+        init=params.init,
+        delta=params.init_delta,
+    )
+    return run_kernel(kernel, params, problem, ctx, {"kernel": "MetropolisCell"})
