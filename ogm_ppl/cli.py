@@ -503,16 +503,9 @@ def _compute_map(
     return np.mean(probs, axis=0) if chains > 1 else probs[0], result.observed, details
 
 
-def _umask_mode() -> int:
-    mask = os.umask(0)
-    os.umask(mask)
-    return 0o666 & ~mask
-
-
 def _atomic_savez(path: Path, **arrays) -> None:
     with atomic_write(path) as f:
         np.savez_compressed(f, **arrays)
-    os.chmod(path, _umask_mode())  # atomic_write's temporary file is 0600; give the usual mode of a new file
 
 
 def save_map_png(path: Path, probabilities: np.ndarray, observed: np.ndarray, grid: Grid) -> None:
@@ -530,7 +523,6 @@ def save_map_png(path: Path, probabilities: np.ndarray, observed: np.ndarray, gr
     img = Image.fromarray(np.ascontiguousarray(rgb[::-1]), "RGB")
     with atomic_write(path) as f:
         img.save(f, "PNG", compress_level=3)
-    os.chmod(path, _umask_mode())
 
 
 def load_map(path: str | os.PathLike) -> dict:
