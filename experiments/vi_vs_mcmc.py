@@ -57,7 +57,7 @@ from ogm_ppl.inference.patch_map import offline_patch_map, online_patch_map
 from ogm_ppl.inference.variational.delta_fit import cross_entropy_loss, fit_delta
 from ogm_ppl.inference.variational.guides import MeanFieldGuide, PatchGuide, fit_guide
 from ogm_ppl.inference.variational.structured_guides import ExactELBO, FirstHitGuide
-from ogm_ppl.io import atomic_write_text
+from ogm_ppl.io import atomic_write, atomic_write_text
 from ogm_ppl.metrics import cross_entropy, kl_divergence
 from ogm_ppl.models.delta import PN, NeuralDelta, delta_by_name
 from ogm_ppl.priors import IndependentPrior
@@ -635,11 +635,9 @@ def plot(res: dict, path: Path) -> None:
     labels = [*names, f"KL = {TARGET}", "exact posterior's time"]
     list(axes.flat)[-1].legend(handles, labels, loc="center", fontsize=7.5, frameon=False, ncol=1)
     fig.tight_layout()
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(path.stem + ".tmp.png")
-    fig.savefig(tmp, dpi=110)
+    with atomic_write(path) as f:
+        fig.savefig(f, format="png", dpi=110)
     plt.close(fig)
-    tmp.replace(path)
 
 
 def load_results(path: Path) -> dict:
