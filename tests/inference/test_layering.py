@@ -71,3 +71,15 @@ def test_model_layer_imports_nothing_above_it(name):
 def test_delta_fitting_takes_tensors_not_datasets():
     mods = _imports(PKG / "inference" / "variational" / "delta_fit.py")
     assert not any(m.startswith("ogm_ppl.datasets") for m in mods)
+
+
+def test_inference_imports_no_datasets():
+    for path in INFERENCE_FILES:
+        up = [m for m in _imports(path) if m.startswith(("ogm_ppl.datasets", "ogm_ppl.experiment", "ogm_ppl.cli"))]
+        assert not up, f"{path.relative_to(PKG)} imports {up}"
+
+
+def test_guides_do_not_import_structured_guides():
+    """structured_guides builds on guides, never the other way (no import cycle)."""
+    mods = _imports(PKG / "inference" / "variational" / "guides.py")
+    assert not any(m.startswith("ogm_ppl.inference.variational.structured_guides") for m in mods)

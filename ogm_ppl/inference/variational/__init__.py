@@ -17,6 +17,7 @@ from ogm_ppl.inference.variational.delta_fit import (
     cross_validate,
     fit_delta,
 )
+from ogm_ppl.inference.variational.elbo import ExactELBO
 from ogm_ppl.inference.variational.guides import MeanFieldGuide, PatchGuide, fit_guide
 from ogm_ppl.inference.variational.setting_fit import (
     F_FACTOR,
@@ -31,7 +32,7 @@ from ogm_ppl.inference.variational.setting_fit import (
     save_setting_fit,
     setting_file_name,
 )
-from ogm_ppl.inference.variational.structured_guides import ExactELBO, FirstHitGuide
+from ogm_ppl.inference.variational.structured_guides import FirstHitGuide
 
 __all__ = [
     "F_FACTOR",
