@@ -97,9 +97,10 @@ def mean_field_elbo(model: OccupancyModel, logits: torch.Tensor) -> torch.Tensor
 
 
 class ExactELBO(ELBO):
-    """The ELBO in closed form for guides with ``exact_elbo(model)`` (:class:`~ogm_ppl.inference.variational.structured_guides.FirstHitGuide`,
-    :class:`~ogm_ppl.inference.variational.guides.MeanFieldGuide`) on an :class:`OccupancyModel` with an independent
-    prior: use as ``SVI(model.model, guide, optim, ExactELBO())``. Deterministic and exact."""
+    """The ELBO in closed form for guides with ``exact_elbo(model)``
+    (:class:`~ogm_ppl.inference.variational.structured_guides.FirstHitGuide`,
+    :class:`~ogm_ppl.inference.variational.guides.MeanFieldGuide`) on an :class:`OccupancyModel` with an
+    independent prior: use as ``SVI(model.model, guide, optim, ExactELBO())``. Deterministic and exact."""
 
     def __init__(self):
         super().__init__(num_particles=1)

@@ -10,8 +10,9 @@ a categorical over the ``L + 1`` first hits (the latent cells in ray order, and 
 ``f`` free, cells behind it independent. Under an independent prior the exact posterior is
 ``q(f) = p(f | z)``, ``sigma(psi_k) = lambda_k``: inside the family.
 
-Its ELBO under an independent prior is a finite sum: :func:`~ogm_ppl.inference.variational.elbo.first_hit_elbo`
-(fitted with ``loss="exact"``, :class:`~ogm_ppl.inference.variational.elbo.ExactELBO`).
+Its ELBO under an independent prior is a finite sum,
+:func:`~ogm_ppl.inference.variational.elbo.first_hit_elbo` (fitted with ``loss="exact"``,
+:class:`~ogm_ppl.inference.variational.elbo.ExactELBO`).
 
 >>> from ogm_ppl import GaussianRange, OccupancyModel, raycast
 >>> from ogm_ppl.datasets import toy_1d, THESIS_TOY_READINGS

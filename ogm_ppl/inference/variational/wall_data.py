@@ -6,8 +6,8 @@ it; our default is 1..10), each ``round(N(wall, sigma^2))`` clipped to ``[0, F]`
 is a max-range reading). The robot sits in cell 0 (pinned free); cells ``1..F`` are latent. Readings are
 summarised as counts per reading value (``z = 0..F`` and max range), which is all that traditional OGM
 and the exact 1D posterior need. They are the training data of the Delta fit
-(:mod:`~ogm_ppl.inference.variational.setting_fit`, :class:`~ogm_ppl.inference.variational.delta_fit.FitData`);
-:mod:`ogm_ppl.datasets` re-exports them.
+(:mod:`~ogm_ppl.inference.variational.setting_fit`; they meet
+:class:`~ogm_ppl.inference.variational.delta_fit.FitData`); :mod:`ogm_ppl.datasets` re-exports them.
 """
 
 from __future__ import annotations
