@@ -1,4 +1,4 @@
-"""The amortised guide against Gibbs with the same prior and against p21 OGM (Issue #12 item 3).
+"""The amortised guide against Gibbs with the same prior and against p21 OGM.
 
 Held-out simulated 2D maps, never trained on: (A) maps drawn from the guide's prior (``patch3:generated``)
 given the pose cells are free, from a seed stream the training never used; (B) 32 x 32 windows of

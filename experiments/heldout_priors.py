@@ -1,4 +1,4 @@
-"""Priors judged as predictors of what was not seen (Issue: correlated priors, item 4; thesis Chapter 5).
+"""Priors judged as predictors of what was not seen (thesis Chapter 5).
 
 On held-out floor plans (never used to learn a table; the buildings of the real logs are excluded from
 every training set) we simulate sparse stop-and-scan data, run Gibbs sampling with each prior and score

@@ -17,6 +17,7 @@ import time
 from pathlib import Path
 
 from ogm_ppl.cli import main as ogm_ppl
+from ogm_ppl.io import atomic_write_text
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "data"  # shared/ beside the repository
 INTEL = DATA / "intel-lab" / "intel-corrected.log.gz"
@@ -80,8 +81,7 @@ def main(argv: list[str] | None = None) -> int:
         + (f"; failed: {', '.join(failed)}" if failed else "") + ".",
         "",
     ]
-    args.out.mkdir(parents=True, exist_ok=True)
-    (args.out / "summary.md").write_text("\n".join(lines))
+    atomic_write_text(args.out / "summary.md", "\n".join(lines))
     print("\n".join(lines))
     return 1 if failed else 0
 

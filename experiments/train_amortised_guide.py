@@ -1,4 +1,4 @@
-"""Train the amortised guide q(m | z) by inference compilation (Issue #12 item 3; Le et al. 2017).
+"""Train the amortised guide q(m | z) by inference compilation (Le et al. 2017).
 
 Every step draws one random scene (grid of 24..40 x 24..40 cells, 1..6 poses of 120-beam 360 degree
 scans, maximum range 12 cells, ``GaussianRange(1.0)``), then a batch of maps from the learned prior given

@@ -11,7 +11,6 @@ Problem: ``toy_1d(num_cells=21, readings=THESIS_TOY_READINGS)``, ``GaussianRange
 from __future__ import annotations
 
 import argparse
-import os
 import sys
 import time
 from pathlib import Path
@@ -23,6 +22,7 @@ from ogm_ppl.datasets import THESIS_TOY_READINGS, toy_1d
 from ogm_ppl.inference.exact import pose_constrained_1d
 from ogm_ppl.inference.variational.guides import MeanFieldGuide, PatchGuide, fit_guide
 from ogm_ppl.inference.variational.structured_guides import FirstHitGuide
+from ogm_ppl.io import atomic_write_text
 from ogm_ppl.metrics import kl_divergence
 from ogm_ppl.priors import IndependentPrior
 
@@ -76,11 +76,7 @@ def main(argv=None) -> str:
     ]
     lines += [f"| {g} | {o} | {s} | {k:.2e} | {d:.2f} |" for g, o, s, k, d in rows]
     text = "\n".join(lines) + "\n"
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(out.suffix + ".tmp")
-    tmp.write_text(text)
-    os.replace(tmp, out)
+    atomic_write_text(Path(args.out), text)
     print(text)
     return text
 

@@ -10,15 +10,15 @@ from ogm_ppl.scans import Scans
 from ogm_ppl.sensors import GaussianRange, PatternMatch, SensorModel
 
 __all__ = [
-    "Grid",
-    "Scans",
-    "Rays",
     "CellIndex",
-    "raycast",
-    "SensorModel",
     "GaussianRange",
-    "PatternMatch",
+    "Grid",
     "OccupancyModel",
+    "PatternMatch",
+    "Rays",
+    "Scans",
+    "SensorModel",
+    "raycast",
 ]
 
 

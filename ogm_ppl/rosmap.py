@@ -56,7 +56,7 @@ Rows: image row 0 is the top of the map (largest ``y``); our cell ``(row, col)``
 Next to the two files a *sidecar* ``<stem>.npz`` (``allow_pickle=False``, format version 1) keeps the
 float probabilities, the unknown mask, the grid and a SHA-256 of the image, so that
 :func:`load_ros_map` can return the exact probabilities (a stale sidecar is ignored with a warning).
-All files are written atomically (temporary file + ``os.replace``); the YAML is written last.
+All files are written atomically (:func:`ogm_ppl.io.atomic_write_bytes`); the YAML is written last.
 
 >>> import numpy as np, tempfile, pathlib
 >>> g = Grid((2, 3), resolution=0.5, origin=(-1.0, 2.0))
@@ -72,13 +72,11 @@ True
 
 from __future__ import annotations
 
-import contextlib
 import hashlib
 import io
 import math
 import os
 import re
-import tempfile
 import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass, field
@@ -88,6 +86,7 @@ from typing import Any, Literal
 import numpy as np
 
 from ogm_ppl.grid import Grid
+from ogm_ppl.io import atomic_write_bytes
 
 __all__ = [
     "RosMapError",
@@ -355,21 +354,6 @@ def _default_unknown_value(occ_t: float, free_t: float) -> int:
 
 
 # --------------------------------------------------------------------------- writing
-def _atomic_write_bytes(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            f.write(data)
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        raise
-
-
 def _fmt_float(x: float) -> str:
     s = repr(float(x))
     if "e" in s and "." not in s.split("e")[0]:
@@ -482,15 +466,15 @@ def save_ros_map(
     settings = RosMapSettings(image=image_path.name, resolution=grid.resolution,
                               origin=(grid.origin[0], grid.origin[1], 0.0), negate=bool(negate),
                               occupied_thresh=occ_t, free_thresh=free_t, mode=mode)  # fmt: skip
-    _atomic_write_bytes(image_path, data)
+    atomic_write_bytes(image_path, data)
     if sidecar:
         buf = io.BytesIO()
         np.savez(buf, format_version=np.int64(FORMAT_VERSION), probabilities=p, unknown=unk,
                  shape=np.asarray(grid.shape, dtype=np.int64), resolution=np.float64(grid.resolution),
                  origin=np.asarray(grid.origin, dtype=np.float64),
                  image_sha256=np.str_(hashlib.sha256(data).hexdigest()))  # fmt: skip
-        _atomic_write_bytes(npz_path, buf.getvalue())
-    _atomic_write_bytes(yaml_path, settings.to_yaml().encode("utf-8"))
+        atomic_write_bytes(npz_path, buf.getvalue())
+    atomic_write_bytes(yaml_path, settings.to_yaml().encode("utf-8"))
     return RosMapFiles(
         yaml_path, image_path, npz_path if sidecar else None, settings, int(unknown_value)
     )

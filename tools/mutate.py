@@ -1,4 +1,4 @@
-"""Mutation testing of the core modules (issue 15), ``make mutate``; not part of ``make test``.
+"""Mutation testing of the core modules, ``make mutate``; not part of ``make test``.
 
 Mutants are cosmic-ray's (its operators and its parso-based rewriting of the source file on disk; it
 really changes the numba kernels, which mutmut 3 skips: it leaves decorated functions alone). This
@@ -53,6 +53,7 @@ import ast
 import dataclasses
 import difflib
 import hashlib
+import importlib.util
 import json
 import os
 import random
@@ -70,6 +71,19 @@ except ModuleNotFoundError:  # Python 3.10
 ROOT = Path(__file__).resolve().parent.parent
 
 
+def _load_atomic_write_text():
+    """``ogm_ppl.io.atomic_write_text``, loaded from its file (standard library only) so that this process
+    still never imports the ``ogm_ppl`` package (see the module docstring)."""
+    spec = importlib.util.spec_from_file_location("_ogm_ppl_io", ROOT / "ogm_ppl" / "io.py")
+    assert spec is not None and spec.loader is not None
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod.atomic_write_text
+
+
+atomic_write_text = _load_atomic_write_text()
+
+
 @dataclasses.dataclass(frozen=True)
 class Module:
     path: str
@@ -83,7 +97,9 @@ class Module:
 _GIBBS_TESTS = (
     "tests/inference/mcmc/test_gibbs.py",
     "tests/inference/mcmc/test_gibbs_priors.py",
-    "tests/test_mutants.py",
+    "tests/inference/mcmc/test_metropolis_cell.py",
+    "tests/inference/mcmc/test_patch_python_sweep.py",
+    "tests/inference/mcmc/test_resume_rng.py",
 )
 
 #: core module -> the test files that exercise it (read from their imports and call chains); a listed
@@ -91,40 +107,39 @@ _GIBBS_TESTS = (
 MODULES: dict[str, Module] = {
     "sensors": Module(
         "ogm_ppl/sensors.py",
-        ("tests/test_sensors.py", "tests/test_sensor_contracts.py", "tests/test_range_convention.py",
-         "tests/test_sensors_edges.py"),
+        ("tests/test_sensors.py", "tests/test_sensor_contracts.py", "tests/test_range_convention.py"),
     ),
     "raycast": Module(
         "ogm_ppl/raycast.py",
-        ("tests/test_raycast.py", "tests/test_range_convention.py", "tests/test_raycast_edges.py"),
+        ("tests/test_raycast.py", "tests/test_range_convention.py"),
     ),
     "raycast_kernels": Module(
         "ogm_ppl/_raycast_kernels.py",
         ("tests/test_raycast.py", "tests/test_range_convention.py",
-         "tests/inference/log_odds/test_log_odds.py", "tests/test_raycast_edges.py"),
+         "tests/inference/log_odds/test_log_odds.py"),
     ),
     "log_odds": Module(
         "ogm_ppl/inference/log_odds/maps.py",
-        ("tests/inference/log_odds/test_log_odds.py", "tests/inference/log_odds/test_log_odds_edges.py"),
+        ("tests/inference/log_odds/test_log_odds.py",),
         sites=12,
     ),
     "log_odds_kernels": Module(
         "ogm_ppl/inference/_kernels/log_odds.py",
-        ("tests/inference/log_odds/test_log_odds.py", "tests/inference/log_odds/test_log_odds_edges.py"),
+        ("tests/inference/log_odds/test_log_odds.py",),
         sites=12,
     ),
     "exact": Module(
         "ogm_ppl/inference/exact/posteriors.py",
         ("tests/inference/exact/test_exact.py", "tests/inference/exact/test_exact_edges.py",
-         "tests/test_mutants.py"),
+         "tests/inference/exact/test_pose_constrained_evidence.py", "tests/test_posterior.py"),
         sites=12, max_test_s=5,
     ),
     "posterior": Module(
         "ogm_ppl/posterior.py",
-        ("tests/inference/exact/test_exact.py", "tests/test_posterior_edges.py", "tests/test_mutants.py"),
+        ("tests/inference/exact/test_exact.py", "tests/test_posterior.py"),
         sites=12, max_test_s=5,
     ),
-    "metrics": Module("ogm_ppl/metrics.py", ("tests/test_metrics.py", "tests/test_metrics_edges.py"), sites=16),
+    "metrics": Module("ogm_ppl/metrics.py", ("tests/test_metrics.py",), sites=16),
     "cells_kernels": Module(
         "ogm_ppl/inference/_kernels/cells.py",
         ("tests/inference/exact/test_map_estimate.py", "tests/inference/patch_map/test_patch_map.py",
@@ -386,8 +401,8 @@ class _Recorder:
         self.collected = [it.nodeid for it in items]
 
     def pytest_sessionfinish(self, session):
-        self.path.write_text(json.dumps({"tests": self.tests, "failed": self.failed,
-                                         "collected": getattr(self, "collected", [])}))
+        atomic_write_text(self.path, json.dumps({"tests": self.tests, "failed": self.failed,
+                                                 "collected": getattr(self, "collected", [])}))
 
 
 def run_child(tree: Path, args: list[str], cache_dir: Path, log: Path, rec: Path,
@@ -500,7 +515,7 @@ def baselines(tree: Path, files: list[str], base_cache: Path, work: Path, store:
             tests.update({i: d for i, d in known.get(f, {}).get("tests", {}).items() if i in slow})
             known[f] = {"key": keys[f], "tests": tests}
         print(f"   {len(rep['tests'])} tests pass ({dt:.0f} s)", flush=True)
-        store.write_text(json.dumps(known, indent=1))
+        atomic_write_text(store, json.dumps(known, indent=1))
     return {f: known[f]["tests"] for f in files}
 
 
@@ -669,12 +684,12 @@ def main(argv: list[str] | None = None) -> int:
                 ordered = sorted(ids, key=lambda i: (-kills.get(i, 0), durations[i]))
                 cache = work / "numba-cache"
                 mutant_cache(base_cache, cache, stale)
-                target.write_text(mutated)
+                atomic_write_text(target, mutated)
                 try:
                     rc, dt = run_child(tree, ["-x", *ordered], cache, work / "log.txt",
                                        work / "rec.json", timeout)
                 finally:
-                    target.write_text(src)
+                    atomic_write_text(target, src)
                 rep = json.loads((work / "rec.json").read_text()) if (work / "rec.json").exists() else {}
                 if rc is None:
                     rec["outcome"] = TIMEOUT
@@ -701,7 +716,7 @@ def main(argv: list[str] | None = None) -> int:
         print("interrupted: the results so far are kept; run again to resume", flush=True)
     finally:
         for _name, m, src, *_ in plan:  # the copy is put back whatever happened
-            (tree / m.path).write_text(src)
+            atomic_write_text(tree / m.path, src)
     write_report(out, _current(results, plan), equivalents, plan)
     print(f"wall time {(time.monotonic() - t_start) / 60:.1f} min; report: {out / 'report.md'}")
     return 130 if interrupted else 0
@@ -733,7 +748,7 @@ def write_report(out: Path, results: dict[str, dict], equivalents: list[dict], p
             if r["outcome"] not in (SURVIVED, ANNOTATION):
                 continue
             fn = f"{name}-L{r['line']}-{r['operator'].split('/')[-1]}-{i}.diff"
-            (surv_dir / fn).write_text(r.get("diff", ""))
+            atomic_write_text(surv_dir / fn, r.get("diff", ""))
             item = (f"* `{name}` line {r['line']}, {r['operator'].split('/')[-1]}: "
                     f"`{r['original']}` -> `{r['mutated']}` ([diff](survivors/{fn}))")
             (eq_md.append(f"{item}\n  {reason}") if reason else surv_md.append(item))
@@ -748,7 +763,7 @@ def write_report(out: Path, results: dict[str, dict], equivalents: list[dict], p
     det = tot[KILLED] + tot[TIMEOUT] + tot[ERROR]
     denom = det + tot[SURVIVED]
     summary["total"] = {**tot, "kill_ratio": round(det / denom, 4) if denom else None}
-    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
     md = ["# Mutation testing (`make mutate`, tools/mutate.py)", "",
           "cosmic-ray mutants of the core modules, a random sample of code sites per module (one "
           "operator variant each), each run against the tests that cover its module. *Detected* = killed "
@@ -762,7 +777,7 @@ def write_report(out: Path, results: dict[str, dict], equivalents: list[dict], p
           f"{f'{det / denom:.0%}' if denom else '-'} |", "",
           "## Survivors", "", *(surv_md or ["none"]), "",
           "## Equivalent survivors", "", *(eq_md or ["none"]), ""]
-    (out / "report.md").write_text("\n".join(md))
+    atomic_write_text(out / "report.md", "\n".join(md))
 
 
 if __name__ == "__main__":

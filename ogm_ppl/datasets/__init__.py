@@ -1,32 +1,9 @@
-"""Data: the thesis's toy problems, simulation of range scans, and (later) real logs and floor plans."""
+"""Data: the thesis's toy problems, simulated range scans and stop-and-scan datasets, CARMEN logs, the
+dataset file format, floor-plan corpora and generated ground-truth maps (training data for learned
+priors, Section 6.1)."""
 
 from ogm_ppl.datasets.carmen import CarmenFormatError, CarmenLog, read_carmen
 from ogm_ppl.datasets.dataset_file import Dataset, DatasetFileError, load_dataset, save_dataset
-from ogm_ppl.datasets.simple2d import SimpleExample2D, simple_2d_example
-from ogm_ppl.datasets.simulate import first_hit, simulate_scans
-from ogm_ppl.datasets.toy1d import THESIS_TOY_READINGS, Toy1D, toy_1d
-from ogm_ppl.datasets.walls1d import WallDatasets, wall_datasets
-
-__all__ = [
-    "simulate_scans",
-    "first_hit",
-    "Toy1D",
-    "toy_1d",
-    "THESIS_TOY_READINGS",
-    "SimpleExample2D",
-    "simple_2d_example",
-    "WallDatasets",
-    "wall_datasets",
-    "read_carmen",
-    "CarmenLog",
-    "CarmenFormatError",
-    "save_dataset",
-    "load_dataset",
-    "Dataset",
-    "DatasetFileError",
-]
-
-# Floor-plan corpora and generated ground-truth maps (training data for learned priors).
 from ogm_ppl.datasets.floorplans import (
     REAL_LOG_BUILDINGS,
     FloorPlan,
@@ -36,19 +13,39 @@ from ogm_ppl.datasets.floorplans import (
     training_plans,
 )
 from ogm_ppl.datasets.mapgen import generate_corpus, generate_map
+from ogm_ppl.datasets.simple2d import SimpleExample2D, simple_2d_example
+from ogm_ppl.datasets.simulate import first_hit, simulate_scans
+from ogm_ppl.datasets.stop_and_scan import StopAndScan, plan_route, route_coverage, stop_and_scan
+from ogm_ppl.datasets.toy1d import THESIS_TOY_READINGS, Toy1D, toy_1d
+from ogm_ppl.datasets.walls1d import WallDatasets, wall_datasets
 
-__all__ += [
-    "FloorPlan",
+__all__ = [
     "REAL_LOG_BUILDINGS",
-    "load_plan",
-    "iter_plans",
-    "training_plans",
-    "heldout_plans",
-    "generate_map",
+    "THESIS_TOY_READINGS",
+    "CarmenFormatError",
+    "CarmenLog",
+    "Dataset",
+    "DatasetFileError",
+    "FloorPlan",
+    "SimpleExample2D",
+    "StopAndScan",
+    "Toy1D",
+    "WallDatasets",
+    "first_hit",
     "generate_corpus",
+    "generate_map",
+    "heldout_plans",
+    "iter_plans",
+    "load_dataset",
+    "load_plan",
+    "plan_route",
+    "read_carmen",
+    "route_coverage",
+    "save_dataset",
+    "simple_2d_example",
+    "simulate_scans",
+    "stop_and_scan",
+    "toy_1d",
+    "training_plans",
+    "wall_datasets",
 ]
-
-# Simulated stop-and-scan datasets on any ground-truth map (Section 6.1).
-from ogm_ppl.datasets.stop_and_scan import StopAndScan, plan_route, route_coverage, stop_and_scan  # noqa: E402
-
-__all__ += ["StopAndScan", "plan_route", "route_coverage", "stop_and_scan"]

@@ -20,7 +20,7 @@ key                 dtype / shape                   meaning
 ``provenance``      str (JSON object)               where they came from
 ==================  ==============================  =============================================
 
-Writes are atomic (temporary file beside the target, then ``os.replace``). :func:`load_dataset`
+Writes are atomic (:func:`ogm_ppl.io.atomic_write`). :func:`load_dataset`
 checks everything and raises :class:`DatasetFileError` naming the file, what is wrong and a hint.
 
 >>> import tempfile, os
@@ -35,7 +35,6 @@ from __future__ import annotations
 
 import json
 import os
-import tempfile
 import zipfile
 import zlib
 from dataclasses import dataclass
@@ -45,6 +44,7 @@ from typing import Any
 import numpy as np
 
 from ogm_ppl.grid import Grid
+from ogm_ppl.io import atomic_write
 from ogm_ppl.scans import Scans
 
 __all__ = [
@@ -129,18 +129,9 @@ def save_dataset(
             raise ValueError(f"save_dataset: truth must be bool or numeric, got {truth.dtype}")
         arrays["truth"] = truth
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    try:
-        with os.fdopen(fd, "wb") as f:
-            # numpy's stub: **kwds might also bind its `allow_pickle: bool`; our keys are array names
-            np.savez_compressed(f, **arrays)  # type: ignore[arg-type]
-            f.flush()
-            os.fsync(f.fileno())
-        os.replace(tmp, path)
-    except BaseException:
-        Path(tmp).unlink(missing_ok=True)
-        raise
+    with atomic_write(path) as f:
+        # numpy's stub: **kwds might also bind its `allow_pickle: bool`; our keys are array names
+        np.savez_compressed(f, **arrays)  # type: ignore[arg-type]
     return path
 
 

@@ -1,4 +1,5 @@
-"""Models: the inverse-sensor-model update terms (Delta families) and, later, the Pyro map model."""
+"""Models: the occupancy map model as a Pyro program (:class:`OccupancyModel`, Section 2.2) and the
+inverse-sensor-model update terms of traditional mapping (Delta families, Section 2.4)."""
 
 from ogm_ppl.models.delta import (
     PN,
@@ -15,16 +16,16 @@ from ogm_ppl.models.delta import (
 from ogm_ppl.models.occupancy import MapDistribution, OccupancyModel
 
 __all__ = [
-    "DeltaFamily",
-    "BorensteinKoren",
-    "Moravec",
-    "MarshallBarfoot",
-    "Stachniss",
-    "Elfes",
     "PN",
+    "BorensteinKoren",
+    "DeltaFamily",
+    "DeltaFileError",
+    "Elfes",
+    "MapDistribution",
+    "MarshallBarfoot",
+    "Moravec",
+    "OccupancyModel",
+    "Stachniss",
     "delta_by_name",
     "load_delta",
-    "DeltaFileError",
-    "OccupancyModel",
-    "MapDistribution",
 ]

@@ -2,7 +2,8 @@ r"""Update terms Delta of traditional OGM: the log-odds inverse sensor models of
 
 Traditional OGM (Section 2.4, Eq. 2.10) adds an update term ``Delta`` to the evidence of every cell
 ``m_kappa`` on the ray of reading ``z_n``. Every family here is a ``torch.nn.Module`` whose named
-parameters are differentiable (a later fit treats them as amortised variational parameters, Section 2.5),
+parameters are differentiable (:mod:`ogm_ppl.inference.variational.delta_fit` fits them as amortised
+variational parameters, Section 2.5),
 and produces a lookup table
 
 .. math:: T[\kappa, z] = \Delta(\kappa; z_n = z), \qquad T[\kappa, Z] = \Delta(\kappa; \text{max range})

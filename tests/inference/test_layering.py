@@ -85,3 +85,15 @@ def test_map_methods_sit_between_inference_and_the_experiments():
         for path in sorted(root.rglob("*.py")) if root.is_dir() else [root.with_suffix(".py")]:
             for mod in _imports(path):
                 assert not mod.startswith("ogm_ppl.methods"), f"{path.relative_to(PKG)} imports {mod}"
+
+
+def test_inference_imports_no_datasets():
+    for path in INFERENCE_FILES:
+        up = [m for m in _imports(path) if m.startswith(("ogm_ppl.datasets", "ogm_ppl.experiment", "ogm_ppl.cli"))]
+        assert not up, f"{path.relative_to(PKG)} imports {up}"
+
+
+def test_guides_do_not_import_structured_guides():
+    """structured_guides builds on guides, never the other way (no import cycle)."""
+    mods = _imports(PKG / "inference" / "variational" / "guides.py")
+    assert not any(m.startswith("ogm_ppl.inference.variational.structured_guides") for m in mods)

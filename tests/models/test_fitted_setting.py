@@ -1,4 +1,4 @@
-"""The setting a Delta term was fitted for travels with it (issue #11 item 4): ``DeltaFamily.fitted_setting``
+"""The setting a Delta term was fitted for travels with it: ``DeltaFamily.fitted_setting``
 and ``fitted_setting(delta_or_name)``."""
 
 import json

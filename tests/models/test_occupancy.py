@@ -33,7 +33,7 @@ def _cut_ray_model(K, readings, lam, sigma=1.0, max_range=20.0, sensor=None):
 
 def test_ray_cut_by_grid_edge_is_a_normalised_distribution_over_readings():
     # a 9-cell grid and a sensor that reaches 20 cells: every outcome (a hit at kappa 0..20, max range)
-    # summed for every map of the grid must give 1 (Issue: it gave 1.40 when the edge censored max range
+    # summed for every map of the grid must give 1 (it would give 1.40 if the edge censored max range
     # and a hit past the edge counted as an obstacle at the reading)
     # The pattern-matching sensor has discrete outcomes: exact to rounding. The Gaussian is a density
     # on continuous ranges, so its sum over integer kappa is a Riemann sum: exact to ~1e-3 only.

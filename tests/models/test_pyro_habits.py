@@ -1,4 +1,4 @@
-"""The occupancy model behaves as a Pyro user expects (issue 12, item 1)."""
+"""The occupancy model behaves as a Pyro user expects."""
 
 import math
 

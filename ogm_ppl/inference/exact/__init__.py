@@ -10,10 +10,10 @@ from ogm_ppl.inference.exact.posteriors import (
 )
 
 __all__ = [
+    "MAX_BRUTE_FORCE_CELLS",
+    "MapEstimate",
     "brute_force",
+    "map_estimate",
     "pose_constrained_1d",
     "pyro_enumeration",
-    "MAX_BRUTE_FORCE_CELLS",
-    "map_estimate",
-    "MapEstimate",
 ]

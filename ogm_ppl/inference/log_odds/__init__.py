@@ -9,9 +9,9 @@ from ogm_ppl.inference.log_odds.maps import (
 )
 
 __all__ = [
+    "OCTOMAP_CLAMP",
     "LogOddsMap",
+    "delta_table_for",
     "evidence_grid",
     "evidence_grid_from_scans",
-    "delta_table_for",
-    "OCTOMAP_CLAMP",
 ]

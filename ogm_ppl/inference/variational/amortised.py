@@ -61,6 +61,7 @@ from torch import nn
 
 from ogm_ppl.grid import Grid
 from ogm_ppl.inference.variational.guides import guide_name
+from ogm_ppl.io import atomic_write
 from ogm_ppl.models.occupancy import OBSERVED, OccupancyModel
 from ogm_ppl.priors.base import MapPrior
 from ogm_ppl.sensors import SensorModel
@@ -403,10 +404,8 @@ class AmortisedGuide(PyroModule):
         }
         for k, v in self.net.state_dict().items():
             payload[f"param/{k}"] = v.detach().cpu().to(torch.float32).numpy()
-        path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(path.name + ".tmp.npz")
-        np.savez_compressed(tmp, **payload)  # type: ignore[arg-type]  # numpy stub: **arrays could fill allow_pickle
-        os.replace(tmp, path)
+        with atomic_write(path) as f:
+            np.savez_compressed(f, **payload)  # type: ignore[arg-type]  # numpy stub: **arrays could fill allow_pickle
         return path
 
     @classmethod

@@ -12,7 +12,7 @@ strong-Wolfe line search (the thesis: BFGS with a mixed quadratic/cubic line sea
 
 Fitting takes any data with ``counts`` (``D x (F + 2)`` readings per dataset, max range last), ``exact``
 (``D x (F + 1)`` exact marginals), ``F`` and ``subset(index)``: the :class:`FitData` protocol, met by
-:class:`~ogm_ppl.datasets.walls1d.FitData` (this module imports no dataset code).
+:class:`~ogm_ppl.inference.variational.wall_data.WallDatasets` (this module imports no dataset code).
 """
 
 from __future__ import annotations

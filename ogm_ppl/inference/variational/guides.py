@@ -9,7 +9,7 @@ Both are Pyro guides (``PyroModule`` s) for the site ``"m"`` of :meth:`Occupancy
 cells, event shape ``L``) and train with Pyro's ``SVI``: :func:`fit_guide` with ``loss="tracegraph"``
 (``TraceGraph_ELBO``, score-function gradients with vectorised particles; the discrete site is not
 reparameterisable), ``"rws"`` (``ReweightedWakeSleep``: importance-weighted wake-phi updates, which fit
-``KL(p || q)``) or ``"exact"`` (:class:`~ogm_ppl.inference.variational.structured_guides.ExactELBO`, the ELBO in
+``KL(p || q)``) or ``"exact"`` (:class:`~ogm_ppl.inference.variational.elbo.ExactELBO`, the ELBO in
 closed form where the guide and an independent prior allow it). Each instance has its own parameter
 names (``"<name>.logits"``, ``name`` defaulting to ``"<ClassName>_<n>"``, unique in the process). See
 :mod:`ogm_ppl.inference.variational.structured_guides` for the first-hit guide, whose family holds the exact 1D
@@ -34,6 +34,7 @@ from pyro.nn import PyroModule, PyroParam
 from torch.distributions import constraints
 
 from ogm_ppl.inference.tiling import tile_patches
+from ogm_ppl.inference.variational.elbo import ExactELBO, mean_field_elbo
 from ogm_ppl.models.occupancy import OccupancyModel
 
 __all__ = ["MeanFieldGuide", "PatchGuide", "PatchMapDistribution", "fit_guide", "guide_name"]
@@ -69,9 +70,7 @@ class MeanFieldGuide(PyroModule):
         return pyro.sample("m", dist.Bernoulli(logits=self.logits).to_event(1))
 
     def exact_elbo(self, model: OccupancyModel) -> torch.Tensor:
-        """The ELBO in closed form (independent prior, any rays): see :mod:`.structured_guides`."""
-        from ogm_ppl.inference.variational.structured_guides import mean_field_elbo
-
+        """The ELBO in closed form (independent prior, any rays): see :mod:`.elbo`."""
         with self._pyro_context:
             return mean_field_elbo(model, self.logits)
 
@@ -186,7 +185,7 @@ def fit_guide(model: OccupancyModel, guide, steps: int = 1000, lr: float = 0.05,
 
     ``loss``: ``"tracegraph"`` (``TraceGraph_ELBO(num_particles, vectorised)``, score-function reverse
     KL), ``"rws"`` (``ReweightedWakeSleep(num_particles)``, wake-phi only: importance-weighted
-    ``KL(p || q)``), or ``"exact"`` (:class:`~ogm_ppl.inference.variational.structured_guides.ExactELBO`, for guides with
+    ``KL(p || q)``), or ``"exact"`` (:class:`~ogm_ppl.inference.variational.elbo.ExactELBO`, for guides with
     ``exact_elbo``). Returns the loss trace. Seeds Pyro; the guide's parameters live in the guide (a
     ``PyroModule``), so other guides' parameters are untouched.
     """
@@ -194,7 +193,6 @@ def fit_guide(model: OccupancyModel, guide, steps: int = 1000, lr: float = 0.05,
     from pyro.optim import Adam
     from tqdm.auto import tqdm
 
-    from ogm_ppl.inference.variational.structured_guides import ExactELBO
 
     valid = torch.arange(model.loglik_table.shape[1])[None, :] <= model.lengths[:, None]
     if loss != "exact" and torch.isinf(model.loglik_table[valid]).any():

@@ -1,5 +1,5 @@
 r"""Update terms Delta fitted for a sensor setting, and a warning when a term is used outside its own
-(Section 2.5, issue #11 item 4).
+(Section 2.5).
 
 Section 2.5 fits Delta by minimising the summed cell cross-entropy against exact 1D posteriors,
 
@@ -11,7 +11,7 @@ on datasets of a stationary robot, a wall at ``f`` and Gaussian readings ``N(f, 
 fitted there is a function of ``kappa - z`` in *cells*, so it is only right for that sigma in cells: at
 5 cm cells a laser's noise is ~1 cell, its range 400 cells. :func:`fit_delta_for_setting` fits the
 named family at any ``(sigma, F)`` (wall ``round(0.8 F)`` unless given) on
-:func:`~ogm_ppl.datasets.wall_datasets`; :func:`check_delta_setting` warns
+:func:`~ogm_ppl.inference.variational.wall_data.wall_datasets`; :func:`check_delta_setting` warns
 (:class:`FittedSettingWarning`) when a term is used outside the setting it was fitted for.
 
 Two facts make the fit cheap (the exact posteriors, ~5-8 ms per dataset, are the dominant cost):
@@ -53,6 +53,7 @@ import torch
 from torch import nn
 
 from ogm_ppl.inference.variational.delta_fit import FitData, FitResult, cross_entropy_loss, minimise
+from ogm_ppl.inference.variational.wall_data import wall_datasets
 from ogm_ppl.models.delta import (
     PN,
     BorensteinKoren,
@@ -350,8 +351,6 @@ def fit_deltas_for_setting(
     todo = [n for n in names if n not in out]
     if not todo:
         return out
-    from ogm_ppl.datasets import wall_datasets
-
     t0 = time.perf_counter()
     data = wall_datasets(num=num, F=F, wall=wall, sigma=sigma, num_readings=num_readings, prior=prior, seed=seed)
     test = None

@@ -1,3 +1,4 @@
+import dataclasses
 import math
 
 import numpy as np
@@ -181,3 +182,16 @@ def test_nan_parameters_in_a_delta_are_refused():
             evidence_grid(raycast(grid, scans), delta)
         with pytest.raises(ValueError, match="non-finite update term"):
             evidence_grid_from_scans(grid, scans, delta)
+
+
+# ------------------------------------------------------- LogOddsMap is a value
+
+
+def test_log_odds_map_is_immutable():
+    """A ``LogOddsMap`` is a frozen value: its fields cannot be rebound after it is built."""
+    rays = raycast(Grid.line(6), Scans.one_d([3.0], max_range=5.0))
+    m = evidence_grid(rays, Moravec.haehnel())
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        m.log_odds = torch.zeros(6)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        m.observed = torch.ones(6, dtype=torch.bool)

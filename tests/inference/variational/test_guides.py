@@ -65,7 +65,7 @@ def test_patch_guide_needs_a_tiling():
         PatchGuide(model(), [[0, 0], [0, 2]])
 
 
-# ---------------------------------------------------------------- structured guides, exact ELBO (issue 12)
+# ----------------------------------------------------------------------- structured guides, exact ELBO
 from ogm_ppl.inference.exact.posteriors import _bits, brute_force  # noqa: E402
 from ogm_ppl.inference.variational.structured_guides import (  # noqa: E402
     ExactELBO,

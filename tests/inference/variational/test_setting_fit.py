@@ -1,5 +1,5 @@
 """Update terms fitted for a sensor setting, and the warning for a shipped term used outside its own
-(issue #11 item 4; Section 2.5)."""
+(Section 2.5)."""
 
 import json
 import warnings
