@@ -105,9 +105,7 @@ def plan_tasks(spec: ExperimentSpec, out: Path, resume: bool = True) -> list[Tas
             hs = []
             for c in range(alg.chains):
                 seed = derive_seed(spec.seed, "run", ds.name, alg.name, c)
-                rec_metrics = (
-                    m if alg.kind == "gibbs" else None
-                )  # the F1 records depend on the metrics
+                rec_metrics = m if alg.records_metrics else None  # the F1 records depend on them
                 h = T.task_hash(
                     "run", ds_h[ds.name], T.spec_entry(alg), c, seed, rec_metrics, o["maps"]
                 )
