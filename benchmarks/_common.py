@@ -46,11 +46,13 @@ def _cpu_model() -> str:
 
 
 def _git_commit(root: Path) -> str:
-    """``git rev-parse HEAD`` of ``root``, with ``-dirty`` when tracked files differ from it."""
+    """``git rev-parse HEAD`` of ``root``, with ``-dirty`` when tracked files of the code that produces
+    results (``ogm_ppl/``, ``benchmarks/``, ``experiments/``) differ from it; edits to docs do not count."""
     try:
         head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True,
                               check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=root,
+        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--",
+                                "ogm_ppl", "benchmarks", "experiments"], cwd=root,
                                capture_output=True, text=True, check=True).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
