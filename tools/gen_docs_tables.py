@@ -192,6 +192,13 @@ def _bench_exact(doc: dict) -> Table:
                  rows=rows, provenance=doc["provenance"])
 
 
+def _bench_patch(doc: dict) -> Table:
+    rows = [[k, _g(v)] for k, v in doc["seconds"].items()]
+    return Table(caption=(f"Patch maps of the same scene ({doc['cells']:,} cells, {doc['rays']:,} rays): seconds of one "
+                          "call each, the first (numba compilation or cache load included)"),
+                 header=["method", "seconds"], rows=rows, provenance=doc["provenance"])
+
+
 def _table_3_1(doc: dict) -> Table:
     rows = [[k, _g(v["mean"], 4), "" if v.get("thesis") is None else _g(v["thesis"], 4)] for k, v in doc["rows"].items()]
     return Table(caption=(f"Table 3.1: mean summed KL to the exact marginals, {doc['datasets']} datasets, "
@@ -204,6 +211,7 @@ def _table_3_1(doc: dict) -> Table:
 TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "bench_exact": ("bench_exact", _bench_exact),
     "bench_ogm": ("bench_ogm", _bench_ogm),
+    "bench_patch": ("bench_patch", _bench_patch),
     "headline": ("headline", _headline),
     "simulated": ("headline", _simulated),
     "table_3_1": ("table_3_1", _table_3_1),
