@@ -47,8 +47,11 @@ types: $(STAMP)
 package-check: $(STAMP)
 	CI=1 $(BIN)/python -m pytest -q -p no:cacheprovider -m packaging tests/test_packaging.py
 
-# the API reference from the docstrings -> docs/_build/html/index.html; warnings are errors
+# the guide, results and benchmark pages (tables generated from docs/results/*.json by
+# tools/gen_docs_tables.py), the notebooks (not executed) and the API reference -> docs/_build/html/index.html;
+# warnings are errors, and so is a README table that differs from its snapshot
 docs: $(DOCS_STAMP)
+	$(BIN)/python tools/gen_docs_tables.py readme --check
 	$(BIN)/sphinx-build -W --keep-going -q -b html docs docs/_build/html
 
 bench: $(STAMP)

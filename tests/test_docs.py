@@ -1,9 +1,12 @@
-"""The README's quick start and every docstring example run as written."""
+"""The README's quick start and every docstring example run as written; the generated tables of the
+README and the docs equal what tools/gen_docs_tables.py builds from the committed JSON snapshots."""
 
 import doctest
 import importlib
+import json
 import pkgutil
 import re
+import sys
 from pathlib import Path
 
 import matplotlib
@@ -13,6 +16,9 @@ import ogm_ppl
 
 matplotlib.use("Agg")
 ROOT = Path(__file__).resolve().parent.parent
+sys.path.insert(0, str(ROOT / "tools"))
+import gen_docs_tables  # noqa: E402
+
 MODULES = sorted(
     m.name for m in pkgutil.walk_packages(ogm_ppl.__path__, "ogm_ppl.") if not m.name.endswith("__main__")
 )
@@ -32,8 +38,85 @@ def test_readme_quick_start_runs(tmp_path, monkeypatch):
         exec(compile(block, "README.md", "exec"), namespace)
 
 
+GUIDE = ["guide/model.md", "guide/priors.md", "guide/inference.md", "guide/real_data.md"]
+
+
+def test_guide_examples_run(tmp_path, monkeypatch):
+    """The guide's Python blocks, page after page in one namespace, as a reader would run them."""
+    work = tmp_path / "work"
+    work.mkdir()
+    (tmp_path / "shared").symlink_to(ROOT.parent / "shared")
+    monkeypatch.chdir(work)
+    namespace = {}
+    for page in GUIDE:
+        blocks = re.findall(r"```python\n(.*?)```", (ROOT / "docs" / page).read_text(), flags=re.S)
+        assert blocks, page
+        for block in blocks:
+            exec(compile(block, page, "exec"), namespace)
+
+
 @pytest.mark.parametrize("name", MODULES)
 def test_docstring_examples(name):
     module = importlib.import_module(name)
     result = doctest.testmod(module, optionflags=doctest.ELLIPSIS | doctest.NORMALIZE_WHITESPACE)
     assert result.failed == 0
+
+
+def test_readme_generated_blocks_equal_the_snapshots():
+    text = (ROOT / "README.md").read_text()
+    names = re.findall(r"<!-- generated: ([a-z0-9_]+) -->", text)
+    assert "headline" in names
+    for name in names:
+        body = re.search(rf"<!-- generated: {name} -->\n(.*?)<!-- end generated -->", text, re.S)[1]
+        assert body == gen_docs_tables.readme_block(name), f"README block {name!r} is stale: run " \
+            "python tools/gen_docs_tables.py readme"
+    assert gen_docs_tables.update_readme(ROOT / "README.md", check=True) == []
+
+
+def test_every_snapshot_is_stamped_and_every_table_builds():
+    snaps = sorted(p.stem for p in gen_docs_tables.RESULTS.glob("*.json"))
+    assert snaps
+    for name in snaps:
+        prov = gen_docs_tables.load_snapshot(name)["provenance"]
+        assert prov["command"] and re.fullmatch(r"[0-9a-f]{40}(-dirty)?", prov["commit"]), (name, prov)
+        assert {"cpu", "cores", "python", "torch", "numba"} <= set(prov["machine"]), name
+    for name, (snap, _) in gen_docs_tables.TABLES.items():
+        if snap in snaps:
+            t = gen_docs_tables.table(name)
+            assert t.rows and all(len(r) == len(t.header) for r in t.rows), name
+
+
+def test_every_table_a_page_shows_has_a_snapshot():
+    shown = set()
+    for page in (ROOT / "docs").rglob("*.md"):
+        shown |= set(re.findall(r"```\{ogm-table\} ([a-z0-9_]+)", page.read_text()))
+    assert {"headline", "bench_ogm"} <= shown
+    for name in shown:
+        assert name in gen_docs_tables.TABLES, name
+        assert (gen_docs_tables.RESULTS / f"{gen_docs_tables.TABLES[name][0]}.json").is_file(), name
+
+
+def test_snapshot_stamps_an_unstamped_result_and_the_readme_follows(tmp_path):
+    results = tmp_path / "results"
+    src = tmp_path / "bench_exact.json"
+    doc = gen_docs_tables.load_snapshot("bench_exact")
+    doc.pop("provenance")
+    doc["brute_force"][0]["seconds"] = 123.0
+    src.write_text(json.dumps(doc))
+    with pytest.raises(ValueError, match="--command"):
+        gen_docs_tables.snapshot(src, results=results)
+    gen_docs_tables.snapshot(src, command="python benchmarks/bench_exact.py", results=results)
+    stamped = gen_docs_tables.load_snapshot("bench_exact", results)
+    assert stamped["provenance"]["command"] == "python benchmarks/bench_exact.py"
+    with pytest.raises(ValueError, match="already stamped"):
+        gen_docs_tables.snapshot(results / "bench_exact.json", command="x", results=tmp_path)
+
+    readme = tmp_path / "README.md"
+    readme.write_text("intro\n<!-- generated: bench_exact -->\n| stale |\n<!-- end generated -->\nend\n")
+    assert gen_docs_tables.update_readme(readme, results, check=True) == ["bench_exact"]
+    assert "| stale |" in readme.read_text()  # check writes nothing
+    assert gen_docs_tables.update_readme(readme, results) == ["bench_exact"]
+    text = readme.read_text()
+    assert "| brute force, K = 16 | 6 | 123 |" in text and "`python benchmarks/bench_exact.py` at commit" in text
+    assert text.startswith("intro\n") and text.endswith("<!-- end generated -->\nend\n")
+    assert gen_docs_tables.update_readme(readme, results, check=True) == []

@@ -1,0 +1,293 @@
+"""The results and benchmark tables of the docs and the README, generated from committed JSON snapshots.
+
+Every table shown in ``docs/`` or in the README's ``<!-- generated: NAME -->`` block is built here from a
+JSON snapshot in ``docs/results/`` (a copy of what a benchmark or experiment wrote), never typed by hand.
+Each snapshot carries a ``"provenance"`` block (command line, git commit, machine, date): the benchmarks
+stamp their own JSON (``benchmarks/_common.py``: ``write_json``); for an experiment's JSON the
+``snapshot`` command below adds the stamp when copying it. Under each table the command, commit and
+machine are printed, so a reader can rerun it and a rerun updates the page.
+
+Commands (from the repository root)::
+
+    python tools/gen_docs_tables.py snapshot out/bench/bench_ogm.json          # copy a stamped JSON
+    python tools/gen_docs_tables.py snapshot out/report.json --name headline --command "make run"
+    python tools/gen_docs_tables.py readme           # rewrite the README's generated blocks
+    python tools/gen_docs_tables.py readme --check   # exit 1 if they differ from the snapshots
+    python tools/gen_docs_tables.py show NAME        # one table as Markdown
+
+The Sphinx extension ``docs/_ext/ogm_tables.py`` renders the same :class:`Table` objects into the pages
+(``{ogm-table} NAME``); ``tests/test_docs.py`` checks that the README blocks equal :func:`readme_block`.
+"""
+
+from __future__ import annotations
+
+import argparse
+import datetime
+import json
+import math
+import re
+import sys
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parent.parent
+RESULTS = ROOT / "docs" / "results"
+README = ROOT / "README.md"
+
+__all__ = [
+    "RESULTS",
+    "TABLES",
+    "Table",
+    "load_snapshot",
+    "provenance_line",
+    "readme_block",
+    "snapshot",
+    "table",
+    "to_markdown",
+    "update_readme",
+]
+
+
+@dataclass(frozen=True)
+class Table:
+    """One generated table: a caption, a header row, body rows (strings) and where the numbers came from."""
+
+    caption: str
+    header: list[str]
+    rows: list[list[str]]
+    provenance: dict
+    note: str = ""
+
+
+# ------------------------------------------------------------------------------------------ snapshots
+_PROVENANCE_KEYS = ("command", "commit", "machine", "date")
+
+
+def load_snapshot(name: str, results: Path = RESULTS) -> dict:
+    """``docs/results/NAME.json``, validated: a JSON object with a complete ``"provenance"`` block."""
+    path = results / f"{name}.json"
+    doc = json.loads(path.read_text())
+    if not isinstance(doc, dict):
+        raise ValueError(f"{path}: a snapshot is a JSON object")
+    prov = doc.get("provenance")
+    missing = [k for k in _PROVENANCE_KEYS if not isinstance(prov, dict) or k not in prov]
+    if missing:
+        raise ValueError(f"{path}: provenance lacks {', '.join(missing)}")
+    return doc
+
+
+def snapshot(src: Path, name: str | None = None, command: str | None = None, results: Path = RESULTS) -> Path:
+    """Copy the JSON ``src`` into ``results/NAME.json`` (``NAME`` defaults to the file's stem).
+
+    A JSON without a ``"provenance"`` block (an experiment's own output) gets one: ``command`` (required
+    then), the commit of this checkout and this machine, dated by ``src``'s modification time, so take the
+    snapshot right after the run, from the checkout that ran it.
+    """
+    from ogm_ppl.io import atomic_write_text
+
+    doc = json.loads(Path(src).read_text())
+    if not isinstance(doc, dict):
+        raise ValueError(f"{src}: expected a JSON object")
+    if "provenance" not in doc:
+        if not command:
+            raise ValueError(f"{src} has no provenance: pass the command that produced it (--command)")
+        sys.path.insert(0, str(ROOT / "benchmarks"))
+        from _common import provenance
+
+        prov = provenance(command)
+        mtime = datetime.datetime.fromtimestamp(Path(src).stat().st_mtime, datetime.timezone.utc)
+        prov["date"] = mtime.strftime("%Y-%m-%dT%H:%M:%SZ")
+        doc = {"provenance": prov, **doc}
+    elif command:
+        raise ValueError(f"{src} is already stamped (command {doc['provenance'].get('command')!r})")
+    return atomic_write_text(results / f"{name or Path(src).stem}.json", json.dumps(doc, indent=1, allow_nan=True))
+
+
+def provenance_line(prov: dict) -> str:
+    """One line under a table: ``command`` at ``commit`` on the machine, date."""
+    m = prov["machine"]
+    machine = (f"{m.get('cpu', '?')}, {m.get('cores', '?')} cores, Python {m.get('python', '?')}, "
+               f"torch {m.get('torch', '?')}, numba {m.get('numba', '?')}")
+    commit = prov["commit"][:12] + ("-dirty" if prov["commit"].endswith("-dirty") else "")
+    return f"`{prov['command']}` at commit {commit} on {machine}; {prov['date'][:10]}"
+
+
+# ------------------------------------------------------------------------------------------ formatting
+def _f(x, digits: int = 3) -> str:
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "–"
+    return f"{x:.{digits}f}"
+
+
+def _g(x, digits: int = 3) -> str:
+    if x is None or (isinstance(x, float) and math.isnan(x)):
+        return "–"
+    return f"{x:.{digits}g}"
+
+
+def _rate(x: float) -> str:
+    return f"{x / 1e6:.2f} M" if x >= 1e6 else f"{x / 1e3:.0f} k"
+
+
+# ------------------------------------------------------------------------------------------ the tables
+HEADLINE_LABELS = {"ogm": "traditional OGM (Hähnel)", "p21": "log-odds OGM, p21 fitted for this sensor",
+                   "border-L9": "Gibbs, border prior learned from HouseExpo, L = 9"}
+
+
+def _headline(doc: dict) -> Table:
+    pooled = doc["intel"]["pooled"]
+    conds = list(dict.fromkeys(p["condition"] for p in pooled))
+    frac = {p["condition"]: p["measurement_fraction"] for p in pooled}
+    algs = list(dict.fromkeys(p["algorithm"] for p in pooled))
+    rows = []
+    for a in algs:
+        cells = []
+        for c in conds:
+            p = next((p for p in pooled if p["condition"] == c and p["algorithm"] == a), None)
+            cells.append("–" if p is None else
+                         f"{_f(p['mask'].get('best_f1'))} / {_f(p['mask'].get('auc'))} / "
+                         f"{_f(p['touched'].get('best_f1'))}")
+        rows.append([HEADLINE_LABELS.get(a, a), *cells])
+    return Table(
+        caption="Intel Lab log at 5 cm, half the beams: best F1 / ROC AUC / best F1 on the touched cells",
+        header=["map", *(f"{100 * frac[c]:.3g} % of the readings" for c in conds)],
+        rows=rows, provenance=doc["provenance"],
+        note=f"run time {doc['intel']['seconds']:.0f} s",
+    )
+
+
+def _simulated(doc: dict) -> Table:
+    maps = doc["simple2d"]["maps"]
+    rows = [[r["label"], _f(r["best_f1"]), _f(r["roc_auc"]), _g(r["seconds"])] for r in maps.values()]
+    return Table(caption="Simple 2D example (Fig. 2.8 setting), scored against the ground truth near observed cells",
+                 header=["map", "best F1", "ROC AUC", "seconds"], rows=rows, provenance=doc["provenance"])
+
+
+_OGM_LABELS = {"ours (fused)": "ours, fused traversal + update", "ours (CSR)": "ours, `raycast` (CSR) + `evidence_grid`",
+               "numpy (batched)": "batched numpy DDA (`reference.evidence_grid_numpy`)",
+               "python loop": "plain per-ray Python loop (timed on 10 scans, scaled by work)",
+               "octomap": "OctoMap (`octomap-python`, one thread)"}
+
+
+def _bench_ogm(doc: dict) -> Table:
+    rows = [[_OGM_LABELS.get(k, k), _g(sec, 3), _rate(doc["rays_per_second"][k]),
+             f"{doc['updates_per_second'][k] / 1e6:.1f}", f"{doc['speedup_of_fused_over'][k]:.1f}x"]
+            for k, sec in doc["seconds"].items()]
+    s = doc["scene"]
+    return Table(
+        caption=(f"Traditional OGM, {s['grid'][0]} x {s['grid'][1]} grid at {s['resolution_m'] * 100:g} cm, "
+                 f"{s['rays']:,} rays, max range {s['max_range_cells']} cells: best of several runs, one core"),
+        header=["method", "seconds", "rays/s", "M ray-cell updates/s", "the fused kernel is faster by"],
+        rows=rows, provenance=doc["provenance"], note=f"OctoMap: {doc['octomap_status']}",
+    )
+
+
+def _bench_exact(doc: dict) -> Table:
+    rows = [[f"brute force, K = {r['K']}", "6", _g(r["seconds"]), _g(r["python_loop_seconds_estimated"])]
+            for r in doc["brute_force"]]
+    rows += [[f"pose-constrained 1D, K = {r['K']:,}", str(r["N"]), _g(r["seconds"]), ""] for r in doc["pose_constrained"]]
+    return Table(caption="Exact posteriors of 1D problems: seconds per posterior (marginals included)",
+                 header=["method", "readings", "seconds", "a per-map Python loop, estimated (s)"],
+                 rows=rows, provenance=doc["provenance"])
+
+
+def _bench_patch(doc: dict) -> Table:
+    rows = [[k, _g(v)] for k, v in doc["seconds"].items()]
+    return Table(caption=(f"Patch maps of the same scene ({doc['cells']:,} cells, {doc['rays']:,} rays): seconds of one "
+                          "call each, the first (numba compilation or cache load included)"),
+                 header=["method", "seconds"], rows=rows, provenance=doc["provenance"])
+
+
+def _table_3_1(doc: dict) -> Table:
+    rows = [[k, _g(v["mean"], 4), "" if v.get("thesis") is None else _g(v["thesis"], 4)] for k, v in doc["rows"].items()]
+    return Table(caption=(f"Table 3.1: mean summed KL to the exact marginals, {doc['datasets']} datasets, "
+                          f"K = {doc['cells']} latent cells, Gibbs {doc['gibbs_sweeps']:,} sweeps"),
+                 header=["algorithm", "ours", "thesis (Table 3.1)"], rows=rows, provenance=doc["provenance"],
+                 note=f"run time {doc['seconds']:.0f} s")
+
+
+#: table name -> (snapshot name, builder)
+TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
+    "bench_exact": ("bench_exact", _bench_exact),
+    "bench_ogm": ("bench_ogm", _bench_ogm),
+    "bench_patch": ("bench_patch", _bench_patch),
+    "headline": ("headline", _headline),
+    "simulated": ("headline", _simulated),
+    "table_3_1": ("table_3_1", _table_3_1),
+}
+
+
+def table(name: str, results: Path = RESULTS) -> Table:
+    """The table ``name`` (a key of :data:`TABLES`) built from its snapshot."""
+    snap, build = TABLES[name]
+    return build(load_snapshot(snap, results))
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "\\|")
+
+
+def to_markdown(t: Table) -> str:
+    """A GitHub-flavoured Markdown table and, under it, the line naming its command, commit and machine."""
+    lines = ["| " + " | ".join(map(_cell, t.header)) + " |", "|" + "---|" * len(t.header)]
+    lines += ["| " + " | ".join(map(_cell, r)) + " |" for r in t.rows]
+    tail = provenance_line(t.provenance) + (f"; {t.note}" if t.note else "")
+    return "\n".join([*lines, "", f"{t.caption}. From {tail}."])
+
+
+# ------------------------------------------------------------------------------------------ the README
+_BLOCK = re.compile(r"(<!-- generated: (?P<name>[a-z0-9_]+) -->\n)(?P<body>.*?)(<!-- end generated -->)", re.S)
+
+
+def readme_block(name: str, results: Path = RESULTS) -> str:
+    """The body of the README's ``<!-- generated: NAME -->`` block."""
+    return to_markdown(table(name, results)) + "\n"
+
+
+def update_readme(path: Path = README, results: Path = RESULTS, check: bool = False) -> list[str]:
+    """Rewrite every generated block of ``path`` from the snapshots; returns the names of blocks that
+    differed (with ``check``, nothing is written)."""
+    from ogm_ppl.io import atomic_write_text
+
+    text = path.read_text()
+    stale = []
+
+    def sub(m: re.Match) -> str:
+        body = readme_block(m["name"], results)
+        if body != m["body"]:
+            stale.append(m["name"])
+        return m.group(1) + body + m.group(4)
+
+    new = _BLOCK.sub(sub, text)
+    if stale and not check:
+        atomic_write_text(path, new)
+    return stale
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    s = sub.add_parser("snapshot", help="copy a result JSON into docs/results/, stamped")
+    s.add_argument("src", type=Path)
+    s.add_argument("--name")
+    s.add_argument("--command", help="the command that produced SRC (for a JSON without provenance)")
+    r = sub.add_parser("readme", help="rewrite the README's generated blocks")
+    r.add_argument("--check", action="store_true", help="only report blocks that differ; exit 1 if any")
+    sh = sub.add_parser("show", help="print one table as Markdown")
+    sh.add_argument("name", choices=sorted(TABLES))
+    args = ap.parse_args(argv)
+    if args.cmd == "snapshot":
+        print("wrote", snapshot(args.src, args.name, args.command))
+    elif args.cmd == "readme":
+        stale = update_readme(check=args.check)
+        print(("stale: " if args.check else "updated: ") + (", ".join(stale) or "none"))
+        return 1 if (args.check and stale) else 0
+    else:
+        print(to_markdown(table(args.name)))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.path.insert(0, str(ROOT))
+    raise SystemExit(main())
