@@ -32,6 +32,7 @@ from collections import OrderedDict
 
 import numpy as np
 import torch
+
 from ogm_ppl.inference.mcmc.kernel import KernelStateError, MapKernel
 from ogm_ppl.inference.tiling import patch_cells, tiling_starts
 
@@ -423,7 +424,7 @@ class GuidedGibbs(MapKernel):
     # ------------------------------------------------------------------ checkpoints
     def _extra_state(self) -> dict[str, np.ndarray]:
         d = {f"base.{k}": v for k, v in self.base.state_dict().items()}
-        d["guide_sweeps"] = np.int64(self.guide_sweeps)
+        d["guide_sweeps"] = np.asarray(self.guide_sweeps, np.int64)
         d["guide_counts"] = np.array([self._proposed, self._same, self._accepted], np.int64)
         return d
 

@@ -284,9 +284,9 @@ class MapKernel(MCMCKernel):
     # --------------------------------------------------------------- checkpoints
     def state_dict(self) -> dict[str, np.ndarray]:
         """The kernel's state as flat arrays (module docstring), extras from :meth:`_extra_state`."""
-        d = {"format": np.int64(self.STATE_FORMAT), "kind": np.str_(type(self).__qualname__),
-             "m": self.state.copy(), "sweeps": np.int64(self.sweeps), "changes": np.int64(self._changes),
-             "updates": np.int64(self._updates)}  # fmt: skip
+        d = {"format": np.asarray(self.STATE_FORMAT, np.int64), "kind": np.asarray(type(self).__qualname__),
+             "m": self.state.copy(), "sweeps": np.asarray(self.sweeps, np.int64),
+             "changes": np.asarray(self._changes, np.int64), "updates": np.asarray(self._updates, np.int64)}
         extra = self._extra_state()
         clash = sorted(set(extra) & set(d))
         if clash:
