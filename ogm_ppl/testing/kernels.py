@@ -223,7 +223,7 @@ class KernelContract:
     """Pytest mixin: a map kernel's contract (module docstring). Override :meth:`make_kernel`; optionally
     the problems, :meth:`transition_matrix`, ``supports_region`` and the sample sizes."""
 
-    num_draws = 1500  #: chains / repeats for each statistical check
+    num_draws = 1000  #: chains / repeats for each statistical check
     supports_region = True
     region = np.array([1, 2, 5, 6])  #: region of the 3 x 4 region problem
 
