@@ -299,3 +299,9 @@ def test_table_3_1_setup_subsample():
     assert 0 < gibbs < 2 * K / (2 * n)
     # Gibbs beats every patch method and traditional OGM by orders of magnitude
     assert all(v["mean"] > 10 * gibbs for k, v in rows.items() if k != "Gibbs")
+
+
+def _lik(kernel, k):
+    """The likelihood part of ``l(m_k | z, m_-k)`` at the kernel's state (Eq. 4.2): log-odds less the
+    prior's, for an independent prior."""
+    return kernel.cell_log_odds(int(k)) - float(kernel.model.prior.cell_log_odds()[int(k)])
