@@ -4,7 +4,7 @@ Gibbs, the streaming runner with checkpoints, and convergence diagnostics."""
 from ogm_ppl.inference.mcmc.diagnostics import ChainsResult, ess, kl_trace, run_chains, split_rhat
 from ogm_ppl.inference.mcmc.gibbs import CellGibbs, MetropolisCell, PatchGibbs
 from ogm_ppl.inference.mcmc.guided import GuidedGibbs
-from ogm_ppl.inference.mcmc.kernel import MapKernel, initial_map
+from ogm_ppl.inference.mcmc.kernel import KernelStateError, MapKernel, initial_map
 from ogm_ppl.inference.mcmc.runner import CheckpointError, GibbsRun, RunningStats, run_gibbs
 
 __all__ = [
@@ -13,6 +13,7 @@ __all__ = [
     "CheckpointError",
     "GibbsRun",
     "GuidedGibbs",
+    "KernelStateError",
     "MapKernel",
     "MetropolisCell",
     "PatchGibbs",

@@ -19,12 +19,11 @@ import hashlib
 import numpy as np
 import torch
 
-__all__ = ["fingerprint"]
-
-_DYNAMIC = {"sweeps", "model", "transforms"}
+__all__ = ["digest", "fingerprint"]
 
 
-def _digest(*parts) -> str:
+def digest(*parts) -> str:
+    """A short sha256 of ``parts`` (arrays by dtype, shape and bytes; anything else by ``repr``)."""
     h = hashlib.sha256()
     for p in parts:
         if isinstance(p, torch.Tensor):
@@ -38,25 +37,22 @@ def _digest(*parts) -> str:
     return h.hexdigest()[:16]
 
 
-def _prior_digest(prior, num_cells: int) -> str:
+def _priordigest(prior, num_cells: int) -> str:
     g = torch.Generator().manual_seed(12345)
     maps = (torch.rand(8, num_cells, generator=g, dtype=torch.float64) < 0.3).to(torch.float64)
     with torch.no_grad():
         lp = torch.as_tensor(prior.log_prob(maps), dtype=torch.float64)
     lp = torch.where(torch.isfinite(lp), torch.round(lp * 1e6) / 1e6, lp)
-    return _digest(type(prior).__qualname__, lp)
+    return digest(type(prior).__qualname__, lp)
 
 
 def _settings(kernel) -> dict:
-    out = {}
-    for k, v in sorted(vars(kernel).items()):
-        if k.startswith("_") or k in _DYNAMIC:
-            continue
-        if isinstance(v, (bool, int, float, str, tuple, type(None))):
-            out[k] = v
-        elif isinstance(v, (torch.Tensor, np.ndarray)):
-            out[k] = _digest(v)
-    return out
+    """A :class:`~ogm_ppl.inference.mcmc.kernel.MapKernel`'s ``settings()``; for another kernel its public
+    attributes of simple types."""
+    if hasattr(kernel, "settings"):
+        return kernel.settings()
+    return {k: v for k, v in sorted(vars(kernel).items()) if not k.startswith("_") and k not in ("model", "sweeps",
+            "transforms") and isinstance(v, (bool, int, float, str, tuple, type(None)))}  # fmt: skip
 
 
 def fingerprint(kernel, stats) -> dict[str, str]:
@@ -64,10 +60,10 @@ def fingerprint(kernel, stats) -> dict[str, str]:
     model = kernel.model
     g, r = model.grid, model.rays
     return {
-        "grid": _digest(g.shape, g.resolution, tuple(np.asarray(g.origin).tolist())),
-        "readings": _digest(r.offsets, r.cells, r.z, r.is_max, r.range_cells, model.known_free),
-        "sensor": _digest(repr(model.sensor), model.loglik_table),
-        "prior": _prior_digest(model.prior, model.num_cells),
-        "kernel": _digest(type(kernel).__qualname__, _settings(kernel)),
-        "stats": _digest(stats.rays, stats.pairs, [p.numpy() for p in stats.paths], stats.trace_cells),
+        "grid": digest(g.shape, g.resolution, tuple(np.asarray(g.origin).tolist())),
+        "readings": digest(r.offsets, r.cells, r.z, r.is_max, r.range_cells, model.known_free),
+        "sensor": digest(repr(model.sensor), model.loglik_table),
+        "prior": _priordigest(model.prior, model.num_cells),
+        "kernel": digest(type(kernel).__qualname__, _settings(kernel)),
+        "stats": digest(stats.rays, stats.pairs, [p.numpy() for p in stats.paths], stats.trace_cells),
     }

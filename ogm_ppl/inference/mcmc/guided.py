@@ -18,7 +18,7 @@ it stationary (Section 4.1, 4.2). Only what changes is computed: the prior throu
 for blocks of more than 48 cells) and the likelihood through the rays that cross the block
 (``sum_{n: B cap ray_n != {}} log p(z_n | f_n(m))``, Eq. 2.6).
 
-:class:`GuidedGibbs` is a ``pyro.infer.mcmc.MCMCKernel`` like :class:`~ogm_ppl.inference.mcmc.gibbs.CellGibbs`
+:class:`GuidedGibbs` is a :class:`~ogm_ppl.inference.mcmc.kernel.MapKernel` like :class:`~ogm_ppl.inference.mcmc.gibbs.CellGibbs`
 (one ``sample`` call is one sweep: with probability ``p_guide`` a pass of guide moves over the blocks,
 otherwise one sweep of the wrapped base kernel) and runs under ``pyro.infer.MCMC`` or
 :func:`~ogm_ppl.inference.mcmc.runner.run_gibbs`. By default it also starts from the guide's mode
@@ -32,8 +32,8 @@ from collections import OrderedDict
 
 import numpy as np
 import torch
-from pyro.infer.mcmc.mcmc_kernel import MCMCKernel
 
+from ogm_ppl.inference.mcmc.kernel import KernelStateError, MapKernel
 from ogm_ppl.inference.tiling import patch_cells, tiling_starts
 
 __all__ = ["GuidedGibbs"]
@@ -42,13 +42,14 @@ _INITS = ("guide", "guide_sample", "base")
 _MAX_PATCH_PRIOR = 48
 
 
-class GuidedGibbs(MCMCKernel):
+class GuidedGibbs(MapKernel):
     """Gibbs sweeps of a base kernel mixed with block proposals from an amortised guide (module docstring).
 
     Args:
-        base: the Gibbs kernel to wrap (:class:`~ogm_ppl.inference.mcmc.gibbs.CellGibbs`, ``PatchGibbs``,
-            ``MetropolisCell``; a kernel with ``model``, ``setup``, ``sample``, ``state`` and the
-            ``initial_params`` setter).
+        base: the Gibbs kernel to wrap (a :class:`~ogm_ppl.inference.mcmc.kernel.MapKernel`:
+            :class:`~ogm_ppl.inference.mcmc.gibbs.CellGibbs`, ``PatchGibbs``, ``MetropolisCell``), kept
+            in step with this kernel's state through its public protocol; its checkpoint entries are
+            this kernel's ``base.*`` entries.
         guide: an :class:`~ogm_ppl.inference.variational.amortised.AmortisedGuide` (anything with
             ``cell_logits(model)``: ``K`` logits of ``q(m_k = 1 | z)``).
         block: the proposal block: ``(h, w)`` windows of a tiling (an int ``w``: ``(1, w)``), or ``"all"``
@@ -69,16 +70,16 @@ class GuidedGibbs(MCMCKernel):
             configuration.
     """
 
-    site = "m"
-
     def __init__(self, base, guide, block=(6, 6), p_guide: float = 0.5, init: str = "guide",
                  random_offset: bool = True, proposal: str = "bernoulli") -> None:  # fmt: skip
         if not 0.0 <= float(p_guide) <= 1.0:
             raise ValueError(f"p_guide must lie in [0, 1], got {p_guide}")
         if init not in _INITS:
             raise ValueError(f"init must be one of {_INITS}, got {init!r}")
+        if not isinstance(base, MapKernel):
+            raise TypeError(f"base must be a MapKernel (CellGibbs, PatchGibbs, ...), got {type(base).__name__}")
+        super().__init__(base.model)
         self.base = base
-        self.model = base.model
         self.guide = guide
         self.p_guide = float(p_guide)
         self.init = init
@@ -87,19 +88,12 @@ class GuidedGibbs(MCMCKernel):
             raise ValueError(f"proposal must be 'bernoulli' or 'tiles', got {proposal!r}")
         self.proposal = proposal
         self.block = self._check_block(block)
-        self.base_kind = type(base).__qualname__ + repr(sorted((k, v) for k, v in vars(base).items()
-                                                            if not k.startswith("_") and isinstance(v, (int, float, str, tuple))))  # fmt: skip
-        self.transforms: dict = {}
-        self.sweeps = 0
         self.guide_sweeps = 0
         self._proposed = 0
         self._same = 0
         self._accepted = 0
-        self._initial_params = None
-        self._last = None
-        self._base_out = None
+        self._base_stale = True  # the base kernel's state differs from ours: load ours before its sweep
         self._blocks: dict = {}
-        self._m: torch.Tensor | None = None
         with torch.no_grad():
             lg = torch.as_tensor(guide.cell_logits(self.model), dtype=torch.float64).detach().clone()
         if lg.shape != (self.model.num_cells,) or torch.isnan(lg).any():
@@ -121,7 +115,6 @@ class GuidedGibbs(MCMCKernel):
         self._tiles: dict = {}  # block cells (bytes) -> tile proposals, for proposal="tiles"
         if proposal == "tiles":
             self._check_tiles()
-        super().__init__()
 
     # ------------------------------------------------------------------ blocks
     def _check_block(self, block):
@@ -333,10 +326,15 @@ class GuidedGibbs(MCMCKernel):
         pinned = (news[:, self._pinned[cells]] != 0).any(1)
         return np.where(pinned, -np.inf, out)
 
-    # ------------------------------------------------------------------ Pyro's kernel interface
-    def _init_map(self) -> torch.Tensor | None:
+    # ------------------------------------------------------------------ the MapKernel hooks
+    def _prepare(self) -> None:
+        if not self._ready:
+            self._latent = self.model.latent.numpy().astype(np.int64)
+            self._ready = True
+
+    def _initial_map(self) -> torch.Tensor:
         if self.init == "base":
-            return None
+            return self.model.full_map(self.base.initial_params[self.site]).to(torch.float64)
         if self.init == "guide" and self.proposal == "tiles":
             m = torch.zeros(self.model.num_cells, dtype=torch.float64)
             for cells, _ in self.blocks(self.offsets()[0]):  # blocks of one offset cover every latent cell
@@ -351,71 +349,51 @@ class GuidedGibbs(MCMCKernel):
         m[self.model.known_free] = 0.0
         return m
 
-    @property
-    def initial_params(self):
-        if self._initial_params is None:
-            m = self._init_map()
-            if m is not None:
-                self.base.initial_params = {self.site: m[self.model.latent]}
-            self._initial_params = self.base.initial_params
-        return self._initial_params
-
-    @initial_params.setter
-    def initial_params(self, params):
-        self._initial_params = params
-        self.base.initial_params = params
-
-    def setup(self, warmup_steps=0, *args, **kwargs) -> None:
-        params = self.initial_params
-        self.base.initial_params = params
-        self.base.setup(warmup_steps, *args, **kwargs)
-        self._m = torch.from_numpy(np.asarray(self.base.state).astype(np.float64))
+    def _set_state(self, m) -> None:
+        m = self.model.check_maps(self.model.full_map(torch.as_tensor(m).detach().cpu()), what="kernel state")
+        self._m = np.ascontiguousarray((m.numpy() != 0).astype(np.uint8))
+        self._m[self._pinned] = 0
         self._last = None
-        self._base_out = None
+        self._base_stale = True
 
-    @property
-    def state(self) -> np.ndarray:
-        """The current full map (uint8, ``K``)."""
-        return self._state().numpy().astype(np.uint8)
+    def sampled_cells(self) -> np.ndarray:
+        """Every latent cell (guide moves reach them all)."""
+        return self.model.latent.numpy().astype(np.int64)
 
-    def _state(self) -> torch.Tensor:
-        if self._m is None:
-            self.setup()
-        assert self._m is not None
-        return self._m
+    def settings(self) -> dict:
+        out = super().settings()
+        out.pop("guide_sweeps", None)
+        out["base"] = (type(self.base).__qualname__, self.base.settings())
+        return out
 
-    def sample(self, params):
-        m_in = params[self.site]
-        if self._m is None:
-            self.setup()
-        if m_in is not self._last:
-            self._m = self.model.check_maps(self.model.full_map(torch.as_tensor(m_in).detach()), "kernel state").clone()
-            self._m[self.model.known_free] = 0.0
-            self._base_out = None
+    def _sweep(self) -> int:
         if self.p_guide >= 1.0 or (self.p_guide > 0.0 and float(torch.rand(())) < self.p_guide):
-            if self.mh_pass():
-                self._base_out = None
-            out = self._m[self.model.latent].clone()
+            before = self._proposed
+            moved = self.mh_pass()
+            self._updates += self._proposed - before
+            self._base_stale |= moved > 0
             self.guide_sweeps += 1
-        else:
-            inp = self._base_out if self._base_out is not None else self._m[self.model.latent].clone()
-            out = self.base.sample({self.site: inp})[self.site]
-            self._base_out = out
-            self._m = self.model.full_map(out).to(torch.float64).clone()
-        self.sweeps += 1
-        self._last = out
-        return {self.site: out}
+            return moved
+        base = self.base
+        if self._base_stale:
+            base.set_state(self._m)
+            self._base_stale = False
+        changes, updates = base.changes, base.updates
+        base.sample(base.current_params())
+        self._m[:] = base.state
+        self._updates += base.updates - updates
+        return base.changes - changes
 
     def mh_pass(self, offset: tuple[int, int] | None = None) -> int:
         """One pass of guide moves over the blocks of a tiling (offset drawn uniformly unless given), on
         the current state; returns the number of blocks that changed."""
-        if self._m is None:
+        if not hasattr(self, "_m"):
             self.setup()
         offs = self.offsets()
         if offset is None:
             offset = offs[int(torch.randint(len(offs), ()))] if len(offs) > 1 else offs[0]
         moved = 0
-        mn = self._state().numpy()  # a view: moves write into the state
+        mn = self._m  # moves write into the state
         for cells, rays in self.blocks(offset):
             new = self._propose(cells)
             self._proposed += 1
@@ -443,19 +421,20 @@ class GuidedGibbs(MCMCKernel):
                 "unchanged_proposals": self._same, "accepted": self._accepted,
                 "acceptance_rate": self.acceptance_rate}  # fmt: skip
 
-    # ------------------------------------------------------------------ checkpoints (run_gibbs)
-    def state_dict(self) -> dict:
-        d = dict(self.base.state_dict()) if hasattr(self.base, "state_dict") else {}
-        d.update({"m": self.state, "guided_sweeps": self.sweeps, "guided_guide_sweeps": self.guide_sweeps,
-                  "guided_counts": np.array([self._proposed, self._same, self._accepted], np.int64)})  # fmt: skip
+    # ------------------------------------------------------------------ checkpoints
+    def _extra_state(self) -> dict[str, np.ndarray]:
+        d = {f"base.{k}": v for k, v in self.base.state_dict().items()}
+        d["guide_sweeps"] = np.asarray(self.guide_sweeps, np.int64)
+        d["guide_counts"] = np.array([self._proposed, self._same, self._accepted], np.int64)
         return d
 
-    def load_state_dict(self, state: dict) -> None:
-        if hasattr(self.base, "load_state_dict"):
-            self.base.load_state_dict(state)
-        self._m = self.model.check_maps(torch.as_tensor(np.asarray(state["m"]), dtype=torch.float64), "checkpoint map").clone()
-        self.sweeps = int(state["guided_sweeps"])
-        self.guide_sweeps = int(state["guided_guide_sweeps"])
-        self._proposed, self._same, self._accepted = (int(v) for v in np.asarray(state["guided_counts"]))
-        self._last = None
-        self._base_out = None
+    def _load_extra_state(self, state) -> None:
+        counts = np.asarray(state["guide_counts"]) if "guide_counts" in state else None
+        if counts is None or counts.shape != (3,) or counts.dtype.kind not in "iu" or (counts < 0).any():
+            raise KernelStateError("GuidedGibbs state 'guide_counts' must be 3 non-negative integers")
+        sweeps = np.asarray(state.get("guide_sweeps", -1))
+        if sweeps.shape != () or sweeps.dtype.kind not in "iu" or int(sweeps) < 0:
+            raise KernelStateError("GuidedGibbs state 'guide_sweeps' must be a non-negative integer")
+        self.base.load_state_dict({k[5:]: v for k, v in state.items() if k.startswith("base.")})
+        self.guide_sweeps = int(sweeps)
+        self._proposed, self._same, self._accepted = (int(v) for v in counts)

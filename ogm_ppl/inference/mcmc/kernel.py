@@ -1,25 +1,47 @@
 r"""The map-kernel base: the protocol every MCMC kernel over whole maps follows (Chapter 4).
 
-:class:`MapKernel` is a Pyro :class:`~pyro.infer.mcmc.mcmc_kernel.MCMCKernel` whose single site ``"m"``
-holds the latent (not pinned) cells of the map as float 0/1 (``L``, in ``model.latent`` order). It keeps the
-full map (``K`` uint8) and every ray's first occupied kappa (``R``) in step, draws its random numbers from
-torch's global generator, and saves / restores itself through ``state_dict`` / ``load_state_dict``.
-Subclasses implement ``_sweep()`` (one sweep; returns the number of changed updates).
+:class:`MapKernel` is a Pyro :class:`~pyro.infer.mcmc.mcmc_kernel.MCMCKernel`, driven by
+``pyro.infer.MCMC`` (``setup``, ``initial_params``, ``sample``, ``logging``, ``diagnostics``) or by
+:func:`~ogm_ppl.inference.mcmc.runner.run_gibbs`. Its protocol:
+
+* **Site** ``"m"``: the latent (not pinned) cells of the map, float64 0/1, shape ``(L,)`` in
+  ``model.latent`` order (``model.full_map`` restores the ``K`` cells).
+* **State** (:attr:`MapKernel.state`): the current full map, a live ``(K,)`` uint8 0/1 array with the
+  pinned cells 0 (copy it to keep it). Random numbers come from torch's global generator only, so the
+  state, the counters and ``torch.get_rng_state()`` determine the rest of the chain.
+* **Params in step**: ``sample(params)`` re-reads ``params["m"]`` unless it is the very tensor the kernel
+  returned last; a runner that holds no params asks :meth:`MapKernel.current_params` for them (a set-up
+  or restored kernel), and :meth:`MapKernel.set_state` loads any map.
+* **Checkpoints**: :meth:`MapKernel.state_dict` is a flat ``dict[str, np.ndarray]`` (savable by
+  ``np.savez`` and read back with ``allow_pickle=False``): ``format`` (int64, :attr:`STATE_FORMAT`),
+  ``kind`` (the class name), ``m`` (the state, ``(K,)`` uint8), ``sweeps``, ``changes`` and ``updates``
+  (int64 counters), and a subclass's extra entries. :meth:`MapKernel.load_state_dict` checks every entry
+  and raises :class:`KernelStateError` naming what is wrong; a kernel built with the same arguments that
+  loads it continues the chain bit for bit.
+
+A subclass implements ``_sweep()`` (one sweep from the current state, drawing from torch's generator;
+adds its number of updates to ``self._updates`` and returns the number that changed the map) and may
+extend ``_prepare()`` (one-time set-up), ``_set_state(m)`` (rebuild state derived from the map; call
+``super()``), ``_extra_state()`` / ``_load_extra_state(state)`` (more checkpoint entries) and
+``_initial_map()`` (a ``K`` starting map). ``ogm_ppl.testing.KernelContract`` checks a kernel against
+this protocol and the exact posterior.
 """
 
 from __future__ import annotations
 
 from collections import OrderedDict
+from collections.abc import Mapping
 
 import numpy as np
 import torch
 from pyro.infer.mcmc.mcmc_kernel import MCMCKernel
 
 from ogm_ppl.inference._kernels.cells import first_hits
+from ogm_ppl.inference.mcmc.fingerprint import digest
 from ogm_ppl.models.occupancy import OccupancyModel
 from ogm_ppl.priors.local import local_of
 
-__all__ = ["MapKernel", "initial_map", "region_cells"]
+__all__ = ["KernelStateError", "MapKernel", "initial_map", "region_cells"]
 
 SCANS = ("random", "permutation", "systematic")
 
@@ -84,10 +106,28 @@ def region_cells(model: OccupancyModel, region) -> np.ndarray | None:
     return np.ascontiguousarray(cells, dtype=np.int64)
 
 
+class KernelStateError(ValueError):
+    """A kernel state (``load_state_dict``) that this kernel cannot take: the message names the entry."""
+
+
+_STATE_KEYS = ("format", "kind", "m", "sweeps", "changes", "updates")
+_DYNAMIC = {"sweeps", "model", "transforms"}
+
+
 class MapKernel(MCMCKernel):
-    """Shared state handling: the map, every ray's first hit, and sync with Pyro's ``params``."""
+    """Base of the MCMC kernels over whole maps (protocol: module docstring).
+
+    Args:
+        model: an :class:`~ogm_ppl.OccupancyModel`.
+        scan: ``"systematic"``, ``"permutation"`` or ``"random"`` (the order of the updates in a sweep).
+        init: the starting map, see :func:`initial_map`.
+        delta: the OGM update term for ``init="ogm"``.
+        region: ``None`` or the cells to sample (:func:`region_cells`); the others keep their values, so
+            the chain samples ``p(m_R' | m_rest, z)`` with ``R'`` = :meth:`sampled_cells`.
+    """
 
     site = "m"
+    STATE_FORMAT = 1
 
     def __init__(self, model: OccupancyModel, scan: str = "systematic", init="ogm", delta="haehnel",
                  region=None) -> None:  # fmt: skip
@@ -126,37 +166,55 @@ class MapKernel(MCMCKernel):
         self._pinned = model.known_free.numpy().astype(np.uint8)
         self._ready = True
 
-    def _latent_values(self, m: torch.Tensor) -> torch.Tensor:
-        """Site ``"m"`` holds the latent (not pinned) cells only (``L``), in ``model.latent`` order."""
-        return m[self.model.latent]
+    def _initial_map(self) -> torch.Tensor:
+        """Hook: the ``K`` starting map (float 0/1) when no ``initial_params`` are given."""
+        return initial_map(self.model, self.init, self.delta)
 
     def setup(self, warmup_steps=0, *args, **kwargs) -> None:
+        """Set up (once) and load the initial params as the state."""
         self._prepare()
-        if self._initial_params is None:
-            self._initial_params = {self.site: self._latent_values(initial_map(self.model, self.init, self.delta))}
-        self._set_state(self._initial_params[self.site])
+        self._set_state(self.initial_params[self.site])
 
     @property
-    def initial_params(self):
+    def initial_params(self) -> dict[str, torch.Tensor]:
+        """``{"m": (L,) float64}``: given by the setter, else :meth:`_initial_map`'s latent cells."""
         if self._initial_params is None:
-            self._initial_params = {self.site: self._latent_values(initial_map(self.model, self.init, self.delta))}
+            m = torch.as_tensor(self._initial_map(), dtype=torch.float64)
+            self._initial_params = {self.site: m[self.model.latent]}
         return self._initial_params
 
     @initial_params.setter
-    def initial_params(self, params):
+    def initial_params(self, params) -> None:
         self._initial_params = params
 
     def _set_state(self, m) -> None:
+        """Hook: load map ``m`` (``K`` or ``L`` values, 0/1) as the state; extend to rebuild derived state."""
         m = self.model.check_maps(self.model.full_map(torch.as_tensor(m).detach().cpu()), what="kernel state")
         self._m = np.ascontiguousarray((m.numpy() != 0).astype(np.uint8))
         self._m[self._pinned.astype(bool)] = 0
         self._f = first_hits(self._m, self._offsets, self._cells)
         self._last = None
 
+    def set_state(self, m) -> None:
+        """Make map ``m`` (``K`` cells or site ``"m"``'s ``L``; 0/1) the current state."""
+        self._prepare()
+        self._set_state(m)
+
     @property
     def state(self) -> np.ndarray:
-        """The current full map (uint8, ``K``; site ``"m"`` carries its latent cells, ``model.full_map``)."""
+        """The current full map (live ``(K,)`` uint8 array; site ``"m"`` carries its latent cells)."""
+        if not hasattr(self, "_m"):
+            raise RuntimeError(f"{type(self).__name__} has no state yet: call setup(), set_state() or "
+                               "load_state_dict() first")  # fmt: skip
         return self._m
+
+    def current_params(self) -> dict[str, torch.Tensor]:
+        """``{"m": (L,) float64}`` of the current state, recognised by the next :meth:`sample` as the
+        kernel's own (no re-read): how a runner starts a chain from a set-up or restored kernel."""
+        self._prepare()
+        out = torch.from_numpy(self.state[self._latent].astype(np.float64))
+        self._last = out
+        return {self.site: out}
 
     @property
     def first_hit_state(self) -> np.ndarray:
@@ -168,17 +226,42 @@ class MapKernel(MCMCKernel):
         ``p(m_R' | m_rest, z)`` and every other cell keeps its value. Latent ∩ region for cell kernels."""
         return self._visit
 
+    @property
+    def changes(self) -> int:
+        """Updates that changed the map, since the start of the chain."""
+        return self._changes
+
+    @property
+    def updates(self) -> int:
+        """Updates made (cell or patch updates, proposals), since the start of the chain."""
+        return self._updates
+
+    def settings(self) -> dict:
+        """The public settings (simple values; arrays as digests) that a checkpoint's fingerprint sees."""
+        out = {}
+        for k, v in sorted(vars(self).items()):
+            if k.startswith("_") or k in _DYNAMIC:
+                continue
+            if isinstance(v, (bool, int, float, str, tuple, type(None))):
+                out[k] = v
+            elif isinstance(v, (torch.Tensor, np.ndarray)):
+                out[k] = digest(v)
+        return out
+
     # --------------------------------------------------------------- sampling
     def sample(self, params):
+        """One sweep from ``params["m"]`` (or from the state, if ``params`` are the kernel's own)."""
         self._prepare()
         m = params[self.site]
         if m is not self._last:
             self._set_state(m)
         self._changes += self._sweep()
         self.sweeps += 1
-        out = torch.from_numpy(self._m[self._latent].astype(np.float64))  # site "m": the latent cells
-        self._last = out
-        return {self.site: out}
+        return self.current_params()
+
+    def _sweep(self) -> int:
+        """Hook: one sweep from the current state (module docstring); returns the number of changes."""
+        raise NotImplementedError
 
     def _order(self, items: np.ndarray) -> np.ndarray:
         n = len(items)
@@ -199,12 +282,57 @@ class MapKernel(MCMCKernel):
         return {"sweeps": self.sweeps, "change rate": self._changes / max(self._updates, 1)}
 
     # --------------------------------------------------------------- checkpoints
-    def state_dict(self) -> dict:
-        return {"m": self._m.copy(), "sweeps": self.sweeps, "changes": self._changes, "updates": self._updates}
+    def state_dict(self) -> dict[str, np.ndarray]:
+        """The kernel's state as flat arrays (module docstring), extras from :meth:`_extra_state`."""
+        d = {"format": np.asarray(self.STATE_FORMAT, np.int64), "kind": np.asarray(type(self).__qualname__),
+             "m": self.state.copy(), "sweeps": np.asarray(self.sweeps, np.int64),
+             "changes": np.asarray(self._changes, np.int64), "updates": np.asarray(self._updates, np.int64)}
+        extra = self._extra_state()
+        clash = sorted(set(extra) & set(d))
+        if clash:
+            raise KeyError(f"{type(self).__name__}._extra_state() reuses the base entries {clash}")
+        d.update(extra)
+        return d
 
-    def load_state_dict(self, state: dict) -> None:
+    def _extra_state(self) -> dict[str, np.ndarray]:
+        """Hook: more checkpoint entries (arrays, no objects)."""
+        return {}
+
+    def _load_extra_state(self, state: Mapping) -> None:
+        """Hook: check and load the entries of :meth:`_extra_state` (raise :class:`KernelStateError`)."""
+
+    def load_state_dict(self, state: Mapping) -> None:
+        """Check ``state`` (from :meth:`state_dict`) and make it the kernel's; the next sweep continues the
+        chain it was taken from. Raises :class:`KernelStateError` naming the bad entry."""
+        name = type(self).__qualname__
+        if not isinstance(state, Mapping):
+            raise KernelStateError(f"a {name} state is a mapping of arrays, got {type(state).__name__}")
+        missing = [k for k in _STATE_KEYS if k not in state]
+        if missing:
+            raise KernelStateError(f"{name} state lacks {', '.join(missing)}")
+        fmt = _count(state, "format")
+        if fmt != self.STATE_FORMAT:
+            raise KernelStateError(f"{name} state of format {fmt}, this kernel reads format {self.STATE_FORMAT}")
+        kind = np.asarray(state["kind"])
+        if kind.shape != () or kind.dtype.kind != "U" or str(kind) != name:
+            raise KernelStateError(f"a state of a {kind!s} kernel cannot be loaded into a {name}")
+        m = np.asarray(state["m"])
+        K = self.model.num_cells
+        if m.shape != (K,):
+            raise KernelStateError(f"{name} state 'm' must have shape ({K},), got {m.shape}")
+        if m.dtype.kind not in "biuf" or not np.isin(m, (0, 1)).all():
+            raise KernelStateError(f"{name} state 'm' must hold 0/1 values")
+        if m[self.model.known_free.numpy()].any():
+            raise KernelStateError(f"{name} state 'm' occupies a pinned (known-free) cell")
+        counts = {k: _count(state, k) for k in ("sweeps", "changes", "updates")}
         self._prepare()
-        self._set_state(torch.from_numpy(np.asarray(state["m"])))
-        self.sweeps = int(state["sweeps"])
-        self._changes = int(state["changes"])
-        self._updates = int(state["updates"])
+        self._load_extra_state(state)
+        self._set_state(torch.from_numpy(m.astype(np.float64)))
+        self.sweeps, self._changes, self._updates = counts["sweeps"], counts["changes"], counts["updates"]
+
+
+def _count(state: Mapping, key: str) -> int:
+    v = np.asarray(state[key])
+    if v.shape != () or v.dtype.kind not in "iu" or int(v) < 0:
+        raise KernelStateError(f"kernel state {key!r} must be a non-negative integer, got {v!r}")
+    return int(v)

@@ -27,11 +27,12 @@ import torch
 from tqdm.auto import tqdm
 
 from ogm_ppl.inference.mcmc.fingerprint import fingerprint
+from ogm_ppl.io import atomic_write
 from ogm_ppl.posterior import mutual_information_from_joint
 
-__all__ = ["RunningStats", "GibbsRun", "run_gibbs", "CheckpointError"]
+__all__ = ["CheckpointError", "GibbsRun", "RunningStats", "run_gibbs"]
 
-_FORMAT = 2
+_FORMAT = 3  # the kernel's entries follow MapKernel.state_dict (its own format: kernel_format)
 
 
 class CheckpointError(ValueError):
@@ -161,9 +162,8 @@ def _save_checkpoint(path: Path, kernel, stats: RunningStats, sweep: int, seed: 
     payload["num_cells"] = np.asarray(kernel.model.num_cells, np.int64)
     for k, v in fp.items():
         payload[f"fp_{k}"] = np.asarray(v)
-    tmp = path.with_name(path.name + ".tmp.npz")
-    np.savez(tmp, **payload)  # type: ignore[arg-type]  # numpy stub: **arrays could fill allow_pickle
-    os.replace(tmp, path)
+    with atomic_write(path) as f:
+        np.savez(f, **payload)  # type: ignore[arg-type]  # numpy stub: **arrays could fill allow_pickle
 
 
 _HINT = "delete it (or pass another checkpoint path) to start a fresh run"
@@ -217,7 +217,9 @@ def run_gibbs(
     """Run ``warmup + num_sweeps`` sweeps of ``kernel``; statistics count the last ``num_sweeps``.
 
     Args:
-        kernel: a :class:`CellGibbs`, :class:`PatchGibbs` or :class:`MetropolisCell`.
+        kernel: a :class:`~ogm_ppl.inference.mcmc.kernel.MapKernel` (``CellGibbs``, ``PatchGibbs``,
+            ``MetropolisCell``, ``GuidedGibbs``); the run uses its public protocol only (``setup``,
+            ``current_params``, ``sample``, ``state``, ``state_dict`` / ``load_state_dict``).
         stats: where statistics accumulate (default: marginals only).
         seed: seeds torch's generator at the start of a fresh run (a resumed run restores its state).
         checkpoint: an ``.npz`` path; if it exists the run resumes from it.
@@ -251,8 +253,7 @@ def run_gibbs(
         stop["flag"] = True
 
     old = signal.signal(signal.SIGINT, handler) if _main_thread() else None
-    params = {kernel.site: torch.from_numpy(kernel.state.astype(np.float64))}
-    kernel._last = params[kernel.site]
+    params = kernel.current_params()
     t0 = time.perf_counter()
     done = start
     bar = tqdm(total=total, initial=start, disable=not progress, unit="sweep", desc="gibbs")
@@ -262,10 +263,8 @@ def run_gibbs(
             if i >= warmup:
                 stats.update(params[kernel.site])
                 if store is not None and store_every and (i - warmup) % store_every == 0:
-                    out = store / f"sweep_{i:09d}.npy"
-                    tmp = out.with_name(out.stem + ".tmp.npy")
-                    np.save(tmp, np.packbits(kernel.state))
-                    os.replace(tmp, out)
+                    with atomic_write(store / f"sweep_{i:09d}.npy") as f:
+                        np.save(f, np.packbits(kernel.state))
             done = i + 1
             bar.update(1)
             if ckpt is not None and done % checkpoint_every == 0:

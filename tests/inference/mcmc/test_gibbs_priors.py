@@ -114,7 +114,7 @@ def test_compiled_sweep_draws_from_its_transition_row(name, kind):
     n = 6000
     counts = torch.zeros(len(sweep), dtype=torch.float64)
     for _ in range(n):
-        kernel._set_state(start)
+        kernel.set_state(start)
         counts[code_of(model, kernel.sample({"m": start})["m"])] += 1
     row = sweep[i0]
     assert counts[row == 0].sum() == 0
