@@ -33,7 +33,7 @@ def _metropolis_single_matrix(kernel, model, sign: float = 1.0) -> torch.Tensor:
     S = states(model)
     T = torch.zeros(len(S), len(S), dtype=torch.float64)
     for i, s in enumerate(S):
-        kernel._set_state(s)
+        kernel.set_state(s)
         for j, k in enumerate(model.latent.tolist()):
             lo = float(kernel.model.prior.cell_log_odds()[k]) + _lik(kernel, k)
             delta = sign * (-lo if s[k] else lo)
@@ -88,7 +88,7 @@ def test_metropolis_cell_sweep_draws_from_its_row():
     counts = torch.zeros(len(pi), dtype=torch.float64)
     draws = 5000
     for _ in range(draws):
-        kernel._set_state(start)
+        kernel.set_state(start)
         out = kernel.sample({"m": start})["m"]
         counts[code_of(model, out)] += 1
     row = sweep[code]
