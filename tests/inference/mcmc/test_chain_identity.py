@@ -28,7 +28,14 @@ from ogm_ppl.datasets import simulate_scans, toy_1d
 from ogm_ppl.inference.exact.map_estimate import map_estimate
 from ogm_ppl.inference.mcmc.gibbs import CellGibbs, MetropolisCell, PatchGibbs
 from ogm_ppl.inference.patch_map import offline_patch_map, online_patch_map
-from ogm_ppl.priors import BorderPatchPrior, IndependentPrior, MapPrior, MRFPrior, PatchTablePrior, StencilPrior
+from ogm_ppl.priors import (
+    BorderPatchPrior,
+    IndependentPrior,
+    MapPrior,
+    MRFPrior,
+    PatchTablePrior,
+    StencilPrior,
+)
 
 FIXTURE = Path(__file__).with_name("chain_identity.json")
 SWEEPS = 4
@@ -171,7 +178,7 @@ def cases() -> dict:
                     name = f"cell/{pname}/{scan}/{update}" + ("/region" if region else "")
                     out[name] = chain(scene, prior, lambda m, r, s=scan, u=update: CellGibbs(m, scan=s, update=u, region=r),
                                       seed=len(out), region=region, probe=cell_probe)  # fmt: skip
-    small = lambda p: (lambda: p((6, 6)))  # noqa: E731
+    small = lambda p: (lambda: p((6, 6)))
     for scan in ("systematic", "random"):
         for update in ("gibbs", "metropolised"):
             out[f"cell/generic/{scan}/{update}"] = chain(
