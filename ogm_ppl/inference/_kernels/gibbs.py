@@ -119,7 +119,7 @@ def ray_scratch(L, num_slots, dense, num_cands):
     return RayScratch(np.empty(S, np.int64), np.empty(S, np.int64), np.empty(S, np.int64),
                       np.empty((S, max(L, 1)), np.int64), np.empty((S, max(L, 1)), np.int64),
                       np.empty(max(L, 1), np.int64), np.empty(W, np.int64), lowbit, np.empty(W, np.float64),
-                      np.empty(max(W, num_cands, 1), np.float64))  # fmt: skip
+                      np.empty(max(W, num_cands, 1), np.float64))
 
 
 @nb.njit(cache=True)
