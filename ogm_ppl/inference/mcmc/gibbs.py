@@ -254,7 +254,7 @@ class PatchGibbs(MapKernel):
         self._metropolised = update == "metropolised"
         compiled = model.prior.compiled()
         # patches of up to 62 cells where the prior's kind weighs only its sparse support (tiles as patches)
-        sparse = compiled is not None and scan != "random" and compiled.sparse_patches
+        sparse = compiled is not None and scan != "random" and compiled.sparse_patches()
         self.dr, self.dc = patch_shape(patch, model.grid.ndim, max_cells=62 if sparse else 20)
         if not 0.0 <= p_rand_patch < 1.0:
             raise ValueError(f"p_rand_patch must lie in [0, 1), got {p_rand_patch}")

@@ -18,7 +18,7 @@ registered functions of the bundle's type when it compiles a kernel for that typ
 per kind, with no branch on the kind anywhere.
 
 **Adding a kind** is one module: a ``typing.NamedTuple`` bundle (numba takes it as one argument; give it
-the Python methods ``patch_capacity(L)`` and ``tiles_patches(hw, anchors)`` of the bundles here), its
+the Python methods ``sparse_patches()``, ``patch_capacity(L)`` and ``tiles_patches(hw, anchors)`` of the bundles here), its
 compiled conditionals as plain functions numba compiles inline, and one :func:`register` call; import the
 module below and add the class to :data:`CompiledPrior`. A prior then returns the bundle from
 ``compiled()``, and ``ogm_ppl.testing.PriorContract`` checks its conditionals against ``log_prob``.

@@ -3,7 +3,7 @@
 Each bundle is a ``typing.NamedTuple`` built by keyword (numba takes it as one argument and compiles one
 specialisation of a kernel per bundle type). Its kind's compiled conditionals are registered beside it
 (:func:`~ogm_ppl.priors.compiled.registry.register`); the kernels never look at which kind they hold.
-The Python attribute ``sparse_patches`` and methods (``patch_capacity``, ``tiles_patches``) tell a kernel's set-up how many candidate
+The Python methods (``sparse_patches``, ``patch_capacity``, ``tiles_patches``) tell a kernel's set-up how many candidate
 configurations a patch update may weigh and whether patches larger than 20 cells are possible.
 """
 
@@ -21,8 +21,9 @@ class IndependentCells(NamedTuple):
 
     log_odds: np.ndarray  # K float64: l_k = log lambda_k - log(1 - lambda_k)
 
-    #: whether patch updates may weigh a sparse support (so patches may exceed 20 cells)
-    sparse_patches = False
+    def sparse_patches(self) -> bool:
+        """Whether patch updates may weigh a sparse support (so patches may exceed 20 cells)."""
+        return False
 
     def patch_capacity(self, L: int) -> int:
         return max(1 << L if L <= 20 else 0, 2)
@@ -43,7 +44,8 @@ class Stencil(NamedTuple):
     bias: np.ndarray  # D float64: a_d
     coupling: np.ndarray  # D float64: J_d
 
-    sparse_patches = False
+    def sparse_patches(self) -> bool:
+        return False
 
     def patch_capacity(self, L: int) -> int:
         return max(1 << L if L <= 20 else 0, 2)
@@ -80,7 +82,8 @@ class Tiles(NamedTuple):
     dense: np.ndarray  # S * 2^Lw float64 (empty: none)
     dense_bits: int  # Lw when ``dense`` is present, else -1
 
-    sparse_patches = True
+    def sparse_patches(self) -> bool:
+        return True
 
     def patch_capacity(self, L: int) -> int:
         seg = int(np.diff(self.seg_off).max()) if len(self.seg_off) > 1 else 0
