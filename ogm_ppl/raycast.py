@@ -39,6 +39,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 from functools import cached_property
+from typing import NamedTuple
 
 import numpy as np
 
@@ -46,7 +47,7 @@ from ogm_ppl._raycast_kernels import entries_beyond, entry_positions, transpose_
 from ogm_ppl.grid import Grid
 from ogm_ppl.scans import Scans
 
-__all__ = ["Rays", "CellIndex", "RayInputs", "ray_inputs", "raycast"]
+__all__ = ["CellIndex", "RayIndex", "RayInputs", "Rays", "ray_inputs", "raycast"]
 
 
 @dataclass(frozen=True)
@@ -57,6 +58,19 @@ class CellIndex:
     offsets: np.ndarray
     ray: np.ndarray
     kappa: np.ndarray
+
+
+class RayIndex(NamedTuple):
+    """What the compiled likelihood kernels walk, in one bundle (numba takes it as one argument): the rays
+    in CSR form, the transposed cell -> (ray, kappa) index and the likelihood table ``ll[r, kappa] =
+    log p(z_r | first hit at kappa)`` (column ``len(r)``: no hit). Built by :meth:`Rays.index`."""
+
+    offsets: np.ndarray  # R + 1 int64: CSR along rays
+    cells: np.ndarray  # nnz int64: cells of each ray in kappa order
+    c_off: np.ndarray  # K + 1 int64: CSR by cell
+    c_ray: np.ndarray  # nnz int64: the rays through each cell
+    c_kappa: np.ndarray  # nnz int64: the cell's position on each of them
+    ll: np.ndarray  # R x (F + 1) float64
 
 
 @dataclass(frozen=True, eq=False)
@@ -138,6 +152,12 @@ class Rays:
         """The transposed index cell -> (ray, kappa)."""
         off, ray, kap = transpose_csr(self.offsets, self.cells, self.grid.num_cells)
         return CellIndex(off, ray, kap)
+
+    def index(self, loglik_table) -> RayIndex:
+        """The :class:`RayIndex` of these rays with the likelihood table ``loglik_table`` (``R x (F + 1)``)."""
+        idx = self.by_cell
+        ll = np.ascontiguousarray(np.asarray(loglik_table), dtype=np.float64)
+        return RayIndex(self.offsets, self.cells, idx.offsets, idx.ray, idx.kappa, ll)
 
     def reached(self) -> np.ndarray:
         """Boolean ``K``: cells some beam reached (entered at or before its end point, or anywhere

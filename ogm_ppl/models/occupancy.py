@@ -235,6 +235,15 @@ class OccupancyModel:
     def num_cells(self) -> int:
         return self.grid.num_cells
 
+    def ray_index(self):
+        """The rays, their transposed index and :attr:`loglik_table` as one
+        :class:`~ogm_ppl.raycast.RayIndex` (built once per table) for the compiled kernels."""
+        cached = getattr(self, "_ray_index", None)
+        if cached is None or cached[0] is not self.loglik_table:
+            cached = (self.loglik_table, self.rays.index(self.loglik_table.numpy()))
+            self._ray_index = cached
+        return cached[1]
+
     def _loglik_table(self, range_cells=None, z_kappa=None, is_max=None) -> torch.Tensor:
         """``R x W`` table for the model's readings, or for other readings of the same rays (``R`` each:
         range in cells, kappa of the reading, max-range flags).

@@ -1,18 +1,19 @@
 """Priors over binary maps (Chapter 5) behind one interface (:class:`MapPrior`): the independent prior,
 the 1D data-driven prior, pairwise stencil priors and the higher-order MRF (Section 5.2.1), data-driven
-patch tables (5.2.2) and border-conditioned tables (5.2.3). The correlated priors give the compiled
-Gibbs kernels a local conditional (:class:`~ogm_ppl.priors.local.LocalPrior`)."""
+patch tables (5.2.2) and border-conditioned tables (5.2.3). Each prior hands the compiled kernels one bundle
+of arrays (:meth:`MapPrior.compiled`, :mod:`ogm_ppl.priors.compiled`) or none (the generic path)."""
 
 from ogm_ppl.priors.base import MapPrior
 from ogm_ppl.priors.border import BorderPatchPrior
+from ogm_ppl.priors.compiled import CompiledPrior
 from ogm_ppl.priors.data_driven_1d import DataDriven1DPrior
 from ogm_ppl.priors.independent import IndependentPrior
-from ogm_ppl.priors.local import LocalMapPrior, LocalPrior
+from ogm_ppl.priors.local import LocalMapPrior
 from ogm_ppl.priors.mrf import MRFPrior, StencilPrior
 from ogm_ppl.priors.named import PRIOR_KINDS, prior_by_name
 from ogm_ppl.priors.patch_table import PatchTablePrior
 from ogm_ppl.priors.tables import PriorTables, available_tables, load_tables, tables_by_name
 
-__all__ = ["MapPrior", "IndependentPrior", "DataDriven1DPrior", "StencilPrior", "MRFPrior", "PatchTablePrior",
-           "BorderPatchPrior", "LocalMapPrior", "LocalPrior", "prior_by_name", "PRIOR_KINDS", "PriorTables",
-           "available_tables", "load_tables", "tables_by_name"]  # fmt: skip
+__all__ = ["BorderPatchPrior", "CompiledPrior", "DataDriven1DPrior", "IndependentPrior", "LocalMapPrior", "MRFPrior",
+           "MapPrior", "PRIOR_KINDS", "PatchTablePrior", "PriorTables", "StencilPrior", "available_tables",
+           "load_tables", "prior_by_name", "tables_by_name"]

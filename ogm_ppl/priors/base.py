@@ -10,14 +10,21 @@ A prior over binary maps ``m in {0, 1}^K`` answers three questions, all vectoris
   ``log_prob``; priors override it with a local computation;
 * :meth:`MapPrior.sample` — maps drawn from the prior.
 
-Priors whose cells are independent also expose :meth:`MapPrior.cell_log_odds` (``K``), which lets the
-compiled kernels skip the generic patch call. The Pyro model wraps any prior in
+Priors whose cells are independent also expose :meth:`MapPrior.cell_log_odds` (``K``). The compiled
+kernels read a prior through :meth:`MapPrior.compiled`: a bundle of arrays of one kind
+(:mod:`ogm_ppl.priors.compiled`: independent cells, stencil, tiles), or ``None`` for the generic path
+through :meth:`MapPrior.log_prob_patch`. The Pyro model wraps any prior in
 :class:`~ogm_ppl.models.occupancy.MapDistribution`.
 """
 
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import torch
+
+if TYPE_CHECKING:
+    from ogm_ppl.priors.compiled import CompiledPrior
 
 __all__ = ["MapPrior"]
 
@@ -60,6 +67,19 @@ class MapPrior:
     def cell_log_odds(self) -> torch.Tensor | None:
         """Per-cell prior log-odds ``l(lambda_k)`` if cells are independent a priori, else ``None``."""
         return None
+
+    def compiled(self) -> CompiledPrior | None:
+        """The prior's compiled face: a bundle of :mod:`ogm_ppl.priors.compiled` the kernels read (each kind
+        with its compiled cell and patch conditionals), or ``None`` for the generic path, one
+        :meth:`log_prob_patch` call per update (correct, for small maps). The default gives priors with
+        independent cells (:meth:`cell_log_odds` not ``None``) the
+        :class:`~ogm_ppl.priors.compiled.IndependentCells` bundle."""
+        lo = self.cell_log_odds()
+        if lo is None:
+            return None
+        from ogm_ppl.priors.compiled import independent_cells
+
+        return independent_cells(lo.detach().cpu().numpy())
 
     def sample(self, sample_shape=(), generator: torch.Generator | None = None) -> torch.Tensor:
         """Maps drawn from the prior, ``sample_shape x K`` (float 0/1)."""

@@ -26,7 +26,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ogm_ppl.priors.local import LocalMapPrior, grid_shape, tiles_local, tiles_log_prob, tiling
+from ogm_ppl.priors.compiled import tiles
+from ogm_ppl.priors.local import LocalMapPrior, grid_shape, tiles_log_prob, tiling
 from ogm_ppl.priors.patch_table import _patch_hw
 
 __all__ = ["BorderPatchPrior"]
@@ -99,7 +100,7 @@ class BorderPatchPrior(LocalMapPrior):
             seg_keys.append(mi)
             seg_logp.append(np.log(mc / mc.sum()))
             fallback = 1
-        self._local = tiles_local(self.rows, self.cols, geo, Li, self.inner, pad,
+        self._compiled = tiles(self.rows, self.cols, geo, Li, self.inner, pad,
                                   np.zeros(len(fill), np.int64), fill, seg_keys, seg_logp, fallback)  # fmt: skip
         self.keys, self.log_probs = keys, logp
         self.border_codes = borders

@@ -29,7 +29,8 @@ import math
 import numpy as np
 import torch
 
-from ogm_ppl.priors.local import LocalMapPrior, grid_shape, stencil_local
+from ogm_ppl.priors.compiled import stencil
+from ogm_ppl.priors.local import LocalMapPrior, grid_shape
 
 __all__ = ["StencilPrior", "MRFPrior"]
 
@@ -86,8 +87,8 @@ class StencilPrior(LocalMapPrior):
         self.coupling = np.array([table[k][0] for k in keys], np.float64)
         self.bias = np.array([table[k][1] for k in keys], np.float64)
         self.unary = h
-        self._local = stencil_local(self.rows, self.cols, h, self.offsets[:, 0], self.offsets[:, 1], self.bias,
-                                    self.coupling)  # fmt: skip
+        self._compiled = stencil(self.rows, self.cols, h, self.offsets[:, 0], self.offsets[:, 1], self.bias,
+                                 self.coupling)
         # per-cell sum of a_d over neighbours inside the grid
         r, c = np.divmod(np.arange(K), self.cols)
         nb = np.zeros(K)
@@ -144,7 +145,7 @@ class MRFPrior(StencilPrior):
         cell_prior: ``lambda``, the cell prior (scalar or ``K``).
 
     >>> p = MRFPrior((3, 3), order=1, psi=0.5)
-    >>> float(p.local().s_coup[0]) == -2 * math.log(0.5)
+    >>> float(p.compiled().coupling[0]) == -2 * math.log(0.5)
     True
     """
 

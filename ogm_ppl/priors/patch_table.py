@@ -22,7 +22,8 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ogm_ppl.priors.local import LocalMapPrior, grid_shape, tiles_local, tiles_log_prob, tiling
+from ogm_ppl.priors.compiled import tiles
+from ogm_ppl.priors.local import LocalMapPrior, grid_shape, tiles_log_prob, tiling
 
 __all__ = ["PatchTablePrior", "truncate_mass"]
 
@@ -116,7 +117,7 @@ class PatchTablePrior(LocalMapPrior):
                 seg_logp.append(np.log(np.bincount(inv, weights=p)))
             seg_keys.append(keys)
         self._masks = masks
-        self._local = tiles_local(self.rows, self.cols, geo, L, self.patch, (0, 0), t_seg,
+        self._compiled = tiles(self.rows, self.cols, geo, L, self.patch, (0, 0), t_seg,
                                   np.zeros(len(t_seg), np.int64), seg_keys, seg_logp)  # fmt: skip
         self.mean_occupancy = float((p * np.array([bin(int(x)).count("1") for x in c])).sum() / L)
 
@@ -135,7 +136,7 @@ class PatchTablePrior(LocalMapPrior):
         """Exact draws: every tile from its (marginal) table, independently."""
         shape = torch.Size(sample_shape)
         B = int(np.prod(shape)) if len(shape) else 1
-        lp = self._local
+        lp = self._compiled
         maps = np.zeros((B, self.num_cells), np.float64)
         T = lp.t_rows * lp.t_cols
         ti, tj = np.divmod(np.arange(T), lp.t_cols)

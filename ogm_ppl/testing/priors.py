@@ -75,13 +75,12 @@ class PriorContract:
         """The log-odds the compiled kernels read equal ``log p(m_k = 1, m_-k) - log p(m_k = 0, m_-k)``."""
         import numpy as np
 
-        prior = self.make_prior(self.num_cells)
-        local = getattr(prior, "local", None)
-        if not callable(local):
-            return
-        from ogm_ppl.priors.local import cell_log_odds
+        from ogm_ppl.inference._kernels.cell_sweep import prior_log_odds
 
-        lp = local()
+        prior = self.make_prior(self.num_cells)
+        bundle = prior.compiled()
+        if bundle is None:
+            return
         maps = self._all_maps()
         for k in range(self.num_cells):
             on, off = maps.clone(), maps.clone()
@@ -89,9 +88,37 @@ class PriorContract:
             a, b = prior.log_prob(on), prior.log_prob(off)
             for i in range(len(maps)):
                 m = maps[i].numpy().astype(np.uint8)
-                got = cell_log_odds(lp, k, m)
+                got = prior_log_odds(bundle, k, m)
                 assert np.array_equal(m, maps[i].numpy().astype(np.uint8))  # state restored
                 if torch.isinf(a[i]) and torch.isinf(b[i]):  # a map the prior rules out either way
                     continue
                 want = float(a[i] - b[i])
                 assert (math.isinf(want) and got == want) or abs(got - want) < 1e-10, (k, i, got, want)
+
+    def test_compiled_patch_weights_match_log_prob(self):
+        """The patch weights the compiled patch kernels read (``patch_prior_batch``, through the bundle's
+        registered ``patch_prior_weights``) equal ``log p(m_C = c, m_-C)`` up to a constant per map."""
+        import numpy as np
+
+        from ogm_ppl.priors.compiled import patch_prior_batch
+
+        prior = self.make_prior(self.num_cells)
+        bundle = prior.compiled()
+        if bundle is None:
+            return
+        maps = self._all_maps()
+        cells = np.array([1, 3, 4], np.int64)
+        cands = np.arange(8, dtype=np.int64)
+        got = np.empty((len(maps), 8))
+        patch_prior_batch(bundle, np.ascontiguousarray(maps.numpy().astype(np.uint8)), cells, cands, got)
+        configs = torch.tensor(list(itertools.product([0.0, 1.0], repeat=3)), dtype=torch.float64).flip(1)
+        trial = maps[:, None, :].repeat(1, 8, 1)
+        trial[:, :, torch.from_numpy(cells)] = configs  # candidate j sets bit b = the b-th patch cell
+        want = prior.log_prob(trial).numpy()
+        assert np.array_equal(np.isinf(got), np.isinf(want))
+        fin = np.isfinite(want)
+        with np.errstate(invalid="ignore"):  # -inf - -inf where both rule a map out
+            diff = np.where(fin, got - want, np.nan)
+        rows = fin.any(1)
+        spread = np.nanmax(diff[rows], 1) - np.nanmin(diff[rows], 1)
+        assert (spread < 1e-10).all()

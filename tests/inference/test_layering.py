@@ -1,4 +1,4 @@
-"""Imports point down (issue 12, item 5): the inference roles sit on the compiled kernels and the model;
+"""Imports point down: the inference roles sit on the compiled kernels and the model;
 a role never reaches into a role above it, and the model layer never imports inference or datasets."""
 
 import ast
@@ -97,3 +97,19 @@ def test_guides_do_not_import_structured_guides():
     """structured_guides builds on guides, never the other way (no import cycle)."""
     mods = _imports(PKG / "inference" / "variational" / "guides.py")
     assert not any(m.startswith("ogm_ppl.inference.variational.structured_guides") for m in mods)
+
+
+def test_kernels_read_priors_only_through_the_compiled_package():
+    """The compiled kernels see a prior only as a bundle of ``ogm_ppl.priors.compiled``, never the rest of
+    ``ogm_ppl.priors`` (the Python prior classes, tables, learning)."""
+    for path in sorted((PKG / "inference" / "_kernels").rglob("*.py")):
+        for mod in _imports(path):
+            if mod.startswith("ogm_ppl.priors"):
+                assert mod.startswith("ogm_ppl.priors.compiled"), f"{path.relative_to(PKG)} imports {mod}"
+
+
+def test_compiled_priors_are_self_contained():
+    """``ogm_ppl.priors.compiled`` imports nothing of the library outside itself, so kernels may use it."""
+    for path in sorted((PKG / "priors" / "compiled").rglob("*.py")):
+        for mod in _imports(path):
+            assert mod.startswith("ogm_ppl.priors.compiled"), f"{path.relative_to(PKG)} imports {mod}"

@@ -36,7 +36,7 @@ class TestAnisotropicStencil(PriorContract):
 
 def test_thesis_log_odds_formula():
     """l(m_k | neighbours) = l(lambda) + (n0 - n1) log psi (Section 5.2.1), on a 3 x 3 grid, centre cell."""
-    from ogm_ppl.priors.local import cell_log_odds
+    from ogm_ppl.inference._kernels.cell_sweep import prior_log_odds
 
     lam, psi = 0.234, 0.3
     for order, nbrs in ((1, [1, 3, 5, 7]), (2, [0, 1, 2, 3, 5, 6, 7, 8])):
@@ -47,7 +47,7 @@ def test_thesis_log_odds_formula():
             n1 = int(m[nbrs].sum())
             n0 = len(nbrs) - n1
             want = math.log(lam / (1 - lam)) + (n0 - n1) * math.log(psi)
-            assert cell_log_odds(p.local(), 4, m) == pytest.approx(want, abs=1e-12)
+            assert prior_log_odds(p.compiled(), 4, m) == pytest.approx(want, abs=1e-12)
     # the joint is the product of cell priors and psi per unequal edge, up to a constant
     p = MRFPrior((4,), order=1, psi=psi, cell_prior=lam)
     maps = torch.tensor([[0, 0, 0, 0], [0, 1, 0, 0], [1, 1, 0, 1]], dtype=torch.float64)

@@ -48,7 +48,7 @@ import numba as nb
 import numpy as np
 
 from ogm_ppl.inference._kernels.cells import _next_occupied
-from ogm_ppl.priors.local import STENCIL, TILES, stencil_cell_log_odds, tile_cell_log_odds
+from ogm_ppl.priors.compiled import cell_log_odds
 
 HEAT_BATH = 0
 METROPOLISED = 1
@@ -116,6 +116,11 @@ def cell_state(m: np.ndarray, offsets, cells, c_off, c_ray, c_kappa, ll: np.ndar
                    float(2.0**bits))  # fmt: skip
     _fill(st)
     return st
+
+
+def cell_state_of(m: np.ndarray, index, bits: int | None = None) -> CellState:
+    """:func:`cell_state` over a :class:`~ogm_ppl.raycast.RayIndex`."""
+    return cell_state(m, index.offsets, index.cells, index.c_off, index.c_ray, index.c_kappa, index.ll, bits)
 
 
 @nb.njit(cache=True)
@@ -333,31 +338,15 @@ def draws(cells, scan, seed):
 
 
 @nb.njit(cache=True)
-def sweep_independent(st, order, prior_log_odds, uniforms, update):
-    """One pass of single-cell updates over ``order`` with an independent prior. Returns the flips."""
+def sweep(st, order, prior, uniforms, update):
+    """One pass of single-cell updates over ``order`` with the prior bundle ``prior``
+    (:mod:`ogm_ppl.priors.compiled`; numba compiles one loop per bundle type, inlining its conditional
+    ``l(m_k | m_-k)``). Returns the flips."""
     flips = 0
     m = st.m
     for i in range(order.shape[0]):
         k = order[i]
-        lo = prior_log_odds[k] + _lik_ratio(st, k)
-        cur = m[k]
-        v = new_value(lo, uniforms[i], cur, update)
-        if v != cur:
-            _set_cell(st, k, v)
-            flips += 1
-    return flips
-
-
-@nb.njit(cache=True, inline="always")
-def _local_pass(st, order, lp, uniforms, update, kind):
-    flips = 0
-    m = st.m
-    for i in range(order.shape[0]):
-        k = order[i]
-        if kind == STENCIL:
-            lo = stencil_cell_log_odds(lp, k, m)
-        else:
-            lo = tile_cell_log_odds(lp, k, m)
+        lo = cell_log_odds(prior, k, m)
         lo += _lik_ratio(st, k)
         cur = m[k]
         v = new_value(lo, uniforms[i], cur, update)
@@ -368,16 +357,38 @@ def _local_pass(st, order, lp, uniforms, update, kind):
 
 
 @nb.njit(cache=True)
-def sweep_local(st, order, lp, uniforms, update):
-    """:func:`sweep_independent` with a correlated prior's local log-odds ``l(m_k | m_-k)`` from a
-    :mod:`ogm_ppl.priors.local` bundle (one loop per prior kind, each inlining its own conditional)."""
-    if lp.kind == STENCIL:
-        return _local_pass(st, order, lp, uniforms, update, STENCIL)
-    return _local_pass(st, order, lp, uniforms, update, TILES)
+def prior_log_odds(prior, k, m):
+    """``l(m_k | m_-k)`` of the prior bundle at the map ``m`` (callable from Python)."""
+    return cell_log_odds(prior, k, m)
 
 
 @nb.njit(cache=True)
-def marginals_independent(st, order, prior_log_odds, num_sweeps, seed, update):
+def icm_sweeps(st, order, prior, max_sweeps):
+    """Iterated conditional modes (the EM hill-climbing of Section 2.2) over ``order``: each cell takes
+    the value with the larger conditional posterior (ties, and ``nan``, keep the current value), until a
+    sweep changes nothing. Returns the number of sweeps run."""
+    m = st.m
+    for s in range(max_sweeps):
+        changed = 0
+        for i in range(order.shape[0]):
+            k = order[i]
+            lo = cell_log_odds(prior, k, m)
+            lo += _lik_ratio(st, k)
+            v = m[k]
+            if lo > 0.0:
+                v = 1
+            elif lo < 0.0:
+                v = 0
+            if v != m[k]:
+                _set_cell(st, k, v)
+                changed += 1
+        if changed == 0:
+            return s + 1
+    return max_sweeps
+
+
+@nb.njit(cache=True)
+def marginals(st, order, prior, num_sweeps, seed, update):
     """``num_sweeps`` passes over ``order`` in one compiled call with numba's generator seeded by
     ``seed``; returns the running sum of the sampled maps (``K`` float64): for long runs of small problems
     (e.g. the 10^5-sweep column of Table 3.1), where one Python call per sweep would dominate."""
@@ -387,7 +398,8 @@ def marginals_independent(st, order, prior_log_odds, num_sweeps, seed, update):
     for _ in range(num_sweeps):
         for i in range(order.shape[0]):
             k = order[i]
-            lo = prior_log_odds[k] + _lik_ratio(st, k)
+            lo = cell_log_odds(prior, k, m)
+            lo += _lik_ratio(st, k)
             cur = m[k]
             v = new_value(lo, np.random.random(), cur, update)
             if v != cur:

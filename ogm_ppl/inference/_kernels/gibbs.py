@@ -1,86 +1,90 @@
 """Compiled patch Gibbs sweeps over binary maps (Section 4.2; Algorithms 1 and 2), heat bath or metropolised;
 the single-cell sweeps are in :mod:`~ogm_ppl.inference._kernels.cell_sweep`.
 
-The state is the map ``m`` (uint8, ``K``) and every ray's first occupied kappa ``f`` (kept in step with
-``m`` by :func:`~ogm_ppl.inference._kernels.cells.set_cell`). Random numbers come in as arrays drawn
-outside (from torch's generator), so a run is reproducible from a seed and resumable from a checkpoint.
+The state is a :class:`PatchState`: the map ``m`` (uint8, ``K``), every ray's first occupied kappa ``f``
+(kept in step with ``m`` by :func:`set_patch`), the scratch of ray collection, and the ray index
+(:class:`~ogm_ppl.raycast.RayIndex`) it walks. Random numbers come in as arrays drawn outside (from
+torch's generator), so a run is reproducible from a seed and resumable from a checkpoint.
 
-Patches are rows of a ``P x L`` int64 array (``-1`` pads patches cut by the grid edge or pinned cells).
-The likelihood of each of a patch's ``W = 2^L`` configurations needs only the rays through the patch:
-for each such ray the first occupied kappa outside the patch, ``f_out``, and the kappas of the patch's
-cells on it; configuration ``w`` then has ``f = min(f_out, min{kappa_c : w_c = 1})``. Rays blocked before
-the patch are skipped (Section 4.1.2).
+A patch is the shape ``(dr, dc)`` of a :class:`PatchGeometry` placed at an anchor (``-1`` pads cells cut
+by the grid edge or pinned). The likelihood of each of a patch's ``W = 2^L`` configurations needs only the
+rays through the patch: for each such ray the first occupied kappa outside the patch, ``f_out``, and the
+kappas of the patch's cells on it; configuration ``w`` then has ``f = min(f_out, min{kappa_c : w_c = 1})``.
+Rays blocked before the patch are skipped (Section 4.1.2).
 
-Sweeps allocate their scratch once (:class:`RayScratch`, :class:`~ogm_ppl.priors.local.TileScratch`);
-the public one-patch functions (``patch_log_lik``, ``local_patch_log_weights``) allocate their own.
+:func:`patch_sweep` is compiled once per prior bundle type (:mod:`ogm_ppl.priors.compiled`): for priors
+whose weights add over cells (independent cells) every update weighs all ``2^L`` configurations in
+``O(2^L)`` per ray; for the others it weighs the candidates the prior's kind allows (a tile's sparse
+support, else all ``2^L``). Both end in the one choice step of :mod:`~ogm_ppl.inference._kernels.choice`.
+Sweeps allocate their scratch once (:class:`RayScratch`, :class:`~ogm_ppl.priors.compiled.scratch.TileScratch`).
 """
 
 from __future__ import annotations
 
-import math
 from typing import NamedTuple
 
 import numba as nb
 import numpy as np
+from numba.extending import overload
 
-from ogm_ppl.inference._kernels.cells import set_cell
-from ogm_ppl.priors.local import (
-    patch_prior_weights_ws,
-    tile_candidates,
-    tile_of_anchor,
-    tile_patch_factors,
-    tile_patch_setup,
-    tile_scratch,
+from ogm_ppl.inference._kernels.cells import _next_occupied
+from ogm_ppl.inference._kernels.choice import accept_random, categorical, choose
+from ogm_ppl.priors.compiled import (
+    candidate_weights,
+    cell_log_odds,
+    kind_of,
+    patch_candidates,
+    scratch_capacity,
 )
+from ogm_ppl.priors.compiled.scratch import tile_scratch
 
 
-@nb.njit(cache=True)
-def _first_outside(m, in_patch, offsets, cells, r, start):
-    a = offsets[r]
-    n = offsets[r + 1] - a
-    for j in range(start, n):
-        c = cells[a + j]
-        if m[c] and not in_patch[c]:
-            return j
-    return n
+class PatchState(NamedTuple):
+    """The map and first hits a patch sweep reads and writes, its ray-collection scratch, and the ray
+    index it walks (the fields of :class:`~ogm_ppl.raycast.RayIndex`)."""
+
+    m: np.ndarray  # K uint8: the map
+    f: np.ndarray  # R int64: every ray's first occupied kappa (its length if none)
+    in_patch: np.ndarray  # K bool, all False between updates
+    ray_stamp: np.ndarray  # R x 2 int64: (stamp, slot) of a ray collected for the update with that stamp
+    stamp: np.ndarray  # 1 int64: the next unused stamp
+    offsets: np.ndarray  # R + 1 int64: CSR along rays
+    cells: np.ndarray  # nnz int64
+    c_off: np.ndarray  # K + 1 int64: CSR by cell
+    c_ray: np.ndarray  # nnz int64
+    c_kappa: np.ndarray  # nnz int64
+    ll: np.ndarray  # R x (F + 1) float64
 
 
-@nb.njit(cache=True)
-def collect_patch_rays(patch, c_off, c_ray, c_kappa, ray_stamp, stamp):
-    """The rays through a patch and, per ray (a *slot*), the (kappa, bit) of each patch cell on it.
+def patch_state(m: np.ndarray, f: np.ndarray, index) -> PatchState:
+    """The :class:`PatchState` over the map ``m`` and first hits ``f`` (views: kept in step in place)."""
+    R = len(index.offsets) - 1
+    return PatchState(m, f, np.zeros(len(m), np.bool_), np.full((R, 2), -1, np.int64), np.zeros(1, np.int64),
+                      index.offsets, index.cells, index.c_off, index.c_ray, index.c_kappa, index.ll)
 
-    Returns ``(L, n_slots, slot_ray, slot_n, ent_kappa, ent_bit)``; bit ``j`` is the ``j``-th live cell.
-    """
-    L = 0
-    n_ent = 0
-    for i in range(patch.shape[0]):
-        c = patch[i]
-        if c >= 0:
-            L += 1
-            n_ent += c_off[c + 1] - c_off[c]
-    slot_ray = np.empty(n_ent, np.int64)
-    slot_n = np.zeros(n_ent, np.int64)
-    ent_kappa = np.empty((n_ent, max(L, 1)), np.int64)
-    ent_bit = np.empty((n_ent, max(L, 1)), np.int64)
-    n_slots = 0
-    bit = 0
-    for i in range(patch.shape[0]):
-        c = patch[i]
-        if c < 0:
-            continue
-        for p in range(c_off[c], c_off[c + 1]):
-            r = c_ray[p]
-            if ray_stamp[r, 0] != stamp:
-                ray_stamp[r, 0] = stamp
-                ray_stamp[r, 1] = n_slots
-                slot_ray[n_slots] = r
-                n_slots += 1
-            s = ray_stamp[r, 1]
-            ent_kappa[s, slot_n[s]] = c_kappa[p]
-            ent_bit[s, slot_n[s]] = bit
-            slot_n[s] += 1
-        bit += 1
-    return L, n_slots, slot_ray, slot_n, ent_kappa, ent_bit
+
+class PatchGeometry(NamedTuple):
+    """A patch shape on the grid: cell offsets ``(dr, dc)`` from the anchor, its ``h x w`` rectangle (0, 0
+    if not a rectangle), the grid size and the pinned (known-free) cells."""
+
+    dr: np.ndarray  # L int64
+    dc: np.ndarray  # L int64
+    h: int
+    w: int
+    rows: int
+    cols: int
+    pinned: np.ndarray  # K uint8
+
+
+class PatchRule(NamedTuple):
+    """How a patch update chooses: Algorithm 2's probability of a random configuration (accepted by
+    Metropolis-Hastings unless ``thesis_random``), Liu's metropolised Gibbs or heat bath, and the most
+    candidate configurations an update may weigh."""
+
+    p_rand_patch: float
+    thesis_random: bool
+    metropolised: bool
+    capacity: int
 
 
 class RayScratch(NamedTuple):
@@ -115,7 +119,7 @@ def ray_scratch(L, num_slots, dense, num_cands):
     return RayScratch(np.empty(S, np.int64), np.empty(S, np.int64), np.empty(S, np.int64),
                       np.empty((S, max(L, 1)), np.int64), np.empty((S, max(L, 1)), np.int64),
                       np.empty(max(L, 1), np.int64), np.empty(W, np.int64), lowbit, np.empty(W, np.float64),
-                      np.empty(max(W, num_cands, 1), np.float64))  # fmt: skip
+                      np.empty(max(W, num_cands, 1), np.float64))
 
 
 @nb.njit(cache=True)
@@ -140,15 +144,68 @@ def patch_slots(patch, c_off, num_rays):
 
 
 @nb.njit(cache=True)
-def collect_rays(patch, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa, sc):
+def _first_outside(m, in_patch, offsets, cells, r, start):
+    a = offsets[r]
+    n = offsets[r + 1] - a
+    for j in range(start, n):
+        c = cells[a + j]
+        if m[c] and not in_patch[c]:
+            return j
+    return n
+
+
+@nb.njit(cache=True)
+def collect_patch_rays(ps, patch, stamp):
+    """The rays through a patch and, per ray (a *slot*), the (kappa, bit) of each patch cell on it.
+
+    Returns ``(L, n_slots, slot_ray, slot_n, ent_kappa, ent_bit)``; bit ``j`` is the ``j``-th live cell.
+    """
+    c_off, c_ray, c_kappa, ray_stamp = ps.c_off, ps.c_ray, ps.c_kappa, ps.ray_stamp
+    L = 0
+    n_ent = 0
+    for i in range(patch.shape[0]):
+        c = patch[i]
+        if c >= 0:
+            L += 1
+            n_ent += c_off[c + 1] - c_off[c]
+    slot_ray = np.empty(n_ent, np.int64)
+    slot_n = np.zeros(n_ent, np.int64)
+    ent_kappa = np.empty((n_ent, max(L, 1)), np.int64)
+    ent_bit = np.empty((n_ent, max(L, 1)), np.int64)
+    n_slots = 0
+    bit = 0
+    for i in range(patch.shape[0]):
+        c = patch[i]
+        if c < 0:
+            continue
+        for p in range(c_off[c], c_off[c + 1]):
+            r = c_ray[p]
+            if ray_stamp[r, 0] != stamp:
+                ray_stamp[r, 0] = stamp
+                ray_stamp[r, 1] = n_slots
+                slot_ray[n_slots] = r
+                n_slots += 1
+            s = ray_stamp[r, 1]
+            ent_kappa[s, slot_n[s]] = c_kappa[p]
+            ent_bit[s, slot_n[s]] = bit
+            slot_n[s] += 1
+        bit += 1
+    return L, n_slots, slot_ray, slot_n, ent_kappa, ent_bit
+
+
+@nb.njit(cache=True)
+def collect_rays(ps, patch, stamp, sc):
     """The rays whose first hit depends on the configuration of ``patch``, into ``sc`` (Section 4.1.2).
 
     Per ray (a *slot*): ``f_out``, its first occupied kappa outside the patch (its length if none), and
     the (kappa, bit) of the patch cells on it before ``f_out``, ascending in kappa, so that configuration
     ``w`` has first hit ``min(f_out, first kappa whose bit is set in w)``. Rays blocked before the patch
     have no such cells and are dropped. Scratch: ``in_patch`` (bool ``K``, left all False) and
-    ``ray_stamp`` (int64 ``R x 2``; pass a ``stamp`` never used before). Returns the number of slots.
+    ``ray_stamp`` (int64 ``R x 2``) of the :class:`PatchState` ``ps``; pass a ``stamp`` never used before.
+    Returns the number of slots.
     """
+    m, f, in_patch, ray_stamp = ps.m, ps.f, ps.in_patch, ps.ray_stamp
+    offsets, cells, c_off, c_ray, c_kappa = ps.offsets, ps.cells, ps.c_off, ps.c_ray, ps.c_kappa
     ns = 0
     bit = 0
     for i in range(patch.shape[0]):
@@ -258,119 +315,6 @@ def lik_list(sc, ns, ll, cands, n, out):
 
 
 @nb.njit(cache=True)
-def _patch_log_lik_ws(patch, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa, ll, out, sc):
-    L = 0
-    for i in range(patch.shape[0]):
-        if patch[i] >= 0:
-            L += 1
-    W = 1 << L
-    for w in range(W):
-        out[w] = 0.0
-    ns = collect_rays(patch, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa, sc)
-    lik_all(sc, ns, ll, L, out)
-    return W
-
-
-@nb.njit(cache=True)
-def patch_log_lik(patch, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa, ll, out):
-    """``out[w] = log p(z | patch = w, rest)`` up to a constant common to all ``w`` (Eq. 4.4).
-
-    Scratch: ``in_patch`` (bool ``K``, left all False) and ``ray_stamp`` (int64 ``R x 2``: a ray whose
-    first entry equals ``stamp`` was already collected for this patch, into the slot in its second
-    entry; pass a ``stamp`` never used before on every call).
-    Returns ``W``.
-    """
-    L = patch.shape[0]
-    sc = ray_scratch(L, patch_slots(patch, c_off, offsets.shape[0] - 1), True, 0)
-    return _patch_log_lik_ws(patch, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa, ll,
-                             out, sc)  # fmt: skip
-
-
-@nb.njit(cache=True)
-def set_patch(patch, w, m, f, offsets, cells, c_off, c_ray, c_kappa):
-    bit = 0
-    for i in range(patch.shape[0]):
-        c = patch[i]
-        if c < 0:
-            continue
-        set_cell(c, (w >> bit) & 1, m, f, offsets, cells, c_off, c_ray, c_kappa)
-        bit += 1
-
-
-@nb.njit(cache=True, inline="always")
-def _exp_weights(logw, n, ew, skip):
-    """``ew[j] = exp(logw[j] - max logw)`` for ``j < n``; returns ``(sum, sum without entry skip)``, each
-    summed directly (no cancellation), or ``(-1, -1)`` if no entry has mass."""
-    mx = -np.inf
-    for j in range(n):
-        if logw[j] > mx:
-            mx = logw[j]
-    if mx == -np.inf:
-        return -1.0, -1.0
-    total = 0.0
-    other = 0.0
-    for j in range(n):
-        e = math.exp(logw[j] - mx)
-        ew[j] = e
-        total += e
-        if j != skip:
-            other += e
-    return total, other
-
-
-@nb.njit(cache=True)
-def _categorical_ws(logw, W, u, ew):
-    """Index drawn by inverse CDF from ``softmax(logw[:W])`` with the uniform ``u`` (``-1`` if no entry
-    has mass); ``ew`` (``>= W``) holds the exponentials, so each is computed once."""
-    total, _ = _exp_weights(logw, W, ew, -1)
-    if total < 0.0:
-        return -1
-    t = u * total
-    acc = 0.0
-    for w in range(W):
-        acc += ew[w]
-        if t < acc:
-            return w
-    for w in range(W - 1, -1, -1):  # rounding: the last configuration with mass
-        if logw[w] > -np.inf:
-            return w
-    return -1
-
-
-@nb.njit(cache=True)
-def metropolised_pick(logw, n, jc, u_choice, u_accept, ew):
-    """Liu's metropolised Gibbs over ``n`` candidates with the current one at index ``jc``: propose
-    ``j != jc`` with probability ``p_j / (1 - p_jc)`` and accept with ``min(1, (1 - p_jc) / (1 - p_j))``,
-    which leaves ``p`` invariant and moves at least as often as a heat-bath draw (Peskun's order).
-
-    ``p = softmax(logw[:n])``; ``jc = -1`` (the current configuration is not a candidate: it has no prior
-    mass) falls back to a heat-bath draw. Returns the chosen index (``jc`` when staying; ``-1`` if no
-    candidate has mass). ``ew`` (``>= n``) is scratch.
-    """
-    if jc < 0:
-        return _categorical_ws(logw, n, u_choice, ew)
-    total, other = _exp_weights(logw, n, ew, jc)
-    if total < 0.0:
-        return -1
-    if other == 0.0:
-        return jc  # no other configuration has mass
-    t = u_choice * other
-    acc = 0.0
-    pick = -1
-    for j in range(n):
-        if j == jc or ew[j] == 0.0:
-            continue
-        pick = j  # (rounding: the last one with mass)
-        acc += ew[j]
-        if t < acc:
-            break
-    denom = other + ew[jc] - ew[pick]  # = total - e_pick, so the ratio is (1 - p_jc) / (1 - p_pick)
-    if denom <= 0.0 or u_accept * denom < other:
-        return pick
-    return jc
-
-
-@nb.njit(cache=True)
 def patch_config(patch, m):
     w = 0
     bit = 0
@@ -385,9 +329,39 @@ def patch_config(patch, m):
 
 
 @nb.njit(cache=True, inline="always")
-def build_patch(r0, c0, dr, dc, rows, cols, pinned, patch):
-    """Cells of the patch of shape ``(dr, dc)`` placed at row ``r0``, column ``c0`` (which may lie off the
-    grid); ``-1`` where a cell is off the grid or pinned. Returns the number of live cells."""
+def _set_cell(ps, k, v):
+    """``m[k] = v``, updating the first hits of the rays through ``k``."""
+    m, f = ps.m, ps.f
+    if m[k] == v:
+        return
+    m[k] = v
+    for p in range(ps.c_off[k], ps.c_off[k + 1]):
+        r = ps.c_ray[p]
+        kap = ps.c_kappa[p]
+        if v:
+            if kap < f[r]:
+                f[r] = kap
+        elif f[r] == kap:
+            f[r] = _next_occupied(m, ps.offsets, ps.cells, r, kap + 1)
+
+
+@nb.njit(cache=True)
+def set_patch(ps, patch, w):
+    """Set the live cells of ``patch`` to configuration ``w`` (bit ``j``: the ``j``-th live cell)."""
+    bit = 0
+    for i in range(patch.shape[0]):
+        c = patch[i]
+        if c < 0:
+            continue
+        _set_cell(ps, c, (w >> bit) & 1)
+        bit += 1
+
+
+@nb.njit(cache=True, inline="always")
+def build_patch(geo, r0, c0, patch):
+    """Cells of the patch ``geo`` placed at row ``r0``, column ``c0`` (which may lie off the grid);
+    ``-1`` where a cell is off the grid or pinned. Returns the number of live cells."""
+    dr, dc, pinned, rows, cols = geo.dr, geo.dc, geo.pinned, geo.rows, geo.cols
     n = 0
     for j in range(dr.shape[0]):
         r = r0 + dr[j]
@@ -401,8 +375,43 @@ def build_patch(r0, c0, dr, dc, rows, cols, pinned, patch):
 
 
 @nb.njit(cache=True)
-def add_patch_prior(patch, prior_log_odds, logw, W):
-    """Add the independent cell prior (log-odds of the occupied cells) to every configuration's weight."""
+def build_patch_at(geo, r0, c0, patch):
+    """:func:`build_patch`, callable from Python."""
+    return build_patch(geo, r0, c0, patch)
+
+
+@nb.njit(cache=True)
+def _patch_log_lik_ws(ps, patch, stamp, out, sc):
+    L = 0
+    for i in range(patch.shape[0]):
+        if patch[i] >= 0:
+            L += 1
+    W = 1 << L
+    for w in range(W):
+        out[w] = 0.0
+    ns = collect_rays(ps, patch, stamp, sc)
+    lik_all(sc, ns, ps.ll, L, out)
+    return W
+
+
+@nb.njit(cache=True, inline="always")
+def _next_stamp(ps, n):
+    """Reserve ``n`` fresh stamps; returns the first."""
+    s = ps.stamp[0]
+    ps.stamp[0] = s + n
+    return s
+
+
+@nb.njit(cache=True)
+def patch_log_lik(ps, patch, out):
+    """``out[w] = log p(z | patch = w, rest)`` up to a constant common to all ``w`` (Eq. 4.4). Returns ``W``."""
+    sc = ray_scratch(patch.shape[0], patch_slots(patch, ps.c_off, ps.offsets.shape[0] - 1), True, 0)
+    return _patch_log_lik_ws(ps, patch, _next_stamp(ps, 1), out, sc)
+
+
+@nb.njit(cache=True)
+def add_patch_prior(patch, prior, m, logw, W):
+    """Add the cell prior (log-odds of the occupied cells) of an additive prior to every configuration."""
     for w in range(W):
         bit = 0
         for j in range(patch.shape[0]):
@@ -410,12 +419,12 @@ def add_patch_prior(patch, prior_log_odds, logw, W):
             if c < 0:
                 continue
             if (w >> bit) & 1:
-                logw[w] += prior_log_odds[c]
+                logw[w] += cell_log_odds(prior, c, m)
             bit += 1
 
 
 @nb.njit(cache=True)
-def _add_patch_prior_ws(patch, prior_log_odds, logw, W, sc):
+def _add_patch_prior_ws(patch, prior, m, logw, W, sc):
     """:func:`add_patch_prior` in ``O(W)``: the prior of ``w`` is that of ``w & (w - 1)`` plus the
     log-odds of its lowest bit's cell."""
     live = sc.kb
@@ -427,116 +436,59 @@ def _add_patch_prior_ws(patch, prior_log_odds, logw, W, sc):
     pv = sc.prior
     pv[0] = 0.0
     for w in range(1, W):
-        v = pv[w & (w - 1)] + prior_log_odds[live[sc.lowbit[w]]]
+        v = pv[w & (w - 1)] + cell_log_odds(prior, live[sc.lowbit[w]], m)
         pv[w] = v
         logw[w] += v
 
 
 @nb.njit(cache=True)
-def patch_log_weights(patch, prior_log_odds, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off,
-                      c_ray, c_kappa, ll, logw):  # fmt: skip
-    """Unnormalised log conditional of every configuration of ``patch`` under an independent prior."""
-    W = patch_log_lik(patch, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa, ll, logw)
-    add_patch_prior(patch, prior_log_odds, logw, W)
+def additive_patch_log_weights(ps, patch, prior, logw):
+    """Unnormalised log conditional of every configuration of ``patch`` under an additive prior
+    (likelihood first, then the cells' log-odds). Returns ``W``."""
+    W = patch_log_lik(ps, patch, logw)
+    add_patch_prior(patch, prior, ps.m, logw, W)
     return W
 
 
 @nb.njit(cache=True)
-def gibbs_patch_sweep(anchors, dr, dc, rows, cols, pinned, prior_log_odds, m, f, offsets, cells, c_off,
-                      c_ray, c_kappa, ll, u_choice, u_rand, u_accept, p_rand_patch, thesis_random,
-                      ray_stamp, stamp0, metropolised):  # fmt: skip
-    """One pass of patch Gibbs updates at ``anchors`` (Algorithm 1; Algorithm 2 when
-    ``p_rand_patch > 0``) with an independent cell prior. Returns the number of patches changed.
+def candidate_log_weights(ps, patch, prior, cands, n, logw):
+    """``logw[j]``: unnormalised log conditional of ``cands[j]`` (prior first; the likelihood only for
+    candidates the prior allows)."""
+    sc = ray_scratch(patch.shape[0], patch_slots(patch, ps.c_off, ps.offsets.shape[0] - 1), False, 0)
+    ts = tile_scratch(ps.m.shape[0], scratch_capacity(prior, patch.shape[0]))
+    candidate_weights(prior, patch, ps.m, cands, n, -1, logw, logw, ts)
+    ns = collect_rays(ps, patch, _next_stamp(ps, 1), sc)
+    lik_list(sc, ns, ps.ll, cands, n, logw)
 
-    Each update weighs all ``W = 2^L`` configurations: the likelihood through the rays of the patch
-    (:func:`collect_rays`, :func:`lik_all`: ``O(W)`` per ray) plus the cells' prior log-odds.
-    Algorithm 2's random configuration is accepted with the Metropolis-Hastings probability
-    ``min(1, p(w') / p(w))``, which keeps the posterior invariant, unless ``thesis_random`` (always
-    accepted, as printed in the thesis; not exact). ``metropolised``: the other updates are Liu's
-    metropolised Gibbs (:func:`metropolised_pick`) instead of heat-bath draws.
-    """
-    K = m.shape[0]
-    L = dr.shape[0]
+
+@nb.njit(cache=True)
+def _additive_sweep(ps, geo, anchors, prior, u, rule):
+    """Patch updates that weigh all ``W = 2^L`` configurations: the likelihood through the rays of the
+    patch (:func:`collect_rays`, :func:`lik_all`: ``O(W)`` per ray) plus the cells' prior log-odds."""
+    L = geo.dr.shape[0]
     logw = np.empty(1 << L, np.float64)
-    in_patch = np.zeros(K, np.bool_)
     patch = np.empty(L, np.int64)
-    sc = ray_scratch(L, max_slots(L, c_off, offsets.shape[0] - 1), True, 0)
+    sc = ray_scratch(L, max_slots(L, ps.c_off, ps.offsets.shape[0] - 1), True, 0)
+    p_rand, thesis, metro = rule.p_rand_patch, rule.thesis_random, rule.metropolised
+    stamp0 = _next_stamp(ps, anchors.shape[0])
     changed = 0
     for i in range(anchors.shape[0]):
-        if build_patch(anchors[i, 0], anchors[i, 1], dr, dc, rows, cols, pinned, patch) == 0:
+        if build_patch(geo, anchors[i, 0], anchors[i, 1], patch) == 0:
             continue
-        W = _patch_log_lik_ws(patch, m, f, in_patch, ray_stamp, stamp0 + i, offsets, cells, c_off, c_ray,
-                              c_kappa, ll, logw, sc)  # fmt: skip
-        _add_patch_prior_ws(patch, prior_log_odds, logw, W, sc)
-        cur = patch_config(patch, m)
-        if p_rand_patch > 0.0 and u_rand[i] < p_rand_patch:
-            prop = min(int(u_choice[i] * W), W - 1)
-            if thesis_random:
-                new = prop
-            else:
-                d = logw[prop] - logw[cur]
-                new = prop if (d >= 0.0 or (d > -np.inf and u_accept[i] < math.exp(d))) else cur
-        elif metropolised:
-            new = metropolised_pick(logw, W, cur, u_choice[i], u_accept[i], sc.ew)
-            if new < 0:
-                new = cur
+        W = _patch_log_lik_ws(ps, patch, stamp0 + i, logw, sc)
+        _add_patch_prior_ws(patch, prior, ps.m, logw, W, sc)
+        cur = patch_config(patch, ps.m)
+        if p_rand > 0.0 and u[1, i] < p_rand:
+            prop = min(int(u[0, i] * W), W - 1)
+            new = prop if (thesis or accept_random(logw[cur], logw[prop], u[2, i])) else cur
         else:
-            new = _categorical_ws(logw, W, u_choice[i], sc.ew)
+            new = choose(logw, W, cur, u[0, i], u[2, i], metro, sc.ew)
             if new < 0:
                 new = cur
         if new != cur:
-            set_patch(patch, new, m, f, offsets, cells, c_off, c_ray, c_kappa)
+            set_patch(ps, patch, new)
             changed += 1
-    return changed
-
-
-# ---------------------------------------------------------------------------------------------------
-# Correlated priors: the prior's local conditional comes from a LocalPrior bundle (ogm_ppl.priors.local)
-
-
-@nb.njit(cache=True)
-def patch_log_lik_list(patch, cands, n, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa,
-                       ll, out):  # fmt: skip
-    """``out[j] += log p(z | patch = cands[j], rest)`` (up to a constant in ``j``); skips ``-inf`` entries.
-    Bit ``b`` of a candidate is the ``b``-th live cell (as :func:`patch_log_lik`)."""
-    sc = ray_scratch(patch.shape[0], patch_slots(patch, c_off, offsets.shape[0] - 1), False, 0)
-    ns = collect_rays(patch, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa, sc)
-    lik_list(sc, ns, ll, cands, n, out)
-
-
-@nb.njit(cache=True, inline="always")
-def local_patch_candidates(anchor_r, anchor_c, h, w, lp, patch, n_live, pinned, m, cands, cand_lp):
-    """The configurations to weigh: the tile's sparse support when the patch is a tile of a table prior
-    (with the tile's own log factor of each in ``cand_lp``), else all ``2^n_live``. Returns ``(count,
-    tile)``: count ``-1`` when the dense set does not fit in ``cands``; tile ``-1`` when not a tile."""
-    t = tile_of_anchor(lp, anchor_r, anchor_c, h, w)
-    if t >= 0:
-        return tile_candidates(lp, t, patch, pinned, m, cands, cand_lp), t
-    if n_live > 62 or (np.int64(1) << n_live) > cands.shape[0]:
-        return -1, t
-    W = np.int64(1) << n_live
-    for j in range(W):
-        cands[j] = j
-    return W, t
-
-
-@nb.njit(cache=True)
-def _local_patch_log_weights_ws(patch, cands, n, lp, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off,
-                                c_ray, c_kappa, ll, logw, sc, ts):  # fmt: skip
-    patch_prior_weights_ws(lp, patch, m, cands, n, logw, ts)
-    ns = collect_rays(patch, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa, sc)
-    lik_list(sc, ns, ll, cands, n, logw)
-
-
-@nb.njit(cache=True)
-def local_patch_log_weights(patch, cands, n, lp, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray,
-                            c_kappa, ll, logw):  # fmt: skip
-    """``logw[j]``: unnormalised log conditional of ``cands[j]`` (prior first; the likelihood only for
-    candidates the prior allows)."""
-    sc = ray_scratch(patch.shape[0], patch_slots(patch, c_off, offsets.shape[0] - 1), False, 0)
-    ts = tile_scratch(lp, m.shape[0], patch.shape[0])
-    _local_patch_log_weights_ws(patch, cands, n, lp, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off,
-                                c_ray, c_kappa, ll, logw, sc, ts)  # fmt: skip
+    return changed, 0
 
 
 @nb.njit(cache=True, inline="always")
@@ -550,58 +502,56 @@ def _add_lik(sc, ns, ll, n_live, cands, n, dense, logw):
 
 
 @nb.njit(cache=True)
-def local_patch_sweep(anchors, dr, dc, h, w, rows, cols, pinned, lp, m, f, offsets, cells, c_off, c_ray, c_kappa,
-                      ll, u_choice, u_rand, u_accept, p_rand_patch, thesis_random, ray_stamp, stamp0, capacity,
-                      metropolised):  # fmt: skip
-    """Patch Gibbs (Algorithm 1; Algorithm 2 with ``p_rand_patch``) with a correlated prior.
-
-    Each update weighs only the configurations the prior allows given the rest (a tile's sparse support
-    for table priors whose tiles are the patches, else all ``2^L``), so it stays exact. For a tile, a
-    single allowed configuration is drawn without weighing it, and the weights of several are the
-    tile's own factor (read with the candidates) plus the factors of the neighbouring tiles whose
-    windows hold patch cells (:func:`~ogm_ppl.priors.local.tile_patch_factors`) plus the likelihood of
-    the rays through the patch. Algorithm 2's random configuration (uniform over all ``2^L``) is
-    accepted by Metropolis-Hastings unless ``thesis_random``. ``(h, w)``: the patch's rectangle (0 if
-    not a rectangle). ``metropolised``: Liu's metropolised Gibbs over the candidates instead of a
-    heat-bath draw. Returns ``(changed, skipped)``: patches changed, and patches whose configurations
-    did not fit ``capacity``.
-    """
-    K = m.shape[0]
-    L = dr.shape[0]
+def _candidate_sweep(ps, geo, anchors, prior, u, rule):
+    """Patch updates that weigh only the configurations the prior allows given the rest
+    (:func:`~ogm_ppl.priors.compiled.patch_candidates`: a tile's sparse support for table priors whose
+    tiles are the patches, else all ``2^L``), so they stay exact. A single allowed configuration is taken
+    without weighing it; the weights of several are the prior's
+    (:func:`~ogm_ppl.priors.compiled.candidate_weights`) plus the likelihood of the rays through the
+    patch. Algorithm 2's random configuration (uniform over all ``2^L``) is accepted by
+    Metropolis-Hastings unless ``thesis_random``. Returns ``(changed, skipped)``: patches changed, and
+    patches whose configurations did not fit ``capacity``."""
+    K = ps.m.shape[0]
+    L = geo.dr.shape[0]
+    capacity = rule.capacity
+    p_rand, thesis, metro = rule.p_rand_patch, rule.thesis_random, rule.metropolised
     cands = np.empty(capacity, np.int64)
     cand_lp = np.empty(capacity, np.float64)
     logw = np.empty(capacity, np.float64)
-    in_patch = np.zeros(K, np.bool_)
     patch = np.empty(L, np.int64)
     pair = np.empty(2, np.int64)
     pw = np.empty(2, np.float64)
-    sc = ray_scratch(L, max_slots(L, c_off, offsets.shape[0] - 1), L <= 20, capacity)
-    ts = tile_scratch(lp, K, L)
+    sc = ray_scratch(L, max_slots(L, ps.c_off, ps.offsets.shape[0] - 1), L <= 20, capacity)
+    ts = tile_scratch(K, scratch_capacity(prior, L))
+    ll = ps.ll
+    m = ps.m
+    stamp0 = _next_stamp(ps, anchors.shape[0])
     changed = 0
     skipped = 0
     for i in range(anchors.shape[0]):
-        n_live = build_patch(anchors[i, 0], anchors[i, 1], dr, dc, rows, cols, pinned, patch)
+        r0 = anchors[i, 0]
+        c0 = anchors[i, 1]
+        n_live = build_patch(geo, r0, c0, patch)
         if n_live == 0:
             continue
         cur = patch_config(patch, m)
         new = cur
         stamp = stamp0 + i
-        if p_rand_patch > 0.0 and u_rand[i] < p_rand_patch:
+        if p_rand > 0.0 and u[1, i] < p_rand:
             Wl = np.int64(1) << n_live
-            prop = min(np.int64(u_choice[i] * Wl), Wl - 1)
-            if thesis_random:
+            prop = min(np.int64(u[0, i] * Wl), Wl - 1)
+            if thesis:
                 new = prop
             else:
                 pair[0] = cur
                 pair[1] = prop
-                _local_patch_log_weights_ws(patch, pair, 2, lp, m, f, in_patch, ray_stamp, stamp, offsets, cells,
-                                            c_off, c_ray, c_kappa, ll, pw, sc, ts)  # fmt: skip
-                d = pw[1] - pw[0]
-                if pw[0] == -np.inf or d >= 0.0 or (d > -np.inf and u_accept[i] < math.exp(d)):
+                candidate_weights(prior, patch, m, pair, 2, -1, pw, pw, ts)
+                ns = collect_rays(ps, patch, stamp, sc)
+                lik_list(sc, ns, ll, pair, 2, pw)
+                if accept_random(pw[0], pw[1], u[2, i]):
                     new = prop  # (a state without mass may move anywhere)
         else:
-            n, t = local_patch_candidates(anchors[i, 0], anchors[i, 1], h, w, lp, patch, n_live, pinned, m, cands,
-                                          cand_lp)  # fmt: skip
+            n, t = patch_candidates(prior, r0, c0, geo.h, geo.w, patch, n_live, geo.pinned, m, cands, cand_lp)
             if n < 0:
                 skipped += 1
                 continue
@@ -610,24 +560,16 @@ def local_patch_sweep(anchors, dr, dc, h, w, rows, cols, pinned, lp, m, f, offse
             if n == 1:
                 j = 0  # the only configuration with mass (or, if it has none, the one to move to)
             else:
-                if t >= 0:  # the tile's own factor came with the candidates; add its neighbours'
-                    for j in range(n):
-                        logw[j] = cand_lp[j]
-                    nt = tile_patch_setup(lp, patch, m, t, ts)
-                    tile_patch_factors(lp, nt, ts, cands, n, logw)
-                else:
-                    patch_prior_weights_ws(lp, patch, m, cands, n, logw, ts)
-                ns = collect_rays(patch, m, f, in_patch, ray_stamp, stamp, offsets, cells, c_off, c_ray, c_kappa, sc)
+                candidate_weights(prior, patch, m, cands, n, t, cand_lp, logw, ts)
+                ns = collect_rays(ps, patch, stamp, sc)
                 _add_lik(sc, ns, ll, n_live, cands, n, t < 0, logw)
-                if metropolised:
-                    jc = -1
+                jc = -1
+                if metro:
                     for x in range(n):
                         if cands[x] == cur:
                             jc = x
                             break
-                    j = metropolised_pick(logw, n, jc, u_choice[i], u_accept[i], sc.ew)
-                else:
-                    j = _categorical_ws(logw, n, u_choice[i], sc.ew)
+                j = choose(logw, n, jc, u[0, i], u[2, i], metro, sc.ew)
                 if j < 0:  # every candidate has zero mass, so has the current state: move to leave it,
                     # led by the data: drawn by the likelihood alone (the prior is zero for each). Any
                     # rule is exact here: the states with mass are closed under the update, so how a chain
@@ -636,11 +578,56 @@ def local_patch_sweep(anchors, dr, dc, h, w, rows, cols, pinned, lp, m, f, offse
                     for x in range(n):
                         logw[x] = 0.0
                     _add_lik(sc, ns, ll, n_live, cands, n, t < 0, logw)
-                    j = _categorical_ws(logw, n, u_choice[i], sc.ew)
+                    j = categorical(logw, n, u[0, i], sc.ew)
                     if j < 0:  # the data rule out every candidate too
-                        j = min(np.int64(u_choice[i] * n), n - 1)
+                        j = min(np.int64(u[0, i] * n), n - 1)
             new = cands[j]
         if new != cur:
-            set_patch(patch, new, m, f, offsets, cells, c_off, c_ray, c_kappa)
+            set_patch(ps, patch, new)
             changed += 1
     return changed, skipped
+
+
+def _patch_sweep(ps, geo, anchors, prior, u, rule):
+    """Python stand-in of :func:`patch_sweep` for numba's overload (not called)."""
+    raise NotImplementedError
+
+
+@overload(_patch_sweep)
+def _patch_sweep_for(ps, geo, anchors, prior, u, rule):
+    if kind_of(prior).additive:
+        return lambda ps, geo, anchors, prior, u, rule: _additive_sweep(ps, geo, anchors, prior, u, rule)
+    return lambda ps, geo, anchors, prior, u, rule: _candidate_sweep(ps, geo, anchors, prior, u, rule)
+
+
+@nb.njit(cache=True)
+def patch_sweep(ps, geo, anchors, prior, u, rule):
+    """One pass of patch updates at ``anchors`` (``n x 2``; Algorithm 1, Algorithm 2 when
+    ``rule.p_rand_patch > 0``) with the uniforms ``u`` (``3 x n``: choice, random-patch, acceptance), the
+    loop chosen by the prior bundle's type when it compiles. Returns ``(changed, skipped)``."""
+    return _patch_sweep(ps, geo, anchors, prior, u, rule)
+
+
+def _patch_log_weights(ps, patch, prior, logw):
+    raise NotImplementedError
+
+
+@overload(_patch_log_weights)
+def _patch_log_weights_for(ps, patch, prior, logw):
+    if kind_of(prior).additive:
+        return lambda ps, patch, prior, logw: additive_patch_log_weights(ps, patch, prior, logw)
+
+    def impl(ps, patch, prior, logw):
+        W = logw.shape[0]
+        cands = np.arange(W)
+        candidate_log_weights(ps, patch, prior, cands, W, logw)
+        return W
+
+    return impl
+
+
+@nb.njit(cache=True)
+def patch_log_weights(ps, patch, prior, logw):
+    """``logw[w]``: unnormalised log conditional of every configuration of ``patch`` (``logw``: at least
+    ``2^L`` for additive priors, exactly ``2^L`` for the others). Returns ``W``."""
+    return _patch_log_weights(ps, patch, prior, logw)

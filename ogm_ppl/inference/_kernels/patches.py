@@ -16,13 +16,30 @@ Three ways to weigh a patch's ``W = 2^L`` configurations against the readings th
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
 import numba as nb
 import numpy as np
 
-from ogm_ppl.inference._kernels.gibbs import add_patch_prior, collect_patch_rays, patch_log_weights
+from ogm_ppl.inference._kernels.gibbs import (
+    add_patch_prior,
+    additive_patch_log_weights,
+    collect_patch_rays,
+)
 
 OFFLINE, ONLINE, INVERSE = 0, 1, 2
+
+
+class PatchSensor(NamedTuple):
+    """What the online and inverse weights read beside the rays: the cells' log prior occupancy and
+    vacancy, each ray's reading (kappa) and max-range flag, and the inverse model's log masses."""
+
+    log_on: np.ndarray  # K float64: log lambda_k
+    log_off: np.ndarray  # K float64: log(1 - lambda_k)
+    z: np.ndarray  # R int64
+    is_max: np.ndarray  # R bool
+    log_match: float
+    log_other: float
 
 
 @nb.njit(cache=True, inline="always")
@@ -37,13 +54,17 @@ def _logaddexp(a, b):
 
 
 @nb.njit(cache=True)
-def patch_log_weights_mode(mode, patch, prior_lo, log_on, log_off, m_ref, f_ref, in_patch, ray_stamp, stamp,
-                           offsets, cells, c_off, c_ray, c_kappa, ll, z, is_max, log_match, log_other, out):  # fmt: skip
-    """``out[w]``: unnormalised log posterior of configuration ``w`` (prior included). Returns ``W``."""
+def patch_log_weights_mode(mode, ps, patch, prior, sensor, out):
+    """``out[w]``: unnormalised log posterior of configuration ``w`` (prior included), with the reference
+    map and its first hits in the :class:`~ogm_ppl.inference._kernels.gibbs.PatchState` ``ps``. Returns ``W``."""
     if mode == OFFLINE:
-        return patch_log_weights(patch, prior_lo, m_ref, f_ref, in_patch, ray_stamp, stamp, offsets, cells, c_off,
-                                 c_ray, c_kappa, ll, out)  # fmt: skip
-    L, n_slots, slot_ray, slot_n, ent_kappa, ent_bit = collect_patch_rays(patch, c_off, c_ray, c_kappa, ray_stamp, stamp)
+        return additive_patch_log_weights(ps, patch, prior, out)
+    in_patch, offsets, cells, ll = ps.in_patch, ps.offsets, ps.cells, ps.ll
+    log_on, log_off, z, is_max = sensor.log_on, sensor.log_off, sensor.z, sensor.is_max
+    log_match, log_other = sensor.log_match, sensor.log_other
+    stamp = ps.stamp[0]
+    ps.stamp[0] = stamp + 1
+    L, n_slots, slot_ray, slot_n, ent_kappa, ent_bit = collect_patch_rays(ps, patch, stamp)
     W = 1 << L
     for w in range(W):
         out[w] = 0.0
@@ -108,28 +129,22 @@ def patch_log_weights_mode(mode, patch, prior_lo, log_on, log_off, m_ref, f_ref,
     for i in range(patch.shape[0]):
         if patch[i] >= 0:
             in_patch[patch[i]] = False
-    add_patch_prior(patch, prior_lo, out, W)
+    add_patch_prior(patch, prior, ps.m, out, W)
     return W
 
 
 @nb.njit(cache=True)
-def patch_map_all(mode, patches, centre, prior_lo, log_on, log_off, m_ref, f_ref, offsets, cells, c_off, c_ray,
-                  c_kappa, ll, z, is_max, log_match, log_other, keep_weights):  # fmt: skip
+def patch_map_all(mode, patches, centre, ps, prior, sensor, keep_weights):
     """Weigh every patch. Returns (marginals ``P x L`` of each patch cell, normalised log weights
     ``P x W`` if ``keep_weights`` else an empty array). ``centre >= 0`` fills only that column."""
     P, L = patches.shape
     W = 1 << L
-    K = m_ref.shape[0]
-    in_patch = np.zeros(K, np.bool_)
-    ray_stamp = np.full((offsets.shape[0] - 1, 2), -1, np.int64)
     logw = np.empty(W, np.float64)
     marg = np.zeros((P, L), np.float64)
     weights = np.empty((P if keep_weights else 0, W), np.float64)
     for p in range(P):
         patch = patches[p]
-        Wp = patch_log_weights_mode(mode, patch, prior_lo, log_on, log_off, m_ref, f_ref, in_patch, ray_stamp, p,
-                                    offsets, cells, c_off, c_ray, c_kappa, ll, z, is_max, log_match, log_other,
-                                    logw)  # fmt: skip
+        Wp = patch_log_weights_mode(mode, ps, patch, prior, sensor, logw)
         mx = -np.inf
         for w in range(Wp):
             if logw[w] > mx:

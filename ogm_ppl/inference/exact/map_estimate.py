@@ -17,9 +17,8 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
-from ogm_ppl.inference._kernels.cells import first_hits, icm_sweeps, local_icm_sweeps
+from ogm_ppl.inference._kernels import cell_sweep as cs
 from ogm_ppl.models.occupancy import OccupancyModel
-from ogm_ppl.priors.local import local_of
 
 __all__ = ["MapEstimate", "map_estimate"]
 
@@ -59,49 +58,40 @@ def map_estimate(
     """Hill-climb to a local maximum of ``log p(m, z)``.
 
     Args:
-        model: the model; priors with independent cells, and correlated priors with a local conditional
-            (``prior.local()``: MRF / stencil / table priors), run in compiled kernels; others through the
-            prior's ``log_prob_patch`` one cell at a time (small maps).
+        model: the model; priors with a compiled face (``prior.compiled()``: independent cells, MRF /
+            stencil / table priors) run in compiled kernels; others through the prior's ``log_prob_patch``
+            one cell at a time (small maps).
         init: ``"occupied"`` (thesis), ``"free"``, ``"random"`` (seeded) or a ``K`` map.
         max_sweeps: stop after this many sweeps even if cells still change.
     """
-    r = model.rays
-    idx = r.by_cell
     m = _initial(model, init, seed)
-    f = first_hits(m, r.offsets, r.cells)
-    ll = np.ascontiguousarray(model.loglik_table.numpy())
+    st = cs.cell_state_of(m, model.ray_index())
     order = model.latent.numpy().astype(np.int64)
-    prior_lo = model.prior.cell_log_odds()
-    if prior_lo is not None:
-        sweeps = icm_sweeps(order, prior_lo.numpy().astype(np.float64), m, f, r.offsets, r.cells,
-                            idx.offsets, idx.ray, idx.kappa, ll, int(max_sweeps))  # fmt: skip
-    elif local_of(model.prior) is not None:
-        sweeps = local_icm_sweeps(order, local_of(model.prior), m, f, r.offsets, r.cells, idx.offsets, idx.ray,
-                                  idx.kappa, ll, int(max_sweeps))  # fmt: skip
+    prior = model.prior.compiled()
+    if prior is not None:
+        sweeps = cs.icm_sweeps(st, order, prior, int(max_sweeps))
     else:
-        sweeps = _generic_icm(model, m, f, order, ll, idx, int(max_sweeps))
+        sweeps = _generic_icm(model, st, order, int(max_sweeps))
+    m = st.m
     mt = torch.from_numpy(m.astype(np.float64))
     lj = float(model.log_joint(mt))
     return MapEstimate(mt, lj, int(sweeps), bool(sweeps < max_sweeps))
 
 
-def _generic_icm(model, m, f, order, ll, idx, max_sweeps) -> int:
-    """ICM for priors without independent cells: the prior's patch conditional, cell by cell."""
-    from ogm_ppl.inference._kernels.cells import cell_log_lik_ratio, set_cell
-
-    r = model.rays
+def _generic_icm(model, st, order, max_sweeps) -> int:
+    """ICM for priors without a compiled face: the prior's patch conditional, cell by cell."""
+    m = st.m
     configs = torch.tensor([[0.0], [1.0]], dtype=torch.float64)
     for s in range(max_sweeps):
         changed = 0
         for k in order:
             cur = torch.from_numpy(m.astype(np.float64))
             lp = model.prior.log_prob_patch(cur, torch.tensor([int(k)]), configs)
-            lik = cell_log_lik_ratio(int(k), m, f, r.offsets, r.cells, idx.offsets, idx.ray, idx.kappa, ll)
-            lo = float(lp[1] - lp[0]) + lik if torch.isfinite(lp).all() else (
-                np.inf if lp[1] > lp[0] else -np.inf)  # fmt: skip
+            lik = cs.log_lik_ratio(st, int(k))
+            lo = float(lp[1] - lp[0]) + lik if torch.isfinite(lp).all() else (np.inf if lp[1] > lp[0] else -np.inf)
             v = 1 if lo > 0 else 0 if lo < 0 else int(m[k])
             if v != m[k]:
-                set_cell(int(k), v, m, f, r.offsets, r.cells, idx.offsets, idx.ray, idx.kappa)
+                cs.set_cell(st, int(k), v)
                 changed += 1
         if changed == 0:
             return s + 1

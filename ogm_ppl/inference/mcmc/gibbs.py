@@ -27,11 +27,11 @@ chain samples the *conditional* ``p(m_R' | m_rest, z)``, not the full posterior,
 (:meth:`~ogm_ppl.inference.mcmc.kernel.MapKernel.sampled_cells`) is the set of cells the kernel can change: the latent region cells for
 single-cell kernels, every latent cell of the visited patches for :class:`PatchGibbs`.
 
-Priors with independent cells use the compiled path; correlated priors that describe their local
-conditional (``prior.local()``, a :class:`~ogm_ppl.priors.LocalPrior`: a stencil of unary + pairwise
-weights such as :class:`~ogm_ppl.priors.MRFPrior` / :class:`~ogm_ppl.priors.StencilPrior`, or tiles of
-a table such as :class:`~ogm_ppl.priors.PatchTablePrior` / :class:`~ogm_ppl.priors.BorderPatchPrior`) use
-compiled sweeps that read it, and patch updates of table priors weigh only the configurations the table
+Priors with a compiled face (``prior.compiled()``, a bundle of :mod:`ogm_ppl.priors.compiled`: independent
+cells; a stencil of unary + pairwise weights such as :class:`~ogm_ppl.priors.MRFPrior` /
+:class:`~ogm_ppl.priors.StencilPrior`; tiles of a table such as :class:`~ogm_ppl.priors.PatchTablePrior` /
+:class:`~ogm_ppl.priors.BorderPatchPrior`) use compiled sweeps specialised for the bundle's type, and patch
+updates of table priors weigh only the configurations the table
 allows given the border (so 5 x 5 patches are possible). Any other :class:`~ogm_ppl.priors.MapPrior` goes
 through its ``log_prob_patch`` one update at a time (correct and overflow-free, but meant for small maps).
 
@@ -47,22 +47,21 @@ import numpy as np
 import torch
 
 from ogm_ppl.inference._kernels import cell_sweep as cs
+from ogm_ppl.inference._kernels.choice import accept_random, choose
 from ogm_ppl.inference._kernels.gibbs import (
-    build_patch,
-    gibbs_patch_sweep,
-    local_patch_log_weights,
-    local_patch_sweep,
-    metropolised_pick,
+    PatchGeometry,
+    PatchRule,
+    build_patch_at,
     patch_config,
     patch_log_lik,
     patch_log_weights,
+    patch_state,
+    patch_sweep,
     set_patch,
 )
 from ogm_ppl.inference.mcmc.kernel import MapKernel, initial_map
 from ogm_ppl.inference.tiling import patch_cells, patch_shape, tiling_starts
 from ogm_ppl.models.occupancy import OccupancyModel
-from ogm_ppl.priors.local import TILES, local_of
-from ogm_ppl.priors.local import cell_log_odds as prior_cell_log_odds
 
 __all__ = ["CellGibbs", "PatchGibbs", "MetropolisCell", "initial_map"]
 
@@ -117,8 +116,7 @@ class CellGibbs(MapKernel):
 
     def _set_state(self, m) -> None:
         super()._set_state(m)
-        self._st = cs.cell_state(self._m, self._offsets, self._cells, self._c_off, self._c_ray, self._c_kappa,
-                                 self._ll, self._bits)  # fmt: skip
+        self._st = cs.cell_state_of(self._m, self._index, self._bits)
         self._f = self._st.rays["f"]  # a view: the compiled sweeps keep it in step with the map
 
     def _sweep_order(self) -> np.ndarray | None:
@@ -135,23 +133,20 @@ class CellGibbs(MapKernel):
         else:
             u = cs.draws(order, cs.SYSTEMATIC, seed)[1]
         self._updates += len(order)
-        if self._prior_lo is not None:
-            return cs.sweep_independent(self._st, order, self._prior_lo, u, self._rule)
-        if self._local is not None:
-            return cs.sweep_local(self._st, order, self._local, u, self._rule)
+        if self._compiled is not None:
+            return cs.sweep(self._st, order, self._compiled, u, self._rule)
         return self._generic_sweep(order, u)
 
     def run_marginals(self, num_sweeps: int, seed: int = 0) -> torch.Tensor:
         """Marginals from ``num_sweeps`` systematic sweeps run in one compiled call (numba's generator,
         seeded by ``seed``), continuing from the current state: for long runs on small maps, where one
-        Python call per sweep would dominate. Independent priors only."""
+        Python call per sweep would dominate. Priors with a compiled face only."""
         self._prepare()
-        if self._prior_lo is None:
-            raise ValueError("run_marginals needs a prior with independent cells")
+        if self._compiled is None:
+            raise ValueError("run_marginals needs a prior with a compiled face (prior.compiled())")
         if not hasattr(self, "_m"):
             self.setup()
-        acc = cs.marginals_independent(self._st, self._visit, self._prior_lo, int(num_sweeps), int(seed),
-                                       self._rule)  # fmt: skip
+        acc = cs.marginals(self._st, self._visit, self._compiled, int(num_sweeps), int(seed), self._rule)
         self.sweeps += int(num_sweeps)
         self._last = None
         return torch.from_numpy(acc / max(int(num_sweeps), 1))
@@ -160,10 +155,8 @@ class CellGibbs(MapKernel):
         """``l(m_k | z, m_{-k})`` at the current state (Eq. 4.2)."""
         self._prepare()
         lik = cs.log_lik_ratio(self._st, int(k))
-        if self._prior_lo is not None:
-            return float(self._prior_lo[k] + lik)
-        if self._local is not None:
-            return float(prior_cell_log_odds(self._local, int(k), self._m) + lik)
+        if self._compiled is not None:
+            return float(cs.prior_log_odds(self._compiled, int(k), self._m) + lik)
         cur = torch.from_numpy(self._m.astype(np.float64))
         lp = self.model.prior.log_prob_patch(cur, torch.tensor([int(k)]), torch.tensor([[0.0], [1.0]]))
         if not torch.isfinite(lp).any():
@@ -259,9 +252,10 @@ class PatchGibbs(MapKernel):
         super().__init__(model, scan, init, delta, region)
         self.update = update
         self._metropolised = update == "metropolised"
-        local = local_of(model.prior) if model.prior.cell_log_odds() is None else None
-        tiled = local is not None and local.kind == TILES and scan != "random"
-        self.dr, self.dc = patch_shape(patch, model.grid.ndim, max_cells=62 if tiled else 20)
+        compiled = model.prior.compiled()
+        # patches of up to 62 cells where the prior's kind weighs only its sparse support (tiles as patches)
+        sparse = compiled is not None and scan != "random" and compiled.sparse_patches()
+        self.dr, self.dc = patch_shape(patch, model.grid.ndim, max_cells=62 if sparse else 20)
         if not 0.0 <= p_rand_patch < 1.0:
             raise ValueError(f"p_rand_patch must lie in [0, 1), got {p_rand_patch}")
         if random_patch not in ("mh", "thesis"):
@@ -274,7 +268,7 @@ class PatchGibbs(MapKernel):
         if self.scan != "random" and len(self._anchors) == 0:
             raise ValueError("no patch holds a latent cell")
         self._hw = self._rectangle()
-        if self.L > 20 and not self._all_tiles(local):
+        if self.L > 20 and not (compiled is not None and compiled.tiles_patches(self._hw, self._anchors)):
             raise ValueError(f"patches of {self.L} cells (2^{self.L} configurations) need a table prior whose "
                              "tiles are the patches (same shape, aligned: offset = prior.origin)")  # fmt: skip
 
@@ -284,19 +278,6 @@ class PatchGibbs(MapKernel):
             if np.array_equal(self.dr * w + self.dc, np.arange(h * w)):  # row-major, as tiles are
                 return h, w
         return 0, 0
-
-    def _all_tiles(self, local) -> bool:
-        if local is None or local.kind != TILES or (local.t_h, local.t_w) != self._hw:
-            return False
-        a = self._anchors
-        return bool(((a[:, 0] - local.t_r0) % local.t_h == 0).all() and ((a[:, 1] - local.t_c0) % local.t_w == 0).all())
-
-    def _capacity(self) -> int:
-        lp = self._local
-        assert lp is not None  # only the local path asks
-        dense = 1 << self.L if self.L <= 20 else 0
-        seg = int(np.diff(lp.seg_off).max()) if lp.kind == TILES and len(lp.seg_off) > 1 else 0
-        return max(dense, seg, 2)
 
     @property
     def L(self) -> int:
@@ -351,60 +332,37 @@ class PatchGibbs(MapKernel):
         else:
             anchors = self._order(self._anchors)
         n = len(anchors)
-        u_choice, u_rand, u_accept = self._uniforms(n), self._uniforms(n), self._uniforms(n)
+        u = np.stack([self._uniforms(n), self._uniforms(n), self._uniforms(n)])  # choice, random patch, accept
         self._updates += n
-        rows, cols, pinned = g.rows, g.cols, self._pinned
-        if self._prior_lo is None and self._local is not None:
-            stamp0 = self._stamp
-            self._stamp += n
-            h, w = self._hw
-            changed, skipped = local_patch_sweep(anchors, self.dr, self.dc, h, w, rows, cols, pinned, self._local,
-                                                 self._m, self._f, self._offsets, self._cells, self._c_off,
-                                                 self._c_ray, self._c_kappa, self._ll, u_choice, u_rand, u_accept,
-                                                 self.p_rand_patch, self.thesis_random, self._ray_stamp(), stamp0,
-                                                 self._capacity(), self._metropolised)  # fmt: skip
-            if skipped:
-                raise RuntimeError(f"{skipped} patch updates had more configurations than fit")
-            return changed
-        if self._prior_lo is not None:
-            stamp0 = self._stamp
-            self._stamp += n
-            return gibbs_patch_sweep(anchors, self.dr, self.dc, rows, cols, pinned, self._prior_lo, self._m,
-                                     self._f, self._offsets, self._cells, self._c_off, self._c_ray,
-                                     self._c_kappa, self._ll, u_choice, u_rand, u_accept, self.p_rand_patch,
-                                     self.thesis_random, self._ray_stamp(), stamp0, self._metropolised)  # fmt: skip
-        return self._python_sweep(anchors, u_choice, u_rand, u_accept)
+        if self._compiled is None:
+            return self._python_sweep(anchors, u[0], u[1], u[2])
+        changed, skipped = patch_sweep(self._ps, self._geometry(), anchors, self._compiled, u, self._patch_rule())
+        if skipped:
+            raise RuntimeError(f"{skipped} patch updates had more configurations than fit")
+        return changed
 
-    def _ray_stamp(self) -> np.ndarray:
-        if not hasattr(self, "_ray_stamp_arr"):
-            self._ray_stamp_arr = np.full((self.model.rays.num_rays, 2), -1, np.int64)
-        return self._ray_stamp_arr
+    def _set_state(self, m) -> None:
+        super()._set_state(m)
+        self._ps = patch_state(self._m, self._f, self._index)  # views: the sweeps keep them in step
+
+    def _geometry(self) -> PatchGeometry:
+        g = self.model.grid
+        h, w = self._hw
+        return PatchGeometry(self.dr, self.dc, h, w, g.rows, g.cols, self._pinned)
+
+    def _patch_rule(self) -> PatchRule:
+        capacity = self._compiled.patch_capacity(self.L) if self._compiled is not None else 2
+        return PatchRule(self.p_rand_patch, self.thesis_random, self._metropolised, capacity)
 
     def patch_log_weights(self, patch: np.ndarray) -> np.ndarray:
         """Unnormalised log conditional of each configuration of ``patch`` (grid cells, ``-1`` = none)
         at the current state: bit ``j`` of configuration ``w`` is the ``j``-th live cell."""
         self._prepare()
         patch = np.ascontiguousarray(patch, dtype=np.int64)
-        in_patch = np.zeros(self.model.num_cells, np.bool_)
-        stamp = self._stamp
-        self._stamp += 1
-        if self._local is None or self._prior_lo is not None:
-            logw = np.empty(1 << int((patch >= 0).sum()), np.float64)
-        if self._prior_lo is not None:
-            W = patch_log_weights(patch, self._prior_lo, self._m, self._f, in_patch, self._ray_stamp(),
-                                  stamp, self._offsets, self._cells, self._c_off, self._c_ray,
-                                  self._c_kappa, self._ll, logw)  # fmt: skip
-            return logw[:W].copy()
-        if self._local is not None:
-            W = 1 << int((patch >= 0).sum())
-            cands = np.arange(W, dtype=np.int64)
-            out = np.empty(W, np.float64)
-            local_patch_log_weights(patch, cands, W, self._local, self._m, self._f, in_patch, self._ray_stamp(), stamp,
-                                    self._offsets, self._cells, self._c_off, self._c_ray, self._c_kappa, self._ll,
-                                    out)  # fmt: skip
-            return out
-        W = patch_log_lik(patch, self._m, self._f, in_patch, self._ray_stamp(), stamp, self._offsets,
-                          self._cells, self._c_off, self._c_ray, self._c_kappa, self._ll, logw)  # fmt: skip
+        logw = np.empty(1 << int((patch >= 0).sum()), np.float64)
+        if self._compiled is not None:
+            return logw[: patch_log_weights(self._ps, patch, self._compiled, logw)].copy()
+        W = patch_log_lik(self._ps, patch, logw)
         live = patch[patch >= 0]
         configs = ((torch.arange(W)[:, None] >> torch.arange(len(live))) & 1).to(torch.float64)
         cur = torch.from_numpy(self._m.astype(np.float64))
@@ -412,33 +370,25 @@ class PatchGibbs(MapKernel):
         return logw[:W] + prior
 
     def _python_sweep(self, anchors, u_choice, u_rand, u_accept) -> int:
-        g = self.model.grid
+        """The generic path: each patch weighed through the prior's ``log_prob_patch``, then the same
+        choice step as the compiled sweeps."""
+        geo = self._geometry()
         p = np.empty(self.L, np.int64)
         changed = 0
         for i, a in enumerate(anchors):
-            if build_patch(int(a[0]), int(a[1]), self.dr, self.dc, g.rows, g.cols, self._pinned, p) == 0:
+            if build_patch_at(geo, int(a[0]), int(a[1]), p) == 0:
                 continue
-            logw = self.patch_log_weights(p)
+            logw = np.ascontiguousarray(self.patch_log_weights(p))
             W = len(logw)
             cur = patch_config(p, self._m)
             if self.p_rand_patch > 0 and u_rand[i] < self.p_rand_patch:
                 prop = min(int(u_choice[i] * W), W - 1)
-                d = logw[prop] - logw[cur]
-                new = prop if (self.thesis_random or d >= 0 or (d > -np.inf and u_accept[i] < math.exp(d))) else cur
-            elif self._metropolised:
-                new = metropolised_pick(np.ascontiguousarray(logw), W, cur, u_choice[i], u_accept[i], np.empty(W))
+                new = prop if (self.thesis_random or accept_random(logw[cur], logw[prop], u_accept[i])) else cur
+            else:
+                new = choose(logw, W, cur, u_choice[i], u_accept[i], self._metropolised, np.empty(W))
                 if new < 0:
                     continue
-            else:
-                mx = logw.max()
-                if mx == -np.inf:
-                    continue
-                w = np.exp(logw - mx)
-                c = np.cumsum(w)
-                new = int(np.searchsorted(c, u_choice[i] * c[-1], side="right"))
-                new = min(new, W - 1)
             if new != cur:
-                set_patch(p, new, self._m, self._f, self._offsets, self._cells, self._c_off, self._c_ray,
-                          self._c_kappa)  # fmt: skip
+                set_patch(self._ps, p, new)
                 changed += 1
         return changed

@@ -39,7 +39,6 @@ from pyro.infer.mcmc.mcmc_kernel import MCMCKernel
 from ogm_ppl.inference._kernels.cells import first_hits
 from ogm_ppl.inference.mcmc.fingerprint import digest
 from ogm_ppl.models.occupancy import OccupancyModel
-from ogm_ppl.priors.local import local_of
 
 __all__ = ["KernelStateError", "MapKernel", "initial_map", "region_cells"]
 
@@ -154,14 +153,15 @@ class MapKernel(MCMCKernel):
         if self._ready:
             return
         model = self.model
-        r = model.rays
-        idx = r.by_cell
-        self._offsets, self._cells = r.offsets, r.cells
-        self._c_off, self._c_ray, self._c_kappa = idx.offsets, idx.ray, idx.kappa
-        self._ll = np.ascontiguousarray(model.loglik_table.numpy())
+        # the ray index and the prior's compiled face (None: the generic path), read by the compiled sweeps
+        self._index = index = model.ray_index()
+        self._compiled = model.prior.compiled()
+        # the same arrays under their own names (read by tests and benchmarks)
+        self._offsets, self._cells, self._ll = index.offsets, index.cells, index.ll
+        self._c_off, self._c_ray, self._c_kappa = index.c_off, index.c_ray, index.c_kappa
         lo = model.prior.cell_log_odds()
         self._prior_lo = None if lo is None else np.ascontiguousarray(lo.numpy(), dtype=np.float64)
-        self._local = None if lo is not None else local_of(model.prior)
+        self._local = self._compiled if lo is None else None
         self._latent = model.latent.numpy().astype(np.int64)
         self._pinned = model.known_free.numpy().astype(np.uint8)
         self._ready = True

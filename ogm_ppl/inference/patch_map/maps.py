@@ -27,7 +27,8 @@ import numpy as np
 import torch
 
 from ogm_ppl.inference._kernels.cells import first_hits
-from ogm_ppl.inference._kernels.patches import INVERSE, OFFLINE, ONLINE, patch_map_all
+from ogm_ppl.inference._kernels.gibbs import patch_state
+from ogm_ppl.inference._kernels.patches import INVERSE, OFFLINE, ONLINE, PatchSensor, patch_map_all
 from ogm_ppl.inference.tiling import centred_patches, tile_patches
 from ogm_ppl.models.occupancy import OccupancyModel
 from ogm_ppl.posterior import MapPosterior
@@ -114,28 +115,21 @@ class PatchMap(MapPosterior):
         return float(p)
 
 
-def _arrays(model: OccupancyModel):
+def _run(model, mode, patches, centre, m_ref, keep, log_match=0.0, log_other=0.0):
+    prior = model.prior.compiled()
     lo = model.prior.cell_log_odds()
-    if lo is None:
+    if lo is None or prior is None:
         raise ValueError("patch maps need a prior with independent cells (a uniform patch prior is lambda = 0.5)")
-    lam = torch.sigmoid(lo)
-    lam = torch.where(model.known_free, 0.0, lam).numpy()
+    if patches.shape[1] > 16:
+        raise ValueError(f"patches of {patches.shape[1]} cells: at most 16 (2^16 configurations)")
+    lam = torch.where(model.known_free, 0.0, torch.sigmoid(lo)).numpy()
     with np.errstate(divide="ignore"):
         log_on, log_off = np.log(lam), np.log1p(-lam)
     r = model.rays
-    idx = r.by_cell
-    return (np.ascontiguousarray(lo.numpy(), dtype=np.float64), log_on, log_off, r, idx,
-            np.ascontiguousarray(model.loglik_table.numpy()))  # fmt: skip
-
-
-def _run(model, mode, patches, centre, m_ref, keep, log_match=0.0, log_other=0.0):
-    lo, log_on, log_off, r, idx, ll = _arrays(model)
-    if patches.shape[1] > 16:
-        raise ValueError(f"patches of {patches.shape[1]} cells: at most 16 (2^16 configurations)")
-    f_ref = first_hits(m_ref, r.offsets, r.cells)
-    marg, weights = patch_map_all(mode, np.ascontiguousarray(patches), centre, lo, log_on, log_off, m_ref, f_ref,
-                                  r.offsets, r.cells, idx.offsets, idx.ray, idx.kappa, ll, r.z, r.is_max,
-                                  log_match, log_other, keep)  # fmt: skip
+    index = model.ray_index()
+    ps = patch_state(m_ref, first_hits(m_ref, index.offsets, index.cells), index)
+    sensor = PatchSensor(log_on, log_off, r.z, r.is_max, float(log_match), float(log_other))
+    marg, weights = patch_map_all(mode, np.ascontiguousarray(patches), centre, ps, prior, sensor, keep)
     out = torch.zeros(model.num_cells, dtype=torch.float64)
     cols = range(patches.shape[1]) if centre < 0 else [centre]
     for j in cols:

@@ -17,7 +17,6 @@ from ogm_ppl.datasets import simulate_scans
 from ogm_ppl.inference._kernels import cell_sweep as cs
 from ogm_ppl.inference._kernels.cells import first_hits
 from ogm_ppl.priors import IndependentPrior, MRFPrior
-from ogm_ppl.priors.local import cell_log_odds, local_of
 
 N = 24
 def scene(prior):
@@ -83,7 +82,7 @@ def plain_sweep(arr, m, f, order, uniforms, update, scale, prior_lo=None, lp=Non
     _, _, c_off, c_ray, c_kappa, _ = arr
     flips = 0
     for i, k in enumerate(order):
-        lo = (prior_lo[k] if lp is None else cell_log_odds(lp, k, m)) + plain_ratio(arr, m, f, k, scale)
+        lo = (prior_lo[k] if lp is None else cs.prior_log_odds(lp, k, m)) + plain_ratio(arr, m, f, k, scale)
         v = plain_new_value(lo, uniforms[i], int(m[k]), update)
         if v != m[k]:
             m[k] = v
@@ -135,7 +134,8 @@ def test_compiled_sweeps_are_the_plain_sweep_bit_for_bit(update, prior, start):
     latent = model.latent.numpy().astype(np.int64)
     lo = model.prior.cell_log_odds()
     prior_lo = None if lo is None else np.ascontiguousarray(lo.numpy(), dtype=np.float64)
-    lp = None if lo is not None else local_of(model.prior)
+    lp = None if lo is not None else model.prior.compiled()
+    bundle = model.prior.compiled()
     m0 = (rng.random(N * N) < (0.08 if start == "ogm-like" else 0.5)).astype(np.uint8)
     m0[model.known_free.numpy()] = 0
     f0 = first_hits(m0, offsets, cells)
@@ -150,10 +150,7 @@ def test_compiled_sweeps_are_the_plain_sweep_bit_for_bit(update, prior, start):
             if sweep == 3:
                 u[::7] = 0.0  # the smallest uniforms: the exp-free shortcuts must not decide these
             a = plain_sweep(arr, m_plain, f_plain, order, u, update, st.scale, prior_lo, lp)
-            if lp is None:
-                b = cs.sweep_independent(st, order, prior_lo, u, update)
-            else:
-                b = cs.sweep_local(st, order, lp, u, update)
+            b = cs.sweep(st, order, bundle, u, update)
             assert a == b, (name, sweep)
             assert np.array_equal(st.m, m_plain) and np.array_equal(st.rays["f"], f_plain), (name, sweep)
             assert np.array_equal(st.rays["s"], second_hits(arr, m_plain, f_plain)), (name, sweep)

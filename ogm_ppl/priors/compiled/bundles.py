@@ -1,0 +1,101 @@
+"""The bundles of arrays a prior hands to the compiled kernels (:meth:`MapPrior.compiled`), one per kind.
+
+Each bundle is a ``typing.NamedTuple`` built by keyword (numba takes it as one argument and compiles one
+specialisation of a kernel per bundle type). Its kind's compiled conditionals are registered beside it
+(:func:`~ogm_ppl.priors.compiled.registry.register`); the kernels never look at which kind they hold.
+The Python methods (``sparse_patches``, ``patch_capacity``, ``tiles_patches``) tell a kernel's set-up how many candidate
+configurations a patch update may weigh and whether patches larger than 20 cells are possible.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numpy as np
+
+__all__ = ["CompiledPrior", "IndependentCells", "Stencil", "Tiles"]
+
+
+class IndependentCells(NamedTuple):
+    """Cells independent a priori: ``log p(m) = sum_k m_k l_k + const``."""
+
+    log_odds: np.ndarray  # K float64: l_k = log lambda_k - log(1 - lambda_k)
+
+    def sparse_patches(self) -> bool:
+        """Whether patch updates may weigh a sparse support (so patches may exceed 20 cells)."""
+        return False
+
+    def patch_capacity(self, L: int) -> int:
+        return max(1 << L if L <= 20 else 0, 2)
+
+    def tiles_patches(self, hw, anchors) -> bool:
+        return False
+
+
+class Stencil(NamedTuple):
+    r"""A pairwise binary field on a stencil of offsets ``d`` (Section 5.2.1):
+    ``l(m_k | m_-k) = h_k + sum_{d: k+d in G} (a_d + J_d m_{k+d})`` with ``J_d = J_{-d}``."""
+
+    rows: int
+    cols: int
+    unary: np.ndarray  # K float64: h_k
+    dr: np.ndarray  # D int64: the offsets
+    dc: np.ndarray  # D int64
+    bias: np.ndarray  # D float64: a_d
+    coupling: np.ndarray  # D float64: J_d
+
+    def sparse_patches(self) -> bool:
+        return False
+
+    def patch_capacity(self, L: int) -> int:
+        return max(1 << L if L <= 20 else 0, 2)
+
+    def tiles_patches(self, hw, anchors) -> bool:
+        return False
+
+
+class Tiles(NamedTuple):
+    r"""``log p~(m) = sum_t log phi(key_t(m))`` over the tiles ``t`` of a fixed tiling by ``h x w`` rectangles
+    (Sections 5.2.2, 5.2.3; see :mod:`ogm_ppl.priors.compiled.tiles` for the keys, segments and fallback)."""
+
+    rows: int
+    cols: int
+    w_dr: np.ndarray  # Lw int64: window offsets from the tile anchor (tile cells first)
+    w_dc: np.ndarray
+    n_inner: int  # cells of a tile (h * w)
+    t_h: int
+    t_w: int
+    t_r0: int  # anchor (top-left cell) of tile (0, 0); <= 0
+    t_c0: int
+    t_rows: int  # tiles per column / row
+    t_cols: int
+    pad_r: int
+    pad_c: int
+    t_seg: np.ndarray  # T int64: segment of each tile
+    t_fill: np.ndarray  # T int64: key bits of window cells off the grid
+    seg_off: np.ndarray  # S + 1 int64
+    keys: np.ndarray  # sorted within each segment
+    logp: np.ndarray
+    fallback: int  # segment used for unseen borders (-1: none, phi = 0)
+    # the same factors as a dense table, for small windows: dense[s << dense_bits | key] = log phi(key) in
+    # segment s (fallback resolved), so a lookup is one load instead of a binary search
+    dense: np.ndarray  # S * 2^Lw float64 (empty: none)
+    dense_bits: int  # Lw when ``dense`` is present, else -1
+
+    def sparse_patches(self) -> bool:
+        return True
+
+    def patch_capacity(self, L: int) -> int:
+        seg = int(np.diff(self.seg_off).max()) if len(self.seg_off) > 1 else 0
+        return max(1 << L if L <= 20 else 0, seg, 2)
+
+    def tiles_patches(self, hw, anchors) -> bool:
+        """Whether every patch (``h x w`` rectangles at ``anchors``, ``n x 2``) is a tile of this tiling."""
+        if (self.t_h, self.t_w) != tuple(hw):
+            return False
+        a = np.asarray(anchors).reshape(-1, 2)
+        return bool(((a[:, 0] - self.t_r0) % self.t_h == 0).all() and ((a[:, 1] - self.t_c0) % self.t_w == 0).all())
+
+
+#: any bundle a prior's ``compiled()`` may return (a new kind adds its class here and registers itself)
+CompiledPrior = IndependentCells | Stencil | Tiles

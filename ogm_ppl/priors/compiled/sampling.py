@@ -1,0 +1,40 @@
+"""Compiled batch passes over maps that any bundle kind runs through its registered conditionals: Gibbs
+sweeps on the prior alone (prior sampling) and the patch weights of a batch of maps (``log_prob_patch``)."""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from ogm_ppl.priors.compiled.registry import cell_log_odds, patch_prior_weights, scratch_capacity
+from ogm_ppl.priors.compiled.scratch import tile_scratch
+
+__all__ = ["patch_prior_batch", "prior_gibbs_sweeps"]
+
+
+@nb.njit(cache=True)
+def prior_gibbs_sweeps(prior, maps, num_sweeps, seed):
+    """Single-cell Gibbs sweeps on the prior alone, for each row of ``maps`` (``B x K`` uint8), in place."""
+    np.random.seed(seed)
+    for b in range(maps.shape[0]):
+        m = maps[b]
+        for _ in range(num_sweeps):
+            for k in range(m.shape[0]):
+                lo = cell_log_odds(prior, k, m)
+                if lo != lo:
+                    continue
+                u = np.random.random()
+                if lo >= 0:
+                    m[k] = 1 if u * (1.0 + np.exp(-lo)) < 1.0 else 0
+                else:
+                    e = np.exp(lo)
+                    m[k] = 1 if u * (1.0 + e) < e else 0
+
+
+@nb.njit(cache=True)
+def patch_prior_batch(prior, maps, patch, cands, out):
+    """``out[b, j] = log p(patch = cands[j], rest of maps[b])`` up to a constant in ``j`` (``B x K`` uint8
+    maps; bit ``i`` of a candidate = the ``i``-th live cell of ``patch``)."""
+    ts = tile_scratch(maps.shape[1], scratch_capacity(prior, patch.shape[0]))
+    for b in range(maps.shape[0]):
+        patch_prior_weights(prior, patch, maps[b], cands, cands.shape[0], out[b], ts)

@@ -1,0 +1,505 @@
+r"""Compiled conditionals of the tiles kind (:class:`~ogm_ppl.priors.compiled.bundles.Tiles`).
+
+``log p~(m) = sum_t log phi(key_t(m))`` over the tiles ``t`` of a fixed tiling of the plane by ``h x w``
+rectangles; ``key_t`` packs the tile's *window* (the tile and a ring of ``pad`` border cells) into an
+integer: bit ``i`` = window cell ``i``, the tile's own cells first (row-major), then the border ring
+(row-major in the window). Window cells off the grid read as the tile's ``fill`` bits. ``phi`` is a sparse
+table (sorted keys and their log values) per *segment*; a tile names its segment (e.g. the marginal table
+of tiles cut by the grid edge). Keys missing from a segment fall back to segment ``fallback`` (keyed by the
+tile's own bits only) when its border is unseen, else have ``phi = 0``. The patch tables of Section 5.2.2
+(``pad = 0``) and the border-conditioned tables of Section 5.2.3 (``pad = 1``) are both of this kind.
+
+For speed, tables over windows of at most 16 cells are also stored dense (one load per factor), and a
+patch update reads the keys of the tiles it touches once (:func:`tile_patch_setup`), after which a
+candidate only ORs in its own bits and each touched tile's factor is memoised per the few bits the patch
+sets in it (:func:`tile_patch_factors`). Patch updates whose patch is a tile weigh only the
+configurations the tile's table allows given its border (:func:`tile_candidates`, Section 5.2.2 / 5.2.3).
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from ogm_ppl.priors.compiled.bundles import Tiles
+from ogm_ppl.priors.compiled.registry import register
+from ogm_ppl.priors.compiled.scratch import MEMO_BITS
+
+__all__ = ["DENSE_MAX_BITS", "DENSE_MAX_ENTRIES", "tile_candidates", "tile_cell_log_odds", "tile_of_anchor",
+           "tile_patch_factors", "tile_patch_setup", "tiles", "tiles_log_prob_batch", "touch_capacity"]
+
+_I = np.zeros(0, np.int64)
+_F = np.zeros(0, np.float64)
+#: windows of at most this many cells get a dense factor table (at most DENSE_MAX_ENTRIES entries in all)
+DENSE_MAX_BITS, DENSE_MAX_ENTRIES = 16, 1 << 20
+
+
+# Speed: the hot helpers are inlined (``inline="always"``; a call that passes the bundle costs about
+# 130 ns in reference counts of its arrays, more than a lookup itself), and each binds the bundle's arrays
+# to locals once (numba counts a reference at every ``lp.array`` read: in a loop that costs 5x).
+@nb.njit(cache=True, inline="always")
+def tile_key(lp, t, m):
+    """The window key of tile ``t`` in map ``m``."""
+    w_dr, w_dc = lp.w_dr, lp.w_dc
+    rows, cols = lp.rows, lp.cols
+    ti = t // lp.t_cols
+    tj = t - ti * lp.t_cols
+    ar = lp.t_r0 + ti * lp.t_h
+    ac = lp.t_c0 + tj * lp.t_w
+    key = lp.t_fill[t]
+    for i in range(w_dr.shape[0]):
+        r = ar + w_dr[i]
+        c = ac + w_dc[i]
+        if 0 <= r < rows and 0 <= c < cols and m[r * cols + c]:
+            key |= np.int64(1) << i
+    return key
+
+
+@nb.njit(cache=True, inline="always")
+def _lower(keys, lo, hi, key):
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if keys[mid] < key:
+            lo = mid + 1
+        else:
+            hi = mid
+    return lo
+
+
+@nb.njit(cache=True)
+def _sparse_factor(keys, logp, seg_off, backoff, n_inner, s, key):
+    """``log phi(key)`` in segment ``s`` by binary search of the sorted keys, backing off to segment
+    ``backoff`` (keyed by the inner bits; ``-1``: none) when the key's border was never seen; ``-inf`` if
+    absent. (Not inlined: a large inlined body slows the loops around it.)"""
+    a, b = seg_off[s], seg_off[s + 1]
+    i = _lower(keys, a, b, key)
+    if i < b and keys[i] == key:
+        return logp[i]
+    if backoff >= 0:
+        border = key >> n_inner
+        j = _lower(keys, a, b, border << n_inner)
+        if j == b or (keys[j] >> n_inner) != border:  # border never seen: back off
+            fa, fb = seg_off[backoff], seg_off[backoff + 1]
+            inner = key & ((np.int64(1) << n_inner) - 1)
+            q = _lower(keys, fa, fb, inner)
+            if q < fb and keys[q] == inner:
+                return logp[q]
+    return -np.inf
+
+
+@nb.njit(cache=True, inline="always")
+def _factor(dense, dense_bits, keys, logp, seg_off, backoff, n_inner, s, key):
+    """``log phi(key)`` in segment ``s`` from arrays already bound to locals: one load from the dense table
+    if ``dense_bits >= 0``, else :func:`_sparse_factor`."""
+    if dense_bits >= 0:
+        return dense[(s << dense_bits) | key]
+    return _sparse_factor(keys, logp, seg_off, backoff, n_inner, s, key)
+
+
+@nb.njit(cache=True, inline="always")
+def _backoff(lp):
+    """The fallback segment when keys have a border to back off from, else ``-1``."""
+    return lp.fallback if lp.w_dr.shape[0] > lp.n_inner else -1
+
+
+@nb.njit(cache=True, inline="always")
+def sparse_key_log_factor(lp, s, key):
+    """``log phi(key)`` in segment ``s`` from the sorted keys (fallback for an unseen border; ``-inf`` if
+    absent)."""
+    return _factor(lp.dense, -1, lp.keys, lp.logp, lp.seg_off, _backoff(lp), lp.n_inner, s, key)
+
+
+@nb.njit(cache=True, inline="always")
+def key_log_factor(lp, s, key):
+    """``log phi(key)`` in segment ``s``: one load from the dense table when there is one, else
+    :func:`sparse_key_log_factor`."""
+    return _factor(lp.dense, lp.dense_bits, lp.keys, lp.logp, lp.seg_off, _backoff(lp), lp.n_inner, s, key)
+
+
+@nb.njit(cache=True)
+def dense_factor_table(lp):
+    """``S * 2^Lw`` float64: :func:`sparse_key_log_factor` of every key of every segment."""
+    S = lp.seg_off.shape[0] - 1
+    Lw = lp.w_dr.shape[0]
+    out = np.empty(S << Lw, np.float64)
+    for s in range(S):
+        for key in range(np.int64(1) << Lw):
+            out[(s << Lw) | key] = sparse_key_log_factor(lp, s, key)
+    return out
+
+
+@nb.njit(cache=True, inline="always")
+def tile_log_factor(lp, t, m):
+    return key_log_factor(lp, lp.t_seg[t], tile_key(lp, t, m))
+
+
+@nb.njit(cache=True, inline="always")
+def tiles_touching(lp, r, c, out, n):
+    """Append to ``out[:n]`` the tiles whose window holds cell ``(r, c)`` (no duplicates); new ``n``."""
+    # tile i's window rows are [t_r0 + i h - pad_r, t_r0 + i h + h - 1 + pad_r]
+    i0 = max((r - lp.pad_r - lp.t_r0) // lp.t_h - 1, 0)
+    i1 = min((r + lp.pad_r - lp.t_r0) // lp.t_h, lp.t_rows - 1)
+    j0 = max((c - lp.pad_c - lp.t_c0) // lp.t_w - 1, 0)
+    j1 = min((c + lp.pad_c - lp.t_c0) // lp.t_w, lp.t_cols - 1)
+    for i in range(i0, i1 + 1):
+        ar = lp.t_r0 + i * lp.t_h
+        if r < ar - lp.pad_r or r > ar + lp.t_h - 1 + lp.pad_r:
+            continue
+        for j in range(j0, j1 + 1):
+            ac = lp.t_c0 + j * lp.t_w
+            if c < ac - lp.pad_c or c > ac + lp.t_w - 1 + lp.pad_c:
+                continue
+            t = i * lp.t_cols + j
+            dup = False
+            for q in range(n):
+                if out[q] == t:
+                    dup = True
+                    break
+            if not dup:
+                out[n] = t
+                n += 1
+    return n
+
+
+@nb.njit(cache=True, inline="always")
+def _tiles_of_patch(lp, patch, out):
+    n = 0
+    for i in range(patch.shape[0]):
+        k = patch[i]
+        if k >= 0:
+            r = k // lp.cols
+            n = tiles_touching(lp, r, k - r * lp.cols, out, n)
+    return n
+
+
+@nb.njit(cache=True)
+def touch_capacity(lp, L):
+    """An upper bound on the tiles an ``L``-cell patch touches (and on its (cell, tile) pairs)."""
+    per = ((lp.t_h + 2 * lp.pad_r) // lp.t_h + 2) * ((lp.t_w + 2 * lp.pad_c) // lp.t_w + 2)
+    return max(L, 1) * per
+
+
+@nb.njit(cache=True)
+def tile_patch_setup(lp, patch, m, skip, ts):
+    """Prepare the factors of the tiles whose window holds a cell of ``patch`` (all but tile ``skip``):
+    per tile ``q`` its window key with the patch cells read as free (``ts.base[q]``) and the pairs
+    (patch bit, window bit) through which a configuration adds bits to that key. The keys do not depend
+    on the configuration otherwise, so they are read from the map once per update, not per candidate.
+    Returns the number of tiles ``nt``; ``ts.memo_off[nt]`` is the memo size used."""
+    w_dr, w_dc, t_fill, t_seg = lp.w_dr, lp.w_dc, lp.t_fill, lp.t_seg
+    bit_of, touch, base, seg, pr_off, pr_pb, pr_wb, memo_off, memo = ts
+    rows, cols = lp.rows, lp.cols
+    nt_all = _tiles_of_patch(lp, patch, touch)
+    bit = 0
+    for i in range(patch.shape[0]):
+        if patch[i] >= 0:
+            bit_of[patch[i]] = bit
+            bit += 1
+    nt = 0
+    npair = 0
+    mo = 0
+    pr_off[0] = 0
+    for q in range(nt_all):
+        t = touch[q]
+        if t == skip:
+            continue
+        ti = t // lp.t_cols
+        ar = lp.t_r0 + ti * lp.t_h
+        ac = lp.t_c0 + (t - ti * lp.t_cols) * lp.t_w
+        key = t_fill[t]
+        for i in range(w_dr.shape[0]):
+            r = ar + w_dr[i]
+            c = ac + w_dc[i]
+            if 0 <= r < rows and 0 <= c < cols:
+                k = r * cols + c
+                b = bit_of[k]
+                if b >= 0:
+                    pr_pb[npair] = b
+                    pr_wb[npair] = i
+                    npair += 1
+                elif m[k]:
+                    key |= np.int64(1) << i
+        touch[nt] = t
+        base[nt] = key
+        seg[nt] = t_seg[t]
+        ns = npair - pr_off[nt]
+        pr_off[nt + 1] = npair
+        if ns <= MEMO_BITS:
+            memo_off[nt] = mo
+            for x in range(mo, mo + (1 << ns)):
+                memo[x] = np.nan
+            mo += 1 << ns
+        else:
+            memo_off[nt] = -1
+        nt += 1
+    memo_off[nt] = mo
+    for i in range(patch.shape[0]):
+        if patch[i] >= 0:
+            bit_of[patch[i]] = -1
+    return nt
+
+
+@nb.njit(cache=True)
+def tile_patch_factors(lp, nt, ts, cands, n, out):
+    """``out[j] += sum_q log phi_q(key_q(cands[j]))`` over the ``nt`` tiles of :func:`tile_patch_setup`
+    (entries already ``-inf`` are left alone). A tile's factor depends on a candidate only through the
+    bits the candidate sets in its window (for a 3 x 3 tile of a border prior, 3 cells of an edge
+    neighbour, 1 of a corner one), so it is memoised per such sub-configuration: a neighbour costs at
+    most ``2^shared`` lookups per update, however many candidates there are."""
+    _bit_of, _touch, base, seg, pr_off, pr_pb, pr_wb, memo_off, memo = ts
+    dense, db, keys, logp, seg_off = lp.dense, lp.dense_bits, lp.keys, lp.logp, lp.seg_off
+    backoff, n_inner = _backoff(lp), lp.n_inner
+    for j in range(n):
+        s = out[j]
+        if s == -np.inf:
+            continue
+        w = cands[j]
+        for q in range(nt):
+            key = base[q]
+            p0 = pr_off[q]
+            sub = 0
+            for p in range(p0, pr_off[q + 1]):
+                if (w >> pr_pb[p]) & 1:
+                    key |= np.int64(1) << pr_wb[p]
+                    sub |= 1 << (p - p0)
+            mo = memo_off[q]
+            if mo >= 0:
+                v = memo[mo + sub]
+                if v != v:
+                    v = _factor(dense, db, keys, logp, seg_off, backoff, n_inner, seg[q], key)
+                    memo[mo + sub] = v
+            else:
+                v = _factor(dense, db, keys, logp, seg_off, backoff, n_inner, seg[q], key)
+            s += v
+            if s == -np.inf:
+                break
+        out[j] = s
+
+
+@nb.njit(cache=True, inline="always")
+def _tile_cell_terms(lp, k, m, dense_path):
+    """``(s1, s0)``: the summed log factors of the tiles whose window holds ``k`` with ``m_k = 1`` and with
+    ``m_k = 0``. Each tile's key is read once with ``k`` free; ``k``'s bit is then set for the occupied
+    value. ``dense_path``: look the keys up in the dense table (else by binary search)."""
+    w_dr, w_dc, t_fill, t_seg, dense = lp.w_dr, lp.w_dc, lp.t_fill, lp.t_seg, lp.dense
+    db = lp.dense_bits
+    rows, cols = lp.rows, lp.cols
+    t_h, t_w, pad_r, pad_c, t_r0, t_c0, t_cols = lp.t_h, lp.t_w, lp.pad_r, lp.pad_c, lp.t_r0, lp.t_c0, lp.t_cols
+    Lw = w_dr.shape[0]
+    r = k // cols
+    c = k - r * cols
+    i0 = max((r - pad_r - t_r0) // t_h - 1, 0)
+    i1 = min((r + pad_r - t_r0) // t_h, lp.t_rows - 1)
+    j0 = max((c - pad_c - t_c0) // t_w - 1, 0)
+    j1 = min((c + pad_c - t_c0) // t_w, t_cols - 1)
+    s1 = 0.0
+    s0 = 0.0
+    for i in range(i0, i1 + 1):
+        ar = t_r0 + i * t_h
+        if r < ar - pad_r or r > ar + t_h - 1 + pad_r:
+            continue
+        for j in range(j0, j1 + 1):
+            ac = t_c0 + j * t_w
+            if c < ac - pad_c or c > ac + t_w - 1 + pad_c:
+                continue
+            t = i * t_cols + j
+            key = t_fill[t]
+            kbit = np.int64(0)
+            for q in range(Lw):
+                rr = ar + w_dr[q]
+                cc = ac + w_dc[q]
+                if 0 <= rr < rows and 0 <= cc < cols:
+                    kk = rr * cols + cc
+                    if kk == k:
+                        kbit = np.int64(1) << q
+                    elif m[kk]:
+                        key |= np.int64(1) << q
+            s = t_seg[t]
+            if dense_path:
+                s1 += dense[(s << db) | key | kbit]
+                s0 += dense[(s << db) | key]
+            else:
+                s1 += sparse_key_log_factor(lp, s, key | kbit)
+                s0 += sparse_key_log_factor(lp, s, key)
+    return s1, s0
+
+
+@nb.njit(cache=True)
+def _tile_cell_log_odds_sparse(lp, k, m):
+    s1, s0 = _tile_cell_terms(lp, k, m, False)
+    return s1 - s0
+
+
+@nb.njit(cache=True, inline="always")
+def tile_cell_log_odds(lp, k, m):
+    """:func:`cell_log_odds` of a tiles prior: the factors of the tiles whose window holds ``k``."""
+    if lp.dense_bits < 0:
+        return _tile_cell_log_odds_sparse(lp, k, m)
+    s1, s0 = _tile_cell_terms(lp, k, m, True)
+    return s1 - s0
+
+
+@nb.njit(cache=True, inline="always")
+def tile_of_anchor(lp, r0, c0, h, w):
+    """The tile whose cells are exactly the ``h x w`` rectangle at ``(r0, c0)``, or ``-1``."""
+    if h != lp.t_h or w != lp.t_w:
+        return -1
+    dr = r0 - lp.t_r0
+    dc = c0 - lp.t_c0
+    if dr % lp.t_h != 0 or dc % lp.t_w != 0:
+        return -1
+    i = dr // lp.t_h
+    j = dc // lp.t_w
+    if i < 0 or j < 0 or i >= lp.t_rows or j >= lp.t_cols:
+        return -1
+    return i * lp.t_cols + j
+
+
+@nb.njit(cache=True, inline="always")
+def tile_candidates(lp, t, patch, pinned, m, cands, cand_lp):
+    """Configurations of tile ``t`` (whose cells, row-major, are ``patch``; ``-1`` off the grid or
+    pinned) that its own factor allows given the current border: the sparse support of Section 5.2.2 /
+    5.2.3. Written to ``cands`` as live-bit codes, with tile ``t``'s own ``log phi`` of each in
+    ``cand_lp``; returns how many (``-1`` if ``cands`` is too small)."""
+    keys, logp, seg_off, w_dr, w_dc = lp.keys, lp.logp, lp.seg_off, lp.w_dr, lp.w_dc
+    key = tile_key(lp, t, m)
+    Li = lp.n_inner
+    border = key >> Li
+    s = lp.t_seg[t]
+    a, b = seg_off[s], seg_off[s + 1]
+    lo = _lower(keys, a, b, border << Li)
+    hi = _lower(keys, a, b, (border + 1) << Li)
+    if lo == hi and _backoff(lp) >= 0:
+        lo, hi = seg_off[lp.fallback], seg_off[lp.fallback + 1]
+    fill = lp.t_fill[t]
+    ti = t // lp.t_cols
+    ar = lp.t_r0 + ti * lp.t_h
+    ac = lp.t_c0 + (t - ti * lp.t_cols) * lp.t_w
+    live = 0
+    for i in range(Li):
+        if patch[i] >= 0:
+            live += 1
+    n = 0
+    for q in range(lo, hi):
+        inner = keys[q] & ((np.int64(1) << Li) - 1)
+        ok = True
+        code = 0
+        bit = 0
+        if live == Li:  # every tile cell is live: the code is the inner key itself
+            code = inner
+        else:
+            for i in range(Li):
+                v = (inner >> i) & 1
+                if patch[i] >= 0:
+                    if v:
+                        code |= np.int64(1) << bit
+                    bit += 1
+                else:
+                    r = ar + w_dr[i]
+                    c = ac + w_dc[i]
+                    if 0 <= r < lp.rows and 0 <= c < lp.cols:
+                        if v:  # a pinned cell is free
+                            ok = False
+                            break
+                    elif v != ((fill >> i) & 1):
+                        ok = False
+                        break
+        if ok:
+            if n >= cands.shape[0]:
+                return -1
+            cands[n] = code
+            cand_lp[n] = logp[q]
+            n += 1
+    return n
+
+
+@nb.njit(cache=True)
+def tiles_log_prob_batch(lp, maps, out):
+    """``sum_t log phi_t(m)`` for every row of ``maps`` (``B x K`` uint8)."""
+    T = lp.t_rows * lp.t_cols
+    for b in range(maps.shape[0]):
+        s = 0.0
+        for t in range(T):
+            s += tile_log_factor(lp, t, maps[b])
+        out[b] = s
+
+
+def tiles(rows, cols, geometry, n_inner, tile, pad, t_seg, t_fill, seg_keys, seg_logp, fallback=-1) -> Tiles:
+    """A :class:`Tiles` bundle from a tiling (``geometry``: :func:`~ogm_ppl.priors.local.tiling`) and
+    per-segment (keys, log-values) lists; windows of at most :data:`DENSE_MAX_BITS` cells also get the
+    dense table."""
+    w_dr, w_dc, r0, c0, t_rows, t_cols, _ = geometry
+    seg_off = np.zeros(len(seg_keys) + 1, np.int64)
+    keys, logp = [], []
+    for s, (k, lp) in enumerate(zip(seg_keys, seg_logp)):
+        order = np.argsort(k, kind="stable")
+        keys.append(np.asarray(k, np.int64)[order])
+        logp.append(np.asarray(lp, np.float64)[order])
+        seg_off[s + 1] = seg_off[s] + len(k)
+    bundle = Tiles(rows=int(rows), cols=int(cols), w_dr=w_dr, w_dc=w_dc, n_inner=int(n_inner), t_h=int(tile[0]),
+                   t_w=int(tile[1]), t_r0=int(r0), t_c0=int(c0), t_rows=int(t_rows), t_cols=int(t_cols),
+                   pad_r=int(pad[0]), pad_c=int(pad[1]), t_seg=np.ascontiguousarray(t_seg, np.int64),
+                   t_fill=np.ascontiguousarray(t_fill, np.int64), seg_off=seg_off,
+                   keys=np.ascontiguousarray(np.concatenate(keys) if keys else _I, np.int64),
+                   logp=np.ascontiguousarray(np.concatenate(logp) if logp else _F, np.float64),
+                   fallback=int(fallback), dense=_F, dense_bits=-1)
+    Lw = len(w_dr)
+    if Lw <= DENSE_MAX_BITS and (len(seg_keys) << Lw) <= DENSE_MAX_ENTRIES:
+        bundle = bundle._replace(dense=dense_factor_table(bundle), dense_bits=Lw)
+    return bundle
+
+
+@nb.njit(cache=True)
+def tiles_patch_weights(lp, patch, m, cands, n, out, ts):
+    """``out[j] = log p(patch = cands[j], rest)`` up to a constant in ``j``: the factors of the tiles whose
+    window holds a patch cell, through the scratch ``ts``."""
+    for j in range(n):
+        out[j] = 0.0
+    nt = tile_patch_setup(lp, patch, m, -1, ts)
+    tile_patch_factors(lp, nt, ts, cands, n, out)
+
+
+@nb.njit(cache=True)
+def tile_candidate_weights(lp, patch, m, cands, n, t, cand_lp, out, ts):
+    """The weights of the candidates of a patch: for a tile ``t >= 0``, its own factor (read with the
+    candidates, ``cand_lp``) plus those of its neighbours whose windows hold patch cells; else
+    :func:`tiles_patch_weights`."""
+    if t < 0:
+        tiles_patch_weights(lp, patch, m, cands, n, out, ts)
+        return
+    for j in range(n):
+        out[j] = cand_lp[j]
+    nt = tile_patch_setup(lp, patch, m, t, ts)
+    tile_patch_factors(lp, nt, ts, cands, n, out)
+
+
+def _cell(prior, k, m):
+    return tile_cell_log_odds(prior, k, m)
+
+
+def _patch(prior, patch, m, cands, n, out, ts):
+    tiles_patch_weights(prior, patch, m, cands, n, out, ts)
+
+
+def _cands(prior, r0, c0, h, w, patch, n_live, pinned, m, cands, cand_lp):
+    t = tile_of_anchor(prior, r0, c0, h, w)
+    if t >= 0:
+        return np.int64(tile_candidates(prior, t, patch, pinned, m, cands, cand_lp)), t
+    if n_live > 62 or (np.int64(1) << n_live) > cands.shape[0]:
+        return np.int64(-1), t
+    W = np.int64(1) << n_live
+    for j in range(W):
+        cands[j] = j
+    return W, t
+
+
+def _weights(prior, patch, m, cands, n, tag, cand_lp, out, ts):
+    tile_candidate_weights(prior, patch, m, cands, n, tag, cand_lp, out, ts)
+
+
+def _capacity(prior, L):
+    return touch_capacity(prior, L)
+
+
+register(Tiles, cell_log_odds=_cell, patch_prior_weights=_patch, patch_candidates=_cands, candidate_weights=_weights,
+         scratch_capacity=_capacity)
