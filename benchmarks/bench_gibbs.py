@@ -51,8 +51,7 @@ def sweep_time(kernel, repeat=3, warmup=1) -> float:
     """Best ``sample`` time (s) of ``repeat`` sweeps after ``warmup`` sweeps from the thresholded OGM map."""
     torch.manual_seed(0)
     kernel.setup()
-    params = {"m": torch.from_numpy(kernel.state.astype(np.float64))}
-    kernel._last = params["m"]
+    params = kernel.current_params()
     state = {"p": params}
 
     def one():

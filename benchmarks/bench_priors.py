@@ -164,8 +164,7 @@ def priors_for(shape, truth):
 def sweep_seconds(kernel, repeat=3) -> float:
     torch.manual_seed(0)
     kernel.setup()
-    state = {"p": {"m": torch.from_numpy(kernel.state.astype(np.float64))}}
-    kernel._last = state["p"]["m"]
+    state = {"p": kernel.current_params()}
 
     def one():
         state["p"] = kernel.sample(state["p"])

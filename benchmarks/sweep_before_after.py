@@ -65,8 +65,7 @@ def main(root: str, repeat: int = 15) -> dict:
         torch.manual_seed(0)
         k = CellGibbs(model, scan=scan)
         k.setup()
-        p = {"m": torch.from_numpy(k.state[k.model.latent.numpy()].astype(np.float64))}
-        k._last = p["m"]
+        p = k.current_params()
         times = []
         for i in range(20 + repeat):  # 20 warm-up sweeps, as in interleaved()
             t = time.perf_counter()
@@ -229,8 +228,7 @@ def interleaved(model, repeat: int = 7, scans=SCANS, warmup: int = 20) -> dict:
             torch.manual_seed(0)
             k = cls(model, scan=scan)
             k.setup()
-            p = {"m": torch.from_numpy(k.state[k.model.latent.numpy()].astype(np.float64))}
-            k._last = p["m"]
+            p = k.current_params()
             for _ in range(warmup):  # past the first sweeps from the OGM map, where most cells still move
                 p = k.sample(p)
             pair[name] = [k, p, []]
