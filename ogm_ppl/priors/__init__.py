@@ -10,10 +10,16 @@ from ogm_ppl.priors.data_driven_1d import DataDriven1DPrior
 from ogm_ppl.priors.independent import IndependentPrior
 from ogm_ppl.priors.local import LocalMapPrior
 from ogm_ppl.priors.mrf import MRFPrior, StencilPrior
-from ogm_ppl.priors.named import PRIOR_KINDS, prior_by_name
+from ogm_ppl.priors.named import (
+           PRIOR_KINDS,
+           prior_by_name,
+           prior_kinds,
+           register_prior,
+           unregister_prior,
+)
 from ogm_ppl.priors.patch_table import PatchTablePrior
 from ogm_ppl.priors.tables import PriorTables, available_tables, load_tables, tables_by_name
 
 __all__ = ["BorderPatchPrior", "CompiledPrior", "DataDriven1DPrior", "IndependentPrior", "LocalMapPrior", "MRFPrior",
            "MapPrior", "PRIOR_KINDS", "PatchTablePrior", "PriorTables", "StencilPrior", "available_tables",
-           "load_tables", "prior_by_name", "tables_by_name"]
+           "load_tables", "prior_by_name", "prior_kinds", "register_prior", "tables_by_name", "unregister_prior"]

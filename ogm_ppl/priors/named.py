@@ -20,12 +20,23 @@ statistics are closest to the thesis's):
 The tables were learned on the corpus's *training* plans only, with the buildings of the real logs
 excluded (:data:`~ogm_ppl.datasets.floorplans.REAL_LOG_BUILDINGS`): evaluate on held-out plans or logs.
 
+**Your own kind** registers a factory under a name with :func:`register_prior`; from then on
+``prior_by_name`` (and so the command line's ``--prior`` and experiment specs) builds it. Name the module in
+``$OGM_PPL_METHODS`` (comma-separated modules, imported by :mod:`ogm_ppl.methods` in every process) for the
+command line and dask workers to find it:
+
+>>> from ogm_ppl.priors import IndependentPrior
+>>> register_prior("half", lambda shape, tables: IndependentPrior(0.5, int(np.prod(shape))))
+>>> prior_by_name("half", (4, 5)).num_cells
+20
+>>> unregister_prior("half")
 >>> prior_by_name("independent:houseexpo", (4, 5)).num_cells
 20
 """
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -35,10 +46,44 @@ from ogm_ppl.priors.base import MapPrior
 if TYPE_CHECKING:
     from ogm_ppl.priors.tables import PriorTables
 
-__all__ = ["prior_by_name", "PRIOR_KINDS"]
+__all__ = ["PRIOR_KINDS", "CorpusTables", "prior_by_name", "prior_kinds", "register_prior", "unregister_prior"]
 
+#: the kinds the library ships (the module docstring's table)
 PRIOR_KINDS = ("independent", "mrf", "mrf8", "patch3", "patch3_999", "patch5", "border", "border1")
 DEFAULT_CORPUS = "houseexpo"
+
+#: ``factory(shape, tables) -> MapPrior``: ``shape`` the grid's shape (a tuple), ``tables`` a
+#: :class:`CorpusTables` (``tables()`` the corpus's :class:`~ogm_ppl.priors.tables.PriorTables`)
+PriorFactory = Callable[[tuple, "CorpusTables"], MapPrior]
+_FACTORIES: dict[str, PriorFactory] = {}
+
+
+def register_prior(kind: str, factory: PriorFactory) -> None:
+    """Make ``prior_by_name("KIND[:CORPUS]", shape)`` build ``factory(shape, tables)``.
+
+    ``kind`` is a non-empty name without ``:``; registering a shipped kind or a taken name is refused
+    (:func:`unregister_prior` first). ``tables()`` returns the tables of ``CORPUS`` (default
+    ``houseexpo``) or those passed to :func:`prior_by_name`.
+    """
+    if not isinstance(kind, str) or not kind or ":" in kind:
+        raise ValueError(f"a prior kind is a non-empty name without ':', got {kind!r}")
+    if kind in _FACTORIES:
+        raise ValueError(f"prior kind {kind!r} is already registered")
+    if not callable(factory):
+        raise TypeError(f"the factory of prior kind {kind!r} must be callable, got {type(factory).__name__}")
+    _FACTORIES[kind] = factory
+
+
+def unregister_prior(kind: str) -> None:
+    """Remove a kind added by :func:`register_prior` (the shipped kinds stay)."""
+    if kind in PRIOR_KINDS:
+        raise ValueError(f"{kind!r} is a shipped prior kind")
+    _FACTORIES.pop(kind, None)
+
+
+def prior_kinds() -> tuple[str, ...]:
+    """Every kind :func:`prior_by_name` knows: the shipped ones, then the registered ones."""
+    return tuple(_FACTORIES)
 
 
 def _shape(shape) -> tuple[int, ...]:
@@ -52,40 +97,93 @@ def prior_by_name(name: str, shape, tables: PriorTables | None = None) -> MapPri
     Args:
         tables: a :class:`~ogm_ppl.priors.tables.PriorTables` to use instead of the shipped corpus.
     """
-    from ogm_ppl.priors.border import BorderPatchPrior
-    from ogm_ppl.priors.independent import IndependentPrior
-    from ogm_ppl.priors.mrf import MRFPrior
-    from ogm_ppl.priors.patch_table import PatchTablePrior
-    from ogm_ppl.priors.tables import available_tables, tables_by_name
-
     if not isinstance(name, str) or not name:
         raise ValueError(f"a prior name is a non-empty string, got {name!r}")
     kind, _, corpus = name.partition(":")
-    if kind not in PRIOR_KINDS:
-        raise ValueError(f"unknown prior kind {kind!r} in {name!r}; kinds: {', '.join(PRIOR_KINDS)}")
-    shape = _shape(shape)
-    K = int(np.prod(shape))
-    if kind == "independent" and not corpus:
-        return IndependentPrior(0.5, K)  # the name alone is always the uniform prior
-    if tables is None:
-        corpus = corpus or DEFAULT_CORPUS
-        if corpus not in available_tables():
+    if kind not in _FACTORIES:
+        raise ValueError(f"unknown prior kind {kind!r} in {name!r}; kinds: {', '.join(prior_kinds())}")
+    return _FACTORIES[kind](_shape(shape), CorpusTables(corpus, tables))
+
+
+class CorpusTables:
+    """The ``tables`` argument of a prior factory: ``tables()`` loads (once) the tables of the corpus the
+    name gave (``corpus``, ``""`` if none: the default corpus), or returns those passed to
+    :func:`prior_by_name`. An unknown corpus is refused at once."""
+
+    def __init__(self, corpus: str, tables: PriorTables | None = None) -> None:
+        from ogm_ppl.priors.tables import available_tables
+
+        if corpus and tables is None and corpus not in available_tables():
             raise ValueError(f"no shipped tables for corpus {corpus!r}; shipped: {available_tables()}")
-        tables = tables_by_name(corpus)
-    lam = float(tables.lam)
-    if kind == "independent":
-        return IndependentPrior(lam, K)
-    if kind in ("mrf", "mrf8"):
-        conn = 4 if kind == "mrf" else 8
-        lam_c, psi = tables.mrf_fit(conn)
+        self.corpus = corpus
+        self._tables = tables
+
+    def __call__(self) -> PriorTables:
+        if self._tables is None:
+            from ogm_ppl.priors.tables import tables_by_name
+
+            self._tables = tables_by_name(self.corpus or DEFAULT_CORPUS)
+        return self._tables
+
+
+# ------------------------------------------------------------------ the shipped kinds
+def _independent(shape, tables) -> MapPrior:
+    from ogm_ppl.priors.independent import IndependentPrior
+
+    K = int(np.prod(shape))
+    if not tables.corpus:
+        return IndependentPrior(0.5, K)  # the name alone is always the uniform prior
+    return IndependentPrior(float(tables().lam), K)
+
+
+def _mrf(conn: int) -> PriorFactory:
+    def build(shape, tables) -> MapPrior:
+        from ogm_ppl.priors.mrf import MRFPrior
+
+        lam_c, psi = tables().mrf_fit(conn)
         return MRFPrior(shape, order=1 if conn == 4 else 2, psi=min(1.0, psi), cell_prior=lam_c)
+
+    return build
+
+
+def _two_d(kind: str, shape) -> None:
     if len(shape) != 2:
-        raise ValueError(f"prior {name!r} is a 2D patch prior; the grid has shape {shape}")
-    if kind in ("patch3", "patch3_999"):
-        return PatchTablePrior(shape, codes=np.arange(512), counts=tables.counts3x3, patch=(3, 3),
-                               mass=0.999 if kind == "patch3_999" else None)  # fmt: skip
-    if kind == "patch5":
-        return PatchTablePrior(shape, codes=tables.codes5x5, counts=tables.counts5x5, patch=(5, 5))
-    if kind == "border":
-        return BorderPatchPrior(shape, *tables.border_table().triples(), inner=(3, 3))
-    return BorderPatchPrior(shape, *tables.border1_triples(), inner=(1, 1))
+        raise ValueError(f"prior {kind!r} is a 2D patch prior; the grid has shape {shape}")
+
+
+def _patch3(mass: float | None) -> PriorFactory:
+    def build(shape, tables) -> MapPrior:
+        from ogm_ppl.priors.patch_table import PatchTablePrior
+
+        _two_d("patch3", shape)
+        return PatchTablePrior(shape, codes=np.arange(512), counts=tables().counts3x3, patch=(3, 3), mass=mass)
+
+    return build
+
+
+def _patch5(shape, tables) -> MapPrior:
+    from ogm_ppl.priors.patch_table import PatchTablePrior
+
+    _two_d("patch5", shape)
+    t = tables()
+    return PatchTablePrior(shape, codes=t.codes5x5, counts=t.counts5x5, patch=(5, 5))
+
+
+def _border(shape, tables) -> MapPrior:
+    from ogm_ppl.priors.border import BorderPatchPrior
+
+    _two_d("border", shape)
+    return BorderPatchPrior(shape, *tables().border_table().triples(), inner=(3, 3))
+
+
+def _border1(shape, tables) -> MapPrior:
+    from ogm_ppl.priors.border import BorderPatchPrior
+
+    _two_d("border1", shape)
+    return BorderPatchPrior(shape, *tables().border1_triples(), inner=(1, 1))
+
+
+for _kind, _factory in (("independent", _independent), ("mrf", _mrf(4)), ("mrf8", _mrf(8)),
+                        ("patch3", _patch3(None)), ("patch3_999", _patch3(0.999)), ("patch5", _patch5),
+                        ("border", _border), ("border1", _border1)):
+    register_prior(_kind, _factory)

@@ -1,0 +1,85 @@
+"""A prior written in one file (tests/priors/toy_checkerboard.py) passes the prior contract and reaches
+the compiled kernels, a spec and the command line with no other edit."""
+
+import tomllib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from ogm_ppl import Grid
+from ogm_ppl.datasets import stop_and_scan
+from ogm_ppl.methods import MapProblem, RunContext, get_method
+from ogm_ppl.priors import prior_by_name, prior_kinds, unregister_prior
+from ogm_ppl.priors.compiled import Stencil
+from ogm_ppl.testing import PriorContract
+
+from . import toy_checkerboard
+from .toy_checkerboard import KIND, CheckerboardPrior
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+class TestCheckerboardContract(PriorContract):
+    def make_prior(self, num_cells):
+        return CheckerboardPrior((num_cells,), beta=0.7)
+
+
+def test_the_name_builds_it_and_it_declares_a_stencil():
+    assert KIND in prior_kinds()
+    p = prior_by_name(KIND, (5, 6))
+    assert isinstance(p, CheckerboardPrior) and isinstance(p.compiled(), Stencil)
+    with pytest.raises(ValueError, match="already registered"):
+        from ogm_ppl.priors import register_prior
+
+        register_prior(KIND, lambda shape, tables: p)
+    with pytest.raises(ValueError, match="shipped"):
+        unregister_prior("mrf")
+
+
+@pytest.fixture(scope="module")
+def room():
+    truth = np.zeros((16, 16), bool)
+    truth[[0, -1], :] = truth[:, [0, -1]] = True
+    grid = Grid(truth.shape, 1.0)
+    data = stop_and_scan(truth, grid, route=np.array([[8.5, 8.5, 0.0]]), beams=36, max_range_cells=12,
+                         sigma_cells=0.5, seed=0)
+    return MapProblem(grid, data.scans, sigma_cells=0.5)
+
+
+def test_gibbs_by_name_runs_the_compiled_sweeps(room, monkeypatch):
+    """Single-cell and patch Gibbs never call the generic path (``log_prob_patch``) for this prior."""
+
+    def generic(*args, **kwargs):
+        raise AssertionError("the generic path was used")
+
+    monkeypatch.setattr(CheckerboardPrior, "log_prob_patch", generic)
+    method = get_method("gibbs")
+    for patch in (1, [2, 2]):
+        params = method.parse({"prior": KIND, "sweeps": 3, "burn_in": 1, "patch": patch})
+        p = method.run(params, room, RunContext(seed=0)).probabilities
+        assert p.shape == (room.grid.num_cells,) and np.all((p >= 0) & (p <= 1))
+
+
+def test_a_spec_names_it(tmp_path):
+    from ogm_ppl.experiment import parse_spec, run_experiment
+
+    d = tomllib.loads((ROOT / "experiments" / "specs" / "smoke.toml").read_text())
+    d["datasets"][0]["pose_fraction"] = 1.0
+    d["algorithms"] = [{"name": "checker", "kind": "gibbs", "prior": KIND, "sweeps": 2, "burn_in": 1}]
+    d["output"] = {"maps": False, "figures": False}
+    r = run_experiment(parse_spec(d, "checker.toml"), tmp_path, scheduler="serial", progress=False)
+    assert [x["algorithm"] for x in r.runs] == ["checker"]
+
+
+def test_the_command_line_names_it(tmp_path):
+    from ogm_ppl.cli import load_map, main
+
+    sim = tmp_path / "sim.npz"
+    assert main(["simulate", "--map", "office", "--size", "60", "--poses", "2", "--beams", "90",
+                 "--max-range-cells", "20", "--out", str(sim)]) == 0
+    out = tmp_path / "checker"
+    assert main(["map", str(sim), "--method", "gibbs", "--prior", KIND, "--sweeps", "3", "--warmup", "1",
+                 "--out", str(out)]) == 0
+    assert load_map(out / "map.npz")["probabilities"].shape == (60, 60)
+    assert toy_checkerboard.KIND == KIND
