@@ -94,23 +94,14 @@ def run_kernel(
     done, seconds = start, (trace[-1]["seconds"] if trace else 0.0)
     budget = ctx.stop_after
     details.update(resumed_from_sweep=start)
+    run_kw = {"warmup": warm, "seed": ctx.seed, "checkpoint": ckpt, "checkpoint_every": params.checkpoint_every}
     for mark in marks:
         if mark <= done:
             continue
         step = mark - done
         if budget is not None:
             step = min(step, budget)
-        r = run_gibbs(
-            kernel,
-            n,
-            stats,
-            warmup=warm,
-            seed=ctx.seed,
-            checkpoint=ckpt,
-            checkpoint_every=params.checkpoint_every,
-            progress=ctx.progress,
-            stop_after=step,
-        )
+        r = run_gibbs(kernel, n, stats, **run_kw, progress=ctx.progress, stop_after=step)
         done, seconds = r.sweeps, seconds + r.seconds
         if budget is not None:
             budget -= step
@@ -127,15 +118,6 @@ def run_kernel(
         if budget is not None and budget <= 0 and done < total:
             return MapResult(None, observed, {**details, "trace": trace, "sweeps_total": done})
     if stats.n == 0:  # every mark was reached before (killed after the last checkpoint): load it
-        r = run_gibbs(
-            kernel,
-            n,
-            stats,
-            warmup=warm,
-            seed=ctx.seed,
-            checkpoint=ckpt,
-            checkpoint_every=params.checkpoint_every,
-            progress=False,
-        )
+        r = run_gibbs(kernel, n, stats, **run_kw, progress=False)
         done = r.sweeps
     return MapResult(stats.marginals.numpy(), observed, {**details, "trace": trace, "sweeps_total": done})
