@@ -651,9 +651,11 @@ def main(argv: list[str] | None = None) -> int:
             ids = [i for i, d in durations.items() if d <= m.max_test_s]
             budget = sum(durations[i] for i in ids)
             timeout = 2 * budget + 45
+            n_slow = len(durations) - len(ids)
+            left_out = f" ({n_slow} slower than {m.max_test_s:g} s left out)" if n_slow else ""
             print(f"== {name} ({m.path}): {len(todo)} of {len(muts)} sampled mutants to run "
                   f"(population {n_all}); {len(ids)} tests, {budget:.0f} s"
-                  f"{f' ({len(durations) - len(ids)} slower than {m.max_test_s:g} s left out)' if len(ids) < len(durations) else ''}",
+                  f"{left_out}",
                   flush=True)
             kills: dict[str, int] = {}
             for r in results.values():
