@@ -37,7 +37,8 @@ test: check
 check: lint types
 
 lint: $(STAMP)
-	$(BIN)/ruff check ogm_ppl tests benchmarks experiments
+	$(BIN)/ruff check ogm_ppl tests benchmarks experiments tools docs/_ext
+	$(BIN)/ruff format --check ogm_ppl tests benchmarks experiments tools docs/_ext
 
 types: $(STAMP)
 	$(BIN)/mypy
@@ -57,7 +58,7 @@ docs: $(DOCS_STAMP)
 bench: $(STAMP)
 	$(BIN)/python benchmarks/bench_ogm.py
 
-# Mutation testing (issue 15; tools/mutate.py, not part of `make test`): cosmic-ray mutants of the core
+# Mutation testing (tools/mutate.py, not part of `make test`): cosmic-ray mutants of the core
 # modules, each run against the tests that cover it, in a copy of the tree under out/mutation/ (never this
 # one). A first run took ~45 min here (164 mutants, 2 busy cores); a rerun resumes, running only mutants
 # whose module or tests changed. Writes out/mutation/report.md, summary.json, survivors/*.diff.

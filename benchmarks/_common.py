@@ -49,11 +49,16 @@ def _git_commit(root: Path) -> str:
     """``git rev-parse HEAD`` of ``root``, with ``-dirty`` when tracked files of the code that produces
     results (``ogm_ppl/``, ``benchmarks/``, ``experiments/``) differ from it; edits to docs do not count."""
     try:
-        head = subprocess.run(["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True,
-                              check=True).stdout.strip()
-        dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no", "--",
-                                "ogm_ppl", "benchmarks", "experiments"], cwd=root,
-                               capture_output=True, text=True, check=True).stdout.strip()
+        head = subprocess.run(
+            ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, check=True
+        ).stdout.strip()
+        dirty = subprocess.run(
+            ["git", "status", "--porcelain", "--untracked-files=no", "--", "ogm_ppl", "benchmarks", "experiments"],
+            cwd=root,
+            capture_output=True,
+            text=True,
+            check=True,
+        ).stdout.strip()
     except (OSError, subprocess.CalledProcessError):
         return "unknown"
     return head + ("-dirty" if dirty else "")
@@ -103,8 +108,16 @@ def write_json(name: str, payload: dict) -> Path:
     return atomic_write_text(OUT / f"{name}.json", json.dumps(stamped, indent=2))
 
 
-def sparse_scene(n: int, poses: int, walls: int, seed: int = 0, res: float = 0.05, max_range_cells: int = 75,
-                 sigma_cells: float = 3.0, beams: int = 720):  # fmt: skip
+def sparse_scene(
+    n: int,
+    poses: int,
+    walls: int,
+    seed: int = 0,
+    res: float = 0.05,
+    max_range_cells: int = 75,
+    sigma_cells: float = 3.0,
+    beams: int = 720,
+):
     """An ``n x n`` map with a border and ``walls`` random wall segments, scanned from ``poses`` random
     free cells with ``beams`` beams each (simulated, seeded): most beams are max-range readings."""
     from ogm_ppl import Grid

@@ -83,8 +83,12 @@ def main() -> dict:
             dt = time.perf_counter() - t
             pc_rows.append({"K": K, "N": N, "model_seconds": t_model, "seconds": dt})
             print(f"{K:>7}{N:>6}{t_model:>11.4f}{dt:>22.5f}")
-    payload = {"brute_force": rows, "python_loop_seconds_per_map": per_map,
-               "pose_constrained": pc_rows, "peak_rss_mib": peak_rss_mb()}  # fmt: skip
+    payload = {
+        "brute_force": rows,
+        "python_loop_seconds_per_map": per_map,
+        "pose_constrained": pc_rows,
+        "peak_rss_mib": peak_rss_mb(),
+    }
     print(f"peak RSS {peak_rss_mb():.0f} MiB")
     print("wrote", write_json("bench_exact", payload))
     return payload

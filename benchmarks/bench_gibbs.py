@@ -36,8 +36,9 @@ RES, F, SIGMA = 0.05, 75, 3.0
 
 
 def scene(n: int, poses: int, beams: int = 720, seed: int = 0):
-    return sparse_scene(n, poses, walls=max(4, n * n // 6000), seed=seed, res=RES, max_range_cells=F,
-                        sigma_cells=SIGMA, beams=beams)  # fmt: skip
+    return sparse_scene(
+        n, poses, walls=max(4, n * n // 6000), seed=seed, res=RES, max_range_cells=F, sigma_cells=SIGMA, beams=beams
+    )
 
 
 def build(n: int, poses: int, beams: int = 720, lam: float = 0.234):
@@ -63,8 +64,18 @@ def sweep_time(kernel, repeat=3, warmup=1) -> float:
 def index_bytes(model) -> int:
     r = model.rays
     idx = r.by_cell
-    arrays = [r.offsets, r.cells, r.t_enter, r.z, r.is_max, r.endpoint_in_grid, r.range_cells,
-              idx.offsets, idx.ray, idx.kappa]  # fmt: skip
+    arrays = [
+        r.offsets,
+        r.cells,
+        r.t_enter,
+        r.z,
+        r.is_max,
+        r.endpoint_in_grid,
+        r.range_cells,
+        idx.offsets,
+        idx.ray,
+        idx.kappa,
+    ]
     # + the cell kernels' state: a kept sum and two counts a cell (16 bytes), first and second hits a ray (16)
     return sum(a.nbytes for a in arrays) + model.loglik_table.numel() * 8 + 16 * model.num_cells + 16 * r.num_rays
 
@@ -74,19 +85,28 @@ def main() -> dict:
     model = build(500, 100)
     setup_s = time.perf_counter() - t
     R, K, nnz = model.rays.num_rays, model.num_cells, model.rays.nnz
-    print(f"500x500 map, {R} rays ({model.rays.is_max.mean():.0%} max-range), {nnz / 1e6:.2f} M ray-cells; "
-          f"set-up {setup_s:.2f} s")  # fmt: skip
+    print(
+        f"500x500 map, {R} rays ({model.rays.is_max.mean():.0%} max-range), {nnz / 1e6:.2f} M ray-cells; "
+        f"set-up {setup_s:.2f} s"
+    )
     res = {}
-    kernels = [(f"cell{'' if u == 'gibbs' else ' metropolised'}, {s}", CellGibbs(model, scan=s, update=u))
-               for u in ("gibbs", "metropolised") for s in ("systematic", "permutation", "random")]
-    kernels += [("patch 3x3, systematic", PatchGibbs(model, (3, 3), scan="systematic")),
-                ("patch plus, random", PatchGibbs(model, "plus", scan="random"))]  # fmt: skip
+    kernels = [
+        (f"cell{'' if u == 'gibbs' else ' metropolised'}, {s}", CellGibbs(model, scan=s, update=u))
+        for u in ("gibbs", "metropolised")
+        for s in ("systematic", "permutation", "random")
+    ]
+    kernels += [
+        ("patch 3x3, systematic", PatchGibbs(model, (3, 3), scan="systematic")),
+        ("patch plus, random", PatchGibbs(model, "plus", scan="random")),
+    ]
     for name, kern in kernels:
         # single-cell sweeps in the steady state (20 sweeps on: the first from the OGM map move more cells)
         res[name] = sweep_time(kern, repeat=5, warmup=20) if "cell" in name else sweep_time(kern, repeat=1)
         print(f"  {name:<32} {res[name]:8.4f} s per sweep")
-    print(f"targets (issue 14): systematic < 20 ms: {res['cell, systematic'] * 1e3:.1f} ms; "
-          f"random < 60 ms: {res['cell, random'] * 1e3:.1f} ms (permutation {res['cell, permutation'] * 1e3:.1f} ms)")
+    print(
+        f"targets (issue 14): systematic < 20 ms: {res['cell, systematic'] * 1e3:.1f} ms; "
+        f"random < 60 ms: {res['cell, random'] * 1e3:.1f} ms (permutation {res['cell, permutation'] * 1e3:.1f} ms)"
+    )
     before_after = interleaved(model, repeat=7)
     floor = floors(model)
     report(before_after, floor)
@@ -103,8 +123,10 @@ def main() -> dict:
     ref_full = ref_sub * len(model.latent) / len(sub)
     ours = res["cell, systematic"]
     print(f"  plain Python sweep (est. from {len(sub)} cells): {ref_full:8.2f} s per sweep")
-    print(f"L = 1 sweep: {ours * 1e3:.1f} ms; {10.3 / ours:.0f}x the thesis's 10.3 s; "
-          f"{ref_full / ours:.0f}x plain Python; target < 0.1 s: {'met' if ours < 0.1 else 'NOT met'}")
+    print(
+        f"L = 1 sweep: {ours * 1e3:.1f} ms; {10.3 / ours:.0f}x the thesis's 10.3 s; "
+        f"{ref_full / ours:.0f}x plain Python; target < 0.1 s: {'met' if ours < 0.1 else 'NOT met'}"
+    )
 
     scaling = []
     print("\nscaling (cell Gibbs, systematic):  K        rays     s/sweep")
@@ -119,18 +141,32 @@ def main() -> dict:
     big = build(1500, 278)  # 2.25 M cells, 200,160 rays
     big_setup = time.perf_counter() - t
     nbytes = index_bytes(big)
-    print(f"\n1500x1500 (2.25 M cells), {big.rays.num_rays:,} rays: index + likelihood tables "
-          f"{nbytes / 2**20:.0f} MiB (target < 2048 MiB); set-up {big_setup:.1f} s")
+    print(
+        f"\n1500x1500 (2.25 M cells), {big.rays.num_rays:,} rays: index + likelihood tables "
+        f"{nbytes / 2**20:.0f} MiB (target < 2048 MiB); set-up {big_setup:.1f} s"
+    )
     big_sweep = sweep_time(CellGibbs(big, scan="systematic"), repeat=1)
     print(f"one L = 1 sweep of the 2.25 M-cell map: {big_sweep:.3f} s; peak RSS {peak_rss_mb():.0f} MiB")
     payload = {
-        "map_500": {"cells": K, "rays": R, "ray_cells": nnz, "seconds_per_sweep": res,
-                    "python_reference_seconds_per_sweep": ref_full, "speedup_vs_python": ref_full / ours,
-                    "speedup_vs_thesis_matlab": 10.3 / ours, "before_after_interleaved": before_after,
-                    "floor_seconds": floor},  # fmt: skip
+        "map_500": {
+            "cells": K,
+            "rays": R,
+            "ray_cells": nnz,
+            "seconds_per_sweep": res,
+            "python_reference_seconds_per_sweep": ref_full,
+            "speedup_vs_python": ref_full / ours,
+            "speedup_vs_thesis_matlab": 10.3 / ours,
+            "before_after_interleaved": before_after,
+            "floor_seconds": floor,
+        },
         "scaling": scaling,
-        "map_1500": {"cells": big.num_cells, "rays": big.rays.num_rays, "index_mib": nbytes / 2**20,
-                     "seconds_per_sweep": big_sweep, "setup_seconds": big_setup},  # fmt: skip
+        "map_1500": {
+            "cells": big.num_cells,
+            "rays": big.rays.num_rays,
+            "index_mib": nbytes / 2**20,
+            "seconds_per_sweep": big_sweep,
+            "setup_seconds": big_setup,
+        },
         "peak_rss_mib": peak_rss_mb(),
     }
     print("wrote", write_json("bench_gibbs", payload))

@@ -59,14 +59,18 @@ def wall200():
 
 def grid4x4():
     grid = Grid((4, 4), resolution=1.0)
-    scans = Scans([[0.5, 0.5, 0.0], [0.5, 0.5, 0.7], [3.5, 3.5, math.pi], [3.5, 3.5, -2.0], [0.5, 3.5, -0.6]],
-                  [0.0], [[2.6], [3.3], [2.2], [1.3], [2.9]], max_range=4.0, over_range="max")  # fmt: skip
+    scans = Scans(
+        [[0.5, 0.5, 0.0], [0.5, 0.5, 0.7], [3.5, 3.5, math.pi], [3.5, 3.5, -2.0], [0.5, 3.5, -0.6]],
+        [0.0],
+        [[2.6], [3.3], [2.2], [1.3], [2.9]],
+        max_range=4.0,
+        over_range="max",
+    )
     model = OccupancyModel(grid, raycast(grid, scans), GaussianRange(0.8), IndependentPrior(0.4, 16))
     return model, brute_force(model).marginals
 
 
-PROBLEMS = {"toy K=14": partial(toy, 14), "toy K=21": partial(toy, 21), "wall K=200": wall200,
-            "grid 4x4": grid4x4}  # fmt: skip
+PROBLEMS = {"toy K=14": partial(toy, 14), "toy K=21": partial(toy, 21), "wall K=200": wall200, "grid 4x4": grid4x4}
 
 
 def kernels(model) -> dict:
@@ -101,8 +105,14 @@ def measure(trace: np.ndarray, seconds: float, exact: np.ndarray, uncertain: np.
     running = np.cumsum(trace, 0) / np.arange(1, n + 1)[:, None]
     checkpoints = np.unique(np.geomspace(1, n, 400).astype(int)) - 1
     kl = kl_sum(exact[None, :], running[checkpoints])
-    out = {"sweeps": n, "ms_per_sweep": 1e3 * per_sweep, "ess_median": ess_med,
-           "ess_per_sweep": ess_med / n, "ess_per_s": ess_med / seconds, "final_kl": float(kl[-1])}  # fmt: skip
+    out = {
+        "sweeps": n,
+        "ms_per_sweep": 1e3 * per_sweep,
+        "ess_median": ess_med,
+        "ess_per_sweep": ess_med / n,
+        "ess_per_s": ess_med / seconds,
+        "final_kl": float(kl[-1]),
+    }
     for thr in (0.01, 0.001):
         hit = np.flatnonzero(kl < thr)
         # the first checkpoint after which the KL stays below the threshold
@@ -156,8 +166,7 @@ def numpyro_peer(model, num_samples: int, modified: bool, seed: int = 0):
         first = jnp.where(occ.any(1), jnp.argmax(occ, 1), lengths_j)
         numpyro.factor("z", ll[rows, first].sum())
 
-    mcmc = MCMC(DiscreteGibbs(np_model, modified=modified), num_warmup=20, num_samples=num_samples,
-                progress_bar=False)  # fmt: skip
+    mcmc = MCMC(DiscreteGibbs(np_model, modified=modified), num_warmup=20, num_samples=num_samples, progress_bar=False)
     key = jax.random.PRNGKey(seed)
     t = time.perf_counter()
     mcmc.run(key)
@@ -186,30 +195,48 @@ def reference_scene(num_sweeps: int) -> dict:
     rng = np.random.default_rng(0)
     candidates = np.flatnonzero(moved)
     trace_cells = np.sort(rng.choice(candidates, min(300, len(candidates)), replace=False))
-    res = {"K": model.num_cells, "rays": model.rays.num_rays, "chains": 4, "sweeps_per_chain": num_sweeps,
-           "traced_cells": len(trace_cells)}  # fmt: skip
+    res = {
+        "K": model.num_cells,
+        "rays": model.rays.num_rays,
+        "chains": 4,
+        "sweeps_per_chain": num_sweeps,
+        "traced_cells": len(trace_cells),
+    }
     for update in ("gibbs", "metropolised"):
         make = partial(CellGibbs, model, scan="systematic", update=update)
         for processes, ctx in ((1, None), (2, "fork"), (2, "spawn")) if update == "metropolised" else ((1, None),):
             t = time.perf_counter()
-            chains = run_chains(make, 4, num_sweeps, trace_cells, warmup=20, seed=0, processes=processes,
-                                mp_context=ctx)  # fmt: skip
+            chains = run_chains(
+                make, 4, num_sweeps, trace_cells, warmup=20, seed=0, processes=processes, mp_context=ctx
+            )
             sec = time.perf_counter() - t
             rhat = chains.rhat().numpy()
             ess = chains.ess().numpy()
             ok = np.isfinite(rhat)
-            row = {"seconds": sec, "ess_median": float(np.nanmedian(ess)), "ess_per_s": float(np.nanmedian(ess)) / sec,
-                   "rhat_max": float(np.nanmax(rhat)), "rhat_median": float(np.nanmedian(rhat)),
-                   "frac_rhat_below_1.01": float((rhat[ok] < 1.01).mean()), "varying_cells": int(ok.sum())}  # fmt: skip
+            row = {
+                "seconds": sec,
+                "ess_median": float(np.nanmedian(ess)),
+                "ess_per_s": float(np.nanmedian(ess)) / sec,
+                "rhat_max": float(np.nanmax(rhat)),
+                "rhat_median": float(np.nanmedian(rhat)),
+                "frac_rhat_below_1.01": float((rhat[ok] < 1.01).mean()),
+                "varying_cells": int(ok.sum()),
+            }
             key = f"{update}, {processes} process(es)" + (f", {ctx}" if processes > 1 else "")
             res[key] = row
-            print(f"  reference scene {update:12s} processes={processes} {ctx or '':5s}: {sec:6.1f} s, ESS/s {row['ess_per_s']:.1f}, "
-                  f"R-hat max {row['rhat_max']:.3f}, {row['frac_rhat_below_1.01']:.0%} of {ok.sum()} varying cells < 1.01")  # fmt: skip
+            print(
+                f"  reference scene {update:12s} processes={processes} {ctx or '':5s}: {sec:6.1f} s, ESS/s "
+                f"{row['ess_per_s']:.1f}, "
+                f"R-hat max {row['rhat_max']:.3f}, {row['frac_rhat_below_1.01']:.0%} of {ok.sum()} varying cells < 1.01"
+            )
     for ctx in ("fork", "spawn"):
-        res[f"parallel speed-up (metropolised, {ctx})"] = (res["metropolised, 1 process(es)"]["seconds"]
-                                                            / res[f"metropolised, 2 process(es), {ctx}"]["seconds"])  # fmt: skip
-        print(f"  4 chains on 2 processes ({ctx}): {res[f'parallel speed-up (metropolised, {ctx})']:.2f}x "
-              "the speed of one after another")  # fmt: skip
+        res[f"parallel speed-up (metropolised, {ctx})"] = (
+            res["metropolised, 1 process(es)"]["seconds"] / res[f"metropolised, 2 process(es), {ctx}"]["seconds"]
+        )
+        print(
+            f"  4 chains on 2 processes ({ctx}): {res[f'parallel speed-up (metropolised, {ctx})']:.2f}x "
+            "the speed of one after another"
+        )
     return res
 
 
@@ -244,9 +271,15 @@ def main(quick: bool = False) -> dict:
             if peer and peer["ess_per_s"] > 0:
                 row["ess_per_s_vs_numpyro_modified"] = row["ess_per_s"] / peer["ess_per_s"]
             t1 = row["s_to_kl_0.01"]
-            print(f"  {kname:34s} {row['ms_per_sweep']:8.3f} ms/sweep  ESS/sweep {row['ess_per_sweep']:5.2f}  "
-                  f"ESS/s {row['ess_per_s']:10.1f}  KL<0.01 in {'-' if t1 is None else f'{t1:.3g} s':>9s}"
-                  + (f"  x{row['ess_per_s_vs_numpyro_modified']:.1f} vs NumPyro modified" if "ess_per_s_vs_numpyro_modified" in row else ""))  # fmt: skip
+            print(
+                f"  {kname:34s} {row['ms_per_sweep']:8.3f} ms/sweep  ESS/sweep {row['ess_per_sweep']:5.2f}  "
+                f"ESS/s {row['ess_per_s']:10.1f}  KL<0.01 in {'-' if t1 is None else f'{t1:.3g} s':>9s}"
+                + (
+                    f"  x{row['ess_per_s_vs_numpyro_modified']:.1f} vs NumPyro modified"
+                    if "ess_per_s_vs_numpyro_modified" in row
+                    else ""
+                )
+            )
         out["problems"][pname] = rows
     if not quick:
         out["reference_scene"] = reference_scene(100)

@@ -74,8 +74,10 @@ def main() -> dict:
     rays = raycast(grid, scans)
     nnz, R = rays.nnz, rays.num_rays
     haehnel = Moravec.haehnel()
-    print(f"scene: {N}x{N} cells at {RES} m, {R} rays, {scans.is_max.mean():.1%} max-range, "
-          f"{nnz / 1e6:.2f} M ray-cell updates ({nnz / R:.1f} per ray); setup {time.perf_counter() - t0:.1f} s")  # fmt: skip
+    print(
+        f"scene: {N}x{N} cells at {RES} m, {R} rays, {scans.is_max.mean():.1%} max-range, "
+        f"{nnz / 1e6:.2f} M ray-cell updates ({nnz / R:.1f} per ray); setup {time.perf_counter() - t0:.1f} s"
+    )
 
     t = time.perf_counter()
     evidence_grid_from_scans(grid, scans, haehnel)
@@ -95,8 +97,7 @@ def main() -> dict:
     agree_loop = float(np.abs(evidence_grid_from_scans(grid, sub, haehnel).log_odds.numpy() - ref_loop).max())
     t_octo, octo_status = octomap_time(scans)
 
-    rows = {"ours (fused)": t_fused, "ours (CSR)": t_csr, "numpy (batched)": t_numpy,
-            "python loop": t_loop}  # fmt: skip
+    rows = {"ours (fused)": t_fused, "ours (CSR)": t_csr, "numpy (batched)": t_numpy, "python loop": t_loop}
     if t_octo is not None:
         rows["octomap"] = t_octo
     print(f"\n{'method':<18}{'time (s)':>10}{'rays/s':>14}{'M updates/s':>14}{'ours fused is':>16}")
@@ -110,9 +111,15 @@ def main() -> dict:
     target = nnz / t_fused / 1e6
     print(f"target >= 100 M updates/s: {target:.0f} M/s -> {'met' if target >= 100 else 'NOT met'}")
     payload = {
-        "scene": {"grid": [N, N], "resolution_m": RES, "rays": R, "max_range_cells": F,
-                  "sigma_cells": SIGMA, "max_range_fraction": float(scans.is_max.mean()),
-                  "ray_cell_updates": nnz},  # fmt: skip
+        "scene": {
+            "grid": [N, N],
+            "resolution_m": RES,
+            "rays": R,
+            "max_range_cells": F,
+            "sigma_cells": SIGMA,
+            "max_range_fraction": float(scans.is_max.mean()),
+            "ray_cell_updates": nnz,
+        },
         "seconds": rows,
         "rays_per_second": {k: R / v for k, v in rows.items()},
         "updates_per_second": {k: nnz / v for k, v in rows.items()},

@@ -41,7 +41,9 @@ def main() -> dict:
     ref = reference_map(model)
     _, res["online patch map 3x3"] = timed(lambda: online_patch_map(model, (3, 3)))
     _, res["offline patch map 3x3"] = timed(lambda: offline_patch_map(model, (3, 3), reference=ref))
-    _, res["offline patch map 3x3, overlapping"] = timed(lambda: offline_patch_map(model, (3, 3), reference=ref, overlap=True))
+    _, res["offline patch map 3x3, overlapping"] = timed(
+        lambda: offline_patch_map(model, (3, 3), reference=ref, overlap=True)
+    )
     for k, v in res.items():
         print(f"{k:<40} {v:9.2f} s")
     print(f"peak RSS {peak_rss_mb():.0f} MiB")

@@ -94,8 +94,11 @@ def border_table(truth: np.ndarray, n: int):
     inner_pos = [i for i, (r, c) in enumerate(pos) if 0 < r < N - 1 and 0 < c < N - 1]
     ring_pos = [i for i, (r, c) in enumerate(pos) if not (0 < r < N - 1 and 0 < c < N - 1)]
     bits = (full[:, None] >> np.arange(N * N)) & 1
-    return ((bits[:, ring_pos] << np.arange(len(ring_pos))).sum(1), (bits[:, inner_pos] << np.arange(len(inner_pos))).sum(1),
-            cnt)  # fmt: skip
+    return (
+        (bits[:, ring_pos] << np.arange(len(ring_pos))).sum(1),
+        (bits[:, inner_pos] << np.arange(len(inner_pos))).sum(1),
+        cnt,
+    )
 
 
 def walled_map(n: int, seed: int = 0) -> np.ndarray:
@@ -135,10 +138,17 @@ def intel_size(n: int = 1500, poses: int = 455, beams: int = 180, max_range_cell
     kern = PatchGibbs(model, (3, 3), p_rand_patch=0.001)
     setup = time.perf_counter() - t0
     s = sweep_seconds(kern, repeat=2)
-    out = {"cells": grid.num_cells, "rays": rays.num_rays, "seconds": s, "setup_seconds": setup,
-           "thesis_seconds": 1518.0}  # fmt: skip
-    print(f"\nIntel-size border prior, L = 9: {n} x {n} = {grid.num_cells:,} cells, {rays.num_rays:,} rays: "
-          f"{s:.3f} s per map sample (set-up {setup:.1f} s; thesis 1518 s)")  # fmt: skip
+    out = {
+        "cells": grid.num_cells,
+        "rays": rays.num_rays,
+        "seconds": s,
+        "setup_seconds": setup,
+        "thesis_seconds": 1518.0,
+    }
+    print(
+        f"\nIntel-size border prior, L = 9: {n} x {n} = {grid.num_cells:,} cells, {rays.num_rays:,} rays: "
+        f"{s:.3f} s per map sample (set-up {setup:.1f} s; thesis 1518 s)"
+    )
     return out
 
 
@@ -179,12 +189,16 @@ def table_5_1(rows: int = 200, cols: int = 320) -> dict:
     sensor = GaussianRange(3.0)
     priors = priors_for(grid.shape, truth)
     priors.update({("uniform", L): IndependentPrior(0.5, grid.num_cells) for L in (1, 9, 25)})
-    print(f"simple 2D example at {grid.shape[0]} x {grid.shape[1]} = {grid.num_cells:,} cells, "
-          f"{rays.num_rays:,} rays; set-up {time.perf_counter() - t0:.1f} s")  # fmt: skip
+    print(
+        f"simple 2D example at {grid.shape[0]} x {grid.shape[1]} = {grid.num_cells:,} cells, "
+        f"{rays.num_rays:,} rays; set-up {time.perf_counter() - t0:.1f} s"
+    )
     for L, n in ((9, 3), (25, 5)):
         p, b = priors[("data-driven", L)], priors[("border", L)]
-        print(f"  {n}x{n}: table keeps {p.num_configurations} configurations (99.9% of the mass); border table "
-              f"{b.num_borders} borders, at most {b.max_per_border} patches per border")  # fmt: skip
+        print(
+            f"  {n}x{n}: table keeps {p.num_configurations} configurations (99.9% of the mass); border table "
+            f"{b.num_borders} borders, at most {b.max_per_border} patches per border"
+        )
     rows = {}
     print(f"\n{'':8}{'prior':<13}{'ours [s]':>10}{'thesis [s]':>12}{'thesis/ours':>13}")
     for L, patch in ((1, None), (9, (3, 3)), (25, (5, 5))):
@@ -200,20 +214,29 @@ def table_5_1(rows: int = 200, cols: int = 320) -> dict:
             if s is not None:
                 ratio = f"{thesis / s:,.0f}x" if thesis else "-"
                 print(f"  L={L:<4}{name:<13}{s:>10.4f}{thesis or '-':>12}{ratio:>13}")
-            rows[f"L={L}/{name}"] = {"seconds": s, "thesis_seconds": thesis,
-                                     "speedup_vs_thesis": (thesis / s) if (s and thesis) else None}  # fmt: skip
+            rows[f"L={L}/{name}"] = {
+                "seconds": s,
+                "thesis_seconds": thesis,
+                "speedup_vs_thesis": (thesis / s) if (s and thesis) else None,
+            }
     r9 = [rows[f"L=9/{n}"]["seconds"] for n in ("border", "data-driven", "uniform")]
     order_ok = r9[0] < r9[1] < r9[2]
     speed_ok = all(v["speedup_vs_thesis"] >= 100 for v in rows.values() if v["speedup_vs_thesis"] is not None)
     print(f"thesis ordering at L = 9 (border < data-driven < uniform): {'holds' if order_ok else 'DOES NOT hold'}")
     print(f"every time at least 100x below the thesis's: {'yes' if speed_ok else 'NO'}")
-    return {"cells": grid.num_cells, "rays": rays.num_rays, "rows": rows, "ordering_at_L9_holds": order_ok,
-            "all_100x_faster": speed_ok}  # fmt: skip
+    return {
+        "cells": grid.num_cells,
+        "rays": rays.num_rays,
+        "rows": rows,
+        "ordering_at_L9_holds": order_ok,
+        "all_100x_faster": speed_ok,
+    }
 
 
 def mrf_overhead() -> dict:
-    grid, scans = sparse_scene(500, 100, walls=max(4, 500 * 500 // 6000), seed=0, res=0.05, max_range_cells=75,
-                               sigma_cells=3.0, beams=720)  # fmt: skip
+    grid, scans = sparse_scene(
+        500, 100, walls=max(4, 500 * 500 // 6000), seed=0, res=0.05, max_range_cells=75, sigma_cells=3.0, beams=720
+    )
     rays = raycast(grid, scans)
     base = OccupancyModel(grid, rays, GaussianRange(3.0), IndependentPrior(0.234, grid.num_cells))
     s_ind = sweep_seconds(CellGibbs(base))

@@ -23,7 +23,8 @@ value, so the region chain samples the conditional of the visited patches given 
 Per configuration ``--sweeps`` sweeps run (default 3): the first (after ``setup``: initial OGM map and
 every ray's first hit; it also pays numba's compilation the first time) is reported apart, the mean of the
 others is the time per sample (wall clock; the CPU time of this single-threaded process is reported
-beside it, as it moves less when other jobs share the cores). Also reported: model build seconds (raycast + model + prior) and the
+beside it, as it moves less when other jobs share the cores). Also reported: model build seconds (raycast + model +
+prior) and the
 process's peak RSS (``resource.getrusage``), with the load average, since the machine may be shared.
 The sensor is ``GaussianRange(--sigma-cells)`` (default 3.0 cells; the thesis's sigma is not restated
 for Table 6.6). Both priors have ``outside_occupancy() = 0.5``, so their likelihood tables are equal and the
@@ -133,8 +134,14 @@ def run_experiment(log, exp: int, grid: Grid, sigma_cells: float, near: float, s
     # which caches two per-entry arrays (about 0.75 GB at Experiment 1) for the rest of the run.
     mapped = evidence_grid(rays, delta_by_name("haehnel")).observed.numpy().reshape(grid.shape)
     region = near_mapped_mask(mapped, near)
-    out: dict = {"poses": int(scans.num_scans), "rays": int(rays.num_rays), "raycast_s": raycast_s,
-                 "mapped_cells": int(mapped.sum()), "region_cells": int(region.sum()), "priors": {}}  # fmt: skip
+    out: dict = {
+        "poses": int(scans.num_scans),
+        "rays": int(rays.num_rays),
+        "raycast_s": raycast_s,
+        "mapped_cells": int(mapped.sum()),
+        "region_cells": int(region.sum()),
+        "priors": {},
+    }
     init, model = None, None
     for key, name in PRIORS.items():
         t = time.perf_counter()
@@ -156,9 +163,14 @@ def run_experiment(log, exp: int, grid: Grid, sigma_cells: float, near: float, s
             r = time_chain(model, reg, sweeps, init)
             init = r.pop("init")  # the same starting map (thresholded traditional OGM) for every chain
             res[label] = r
-            print(f"  exp {exp} {key:>6} {label:>6}: setup {r['setup_s']:6.1f} s, first sweep {r['first_sweep_s']:6.2f} s, "
-                  f"{r['s_per_sample']:7.3f} s/sample (CPU {r['cpu_s_per_sample']:.3f} s; {r['patches']} patches, {r['sampled_cells']} cells), "
-                  f"load {loadavg()}", flush=True)  # fmt: skip
+            print(
+                f"  exp {exp} {key:>6} {label:>6}: setup {r['setup_s']:6.1f} s, first sweep "
+                f"{r['first_sweep_s']:6.2f} s, "
+                f"{r['s_per_sample']:7.3f} s/sample (CPU {r['cpu_s_per_sample']:.3f} s; {r['patches']} patches, "
+                f"{r['sampled_cells']} cells), "
+                f"load {loadavg()}",
+                flush=True,
+            )
         res["peak_rss_mib"] = peak_rss_mb()
         out["priors"][key] = res
     del model, rays, scans
@@ -191,7 +203,9 @@ def main(argv: list[str] | None = None) -> dict:
     results = {}
     for e in exps:
         results[str(e)] = run_experiment(log, e, grid, a.sigma_cells, a.near, a.sweeps)
-    print(f"\nTable 6.6, seconds per map sample (one sweep of 3 x 3 patches), K = {grid.num_cells}; thesis / ours in ()")
+    print(
+        f"\nTable 6.6, seconds per map sample (one sweep of 3 x 3 patches), K = {grid.num_cells}; thesis / ours in ()"
+    )
     print(f"{'':>12} {'prior':>6} {'thesis':>8} {'full':>16} {'(CPU)':>8} {'region':>16} {'(CPU)':>8}")
     for name, r in results.items():
         for key in PRIORS:
@@ -199,15 +213,29 @@ def main(argv: list[str] | None = None) -> dict:
             full, reg = r["priors"][key]["full"], r["priors"][key]["region"]
             fs, rs = full["s_per_sample"], reg["s_per_sample"]
             r["priors"][key].update(thesis_s=th, speedup_full=th / fs, speedup_region=th / rs)
-            print(f"{'Experiment ' + name:>12} {key:>6} {th:8.1f} {fs:8.3f} ({th / fs:5.0f}x) {full['cpu_s_per_sample']:8.3f} "
-                  f"{rs:8.3f} ({th / rs:5.0f}x) {reg['cpu_s_per_sample']:8.3f}")  # fmt: skip
-        print(f"{'':>12} build {r['build_s']:.1f} s (raycast {r['raycast_s']:.1f} s), region {r['region_cells']} of "
-              f"{grid.num_cells} cells")  # fmt: skip
+            print(
+                f"{'Experiment ' + name:>12} {key:>6} {th:8.1f} {fs:8.3f} ({th / fs:5.0f}x) "
+                f"{full['cpu_s_per_sample']:8.3f} "
+                f"{rs:8.3f} ({th / rs:5.0f}x) {reg['cpu_s_per_sample']:8.3f}"
+            )
+        print(
+            f"{'':>12} build {r['build_s']:.1f} s (raycast {r['raycast_s']:.1f} s), region {r['region_cells']} of "
+            f"{grid.num_cells} cells"
+        )
     load1 = loadavg()
     print(f"peak RSS {peak_rss_mb():.0f} MiB; log read {read_s:.1f} s; load {load0} -> {load1}")
-    payload = {"resolution_m": a.resolution, "cells": grid.num_cells, "sigma_cells": a.sigma_cells, "near_cells": a.near,
-               "sweeps": a.sweeps, "log_read_s": read_s, "experiments": results, "peak_rss_mib": peak_rss_mb(),
-               "loadavg_start": load0, "loadavg_end": load1}  # fmt: skip
+    payload = {
+        "resolution_m": a.resolution,
+        "cells": grid.num_cells,
+        "sigma_cells": a.sigma_cells,
+        "near_cells": a.near,
+        "sweeps": a.sweeps,
+        "log_read_s": read_s,
+        "experiments": results,
+        "peak_rss_mib": peak_rss_mb(),
+        "loadavg_start": load0,
+        "loadavg_end": load1,
+    }
     print("wrote", write_json("bench_table_6_6", payload))
     return payload
 

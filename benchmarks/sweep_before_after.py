@@ -72,16 +72,27 @@ def main(root: str, repeat: int = 15) -> dict:
             p = k.sample(p)
             if i >= 20:
                 times.append(time.perf_counter() - t)
-        out[scan] = {"best": 1e3 * min(times), "median": 1e3 * float(np.median(times)),
-                     "change rate": k.diagnostics()["change rate"]}  # fmt: skip
+        out[scan] = {
+            "best": 1e3 * min(times),
+            "median": 1e3 * float(np.median(times)),
+            "change rate": k.diagnostics()["change rate"],
+        }
         if getattr(k, "_bits", None) is not None:  # the kept-sum kernel: its fixed point and rounding bound
             out["fixed-point bits"] = k._bits
-            out["rounding bound"] = int(np.diff(k._c_off).max()) * 2.0 ** -k._bits
-    print(root, "  ".join(f"{k} best {v['best']:.1f} / median {v['median']:.1f} ms (change rate {v['change rate']:.3f})"
-                          for k, v in out.items() if k in SCANS))  # fmt: skip
+            out["rounding bound"] = int(np.diff(k._c_off).max()) * 2.0**-k._bits
+    print(
+        root,
+        "  ".join(
+            f"{k} best {v['best']:.1f} / median {v['median']:.1f} ms (change rate {v['change rate']:.3f})"
+            for k, v in out.items()
+            if k in SCANS
+        ),
+    )
     if "fixed-point bits" in out:
-        print(f"fixed-point bits S = {out['fixed-point bits']}; log-odds within {out['rounding bound']:.2g} of the "
-              "floating-point sum (the most rays a cell has x 2^-S)")  # fmt: skip
+        print(
+            f"fixed-point bits S = {out['fixed-point bits']}; log-odds within {out['rounding bound']:.2g} of the "
+            "floating-point sum (the most rays a cell has x 2^-S)"
+        )
     return out
 
 
@@ -194,8 +205,7 @@ def _baseline():
             MapKernel._set_state(self, m)  # the map and every ray's first hit self._f, not CellGibbs's state
             rays = np.empty(len(self._f), _BASE_RAY)
             rays["f"], rays["ll_hit"] = self._f, self._ll[np.arange(len(self._f)), self._f]
-            self._base = _BaseState(self._m, rays, self._offsets, self._cells, self._c_off, self._base_pairs,
-                                    self._ll)  # fmt: skip
+            self._base = _BaseState(self._m, rays, self._offsets, self._cells, self._c_off, self._base_pairs, self._ll)
             self._f = rays["f"]
 
         def _sweep(self) -> int:
@@ -212,7 +222,8 @@ def interleaved(model, repeat: int = 7, scans=SCANS, warmup: int = 20) -> dict:
     """Best-of-``repeat`` (and median) ``sample`` times (seconds) of :class:`CellGibbs` and of the baseline kernel, one
     sweep of each in turn after ``warmup`` sweeps each (the chains' steady state: nearly all of a long
     chain's sweeps are like these; the first sweeps from the OGM map move more cells), per scan; both start
-    from the same map (the thresholded OGM). Returns ``{scan: {"before": s, "after": s, "ratio": before / after, "before_median": s, "after_median": s}}`` and the load
+    from the same map (the thresholded OGM). Returns ``{scan: {"before": s, "after": s, "ratio": before / after,
+    "before_median": s, "after_median": s}}`` and the load
     average (``/proc/loadavg``, where there is one) at the start and at the end."""
     import time
 
@@ -276,8 +287,11 @@ def floors(model, repeat: int = 7) -> dict:
     st = k._base
     latent = k._latent
     rand = np.ascontiguousarray(latent[np.random.default_rng(0).integers(0, len(latent), len(latent))])
-    runs = {"stream": lambda: stream(st.pairs), "stream + rays, systematic": lambda: gather(st, latent),
-            "stream + rays, random": lambda: gather(st, rand)}  # fmt: skip
+    runs = {
+        "stream": lambda: stream(st.pairs),
+        "stream + rays, systematic": lambda: gather(st, latent),
+        "stream + rays, random": lambda: gather(st, rand),
+    }
     best = {}
     for name, fn in runs.items():
         fn()
@@ -299,18 +313,24 @@ def _loadavg() -> str:
 
 
 def report(res: dict, floor: dict | None = None) -> None:
-    print(f"single-cell sweep, best of N, interleaved in one process (load average {res['loadavg_start']} -> "
-          f"{res['loadavg_end']}):")  # fmt: skip
+    print(
+        f"single-cell sweep, best of N, interleaved in one process (load average {res['loadavg_start']} -> "
+        f"{res['loadavg_end']}):"
+    )
     for scan in SCANS:
         if scan in res:
             r = res[scan]
-            print(f"  {scan:<12} before {r['before'] * 1e3:7.1f} ms   after {r['after'] * 1e3:6.1f} ms   "
-                  f"{r['ratio']:4.1f}x   (medians {r['before_median'] * 1e3:.1f} -> {r['after_median'] * 1e3:.1f} ms)")  # fmt: skip
+            print(
+                f"  {scan:<12} before {r['before'] * 1e3:7.1f} ms   after {r['after'] * 1e3:6.1f} ms   "
+                f"{r['ratio']:4.1f}x   (medians {r['before_median'] * 1e3:.1f} -> {r['after_median'] * 1e3:.1f} ms)"
+            )
     if floor:
-        print(f"  floor: one pass over the {floor['bytes'] / 1e6:.0f} MB of pair records "
-              f"{floor['stream'] * 1e3:.1f} ms; with the ray records, systematic order "
-              f"{floor['stream + rays, systematic'] * 1e3:.1f} ms, random order "
-              f"{floor['stream + rays, random'] * 1e3:.1f} ms")  # fmt: skip
+        print(
+            f"  floor: one pass over the {floor['bytes'] / 1e6:.0f} MB of pair records "
+            f"{floor['stream'] * 1e3:.1f} ms; with the ray records, systematic order "
+            f"{floor['stream + rays, systematic'] * 1e3:.1f} ms, random order "
+            f"{floor['stream + rays, random'] * 1e3:.1f} ms"
+        )
 
 
 if __name__ == "__main__":

@@ -58,8 +58,12 @@ THRESHOLDS = (0.05, 0.03, 0.02)
 def scores(q: torch.Tensor, truth: np.ndarray, mask: np.ndarray) -> dict:
     q = q.numpy() if isinstance(q, torch.Tensor) else q
     t = truth.ravel().astype(bool)
-    return {"best_f1": best_f1(q, t, mask=mask)[0], "auc": roc_auc(q, t, mask=mask),
-            "nll_bits": nll_bits(q, t, mask=mask), "ece": expected_calibration_error(q, t, mask=mask)}  # fmt: skip
+    return {
+        "best_f1": best_f1(q, t, mask=mask)[0],
+        "auc": roc_auc(q, t, mask=mask),
+        "nll_bits": nll_bits(q, t, mask=mask),
+        "ece": expected_calibration_error(q, t, mask=mask),
+    }
 
 
 def make_maps(args) -> list[dict]:
@@ -76,14 +80,16 @@ def make_maps(args) -> list[dict]:
         gen = torch.Generator().manual_seed(int(rng.integers(2**62)))
         truth = m0.prior.sample_given_free(m0.known_free, (), generator=gen)
         z = m0.simulate_readings(truth, generator=gen)
-        out.append({"set": "A:prior", "name": f"prior_{i}", "truth": truth.numpy().reshape(shape), "model": scene.model(z)})
+        out.append(
+            {"set": "A:prior", "name": f"prior_{i}", "truth": truth.numpy().reshape(shape), "model": scene.model(z)}
+        )
     rng = np.random.default_rng(ss_b)
     for i in range(args.maps_b):
         kind = KINDS[i % len(KINDS)]
         big = generate_map(kind, (120, 120), np.random.default_rng(rng.integers(2**62)), border=20)
         for _ in range(100):  # a window with some wall and some free space
             r0, c0 = rng.integers(12, 120 - 12 - args.size, 2)
-            win = big[r0:r0 + args.size, c0:c0 + args.size]
+            win = big[r0 : r0 + args.size, c0 : c0 + args.size]
             if 0.1 < win.mean() < 0.6:
                 break
         scene = random_scene(prior, shape, args.poses, args.beams, args.range_cells, sensor, rng, free=~win)
@@ -129,7 +135,12 @@ def evaluate(item: dict, guide: AmortisedGuide, args) -> dict:
     latent = model.latent.numpy()
     mask = np.zeros(model.num_cells, bool)
     mask[latent] = True
-    res = {"set": item["set"], "name": item["name"], "cells": int(mask.sum()), "occupied_share": float(truth.ravel()[mask].mean())}
+    res = {
+        "set": item["set"],
+        "name": item["name"],
+        "cells": int(mask.sum()),
+        "occupied_share": float(truth.ravel()[mask].mean()),
+    }
     # (a) the guide, one pass
     t0 = time.perf_counter()
     q_guide = guide.marginals(model)
@@ -141,8 +152,8 @@ def evaluate(item: dict, guide: AmortisedGuide, args) -> dict:
     refs, t_ref, kept = [], 0.0, []
     for c in range(2):
         states, sec = run_chain(PatchGibbs(model, (3, 3)), args.ref_warmup + args.ref_sweeps, 1000 + c, latent)
-        refs.append(states[args.ref_warmup:].mean(0))
-        kept.append(states[args.ref_warmup:])
+        refs.append(states[args.ref_warmup :].mean(0))
+        kept.append(states[args.ref_warmup :])
         t_ref += sec
     ref_states = np.concatenate(kept)
     ref = np.zeros(model.num_cells)
@@ -150,23 +161,30 @@ def evaluate(item: dict, guide: AmortisedGuide, args) -> dict:
     res["ref_chain_gap"] = float(np.abs(refs[0] - refs[1]).mean())
     res["methods"] = {
         "guide": {**scores(q_guide, truth, mask), "seconds": t_guide},
-        "gibbs_long": {**scores(ref, truth, mask), "seconds": t_ref,
-                       "sweeps": 2 * (args.ref_warmup + args.ref_sweeps)},  # fmt: skip
+        "gibbs_long": {**scores(ref, truth, mask), "seconds": t_ref, "sweeps": 2 * (args.ref_warmup + args.ref_sweeps)},
         "p21_ogm": {**scores(q_p21, truth, mask), "seconds": t_p21},
     }
     res["guide_vs_ref_mean_abs"] = float(np.abs(q_guide.numpy()[latent] - ref[latent]).mean())
     res["p21_vs_ref_mean_abs"] = float(np.abs(q_p21.numpy()[latent] - ref[latent]).mean())
     # (b, c) sweeps to the long-run marginals
-    tile_mode = model.full_map(GuidedGibbs(PatchGibbs(model, (3, 3)), guide, block=(3, 3),
-                                           proposal="tiles").initial_params["m"])  # fmt: skip
+    tile_mode = model.full_map(
+        GuidedGibbs(PatchGibbs(model, (3, 3)), guide, block=(3, 3), proposal="tiles").initial_params["m"]
+    )
     variants = {
         "gibbs_default_init": lambda: PatchGibbs(model, (3, 3)),
         "gibbs_guide_init": lambda: PatchGibbs(model, (3, 3), init=guide_initial_map(guide, model)),
         "gibbs_guide_tile_init": lambda: PatchGibbs(model, (3, 3), init=tile_mode),
-        "guided_tiles": lambda: GuidedGibbs(PatchGibbs(model, (3, 3)), guide, block=tuple(args.block),
-                                            p_guide=args.p_guide, init="guide", proposal="tiles"),  # fmt: skip
-        "guided_bernoulli": lambda: GuidedGibbs(PatchGibbs(model, (3, 3)), guide, block=(3, 3),
-                                                p_guide=args.p_guide, init="guide"),  # fmt: skip
+        "guided_tiles": lambda: GuidedGibbs(
+            PatchGibbs(model, (3, 3)),
+            guide,
+            block=tuple(args.block),
+            p_guide=args.p_guide,
+            init="guide",
+            proposal="tiles",
+        ),
+        "guided_bernoulli": lambda: GuidedGibbs(
+            PatchGibbs(model, (3, 3)), guide, block=(3, 3), p_guide=args.p_guide, init="guide"
+        ),
     }
     ref_l = ref[latent]
     C = args.chains
@@ -230,8 +248,10 @@ def summarise(results: list[dict], args) -> dict:
         rows = [r for r in results if s in ("all", r["set"])]
         table = {}
         for meth in ("guide", "gibbs_long", "p21_ogm"):
-            table[meth] = {k: float(np.mean([r["methods"][meth][k] for r in rows]))
-                           for k in ("best_f1", "auc", "nll_bits", "ece", "seconds")}  # fmt: skip
+            table[meth] = {
+                k: float(np.mean([r["methods"][meth][k] for r in rows]))
+                for k in ("best_f1", "auc", "nll_bits", "ece", "seconds")
+            }
         conv = {}
         for v in rows[0]["convergence"]:
             c = {}
@@ -246,7 +266,9 @@ def summarise(results: list[dict], args) -> dict:
                 c[f"{key}_reached"] = f"{sum(x is not None for x in vals)}/{len(vals)}"
             for t in (1, 2, 5, 10):
                 t = min(t, args.sweeps)
-                c[f"log_joint_gap_at_{t}"] = float(np.median([r["convergence"][v]["log_joint_gap"][t - 1] for r in rows]))
+                c[f"log_joint_gap_at_{t}"] = float(
+                    np.median([r["convergence"][v]["log_joint_gap"][t - 1] for r in rows])
+                )
                 c[f"excess_at_{t}"] = float(np.mean([r["convergence"][v]["ensemble_excess"][t - 1] for r in rows]))
             spw = float(np.mean([r["convergence"][v]["seconds_per_sweep"] for r in rows]))
             c["seconds_per_sweep"] = spw
@@ -256,55 +278,91 @@ def summarise(results: list[dict], args) -> dict:
                 c["guide_acceptance"] = float(np.mean([r["convergence"][v]["guide_acceptance"] for r in rows]))
             conv[v] = c
         acc = {k: float(np.mean([r["acceptance_by_block"][k] for r in rows])) for k in rows[0]["acceptance_by_block"]}
-        summary[s] = {"maps": len(rows), "scores": table, "convergence": conv, "acceptance_by_block": acc,
-                      "guide_vs_ref_mean_abs": float(np.mean([r["guide_vs_ref_mean_abs"] for r in rows])),
-                      "p21_vs_ref_mean_abs": float(np.mean([r["p21_vs_ref_mean_abs"] for r in rows])),
-                      "ref_chain_gap": float(np.mean([r["ref_chain_gap"] for r in rows])),
-                      "speedup_guide_vs_gibbs_long": table["gibbs_long"]["seconds"] / table["guide"]["seconds"]}  # fmt: skip
+        summary[s] = {
+            "maps": len(rows),
+            "scores": table,
+            "convergence": conv,
+            "acceptance_by_block": acc,
+            "guide_vs_ref_mean_abs": float(np.mean([r["guide_vs_ref_mean_abs"] for r in rows])),
+            "p21_vs_ref_mean_abs": float(np.mean([r["p21_vs_ref_mean_abs"] for r in rows])),
+            "ref_chain_gap": float(np.mean([r["ref_chain_gap"] for r in rows])),
+            "speedup_guide_vs_gibbs_long": table["gibbs_long"]["seconds"] / table["guide"]["seconds"],
+        }
     return summary
 
 
 def markdown(summary: dict, args, meta: dict) -> str:
-    lines = ["# Amortised guide vs Gibbs with the same prior vs p21 OGM", "",
-             f"Guide: `{args.guide}` (trained for {meta}). Prior `{args.prior}`; maps {args.size} x {args.size}, "
-             f"{args.poses} poses x {args.beams} beams, range {args.range_cells} cells, GaussianRange({args.sigma}). "
-             f"Reference: 3 x 3 patch Gibbs, 2 chains x ({args.ref_warmup} warm-up + {args.ref_sweeps}) sweeps. "
-             f"Scores over the latent cells against the true map; wall times on this machine (1 thread). "
-             "Chain c of every sampler uses the same seed (common random numbers), so the samplers' differences "
-             "are paired; once chains from different starts coalesce they make the same moves.", ""]  # fmt: skip
+    lines = [
+        "# Amortised guide vs Gibbs with the same prior vs p21 OGM",
+        "",
+        f"Guide: `{args.guide}` (trained for {meta}). Prior `{args.prior}`; maps {args.size} x {args.size}, "
+        f"{args.poses} poses x {args.beams} beams, range {args.range_cells} cells, GaussianRange({args.sigma}). "
+        f"Reference: 3 x 3 patch Gibbs, 2 chains x ({args.ref_warmup} warm-up + {args.ref_sweeps}) sweeps. "
+        f"Scores over the latent cells against the true map; wall times on this machine (1 thread). "
+        "Chain c of every sampler uses the same seed (common random numbers), so the samplers' differences "
+        "are paired; once chains from different starts coalesce they make the same moves.",
+        "",
+    ]
     for s, v in summary.items():
-        lines += [f"## Set {s} ({v['maps']} maps)", "",
-                  "| method | best F1 | AUC | NLL bits/cell | ECE | seconds |", "|---|---|---|---|---|---|"]
+        lines += [
+            f"## Set {s} ({v['maps']} maps)",
+            "",
+            "| method | best F1 | AUC | NLL bits/cell | ECE | seconds |",
+            "|---|---|---|---|---|---|",
+        ]
         for meth, t in v["scores"].items():
-            lines.append(f"| {meth} | {t['best_f1']:.3f} | {t['auc']:.3f} | {t['nll_bits']:.3f} | {t['ece']:.3f} | {t['seconds']:.3g} |")
-        lines += ["", f"Speed-up of the guide over the long Gibbs run: {v['speedup_guide_vs_gibbs_long']:.0f}x. "
-                  f"Mean |marginal - reference|: guide {v['guide_vs_ref_mean_abs']:.4f}, p21 {v['p21_vs_ref_mean_abs']:.4f}; "
-                  f"the two reference chains differ by {v['ref_chain_gap']:.4f}.", "",
-                  f"Sweeps until the pooled running marginals of {args.chains} chains stay within mean |diff| <= d of the "
-                  "reference (median over maps; reached / maps):", "",
-                  "| sampler | " + " | ".join(f"d={d}" for d in THRESHOLDS) + " | dist@1 | dist@10 | dist@50 | "
-                  f"dist@{args.sweeps} | s/sweep | guide accept |",
-                  "|---|" + "---|" * (len(THRESHOLDS) + 6)]  # fmt: skip
+            lines.append(
+                f"| {meth} | {t['best_f1']:.3f} | {t['auc']:.3f} | {t['nll_bits']:.3f} | {t['ece']:.3f} | "
+                f"{t['seconds']:.3g} |"
+            )
+        lines += [
+            "",
+            f"Speed-up of the guide over the long Gibbs run: {v['speedup_guide_vs_gibbs_long']:.0f}x. "
+            f"Mean |marginal - reference|: guide {v['guide_vs_ref_mean_abs']:.4f}, p21 {v['p21_vs_ref_mean_abs']:.4f}; "
+            f"the two reference chains differ by {v['ref_chain_gap']:.4f}.",
+            "",
+            f"Sweeps until the pooled running marginals of {args.chains} chains stay within mean |diff| <= d of the "
+            "reference (median over maps; reached / maps):",
+            "",
+            "| sampler | " + " | ".join(f"d={d}" for d in THRESHOLDS) + " | dist@1 | dist@10 | dist@50 | "
+            f"dist@{args.sweeps} | s/sweep | guide accept |",
+            "|---|" + "---|" * (len(THRESHOLDS) + 6),
+        ]
         for name, c in v["convergence"].items():
             cells = [f"{c[f'sweeps_to_{d}_median']:.0f} ({c[f'reached_{d}']})" for d in THRESHOLDS]
             acc = f"{c['guide_acceptance']:.3f}" if "guide_acceptance" in c else "-"
             at = [c.get(f"running_dist_at_{min(t, args.sweeps)}") for t in (1, 10, 50, args.sweeps)]
-            lines.append(f"| {name} | " + " | ".join(cells) + " | " + " | ".join(f"{x:.4f}" for x in at) + " | "
-                         f"{c['seconds_per_sweep'] * 1e3:.2f} ms | {acc} |")  # fmt: skip
-        lines += ["", f"Burn-in, from {args.chains} independent chains at each sweep: the chains' median log joint minus "
-                  "the stationary median (nats; median over maps), and the excess of the chains' ensemble marginals over the distance "
-                  f"{args.chains} exact draws would have (mean |diff| - its binomial expectation):", "",
-                  "| sampler | lj gap@1 | @2 | @5 | @10 | sweeps to |gap| < 2 se | excess@1 | @2 | @5 | @10 | sweeps to excess < 0.01 |",
-                  "|---|---|---|---|---|---|---|---|---|---|---|"]  # fmt: skip
+            lines.append(
+                f"| {name} | " + " | ".join(cells) + " | " + " | ".join(f"{x:.4f}" for x in at) + " | "
+                f"{c['seconds_per_sweep'] * 1e3:.2f} ms | {acc} |"
+            )
+        lines += [
+            "",
+            f"Burn-in, from {args.chains} independent chains at each sweep: the chains' median log joint minus "
+            "the stationary median (nats; median over maps), and the excess of the chains' ensemble marginals over "
+            "the distance "
+            f"{args.chains} exact draws would have (mean |diff| - its binomial expectation):",
+            "",
+            "| sampler | lj gap@1 | @2 | @5 | @10 | sweeps to |gap| < 2 se | excess@1 | @2 | @5 | @10 | sweeps to "
+            "excess < 0.01 |",
+            "|---|---|---|---|---|---|---|---|---|---|---|",
+        ]
         for name, c in v["convergence"].items():
             g = [c[f"log_joint_gap_at_{min(t, args.sweeps)}"] for t in (1, 2, 5, 10)]
             e = [c[f"excess_at_{min(t, args.sweeps)}"] for t in (1, 2, 5, 10)]
-            lines.append(f"| {name} | " + " | ".join(f"{x:.1f}" for x in g)
-                         + f" | {c['sweeps_to_log_joint_2se_median']:.0f} ({c['sweeps_to_log_joint_2se_reached']}) | "
-                         + " | ".join(f"{x:.4f}" for x in e)
-                         + f" | {c['sweeps_to_excess_0.01_median']:.0f} ({c['sweeps_to_excess_0.01_reached']}) |")  # fmt: skip
-        lines += ["", f"Acceptance of guide moves by block ({args.acc_passes} passes from a reference-chain state): "
-                  + ", ".join(f"{k} {a:.3f}" for k, a in v["acceptance_by_block"].items()), ""]  # fmt: skip
+            lines.append(
+                f"| {name} | "
+                + " | ".join(f"{x:.1f}" for x in g)
+                + f" | {c['sweeps_to_log_joint_2se_median']:.0f} ({c['sweeps_to_log_joint_2se_reached']}) | "
+                + " | ".join(f"{x:.4f}" for x in e)
+                + f" | {c['sweeps_to_excess_0.01_median']:.0f} ({c['sweeps_to_excess_0.01_reached']}) |"
+            )
+        lines += [
+            "",
+            f"Acceptance of guide moves by block ({args.acc_passes} passes from a reference-chain state): "
+            + ", ".join(f"{k} {a:.3f}" for k, a in v["acceptance_by_block"].items()),
+            "",
+        ]
     return "\n".join(lines) + "\n"
 
 
@@ -338,8 +396,13 @@ def main(argv=None) -> None:
     results = [evaluate(it, guide, args) for it in tqdm(items, desc="maps", mininterval=5.0)]
     summary = summarise(results, args)
     out = Path(args.out)
-    record = {"settings": vars(args), "trained_for": guide.trained_for, "summary": summary, "per_map": results,
-              "seconds": time.perf_counter() - t0}  # fmt: skip
+    record = {
+        "settings": vars(args),
+        "trained_for": guide.trained_for,
+        "summary": summary,
+        "per_map": results,
+        "seconds": time.perf_counter() - t0,
+    }
     atomic_write_text(out / "results.json", json.dumps(record, indent=1) + "\n")
     md = markdown(summary, args, guide.trained_for)
     atomic_write_text(out / "results.md", md)

@@ -33,8 +33,10 @@ def unseen_tiles(truth: np.ndarray, corpus: str = "generated") -> tuple[int, int
     for r0 in range(0, truth.shape[0] - 2, 3):
         for c0 in range(0, truth.shape[1] - 2, 3):
             W = P[r0 : r0 + 5, c0 : c0 + 5]
-            key = (sum(int(W[r, c]) << j for j, (r, c) in enumerate(ring)),
-                   sum(int(W[r, c]) << k for k, (r, c) in enumerate(inner)))  # fmt: skip
+            key = (
+                sum(int(W[r, c]) << j for j, (r, c) in enumerate(ring)),
+                sum(int(W[r, c]) << k for k, (r, c) in enumerate(inner)),
+            )
             n += 1
             unseen += key not in seen
     return n, unseen
@@ -56,8 +58,10 @@ def main() -> None:
     n, unseen = unseen_tiles(truth)
     t = torch.from_numpy(truth.ravel().astype(np.float64))
     t[model.known_free] = 0.0
-    print(f"true map: log prior {float(prior.log_prob(t[None])[0]):.1f}, log likelihood "
-          f"{float(model.log_likelihood(t[None])[0]):.1f}; {unseen} of {n} tiles never counted")  # fmt: skip
+    print(
+        f"true map: log prior {float(prior.log_prob(t[None])[0]):.1f}, log likelihood "
+        f"{float(model.log_likelihood(t[None])[0]):.1f}; {unseen} of {n} tiles never counted"
+    )
     torch.manual_seed(0)
     k = PatchGibbs(model, patch=(3, 3))
     k.setup(0)
@@ -66,9 +70,11 @@ def main() -> None:
         t0 = time.perf_counter()
         p = k.sample(p)
         m = torch.from_numpy(k.state.astype(np.float64))[None]
-        print(f"sweep {s + 1}: log prior {float(prior.log_prob(m)[0]):.1f}, log likelihood "
-              f"{float(model.log_likelihood(m)[0]):.1f}, cells unlike the truth {int((k.state != truth.ravel()).sum())}, "
-              f"{time.perf_counter() - t0:.1f} s")  # fmt: skip
+        print(
+            f"sweep {s + 1}: log prior {float(prior.log_prob(m)[0]):.1f}, log likelihood "
+            f"{float(model.log_likelihood(m)[0]):.1f}, cells unlike the truth {int((k.state != truth.ravel()).sum())}, "
+            f"{time.perf_counter() - t0:.1f} s"
+        )
 
 
 if __name__ == "__main__":

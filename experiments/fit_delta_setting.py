@@ -37,15 +37,22 @@ def main() -> None:
     ap.add_argument("--compare-full", action="store_true", help="also time the unreduced fit")
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    torch.optim.LBFGS([torch.zeros(1, requires_grad=True)])  # the first optimiser imports torch._dynamo (~5 s): not the fit's
+    torch.optim.LBFGS(
+        [torch.zeros(1, requires_grad=True)]
+    )  # the first optimiser imports torch._dynamo (~5 s): not the fit's
     wall = round(0.8 * args.F) if args.wall is None else args.wall
     t0 = time.perf_counter()
-    fits = fit_deltas_for_setting(args.names, args.sigma, args.F, wall=wall, num=args.num, seed=args.seed,
-                                  cache_dir=args.out)  # fmt: skip
+    fits = fit_deltas_for_setting(
+        args.names, args.sigma, args.F, wall=wall, num=args.num, seed=args.seed, cache_dir=args.out
+    )
     total = time.perf_counter() - t0
-    held = wall_datasets(num=args.heldout, F=args.F, wall=wall, sigma=args.sigma, seed=args.seed + 1)  # as heldout= would
-    print(f"setting: sigma {args.sigma:g} cells, F {args.F}, wall {wall}, {args.num} training / {args.heldout} "
-          f"held-out datasets; fit_deltas_for_setting {total:.1f} s in all")
+    held = wall_datasets(
+        num=args.heldout, F=args.F, wall=wall, sigma=args.sigma, seed=args.seed + 1
+    )  # as heldout= would
+    print(
+        f"setting: sigma {args.sigma:g} cells, F {args.F}, wall {wall}, {args.num} training / {args.heldout} "
+        f"held-out datasets; fit_deltas_for_setting {total:.1f} s in all"
+    )
     print("| term | data s (training) | fit s | train CE | held-out CE (fit) | held-out CE (shipped) |")
     print("|---|---|---|---|---|---|")
     for name, (fam, tr) in fits.items():
@@ -53,16 +60,20 @@ def main() -> None:
             mine = float(cross_entropy_loss(fam, held))
             shipped = float(cross_entropy_loss(delta_by_name(name), held))
         sec = tr.get("seconds") or {}
-        print(f"| {name} | {sec.get('data', float('nan')):.1f} | {sec.get('fit', float('nan')):.2f} | "
-              f"{tr['train_cross_entropy']:.4f} | {mine:.4f} | {shipped:.4f} |")
+        print(
+            f"| {name} | {sec.get('data', float('nan')):.1f} | {sec.get('fit', float('nan')):.2f} | "
+            f"{tr['train_cross_entropy']:.4f} | {mine:.4f} | {shipped:.4f} |"
+        )
     if args.compare_full:
         data = wall_datasets(num=args.num, F=args.F, wall=wall, sigma=args.sigma, seed=args.seed)
         for name in args.names:
             for reduce in (True, False):
                 t = time.perf_counter()
                 res = fit_on_data(name, data, reduce=reduce)
-                print(f"{name} reduce={reduce}: {time.perf_counter() - t:.2f} s, {res.iterations} iterations, "
-                      f"train CE {res.train_loss:.6f}")
+                print(
+                    f"{name} reduce={reduce}: {time.perf_counter() - t:.2f} s, {res.iterations} iterations, "
+                    f"train CE {res.train_loss:.6f}"
+                )
 
 
 if __name__ == "__main__":

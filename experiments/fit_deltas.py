@@ -73,8 +73,10 @@ def fit_all(data) -> dict:
 
 def references(data) -> dict:
     with torch.no_grad():
-        return {n: float(cross_entropy_loss(delta_by_name(n), data))
-                for n in ("haehnel", "moravec_thesis", "elfes_thesis", "p21_thesis")}  # fmt: skip
+        return {
+            n: float(cross_entropy_loss(delta_by_name(n), data))
+            for n in ("haehnel", "moravec_thesis", "elfes_thesis", "p21_thesis")
+        }
 
 
 def cross_validation(data, folds: int) -> dict:
@@ -116,19 +118,37 @@ def main() -> None:
     t_cv = time.perf_counter() - t1
     full = fit_all(data)
     # the data-driven-prior posterior as the target: p21 and the network
-    dd = {"p21_dd": fit_delta(warm_start_pn(full["p20"].family, 21), data_dd, **FIT),
-          "neural_dd": fit_delta(NeuralDelta(data.F, hidden=16, seed=0), data_dd, **FIT)}  # fmt: skip
+    dd = {
+        "p21_dd": fit_delta(warm_start_pn(full["p20"].family, 21), data_dd, **FIT),
+        "neural_dd": fit_delta(NeuralDelta(data.F, hidden=16, seed=0), data_dd, **FIT),
+    }
     with torch.no_grad():
         dd_scores = {n: float(cross_entropy_loss(r.family, data_dd)) for n, r in dd.items()}
-        dd_scores["p21 (uniform-prior fit) on data-driven target"] = float(cross_entropy_loss(full["p21"].family, data_dd))
-        dd_scores["neural (uniform-prior fit) on data-driven target"] = float(cross_entropy_loss(full["neural_opt"].family, data_dd))
+        dd_scores["p21 (uniform-prior fit) on data-driven target"] = float(
+            cross_entropy_loss(full["p21"].family, data_dd)
+        )
+        dd_scores["neural (uniform-prior fit) on data-driven target"] = float(
+            cross_entropy_loss(full["neural_opt"].family, data_dd)
+        )
     total = time.perf_counter() - t0
     rows = []
-    for name in list(LITERATURE) + [f"p{N}" for N in range(1, 22)] + ["haehnel", "moravec_thesis", "elfes_thesis", "p21_thesis"]:
+    for name in (
+        list(LITERATURE) + [f"p{N}" for N in range(1, 22)] + ["haehnel", "moravec_thesis", "elfes_thesis", "p21_thesis"]
+    ):
         fam = full[name].family if name in full else delta_by_name(name)
-        rows.append({"name": name, "params": n_params(name, fam), "test_mean": cv[name]["mean"],
-                     "test_std": cv[name]["std"], "values": family_to_dict(fam)})  # fmt: skip
-    md = ["| update term | parameters | held-out cross-entropy (mean +- sd over folds) | fitted values |", "|---|---|---|---|"]
+        rows.append(
+            {
+                "name": name,
+                "params": n_params(name, fam),
+                "test_mean": cv[name]["mean"],
+                "test_std": cv[name]["std"],
+                "values": family_to_dict(fam),
+            }
+        )
+    md = [
+        "| update term | parameters | held-out cross-entropy (mean +- sd over folds) | fitted values |",
+        "|---|---|---|---|",
+    ]
     for r in rows:
         vals = r["values"]["params"]
         if "net.0.weight" in vals:
@@ -140,35 +160,63 @@ def main() -> None:
                 shown += f"; beta = {r['values']['fixed']['beta']}"
         md.append(f"| {r['name']} | {r['params']} | {r['test_mean']:.4f} +- {r['test_std']:.4f} | {shown} |")
     md.append("")
-    md.append(f"{len(data)} datasets, {args.folds}-fold CV; data + exact posteriors {t_data:.1f} s, CV fits {t_cv:.1f} s, "
-              f"total {total:.1f} s.")
+    md.append(
+        f"{len(data)} datasets, {args.folds}-fold CV; data + exact posteriors {t_data:.1f} s, CV fits {t_cv:.1f} s, "
+        f"total {total:.1f} s."
+    )
     md.append("")
-    md.append("Data-driven-prior target (mean summed cross-entropy over all datasets): " +
-              "; ".join(f"{k} {v:.4f}" for k, v in dd_scores.items()))
+    md.append(
+        "Data-driven-prior target (mean summed cross-entropy over all datasets): "
+        + "; ".join(f"{k} {v:.4f}" for k, v in dd_scores.items())
+    )
     text = "\n".join(md)
-    report = {"settings": {**settings, "num_readings": list(settings["num_readings"])}, "folds": args.folds,
-              "cv": cv, "rows": rows, "data_driven": dd_scores,
-              "seconds": {"data": t_data, "cv": t_cv, "total": total}}  # fmt: skip
+    report = {
+        "settings": {**settings, "num_readings": list(settings["num_readings"])},
+        "folds": args.folds,
+        "cv": cv,
+        "rows": rows,
+        "data_driven": dd_scores,
+        "seconds": {"data": t_data, "cv": t_cv, "total": total},
+    }
     out = ROOT / "out" / "experiments"
     out.mkdir(parents=True, exist_ok=True)
     _write(out / "delta_cv.md", text)
     _write(out / "delta_cv.json", json.dumps(report, indent=2))
     if args.write_artefacts:
-        training = {**settings, "num_readings": list(settings["num_readings"]), "prior": "uniform",
-                    "optimizer": "torch.optim.LBFGS(line_search_fn='strong_wolfe')", **FIT,
-                    "script": "experiments/fit_deltas.py"}  # fmt: skip
+        training = {
+            **settings,
+            "num_readings": list(settings["num_readings"]),
+            "prior": "uniform",
+            "optimizer": "torch.optim.LBFGS(line_search_fn='strong_wolfe')",
+            **FIT,
+            "script": "experiments/fit_deltas.py",
+        }
         fitted = dict(full)
         fitted.update(dd)
         for name, res in fitted.items():
-            rec = {"format": 1, "name": name, "delta": family_to_dict(res.family),
-                   "training": {**training, "prior": "data_driven" if name.endswith("_dd") else "uniform"},
-                   "train_cross_entropy": res.train_loss,
-                   "heldout_cross_entropy": cv.get(name, {}).get("mean")}  # fmt: skip
+            rec = {
+                "format": 1,
+                "name": name,
+                "delta": family_to_dict(res.family),
+                "training": {**training, "prior": "data_driven" if name.endswith("_dd") else "uniform"},
+                "train_cross_entropy": res.train_loss,
+                "heldout_cross_entropy": cv.get(name, {}).get("mean"),
+            }
             _write(ROOT / "ogm_ppl" / "fitted" / f"delta_{name}.json", json.dumps(rec, indent=1))
-        _write(ROOT / "ogm_ppl" / "fitted" / "delta_cv.json", json.dumps(
-            {"format": 1, "settings": report["settings"], "folds": args.folds,
-             "cv": {k: {"mean": v["mean"], "std": v["std"]} for k, v in cv.items()},
-             "params": {r["name"]: r["params"] for r in rows}, "data_driven": dd_scores}, indent=1))  # fmt: skip
+        _write(
+            ROOT / "ogm_ppl" / "fitted" / "delta_cv.json",
+            json.dumps(
+                {
+                    "format": 1,
+                    "settings": report["settings"],
+                    "folds": args.folds,
+                    "cv": {k: {"mean": v["mean"], "std": v["std"]} for k, v in cv.items()},
+                    "params": {r["name"]: r["params"] for r in rows},
+                    "data_driven": dd_scores,
+                },
+                indent=1,
+            ),
+        )
     print(text)
 
 

@@ -35,16 +35,29 @@ from ogm_ppl.priors.named import prior_by_name
 
 # (prior, patch): single-cell Gibbs for cell-level priors, 3 x 3 patch Gibbs (the thesis's L = 9) for the
 # tile priors, whose sparse tables leave single-cell moves stuck (Section 5.2.2-5.2.3, Table 5.1)
-PRIORS = [("independent", 1), ("independent:{c}", 1), ("mrf:{c}", 1), ("border1:{c}", 1),
-          ("patch3:{c}", 9), ("border:{c}", 9)]  # fmt: skip
+PRIORS = [
+    ("independent", 1),
+    ("independent:{c}", 1),
+    ("mrf:{c}", 1),
+    ("border1:{c}", 1),
+    ("patch3:{c}", 9),
+    ("border:{c}", 9),
+]
 METRICS = ["nll_bits", "ece", "brier", "best_f1", "auc", "iou"]
 
 
 def run_plan(plan, args, log) -> list[dict]:
     truth = plan.occupancy
     grid = Grid(truth.shape, resolution=plan.resolution)
-    data = stop_and_scan(truth, grid, num_poses=args.poses, beams=args.beams, max_range_cells=args.range_cells,
-                         sigma_cells=args.sigma, seed=args.seed)  # fmt: skip
+    data = stop_and_scan(
+        truth,
+        grid,
+        num_poses=args.poses,
+        beams=args.beams,
+        max_range_cells=args.range_cells,
+        sigma_cells=args.sigma,
+        seed=args.seed,
+    )
     rays = raycast(grid, data.scans)
     reached = rays.reached().reshape(grid.shape)
     near = near_mapped_mask(reached, 10.0) & plan.known
@@ -79,8 +92,11 @@ def table(rows) -> str:
     methods = list(dict.fromkeys(r["method"] for r in rows))
     out = []
     for mask in ("near", "unseen"):
-        out += [f"\n**{mask}** cells (mean over plans)\n", "| method | " + " | ".join(METRICS) + " | seconds |",
-                "|---" * (len(METRICS) + 2) + "|"]  # fmt: skip
+        out += [
+            f"\n**{mask}** cells (mean over plans)\n",
+            "| method | " + " | ".join(METRICS) + " | seconds |",
+            "|---" * (len(METRICS) + 2) + "|",
+        ]
         for m in methods:
             sel = [r for r in rows if r["method"] == m and r["mask"] == mask]
             vals = [np.nanmean([r[k] for r in sel]) for k in METRICS]
@@ -115,8 +131,10 @@ def main(argv=None) -> dict:
     rows = []
     for p in plans:
         rows += run_plan(p, args, print)
-    md = (f"# Priors as predictors of unseen cells ({args.corpus}, {len(plans)} held-out plans)\n\n"
-          f"Settings: {vars(args)}; {time.perf_counter() - t0:.0f} s in all.\n" + table(rows) + "\n")  # fmt: skip
+    md = (
+        f"# Priors as predictors of unseen cells ({args.corpus}, {len(plans)} held-out plans)\n\n"
+        f"Settings: {vars(args)}; {time.perf_counter() - t0:.0f} s in all.\n" + table(rows) + "\n"
+    )
     atomic_write_text(out / "heldout_priors.md", md)
     atomic_write_text(out / "heldout_priors.json", json.dumps({"settings": vars(args), "rows": rows}, indent=1))
     print(md)

@@ -78,7 +78,8 @@ def main(argv: list[str] | None = None) -> int:
         *rows,
         "",
         f"Total {time.perf_counter() - t_all:.1f} s on {len(todo)} logs"
-        + (f"; failed: {', '.join(failed)}" if failed else "") + ".",
+        + (f"; failed: {', '.join(failed)}" if failed else "")
+        + ".",
         "",
     ]
     atomic_write_text(args.out / "summary.md", "\n".join(lines))

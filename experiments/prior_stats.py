@@ -146,18 +146,18 @@ def report(table_dir: Path, out: Path, timings: dict | None) -> None:
     for key, label, fmt in ROWS:
         th = THESIS.get(key)
         cells = [fmt.format(stats[n]["statistics"][key]) for n in names]
-        lines.append(
-            f"| {label} | {'' if th is None else fmt.format(th)} | " + " | ".join(cells) + " |"
+        lines.append(f"| {label} | {'' if th is None else fmt.format(th)} | " + " | ".join(cells) + " |")
+    lines.append(
+        "| MRF (4-neighbour) lambda, psi by pseudo-likelihood |  | "
+        + " | ".join(
+            f"{stats[n]['statistics']['mrf_lambda']:.3f}, {stats[n]['statistics']['mrf_psi']:.4f}" for n in names
         )
-    lines.append("| MRF (4-neighbour) lambda, psi by pseudo-likelihood |  | "
-                 + " | ".join(f"{stats[n]['statistics']['mrf_lambda']:.3f}, {stats[n]['statistics']['mrf_psi']:.4f}"
-                              for n in names) + " |")  # fmt: skip
+        + " |"
+    )
     lines += ["", "Provenance:", ""]
     for n in names:
         p = stats[n]["provenance"]
-        lines.append(
-            f"- **{n}**: {json.dumps({k: v for k, v in p.items() if k != 'plan_names_sha256'})}"
-        )
+        lines.append(f"- **{n}**: {json.dumps({k: v for k, v in p.items() if k != 'plan_names_sha256'})}")
     if timings:
         lines += ["", "Learning time (reading + counting, this machine): " + json.dumps(timings)]
     out.parent.mkdir(parents=True, exist_ok=True)
@@ -172,9 +172,7 @@ def report(table_dir: Path, out: Path, timings: dict | None) -> None:
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--fit", action="store_true", help="re-learn the tables first")
-    ap.add_argument(
-        "--quick", action="store_true", help="tiny corpora; tables go to out/prior_tables_quick/"
-    )
+    ap.add_argument("--quick", action="store_true", help="tiny corpora; tables go to out/prior_tables_quick/")
     ap.add_argument("--out", default=str(ROOT / "out" / "prior_stats"), help="output path stem")
     args = ap.parse_args(argv)
     table_dir = ROOT / "out" / "prior_tables_quick" if args.quick else FITTED_DIR

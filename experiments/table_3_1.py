@@ -37,11 +37,18 @@ from ogm_ppl.priors import IndependentPrior
 torch.set_default_dtype(torch.float64)
 
 THESIS = {
-    "traditional OGM (Hähnel)": 6.7870, "traditional OGM, optimised (p21)": 0.2509,
-    "online patch map L=1": 0.5297, "online patch map L=3": 0.3100, "online patch map L=5": 0.2290,
-    "offline patch map L=1": 0.2834, "offline patch map L=3": 0.0749, "offline patch map L=5": 0.0274,
-    "offline, overlap L=3": 0.0287, "offline, overlap L=5": 0.0038, "Gibbs": 3.72e-5,
-}  # fmt: skip
+    "traditional OGM (Hähnel)": 6.7870,
+    "traditional OGM, optimised (p21)": 0.2509,
+    "online patch map L=1": 0.5297,
+    "online patch map L=3": 0.3100,
+    "online patch map L=5": 0.2290,
+    "offline patch map L=1": 0.2834,
+    "offline patch map L=3": 0.0749,
+    "offline patch map L=5": 0.0274,
+    "offline, overlap L=3": 0.0287,
+    "offline, overlap L=5": 0.0038,
+    "Gibbs": 3.72e-5,
+}
 
 
 def datasets(n: int, cells: int, seed: int = 0):
@@ -53,8 +60,11 @@ def datasets(n: int, cells: int, seed: int = 0):
 def run(num_datasets: int = 1000, gibbs_sweeps: int = 100_000, cells: int = 30, seed: int = 0, progress=True) -> dict:
     kls: dict[str, list[float]] = {}
     t0 = time.perf_counter()
-    deltas = {"traditional OGM (Hähnel)": delta_by_name("haehnel"), "traditional OGM, optimised (p21)": delta_by_name("p21"),
-              "traditional OGM, optimised (Moravec)": delta_by_name("moravec_opt")}  # fmt: skip
+    deltas = {
+        "traditional OGM (Hähnel)": delta_by_name("haehnel"),
+        "traditional OGM, optimised (p21)": delta_by_name("p21"),
+        "traditional OGM, optimised (Moravec)": delta_by_name("moravec_opt"),
+    }
     for d, z in enumerate(tqdm(datasets(num_datasets, cells, seed), total=num_datasets, disable=not progress)):
         toy = toy_1d(num_cells=cells + 1, wall=20, readings=z)
         rays = raycast(toy.grid, toy.scans)
@@ -76,9 +86,17 @@ def run(num_datasets: int = 1000, gibbs_sweeps: int = 100_000, cells: int = 30, 
             kernel = CellGibbs(model, init="ogm")
             kernel.setup()
             score("Gibbs", kernel.run_marginals(gibbs_sweeps, seed=seed * 100_003 + d))
-    rows = {k: {"mean": float(np.mean(v)), "median": float(np.median(v)), "thesis": THESIS.get(k)} for k, v in kls.items()}
-    return {"datasets": num_datasets, "cells": cells, "gibbs_sweeps": gibbs_sweeps, "seed": seed, "rows": rows,
-            "seconds": time.perf_counter() - t0}  # fmt: skip
+    rows = {
+        k: {"mean": float(np.mean(v)), "median": float(np.median(v)), "thesis": THESIS.get(k)} for k, v in kls.items()
+    }
+    return {
+        "datasets": num_datasets,
+        "cells": cells,
+        "gibbs_sweeps": gibbs_sweeps,
+        "seed": seed,
+        "rows": rows,
+        "seconds": time.perf_counter() - t0,
+    }
 
 
 def main() -> None:
@@ -94,8 +112,10 @@ def main() -> None:
         th = "" if v["thesis"] is None else f"{v['thesis']:.4g}"
         lines.append(f"| {k} | {v['mean']:.4g} | {th} |")
     lines.append("")
-    lines.append(f"{res['datasets']} datasets, K = {res['cells']} latent cells, Gibbs {res['gibbs_sweeps']:,} sweeps; "
-                 f"{res['seconds']:.0f} s.")  # fmt: skip
+    lines.append(
+        f"{res['datasets']} datasets, K = {res['cells']} latent cells, Gibbs {res['gibbs_sweeps']:,} sweeps; "
+        f"{res['seconds']:.0f} s."
+    )
     md = "\n".join(lines)
     out = Path(__file__).resolve().parent.parent / "out" / "experiments"
     atomic_write_text(out / "table_3_1.md", md)

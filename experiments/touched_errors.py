@@ -29,13 +29,23 @@ def touched_errors(folder: Path, dataset: str, algorithm: str) -> dict:
     depth = ndimage.distance_transform_cdt(~free_t, metric="chessboard")
     dist = ndimage.distance_transform_cdt(~truth, metric="chessboard")
     occ = truth & touched
-    by_depth = {int(d): {"cells": int((occ & (np.minimum(depth, 3) == d)).sum()),
-                         "called_occupied": float(pred[occ & (np.minimum(depth, 3) == d)].mean())}
-                for d in (1, 2, 3) if (occ & (np.minimum(depth, 3) == d)).any()}  # fmt: skip
+    by_depth = {
+        int(d): {
+            "cells": int((occ & (np.minimum(depth, 3) == d)).sum()),
+            "called_occupied": float(pred[occ & (np.minimum(depth, 3) == d)].mean()),
+        }
+        for d in (1, 2, 3)
+        if (occ & (np.minimum(depth, 3) == d)).any()
+    }
     fp = pred & free_t
-    return {"threshold": thr, "walls_by_depth": by_depth, "false_positives": int(fp.sum()),
-            "fp_by_distance_1_to_6plus": np.bincount(np.minimum(dist[fp], 6), minlength=7)[1:].tolist(),
-            "true_positives": int((pred & occ).sum()), "false_negatives": int((~pred & occ).sum())}  # fmt: skip
+    return {
+        "threshold": thr,
+        "walls_by_depth": by_depth,
+        "false_positives": int(fp.sum()),
+        "fp_by_distance_1_to_6plus": np.bincount(np.minimum(dist[fp], 6), minlength=7)[1:].tolist(),
+        "true_positives": int((pred & occ).sum()),
+        "false_negatives": int((~pred & occ).sum()),
+    }
 
 
 def main() -> None:

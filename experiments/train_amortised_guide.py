@@ -59,7 +59,11 @@ def heldout_loss(guide: AmortisedGuide, val: list) -> tuple[float, float, float]
             lam = min(max(lam, 1e-6), 1 - 1e-6)
             m = maps[:, model.latent]
             base += float(-(m * math.log(lam) + (1 - m) * math.log(1 - lam)).sum())
-    return nats / len(val) / (sum(len(v[1]) for v in val) / len(val)), nats / cells / math.log(2), base / cells / math.log(2)
+    return (
+        nats / len(val) / (sum(len(v[1]) for v in val) / len(val)),
+        nats / cells / math.log(2),
+        base / cells / math.log(2),
+    )
 
 
 def main(argv=None) -> None:
@@ -113,9 +117,14 @@ def main(argv=None) -> None:
             bar.set_postfix(bits_per_cell=f"{np.mean(trace[-50:]):.4f}")
     seconds = time.perf_counter() - t0
     end = heldout_loss(guide, val)
-    meta = {"prior": args.prior, "sensor": repr(GaussianRange(args.sigma)), "beams": args.beams,
-            "max_range_cells": args.range_cells, "poses": [1, args.max_poses],
-            "sizes": [args.min_size, args.max_size]}  # fmt: skip
+    meta = {
+        "prior": args.prior,
+        "sensor": repr(GaussianRange(args.sigma)),
+        "beams": args.beams,
+        "max_range_cells": args.range_cells,
+        "poses": [1, args.max_poses],
+        "sizes": [args.min_size, args.max_size],
+    }
     out = Path(args.out)
     guide.save(out, meta)
     data = out.read_bytes()
@@ -126,15 +135,29 @@ def main(argv=None) -> None:
         "parameters": sum(p.numel() for p in guide.parameters()),
         "architecture": {"channels": args.channels, "dilations": list(dil), "phase": list(phase), "delta": "p21"},
         "trained_for": meta,
-        "training": {"objective": "E_p(m,z)[-log q(m|z)] (CSIS / inference compilation, Le et al. 2017)",
-                     "steps": args.steps, "batch": args.batch, "lr": args.lr, "schedule": "cosine",
-                     "seed": args.seed, "threads": args.threads, "seconds": round(seconds, 1),
-                     "maps_seen": args.steps * args.batch,
-                     "train_bits_per_cell_last100": float(np.mean(trace[-100:]))},  # fmt: skip
-        "heldout": {"scenes": args.val_scenes, "maps_per_scene": 4, "seed_stream": "SeedSequence(seed).spawn(2)[1]",
-                    "nats_per_map_before": start[0], "nats_per_map": end[0],
-                    "bits_per_cell_before": start[1], "bits_per_cell": end[1],
-                    "bits_per_cell_prior_share_guess": end[2], "bits_per_cell_uniform_guess": 1.0},  # fmt: skip
+        "training": {
+            "objective": "E_p(m,z)[-log q(m|z)] (CSIS / inference compilation, Le et al. 2017)",
+            "steps": args.steps,
+            "batch": args.batch,
+            "lr": args.lr,
+            "schedule": "cosine",
+            "seed": args.seed,
+            "threads": args.threads,
+            "seconds": round(seconds, 1),
+            "maps_seen": args.steps * args.batch,
+            "train_bits_per_cell_last100": float(np.mean(trace[-100:])),
+        },
+        "heldout": {
+            "scenes": args.val_scenes,
+            "maps_per_scene": 4,
+            "seed_stream": "SeedSequence(seed).spawn(2)[1]",
+            "nats_per_map_before": start[0],
+            "nats_per_map": end[0],
+            "bits_per_cell_before": start[1],
+            "bits_per_cell": end[1],
+            "bits_per_cell_prior_share_guess": end[2],
+            "bits_per_cell_uniform_guess": 1.0,
+        },
     }
     atomic_write_text(out.with_suffix(".json"), json.dumps(record, indent=1) + "\n")
     print(json.dumps(record["heldout"], indent=1))

@@ -47,8 +47,9 @@ def main(argv=None) -> str:
     args = ap.parse_args(argv)
     torch.set_default_dtype(torch.float64)
     toy = toy_1d(num_cells=21, readings=THESIS_TOY_READINGS)
-    model = OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0, p_rand=1e-3),
-                           IndependentPrior(0.5, 21))  # fmt: skip
+    model = OccupancyModel(
+        toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0, p_rand=1e-3), IndependentPrior(0.5, 21)
+    )
     t = time.perf_counter()
     exact = pose_constrained_1d(model).marginals
     t_exact = time.perf_counter() - t

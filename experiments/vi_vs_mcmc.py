@@ -93,10 +93,25 @@ class Settings:
     problems: tuple[str, ...] = ("toy", "walls", "2d:independent", "2d:mrf8", "2d:patch3")
 
 
-QUICK = Settings(vi_steps=100, vi_steps_sampled=30, particles_tracegraph=32, particles_rws=64,
-                 toy_gibbs_sweeps=10_000, gibbs_sweeps=1000, walls=50, folds=2, walls_gibbs_sweeps=300,
-                 walls_patch_gibbs=5, walls_patch_gibbs_sweeps=100, walls_vi_exact=2, walls_vi_sampled=1,
-                 walls_vi_steps=60, walls_vi_steps_sampled=20, heldout=50, delta_max_iter=100)  # fmt: skip
+QUICK = Settings(
+    vi_steps=100,
+    vi_steps_sampled=30,
+    particles_tracegraph=32,
+    particles_rws=64,
+    toy_gibbs_sweeps=10_000,
+    gibbs_sweeps=1000,
+    walls=50,
+    folds=2,
+    walls_gibbs_sweeps=300,
+    walls_patch_gibbs=5,
+    walls_patch_gibbs_sweeps=100,
+    walls_vi_exact=2,
+    walls_vi_sampled=1,
+    walls_vi_steps=60,
+    walls_vi_steps_sampled=20,
+    heldout=50,
+    delta_max_iter=100,
+)
 
 
 def budgets(total: int, start: int = 10) -> list[int]:
@@ -157,11 +172,16 @@ def one_pass(model: OccupancyModel, exact: torch.Tensor, name: str, fn, note: st
 
 def ogm_methods(model: OccupancyModel, deltas: dict | None = None) -> dict:
     """Traditional OGM (Section 2.4) with each update term: name -> (fn, note)."""
-    deltas = deltas or {"haehnel": delta_by_name("haehnel"), "p21": delta_by_name("p21"),
-                        "neural": delta_by_name("neural_opt")}  # fmt: skip
+    deltas = deltas or {
+        "haehnel": delta_by_name("haehnel"),
+        "p21": delta_by_name("p21"),
+        "neural": delta_by_name("neural_opt"),
+    }
     lam = _unknown(model)
-    notes = {"p21": "fitted on the walls (F = 75, sigma = 3); a function of kappa - z only",
-             "neural": "fitted on the walls (readings near 60 of F = 75): extrapolates in z / F here"}  # fmt: skip
+    notes = {
+        "p21": "fitted on the walls (F = 75, sigma = 3); a function of kappa - z only",
+        "neural": "fitted on the walls (readings near 60 of F = 75): extrapolates in z / F here",
+    }
     out = {}
     for key, d in deltas.items():
         label = {"haehnel": "OGM Hähnel", "p21": "OGM p21", "neural": "OGM neural Delta (amortised 1D)"}[key]
@@ -180,9 +200,11 @@ def patch_map_methods(model: OccupancyModel) -> dict:
             out[f"offline patch map L={L}"] = lambda L=L: offline_patch_map(model, L, offset=1).marginals
             out[f"offline overlap L={L}"] = lambda L=L: offline_patch_map(model, L, overlap=True).marginals
         return out
-    return {"online patch map 2x2": lambda: online_patch_map(model, (2, 2)).marginals,
-            "offline patch map 2x2": lambda: offline_patch_map(model, (2, 2)).marginals,
-            "offline overlap 3x3": lambda: offline_patch_map(model, (3, 3), overlap=True).marginals}  # fmt: skip
+    return {
+        "online patch map 2x2": lambda: online_patch_map(model, (2, 2)).marginals,
+        "offline patch map 2x2": lambda: offline_patch_map(model, (2, 2)).marginals,
+        "offline overlap 3x3": lambda: offline_patch_map(model, (3, 3), overlap=True).marginals,
+    }
 
 
 _GUIDE: dict = {}
@@ -240,9 +262,11 @@ def gibbs_methods(model: OccupancyModel, problem: str) -> dict:
     """name -> kernel factory."""
     patch = 3 if model.grid.ndim == 1 else (2, 2)
     tag = "L=3" if model.grid.ndim == 1 else "2x2"
-    out = {"Gibbs (cell, heat bath)": lambda: CellGibbs(model, update="gibbs"),
-           "Gibbs (cell, metropolised)": lambda: CellGibbs(model, update="metropolised"),
-           f"patch Gibbs {tag}": lambda: PatchGibbs(model, patch)}  # fmt: skip
+    out = {
+        "Gibbs (cell, heat bath)": lambda: CellGibbs(model, update="gibbs"),
+        "Gibbs (cell, metropolised)": lambda: CellGibbs(model, update="metropolised"),
+        f"patch Gibbs {tag}": lambda: PatchGibbs(model, patch),
+    }
     if problem == "2d:patch3":
         out["patch Gibbs 3x3 (the prior's tiles)"] = lambda: PatchGibbs(model, (3, 3))
     guide, _ = amortised_guide()
@@ -259,13 +283,23 @@ def _objective(loss: str, particles: int):
     if loss == "tracegraph":
         return TraceGraph_ELBO(num_particles=particles, vectorize_particles=True, max_plate_nesting=0)
     if loss == "rws":
-        return ReweightedWakeSleep(num_particles=particles, insomnia=1.0, model_has_params=False,
-                                   vectorize_particles=True, max_plate_nesting=0)  # fmt: skip
+        return ReweightedWakeSleep(
+            num_particles=particles, insomnia=1.0, model_has_params=False, vectorize_particles=True, max_plate_nesting=0
+        )
     return ExactELBO()
 
 
-def vi_curve(name: str, model: OccupancyModel, guide, loss: str, steps: int, lr: float, particles: int,
-             exact: torch.Tensor, seed: int) -> Record:  # fmt: skip
+def vi_curve(
+    name: str,
+    model: OccupancyModel,
+    guide,
+    loss: str,
+    steps: int,
+    lr: float,
+    particles: int,
+    exact: torch.Tensor,
+    seed: int,
+) -> Record:
     """``SVI(model.model, guide, Adam(lr), loss)`` as :func:`fit_guide` runs it, the guide's marginals
     scored at checkpoints (the SVI steps timed, the scoring not)."""
     from pyro.infer import SVI
@@ -316,15 +350,21 @@ def vi_runs(model: OccupancyModel, cfg: Settings, steps_exact: int, steps_sample
 # ------------------------------------------------------------------------------------------- problems
 def toy_problem():
     toy = toy_1d(num_cells=21, readings=THESIS_TOY_READINGS)
-    return OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0, p_rand=1e-3),
-                          IndependentPrior(0.5, 21))  # fmt: skip
+    return OccupancyModel(
+        toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0, p_rand=1e-3), IndependentPrior(0.5, 21)
+    )
 
 
 def grid_4x4(prior) -> OccupancyModel:
     """``benchmarks/bench_mixing.py``'s 4 x 4 grid: five single-beam scans from three poses (13 latent)."""
     grid = Grid((4, 4), resolution=1.0)
-    scans = Scans([[0.5, 0.5, 0.0], [0.5, 0.5, 0.7], [3.5, 3.5, math.pi], [3.5, 3.5, -2.0], [0.5, 3.5, -0.6]],
-                  [0.0], [[2.6], [3.3], [2.2], [1.3], [2.9]], max_range=4.0, over_range="max")  # fmt: skip
+    scans = Scans(
+        [[0.5, 0.5, 0.0], [0.5, 0.5, 0.7], [3.5, 3.5, math.pi], [3.5, 3.5, -2.0], [0.5, 3.5, -0.6]],
+        [0.0],
+        [[2.6], [3.3], [2.2], [1.3], [2.9]],
+        max_range=4.0,
+        over_range="max",
+    )
     return OccupancyModel(grid, raycast(grid, scans), GaussianRange(0.8, p_rand=1e-3), prior)
 
 
@@ -342,11 +382,16 @@ def patch3_scene(seed: int = 2) -> OccupancyModel:
 
 
 PROBLEMS_2D = {
-    "2d:independent": ("4 x 4, independent prior 0.4, five single-beam scans", lambda: grid_4x4(IndependentPrior(0.4, 16))),
-    "2d:mrf8": ("4 x 4, MRF prior mrf8:houseexpo (correlated), five single-beam scans",
-                lambda: grid_4x4(prior_by_name("mrf8:houseexpo", (4, 4)))),
+    "2d:independent": (
+        "4 x 4, independent prior 0.4, five single-beam scans",
+        lambda: grid_4x4(IndependentPrior(0.4, 16)),
+    ),
+    "2d:mrf8": (
+        "4 x 4, MRF prior mrf8:houseexpo (correlated), five single-beam scans",
+        lambda: grid_4x4(prior_by_name("mrf8:houseexpo", (4, 4))),
+    ),
     "2d:patch3": ("4 x 4, tile prior patch3:generated (correlated), one 120-beam scan", patch3_scene),
-}  # fmt: skip
+}
 
 
 def run_single(problem: str, model: OccupancyModel, exact_fn, cfg: Settings, seed: int, log) -> dict:
@@ -359,8 +404,11 @@ def run_single(problem: str, model: OccupancyModel, exact_fn, cfg: Settings, see
         recs.append(one_pass(model, exact, name, fn))
     guide, why = amortised_guide()
     if guide is not None:
-        recs.append(one_pass(model, exact, "amortised guide (2D CNN, one pass)", lambda: guide.marginals(model),
-                             guide_note(problem)))  # fmt: skip
+        recs.append(
+            one_pass(
+                model, exact, "amortised guide (2D CNN, one pass)", lambda: guide.marginals(model), guide_note(problem)
+            )
+        )
     else:
         recs.append(Record("amortised guide (2D CNN, one pass)", "one pass", math.nan, math.nan, note=why))
     for name, make in gibbs_methods(model, problem).items():
@@ -379,8 +427,9 @@ def run_single(problem: str, model: OccupancyModel, exact_fn, cfg: Settings, see
 def wall_model(readings, p_rand: float = 0.0) -> OccupancyModel:
     K = WALLS["F"] + 1
     toy = toy_1d(num_cells=K, wall=WALLS["wall"], readings=readings, max_range=WALLS["F"])
-    return OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(WALLS["sigma"], p_rand=p_rand),
-                          IndependentPrior(0.5, K))  # fmt: skip
+    return OccupancyModel(
+        toy.grid, raycast(toy.grid, toy.scans), GaussianRange(WALLS["sigma"], p_rand=p_rand), IndependentPrior(0.5, K)
+    )
 
 
 def _mean_records(name: str, recs: list[Record], note: str = "") -> Record:
@@ -389,8 +438,16 @@ def _mean_records(name: str, recs: list[Record], note: str = "") -> Record:
     if recs[0].curve:
         for pts in zip(*(r.curve for r in recs)):
             curve.append((pts[0][0], float(np.mean([p[1] for p in pts])), float(np.mean([p[2] for p in pts]))))
-    return Record(name, recs[0].kind, float(np.mean([r.kl for r in recs])), float(np.mean([r.seconds for r in recs])),
-                  curve, recs[0].unit, note or recs[0].note, len(recs))  # fmt: skip
+    return Record(
+        name,
+        recs[0].kind,
+        float(np.mean([r.kl for r in recs])),
+        float(np.mean([r.seconds for r in recs])),
+        curve,
+        recs[0].unit,
+        note or recs[0].note,
+        len(recs),
+    )
 
 
 def cross_fit(data, folds: int, max_iter: int, log) -> tuple[list[dict], dict]:
@@ -405,16 +462,23 @@ def cross_fit(data, folds: int, max_iter: int, log) -> tuple[list[dict], dict]:
         te = torch.arange(k * size, D if k == folds - 1 else (k + 1) * size)
         tr = torch.cat([torch.arange(0, k * size), torch.arange(int(te[-1]) + 1, D)])
         train, held = data.subset(tr), data.subset(te)
-        fams = {"p21": fit_delta(PN.zeros(21), train, max_iter=max_iter).family,
-                "neural": fit_delta(NeuralDelta(data.F, hidden=16, seed=0), train, max_iter=max_iter).family}  # fmt: skip
+        fams = {
+            "p21": fit_delta(PN.zeros(21), train, max_iter=max_iter).family,
+            "neural": fit_delta(NeuralDelta(data.F, hidden=16, seed=0), train, max_iter=max_iter).family,
+        }
         for i in te.tolist():
             per_dataset[i] = fams
         with torch.no_grad():
-            for name, fam in {**fixed, "p21 (refit, out of fold)": fams["p21"],
-                              "neural Delta (refit, out of fold)": fams["neural"]}.items():  # fmt: skip
+            for name, fam in {
+                **fixed,
+                "p21 (refit, out of fold)": fams["p21"],
+                "neural Delta (refit, out of fold)": fams["neural"],
+            }.items():
                 ce.setdefault(name, []).append(float(cross_entropy_loss(fam, held)))
-        log(f"  fold {k + 1}/{folds}: held-out CE p21 {ce['p21 (refit, out of fold)'][-1]:.4f}, "
-            f"neural {ce['neural Delta (refit, out of fold)'][-1]:.4f}")  # fmt: skip
+        log(
+            f"  fold {k + 1}/{folds}: held-out CE p21 {ce['p21 (refit, out of fold)'][-1]:.4f}, "
+            f"neural {ce['neural Delta (refit, out of fold)'][-1]:.4f}"
+        )
     return per_dataset, ce
 
 
@@ -448,36 +512,61 @@ def run_walls(cfg: Settings, seed: int, log) -> dict:
         for name, fn in patch_map_methods(model).items():
             add(one_pass(model, exact, name, fn, warm=warm))
         if guide is not None:
-            add(one_pass(model, exact, "amortised guide (2D CNN, one pass)", lambda model=model: guide.marginals(model),
-                         warm=warm))  # fmt: skip
+            add(
+                one_pass(
+                    model,
+                    exact,
+                    "amortised guide (2D CNN, one pass)",
+                    lambda model=model: guide.marginals(model),
+                    warm=warm,
+                )
+            )
         for name in ("Gibbs (cell, heat bath)", "Gibbs (cell, metropolised)"):
             kernel = CellGibbs(model, update="gibbs" if "heat" in name else "metropolised")
             add(gibbs_curve(name, kernel, model, exact, budgets(cfg.walls_gibbs_sweeps), seed * 100_003 + d))
         if d < cfg.walls_patch_gibbs:
-            add(gibbs_curve("patch Gibbs L=3", PatchGibbs(model, 3), model, exact,
-                            budgets(cfg.walls_patch_gibbs_sweeps), seed * 100_003 + d))  # fmt: skip
+            add(
+                gibbs_curve(
+                    "patch Gibbs L=3",
+                    PatchGibbs(model, 3),
+                    model,
+                    exact,
+                    budgets(cfg.walls_patch_gibbs_sweeps),
+                    seed * 100_003 + d,
+                )
+            )
         if d < max(cfg.walls_vi_exact, cfg.walls_vi_sampled):
             vi_model = wall_model(data.readings[d], p_rand=1e-300)
             floor = summed_kl(exact, pose_constrained_1d(vi_model).marginals, model.latent)
             add(Record("exact posterior under p_rand = 1e-300 (VI's model)", "exact", floor, 0.0))
             objectives = ["exact"] + (["tracegraph", "rws"] if d < cfg.walls_vi_sampled else [])
-            for label, make, loss, steps, lr, particles in vi_runs(vi_model, cfg, cfg.walls_vi_steps,
-                                                                   cfg.walls_vi_steps_sampled, objectives):  # fmt: skip
+            for label, make, loss, steps, lr, particles in vi_runs(
+                vi_model, cfg, cfg.walls_vi_steps, cfg.walls_vi_steps_sampled, objectives
+            ):
                 if d < (cfg.walls_vi_exact if loss == "exact" else cfg.walls_vi_sampled):
                     add(vi_curve(label, vi_model, make(vi_model), loss, steps, lr, particles, exact, seed))
-            log(f"  VI on dataset {d + 1}: " + ", ".join(f"{k} {v[-1].kl:.2e}" for k, v in rec.items() if k.startswith("VI")))
+            log(
+                f"  VI on dataset {d + 1}: "
+                + ", ".join(f"{k} {v[-1].kl:.2e}" for k, v in rec.items() if k.startswith("VI"))
+            )
         if (d + 1) % max(len(data) // 10, 1) == 0:
             log(f"  {d + 1}/{len(data)} datasets")
-    notes = {"OGM p21": f"cross-fitted ({cfg.folds} folds): each dataset scored by a fit that never saw it",
-             "OGM neural Delta (amortised 1D)": f"cross-fitted ({cfg.folds} folds), MLP with 2 x 16 tanh units",
-             "amortised guide (2D CNN, one pass)": guide_note("walls") if guide is not None else why,
-             "exact posterior under p_rand = 1e-300 (VI's model)": "KL of VI's target to the thesis's exact posterior"}  # fmt: skip
+    notes = {
+        "OGM p21": f"cross-fitted ({cfg.folds} folds): each dataset scored by a fit that never saw it",
+        "OGM neural Delta (amortised 1D)": f"cross-fitted ({cfg.folds} folds), MLP with 2 x 16 tanh units",
+        "amortised guide (2D CNN, one pass)": guide_note("walls") if guide is not None else why,
+        "exact posterior under p_rand = 1e-300 (VI's model)": "KL of VI's target to the thesis's exact posterior",
+    }
     records = [_mean_records(name, rs, notes.get(name, "")) for name, rs in rec.items()]
     # held-out cross-entropy: out-of-fold fits, and the shipped artefacts on fresh datasets
     H = _entropy(data.exact)
     heldout = {"entropy": H, "folds": cfg.folds, "datasets": len(data), "out_of_fold": {}, "fresh": {}}
     for name, v in ce_folds.items():
-        heldout["out_of_fold"][name] = {"ce": float(np.mean(v)), "ce_sd_folds": float(np.std(v)), "kl": float(np.mean(v)) - H}
+        heldout["out_of_fold"][name] = {
+            "ce": float(np.mean(v)),
+            "ce_sd_folds": float(np.std(v)),
+            "kl": float(np.mean(v)) - H,
+        }
     t = time.perf_counter()
     fresh = wall_datasets(num=cfg.heldout, **WALLS, seed=1)
     log(f"  {len(fresh)} fresh wall datasets (seed 1) in {time.perf_counter() - t:.1f} s")
@@ -485,8 +574,12 @@ def run_walls(cfg: Settings, seed: int, log) -> dict:
     heldout["fresh"]["datasets"] = len(fresh)
     heldout["fresh"]["entropy"] = H1
     with torch.no_grad():
-        for name, key in (("Hähnel", "haehnel"), ("p21 (thesis values)", "p21_thesis"), ("p21 (shipped)", "p21"),
-                          ("neural Delta (shipped neural_opt)", "neural_opt")):  # fmt: skip
+        for name, key in (
+            ("Hähnel", "haehnel"),
+            ("p21 (thesis values)", "p21_thesis"),
+            ("p21 (shipped)", "p21"),
+            ("neural Delta (shipped neural_opt)", "neural_opt"),
+        ):
             ce = float(cross_entropy_loss(delta_by_name(key), fresh))
             heldout["fresh"][name] = {"ce": ce, "kl": ce - H1}
     if guide is not None:
@@ -513,37 +606,56 @@ def _fmt(x, spec=".2e") -> str:
 
 
 def table_md(res: dict) -> str:
-    lines = ["# Summed KL to the exact posterior against wall-clock time", "",
-             f"`python experiments/vi_vs_mcmc.py{' --quick' if res['quick'] else ''}` (seed {res['seed']}), "
-             f"{res['seconds']:.0f} s in all, one thread. Summed KL(exact || q) of the cell marginals over the latent "
-             f"cells (estimates clamped to [{EPS:g}, 1 - {EPS:g}]); seconds: wall clock of the method (set-up "
-             "included, scoring excluded; one-pass methods timed warm). OGM starts from the prior's lambda "
-             "(0.5 for the correlated priors). Anytime methods: their last budget, "
-             f"and the first time their curve came within {TARGET} (\"t(KL<{TARGET})\").", ""]  # fmt: skip
+    lines = [
+        "# Summed KL to the exact posterior against wall-clock time",
+        "",
+        f"`python experiments/vi_vs_mcmc.py{' --quick' if res['quick'] else ''}` (seed {res['seed']}), "
+        f"{res['seconds']:.0f} s in all, one thread. Summed KL(exact || q) of the cell marginals over the latent "
+        f"cells (estimates clamped to [{EPS:g}, 1 - {EPS:g}]); seconds: wall clock of the method (set-up "
+        "included, scoring excluded; one-pass methods timed warm). OGM starts from the prior's lambda "
+        "(0.5 for the correlated priors). Anytime methods: their last budget, "
+        f'and the first time their curve came within {TARGET} ("t(KL<{TARGET})").',
+        "",
+    ]
     for h in res.get("headlines", []):
         lines.append(f"* {h}")
     for key, prob in res["problems"].items():
         lines += ["", f"## {key}: {TITLES.get(key, key)}", ""]
-        lines += ["| method | summed KL | seconds | t(KL<0.01) s | budget | datasets | note |",
-                  "|---|---:|---:|---:|---:|---:|---|"]  # fmt: skip
+        lines += [
+            "| method | summed KL | seconds | t(KL<0.01) s | budget | datasets | note |",
+            "|---|---:|---:|---:|---:|---:|---|",
+        ]
         for r in prob["records"]:
             r = r if isinstance(r, Record) else Record(**r)
             budget = f"{r.curve[-1][0]} {r.unit}" if r.curve else ""
             t_to = None if r.kind == "exact" else r.time_to()
-            lines.append(f"| {r.method} | {_fmt(r.kl)} | {_fmt(r.seconds, '.3g')} | {_fmt(t_to, '.3g')} | "
-                         f"{budget} | {r.datasets} | {r.note} |")  # fmt: skip
+            lines.append(
+                f"| {r.method} | {_fmt(r.kl)} | {_fmt(r.seconds, '.3g')} | {_fmt(t_to, '.3g')} | "
+                f"{budget} | {r.datasets} | {r.note} |"
+            )
         if "heldout" in prob:
             h = prob["heldout"]
-            lines += ["", "### Held-out cross-entropy on the wall datasets (nats per dataset, cells 1..F)", "",
-                      f"Out of fold: {h['folds']}-fold cross-fitting on the {h['datasets']} datasets (seed 0); "
-                      f"KL = cross-entropy - exact entropy ({h['entropy']:.4f}).", "",
-                      "| update term | held-out cross-entropy (mean +- sd over folds) | summed KL |", "|---|---:|---:|"]  # fmt: skip
+            lines += [
+                "",
+                "### Held-out cross-entropy on the wall datasets (nats per dataset, cells 1..F)",
+                "",
+                f"Out of fold: {h['folds']}-fold cross-fitting on the {h['datasets']} datasets (seed 0); "
+                f"KL = cross-entropy - exact entropy ({h['entropy']:.4f}).",
+                "",
+                "| update term | held-out cross-entropy (mean +- sd over folds) | summed KL |",
+                "|---|---:|---:|",
+            ]
             for name, v in h["out_of_fold"].items():
                 lines.append(f"| {name} | {v['ce']:.4f} +- {v['ce_sd_folds']:.4f} | {v['kl']:.4f} |")
             f = h["fresh"]
-            lines += ["", f"Shipped artefacts (fitted on all 1000 seed-0 datasets) on {f['datasets']} fresh datasets "
-                      f"(seed 1; exact entropy {f['entropy']:.4f}):", "",
-                      "| update term | cross-entropy | summed KL |", "|---|---:|---:|"]  # fmt: skip
+            lines += [
+                "",
+                f"Shipped artefacts (fitted on all 1000 seed-0 datasets) on {f['datasets']} fresh datasets "
+                f"(seed 1; exact entropy {f['entropy']:.4f}):",
+                "",
+                "| update term | cross-entropy | summed KL |",
+                "|---|---:|---:|",
+            ]
             for name, v in f.items():
                 if isinstance(v, dict):
                     lines.append(f"| {name} | {v['ce']:.4f} | {v['kl']:.4f} |")
@@ -559,18 +671,26 @@ def headlines(res: dict) -> list[str]:
         best = min(vis, key=lambda r: r.kl)
         mf = [r.kl for r in vis if r.method.startswith("VI mean field")]
         t = best.time_to()
-        out.append(f"1D toy: best guide {best.method}, summed KL {best.kl:.2e} after {best.curve[-1][0]} steps, "
-                   f"{best.seconds:.2f} s" + (f" (within {TARGET} after {t:.2f} s)" if t is not None else "")
-                   + f"; mean field {min(mf):.2e}..{max(mf):.2e} over its objectives.")  # fmt: skip
+        out.append(
+            f"1D toy: best guide {best.method}, summed KL {best.kl:.2e} after {best.curve[-1][0]} steps, "
+            f"{best.seconds:.2f} s"
+            + (f" (within {TARGET} after {t:.2f} s)" if t is not None else "")
+            + f"; mean field {min(mf):.2e}..{max(mf):.2e} over its objectives."
+        )
         g = next(r for r in toy["records"] if r.method == "Gibbs (cell, heat bath)")
-        out.append(f"1D toy: cell Gibbs {g.kl:.2e} after {g.curve[-1][0]} sweeps, {g.seconds:.2f} s"
-                   + (f" (within {TARGET} after {g.time_to():.3f} s)" if g.time_to() is not None else "") + ".")  # fmt: skip
+        out.append(
+            f"1D toy: cell Gibbs {g.kl:.2e} after {g.curve[-1][0]} sweeps, {g.seconds:.2f} s"
+            + (f" (within {TARGET} after {g.time_to():.3f} s)" if g.time_to() is not None else "")
+            + "."
+        )
     walls = res["problems"].get("walls")
     if walls:
         h = walls["heldout"]["out_of_fold"]
         p, n = h["p21 (refit, out of fold)"], h["neural Delta (refit, out of fold)"]
-        out.append(f"Wall datasets, held-out cross-entropy (out of fold): neural Delta {n['ce']:.4f} against p21 "
-                   f"{p['ce']:.4f} (summed KL {n['kl']:.4f} against {p['kl']:.4f}).")  # fmt: skip
+        out.append(
+            f"Wall datasets, held-out cross-entropy (out of fold): neural Delta {n['ce']:.4f} against p21 "
+            f"{p['ce']:.4f} (summed KL {n['kl']:.4f} against {p['kl']:.4f})."
+        )
     return out
 
 
@@ -589,8 +709,11 @@ def style(method: str) -> dict:
         return dict(one, color=colour, marker="D" if ("L=5" in method or "3x3" in method) else "v")
     if method.startswith("amortised"):
         return dict(one, color="magenta", marker="*", ms=12)
-    gibbs = {"Gibbs (cell, heat bath)": ("tab:green", "o"), "Gibbs (cell, metropolised)": ("darkgreen", "s"),
-             "guided Gibbs (cell + guide 2x2 blocks)": ("olive", "X")}  # fmt: skip
+    gibbs = {
+        "Gibbs (cell, heat bath)": ("tab:green", "o"),
+        "Gibbs (cell, metropolised)": ("darkgreen", "s"),
+        "guided Gibbs (cell + guide 2x2 blocks)": ("olive", "X"),
+    }
     colour, marker = gibbs.get(method, ("teal", "P") if "3x3" in method else ("tab:cyan", "D"))
     return dict(color=colour, ls="-", marker=marker, ms=5, lw=1.6)
 
@@ -628,7 +751,7 @@ def plot(res: dict, path: Path) -> None:
         ax.set_xlabel("seconds (wall clock)")
         ax.set_ylabel("summed KL to exact")
         ax.grid(True, which="major", alpha=0.3)
-    for ax in list(axes.flat)[len(probs):]:
+    for ax in list(axes.flat)[len(probs) :]:
         ax.axis("off")
     handles = [plt.Line2D([], [], **style(n)) for n in names]
     handles += [plt.Line2D([], [], color="k", ls="--", lw=0.8), plt.Line2D([], [], color="0.5", ls=":")]
@@ -644,9 +767,16 @@ def load_results(path: Path) -> dict:
     """``results.json`` back as :func:`run` returned it (records as :class:`Record`)."""
     res = json.loads(Path(path).read_text())
     for prob in res["problems"].values():
-        prob["records"] = [Record(**{k: (math.nan if v is None and k in ("kl", "seconds") else v)
-                                     for k, v in r.items() if k != "time_to_kl_0.01"})
-                           for r in prob["records"]]  # fmt: skip
+        prob["records"] = [
+            Record(
+                **{
+                    k: (math.nan if v is None and k in ("kl", "seconds") else v)
+                    for k, v in r.items()
+                    if k != "time_to_kl_0.01"
+                }
+            )
+            for r in prob["records"]
+        ]
     return res
 
 
@@ -661,8 +791,12 @@ def _warm_up() -> None:
     for k in (CellGibbs(m2), PatchGibbs(m2, (2, 2))):
         k.setup()
         k.sample(k.initial_params)
-    for make, loss in ((MeanFieldGuide, "exact"), (FirstHitGuide, "exact"), (MeanFieldGuide, "tracegraph"),
-                       (lambda m: PatchGuide(m, 2), "rws")):  # fmt: skip
+    for make, loss in (
+        (MeanFieldGuide, "exact"),
+        (FirstHitGuide, "exact"),
+        (MeanFieldGuide, "tracegraph"),
+        (lambda m: PatchGuide(m, 2), "rws"),
+    ):
         fit_guide(model, make(model), steps=2, num_particles=4, loss=loss)
 
 
@@ -677,7 +811,9 @@ def run(cfg: Settings, seed: int = 0, log=print) -> dict:
         t = time.perf_counter()
         if key == "toy":
             model = toy_problem()
-            problems[key] = run_single(key, model, lambda model=model: pose_constrained_1d(model).marginals, cfg, seed, log)
+            problems[key] = run_single(
+                key, model, lambda model=model: pose_constrained_1d(model).marginals, cfg, seed, log
+            )
         elif key == "walls":
             problems[key] = run_walls(cfg, seed, log)
         elif key in PROBLEMS_2D:
@@ -707,7 +843,9 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true", help="small settings (under a minute)")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--problems", default=None, help="comma-separated subset of toy,walls,2d:independent,2d:mrf8,2d:patch3")
+    ap.add_argument(
+        "--problems", default=None, help="comma-separated subset of toy,walls,2d:independent,2d:mrf8,2d:patch3"
+    )
     ap.add_argument("--out", default=str(ROOT / "out" / "vi_vs_mcmc"))
     ap.add_argument("--replot", action="store_true", help="redraw table.md and the figure from results.json")
     args = ap.parse_args(argv)

@@ -124,8 +124,9 @@ def traverse_all(u0, v0, du, dv, length, t_hit, is_max, rows, cols):
     range_len = np.empty(R, np.int64)
     offsets[0] = 0
     for r in range(R):
-        n, zr, nr = trace_ray(u0[r], v0[r], du[r], dv[r], length[r], t_hit[r], is_max[r], rows, cols,
-                              cells, t_enter, offsets[r], True)  # fmt: skip
+        n, zr, nr = trace_ray(
+            u0[r], v0[r], du[r], dv[r], length[r], t_hit[r], is_max[r], rows, cols, cells, t_enter, offsets[r], True
+        )
         offsets[r + 1] = offsets[r] + n
         z[r] = zr
         in_grid[r] = (not is_max[r]) and zr < n

@@ -128,123 +128,242 @@ _finite = _number(float)
 
 def _add_reader_options(p: argparse.ArgumentParser, carmen_only: bool) -> None:
     note = " (CARMEN logs only)" if carmen_only else ""
-    p.add_argument("--lenient", action="store_true",
-                   help="skip malformed log lines (listed in the report) instead of stopping at the first "
-                        "one; by default a malformed line is an error naming file, line and field" + note)
-    p.add_argument("--max-usable-range", type=_pos_float, metavar="R",
-                   help="drop readings at or beyond R metres (the Intel protocol of thesis Section 6.2 is "
-                        "20); default: keep every reading" + note)
-    p.add_argument("--no-return", choices=("drop", "max"),
-                   help="what a no-return sentinel reading becomes: 'drop' (invalid beam, the default, as "
-                        "in the thesis) or 'max' (a max-range reading that clears the cells it crosses)" + note)
+    p.add_argument(
+        "--lenient",
+        action="store_true",
+        help="skip malformed log lines (listed in the report) instead of stopping at the first "
+        "one; by default a malformed line is an error naming file, line and field" + note,
+    )
+    p.add_argument(
+        "--max-usable-range",
+        type=_pos_float,
+        metavar="R",
+        help="drop readings at or beyond R metres (the Intel protocol of thesis Section 6.2 is "
+        "20); default: keep every reading" + note,
+    )
+    p.add_argument(
+        "--no-return",
+        choices=("drop", "max"),
+        help="what a no-return sentinel reading becomes: 'drop' (invalid beam, the default, as "
+        "in the thesis) or 'max' (a max-range reading that clears the cells it crosses)" + note,
+    )
     g = p.add_mutually_exclusive_group()
-    g.add_argument("--pose-step", type=_pos_int, default=1, metavar="K",
-                   help="keep every K-th scan (default 1: all)")
-    g.add_argument("--pose-fraction", type=_fraction, metavar="F",
-                   help="keep an evenly spaced fraction F in (0, 1] of the scans (Table 6.5 uses 0.1)")
-    p.add_argument("--beam-step", type=_pos_int, default=1, metavar="K",
-                   help="keep every K-th beam of each scan (default 1: all; 2 halves the beams)")
+    g.add_argument("--pose-step", type=_pos_int, default=1, metavar="K", help="keep every K-th scan (default 1: all)")
+    g.add_argument(
+        "--pose-fraction",
+        type=_fraction,
+        metavar="F",
+        help="keep an evenly spaced fraction F in (0, 1] of the scans (Table 6.5 uses 0.1)",
+    )
+    p.add_argument(
+        "--beam-step",
+        type=_pos_int,
+        default=1,
+        metavar="K",
+        help="keep every K-th beam of each scan (default 1: all; 2 halves the beams)",
+    )
 
 
 def build_parser() -> argparse.ArgumentParser:
     """The ``ogm-ppl`` argument parser (subcommands ``map``, ``simulate``, ``convert``, ``run``)."""
     parser = _Parser(prog="ogm-ppl", description=__doc__.splitlines()[0])
-    parser.add_argument("--version", action="version", version=f"ogm-ppl {_version()}",
-                        help="print the version and exit")
-    parser.add_argument("--traceback", action="store_true",
-                        help="on an error, show the Python traceback instead of one line (for bug reports)")
-    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND",
-                                help="map, methods, simulate, convert, experiment or run "
-                                "(COMMAND --help for its options)")
+    parser.add_argument(
+        "--version", action="version", version=f"ogm-ppl {_version()}", help="print the version and exit"
+    )
+    parser.add_argument(
+        "--traceback",
+        action="store_true",
+        help="on an error, show the Python traceback instead of one line (for bug reports)",
+    )
+    sub = parser.add_subparsers(
+        dest="command",
+        required=True,
+        metavar="COMMAND",
+        help="map, methods, simulate, convert, experiment or run (COMMAND --help for its options)",
+    )
 
     # --------------------------------------------------------------------------------- map
-    m = sub.add_parser("map", help="occupancy grid map of a CARMEN log or a dataset file",
-                       description="Map INPUT (a CARMEN log, plain or gzip, or an ogm_ppl dataset .npz) into "
-                                   "DIR: map.npz, map.png, ros/map.yaml + ros/map.pgm (+ sidecar), "
-                                   "report.json, report.md.")  # fmt: skip
+    m = sub.add_parser(
+        "map",
+        help="occupancy grid map of a CARMEN log or a dataset file",
+        description="Map INPUT (a CARMEN log, plain or gzip, or an ogm_ppl dataset .npz) into "
+        "DIR: map.npz, map.png, ros/map.yaml + ros/map.pgm (+ sidecar), "
+        "report.json, report.md.",
+    )
     m.add_argument("input", type=Path, metavar="INPUT", help="a CARMEN log (.log / .log.gz) or a dataset .npz")
     m.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory (created)")
-    m.add_argument("--resolution", type=_pos_float, metavar="M",
-                   help="cell size in metres (default 0.05; for a dataset file with a grid, its resolution)")
+    m.add_argument(
+        "--resolution",
+        type=_pos_float,
+        metavar="M",
+        help="cell size in metres (default 0.05; for a dataset file with a grid, its resolution)",
+    )
     ext = m.add_mutually_exclusive_group()
-    ext.add_argument("--size", type=_pos_int, nargs=2, metavar=("W", "H"),
-                     help="grid of W columns x H rows cells with its lower-left corner at --origin (default "
-                          "origin 0 0); every pose must lie inside")
-    ext.add_argument("--auto-extent", action="store_true",
-                     help="(default) a grid covering every pose and hit end point plus --margin; for a dataset "
-                          "file with a grid and no --resolution/--margin/--origin, that grid")
-    m.add_argument("--origin", type=_finite, nargs=2, metavar=("X", "Y"),
-                   help="world coordinates (metres) of the grid's lower-left corner")
-    m.add_argument("--margin", type=_nonneg_float, metavar="M",
-                   help="metres added on every side of the automatic extent (default 1.0)")
-    m.add_argument("--max-cells", type=_pos_int, default=MAX_CELLS, metavar="N",
-                   help=f"refuse grids of more than N cells (default {MAX_CELLS:,})")
-    m.add_argument("--method", default="ogm", metavar="NAME",
-                   help="map method (default ogm), any registered one (ogm-ppl methods lists them with their "
-                        "parameters): " + ", ".join(method_names()))
-    m.add_argument("--param", action="append", default=[], metavar="KEY=VALUE",
-                   help="set a parameter of the method (repeatable), e.g. --param scan=random; "
-                        "'ogm-ppl methods NAME' lists them")
-    m.add_argument("--delta", metavar="NAME",
-                   help="parameter delta: the update term of the log-odds methods, any name delta_by_name "
-                        "knows (haehnel, elfes_thesis, p21_thesis, p21, moravec_opt, ...); default: haehnel "
-                        "for ogm, p21 for p21, elfes_thesis for elfes")
-    m.add_argument("--prior", metavar="NAME",
-                   help="parameter prior of the model-based methods (gibbs, patch, ...; of ogm: the cells' "
-                        "prior occupancy, a number): 'independent' (each "
-                        "cell occupied with probability --lambda, the default) or a learned prior "
-                        "KIND:CORPUS (ogm_ppl.priors.prior_by_name), e.g. mrf:houseexpo, patch3:houseexpo, "
-                        "border:houseexpo, border1:houseexpo")
-    m.add_argument("--lambda", dest="lam", type=_probability, metavar="P",
-                   help="parameter lam: cell prior occupancy of the independent prior "
-                        f"(default {CLI_LAMBDA}, the thesis's value)")
-    m.add_argument("--sigma", type=_pos_float, metavar="CELLS",
-                   help="parameter sigma_cells: standard deviation of the Gaussian range model in cells "
-                        "(default: the dataset's simulation sigma if recorded, else 1.0 cell, about the "
-                        "scatter of a corrected real log at 5 cm)")
-    m.add_argument("--sweeps", type=_pos_int, metavar="N",
-                   help=f"parameter sweeps: MCMC sweeps counted in the marginals (default {CLI_SWEEPS})")
-    m.add_argument("--warmup", type=_nonneg_int, metavar="N",
-                   help="parameter burn_in: MCMC sweeps run before counting (default: sweeps // 10)")
-    m.add_argument("--patch", metavar="SHAPE",
-                   help="parameter patch: of gibbs (PatchGibbs instead of CellGibbs) and patch "
-                        "(default 3x3): HxW, an int L (a run of L cells), 'plus' or 'square'")
+    ext.add_argument(
+        "--size",
+        type=_pos_int,
+        nargs=2,
+        metavar=("W", "H"),
+        help="grid of W columns x H rows cells with its lower-left corner at --origin (default "
+        "origin 0 0); every pose must lie inside",
+    )
+    ext.add_argument(
+        "--auto-extent",
+        action="store_true",
+        help="(default) a grid covering every pose and hit end point plus --margin; for a dataset "
+        "file with a grid and no --resolution/--margin/--origin, that grid",
+    )
+    m.add_argument(
+        "--origin",
+        type=_finite,
+        nargs=2,
+        metavar=("X", "Y"),
+        help="world coordinates (metres) of the grid's lower-left corner",
+    )
+    m.add_argument(
+        "--margin",
+        type=_nonneg_float,
+        metavar="M",
+        help="metres added on every side of the automatic extent (default 1.0)",
+    )
+    m.add_argument(
+        "--max-cells",
+        type=_pos_int,
+        default=MAX_CELLS,
+        metavar="N",
+        help=f"refuse grids of more than N cells (default {MAX_CELLS:,})",
+    )
+    m.add_argument(
+        "--method",
+        default="ogm",
+        metavar="NAME",
+        help="map method (default ogm), any registered one (ogm-ppl methods lists them with their "
+        "parameters): " + ", ".join(method_names()),
+    )
+    m.add_argument(
+        "--param",
+        action="append",
+        default=[],
+        metavar="KEY=VALUE",
+        help="set a parameter of the method (repeatable), e.g. --param scan=random; 'ogm-ppl methods NAME' lists them",
+    )
+    m.add_argument(
+        "--delta",
+        metavar="NAME",
+        help="parameter delta: the update term of the log-odds methods, any name delta_by_name "
+        "knows (haehnel, elfes_thesis, p21_thesis, p21, moravec_opt, ...); default: haehnel "
+        "for ogm, p21 for p21, elfes_thesis for elfes",
+    )
+    m.add_argument(
+        "--prior",
+        metavar="NAME",
+        help="parameter prior of the model-based methods (gibbs, patch, ...; of ogm: the cells' "
+        "prior occupancy, a number): 'independent' (each "
+        "cell occupied with probability --lambda, the default) or a learned prior "
+        "KIND:CORPUS (ogm_ppl.priors.prior_by_name), e.g. mrf:houseexpo, patch3:houseexpo, "
+        "border:houseexpo, border1:houseexpo",
+    )
+    m.add_argument(
+        "--lambda",
+        dest="lam",
+        type=_probability,
+        metavar="P",
+        help=f"parameter lam: cell prior occupancy of the independent prior (default {CLI_LAMBDA}, the thesis's value)",
+    )
+    m.add_argument(
+        "--sigma",
+        type=_pos_float,
+        metavar="CELLS",
+        help="parameter sigma_cells: standard deviation of the Gaussian range model in cells "
+        "(default: the dataset's simulation sigma if recorded, else 1.0 cell, about the "
+        "scatter of a corrected real log at 5 cm)",
+    )
+    m.add_argument(
+        "--sweeps",
+        type=_pos_int,
+        metavar="N",
+        help=f"parameter sweeps: MCMC sweeps counted in the marginals (default {CLI_SWEEPS})",
+    )
+    m.add_argument(
+        "--warmup",
+        type=_nonneg_int,
+        metavar="N",
+        help="parameter burn_in: MCMC sweeps run before counting (default: sweeps // 10)",
+    )
+    m.add_argument(
+        "--patch",
+        metavar="SHAPE",
+        help="parameter patch: of gibbs (PatchGibbs instead of CellGibbs) and patch "
+        "(default 3x3): HxW, an int L (a run of L cells), 'plus' or 'square'",
+    )
     m.add_argument("--seed", type=_nonneg_int, default=0, metavar="S", help="random seed (>= 0, default 0)")
     _add_reader_options(m, carmen_only=True)
-    m.add_argument("--thresholds", choices=("ros1", "nav2"), default="ros1",
-                   help="occupied/free thresholds of the ROS map: ros1 (0.65/0.196, default) or nav2 (0.65/0.25)")
+    m.add_argument(
+        "--thresholds",
+        choices=("ros1", "nav2"),
+        default="ros1",
+        help="occupied/free thresholds of the ROS map: ros1 (0.65/0.196, default) or nav2 (0.65/0.25)",
+    )
 
     # ---------------------------------------------------------------------------- simulate
-    s = sub.add_parser("simulate", help="a simulated stop-and-scan dataset (Section 6.1)",
-                       description="Simulate a stop-and-scan dataset (360 degree scans at the stops of a "
-                                   "frontier-exploration route) on a ground-truth map and save it as a "
-                                   "dataset file with the truth.")  # fmt: skip
-    s.add_argument("--map", nargs="+", required=True, metavar="SPEC",
-                   help="ground truth: 'generated KIND' (or just KIND, or generated:KIND), KIND one of "
-                        f"{', '.join(KINDS)}; or a PNG floor plan (dark pixels < 128 are occupied)")
+    s = sub.add_parser(
+        "simulate",
+        help="a simulated stop-and-scan dataset (Section 6.1)",
+        description="Simulate a stop-and-scan dataset (360 degree scans at the stops of a "
+        "frontier-exploration route) on a ground-truth map and save it as a "
+        "dataset file with the truth.",
+    )
+    s.add_argument(
+        "--map",
+        nargs="+",
+        required=True,
+        metavar="SPEC",
+        help="ground truth: 'generated KIND' (or just KIND, or generated:KIND), KIND one of "
+        f"{', '.join(KINDS)}; or a PNG floor plan (dark pixels < 128 are occupied)",
+    )
     s.add_argument("--out", type=Path, required=True, metavar="FILE.npz", help="dataset file to write")
-    s.add_argument("--size", type=_number(int, 60), default=500, metavar="N",
-                   help="generated map of N x N cells (default 500 as in Fig. 5.9; at least 60; outer wall "
-                        "min(20, N // 4) cells thick)")
-    s.add_argument("--resolution", type=_pos_float, default=0.05, metavar="M",
-                   help="metres per cell (default 0.05)")
-    s.add_argument("--poses", type=_pos_int, metavar="N",
-                   help="at most N stops (default: explore until 95 %% of the free space is seen)")
-    s.add_argument("--beams", type=_pos_int, default=720, metavar="B",
-                   help="beams per 360 degree scan (default 720)")
-    s.add_argument("--max-range-cells", type=_pos_float, default=75.0, metavar="F",
-                   help="sensor maximum range in cells (default 75)")
-    s.add_argument("--sigma", type=_nonneg_float, default=3.0, metavar="CELLS",
-                   help="Gaussian range noise in cells (default 3)")
+    s.add_argument(
+        "--size",
+        type=_number(int, 60),
+        default=500,
+        metavar="N",
+        help="generated map of N x N cells (default 500 as in Fig. 5.9; at least 60; outer wall "
+        "min(20, N // 4) cells thick)",
+    )
+    s.add_argument("--resolution", type=_pos_float, default=0.05, metavar="M", help="metres per cell (default 0.05)")
+    s.add_argument(
+        "--poses",
+        type=_pos_int,
+        metavar="N",
+        help="at most N stops (default: explore until 95 %% of the free space is seen)",
+    )
+    s.add_argument("--beams", type=_pos_int, default=720, metavar="B", help="beams per 360 degree scan (default 720)")
+    s.add_argument(
+        "--max-range-cells",
+        type=_pos_float,
+        default=75.0,
+        metavar="F",
+        help="sensor maximum range in cells (default 75)",
+    )
+    s.add_argument(
+        "--sigma", type=_nonneg_float, default=3.0, metavar="CELLS", help="Gaussian range noise in cells (default 3)"
+    )
     s.add_argument("--seed", type=_nonneg_int, default=0, metavar="S", help="random seed (>= 0, default 0)")
 
     # ----------------------------------------------------------------------------- convert
-    c = sub.add_parser("convert", help="a CARMEN log as a dataset file",
-                       description="Read a CARMEN log (plain or gzip) and save its scans as a dataset file.")
+    c = sub.add_parser(
+        "convert",
+        help="a CARMEN log as a dataset file",
+        description="Read a CARMEN log (plain or gzip) and save its scans as a dataset file.",
+    )
     c.add_argument("log", type=Path, metavar="LOG", help="the CARMEN log")
     c.add_argument("--out", type=Path, required=True, metavar="FILE.npz", help="dataset file to write")
-    c.add_argument("--resolution", type=_pos_float, metavar="M",
-                   help="also store a grid of this resolution covering the log (extent + 1 m margin)")
+    c.add_argument(
+        "--resolution",
+        type=_pos_float,
+        metavar="M",
+        help="also store a grid of this resolution covering the log (extent + 1 m margin)",
+    )
     _add_reader_options(c, carmen_only=False)
 
     # --------------------------------------------------------------------------------- methods
@@ -257,13 +376,20 @@ def build_parser() -> argparse.ArgumentParser:
     ms.add_argument("name", nargs="?", metavar="NAME", help="show this method only")
 
     # --------------------------------------------------------------------------------- experiment
-    e = sub.add_parser("experiment", help="run an experiment spec (TOML): datasets x algorithms x chains",
-                       description="Run an experiment spec (ogm_ppl.experiment): every dataset x algorithm x "
-                                   "chain is a dask task; writes maps, metrics.json/.md and figures.")  # fmt: skip
+    e = sub.add_parser(
+        "experiment",
+        help="run an experiment spec (TOML): datasets x algorithms x chains",
+        description="Run an experiment spec (ogm_ppl.experiment): every dataset x algorithm x "
+        "chain is a dask task; writes maps, metrics.json/.md and figures.",
+    )
     e.add_argument("spec", type=Path, help="the spec file (see experiments/specs/*.toml)")
     e.add_argument("--out", type=Path, default=None, help="output directory (default out/experiments/<name>)")
-    e.add_argument("--scheduler", default=None, metavar="ADDR",
-                   help="'serial' (no dask), a dask scheduler address tcp://..., or none for a LocalCluster")
+    e.add_argument(
+        "--scheduler",
+        default=None,
+        metavar="ADDR",
+        help="'serial' (no dask), a dask scheduler address tcp://..., or none for a LocalCluster",
+    )
     e.add_argument("--workers", type=_pos_int, default=None, help="LocalCluster workers (default: one per core)")
     e.add_argument("--no-resume", action="store_true", help="rerun tasks that are already done")
     e.add_argument("--quiet", action="store_true", help="no progress output")
@@ -272,9 +398,13 @@ def build_parser() -> argparse.ArgumentParser:
     run = sub.add_parser("run", help="the headline experiment: maps, figures and a report")
     run.add_argument("--out", type=Path, default=Path("out"), help="output directory (default out)")
     run.add_argument("--seed", type=_nonneg_int, default=0, help="random seed of the simulated part (default 0)")
-    run.add_argument("--log", type=Path, default=None,
-                     help="the Intel Lab log (default: intel-lab/intel-corrected.log.gz under $OGM_PPL_DATA or the "
-                          "shared data folder)")
+    run.add_argument(
+        "--log",
+        type=Path,
+        default=None,
+        help="the Intel Lab log (default: intel-lab/intel-corrected.log.gz under $OGM_PPL_DATA or the "
+        "shared data folder)",
+    )
     run.add_argument("--quick", action="store_true", help="a small version (10 cm, 10 %% of poses, 6 sweeps)")
     run.add_argument("--scheduler", default=None, help="'serial', a dask scheduler address, or none for a LocalCluster")
     run.add_argument("--workers", type=_pos_int, default=None, help="LocalCluster workers (default: one per core)")
@@ -338,9 +468,14 @@ def _prepare_out_file(out: Path) -> None:
 
 
 def _reader_kwargs(args) -> dict:
-    return dict(strict=not args.lenient, max_usable_range=args.max_usable_range,
-                no_return=args.no_return or "drop", pose_step=args.pose_step,
-                pose_fraction=args.pose_fraction, beam_step=args.beam_step)  # fmt: skip
+    return dict(
+        strict=not args.lenient,
+        max_usable_range=args.max_usable_range,
+        no_return=args.no_return or "drop",
+        pose_step=args.pose_step,
+        pose_fraction=args.pose_fraction,
+        beam_step=args.beam_step,
+    )
 
 
 def _jsonable(x):
@@ -361,8 +496,10 @@ def _jsonable(x):
 def _check_cells(rows: int, cols: int, limit: int) -> None:
     n = rows * cols
     if n > limit:
-        raise CLIError(f"the grid would have {cols} x {rows} = {n:,} cells, more than the limit of {limit:,} "
-                       "(--max-cells); use a coarser --resolution, a smaller --size or a larger --max-cells")  # fmt: skip
+        raise CLIError(
+            f"the grid would have {cols} x {rows} = {n:,} cells, more than the limit of {limit:,} "
+            "(--max-cells); use a coarser --resolution, a smaller --size or a larger --max-cells"
+        )
 
 
 @dataclass
@@ -381,8 +518,11 @@ def _read_input(args) -> _Input:
 
     magic = _check_input(args.input)
     if magic[:2] == b"PK":
-        for flag, value in (("--lenient", args.lenient), ("--max-usable-range", args.max_usable_range),
-                            ("--no-return", args.no_return)):  # fmt: skip
+        for flag, value in (
+            ("--lenient", args.lenient),
+            ("--max-usable-range", args.max_usable_range),
+            ("--no-return", args.no_return),
+        ):
             if value:
                 raise CLIError(f"{flag} applies to CARMEN logs; {args.input} is a dataset file")
         ds = load_dataset(args.input)
@@ -401,8 +541,13 @@ def _make_grid(args, inp: _Input) -> Grid:
         cols, rows = args.size
         _check_cells(rows, cols, args.max_cells)
         grid = Grid((rows, cols), res, tuple(args.origin) if args.origin else (0.0, 0.0))
-    elif inp.grid is not None and inp.grid.ndim == 2 and args.resolution is None and args.margin is None \
-            and args.origin is None:  # fmt: skip
+    elif (
+        inp.grid is not None
+        and inp.grid.ndim == 2
+        and args.resolution is None
+        and args.margin is None
+        and args.origin is None
+    ):
         grid = inp.grid
         _check_cells(grid.rows, grid.cols, args.max_cells)
     else:
@@ -412,8 +557,10 @@ def _make_grid(args, inp: _Input) -> Grid:
         if args.origin is not None:
             ox, oy = args.origin
             if ox > xmin or oy > ymin:
-                raise CLIError(f"--origin {ox} {oy} lies above/right of the data (poses and hits from x = "
-                               f"{xmin:.2f}, y = {ymin:.2f}); give a smaller origin or --size")  # fmt: skip
+                raise CLIError(
+                    f"--origin {ox} {oy} lies above/right of the data (poses and hits from x = "
+                    f"{xmin:.2f}, y = {ymin:.2f}); give a smaller origin or --size"
+                )
         else:
             ox, oy = xmin - margin, ymin - margin
         cols = max(1, math.ceil((xmax + margin - ox) / res))
@@ -425,8 +572,10 @@ def _make_grid(args, inp: _Input) -> Grid:
         s = int(np.flatnonzero(~inside)[0])
         x, y = scans.poses[s, :2]
         xa, xb, ya, yb = grid.extent
-        raise CLIError(f"pose of scan {s} at ({x:.3f}, {y:.3f}) lies outside the grid (x {xa:.3f} .. {xb:.3f}, "
-                       f"y {ya:.3f} .. {yb:.3f}); {(~inside).sum()} of {len(inside)} poses are outside")  # fmt: skip
+        raise CLIError(
+            f"pose of scan {s} at ({x:.3f}, {y:.3f}) lies outside the grid (x {xa:.3f} .. {xb:.3f}, "
+            f"y {ya:.3f} .. {yb:.3f}); {(~inside).sum()} of {len(inside)} poses are outside"
+        )
     return grid
 
 
@@ -532,15 +681,25 @@ def load_map(path: str | os.PathLike) -> dict:
             raise ValueError(f"{path}: not an {MAP_FORMAT} file")
         g = z["grid"]
         grid = Grid((int(g[0]), int(g[1])), float(g[2]), (float(g[3]), float(g[4])))
-        return {"probabilities": z["probabilities"], "observed": z["observed"], "grid": grid,
-                "method": str(z["method"]), "settings": json.loads(str(z["settings"]))}  # fmt: skip
+        return {
+            "probabilities": z["probabilities"],
+            "observed": z["observed"],
+            "grid": grid,
+            "method": str(z["method"]),
+            "settings": json.loads(str(z["settings"])),
+        }
 
 
 def _counts(inp: _Input) -> dict:
     s = inp.scans
     present = int(inp.log.counts["beams"]) if inp.log is not None else int(s.num_readings)  # S x B
-    c: dict[str, int | dict[str, int]] = {"scans": s.num_scans, "beams": present, "valid_beams": s.num_valid,
-         "dropped_beams": present - s.num_valid, "max_range_readings": int(s.is_max.sum())}  # fmt: skip
+    c: dict[str, int | dict[str, int]] = {
+        "scans": s.num_scans,
+        "beams": present,
+        "valid_beams": s.num_valid,
+        "dropped_beams": present - s.num_valid,
+        "max_range_readings": int(s.is_max.sum()),
+    }
     if inp.log is not None:
         for k in ("no_return", "beyond_usable", "below_min"):
             c[k] = int(inp.log.counts.get(k, 0))
@@ -559,8 +718,12 @@ def _scores(probs, observed, inp: _Input, grid: Grid) -> dict | None:
     if truth[mask].all() or not truth[mask].any():
         return None
     f1, thr = best_f1(probs, truth, mask=mask)
-    return {"best_f1": f1, "best_threshold": thr, "roc_auc": roc_auc(probs, truth, mask=mask),
-            "mask": "cells within 10 cells of an observed cell (Fig. 6.16b)"}  # fmt: skip
+    return {
+        "best_f1": f1,
+        "best_threshold": thr,
+        "roc_auc": roc_auc(probs, truth, mask=mask),
+        "mask": "cells within 10 cells of an observed cell (Fig. 6.16b)",
+    }
 
 
 def cmd_map(args) -> dict:
@@ -597,10 +760,16 @@ def _map(args, method, params) -> dict:
         settings = _jsonable({k: v for k, v in vars(args).items() if k not in ("traceback",)})
         settings["method_details"] = _jsonable(details)
         out = args.out
-        _atomic_savez(out / "map.npz", format=np.array(MAP_FORMAT), format_version=np.int64(MAP_FORMAT_VERSION),
-                      probabilities=probs.reshape(grid.shape), observed=observed.reshape(grid.shape),
-                      grid=np.array([grid.rows, grid.cols, grid.resolution, *grid.origin], dtype=float),
-                      method=np.array(args.method), settings=np.array(json.dumps(settings)))  # fmt: skip
+        _atomic_savez(
+            out / "map.npz",
+            format=np.array(MAP_FORMAT),
+            format_version=np.int64(MAP_FORMAT_VERSION),
+            probabilities=probs.reshape(grid.shape),
+            observed=observed.reshape(grid.shape),
+            grid=np.array([grid.rows, grid.cols, grid.resolution, *grid.origin], dtype=float),
+            method=np.array(args.method),
+            settings=np.array(json.dumps(settings)),
+        )
         save_map_png(out / "map.png", probs, observed, grid)
         (out / "ros").mkdir(exist_ok=True)
         ros = save_ros_map(out / "ros" / "map.yaml", probs, grid, unknown=~observed, thresholds=args.thresholds)
@@ -611,17 +780,34 @@ def _map(args, method, params) -> dict:
         "ogm_ppl_version": _version(),
         "input": {"path": str(inp.path), "kind": inp.kind, "size_bytes": inp.path.stat().st_size},
         "counts": _counts(inp),
-        "grid": {"rows": grid.rows, "cols": grid.cols, "cells": grid.num_cells, "resolution_m": grid.resolution,
-                 "origin_m": list(grid.origin), "extent_m": list(grid.extent),
-                 "observed_cells": int(observed.sum())},
+        "grid": {
+            "rows": grid.rows,
+            "cols": grid.cols,
+            "cells": grid.num_cells,
+            "resolution_m": grid.resolution,
+            "origin_m": list(grid.origin),
+            "extent_m": list(grid.extent),
+            "observed_cells": int(observed.sum()),
+        },
         "method": {"name": method.name, "description": method.doc, **_jsonable(details)},
-        "times_s": {"read": times["read_s"], "ray_cast": times["ray_cast_s"], "map": times["map_s"],
-                    "write": times["write_s"]},
-        "files": ["map.npz", "map.png", str(Path("ros") / ros.yaml.name), str(Path("ros") / ros.image.name),
-                  str(Path("ros") / ros.sidecar.name), "report.json", "report.md"],
+        "times_s": {
+            "read": times["read_s"],
+            "ray_cast": times["ray_cast_s"],
+            "map": times["map_s"],
+            "write": times["write_s"],
+        },
+        "files": [
+            "map.npz",
+            "map.png",
+            str(Path("ros") / ros.yaml.name),
+            str(Path("ros") / ros.image.name),
+            str(Path("ros") / ros.sidecar.name),
+            "report.json",
+            "report.md",
+        ],
         "scores_vs_truth": _scores(probs, observed, inp, grid),
         "settings": settings,
-    }  # fmt: skip
+    }
     if inp.log is not None and args.lenient:
         report["bad_lines"] = [{"line": n, "reason": r} for n, r in inp.log.bad_lines[:1000]]
     atomic_write_text(out / "report.json", json.dumps(_jsonable(report), indent=2))
@@ -643,8 +829,10 @@ def _report_md(r: dict) -> str:
         f"{c['dropped_beams']:,}; max-range readings: {c['max_range_readings']:,}",
     ]
     if "no_return" in c:
-        lines.append(f"- dropped by rule: no return {c['no_return']:,}, beyond usable range "
-                     f"{c['beyond_usable']:,}, below min range {c['below_min']:,}; bad lines: {c['bad_lines']}")  # fmt: skip
+        lines.append(
+            f"- dropped by rule: no return {c['no_return']:,}, beyond usable range "
+            f"{c['beyond_usable']:,}, below min range {c['below_min']:,}; bad lines: {c['bad_lines']}"
+        )
     lines += [
         f"- grid: {g['cols']} x {g['rows']} cells ({g['cells']:,}) at {g['resolution_m']} m, origin "
         f"({g['origin_m'][0]:.3f}, {g['origin_m'][1]:.3f}); observed cells: {g['observed_cells']:,}",
@@ -655,8 +843,10 @@ def _report_md(r: dict) -> str:
     ]
     if r.get("scores_vs_truth"):
         sc = r["scores_vs_truth"]
-        lines.append(f"- against the truth ({sc['mask']}): best F1 {sc['best_f1']:.3f} at "
-                     f"{sc['best_threshold']:.2f}, ROC AUC {sc['roc_auc']:.3f}")  # fmt: skip
+        lines.append(
+            f"- against the truth ({sc['mask']}): best F1 {sc['best_f1']:.3f} at "
+            f"{sc['best_threshold']:.2f}, ROC AUC {sc['roc_auc']:.3f}"
+        )
     lines += ["", "Files: " + ", ".join(f"`{f}`" for f in r["files"]) + "."]
     if r.get("bad_lines"):
         lines += ["", "## Skipped lines (--lenient)", ""]
@@ -671,7 +861,7 @@ def _truth_from_spec(spec: list[str], size: int, seed: int) -> tuple[np.ndarray,
 
     words = spec[1:] if spec[0] == "generated" else spec
     if len(words) == 1 and words[0].startswith("generated:"):
-        words = [words[0][len("generated:"):]]
+        words = [words[0][len("generated:") :]]
     if len(words) == 1 and words[0] in KINDS:
         border = min(20, size // 4)  # Fig. 5.9's 20-cell outer wall, thinner on small maps
         truth = generate_map(words[0], (size, size), seed=seed, border=border)
@@ -689,8 +879,10 @@ def _truth_from_spec(spec: list[str], size: int, seed: int) -> tuple[np.ndarray,
         occ = grey < 128
         occ[[0, -1], :] = occ[:, [0, -1]] = True  # a closed outer wall: beams end inside the map
         return occ[::-1].copy(), {"map": "png", "path": str(path)}  # image row 0 is the top (largest y)
-    raise CLIError(f"argument --map: expected 'generated KIND' with KIND one of {', '.join(KINDS)}, "
-                   f"or a PNG file; got {' '.join(spec)!r}")  # fmt: skip
+    raise CLIError(
+        f"argument --map: expected 'generated KIND' with KIND one of {', '.join(KINDS)}, "
+        f"or a PNG file; got {' '.join(spec)!r}"
+    )
 
 
 def cmd_simulate(args) -> dict:
@@ -706,17 +898,34 @@ def cmd_simulate(args) -> dict:
         bar.update()
         bar.set_postfix_str("route and scans")
         t0 = time.perf_counter()
-        data = stop_and_scan(truth, grid, num_poses=args.poses, beams=args.beams,
-                             max_range_cells=args.max_range_cells, sigma_cells=args.sigma, seed=args.seed)  # fmt: skip
+        data = stop_and_scan(
+            truth,
+            grid,
+            num_poses=args.poses,
+            beams=args.beams,
+            max_range_cells=args.max_range_cells,
+            sigma_cells=args.sigma,
+            seed=args.seed,
+        )
         seconds = time.perf_counter() - t0
         bar.update()
         bar.set_postfix_str("writing")
         settings = dict(data.settings, **source, resolution=args.resolution, generator="stop_and_scan")
-        save_dataset(args.out, data.scans, grid=grid, truth=data.truth, settings=_jsonable(settings),
-                     provenance={"tool": "ogm-ppl simulate", "ogm_ppl_version": _version()})  # fmt: skip
+        save_dataset(
+            args.out,
+            data.scans,
+            grid=grid,
+            truth=data.truth,
+            settings=_jsonable(settings),
+            provenance={"tool": "ogm-ppl simulate", "ogm_ppl_version": _version()},
+        )
         bar.update()
-    return {"poses": data.scans.num_scans, "beams": data.scans.beams_per_scan, "grid": list(grid.shape),
-            "seconds": seconds}  # fmt: skip
+    return {
+        "poses": data.scans.num_scans,
+        "beams": data.scans.beams_per_scan,
+        "grid": list(grid.shape),
+        "seconds": seconds,
+    }
 
 
 def cmd_convert(args) -> dict:
@@ -729,12 +938,22 @@ def cmd_convert(args) -> dict:
     log = read_carmen(args.log, **_reader_kwargs(args))
     seconds = time.perf_counter() - t0
     grid = log.grid(args.resolution) if args.resolution else None
-    provenance = {"tool": "ogm-ppl convert", "source": str(args.log), "reader": "ogm_ppl.datasets.read_carmen",
-                  "ogm_ppl_version": _version(), "num_lines": log.num_lines, "bad_lines": len(log.bad_lines),
-                  "counts": log.counts}  # fmt: skip
+    provenance = {
+        "tool": "ogm-ppl convert",
+        "source": str(args.log),
+        "reader": "ogm_ppl.datasets.read_carmen",
+        "ogm_ppl_version": _version(),
+        "num_lines": log.num_lines,
+        "bad_lines": len(log.bad_lines),
+        "counts": log.counts,
+    }
     save_dataset(args.out, log.scans, grid=grid, settings=_jsonable(log.settings), provenance=_jsonable(provenance))
-    return {"scans": log.scans.num_scans, "beams": log.scans.beams_per_scan, "bad_lines": len(log.bad_lines),
-            "seconds": seconds}  # fmt: skip
+    return {
+        "scans": log.scans.num_scans,
+        "beams": log.scans.beams_per_scan,
+        "bad_lines": len(log.bad_lines),
+        "seconds": seconds,
+    }
 
 
 def _one_line(e: BaseException) -> str:
@@ -770,8 +989,14 @@ def cmd_experiment(args) -> int:
         raise CLIError(str(e)) from None
     out = args.out if args.out is not None else Path("out") / "experiments" / spec.name
     try:
-        r = run_experiment(spec, out, scheduler=args.scheduler, workers=args.workers, resume=not args.no_resume,
-                           progress=not args.quiet and _progress())  # fmt: skip
+        r = run_experiment(
+            spec,
+            out,
+            scheduler=args.scheduler,
+            workers=args.workers,
+            resume=not args.no_resume,
+            progress=not args.quiet and _progress(),
+        )
     except ExperimentError as e:
         print(f"ogm-ppl: error: {_one_line(e)}", file=sys.stderr)
         return 1
@@ -796,26 +1021,39 @@ def main(argv: list[str] | None = None) -> int:
             _prepare_out_dir(args.out)
             from ogm_ppl.experiment.headline import run_headline
 
-            run_headline(args.out, seed=args.seed, log=args.log, quick=args.quick, scheduler=args.scheduler,
-                         workers=args.workers, progress=_progress())
+            run_headline(
+                args.out,
+                seed=args.seed,
+                log=args.log,
+                quick=args.quick,
+                scheduler=args.scheduler,
+                workers=args.workers,
+                progress=_progress(),
+            )
             print((args.out / "report.md").read_text())
         elif args.command == "map":
             r = cmd_map(args)
             t = r["times_s"]
-            print(f"ogm-ppl map: {r['grid']['cols']} x {r['grid']['rows']} cells, {r['counts']['scans']} scans, "
-                  f"method {args.method}; read {_fmt_s(t['read'])}, map {_fmt_s(t['map'])} -> {args.out}")  # fmt: skip
+            print(
+                f"ogm-ppl map: {r['grid']['cols']} x {r['grid']['rows']} cells, {r['counts']['scans']} scans, "
+                f"method {args.method}; read {_fmt_s(t['read'])}, map {_fmt_s(t['map'])} -> {args.out}"
+            )
         elif args.command == "simulate":
             r = cmd_simulate(args)
-            print(f"ogm-ppl simulate: {r['poses']} poses x {r['beams']} beams on {r['grid'][1]} x {r['grid'][0]} "
-                  f"cells -> {args.out}")  # fmt: skip
+            print(
+                f"ogm-ppl simulate: {r['poses']} poses x {r['beams']} beams on {r['grid'][1]} x {r['grid'][0]} "
+                f"cells -> {args.out}"
+            )
         elif args.command == "experiment":
             return cmd_experiment(args)
         elif args.command == "methods":
             print(cmd_methods(args))
         elif args.command == "convert":
             r = cmd_convert(args)
-            print(f"ogm-ppl convert: {r['scans']} scans x {r['beams']} beams ({r['bad_lines']} bad lines "
-                  f"skipped) -> {args.out}")  # fmt: skip
+            print(
+                f"ogm-ppl convert: {r['scans']} scans x {r['beams']} beams ({r['bad_lines']} bad lines "
+                f"skipped) -> {args.out}"
+            )
         return 0
     except (CLIError, CarmenFormatError, DatasetFileError, RosMapError, ValueError, OSError, MemoryError) as e:
         if show_tb:

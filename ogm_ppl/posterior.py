@@ -117,8 +117,7 @@ class WeightedMaps(MapPosterior):
     log_probs: torch.Tensor  # normalised log-probability of every map (set by ``brute_force``)
     log_evidence: float  # log p(z) (set by ``brute_force``)
 
-    def __init__(self, model, chunks: Callable[[], Iterator[tuple[torch.Tensor, torch.Tensor]]],
-                 num_maps: int) -> None:  # fmt: skip
+    def __init__(self, model, chunks: Callable[[], Iterator[tuple[torch.Tensor, torch.Tensor]]], num_maps: int) -> None:
         self.model = model
         self._chunk_fn = chunks
         self.num_maps = int(num_maps)

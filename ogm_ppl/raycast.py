@@ -140,8 +140,14 @@ class Rays:
         if self.geometry is None:
             raise ValueError("these Rays carry no geometry; build them with raycast()")
         g = self.geometry[rays]
-        return entries_beyond(g[:, 0].copy(), g[:, 1].copy(), g[:, 2].copy(), g[:, 3].copy(), g[:, 4].copy(),
-                              self.lengths[rays].astype(np.int64))  # fmt: skip
+        return entries_beyond(
+            g[:, 0].copy(),
+            g[:, 1].copy(),
+            g[:, 2].copy(),
+            g[:, 3].copy(),
+            g[:, 4].copy(),
+            self.lengths[rays].astype(np.int64),
+        )
 
     def ray(self, r: int) -> np.ndarray:
         """Cells of ray ``r``, from the sensor outward."""
@@ -206,10 +212,7 @@ def ray_inputs(grid: Grid, scans: Scans) -> RayInputs:
         inside &= ok_y
     if not inside.all():
         s = int(np.flatnonzero(~inside)[0])
-        raise ValueError(
-            f"Scans.poses[{s}] = {scans.poses[s].tolist()} lies outside the grid "
-            f"(extent {grid.extent})"
-        )
+        raise ValueError(f"Scans.poses[{s}] = {scans.poses[s].tolist()} lies outside the grid (extent {grid.extent})")
     theta = scans.world_angles().ravel()
     du = np.cos(theta)
     dv = np.sin(theta)

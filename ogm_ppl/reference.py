@@ -40,9 +40,7 @@ def traverse_reference(
 ) -> tuple[list[int], list[float]]:
     """Cells (flat, row-major) and entry distances of one ray; see the module docstring."""
     u0, v0, du, dv = float(u0), float(v0), float(du), float(dv)
-    events = [(t, 0) for t in _crossings(u0, du, length)] + [
-        (t, 1) for t in _crossings(v0, dv, length)
-    ]
+    events = [(t, 0) for t in _crossings(u0, du, length)] + [(t, 1) for t in _crossings(v0, dv, length)]
     events.sort()  # by t, then column (0) before row (1)
     col, row = math.floor(u0), math.floor(v0)
     sx = int(du > 0) - int(du < 0)
@@ -91,9 +89,7 @@ def reading_kappa_reference(u0: float, v0: float, du: float, dv: float, length: 
     return z
 
 
-def evidence_grid_reference(
-    grid: Grid, scans: Scans, l_occ: float, l_free: float, prior: float = 0.5
-) -> np.ndarray:
+def evidence_grid_reference(grid: Grid, scans: Scans, l_occ: float, l_free: float, prior: float = 0.5) -> np.ndarray:
     """Moravec/Hähnel traditional OGM, one ray at a time in plain Python (Eq. 2.10)."""
     ev = np.full(grid.num_cells, math.log(prior / (1 - prior)))
     u0, v0, du, dv, rng, is_max, L = _rays_of(grid, scans)
@@ -108,9 +104,7 @@ def evidence_grid_reference(
     return ev
 
 
-def evidence_grid_numpy(
-    grid: Grid, scans: Scans, l_occ: float, l_free: float, prior: float = 0.5
-) -> np.ndarray:
+def evidence_grid_numpy(grid: Grid, scans: Scans, l_occ: float, l_free: float, prior: float = 0.5) -> np.ndarray:
     """Moravec/Hähnel traditional OGM, batched and vectorised in numpy (traversal included).
 
     A batched DDA: all rays advance one cell per step together (vector operations over the rays still
@@ -157,8 +151,7 @@ def evidence_grid_numpy(
         idx, col, row, sx, sy, bx, by, tx, ty, t, t_prev, th, u0, v0, du, dv = (
             a[live] for a in (idx, col, row, sx, sy, bx, by, tx, ty, t, t_prev, th, u0, v0, du, dv)
         )
-    ev = np.bincount(np.concatenate(all_cells), weights=np.concatenate(all_vals),
-                     minlength=grid.num_cells)  # fmt: skip
+    ev = np.bincount(np.concatenate(all_cells), weights=np.concatenate(all_vals), minlength=grid.num_cells)
     return ev + math.log(prior / (1 - prior))
 
 

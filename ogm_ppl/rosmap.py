@@ -185,15 +185,11 @@ class RosMap:
 def _thresholds(thresholds: str | Sequence[float]) -> tuple[float, float]:
     if isinstance(thresholds, str):
         if thresholds not in THRESHOLDS:
-            raise ValueError(
-                f"thresholds must be one of {sorted(THRESHOLDS)} or (occ, free), got {thresholds!r}"
-            )
+            raise ValueError(f"thresholds must be one of {sorted(THRESHOLDS)} or (occ, free), got {thresholds!r}")
         return THRESHOLDS[thresholds]
     occ, free = (float(t) for t in thresholds)
     if not (math.isfinite(occ) and math.isfinite(free) and 0.0 <= free < occ <= 1.0):
-        raise ValueError(
-            f"thresholds (occupied, free) need 0 <= free < occupied <= 1, got {thresholds!r}"
-        )
+        raise ValueError(f"thresholds (occupied, free) need 0 <= free < occupied <= 1, got {thresholds!r}")
     return occ, free
 
 
@@ -300,11 +296,7 @@ def _interpret(pixels: np.ndarray, s: RosMapSettings, flavor: str) -> np.ndarray
     if colour.shape[-1] == 1:  # grey: map_server sees R = G = B
         colour = np.repeat(colour, 3, axis=-1)
     alpha = px[..., -1] if has_alpha else None
-    chans = (
-        np.concatenate([colour, alpha[..., None]], -1)
-        if (alpha is not None and s.mode == "trinary")
-        else colour
-    )
+    chans = np.concatenate([colour, alpha[..., None]], -1) if (alpha is not None and s.mode == "trinary") else colour
     avg = chans.mean(axis=-1)
     occ_t, free_t = s.occupied_thresh, s.free_thresh
     if s.mode == "raw":
@@ -335,10 +327,7 @@ def _interpret(pixels: np.ndarray, s: RosMapSettings, flavor: str) -> np.ndarray
 
 def _reads_unknown(value: int, occ_t: float, free_t: float, negate: bool) -> bool:
     x = np.array([float(value)])
-    return all(
-        not (o > occ_t) and not (o < free_t)
-        for o in (_occ_of_shade(x, negate, f)[0] for f in ("ros1", "nav2"))
-    )
+    return all(not (o > occ_t) and not (o < free_t) for o in (_occ_of_shade(x, negate, f)[0] for f in ("ros1", "nav2")))
 
 
 def _default_unknown_value(occ_t: float, free_t: float) -> int:
@@ -348,9 +337,7 @@ def _default_unknown_value(occ_t: float, free_t: float) -> int:
     for v in sorted(range(256), key=lambda v: abs(v - mid)):
         if _reads_unknown(v, occ_t, free_t, False) and _reads_unknown(255 - v, occ_t, free_t, True):
             return v
-    raise ValueError(
-        f"no 8-bit grey reads back as unknown between free {free_t} and occupied {occ_t}"
-    )
+    raise ValueError(f"no 8-bit grey reads back as unknown between free {free_t} and occupied {occ_t}")
 
 
 # --------------------------------------------------------------------------- writing
@@ -429,8 +416,12 @@ def save_ros_map(
         if unknown_value is None:
             unknown_value = _default_unknown_value(occ_t, free_t)
         elif not _reads_unknown(int(unknown_value), occ_t, free_t, False):
-            warnings.warn(f"unknown_value={unknown_value} reads back as known (not -1) under thresholds "
-                          f"occupied={occ_t}, free={free_t}", UserWarning, stacklevel=2)  # fmt: skip
+            warnings.warn(
+                f"unknown_value={unknown_value} reads back as known (not -1) under thresholds "
+                f"occupied={occ_t}, free={free_t}",
+                UserWarning,
+                stacklevel=2,
+            )
         x = np.where(p > occ_t, _OCCUPIED, np.where(p < free_t, _FREE, int(unknown_value)))
     else:
         # with alpha, the grey must lie in the unknown band too (ROS 1 checks alpha last)
@@ -439,9 +430,13 @@ def save_ros_map(
             unknown_value = _default_unknown_value(occ_t, free_t) if png else _UNKNOWN
         x = np.floor(255.0 * (1.0 - np.where(np.isnan(p), 0.5, p)) + 0.5)
         if image_format == "pgm" and unk.any():
-            warnings.warn("scale mode in a PGM cannot mark unknown cells (no alpha channel): they are "
-                          "written as 205 and map_server reads them as (nearly) free; use "
-                          "image_format='png'", UserWarning, stacklevel=2)  # fmt: skip
+            warnings.warn(
+                "scale mode in a PGM cannot mark unknown cells (no alpha channel): they are "
+                "written as 205 and map_server reads them as (nearly) free; use "
+                "image_format='png'",
+                UserWarning,
+                stacklevel=2,
+            )
     if not 0 <= int(unknown_value) <= 255:
         raise ValueError(f"unknown_value must be a byte, got {unknown_value}")
     x = np.where(unk, int(unknown_value), x).astype(np.int64)
@@ -463,29 +458,37 @@ def save_ros_map(
         else:
             Image.fromarray(np.ascontiguousarray(img)).save(buf, "PNG")  # L
         data = buf.getvalue()
-    settings = RosMapSettings(image=image_path.name, resolution=grid.resolution,
-                              origin=(grid.origin[0], grid.origin[1], 0.0), negate=bool(negate),
-                              occupied_thresh=occ_t, free_thresh=free_t, mode=mode)  # fmt: skip
+    settings = RosMapSettings(
+        image=image_path.name,
+        resolution=grid.resolution,
+        origin=(grid.origin[0], grid.origin[1], 0.0),
+        negate=bool(negate),
+        occupied_thresh=occ_t,
+        free_thresh=free_t,
+        mode=mode,
+    )
     atomic_write_bytes(image_path, data)
     if sidecar:
         buf = io.BytesIO()
-        np.savez(buf, format_version=np.int64(FORMAT_VERSION), probabilities=p, unknown=unk,
-                 shape=np.asarray(grid.shape, dtype=np.int64), resolution=np.float64(grid.resolution),
-                 origin=np.asarray(grid.origin, dtype=np.float64),
-                 image_sha256=np.str_(hashlib.sha256(data).hexdigest()))  # fmt: skip
+        np.savez(
+            buf,
+            format_version=np.int64(FORMAT_VERSION),
+            probabilities=p,
+            unknown=unk,
+            shape=np.asarray(grid.shape, dtype=np.int64),
+            resolution=np.float64(grid.resolution),
+            origin=np.asarray(grid.origin, dtype=np.float64),
+            image_sha256=np.str_(hashlib.sha256(data).hexdigest()),
+        )
         atomic_write_bytes(npz_path, buf.getvalue())
     atomic_write_bytes(yaml_path, settings.to_yaml().encode("utf-8"))
-    return RosMapFiles(
-        yaml_path, image_path, npz_path if sidecar else None, settings, int(unknown_value)
-    )
+    return RosMapFiles(yaml_path, image_path, npz_path if sidecar else None, settings, int(unknown_value))
 
 
 # --------------------------------------------------------------------------- YAML subset
 _FLOAT_RE = re.compile(r"[-+]?(\d+\.?\d*|\.\d+)([eE][-+]?\d+)?")
 _INT_RE = re.compile(r"[-+]?\d+")
-_KEY_RE = re.compile(
-    r"""(?:"((?:[^"\\]|\\.)*)"|'((?:[^']|'')*)'|([A-Za-z_][\w\-.]*))[ \t]*:(?:[ \t]+(.*))?"""
-)
+_KEY_RE = re.compile(r"""(?:"((?:[^"\\]|\\.)*)"|'((?:[^']|'')*)'|([A-Za-z_][\w\-.]*))[ \t]*:(?:[ \t]+(.*))?""")
 _TRUE, _FALSE = {"true", "yes", "on", "y"}, {"false", "no", "off", "n"}
 _NONFINITE = {".inf", "+.inf", "-.inf", ".nan", "inf", "+inf", "-inf", "nan", "infinity"}
 
@@ -577,9 +580,7 @@ def _parse_yaml(text: str) -> dict[str, Any]:
         m = _KEY_RE.fullmatch(line)
         if m is None:
             raise ValueError(f"{where}: expected 'key: value', got {raw.strip()!r}")
-        key = m.group(3) or (
-            m.group(1) if m.group(1) is not None else (m.group(2) or "").replace("''", "'")
-        )
+        key = m.group(3) or (m.group(1) if m.group(1) is not None else (m.group(2) or "").replace("''", "'"))
         if key in out:
             raise ValueError(f"{where}: duplicate key {key!r}")
         value = (m.group(4) or "").strip()
@@ -631,9 +632,7 @@ def _settings(doc: dict, path: Path) -> RosMapSettings:
     origin_t = (ox, oy, oyaw)
     occ, free = _get_float(doc, "occupied_thresh", path), _get_float(doc, "free_thresh", path)
     if not 0.0 <= free < occ <= 1.0:
-        raise RosMapError(
-            path, f"thresholds need 0 <= free_thresh < occupied_thresh <= 1, got {free}, {occ}"
-        )
+        raise RosMapError(path, f"thresholds need 0 <= free_thresh < occupied_thresh <= 1, got {free}, {occ}")
     neg = doc["negate"]
     if isinstance(neg, str) and _INT_RE.fullmatch(neg):
         negate = int(neg) != 0
@@ -731,11 +730,7 @@ def _read_image(path: Path) -> tuple[np.ndarray, bytes]:
     except RosMapError:
         raise
     except Exception as e:  # Pillow raises many types on corrupt files
-        why = (
-            "unrecognised format"
-            if type(e).__name__ == "UnidentifiedImageError"
-            else f"{type(e).__name__}: {e}"
-        )
+        why = "unrecognised format" if type(e).__name__ == "UnidentifiedImageError" else f"{type(e).__name__}: {e}"
         raise RosMapError(path, f"not a readable image ({why})") from None
     return px, data
 
@@ -745,9 +740,7 @@ def _read_sidecar(path: Path, image_bytes: bytes, settings: RosMapSettings, hw: 
         with np.load(path, allow_pickle=False) as z:
             d = {k: z[k] for k in z.files}
     except Exception as e:
-        raise RosMapError(
-            path, f"sidecar is not a readable npz ({type(e).__name__}: {e})"
-        ) from None
+        raise RosMapError(path, f"sidecar is not a readable npz ({type(e).__name__}: {e})") from None
     need = (
         "format_version",
         "probabilities",
@@ -767,8 +760,7 @@ def _read_sidecar(path: Path, image_bytes: bytes, settings: RosMapSettings, hw: 
     if p.dtype.kind != "f" or unk.dtype != np.bool_ or shape.dtype.kind != "i" or shape.ndim != 1:
         raise RosMapError(path, "sidecar arrays have wrong dtypes")
     if str(d["image_sha256"]) != hashlib.sha256(image_bytes).hexdigest():
-        warnings.warn(f"{path}: sidecar is stale (written for another image); ignored", UserWarning,
-                      stacklevel=3)  # fmt: skip
+        warnings.warn(f"{path}: sidecar is stale (written for another image); ignored", UserWarning, stacklevel=3)
         return None
     K = hw[0] * hw[1]
     if p.shape != (K,) or unk.shape != (K,) or int(np.prod(shape)) != K or len(shape) not in (1, 2):
@@ -777,18 +769,19 @@ def _read_sidecar(path: Path, image_bytes: bytes, settings: RosMapSettings, hw: 
         raise RosMapError(path, "sidecar probabilities outside [0, 1]")
     if (len(shape) == 2 and tuple(shape) != hw) or (len(shape) == 1 and hw[0] != 1):
         raise RosMapError(path, "sidecar grid shape does not match the image")
-    same = (float(d["resolution"]) == settings.resolution
-            and tuple(np.asarray(d["origin"], float).tolist()) == settings.origin[:2])  # fmt: skip
+    same = (
+        float(d["resolution"]) == settings.resolution
+        and tuple(np.asarray(d["origin"], float).tolist()) == settings.origin[:2]
+    )
     if not same:
-        warnings.warn(f"{path}: sidecar grid differs from the YAML resolution/origin; ignored",
-                      UserWarning, stacklevel=3)  # fmt: skip
+        warnings.warn(
+            f"{path}: sidecar grid differs from the YAML resolution/origin; ignored", UserWarning, stacklevel=3
+        )
         return None
     return p.astype(np.float64), unk, tuple(int(s) for s in shape)
 
 
-def load_ros_map(
-    yaml_path: str | os.PathLike, *, flavor: Literal["nav2", "ros1"] = "nav2"
-) -> RosMap:
+def load_ros_map(yaml_path: str | os.PathLike, *, flavor: Literal["nav2", "ros1"] = "nav2") -> RosMap:
     """Read a map_server map (YAML + image) and, if present, its ``<stem>.npz`` sidecar.
 
     ``occupancy`` is what map_server publishes (see the module docstring for the formulas); ``flavor``
@@ -825,16 +818,23 @@ def load_ros_map(
     pixels, image_bytes = _read_image(image_path)
     h, w = pixels.shape[:2]
     if s.origin[2] != 0.0:
-        warnings.warn(f"{path}: origin yaw {s.origin[2]} ignored (ogm_ppl grids are axis-aligned)",
-                      UserWarning, stacklevel=2)  # fmt: skip
+        warnings.warn(
+            f"{path}: origin yaw {s.origin[2]} ignored (ogm_ppl grids are axis-aligned)", UserWarning, stacklevel=2
+        )
     occupancy = _interpret(pixels, s, flavor)
     stem = path.with_suffix("") if path.suffix.lower() in (".yaml", ".yml") else path
     npz = Path(str(stem) + ".npz")
     side = _read_sidecar(npz, image_bytes, s, (h, w)) if npz.exists() else None
     shape = side[2] if side is not None else (h, w)
     grid = Grid(shape, resolution=s.resolution, origin=s.origin[:2])
-    return RosMap(grid=grid, occupancy=occupancy,
-                  probabilities=None if side is None else side[0],
-                  unknown=None if side is None else side[1], settings=s, pixels=pixels,
-                  yaml_path=path, image_path=image_path,
-                  sidecar_path=npz if side is not None else None)  # fmt: skip
+    return RosMap(
+        grid=grid,
+        occupancy=occupancy,
+        probabilities=None if side is None else side[0],
+        unknown=None if side is None else side[1],
+        settings=s,
+        pixels=pixels,
+        yaml_path=path,
+        image_path=image_path,
+        sidecar_path=npz if side is not None else None,
+    )

@@ -71,18 +71,14 @@ class Scans:
         if ranges.ndim == 1:
             ranges = ranges[None, :] if S == 1 else ranges[:, None]
         if ranges.ndim != 2 or ranges.shape[0] != S:
-            raise ValueError(
-                f"Scans.ranges must have shape S x B with S = {S} poses, got {np.shape(self.ranges)}"
-            )
+            raise ValueError(f"Scans.ranges must have shape S x B with S = {S} poses, got {np.shape(self.ranges)}")
         B = ranges.shape[1]
         angles = np.asarray(self.angles, dtype=float)
         if angles.ndim == 0:
             angles = angles[None]
         if angles.ndim == 1:
             if angles.shape[0] != B:
-                raise ValueError(
-                    f"Scans.angles has {angles.shape[0]} beams but Scans.ranges has {B} per scan"
-                )
+                raise ValueError(f"Scans.angles has {angles.shape[0]} beams but Scans.ranges has {B} per scan")
             angles = np.broadcast_to(angles, (S, B))
         if angles.shape != (S, B):
             raise ValueError(f"Scans.angles must have shape B or S x B = {(S, B)}, got {angles.shape}")
@@ -90,14 +86,10 @@ class Scans:
         if not np.isfinite(mr) or mr <= 0:
             raise ValueError(f"Scans.max_range must be a positive finite number, got {self.max_range!r}")
         if self.over_range not in ("error", "max", "drop"):
-            raise ValueError(
-                f"Scans.over_range must be 'error', 'max' or 'drop', got {self.over_range!r}"
-            )
+            raise ValueError(f"Scans.over_range must be 'error', 'max' or 'drop', got {self.over_range!r}")
         min_range = float(self.min_range)
         if not (np.isfinite(min_range) and 0.0 <= min_range < mr):
-            raise ValueError(
-                f"Scans.min_range must lie in [0, max_range = {mr}), got {self.min_range!r}"
-            )
+            raise ValueError(f"Scans.min_range must lie in [0, max_range = {mr}), got {self.min_range!r}")
         if self.valid is None:
             valid = np.ones((S, B), dtype=bool)
         else:
@@ -142,8 +134,13 @@ class Scans:
         valid &= ~short
         ranges = np.where(short, 0.0, ranges)
         is_max = valid & (ranges >= mr)
-        for name, value in (("poses", poses), ("angles", angles), ("ranges", ranges),
-                            ("valid", valid), ("is_max", is_max)):  # fmt: skip
+        for name, value in (
+            ("poses", poses),
+            ("angles", angles),
+            ("ranges", ranges),
+            ("valid", valid),
+            ("is_max", is_max),
+        ):
             value = np.ascontiguousarray(value)
             value.setflags(write=False)
             object.__setattr__(self, name, value)
@@ -186,8 +183,14 @@ class Scans:
         else:
             keep = np.arange(0, S, pose_step)
         assert self.valid is not None  # Scans.__post_init__ always sets the S x B mask
-        return Scans(self.poses[keep], self.angles[keep, ::beam_step], self.ranges[keep, ::beam_step],
-                     self.max_range, valid=self.valid[keep, ::beam_step], min_range=self.min_range)  # fmt: skip
+        return Scans(
+            self.poses[keep],
+            self.angles[keep, ::beam_step],
+            self.ranges[keep, ::beam_step],
+            self.max_range,
+            valid=self.valid[keep, ::beam_step],
+            min_range=self.min_range,
+        )
 
     def extent(self) -> tuple[float, float, float, float]:
         """``(xmin, xmax, ymin, ymax)`` in metres of the poses and the end points of every valid hit."""

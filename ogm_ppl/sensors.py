@@ -19,7 +19,8 @@ evaluated by :class:`~ogm_ppl.models.OccupancyModel` on the measured range itsel
 kappa coordinate ``kappa_c = t + 1/2`` (``t``: distance in cells from the sensor): ``z = r + 1/2`` for a
 reading at range ``r``, ``f = t_f + 1/2`` where ``t_f`` is the entry distance of the first occupied cell,
 and ``F = L`` for a maximum range of ``L`` cells (so max range is censored at ``F + 1/2 = L + 1/2``,
-i.e. at ``r = L``); the sensor's own cell sits at ``kappa_c = 0``. In 1D, from a robot in the middle of cell 0, cell ``kappa`` is entered at
+i.e. at ``r = L``); the sensor's own cell sits at ``kappa_c = 0``. In 1D, from a robot in the middle of cell 0,
+cell ``kappa`` is entered at
 ``kappa - 1/2``: ``kappa_c`` of a wall at ``f`` is exactly ``f``, and the thesis's integer readings are
 kappa values. In 2D this keeps ``p(z | f)`` centred where the beam meets the wall at every beam angle
 (diagonal rays cross more cells per metre; integer kappa would shift the centre by up to half a cell).
@@ -92,7 +93,8 @@ class GaussianRange(SensorModel):
     for a first hit within the ray (``f <= F + 1/2``): a noisy range beyond ``F + 1/2`` is reported as max
     range. With no
     occupied cell in the ray the reading is max range with probability ``1 - p_rand`` and a uniform
-    random hit on ``[-1/2, F + 1/2]`` otherwise (the ``p_rand`` term lives on that interval only). ``p_rand = 0`` (default) is the thesis's model
+    random hit on ``[-1/2, F + 1/2]`` otherwise (the ``p_rand`` term lives on that interval only). ``p_rand = 0``
+    (default) is the thesis's model
     ``N(f, sigma^2)`` (Section 2.6); a hit then has zero likelihood under a map with nothing to reflect it.
 
     >>> s = GaussianRange(3.0)
@@ -175,8 +177,11 @@ class PatternMatch(SensorModel):
             is_max = torch.zeros(torch.broadcast_shapes(z.shape, f.shape), dtype=torch.bool)
         is_max = torch.as_tensor(is_max, dtype=torch.bool)
         match = torch.where(is_max, none, (~none) & (torch.round(z) == f))
-        other = torch.log1p(torch.tensor(-self.p_occ, dtype=dtype)) - torch.log(F + 1.0) \
-            if self.p_occ < 1 else torch.full_like(F, -math.inf)
+        other = (
+            torch.log1p(torch.tensor(-self.p_occ, dtype=dtype)) - torch.log(F + 1.0)
+            if self.p_occ < 1
+            else torch.full_like(F, -math.inf)
+        )
         return torch.where(match, torch.tensor(math.log(self.p_occ), dtype=dtype), other)
 
     def sample(self, f, F, generator: torch.Generator | None = None):

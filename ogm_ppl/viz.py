@@ -52,8 +52,9 @@ def plot_map(probabilities, grid=None, ax=None, title: str | None = None, poses=
         _, ax = plt.subplots(figsize=(4, 4))
     cmap = thesis_cmap().with_extremes(bad="#d9d9d9")
     extent = grid.extent if grid is not None else None
-    im = ax.imshow(np.ma.masked_invalid(p), cmap=cmap, vmin=0, vmax=1, origin="lower",
-                   extent=extent, interpolation="nearest")  # fmt: skip
+    im = ax.imshow(
+        np.ma.masked_invalid(p), cmap=cmap, vmin=0, vmax=1, origin="lower", extent=extent, interpolation="nearest"
+    )
     if poses is not None:
         poses = np.atleast_2d(poses)
         ax.plot(poses[:, 0], poses[:, 1], "o", color="tab:blue", ms=5)
@@ -76,8 +77,7 @@ def plot_marginals_1d(series: Mapping[str, np.ndarray], ax=None, cells=None, tit
     k = np.arange(K) if cells is None else np.asarray(cells)
     width = 0.8 / max(len(names), 1)
     for i, name in enumerate(names):
-        ax.bar(k + (i - (len(names) - 1) / 2) * width, np.asarray(series[name])[: len(k)], width,
-               label=name)  # fmt: skip
+        ax.bar(k + (i - (len(names) - 1) / 2) * width, np.asarray(series[name])[: len(k)], width, label=name)
     ax.set_xlabel("cell k")
     ax.set_ylabel("p(m_k = 1 | z)")
     ax.set_ylim(0, 1)
@@ -116,8 +116,12 @@ def plot_mutual_information(mi, ax=None, title: str | None = None, cells=None):
     if ax is None:
         _, ax = plt.subplots(figsize=(4, 3.5))
     ticks = np.arange(mi.shape[0]) if cells is None else np.asarray(cells)
-    im = ax.imshow(np.ma.masked_invalid(mi), cmap="viridis", origin="lower",
-                   extent=(ticks[0] - 0.5, ticks[-1] + 0.5, ticks[0] - 0.5, ticks[-1] + 0.5))  # fmt: skip
+    im = ax.imshow(
+        np.ma.masked_invalid(mi),
+        cmap="viridis",
+        origin="lower",
+        extent=(ticks[0] - 0.5, ticks[-1] + 0.5, ticks[0] - 0.5, ticks[-1] + 0.5),
+    )
     ax.set_xlabel("cell j")
     ax.set_ylabel("cell k")
     ax.figure.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="MI (nats)")

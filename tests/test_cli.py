@@ -51,8 +51,24 @@ def tiny_log(tmp_path_factory):
 @pytest.fixture(scope="module")
 def sim_dataset(tmp_path_factory):
     out = tmp_path_factory.mktemp("sim") / "sim.npz"
-    argv = ["simulate", "--map", "generated", "office", "--size", "80", "--poses", "3", "--beams", "120",
-            "--max-range-cells", "20", "--seed", "1", "--out", str(out)]  # fmt: skip
+    argv = [
+        "simulate",
+        "--map",
+        "generated",
+        "office",
+        "--size",
+        "80",
+        "--poses",
+        "3",
+        "--beams",
+        "120",
+        "--max-range-cells",
+        "20",
+        "--seed",
+        "1",
+        "--out",
+        str(out),
+    ]
     assert main(argv) == 0
     return out
 
@@ -195,8 +211,26 @@ def test_map_simulated_dataset_each_method(tmp_path, sim_dataset, method, extra)
 
 def test_map_subsampling_and_explicit_grid(tmp_path, sim_dataset):
     out = tmp_path / "o"
-    argv = ["map", str(sim_dataset), "--beam-step", "2", "--pose-step", "2", "--size", "70", "65",
-            "--origin", "-0.1", "-0.2", "--resolution", "0.05", "--thresholds", "nav2", "--out", str(out)]  # fmt: skip
+    argv = [
+        "map",
+        str(sim_dataset),
+        "--beam-step",
+        "2",
+        "--pose-step",
+        "2",
+        "--size",
+        "70",
+        "65",
+        "--origin",
+        "-0.1",
+        "-0.2",
+        "--resolution",
+        "0.05",
+        "--thresholds",
+        "nav2",
+        "--out",
+        str(out),
+    ]
     assert main(argv) == 0
     m, report = _check_outputs(out)
     assert m["grid"].shape == (65, 70) and m["grid"].origin == (-0.1, -0.2)
@@ -206,8 +240,23 @@ def test_map_subsampling_and_explicit_grid(tmp_path, sim_dataset):
 
 def test_simulate_then_map_reproducible(tmp_path, sim_dataset):
     again = tmp_path / "again.npz"
-    argv = ["simulate", "--map", "office", "--size", "80", "--poses", "3", "--beams", "120",
-            "--max-range-cells", "20", "--seed", "1", "--out", str(again)]  # fmt: skip
+    argv = [
+        "simulate",
+        "--map",
+        "office",
+        "--size",
+        "80",
+        "--poses",
+        "3",
+        "--beams",
+        "120",
+        "--max-range-cells",
+        "20",
+        "--seed",
+        "1",
+        "--out",
+        str(again),
+    ]
     assert main(argv) == 0
     a, b = load_dataset(sim_dataset), load_dataset(again)
     assert np.array_equal(a.scans.ranges, b.scans.ranges) and np.array_equal(a.truth, b.truth)
@@ -222,8 +271,24 @@ def test_simulate_png_floor_plan(tmp_path):
     img[35, 10:80] = 0  # one dark wall across the middle
     Image.fromarray(img).save(tmp_path / "plan.png")
     out = tmp_path / "plan.npz"
-    assert main(["simulate", "--map", str(tmp_path / "plan.png"), "--poses", "2", "--beams", "60",
-                 "--max-range-cells", "20", "--out", str(out)]) == 0  # fmt: skip
+    assert (
+        main(
+            [
+                "simulate",
+                "--map",
+                str(tmp_path / "plan.png"),
+                "--poses",
+                "2",
+                "--beams",
+                "60",
+                "--max-range-cells",
+                "20",
+                "--out",
+                str(out),
+            ]
+        )
+        == 0
+    )
     d = load_dataset(out)
     assert d.truth.shape == (70, 90) and d.truth[70 - 1 - 35, 40] and not d.truth[10, 40]
 
@@ -364,8 +429,9 @@ def test_console_entry_prints_no_traceback(tmp_path):
     cmd = [str(exe)] if exe.exists() else [sys.executable, "-m", "ogm_ppl"]
     bad = tmp_path / "bad.log"
     bad.write_text("FLASER 2 1.0 nope 0 0 0 0 0 0 1.0 host 1.0\n")
-    r = subprocess.run([*cmd, "map", str(bad), "--out", str(tmp_path / "o")], capture_output=True, text=True,
-                       timeout=120)  # fmt: skip
+    r = subprocess.run(
+        [*cmd, "map", str(bad), "--out", str(tmp_path / "o")], capture_output=True, text=True, timeout=120
+    )
     assert r.returncode == 2, r.stderr
     assert "Traceback" not in r.stderr and r.stderr.count("\n") == 1
     assert r.stderr.startswith("ogm-ppl: error: ") and "line 1, field 'range[1]'" in r.stderr

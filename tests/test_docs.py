@@ -19,9 +19,7 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT / "tools"))
 import gen_docs_tables  # noqa: E402
 
-MODULES = sorted(
-    m.name for m in pkgutil.walk_packages(ogm_ppl.__path__, "ogm_ppl.") if not m.name.endswith("__main__")
-)
+MODULES = sorted(m.name for m in pkgutil.walk_packages(ogm_ppl.__path__, "ogm_ppl.") if not m.name.endswith("__main__"))
 
 
 def test_readme_quick_start_runs(tmp_path, monkeypatch):
@@ -68,8 +66,9 @@ def test_readme_generated_blocks_equal_the_snapshots():
     assert "headline" in names
     for name in names:
         body = re.search(rf"<!-- generated: {name} -->\n(.*?)<!-- end generated -->", text, re.S)[1]
-        assert body == gen_docs_tables.readme_block(name), f"README block {name!r} is stale: run " \
-            "python tools/gen_docs_tables.py readme"
+        assert body == gen_docs_tables.readme_block(name), (
+            f"README block {name!r} is stale: run python tools/gen_docs_tables.py readme"
+        )
     assert gen_docs_tables.update_readme(ROOT / "README.md", check=True) == []
 
 

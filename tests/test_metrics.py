@@ -96,7 +96,7 @@ def test_prediction_scores_against_hand_computed_values():
         expected_calibration_error,
         nll_bits,
         occupied_iou,
-        prediction_scores,  # fmt: skip
+        prediction_scores,
     )
 
     q = np.array([0.9, 0.2, 0.5, 0.75])

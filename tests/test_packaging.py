@@ -63,8 +63,10 @@ def test_wheel_keeps_torch_and_quick_start_runs(dist, tmp_path):
     # pip's resolver: installing the wheel would change no installed package (torch included)
     report = tmp_path / "report.json"
     _run(py, "-m", "pip", "install", "-q", "--dry-run", "--report", report, "-c", CONSTRAINTS, dist)
-    would_install = {i["metadata"]["name"].lower().replace("_", "-"): i["metadata"]["version"]
-                     for i in json.loads(report.read_text())["install"]}
+    would_install = {
+        i["metadata"]["name"].lower().replace("_", "-"): i["metadata"]["version"]
+        for i in json.loads(report.read_text())["install"]
+    }
     assert "ogm-ppl" in would_install
     changed = {n: (before[n], v) for n, v in would_install.items() if n in before}
     assert not changed, f"the wheel would change installed packages: {changed}"

@@ -45,8 +45,12 @@ def test_chain_prob_free_matches_brute_force_from_the_first_cell():
 
 def test_mutual_information_of_a_hand_computed_joint():
     # joint of (a, b): P(00) = 0.4, P(01) = 0.1, P(10) = 0.2, P(11) = 0.3; P(a=1) = 0.5, P(b=1) = 0.4
-    mi_ab = (0.4 * math.log(0.4 / (0.5 * 0.6)) + 0.1 * math.log(0.1 / (0.5 * 0.4))
-             + 0.2 * math.log(0.2 / (0.5 * 0.6)) + 0.3 * math.log(0.3 / (0.5 * 0.4)))  # fmt: skip
+    mi_ab = (
+        0.4 * math.log(0.4 / (0.5 * 0.6))
+        + 0.1 * math.log(0.1 / (0.5 * 0.4))
+        + 0.2 * math.log(0.2 / (0.5 * 0.6))
+        + 0.3 * math.log(0.3 / (0.5 * 0.4))
+    )
     h_a = math.log(2.0)
     h_b = -(0.4 * math.log(0.4) + 0.6 * math.log(0.6))
     p = torch.tensor([0.5, 0.4], dtype=torch.float64)
@@ -56,8 +60,12 @@ def test_mutual_information_of_a_hand_computed_joint():
     # independent cells: zero; a copy: the entropy
     p11_ind = torch.outer(p, p)
     p11_ind.diagonal().copy_(p)
-    torch.testing.assert_close(mutual_information_from_joint(p, p11_ind),
-                               torch.diag(torch.tensor([h_a, h_b], dtype=torch.float64)), rtol=0, atol=1e-12)  # fmt: skip
+    torch.testing.assert_close(
+        mutual_information_from_joint(p, p11_ind),
+        torch.diag(torch.tensor([h_a, h_b], dtype=torch.float64)),
+        rtol=0,
+        atol=1e-12,
+    )
 
 
 def _entropy(p: torch.Tensor) -> torch.Tensor:

@@ -2,7 +2,8 @@
 
 A beam returns where it enters the first occupied cell; a metric range becomes the kappa of the cell
 whose entry is nearest to it; the sensor centres p(z | f) on f (in the continuous kappa t + 1/2 of
-ogm_ppl.sensors). So simulated readings of a wall at f average the mean of the model's p(z | f) (Issue: they sat half a cell short, -0.51 cells).
+ogm_ppl.sensors). So simulated readings of a wall at f average the mean of the model's p(z | f), not half a
+cell short of it.
 """
 
 import math

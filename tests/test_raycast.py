@@ -65,9 +65,7 @@ def test_traversal_properties(u0, v0, theta, frac, max_range):
 @given(**ray_args)
 def test_traversal_matches_reference(u0, v0, theta, frac, max_range):
     rays = one_ray(u0, v0, theta, frac * max_range, max_range)
-    ref_cells, ref_t = traverse_reference(
-        u0, v0, math.cos(theta), math.sin(theta), max_range, ROWS, COLS
-    )
+    ref_cells, ref_t = traverse_reference(u0, v0, math.cos(theta), math.sin(theta), max_range, ROWS, COLS)
     np.testing.assert_array_equal(rays.ray(0), ref_cells)
     np.testing.assert_allclose(rays.t_enter[rays.offsets[0] : rays.offsets[1]], ref_t, rtol=1e-6, atol=1e-5)
 
@@ -76,8 +74,9 @@ def test_thousands_of_random_rays_match_reference():
     rng = np.random.default_rng(1)
     S, B = 40, 100
     grid = Grid((ROWS, COLS), resolution=0.25, origin=(-2.0, 1.0))
-    poses = np.c_[rng.uniform(-2, -2 + COLS * 0.25, S), rng.uniform(1, 1 + ROWS * 0.25, S),
-                  rng.uniform(-np.pi, np.pi, S)]  # fmt: skip
+    poses = np.c_[
+        rng.uniform(-2, -2 + COLS * 0.25, S), rng.uniform(1, 1 + ROWS * 0.25, S), rng.uniform(-np.pi, np.pi, S)
+    ]
     angles = rng.uniform(-np.pi, np.pi, (S, B))
     scans = Scans(poses, angles, rng.uniform(0, 9.0, (S, B)), max_range=8.0, over_range="max")
     rays = raycast(grid, scans)
@@ -86,8 +85,9 @@ def test_thousands_of_random_rays_match_reference():
     checked = 0
     for s in range(S):
         for b in range(B):
-            ref, _ = traverse_reference(uv[s, 0], uv[s, 1], math.cos(th[s, b]), math.sin(th[s, b]),
-                                        8.0 / 0.25, ROWS, COLS)  # fmt: skip
+            ref, _ = traverse_reference(
+                uv[s, 0], uv[s, 1], math.cos(th[s, b]), math.sin(th[s, b]), 8.0 / 0.25, ROWS, COLS
+            )
             np.testing.assert_array_equal(rays.ray(s * B + b), ref)
             checked += 1
     assert checked == 4000
@@ -106,8 +106,7 @@ def test_axis_aligned_and_corner_rays():
 
 def test_cut_at_grid_edge_and_hits_beyond():
     grid = Grid((1, 10), resolution=1.0)
-    scans = Scans(poses=[[7.5, 0.5, 0.0]] * 3, angles=[0.0], ranges=[[1.0], [5.0], [20.0]],
-                  max_range=20.0)  # fmt: skip
+    scans = Scans(poses=[[7.5, 0.5, 0.0]] * 3, angles=[0.0], ranges=[[1.0], [5.0], [20.0]], max_range=20.0)
     rays = raycast(grid, scans)
     assert rays.ray(1).tolist() == [7, 8, 9]
     assert rays.endpoint_in_grid.tolist() == [True, False, False]
@@ -128,9 +127,13 @@ def test_one_d_rays_and_thesis_kappa():
 def test_transposed_index_is_consistent():
     rng = np.random.default_rng(3)
     grid = Grid((20, 20), resolution=1.0)
-    scans = Scans(np.c_[rng.uniform(0, 20, 5), rng.uniform(0, 20, 5), np.zeros(5)],
-                  rng.uniform(-3, 3, 50), rng.uniform(0, 12, (5, 50)), max_range=10.0,
-                  over_range="max")  # fmt: skip
+    scans = Scans(
+        np.c_[rng.uniform(0, 20, 5), rng.uniform(0, 20, 5), np.zeros(5)],
+        rng.uniform(-3, 3, 50),
+        rng.uniform(0, 12, (5, 50)),
+        max_range=10.0,
+        over_range="max",
+    )
     rays = raycast(grid, scans)
     idx = rays.by_cell
     assert idx.offsets[-1] == rays.nnz
@@ -210,8 +213,7 @@ def test_capacity_bounds_every_ray(angle):
     """``RayInputs.capacity()`` bounds the cells of every ray and every reading's kappa, on an unbounded
     grid too (``range_len``), for long rays at any angle."""
     grid = Grid((80, 80), resolution=1.0)
-    scans = Scans([[40.5, 40.5, angle]], [0.0, 0.1, -0.1], [[35.0, 39.0, 38.0]], max_range=38.0,
-                  over_range="max")
+    scans = Scans([[40.5, 40.5, angle]], [0.0, 0.1, -0.1], [[35.0, 39.0, 38.0]], max_range=38.0, over_range="max")
     rays = raycast(grid, scans)
     cap = ray_inputs(grid, scans).capacity()
     assert cap >= int(np.diff(rays.offsets).max())

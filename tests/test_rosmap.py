@@ -53,9 +53,7 @@ def _expected(p, unknown, mode, occ, free, png=False, grey=205):
         x = np.floor(255 * (1 - p) + 0.5)
         x[unknown] = grey
         q = (255 - x) / 255
-        out = np.where(
-            q > occ, 100, np.where(q < free, 0, np.rint(100 * (q - free) / (occ - free)))
-        )
+        out = np.where(q > occ, 100, np.where(q < free, 0, np.rint(100 * (q - free) / (occ - free))))
         if not png:
             return out.astype(np.int8)
     out[unknown] = -1
@@ -70,8 +68,9 @@ def test_round_trip(tmp_path, thresholds, mode, negate):
     occ, free = THRESH[thresholds]
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")  # scale + PGM warns about unknown cells
-        files = save_ros_map(tmp_path / "sub" / "map.yaml", p, grid, unknown=unknown, mode=mode,
-                             thresholds=thresholds, negate=negate)  # fmt: skip
+        files = save_ros_map(
+            tmp_path / "sub" / "map.yaml", p, grid, unknown=unknown, mode=mode, thresholds=thresholds, negate=negate
+        )
     m = load_ros_map(files.yaml)
     assert m.grid == grid and m.grid.shape == (4, 7)
     assert m.settings.resolution == 0.25 and m.settings.origin == (-1.5, 2.75, 0.0)
@@ -104,19 +103,16 @@ def test_scale_png_marks_unknown_transparent(tmp_path, thresholds):
     occ, free = THRESH[thresholds]
     with warnings.catch_warnings():
         warnings.simplefilter("error")  # no warning: PNG has alpha
-        files = save_ros_map(tmp_path / "m", p, grid, unknown=unknown, mode="scale",
-                             thresholds=thresholds, image_format="png")  # fmt: skip
+        files = save_ros_map(
+            tmp_path / "m", p, grid, unknown=unknown, mode="scale", thresholds=thresholds, image_format="png"
+        )
     assert files.image.name == "m.png" and files.yaml.name == "m.yaml"
     m = load_ros_map(files.yaml)
-    np.testing.assert_array_equal(
-        m.occupancy, _expected(p, unknown, "scale", occ, free, True, files.unknown_value)
-    )
+    np.testing.assert_array_equal(m.occupancy, _expected(p, unknown, "scale", occ, free, True, files.unknown_value))
     m1 = load_ros_map(files.yaml, flavor="ros1")  # ROS 1: int(1 + 98 r) in the middle band
     q = (255 - np.floor(255 * (1 - p) + 0.5)) / 255
     mid = (q >= free) & (q <= occ) & ~unknown
-    np.testing.assert_array_equal(
-        m1.occupancy[mid], np.trunc(1 + 98 * (q[mid] - free) / (occ - free))
-    )
+    np.testing.assert_array_equal(m1.occupancy[mid], np.trunc(1 + 98 * (q[mid] - free) / (occ - free)))
     assert np.all(m1.occupancy[unknown] == -1)
 
 
@@ -201,9 +197,7 @@ def test_nav2_thresholds_keep_unknown_unknown(tmp_path):
     assert files.unknown_value != 205  # 205 reads back as free under free_thresh 0.25
     assert load_ros_map(files.yaml).occupancy.tolist() == [100, 0, -1]
     with pytest.warns(UserWarning, match="reads back as known"):
-        f205 = save_ros_map(
-            tmp_path / "b", p, grid, unknown=unk, thresholds="nav2", unknown_value=205
-        )
+        f205 = save_ros_map(tmp_path / "b", p, grid, unknown=unk, thresholds="nav2", unknown_value=205)
     assert load_ros_map(f205.yaml).occupancy.tolist() == [100, 0, 0]  # what Nav2's map_server does
     with pytest.warns(UserWarning, match="alpha"):
         save_ros_map(tmp_path / "c", p, grid, unknown=unk, mode="scale")
@@ -211,9 +205,7 @@ def test_nav2_thresholds_keep_unknown_unknown(tmp_path):
 
 def test_log_odds_map_and_1d_grid(tmp_path):
     grid = Grid.line(4, resolution=0.5)
-    lo = LogOddsMap(
-        grid, torch.tensor([3.0, -3.0, 0.0, 0.0]), torch.tensor([True, True, True, False])
-    )
+    lo = LogOddsMap(grid, torch.tensor([3.0, -3.0, 0.0, 0.0]), torch.tensor([True, True, True, False]))
     files = save_ros_map(tmp_path / "line.yml", lo)
     m = load_ros_map(files.yaml)
     assert m.grid == grid and m.pixels.shape == (1, 4)
@@ -240,7 +232,9 @@ def _write(tmp_path, yaml_text, image=None, name="map"):
     return y
 
 
-GOOD = "image: map.pgm\nresolution: 0.1\norigin: [0.0, 0.0, 0.0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n"
+GOOD = (
+    "image: map.pgm\nresolution: 0.1\norigin: [0.0, 0.0, 0.0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n"
+)
 
 
 def test_accepts_what_map_server_accepts(tmp_path):

@@ -5,8 +5,7 @@ from ogm_ppl import Scans
 
 
 def make(**kw):
-    args = dict(poses=[[0.0, 0.0, 0.0], [1.0, 1.0, 0.5]], angles=[0.0, 0.1, 0.2],
-                ranges=np.ones((2, 3)), max_range=5.0)  # fmt: skip
+    args = dict(poses=[[0.0, 0.0, 0.0], [1.0, 1.0, 0.5]], angles=[0.0, 0.1, 0.2], ranges=np.ones((2, 3)), max_range=5.0)
     args.update(kw)
     return Scans(**args)
 

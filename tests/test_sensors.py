@@ -87,8 +87,7 @@ def test_bad_p_rand():
 # ----------------------------- dtypes, the far edge, sampling with random hits
 
 
-@pytest.mark.parametrize("sensor", [GaussianRange(1.5), GaussianRange(1.5, p_rand=0.1), PatternMatch(0.7)],
-                         ids=repr)
+@pytest.mark.parametrize("sensor", [GaussianRange(1.5), GaussianRange(1.5, p_rand=0.1), PatternMatch(0.7)], ids=repr)
 def test_log_prob_keeps_the_readings_dtype(sensor):
     """float32 readings with Python-number first hits and ray ends give float32 log-probabilities
     (``f`` and ``F`` are cast to the readings' dtype, not to the default float64)."""
@@ -119,14 +118,19 @@ def _edges(F: int) -> np.ndarray:
 
 def _hit_bin_probs(s: GaussianRange, f: float, F: int) -> np.ndarray:
     """P(hit reading in each bin of ``_edges``), integrated from ``exp(log_prob)``."""
+
     def integral(a: float, b: float) -> float:
         z = torch.linspace(a, b - 1e-12, 4001, dtype=torch.float64)
         return torch.trapezoid(s.log_prob(z, f, F).exp(), z).item()
 
     edges = _edges(F)
     # the random-hit density starts at -1/2: the first bin is integrated in two pieces
-    return np.array([integral(edges[0], -0.5) + integral(-0.5, edges[1]),
-                     *(integral(a, b) for a, b in itertools.pairwise(edges[1:]))])
+    return np.array(
+        [
+            integral(edges[0], -0.5) + integral(-0.5, edges[1]),
+            *(integral(a, b) for a, b in itertools.pairwise(edges[1:])),
+        ]
+    )
 
 
 @pytest.mark.parametrize("f", [4.0, 11.0], ids=["hit-in-ray", "none-in-ray"])

@@ -27,10 +27,26 @@ def harness():
 
 
 def _tiny(mod, problems):
-    return replace(mod.QUICK, problems=problems, vi_steps=150, vi_steps_sampled=10, particles_tracegraph=8,
-                   particles_rws=16, toy_gibbs_sweeps=3000, gibbs_sweeps=300, walls=20, folds=2,
-                   walls_gibbs_sweeps=300, walls_patch_gibbs=2, walls_patch_gibbs_sweeps=30, walls_vi_exact=1,
-                   walls_vi_sampled=0, walls_vi_steps=100, heldout=20, delta_max_iter=50)  # fmt: skip
+    return replace(
+        mod.QUICK,
+        problems=problems,
+        vi_steps=150,
+        vi_steps_sampled=10,
+        particles_tracegraph=8,
+        particles_rws=16,
+        toy_gibbs_sweeps=3000,
+        gibbs_sweeps=300,
+        walls=20,
+        folds=2,
+        walls_gibbs_sweeps=300,
+        walls_patch_gibbs=2,
+        walls_patch_gibbs_sweeps=30,
+        walls_vi_exact=1,
+        walls_vi_sampled=0,
+        walls_vi_steps=100,
+        heldout=20,
+        delta_max_iter=50,
+    )
 
 
 def _by_name(prob):
@@ -62,8 +78,13 @@ def test_toy_and_2d(harness, tmp_path):
     for name, r in toy.items():
         if r.kind != "exact" and not math.isnan(r.kl):
             assert r.kl >= 0 and r.seconds > 0, name
-    assert {"online patch map L=3", "offline overlap L=5", "patch Gibbs L=3", "VI mean field, RWS",
-            "VI patch L=2, TraceGraph"} <= set(toy)  # fmt: skip
+    assert {
+        "online patch map L=3",
+        "offline overlap L=5",
+        "patch Gibbs L=3",
+        "VI mean field, RWS",
+        "VI patch L=2, TraceGraph",
+    } <= set(toy)
     # 2D by brute force
     two = _by_name(res["problems"]["2d:independent"])
     assert res["problems"]["2d:independent"]["latent"] == 13

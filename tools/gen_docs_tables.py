@@ -107,8 +107,10 @@ def snapshot(src: Path, name: str | None = None, command: str | None = None, res
 def provenance_line(prov: dict) -> str:
     """One line under a table: ``command`` at ``commit`` on the machine, date."""
     m = prov["machine"]
-    machine = (f"{m.get('cpu', '?')}, {m.get('cores', '?')} cores, Python {m.get('python', '?')}, "
-               f"torch {m.get('torch', '?')}, numba {m.get('numba', '?')}")
+    machine = (
+        f"{m.get('cpu', '?')}, {m.get('cores', '?')} cores, Python {m.get('python', '?')}, "
+        f"torch {m.get('torch', '?')}, numba {m.get('numba', '?')}"
+    )
     commit = prov["commit"][:12] + ("-dirty" if prov["commit"].endswith("-dirty") else "")
     return f"`{prov['command']}` at commit {commit} on {machine}; {prov['date'][:10]}"
 
@@ -131,8 +133,11 @@ def _rate(x: float) -> str:
 
 
 # ------------------------------------------------------------------------------------------ the tables
-HEADLINE_LABELS = {"ogm": "traditional OGM (Hähnel)", "p21": "log-odds OGM, p21 fitted for this sensor",
-                   "border-L9": "Gibbs, border prior learned from HouseExpo, L = 9"}
+HEADLINE_LABELS = {
+    "ogm": "traditional OGM (Hähnel)",
+    "p21": "log-odds OGM, p21 fitted for this sensor",
+    "border-L9": "Gibbs, border prior learned from HouseExpo, L = 9",
+}
 
 
 def _headline(doc: dict) -> Table:
@@ -145,14 +150,17 @@ def _headline(doc: dict) -> Table:
         cells = []
         for c in conds:
             p = next((p for p in pooled if p["condition"] == c and p["algorithm"] == a), None)
-            cells.append("–" if p is None else
-                         f"{_f(p['mask'].get('best_f1'))} / {_f(p['mask'].get('auc'))} / "
-                         f"{_f(p['touched'].get('best_f1'))}")
+            cells.append(
+                "–"
+                if p is None
+                else f"{_f(p['mask'].get('best_f1'))} / {_f(p['mask'].get('auc'))} / {_f(p['touched'].get('best_f1'))}"
+            )
         rows.append([HEADLINE_LABELS.get(a, a), *cells])
     return Table(
         caption="Intel Lab log at 5 cm, half the beams: best F1 / ROC AUC / best F1 on the touched cells",
         header=["map", *(f"{100 * frac[c]:.3g} % of the readings" for c in conds)],
-        rows=rows, provenance=doc["provenance"],
+        rows=rows,
+        provenance=doc["provenance"],
         note=f"run time {doc['intel']['seconds']:.0f} s",
     )
 
@@ -160,51 +168,90 @@ def _headline(doc: dict) -> Table:
 def _simulated(doc: dict) -> Table:
     maps = doc["simple2d"]["maps"]
     rows = [[r["label"], _f(r["best_f1"]), _f(r["roc_auc"]), _g(r["seconds"])] for r in maps.values()]
-    return Table(caption="Simple 2D example (Fig. 2.8 setting), scored against the ground truth near observed cells",
-                 header=["map", "best F1", "ROC AUC", "seconds"], rows=rows, provenance=doc["provenance"])
+    return Table(
+        caption="Simple 2D example (Fig. 2.8 setting), scored against the ground truth near observed cells",
+        header=["map", "best F1", "ROC AUC", "seconds"],
+        rows=rows,
+        provenance=doc["provenance"],
+    )
 
 
-_OGM_LABELS = {"ours (fused)": "ours, fused traversal + update", "ours (CSR)": "ours, `raycast` (CSR) + `evidence_grid`",
-               "numpy (batched)": "batched numpy DDA (`reference.evidence_grid_numpy`)",
-               "python loop": "plain per-ray Python loop (timed on 10 scans, scaled by work)",
-               "octomap": "OctoMap (`octomap-python`, one thread)"}
+_OGM_LABELS = {
+    "ours (fused)": "ours, fused traversal + update",
+    "ours (CSR)": "ours, `raycast` (CSR) + `evidence_grid`",
+    "numpy (batched)": "batched numpy DDA (`reference.evidence_grid_numpy`)",
+    "python loop": "plain per-ray Python loop (timed on 10 scans, scaled by work)",
+    "octomap": "OctoMap (`octomap-python`, one thread)",
+}
 
 
 def _bench_ogm(doc: dict) -> Table:
-    rows = [[_OGM_LABELS.get(k, k), _g(sec, 3), _rate(doc["rays_per_second"][k]),
-             f"{doc['updates_per_second'][k] / 1e6:.1f}", f"{doc['speedup_of_fused_over'][k]:.1f}x"]
-            for k, sec in doc["seconds"].items()]
+    rows = [
+        [
+            _OGM_LABELS.get(k, k),
+            _g(sec, 3),
+            _rate(doc["rays_per_second"][k]),
+            f"{doc['updates_per_second'][k] / 1e6:.1f}",
+            f"{doc['speedup_of_fused_over'][k]:.1f}x",
+        ]
+        for k, sec in doc["seconds"].items()
+    ]
     s = doc["scene"]
     return Table(
-        caption=(f"Traditional OGM, {s['grid'][0]} x {s['grid'][1]} grid at {s['resolution_m'] * 100:g} cm, "
-                 f"{s['rays']:,} rays, max range {s['max_range_cells']} cells: best of several runs, one core"),
+        caption=(
+            f"Traditional OGM, {s['grid'][0]} x {s['grid'][1]} grid at {s['resolution_m'] * 100:g} cm, "
+            f"{s['rays']:,} rays, max range {s['max_range_cells']} cells: best of several runs, one core"
+        ),
         header=["method", "seconds", "rays/s", "M ray-cell updates/s", "the fused kernel is faster by"],
-        rows=rows, provenance=doc["provenance"], note=f"OctoMap: {doc['octomap_status']}",
+        rows=rows,
+        provenance=doc["provenance"],
+        note=f"OctoMap: {doc['octomap_status']}",
     )
 
 
 def _bench_exact(doc: dict) -> Table:
-    rows = [[f"brute force, K = {r['K']}", "6", _g(r["seconds"]), _g(r["python_loop_seconds_estimated"])]
-            for r in doc["brute_force"]]
-    rows += [[f"pose-constrained 1D, K = {r['K']:,}", str(r["N"]), _g(r["seconds"]), ""] for r in doc["pose_constrained"]]
-    return Table(caption="Exact posteriors of 1D problems: seconds per posterior (marginals included)",
-                 header=["method", "readings", "seconds", "a per-map Python loop, estimated (s)"],
-                 rows=rows, provenance=doc["provenance"])
+    rows = [
+        [f"brute force, K = {r['K']}", "6", _g(r["seconds"]), _g(r["python_loop_seconds_estimated"])]
+        for r in doc["brute_force"]
+    ]
+    rows += [
+        [f"pose-constrained 1D, K = {r['K']:,}", str(r["N"]), _g(r["seconds"]), ""] for r in doc["pose_constrained"]
+    ]
+    return Table(
+        caption="Exact posteriors of 1D problems: seconds per posterior (marginals included)",
+        header=["method", "readings", "seconds", "a per-map Python loop, estimated (s)"],
+        rows=rows,
+        provenance=doc["provenance"],
+    )
 
 
 def _bench_patch(doc: dict) -> Table:
     rows = [[k, _g(v)] for k, v in doc["seconds"].items()]
-    return Table(caption=(f"Patch maps of the same scene ({doc['cells']:,} cells, {doc['rays']:,} rays): seconds of one "
-                          "call each, the first (numba compilation or cache load included)"),
-                 header=["method", "seconds"], rows=rows, provenance=doc["provenance"])
+    return Table(
+        caption=(
+            f"Patch maps of the same scene ({doc['cells']:,} cells, {doc['rays']:,} rays): seconds of one "
+            "call each, the first (numba compilation or cache load included)"
+        ),
+        header=["method", "seconds"],
+        rows=rows,
+        provenance=doc["provenance"],
+    )
 
 
 def _table_3_1(doc: dict) -> Table:
-    rows = [[k, _g(v["mean"], 4), "" if v.get("thesis") is None else _g(v["thesis"], 4)] for k, v in doc["rows"].items()]
-    return Table(caption=(f"Table 3.1: mean summed KL to the exact marginals, {doc['datasets']} datasets, "
-                          f"K = {doc['cells']} latent cells, Gibbs {doc['gibbs_sweeps']:,} sweeps"),
-                 header=["algorithm", "ours", "thesis (Table 3.1)"], rows=rows, provenance=doc["provenance"],
-                 note=f"run time {doc['seconds']:.0f} s")
+    rows = [
+        [k, _g(v["mean"], 4), "" if v.get("thesis") is None else _g(v["thesis"], 4)] for k, v in doc["rows"].items()
+    ]
+    return Table(
+        caption=(
+            f"Table 3.1: mean summed KL to the exact marginals, {doc['datasets']} datasets, "
+            f"K = {doc['cells']} latent cells, Gibbs {doc['gibbs_sweeps']:,} sweeps"
+        ),
+        header=["algorithm", "ours", "thesis (Table 3.1)"],
+        rows=rows,
+        provenance=doc["provenance"],
+        note=f"run time {doc['seconds']:.0f} s",
+    )
 
 
 #: table name -> (snapshot name, builder)

@@ -115,8 +115,7 @@ MODULES: dict[str, Module] = {
     ),
     "raycast_kernels": Module(
         "ogm_ppl/_raycast_kernels.py",
-        ("tests/test_raycast.py", "tests/test_range_convention.py",
-         "tests/inference/log_odds/test_log_odds.py"),
+        ("tests/test_raycast.py", "tests/test_range_convention.py", "tests/inference/log_odds/test_log_odds.py"),
     ),
     "log_odds": Module(
         "ogm_ppl/inference/log_odds/maps.py",
@@ -130,43 +129,62 @@ MODULES: dict[str, Module] = {
     ),
     "exact": Module(
         "ogm_ppl/inference/exact/posteriors.py",
-        ("tests/inference/exact/test_exact.py", "tests/inference/exact/test_exact_edges.py",
-         "tests/inference/exact/test_pose_constrained_evidence.py", "tests/test_posterior.py"),
-        sites=12, max_test_s=5,
+        (
+            "tests/inference/exact/test_exact.py",
+            "tests/inference/exact/test_exact_edges.py",
+            "tests/inference/exact/test_pose_constrained_evidence.py",
+            "tests/test_posterior.py",
+        ),
+        sites=12,
+        max_test_s=5,
     ),
     "posterior": Module(
         "ogm_ppl/posterior.py",
         ("tests/inference/exact/test_exact.py", "tests/test_posterior.py"),
-        sites=12, max_test_s=5,
+        sites=12,
+        max_test_s=5,
     ),
     "metrics": Module("ogm_ppl/metrics.py", ("tests/test_metrics.py",), sites=16),
     "cells_kernels": Module(
         "ogm_ppl/inference/_kernels/cells.py",
-        ("tests/inference/exact/test_map_estimate.py", "tests/inference/patch_map/test_patch_map.py",
-         *_GIBBS_TESTS),
-        sites=6, max_test_s=5,
+        ("tests/inference/exact/test_map_estimate.py", "tests/inference/patch_map/test_patch_map.py", *_GIBBS_TESTS),
+        sites=6,
+        max_test_s=5,
     ),
     "gibbs_kernels": Module(
         "ogm_ppl/inference/_kernels/gibbs.py",
         ("tests/inference/patch_map/test_patch_map.py", *_GIBBS_TESTS),
-        sites=8, max_test_s=5,
+        sites=8,
+        max_test_s=5,
     ),
     "patches_kernels": Module(
         "ogm_ppl/inference/_kernels/patches.py",
         ("tests/inference/patch_map/test_patch_map.py", "tests/inference/patch_map/test_patch_map_edges.py"),
-        sites=6, max_test_s=5,
+        sites=6,
+        max_test_s=5,
     ),
     "runner": Module(
         "ogm_ppl/inference/mcmc/runner.py",
-        ("tests/inference/mcmc/test_checkpoint.py", "tests/inference/mcmc/test_runner_edges.py",
-         *_GIBBS_TESTS),
-        sites=8, max_test_s=5,
+        ("tests/inference/mcmc/test_checkpoint.py", "tests/inference/mcmc/test_runner_edges.py", *_GIBBS_TESTS),
+        sites=8,
+        max_test_s=5,
     ),
 }
 
 #: imported before forking, so that each mutant's child starts in ~1 s instead of ~6 s; never ogm_ppl
-_PRELOAD = ("numpy", "scipy.special", "scipy.stats", "torch", "pyro", "pyro.distributions",
-            "pyro.infer", "numba", "pytest", "hypothesis", "tqdm")
+_PRELOAD = (
+    "numpy",
+    "scipy.special",
+    "scipy.stats",
+    "torch",
+    "pyro",
+    "pyro.distributions",
+    "pyro.infer",
+    "numba",
+    "pytest",
+    "hypothesis",
+    "tqdm",
+)
 
 #: see ``baselines``
 RECHECK_S = 5.0
@@ -174,8 +192,9 @@ RECHECK_S = 5.0
 KILLED, TIMEOUT, ERROR, SURVIVED = "killed", "timeout", "error", "survived"
 INCOMPETENT = "incompetent"  # not valid Python (``x & not y``): not run, left out of every count
 ANNOTATION = "annotation"  # inside a type annotation: equivalent, not run (see ``annotation_spans``)
-_ANNOTATION_REASON = ("inside a type annotation, which `from __future__ import annotations` keeps as an "
-                      "unevaluated string")
+_ANNOTATION_REASON = (
+    "inside a type annotation, which `from __future__ import annotations` keeps as an unevaluated string"
+)
 DETECTED = (KILLED, TIMEOUT, ERROR)
 
 
@@ -290,8 +309,9 @@ def changed_lines(original: str, mutated: str) -> tuple[str, str]:
 
 
 def unified_diff(original: str, mutated: str, path: str) -> str:
-    return "".join(difflib.unified_diff(original.splitlines(True), mutated.splitlines(True),
-                                        f"a/{path}", f"b/{path}", n=3))
+    return "".join(
+        difflib.unified_diff(original.splitlines(True), mutated.splitlines(True), f"a/{path}", f"b/{path}", n=3)
+    )
 
 
 # -------------------------------------------------------------------------------- the copied tree
@@ -300,8 +320,19 @@ def unified_diff(original: str, mutated: str, path: str) -> str:
 def sync_tree(tree: Path) -> None:
     """A fresh copy of the repository (tests read files from experiments/ and docs/), without git,
     the virtualenv, outputs and caches."""
-    skip = {".git", ".venv", "out", "build", "dist", ".hypothesis", ".mypy_cache", ".pytest_cache",
-            ".ruff_cache", "__pycache__", "_build"}
+    skip = {
+        ".git",
+        ".venv",
+        "out",
+        "build",
+        "dist",
+        ".hypothesis",
+        ".mypy_cache",
+        ".pytest_cache",
+        ".ruff_cache",
+        "__pycache__",
+        "_build",
+    }
     ignore = shutil.ignore_patterns(*skip, "*.pyc", "*.egg-info")
     if tree.exists():
         shutil.rmtree(tree)
@@ -401,12 +432,15 @@ class _Recorder:
         self.collected = [it.nodeid for it in items]
 
     def pytest_sessionfinish(self, session):
-        atomic_write_text(self.path, json.dumps({"tests": self.tests, "failed": self.failed,
-                                                 "collected": getattr(self, "collected", [])}))
+        atomic_write_text(
+            self.path,
+            json.dumps({"tests": self.tests, "failed": self.failed, "collected": getattr(self, "collected", [])}),
+        )
 
 
-def run_child(tree: Path, args: list[str], cache_dir: Path, log: Path, rec: Path,
-              timeout: float, check_import: bool = False) -> tuple[int | None, float]:
+def run_child(
+    tree: Path, args: list[str], cache_dir: Path, log: Path, rec: Path, timeout: float, check_import: bool = False
+) -> tuple[int | None, float]:
     """pytest ``args`` in a forked child (its own process group) inside ``tree``; ``None`` on timeout.
     ``check_import``: first check that the copy's ``ogm_ppl``, not the working tree's, is imported."""
     rec.unlink(missing_ok=True)
@@ -436,8 +470,7 @@ def run_child(tree: Path, args: list[str], cache_dir: Path, log: Path, rec: Path
                 os._exit(0)
             import pytest
 
-            rc = int(pytest.main(["-q", "-p", "no:cacheprovider", "-o", "addopts=", *args],
-                                 plugins=[_Recorder(rec)]))
+            rc = int(pytest.main(["-q", "-p", "no:cacheprovider", "-o", "addopts=", *args], plugins=[_Recorder(rec)]))
         except BaseException:
             import traceback
 
@@ -497,16 +530,20 @@ def baselines(tree: Path, files: list[str], base_cache: Path, work: Path, store:
     # a file measured before (when the package differed) is rechecked without its tests slower than
     # RECHECK_S: those keep their old durations (no module runs them against mutants at that size)
     slow = [i for f in missing for i, d in known.get(f, {}).get("tests", {}).items() if d > RECHECK_S]
-    print(f"baseline: {', '.join(missing) or 'all kept from an earlier run'}"
-          f"{f' ({len(slow)} slow tests not rerun)' if slow else ''}", flush=True)
+    print(
+        f"baseline: {', '.join(missing) or 'all kept from an earlier run'}"
+        f"{f' ({len(slow)} slow tests not rerun)' if slow else ''}",
+        flush=True,
+    )
     args = [*missing, *(a for i in slow for a in ("--deselect", i))] if missing else []
     # the import check always runs: the copy's package, not the working tree's, must be imported
-    rc, dt = run_child(tree, args, base_cache, work / "baseline.txt", work / "baseline.json", 3600,
-                       check_import=True)
+    rc, dt = run_child(tree, args, base_cache, work / "baseline.txt", work / "baseline.json", 3600, check_import=True)
     print("   " + (_tail(work / "baseline.txt", 10**6).splitlines() or ["?"])[0], flush=True)
     if rc != 0:
-        print(f"baseline failed (rc {rc}): the tests must pass on the unmutated code first\n"
-              f"{_tail(work / 'baseline.txt')}")
+        print(
+            f"baseline failed (rc {rc}): the tests must pass on the unmutated code first\n"
+            f"{_tail(work / 'baseline.txt')}"
+        )
         return None
     if missing:
         rep = json.loads((work / "baseline.json").read_text())
@@ -549,16 +586,21 @@ def _current(results: dict[str, dict], plan) -> dict[str, dict]:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--modules", default="", help="comma-separated names (default: all): " + ", ".join(MODULES))
-    ap.add_argument("--per-module", type=int, default=None,
-                    help="random sites per module (default: each module's own, 6-24)")
+    ap.add_argument(
+        "--per-module", type=int, default=None, help="random sites per module (default: each module's own, 6-24)"
+    )
     ap.add_argument("--all", action="store_true", help="every mutant, no sampling (days)")
     ap.add_argument("--seed", type=int, default=15)
     ap.add_argument("--out", default=str(ROOT / "out" / "mutation"))
     ap.add_argument("--fresh", action="store_true", help="forget earlier results")
-    ap.add_argument("--retest-survivors", action="store_true",
-                    help="after the tests changed: rerun earlier survivors only, keep the kills")
-    ap.add_argument("--keep", action="store_true",
-                    help="resume and keep earlier results even where the tests changed since")
+    ap.add_argument(
+        "--retest-survivors",
+        action="store_true",
+        help="after the tests changed: rerun earlier survivors only, keep the kills",
+    )
+    ap.add_argument(
+        "--keep", action="store_true", help="resume and keep earlier results even where the tests changed since"
+    )
     ap.add_argument("--report-only", action="store_true", help="rewrite the report from results.jsonl")
     ap.add_argument("--list", action="store_true", help="print the sampled mutants and stop")
     a = ap.parse_args(argv)
@@ -624,8 +666,11 @@ def main(argv: list[str] | None = None) -> int:
             todo.append(mu)
         todo_by_module[name] = todo
     total = sum(len(t) for t in todo_by_module.values())
-    print(f"{total} mutants to run in {out / 'tree'} "
-          f"({sum(len(p[5]) for p in plan) - total} results kept from earlier runs)", flush=True)
+    print(
+        f"{total} mutants to run in {out / 'tree'} "
+        f"({sum(len(p[5]) for p in plan) - total} results kept from earlier runs)",
+        flush=True,
+    )
     if not total:
         write_report(out, _current(results, plan), equivalents, plan)
         print(f"report: {out / 'report.md'}")
@@ -653,10 +698,12 @@ def main(argv: list[str] | None = None) -> int:
             timeout = 2 * budget + 45
             n_slow = len(durations) - len(ids)
             left_out = f" ({n_slow} slower than {m.max_test_s:g} s left out)" if n_slow else ""
-            print(f"== {name} ({m.path}): {len(todo)} of {len(muts)} sampled mutants to run "
-                  f"(population {n_all}); {len(ids)} tests, {budget:.0f} s"
-                  f"{left_out}",
-                  flush=True)
+            print(
+                f"== {name} ({m.path}): {len(todo)} of {len(muts)} sampled mutants to run "
+                f"(population {n_all}); {len(ids)} tests, {budget:.0f} s"
+                f"{left_out}",
+                flush=True,
+            )
             kills: dict[str, int] = {}
             for r in results.values():
                 if r["module"] == name and r.get("killer"):
@@ -669,27 +716,38 @@ def main(argv: list[str] | None = None) -> int:
                 mutated = mutate_source(src, mu)
                 if mutated is None:
                     continue
-                rec = {"id": f"{mu.key}:{fp}", "module": name, "path": m.path, "operator": mu.operator,
-                       "occurrence": mu.occurrence, "line": mu.line}
+                rec = {
+                    "id": f"{mu.key}:{fp}",
+                    "module": name,
+                    "path": m.path,
+                    "operator": mu.operator,
+                    "occurrence": mu.occurrence,
+                    "line": mu.line,
+                }
                 rec["original"], rec["mutated"] = changed_lines(src, mutated)
                 rec["diff"] = unified_diff(src, mutated, m.path)
                 if any(a <= mu.site[:2] < b for a, b in annotations):
                     record({**rec, "outcome": ANNOTATION, "seconds": 0.0})
-                    print(f"[{done_n}/{total}] {name} L{mu.line} {mu.operator.split('/')[-1]}: "
-                          "in a type annotation (equivalent, not run)", flush=True)
+                    print(
+                        f"[{done_n}/{total}] {name} L{mu.line} {mu.operator.split('/')[-1]}: "
+                        "in a type annotation (equivalent, not run)",
+                        flush=True,
+                    )
                     continue
                 if not _compiles(mutated, m.path):
                     record({**rec, "outcome": INCOMPETENT, "seconds": 0.0})
-                    print(f"[{done_n}/{total}] {name} L{mu.line} {mu.operator.split('/')[-1]}: "
-                          f"{INCOMPETENT} (not valid Python)", flush=True)
+                    print(
+                        f"[{done_n}/{total}] {name} L{mu.line} {mu.operator.split('/')[-1]}: "
+                        f"{INCOMPETENT} (not valid Python)",
+                        flush=True,
+                    )
                     continue
                 ordered = sorted(ids, key=lambda i: (-kills.get(i, 0), durations[i]))
                 cache = work / "numba-cache"
                 mutant_cache(base_cache, cache, stale)
                 atomic_write_text(target, mutated)
                 try:
-                    rc, dt = run_child(tree, ["-x", *ordered], cache, work / "log.txt",
-                                       work / "rec.json", timeout)
+                    rc, dt = run_child(tree, ["-x", *ordered], cache, work / "log.txt", work / "rec.json", timeout)
                 finally:
                     atomic_write_text(target, src)
                 rep = json.loads((work / "rec.json").read_text()) if (work / "rec.json").exists() else {}
@@ -709,10 +767,13 @@ def main(argv: list[str] | None = None) -> int:
                 mod_rs = [r for r in results.values() if r["module"] == name and r["id"].endswith(fp)]
                 k = sum(r["outcome"] in DETECTED for r in mod_rs)
                 el = time.monotonic() - t_start
-                print(f"[{done_n}/{total} {el / 60:5.1f} min] {name} L{mu.line} "
-                      f"{mu.operator.split('/')[-1]}: {rec['outcome']}"
-                      f"{' by ' + rec['killer'] if rec.get('killer') else ''} ({dt:.1f} s)"
-                      f"  | {name}: {k}/{len(mod_rs)} detected", flush=True)
+                print(
+                    f"[{done_n}/{total} {el / 60:5.1f} min] {name} L{mu.line} "
+                    f"{mu.operator.split('/')[-1]}: {rec['outcome']}"
+                    f"{' by ' + rec['killer'] if rec.get('killer') else ''} ({dt:.1f} s)"
+                    f"  | {name}: {k}/{len(mod_rs)} detected",
+                    flush=True,
+                )
     except KeyboardInterrupt:
         interrupted = True
         print("interrupted: the results so far are kept; run again to resume", flush=True)
@@ -734,8 +795,7 @@ def write_report(out: Path, results: dict[str, dict], equivalents: list[dict], p
     rows, surv_md, eq_md = [], [], []
     counted = (KILLED, TIMEOUT, ERROR, SURVIVED, "equivalent")
     for name, m, _src, tests, _fp, muts, n_all in plan:
-        rs = sorted((r for r in results.values() if r["module"] == name),
-                    key=lambda r: (r["line"], r["operator"]))
+        rs = sorted((r for r in results.values() if r["module"] == name), key=lambda r: (r["line"], r["operator"]))
         if not rs:
             continue
         c = {k: 0 for k in (*counted, INCOMPETENT)}
@@ -751,34 +811,57 @@ def write_report(out: Path, results: dict[str, dict], equivalents: list[dict], p
                 continue
             fn = f"{name}-L{r['line']}-{r['operator'].split('/')[-1]}-{i}.diff"
             atomic_write_text(surv_dir / fn, r.get("diff", ""))
-            item = (f"* `{name}` line {r['line']}, {r['operator'].split('/')[-1]}: "
-                    f"`{r['original']}` -> `{r['mutated']}` ([diff](survivors/{fn}))")
+            item = (
+                f"* `{name}` line {r['line']}, {r['operator'].split('/')[-1]}: "
+                f"`{r['original']}` -> `{r['mutated']}` ([diff](survivors/{fn}))"
+            )
             (eq_md.append(f"{item}\n  {reason}") if reason else surv_md.append(item))
         det = c[KILLED] + c[TIMEOUT] + c[ERROR]
         denom = det + c[SURVIVED]
-        summary[name] = {"path": m.path, "population": n_all, "sampled": len(muts), "run": len(rs), **c,
-                         "kill_ratio": round(det / denom, 4) if denom else None, "tests": tests}
+        summary[name] = {
+            "path": m.path,
+            "population": n_all,
+            "sampled": len(muts),
+            "run": len(rs),
+            **c,
+            "kill_ratio": round(det / denom, 4) if denom else None,
+            "tests": tests,
+        }
         ratio = f"{det / denom:.0%}" if denom else "-"
-        rows.append(f"| {name} | {n_all} | {len(rs)} | {c[KILLED]} | {c[TIMEOUT]} | {c[ERROR]} | "
-                    f"{c[SURVIVED]} | {c['equivalent']} | {c[INCOMPETENT]} | {ratio} |")
+        rows.append(
+            f"| {name} | {n_all} | {len(rs)} | {c[KILLED]} | {c[TIMEOUT]} | {c[ERROR]} | "
+            f"{c[SURVIVED]} | {c['equivalent']} | {c[INCOMPETENT]} | {ratio} |"
+        )
     tot = {k: sum(v[k] for v in summary.values()) for k in ("population", "run", *counted, INCOMPETENT)}
     det = tot[KILLED] + tot[TIMEOUT] + tot[ERROR]
     denom = det + tot[SURVIVED]
     summary["total"] = {**tot, "kill_ratio": round(det / denom, 4) if denom else None}
     atomic_write_text(out / "summary.json", json.dumps(summary, indent=2) + "\n")
-    md = ["# Mutation testing (`make mutate`, tools/mutate.py)", "",
-          "cosmic-ray mutants of the core modules, a random sample of code sites per module (one "
-          "operator variant each), each run against the tests that cover its module. *Detected* = killed "
-          "(a test failed) + timeout + error (the mutant breaks import or collection). *Equivalent*: a "
-          "survivor listed with its reason in `tools/mutate_equivalents.toml`. *Incompetent*: not valid "
-          "Python, not run. Kill ratio = detected / (detected + survived).", "",
-          "| module | population | run | killed | timeout | error | survived | equivalent | incompetent "
-          "| kill ratio |", "|---|---|---|---|---|---|---|---|---|---|", *rows,
-          f"| **total** | {tot['population']} | {tot['run']} | {tot[KILLED]} | {tot[TIMEOUT]} | "
-          f"{tot[ERROR]} | {tot[SURVIVED]} | {tot['equivalent']} | {tot[INCOMPETENT]} | "
-          f"{f'{det / denom:.0%}' if denom else '-'} |", "",
-          "## Survivors", "", *(surv_md or ["none"]), "",
-          "## Equivalent survivors", "", *(eq_md or ["none"]), ""]
+    md = [
+        "# Mutation testing (`make mutate`, tools/mutate.py)",
+        "",
+        "cosmic-ray mutants of the core modules, a random sample of code sites per module (one "
+        "operator variant each), each run against the tests that cover its module. *Detected* = killed "
+        "(a test failed) + timeout + error (the mutant breaks import or collection). *Equivalent*: a "
+        "survivor listed with its reason in `tools/mutate_equivalents.toml`. *Incompetent*: not valid "
+        "Python, not run. Kill ratio = detected / (detected + survived).",
+        "",
+        "| module | population | run | killed | timeout | error | survived | equivalent | incompetent | kill ratio |",
+        "|---|---|---|---|---|---|---|---|---|---|",
+        *rows,
+        f"| **total** | {tot['population']} | {tot['run']} | {tot[KILLED]} | {tot[TIMEOUT]} | "
+        f"{tot[ERROR]} | {tot[SURVIVED]} | {tot['equivalent']} | {tot[INCOMPETENT]} | "
+        f"{f'{det / denom:.0%}' if denom else '-'} |",
+        "",
+        "## Survivors",
+        "",
+        *(surv_md or ["none"]),
+        "",
+        "## Equivalent survivors",
+        "",
+        *(eq_md or ["none"]),
+        "",
+    ]
     atomic_write_text(out / "report.md", "\n".join(md))
 
 

@@ -54,8 +54,10 @@ class OgmTable(Directive):
         try:
             t = gen_docs_tables.table(name)
         except FileNotFoundError:
-            raise self.error(f"ogm-table {name}: no snapshot docs/results/{snap}.json (run the command that writes "
-                             "it, then python tools/gen_docs_tables.py snapshot ...)") from None
+            raise self.error(
+                f"ogm-table {name}: no snapshot docs/results/{snap}.json (run the command that writes "
+                "it, then python tools/gen_docs_tables.py snapshot ...)"
+            ) from None
         table = nodes.table(classes=["ogm-generated"])
         table += nodes.title(t.caption, t.caption)
         group = nodes.tgroup(cols=len(t.header))

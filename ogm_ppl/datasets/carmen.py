@@ -66,8 +66,7 @@ _LASER_TYPES = ("FLASER", "ROBOTLASER1")
 _TYPE_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
 # (lowest value, highest value) of each known FLASER sentinel band; readings >= lowest are no-return.
 _SENTINEL_BANDS = ((81.83, 81.92), (50.5, 51.5), (50.0, 50.0), (32.767, 32.767))
-_FLASER_TAIL = ("x", "y", "theta", "odom_x", "odom_y", "odom_theta", "ipc_timestamp", "host",
-                "logger_timestamp")  # fmt: skip
+_FLASER_TAIL = ("x", "y", "theta", "odom_x", "odom_y", "odom_theta", "ipc_timestamp", "host", "logger_timestamp")
 _RL_HEAD = (
     "laser_type",
     "start_angle",
@@ -77,13 +76,32 @@ _RL_HEAD = (
     "accuracy",
     "remission_mode",
 )
-_RL_TAIL = ("laser_x", "laser_y", "laser_theta", "robot_x", "robot_y", "robot_theta", "tv", "rv",
-            "forward_safety", "side_safety", "turn_axis", "timestamp", "host", "logger_timestamp")  # fmt: skip
+_RL_TAIL = (
+    "laser_x",
+    "laser_y",
+    "laser_theta",
+    "robot_x",
+    "robot_y",
+    "robot_theta",
+    "tv",
+    "rv",
+    "forward_safety",
+    "side_safety",
+    "turn_axis",
+    "timestamp",
+    "host",
+    "logger_timestamp",
+)
 _MAX_BEAMS = 100_000
 # PARAMs read (CARMEN spells the laser ones both ways); value must be finite (and > 0 where True).
-_NUMERIC_PARAMS = {"laser_front_laser_fov": True, "laser_frontlaser_fov": True,
-                   "laser_front_laser_resolution": True, "laser_frontlaser_resolution": True,
-                   "robot_frontlaser_offset": False, "robot_front_laser_max": False}  # fmt: skip
+_NUMERIC_PARAMS = {
+    "laser_front_laser_fov": True,
+    "laser_frontlaser_fov": True,
+    "laser_front_laser_resolution": True,
+    "laser_frontlaser_resolution": True,
+    "robot_frontlaser_offset": False,
+    "robot_front_laser_max": False,
+}
 
 
 class CarmenFormatError(ValueError):
@@ -147,18 +165,14 @@ def _read_text(path: Path, strict: bool, bad: list[tuple[int, str]]) -> str:
             raw = gzip.decompress(raw)
         except (OSError, EOFError, zlib.error) as e:
             if strict:
-                raise CarmenFormatError(
-                    path, 0, "gzip", f"corrupt or truncated gzip stream ({e})"
-                ) from None
+                raise CarmenFormatError(path, 0, "gzip", f"corrupt or truncated gzip stream ({e})") from None
             d = zlib.decompressobj(16 + zlib.MAX_WBITS)
             try:
                 raw = d.decompress(raw)
             except zlib.error:
                 raw = b""
             raw = raw[: raw.rfind(b"\n") + 1]  # the last, cut-off line is not a good line
-            bad.append(
-                (0, f"corrupt or truncated gzip stream ({e}); read up to the last whole line")
-            )
+            bad.append((0, f"corrupt or truncated gzip stream ({e}); read up to the last whole line"))
     return raw.decode("latin-1")
 
 
@@ -169,8 +183,15 @@ def _names(key: tuple) -> list[str]:
     if key[0] == "FLASER":
         return [key[0], "num_readings", *(f"range[{i}]" for i in range(n)), *_FLASER_TAIL]
     m = key[2]
-    return [key[0], *_RL_HEAD, "num_readings", *(f"range[{i}]" for i in range(n)), "num_remissions",
-            *(f"remission[{i}]" for i in range(m)), *_RL_TAIL]  # fmt: skip
+    return [
+        key[0],
+        *_RL_HEAD,
+        "num_readings",
+        *(f"range[{i}]" for i in range(n)),
+        "num_remissions",
+        *(f"remission[{i}]" for i in range(m)),
+        *_RL_TAIL,
+    ]
 
 
 def _fields(key: tuple) -> dict[str, slice]:
@@ -179,8 +200,12 @@ def _fields(key: tuple) -> dict[str, slice]:
     if key[0] == "FLASER":
         return {"ranges": slice(1, 1 + n), "pose": slice(1 + n, 4 + n), "ts": slice(7 + n, 8 + n)}
     m = key[2]
-    return {"ranges": slice(8, 8 + n), "pose": slice(9 + n + m, 12 + n + m), "ts": slice(20 + n + m, 21 + n + m),
-            "geometry": slice(1, 5)}  # fmt: skip
+    return {
+        "ranges": slice(8, 8 + n),
+        "pose": slice(9 + n + m, 12 + n + m),
+        "ts": slice(20 + n + m, 21 + n + m),
+        "geometry": slice(1, 5),
+    }
 
 
 def _group_key(kind: str, t: list[str]) -> tuple:
@@ -204,9 +229,7 @@ def _group_key(kind: str, t: list[str]) -> tuple:
         key = (kind, n, count(9 + n, "num_remissions"))
     expected = key[1] + 11 if kind == "FLASER" else key[1] + key[2] + 24  # == len(_names(key))
     if len(t) != expected:
-        raise _LineError(
-            "line length", f"{expected} tokens expected for these counts, got {len(t)}"
-        )
+        raise _LineError("line length", f"{expected} tokens expected for these counts, got {len(t)}")
     return key
 
 
@@ -215,9 +238,7 @@ def _numbers(t: list[str]) -> list[str]:
     return t[1:-2] + t[-1:]
 
 
-def _parse_group(
-    key: tuple, rows: list[list[str]]
-) -> tuple[np.ndarray, list[int], list[tuple[int, _LineError]]]:
+def _parse_group(key: tuple, rows: list[list[str]]) -> tuple[np.ndarray, list[int], list[tuple[int, _LineError]]]:
     """Numeric matrix of the rows that parse and hold valid values, their row indices, and
     ``(row, error)`` of the others."""
     try:
@@ -247,9 +268,7 @@ def _parse_group(
     names = _names(key)
     for row in bad_rows:
         col = int(np.argmin(good[row]))
-        errors.append(
-            (ok_rows[row], _LineError(names[col + 1], f"{vals[row, col]!r} is not a valid value"))
-        )
+        errors.append((ok_rows[row], _LineError(names[col + 1], f"{vals[row, col]!r} is not a valid value")))
     keep = np.setdiff1d(np.arange(len(ok_rows)), bad_rows)
     return vals[keep], [(ok_rows[k]) for k in keep], errors
 
@@ -310,8 +329,10 @@ def read_carmen(
         a :class:`CarmenLog`.
     """
     path = Path(path)
-    for name, v, allowed in (("usable_range_rule", usable_range_rule, ("drop", "max")),
-                             ("no_return", no_return, ("drop", "max"))):  # fmt: skip
+    for name, v, allowed in (
+        ("usable_range_rule", usable_range_rule, ("drop", "max")),
+        ("no_return", no_return, ("drop", "max")),
+    ):
         if v not in allowed:
             raise ValueError(f"read_carmen: {name} must be one of {allowed}, got {v!r}")
     if pose_fraction is not None and pose_step != 1:
@@ -350,9 +371,7 @@ def read_carmen(
         elif kind in skipped or _TYPE_RE.match(kind):
             skipped[kind] += 1
         else:
-            errors.append(
-                (no, _LineError("message type", f"{kind[:20]!r} is not a message type"), "")
-            )
+            errors.append((no, _LineError("message type", f"{kind[:20]!r} is not a message type"), ""))
 
     present = {k[0] for k in groups}
     if messages == "auto":
@@ -360,9 +379,7 @@ def read_carmen(
     else:
         use = set((messages,) if isinstance(messages, str) else messages)
         if not use <= set(_LASER_TYPES):
-            raise ValueError(
-                f"read_carmen: messages must be 'auto' or among {_LASER_TYPES}, got {messages!r}"
-            )
+            raise ValueError(f"read_carmen: messages must be 'auto' or among {_LASER_TYPES}, got {messages!r}")
     parsed = []
     for key, items in groups.items():
         if key[0] not in use:
@@ -381,16 +398,33 @@ def read_carmen(
             raise CarmenFormatError(path, no, err.field, err.message)
         bad.append((no, f"{err.field}: {err.message}"))
     if not parsed:
-        raise CarmenFormatError(
-            path, 0, "file", f"no readable laser scans ({'/'.join(sorted(use))}) found"
-        )
+        raise CarmenFormatError(path, 0, "file", f"no readable laser scans ({'/'.join(sorted(use))}) found")
 
     geom = _flaser_geometry(params)
-    return _assemble(path, len(lines), bad, dict(skipped), params, geom, parsed, dict(
-        strict=strict, max_usable_range=max_usable_range, usable_range_rule=usable_range_rule,
-        no_return=no_return, no_return_threshold=no_return_threshold, min_range=min_range,
-        max_range=max_range, pose_step=pose_step, pose_fraction=pose_fraction, beam_step=beam_step,
-        seed=seed, messages=sorted(use), apply_laser_offset=apply_laser_offset))  # fmt: skip
+    return _assemble(
+        path,
+        len(lines),
+        bad,
+        dict(skipped),
+        params,
+        geom,
+        parsed,
+        dict(
+            strict=strict,
+            max_usable_range=max_usable_range,
+            usable_range_rule=usable_range_rule,
+            no_return=no_return,
+            no_return_threshold=no_return_threshold,
+            min_range=min_range,
+            max_range=max_range,
+            pose_step=pose_step,
+            pose_fraction=pose_fraction,
+            beam_step=beam_step,
+            seed=seed,
+            messages=sorted(use),
+            apply_laser_offset=apply_laser_offset,
+        ),
+    )
 
 
 def _param(t: list[str]) -> tuple[str, str]:
@@ -424,9 +458,7 @@ def _flaser_geometry(params: dict[str, str]) -> dict:
     }
 
 
-def flaser_angles(
-    n: int, fov: float | None = None, resolution_deg: float | None = None
-) -> np.ndarray:
+def flaser_angles(n: int, fov: float | None = None, resolution_deg: float | None = None) -> np.ndarray:
     """FLASER beam angles (radians, relative to the laser heading) for ``n`` beams (module docstring).
 
     >>> np.degrees(flaser_angles(180))[[0, 1, -1]].round(6).tolist()
@@ -480,9 +512,7 @@ def _stack(parsed: list, geom: dict, apply_offset: bool) -> tuple[np.ndarray, ..
 
 def _assemble(path, num_lines, bad, skipped, params, geom, parsed, settings) -> CarmenLog:
     """Apply the no-return, usable-range, min-range and subsampling rules; build the CarmenLog."""
-    poses, angles, ranges, present, thr, nos, ts, is_flaser = _stack(
-        parsed, geom, settings["apply_laser_offset"]
-    )
+    poses, angles, ranges, present, thr, nos, ts, is_flaser = _stack(parsed, geom, settings["apply_laser_offset"])
     auto_band = None
     if settings["no_return_threshold"] is not None:
         thr[:] = float(settings["no_return_threshold"])
@@ -501,9 +531,7 @@ def _assemble(path, num_lines, bad, skipped, params, geom, parsed, settings) -> 
         elif finite_thr.size:
             mr = float(finite_thr.max())
         else:
-            mr = float(
-                np.nextafter(max(float(ranges[present].max()), settings["min_range"]), np.inf)
-            )
+            mr = float(np.nextafter(max(float(ranges[present].max()), settings["min_range"]), np.inf))
     if settings["no_return"] == "drop":
         valid &= ~no_ret
     else:
@@ -518,17 +546,25 @@ def _assemble(path, num_lines, bad, skipped, params, geom, parsed, settings) -> 
     sub = (keep, slice(None, None, settings["beam_step"]))
     poses, nos, ts = poses[keep], nos[keep], ts[keep]
     angles, ranges, valid, present, no_ret, beyond, below = (
-        a[sub] for a in (angles, ranges, valid, present, no_ret, beyond, below))  # fmt: skip
-    scans = Scans(
-        poses, angles, ranges, mr, over_range="max", valid=valid, min_range=settings["min_range"]
+        a[sub] for a in (angles, ranges, valid, present, no_ret, beyond, below)
     )
-    counts = {"beams": int(present.sum()), "valid": scans.num_valid, "no_return": int(no_ret.sum()),
-              "beyond_usable": int(beyond.sum()), "below_min": int(below.sum()),
-              "max_range_readings": int(scans.is_max.sum())}  # fmt: skip
-    settings = dict(settings, **geom, auto_no_return_threshold=auto_band, params=params,
-                    beam_counts=sorted({int(k[1]) for k, _, _ in parsed}))  # fmt: skip
-    return CarmenLog(scans, str(path), num_lines, bad, skipped, float(scans.max_range), settings,
-                     nos, ts, counts)  # fmt: skip
+    scans = Scans(poses, angles, ranges, mr, over_range="max", valid=valid, min_range=settings["min_range"])
+    counts = {
+        "beams": int(present.sum()),
+        "valid": scans.num_valid,
+        "no_return": int(no_ret.sum()),
+        "beyond_usable": int(beyond.sum()),
+        "below_min": int(below.sum()),
+        "max_range_readings": int(scans.is_max.sum()),
+    }
+    settings = dict(
+        settings,
+        **geom,
+        auto_no_return_threshold=auto_band,
+        params=params,
+        beam_counts=sorted({int(k[1]) for k, _, _ in parsed}),
+    )
+    return CarmenLog(scans, str(path), num_lines, bad, skipped, float(scans.max_range), settings, nos, ts, counts)
 
 
 def _sentinel_band(top: float) -> float | None:

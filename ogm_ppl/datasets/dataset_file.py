@@ -58,8 +58,18 @@ __all__ = [
 
 FORMAT = "ogm_ppl.dataset"
 FORMAT_VERSION = 1
-_REQUIRED = ("format", "format_version", "poses", "angles", "ranges", "valid", "max_range", "min_range",
-             "settings", "provenance")  # fmt: skip
+_REQUIRED = (
+    "format",
+    "format_version",
+    "poses",
+    "angles",
+    "ranges",
+    "valid",
+    "max_range",
+    "min_range",
+    "settings",
+    "provenance",
+)
 _HINT = "was it written by ogm_ppl.datasets.save_dataset?"
 _KINDS = {"f": "float", "U": "string", "iu": "integer", "b": "bool"}
 
@@ -114,11 +124,15 @@ def save_dataset(
     arrays: dict[str, np.ndarray] = {
         "format": np.array(FORMAT),
         "format_version": np.array(FORMAT_VERSION, dtype=np.int64),
-        "poses": scans.poses, "angles": scans.angles, "ranges": scans.ranges, "valid": scans.valid,
-        "max_range": np.array(scans.max_range), "min_range": np.array(scans.min_range),
+        "poses": scans.poses,
+        "angles": scans.angles,
+        "ranges": scans.ranges,
+        "valid": scans.valid,
+        "max_range": np.array(scans.max_range),
+        "min_range": np.array(scans.min_range),
         "settings": np.array(_json(settings, "settings")),
         "provenance": np.array(_json(provenance, "provenance")),
-    }  # fmt: skip
+    }
     if grid is not None:
         arrays["grid"] = np.array([*grid.shape, grid.resolution, *grid.origin], dtype=float)
     if truth is not None:
@@ -142,9 +156,7 @@ def _read_arrays(path: Path) -> dict[str, np.ndarray]:
     with open(path, "rb") as f:
         magic = f.read(4)
     if magic[:2] == b"\x1f\x8b":
-        raise DatasetFileError(
-            path, "is gzip data, not an npz dataset", "a CARMEN log? use read_carmen"
-        )
+        raise DatasetFileError(path, "is gzip data, not an npz dataset", "a CARMEN log? use read_carmen")
     if magic != b"PK\x03\x04":
         raise DatasetFileError(path, "is not an npz file (no zip signature)", _HINT)
     try:
@@ -152,9 +164,7 @@ def _read_arrays(path: Path) -> dict[str, np.ndarray]:
             return {k: npz[k] for k in npz.files}
     except ValueError as e:
         if "pickle" in str(e):
-            raise DatasetFileError(
-                path, "holds object (pickled) arrays, which are refused", _HINT
-            ) from None
+            raise DatasetFileError(path, "holds object (pickled) arrays, which are refused", _HINT) from None
         raise DatasetFileError(path, f"is corrupt ({e})", "re-create or re-copy the file") from None
     except (zipfile.BadZipFile, zlib.error, EOFError, OSError, KeyError) as e:
         raise DatasetFileError(
@@ -167,9 +177,7 @@ def _read_arrays(path: Path) -> dict[str, np.ndarray]:
 def _scalar(path: Path, a: dict, key: str, kind: str) -> Any:  # the Python scalar (str, int, float, bool)
     v = a[key]
     if v.shape != () or v.dtype.kind not in kind:
-        raise DatasetFileError(
-            path, f"entry {key!r} must be a {_KINDS[kind]} scalar, got {v.dtype} {v.shape}"
-        )
+        raise DatasetFileError(path, f"entry {key!r} must be a {_KINDS[kind]} scalar, got {v.dtype} {v.shape}")
     return v.item()
 
 
@@ -180,9 +188,7 @@ def _dict(path: Path, a: dict, key: str) -> dict:
     except json.JSONDecodeError as e:
         raise DatasetFileError(path, f"entry {key!r} is not valid JSON ({e})") from None
     if not isinstance(value, dict):
-        raise DatasetFileError(
-            path, f"entry {key!r} must be a JSON object, got {type(value).__name__}"
-        )
+        raise DatasetFileError(path, f"entry {key!r} must be a JSON object, got {type(value).__name__}")
     return value
 
 
@@ -197,9 +203,7 @@ def load_dataset(path: str | os.PathLike) -> Dataset:
     path = Path(path)
     a = _read_arrays(path)
     if "format" not in a:
-        raise DatasetFileError(
-            path, f"is not an ogm_ppl dataset (no 'format' entry; entries: {sorted(a)[:8]})"
-        )
+        raise DatasetFileError(path, f"is not an ogm_ppl dataset (no 'format' entry; entries: {sorted(a)[:8]})")
     fmt = _scalar(path, a, "format", "U")
     if fmt != FORMAT:
         raise DatasetFileError(path, f"has format {fmt!r}, expected {FORMAT!r}")
@@ -208,9 +212,10 @@ def load_dataset(path: str | os.PathLike) -> Dataset:
     version = _scalar(path, a, "format_version", "iu")
     if version != FORMAT_VERSION:
         raise DatasetFileError(
-            path, f"has format version {version}; this ogm_ppl reads version {FORMAT_VERSION}",
+            path,
+            f"has format version {version}; this ogm_ppl reads version {FORMAT_VERSION}",
             "use the ogm_ppl version that wrote it, or re-create the file",
-        )  # fmt: skip
+        )
     missing = [k for k in _REQUIRED if k not in a]
     if missing:
         raise DatasetFileError(path, f"lacks the entries {missing}")
@@ -224,9 +229,7 @@ def load_dataset(path: str | os.PathLike) -> Dataset:
     if "grid" in a:
         g = a["grid"]
         if g.dtype.kind != "f" or g.shape not in ((4,), (5,)) or not np.all(np.isfinite(g)):
-            raise DatasetFileError(
-                path, f"entry 'grid' must hold shape, resolution, origin; got {g!r}"
-            )
+            raise DatasetFileError(path, f"entry 'grid' must hold shape, resolution, origin; got {g!r}")
         try:
             grid = Grid(tuple(int(s) for s in g[:-3]), float(g[-3]), (float(g[-2]), float(g[-1])))
         except ValueError as e:
@@ -241,8 +244,14 @@ def load_dataset(path: str | os.PathLike) -> Dataset:
         if truth.dtype.kind == "f" and not np.all(np.isfinite(truth)):
             raise DatasetFileError(path, "entry 'truth' has non-finite values")
     try:
-        scans = Scans(a["poses"], a["angles"], a["ranges"], _scalar(path, a, "max_range", "f"),
-                      valid=a["valid"], min_range=_scalar(path, a, "min_range", "f"))  # fmt: skip
+        scans = Scans(
+            a["poses"],
+            a["angles"],
+            a["ranges"],
+            _scalar(path, a, "max_range", "f"),
+            valid=a["valid"],
+            min_range=_scalar(path, a, "min_range", "f"),
+        )
     except ValueError as e:
         if isinstance(e, DatasetFileError):
             raise

@@ -162,11 +162,7 @@ def list_plans(corpus: str, root=None) -> list[str]:
         return sorted((p.stem for p in (base / _HOUSEEXPO_DIR).glob("*.png")), key=_natural_key)
     if corpus == "ipa":
         d = base / _IPA_DIR
-        files = [
-            p
-            for p in d.iterdir()
-            if p.suffix in (".png", ".pgm") and "_gt_segmentation" not in p.stem
-        ]
+        files = [p for p in d.iterdir() if p.suffix in (".png", ".pgm") and "_gt_segmentation" not in p.stem]
         return sorted((p.stem for p in files), key=_natural_key)
     return sorted(_dungeon_members(str(base / _DUNGEON_TAR)), key=_natural_key)
 
@@ -199,20 +195,14 @@ def excluded(name: str, exclude_buildings: Iterable[str] = tuple(REAL_LOG_BUILDI
     """Whether ``name`` matches a pattern of one of the ``exclude_buildings`` (keys of :data:`REAL_LOG_BUILDINGS`)."""
     for key in exclude_buildings:
         if key not in REAL_LOG_BUILDINGS:
-            raise KeyError(
-                f"unknown real-log building {key!r}; expected one of {tuple(REAL_LOG_BUILDINGS)}"
-            )
+            raise KeyError(f"unknown real-log building {key!r}; expected one of {tuple(REAL_LOG_BUILDINGS)}")
         if any(fnmatchcase(name, pat) for pat in REAL_LOG_BUILDINGS[key]):
             return True
     return False
 
 
 def _plans(corpus, split, exclude_buildings, limit, root) -> list[str]:
-    names = [
-        n
-        for n in list_plans(corpus, root)
-        if split_of(corpus, n) == split and not excluded(n, exclude_buildings)
-    ]
+    names = [n for n in list_plans(corpus, root) if split_of(corpus, n) == split and not excluded(n, exclude_buildings)]
     return names if limit is None else names[: int(limit)]
 
 
@@ -227,9 +217,7 @@ def training_plans(
     return _plans(corpus, "train", tuple(exclude_buildings), limit, root)
 
 
-def heldout_plans(
-    corpus: str, exclude_buildings: Iterable[str] = (), limit: int | None = None, root=None
-) -> list[str]:
+def heldout_plans(corpus: str, exclude_buildings: Iterable[str] = (), limit: int | None = None, root=None) -> list[str]:
     """Names of the held-out plans (nothing excluded by default)."""
     return _plans(corpus, "test", tuple(exclude_buildings), limit, root)
 
@@ -239,9 +227,7 @@ def _open_image(data_or_path, where: str):
     from PIL import Image
 
     try:
-        im = Image.open(
-            io.BytesIO(data_or_path) if isinstance(data_or_path, bytes) else data_or_path
-        )
+        im = Image.open(io.BytesIO(data_or_path) if isinstance(data_or_path, bytes) else data_or_path)
         im.load()
     except Exception as e:
         raise ValueError(f"{where}: unreadable image ({type(e).__name__}: {e})") from e
@@ -277,9 +263,7 @@ def _classify_dungeon(im, where: str) -> tuple[np.ndarray, np.ndarray]:
     free = (key == (195 << 16 | 195 << 8 | 194)) | (key == (255 << 16 | 216 << 8 | 0))
     if not (occ | free).all():
         bad = np.unique(rgb[~(occ | free)].reshape(-1, 3), axis=0)[:3].tolist()
-        raise ValueError(
-            f"{where}: unexpected colours {bad} (DungeonMaps has exactly {list(_DUNGEON_COLOURS)})"
-        )
+        raise ValueError(f"{where}: unexpected colours {bad} (DungeonMaps has exactly {list(_DUNGEON_COLOURS)})")
     return occ, free
 
 
@@ -292,9 +276,7 @@ def _pixels(corpus: str, name: str, root) -> tuple[np.ndarray, np.ndarray]:
         return _classify_binary(_open_image(path, str(path)))
     if corpus == "ipa":
         d = base / _IPA_DIR
-        found = next(
-            (d / f"{name}{ext}" for ext in (".png", ".pgm") if (d / f"{name}{ext}").is_file()), None
-        )
+        found = next((d / f"{name}{ext}" for ext in (".png", ".pgm") if (d / f"{name}{ext}").is_file()), None)
         if found is None:
             raise KeyError(f"no IPA plan {name!r} under {d}")
         return _classify_ipa(_open_image(found, str(found)))
@@ -330,9 +312,7 @@ def _factor(corpus: str, resolution) -> int:
     native = NATIVE_RESOLUTION[corpus]
     if resolution is None or native is None:
         if resolution not in (None, 1, 1.0) and native is None:
-            raise ValueError(
-                f"{corpus} has no metric scale; pass resolution=None (1 px = 1 cell) or an int factor"
-            )
+            raise ValueError(f"{corpus} has no metric scale; pass resolution=None (1 px = 1 cell) or an int factor")
         return 1
     f = resolution / native
     if f < 1 - 1e-9 or abs(f - round(f)) > 1e-6:
@@ -398,9 +378,7 @@ def rasterise(
     """Steps 2-5 of the module docstring on classified pixels -> ``(occupancy, known)``."""
     if outside not in ("occupied", "unknown"):
         raise ValueError(f"outside must be 'occupied' or 'unknown', got {outside!r}")
-    occ, free = _downsample(
-        np.asarray(occ_px, bool), np.asarray(free_px, bool) & ~np.asarray(occ_px, bool), factor
-    )
+    occ, free = _downsample(np.asarray(occ_px, bool), np.asarray(free_px, bool) & ~np.asarray(occ_px, bool), factor)
     occ, free = _crop(occ, free, margin)
     unknown = ~(occ | free) | _outside(occ, free, wall_cells)
     if outside == "occupied":

@@ -155,11 +155,7 @@ def _corridor(m, rng, lo, hi):
         rh, rw = int(rng.integers(40, 120)), int(rng.integers(40, 120))
         t = int(rng.integers(1, 4))
         side = int(rng.integers(2))
-        pos = int(
-            rng.integers(
-                lo[other] + 10, max(lo[other] + 11, hi[other] - (rw if axis == 0 else rh) - 10)
-            )
-        )
+        pos = int(rng.integers(lo[other] + 10, max(lo[other] + 11, hi[other] - (rw if axis == 0 else rh) - 10)))
         if axis == 0:  # corridor is a horizontal band rows a..b
             r0 = a - t - rh if side == 0 else b + t
             r0 = int(np.clip(r0, lo[0] + 3, hi[0] - rh - 3))
@@ -230,9 +226,7 @@ def _hall(m, rng, lo, hi):
 _DRAW = {"office": _office, "corridor": _corridor, "cluttered": _cluttered, "hall": _hall}
 
 
-def generate_map(
-    kind: str = "office", shape: tuple[int, int] = (500, 500), seed=0, border: int = 20
-) -> np.ndarray:
+def generate_map(kind: str = "office", shape: tuple[int, int] = (500, 500), seed=0, border: int = 20) -> np.ndarray:
     """One ground-truth map of the given ``kind`` (see :data:`KINDS`).
 
     Args:
@@ -275,9 +269,7 @@ def iter_corpus(
     if not kinds:
         raise ValueError("iter_corpus: kinds must not be empty")
     for i, child in enumerate(np.random.SeedSequence(seed).spawn(int(n))):
-        yield generate_map(
-            kinds[i % len(kinds)], shape, np.random.default_rng(child), border=border
-        )
+        yield generate_map(kinds[i % len(kinds)], shape, np.random.default_rng(child), border=border)
 
 
 def generate_corpus(

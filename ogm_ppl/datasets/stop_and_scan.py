@@ -101,9 +101,7 @@ def _num_probe_beams(max_range_cells: float) -> int:
     return max(720, int(np.ceil(1.5 * 2 * np.pi * max_range_cells)))
 
 
-def _observe(
-    grid: Grid, truth: np.ndarray, poses: np.ndarray, max_range_cells: float
-) -> np.ndarray:
+def _observe(grid: Grid, truth: np.ndarray, poses: np.ndarray, max_range_cells: float) -> np.ndarray:
     """Flat boolean ``K``: cells a noise-free 360 degree scan from each pose reaches (up to and including
     the first occupied cell of each beam)."""
     B = _num_probe_beams(max_range_cells)
@@ -172,9 +170,7 @@ class _KnownFreeGraph:
             ws.append(np.full(int(ok.sum()), np.hypot(dr, dc)))
         m = sum(x.size for x in srcs)
         src, dst, w = np.concatenate(srcs + dsts), np.concatenate(dsts + srcs), np.concatenate(ws + ws)
-        rev = np.concatenate(
-            [np.arange(m, 2 * m), np.arange(m)]
-        )  # e and rev[e] join the same cells
+        rev = np.concatenate([np.arange(m, 2 * m), np.arange(m)])  # e and rev[e] join the same cells
         order = np.lexsort((dst, src))  # canonical CSR: scipy would sort it in place otherwise
         self.dst, self.w = dst[order], w[order]
         self.rev = np.argsort(order)[rev[order]]
@@ -221,9 +217,7 @@ def _frontier(known_free: np.ndarray, unknown: np.ndarray) -> np.ndarray:
     return known_free & near
 
 
-def _gains(
-    grid: Grid, truth, cells: np.ndarray, unseen: np.ndarray, max_range_cells: float
-) -> np.ndarray:
+def _gains(grid: Grid, truth, cells: np.ndarray, unseen: np.ndarray, max_range_cells: float) -> np.ndarray:
     """New cells of ``unseen`` (flat bool) that a noise-free scan (240 beams) from each cell centre would
     observe (``len(cells)`` int64); all scans in one ray cast."""
     B = 240
@@ -257,8 +251,22 @@ def _kill_near(dead, seen, free, grid: Grid, cell_flat: int, reach: float) -> No
     dead.reshape(grid.shape)[r0:r1, c0:c1] |= f
 
 
-def _next_goal(grid, truth, free, seen, dead, target, graph: _KnownFreeGraph, current, *,
-               reach, min_cluster, min_gain, max_range_cells, k_eval=8):  # fmt: skip
+def _next_goal(
+    grid,
+    truth,
+    free,
+    seen,
+    dead,
+    target,
+    graph: _KnownFreeGraph,
+    current,
+    *,
+    reach,
+    min_cluster,
+    min_gain,
+    max_range_cells,
+    k_eval=8,
+):
     """The next stop (a graph node), -1 after giving up frontiers, or None when nothing is left.
 
     Frontier cells are grouped in 8-connected clusters; clusters of at least ``min_cluster`` cells come
@@ -296,9 +304,7 @@ def _next_goal(grid, truth, free, seen, dead, target, graph: _KnownFreeGraph, cu
     large = cluster[reps] > nf
     reps = np.concatenate([reps[large], reps[~large]])
     unseen = ~seen & target
-    for i in range(
-        0, reps.size, k_eval
-    ):  # the next k_eval goals while those before show too little
+    for i in range(0, reps.size, k_eval):  # the next k_eval goals while those before show too little
         chunk = reps[i : i + k_eval]
         gains = _gains(grid, truth, graph.cell[chunk], unseen, max_range_cells)
         if gains.max() >= min_gain:
@@ -362,9 +368,7 @@ def plan_route(
     clear = ndimage.distance_transform_edt(np.pad(free, 1))[1:-1, 1:-1]
     valid = clear > clearance_cells
     if not valid.any():
-        raise ValueError(
-            f"no free cell keeps clearance_cells = {clearance_cells} from the walls and the grid edge"
-        )
+        raise ValueError(f"no free cell keeps clearance_cells = {clearance_cells} from the walls and the grid edge")
     lab, _ = ndimage.label(valid, structure=_EIGHT)
 
     # ---- start
@@ -380,16 +384,12 @@ def plan_route(
         if start.shape not in ((2,), (3,)) or not np.all(np.isfinite(start)):
             raise ValueError(f"start must be finite (x, y) or (x, y, yaw), got {start.tolist()}")
         if not grid.contains(start[None, :2])[0]:
-            raise ValueError(
-                f"start {start[:2].tolist()} lies outside the grid (extent {grid.extent})"
-            )
+            raise ValueError(f"start {start[:2].tolist()} lies outside the grid (extent {grid.extent})")
         start_cell = grid.world_to_cell(start[None, :2])[0]
         if truth[tuple(start_cell)]:
             raise ValueError(f"start {start[:2].tolist()} lies in an occupied cell (inside a wall)")
         if not valid[tuple(start_cell)]:
-            raise ValueError(
-                f"start {start[:2].tolist()} lies within clearance_cells = {clearance_cells} of a wall"
-            )
+            raise ValueError(f"start {start[:2].tolist()} lies within clearance_cells = {clearance_cells} of a wall")
         yaw0 = float(start[2]) if start.shape == (3,) else 0.0
     comp = lab == lab[tuple(start_cell)]
     target = _free_component(free, start_cell[None, :]).ravel()
@@ -417,9 +417,19 @@ def plan_route(
     need = coverage * n_target
     while (seen & target).sum() < need and (num_poses is None or len(route) < num_poses):
         goal = _next_goal(
-            grid, truth, free, seen, dead, target, graph, current,
-            reach=reach, min_cluster=min_cluster, min_gain=min_gain, max_range_cells=max_range_cells,
-        )  # fmt: skip
+            grid,
+            truth,
+            free,
+            seen,
+            dead,
+            target,
+            graph,
+            current,
+            reach=reach,
+            min_cluster=min_cluster,
+            min_gain=min_gain,
+            max_range_cells=max_range_cells,
+        )
         if goal is None:
             break
         if goal < 0:  # frontiers given up; look again

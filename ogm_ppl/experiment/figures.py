@@ -84,13 +84,9 @@ def _sparsity(result, folder: Path, dpi: int) -> list[Path]:
         if len(fracs) < 2:
             continue
         touched = all("touched" in p for p in rows)
-        fig, axes = plt.subplots(
-            1, 2 if touched else 1, figsize=(9 if touched else 5, 4), squeeze=False
-        )
+        fig, axes = plt.subplots(1, 2 if touched else 1, figsize=(9 if touched else 5, 4), squeeze=False)
         for alg in dict.fromkeys(p["algorithm"] for p in rows):
-            ps = sorted(
-                (p for p in rows if p["algorithm"] == alg), key=lambda p: p["measurement_fraction"]
-            )
+            ps = sorted((p for p in rows if p["algorithm"] == alg), key=lambda p: p["measurement_fraction"])
             x = [100 * p["measurement_fraction"] for p in ps]
             axes[0, 0].plot(x, [p["mask"]["best_f1"] for p in ps], "o-", label=alg)
             if touched:
@@ -157,14 +153,10 @@ def _fpfn(result, folder: Path, dpi: int) -> list[Path]:
         files.append(_save_closed(plt, fig, folder / f"fpfn_{ds.name}.png", dpi))
         thrs = spec.output.fpfn_thresholds
         if thrs:
-            fig, axes = plt.subplots(
-                len(algs), len(thrs), figsize=(3 * len(thrs), 3 * len(algs)), squeeze=False
-            )
+            fig, axes = plt.subplots(len(algs), len(thrs), figsize=(3 * len(thrs), 3 * len(algs)), squeeze=False)
             for i, a in enumerate(algs):
                 for j, thr in enumerate(thrs):
-                    axes[i, j].imshow(
-                        _fpfn_image(qs[a.name], truth, mask, thr).reshape(shape + (3,)), **kw
-                    )
+                    axes[i, j].imshow(_fpfn_image(qs[a.name], truth, mask, thr).reshape(shape + (3,)), **kw)
                     axes[i, j].set_title(f"{a.name}, p > {thr:g}", fontsize=8)
                     axes[i, j].set_xticks([])
                     axes[i, j].set_yticks([])
@@ -182,8 +174,13 @@ def _time(result, folder: Path, dpi: int) -> list[Path]:
                 continue
             pts = [t for t in r["trace"] if "f1" in t]
             if pts:
-                ax.plot([t["seconds"] for t in pts], [t["f1"] for t in pts], "o-", ms=3,
-                        label=f"{r['algorithm']} c{r['chain']}")  # fmt: skip
+                ax.plot(
+                    [t["seconds"] for t in pts],
+                    [t["f1"] for t in pts],
+                    "o-",
+                    ms=3,
+                    label=f"{r['algorithm']} c{r['chain']}",
+                )
         _line_plot(ax, "wall-clock seconds (sampling)", "best F1 of the running marginals", f"Anytime F1: {ds}")
         files.append(_save_closed(plt, fig, folder / f"f1_time_{ds}.png", dpi))
     return files

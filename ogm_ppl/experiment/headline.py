@@ -46,42 +46,66 @@ def find_shared_file(relative: str) -> Path | None:
     return None
 
 
-def headline_spec(log: str | os.PathLike, *, quick: bool = False, sigma_cells: float = 0.5,
-                  sweeps: int = 60) -> dict:  # fmt: skip
+def headline_spec(log: str | os.PathLike, *, quick: bool = False, sigma_cells: float = 0.5, sweeps: int = 60) -> dict:
     """The headline spec as a dict (:func:`~ogm_ppl.experiment.parse_spec` validates it).
 
     ``quick`` (tests): 10 cm cells, only the 10 % subset, 6 sweeps. ``sigma_cells``: range noise of the
     Gibbs sensor model in cells (default 0.5 cell = 2.5 cm; see the README's Intel section for why not 3).
     """
     res, fractions, n = (0.10, [0.1], 6) if quick else (0.05, [0.5, 0.1], sweeps)
-    gibbs = {"kind": "gibbs", "patch": [3, 3], "sweeps": n, "burn_in": max(1, n // 6), "checkpoint_every": 5,
-             "record": 3, "sigma_cells": float(sigma_cells)}  # fmt: skip
+    gibbs = {
+        "kind": "gibbs",
+        "patch": [3, 3],
+        "sweeps": n,
+        "burn_in": max(1, n // 6),
+        "checkpoint_every": 5,
+        "record": 3,
+        "sigma_cells": float(sigma_cells),
+    }
     return {
         "experiment": {
             "name": "intel_headline",
             "seed": 2020,
-            "description": ("Real, sparse data (thesis Table 6.5 / Fig. 6.17, reduced): Intel Lab, half the beams "
-                            "with half / 10 % of the poses, against the p > 0.20 benchmark from all readings."),
-        },  # fmt: skip
-        "datasets": [{
-            "name": "intel", "kind": "log", "path": str(Path(log).resolve()),
-            "reader": {"max_usable_range": 20.0}, "resolution": res, "extent": [-10.9, -23.65, 30.0, 30.0],
-            "sigma_cells": float(sigma_cells), "pose_fraction": fractions, "beam_step": 2,
-            "benchmark": {"delta": "haehnel", "threshold": 0.20, "prior": 0.5},
-        }],  # fmt: skip
+            "description": (
+                "Real, sparse data (thesis Table 6.5 / Fig. 6.17, reduced): Intel Lab, half the beams "
+                "with half / 10 % of the poses, against the p > 0.20 benchmark from all readings."
+            ),
+        },
+        "datasets": [
+            {
+                "name": "intel",
+                "kind": "log",
+                "path": str(Path(log).resolve()),
+                "reader": {"max_usable_range": 20.0},
+                "resolution": res,
+                "extent": [-10.9, -23.65, 30.0, 30.0],
+                "sigma_cells": float(sigma_cells),
+                "pose_fraction": fractions,
+                "beam_step": 2,
+                "benchmark": {"delta": "haehnel", "threshold": 0.20, "prior": 0.5},
+            }
+        ],
         "algorithms": [
             {"name": "ogm", "kind": "ogm", "delta": "haehnel"},
             {"name": "p21", "kind": "ogm", "delta": "p21", "fit": "setting"},
             {"name": "border-L9", "prior": "border:houseexpo", **gibbs},
         ],
-        "metrics": {"mask": "near_mapped", "near_mapped_distance": 10.0, "touched_only": True, "thresholds": 99,
-                    "scores": ["f1", "auc", "max_precision"]},  # fmt: skip
+        "metrics": {
+            "mask": "near_mapped",
+            "near_mapped_distance": 10.0,
+            "touched_only": True,
+            "thresholds": 99,
+            "scores": ["f1", "auc", "max_precision"],
+        },
         "output": {"maps": True, "figures": True, "fpfn": "none", "dpi": 90},
     }
 
 
-LABELS = {"ogm": "traditional OGM (Hähnel)", "p21": "log-odds OGM, p21 fitted for this sensor",
-          "border-L9": "Gibbs, border prior, L = 9"}  # fmt: skip
+LABELS = {
+    "ogm": "traditional OGM (Hähnel)",
+    "p21": "log-odds OGM, p21 fitted for this sensor",
+    "border-L9": "Gibbs, border prior, L = 9",
+}
 
 
 def _maps_figure(result, out: Path) -> Path:
@@ -101,8 +125,13 @@ def _maps_figure(result, out: Path) -> Path:
     for ax, a in zip(axes[1:], algs):
         with np.load(score_path(result.out_dir, ds, a).with_suffix(".npz"), allow_pickle=False) as z:
             q = z["marginals"]
-        plot_map(q, None, ax, f"{LABELS.get(a.name, a.name)}\n{100 * ds.measurement_fraction:.3g} % of readings",
-                 colorbar=False)  # fmt: skip
+        plot_map(
+            q,
+            None,
+            ax,
+            f"{LABELS.get(a.name, a.name)}\n{100 * ds.measurement_fraction:.3g} % of readings",
+            colorbar=False,
+        )
     fig.tight_layout()
     return _save_closed(plt, fig, out / "intel_maps.png", 90)
 
@@ -120,13 +149,22 @@ def _table(result) -> list[str]:
                 cells.append("–")
                 continue
             m, t = p["mask"], p.get("touched", {})
-            cells.append(f"{m['best_f1']:.3f} / {m.get('auc', float('nan')):.3f} / {t.get('best_f1', float('nan')):.3f}")
+            cells.append(
+                f"{m['best_f1']:.3f} / {m.get('auc', float('nan')):.3f} / {t.get('best_f1', float('nan')):.3f}"
+            )
         lines.append(f"| {LABELS.get(a.name, a.name)} | " + " | ".join(cells) + " |")
     return lines
 
 
-def run_intel_headline(out: str | os.PathLike, log: str | os.PathLike | None = None, *, quick: bool = False,
-                       scheduler=None, workers: int | None = None, progress: bool = False) -> dict:  # fmt: skip
+def run_intel_headline(
+    out: str | os.PathLike,
+    log: str | os.PathLike | None = None,
+    *,
+    quick: bool = False,
+    scheduler=None,
+    workers: int | None = None,
+    progress: bool = False,
+) -> dict:
     """Run the headline spec into ``out/intel`` and return ``{"markdown": [...], "json": {...}}`` for the report.
 
     ``log``: the Intel Lab log (default: :func:`find_shared_file` of :data:`INTEL_LOG`); raises
@@ -166,9 +204,15 @@ def run_intel_headline(out: str | os.PathLike, log: str | os.PathLike | None = N
         "`intel/figures/` (P-R curves, F1 against threshold, sparsity and time); tables: `intel/metrics.md`.",
         "",
     ]
-    doc = {"seconds": seconds, "pooled": [{k: v for k, v in r.items() if k not in ("mask", "touched")}
-                                          | {"mask": _summary(r["mask"]), "touched": _summary(r.get("touched", {}))}
-                                          for r in result.pooled], "figure": str(fig)}  # fmt: skip
+    doc = {
+        "seconds": seconds,
+        "pooled": [
+            {k: v for k, v in r.items() if k not in ("mask", "touched")}
+            | {"mask": _summary(r["mask"]), "touched": _summary(r.get("touched", {}))}
+            for r in result.pooled
+        ],
+        "figure": str(fig),
+    }
     atomic_write_text(out / "intel_headline.json", json.dumps(doc, indent=1, default=str, allow_nan=True))
     return {"markdown": md, "json": doc}
 
@@ -199,9 +243,7 @@ def run_headline(
     lines = ["# ogm_ppl headline run", ""]
     report: dict = {}
     try:
-        intel = run_intel_headline(
-            out, log, quick=quick, scheduler=scheduler, workers=workers, progress=progress
-        )
+        intel = run_intel_headline(out, log, quick=quick, scheduler=scheduler, workers=workers, progress=progress)
         lines += intel["markdown"]
         report["intel"] = intel["json"]
     except FileNotFoundError as e:

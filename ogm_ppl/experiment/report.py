@@ -29,10 +29,23 @@ def _pool_block(blocks: list[dict]) -> dict:
         rec = np.where(tp + fn > 0, tp / np.maximum(tp + fn, 1), 0.0)
         f1 = np.where(prec + rec > 0, 2 * prec * rec / (prec + rec), 0.0)
     i = int(np.argmax(f1))
-    d = {"cells": int(sum(b["cells"] for b in blocks)), "occupied": int(sum(b["occupied"] for b in blocks)),
-         "best_f1": float(f1[i]), "threshold": float(thr[i]), "precision": float(prec[i]), "recall": float(rec[i]),
-         "curve": {"thresholds": thr.tolist(), "precision": prec.tolist(), "recall": rec.tolist(), "f1": f1.tolist(),
-                   "tp": tp.tolist(), "fp": fp.tolist(), "fn": fn.tolist()}}  # fmt: skip
+    d = {
+        "cells": int(sum(b["cells"] for b in blocks)),
+        "occupied": int(sum(b["occupied"] for b in blocks)),
+        "best_f1": float(f1[i]),
+        "threshold": float(thr[i]),
+        "precision": float(prec[i]),
+        "recall": float(rec[i]),
+        "curve": {
+            "thresholds": thr.tolist(),
+            "precision": prec.tolist(),
+            "recall": rec.tolist(),
+            "f1": f1.tolist(),
+            "tp": tp.tolist(),
+            "fp": fp.tolist(),
+            "fn": fn.tolist(),
+        },
+    }
     for key in ("auc", "nll_bits", "brier", "ece"):
         if key in blocks[0]:
             vals = [b[key] for b in blocks]
@@ -54,8 +67,14 @@ def pool(scores: list[dict], spec) -> list[dict]:
             recs = [s for s in scores if s["condition"] == cond and s["algorithm"] == alg.name]
             if not recs:
                 continue
-            r = {"condition": cond, "entry": entry[cond], "algorithm": alg.name, "measurement_fraction": frac[cond],
-                 "datasets": [s["dataset"] for s in recs], "mask": _pool_block([s["mask"] for s in recs])}  # fmt: skip
+            r = {
+                "condition": cond,
+                "entry": entry[cond],
+                "algorithm": alg.name,
+                "measurement_fraction": frac[cond],
+                "datasets": [s["dataset"] for s in recs],
+                "mask": _pool_block([s["mask"] for s in recs]),
+            }
             if all("touched" in s for s in recs):
                 r["touched"] = _pool_block([s["touched"] for s in recs])
             out.append(r)
@@ -75,8 +94,11 @@ def markdown(result) -> str:
         "all": "all cells",
         "near_mapped": f"cells within {spec.metrics.near_mapped_distance:g} cells of a mapped cell",
     }
-    lines += ["Best F1 over thresholds, precision and recall at that threshold, ROC AUC; *touched*: only cells the",
-              "dataset's readings reached. Repeats of a condition (map / noise seeds) are pooled by summing counts.", ""]  # fmt: skip
+    lines += [
+        "Best F1 over thresholds, precision and recall at that threshold, ROC AUC; *touched*: only cells the",
+        "dataset's readings reached. Repeats of a condition (map / noise seeds) are pooled by summing counts.",
+        "",
+    ]
     sec: dict[str, list[float]] = {}
     for r in result.runs:
         sec.setdefault(r["algorithm"], []).append(r["seconds"])
@@ -84,26 +106,35 @@ def markdown(result) -> str:
         rows = [p for p in result.pooled if p["condition"] == cond]
         kind = next(d.kind for d in spec.datasets if d.condition == cond)
         n = len(rows[0]["datasets"])
-        lines += [f"## {cond} ({n} dataset{'s' if n > 1 else ''}, {100 * rows[0]['measurement_fraction']:.3g} % of the "
-                  f"readings; mask: {mask_desc[spec.metrics.mask_for(kind)]})", ""]  # fmt: skip
-        head = "| algorithm | best F1 | threshold | precision | recall | AUC | max precision | touched F1 | touched AUC |"
+        lines += [
+            f"## {cond} ({n} dataset{'s' if n > 1 else ''}, {100 * rows[0]['measurement_fraction']:.3g} % of the "
+            f"readings; mask: {mask_desc[spec.metrics.mask_for(kind)]})",
+            "",
+        ]
+        head = (
+            "| algorithm | best F1 | threshold | precision | recall | AUC | max precision | touched F1 | touched AUC |"
+        )
         lines += [head, "|---" * 9 + "|"]
         for p in rows:
             m, t = p["mask"], p.get("touched", {})
-            lines.append(f"| {p['algorithm']} | {_f(m['best_f1'])} | {m['threshold']:.2f} | {_f(m['precision'])} | "
-                         f"{_f(m['recall'])} | {_f(m.get('auc'))} | {_f(m.get('max_precision'))} | "
-                         f"{_f(t.get('best_f1'))} | {_f(t.get('auc'))} |")  # fmt: skip
+            lines.append(
+                f"| {p['algorithm']} | {_f(m['best_f1'])} | {m['threshold']:.2f} | {_f(m['precision'])} | "
+                f"{_f(m['recall'])} | {_f(m.get('auc'))} | {_f(m.get('max_precision'))} | "
+                f"{_f(t.get('best_f1'))} | {_f(t.get('auc'))} |"
+            )
         lines.append("")
     if sec:
-        lines += ["## Run time (seconds per run task: mean over datasets and chains)", "",
-                  "| algorithm | mean s | runs |", "|---|---|---|"]  # fmt: skip
+        lines += [
+            "## Run time (seconds per run task: mean over datasets and chains)",
+            "",
+            "| algorithm | mean s | runs |",
+            "|---|---|---|",
+        ]
         for a, v in sec.items():
             lines.append(f"| {a} | {np.mean(v):.2f} | {len(v)} |")
         lines.append("")
     if result.failed:
-        lines += (
-            ["## Failed tasks", ""] + [f"- `{k}`: {v}" for k, v in result.failed.items()] + [""]
-        )
+        lines += ["## Failed tasks", ""] + [f"- `{k}`: {v}" for k, v in result.failed.items()] + [""]
     return "\n".join(lines)
 
 
@@ -119,12 +150,22 @@ def write_outputs(result, tasks, recs: dict) -> None:
     result.scores = [_strip(recs[t.id]) for t in tasks if t.kind == "score" and t.id in recs]
     result.pooled = pool(result.scores, spec)
     doc = {
-        "format": "ogm_ppl.experiment.metrics", "format_version": 1, "experiment": spec.name, "seed": spec.seed,
-        "datasets": result.datasets, "scores": result.scores, "pooled": result.pooled, "runs": result.runs,
-        "executed": result.executed, "skipped": result.skipped, "failed": result.failed,
-    }  # fmt: skip
-    files = [atomic_write_text(out / "metrics.json", json.dumps(doc, indent=1, allow_nan=True)),
-             atomic_write_text(out / "metrics.md", markdown(result))]  # fmt: skip
+        "format": "ogm_ppl.experiment.metrics",
+        "format_version": 1,
+        "experiment": spec.name,
+        "seed": spec.seed,
+        "datasets": result.datasets,
+        "scores": result.scores,
+        "pooled": result.pooled,
+        "runs": result.runs,
+        "executed": result.executed,
+        "skipped": result.skipped,
+        "failed": result.failed,
+    }
+    files = [
+        atomic_write_text(out / "metrics.json", json.dumps(doc, indent=1, allow_nan=True)),
+        atomic_write_text(out / "metrics.md", markdown(result)),
+    ]
     if spec.output.figures and result.scores:
         from ogm_ppl.experiment.figures import write_figures
 

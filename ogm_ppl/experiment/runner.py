@@ -94,32 +94,67 @@ def plan_tasks(spec: ExperimentSpec, out: Path, resume: bool = True) -> list[Tas
         if ds.base not in base_h:
             h = T.task_hash("base", ds.base_params)
             base_h[ds.base] = h
-            tasks.append(Task(f"base/{ds.base}", "base", T.run_base, (ds, str(out), h), {}, [],
-                              T.base_dir(out) / f"{ds.base}.json", h))  # fmt: skip
+            tasks.append(
+                Task(
+                    f"base/{ds.base}",
+                    "base",
+                    T.run_base,
+                    (ds, str(out), h),
+                    {},
+                    [],
+                    T.base_dir(out) / f"{ds.base}.json",
+                    h,
+                )
+            )
         h = T.task_hash("dataset", ds.params, base_h[ds.base])
         ds_h[ds.name] = h
-        tasks.append(Task(f"dataset/{ds.name}", "dataset", T.run_dataset, (ds, str(out), h), {},
-                          [f"base/{ds.base}"], out / "datasets" / f"{ds.name}.json", h))  # fmt: skip
+        tasks.append(
+            Task(
+                f"dataset/{ds.name}",
+                "dataset",
+                T.run_dataset,
+                (ds, str(out), h),
+                {},
+                [f"base/{ds.base}"],
+                out / "datasets" / f"{ds.name}.json",
+                h,
+            )
+        )
     for ds in spec.datasets:
         for alg in spec.algorithms:
             hs = []
             for c in range(alg.chains):
                 seed = derive_seed(spec.seed, "run", ds.name, alg.name, c)
                 rec_metrics = m if alg.records_metrics else None  # the F1 records depend on them
-                h = T.task_hash(
-                    "run", ds_h[ds.name], T.spec_entry(alg), c, seed, rec_metrics, o["maps"]
-                )
+                h = T.task_hash("run", ds_h[ds.name], T.spec_entry(alg), c, seed, rec_metrics, o["maps"])
                 hs.append(h)
                 tid = f"run/{ds.name}/{alg.name}/c{c}"
                 run_h[tid] = h
-                tasks.append(Task(tid, "run", T.run_algorithm, (ds, alg, c, seed, spec.metrics, spec.output, str(out), h),
-                                  {"resume": resume}, [f"dataset/{ds.name}"],
-                                  T.run_dir(out, ds, alg, c) / "result.json", h))  # fmt: skip
+                tasks.append(
+                    Task(
+                        tid,
+                        "run",
+                        T.run_algorithm,
+                        (ds, alg, c, seed, spec.metrics, spec.output, str(out), h),
+                        {"resume": resume},
+                        [f"dataset/{ds.name}"],
+                        T.run_dir(out, ds, alg, c) / "result.json",
+                        h,
+                    )
+                )
             h = T.task_hash("score", hs, m, o["maps"])
-            tasks.append(Task(f"score/{ds.name}/{alg.name}", "score", T.run_score,
-                              (ds, alg, spec.metrics, spec.output, str(out), h), {},
-                              [f"run/{ds.name}/{alg.name}/c{c}" for c in range(alg.chains)],
-                              T.score_path(out, ds, alg), h))  # fmt: skip
+            tasks.append(
+                Task(
+                    f"score/{ds.name}/{alg.name}",
+                    "score",
+                    T.run_score,
+                    (ds, alg, spec.metrics, spec.output, str(out), h),
+                    {},
+                    [f"run/{ds.name}/{alg.name}/c{c}" for c in range(alg.chains)],
+                    T.score_path(out, ds, alg),
+                    h,
+                )
+            )
     return tasks
 
 
@@ -148,14 +183,13 @@ def _client(scheduler, workers):
         return scheduler, False
     if scheduler is None:
         n = int(workers) if workers else (os.cpu_count() or 1)
-        cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None,
-                               silence_logs=logging.ERROR)  # fmt: skip
+        cluster = LocalCluster(
+            n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR
+        )
         return Client(cluster), True
     if isinstance(scheduler, str):
         return Client(scheduler), True
-    raise TypeError(
-        f"scheduler must be None, 'serial', an address or a distributed.Client, got {scheduler!r}"
-    )
+    raise TypeError(f"scheduler must be None, 'serial', an address or a distributed.Client, got {scheduler!r}")
 
 
 def _execute_dask(todo: list[Task], client, progress: bool):
@@ -188,8 +222,9 @@ def _execute_dask(todo: list[Task], client, progress: bool):
 
 
 # ------------------------------------------------------------------------------------------ the API
-def run_experiment(spec_or_path, out_dir, *, scheduler=None, workers: int | None = None, resume: bool = True,
-                   progress: bool = True) -> ExperimentResult:  # fmt: skip
+def run_experiment(
+    spec_or_path, out_dir, *, scheduler=None, workers: int | None = None, resume: bool = True, progress: bool = True
+) -> ExperimentResult:
     """Run an experiment spec (a path or an :class:`ExperimentSpec`) into ``out_dir``.
 
     Args:
@@ -233,16 +268,18 @@ def run_experiment(spec_or_path, out_dir, *, scheduler=None, workers: int | None
                 if cluster is not None:
                     cluster.close()
     recs = {**done_recs, **{k: v for k, v in results.items() if v is not None}}
-    result = ExperimentResult(spec, out, executed=[t.id for t in todo if t.id in results], skipped=skipped,
-                              failed=failed)  # fmt: skip
+    result = ExperimentResult(
+        spec, out, executed=[t.id for t in todo if t.id in results], skipped=skipped, failed=failed
+    )
     from ogm_ppl.experiment.report import write_outputs
 
     write_outputs(result, tasks, recs)
     result.seconds = time.perf_counter() - t0
     if failed:
         first = next(iter(failed.items()))
-        raise ExperimentError(f"{len(failed)} of {len(todo)} tasks failed (first: {first[0]}: {first[1]}); "
-                              f"rerun to resume", result)  # fmt: skip
+        raise ExperimentError(
+            f"{len(failed)} of {len(todo)} tasks failed (first: {first[0]}: {first[1]}); rerun to resume", result
+        )
     return result
 
 

@@ -66,16 +66,12 @@ def run_simple2d(out: Path, seed: int = 0) -> dict:
         seconds[label] = time.perf_counter() - t0
         probs[label] = m.probabilities.numpy()
     observed = rays.reached()  # cells some beam reached: the mask does not depend on the update term
-    uniform = OccupancyModel(
-        ex.grid, rays, GaussianRange(ex.sigma_cells), IndependentPrior(0.5, ex.grid.num_cells)
-    )
+    uniform = OccupancyModel(ex.grid, rays, GaussianRange(ex.sigma_cells), IndependentPrior(0.5, ex.grid.num_cells))
     t0 = time.perf_counter()
     label = "offline patch map, 3x3 centred (Sec. 3.2)"
     probs[label] = offline_patch_map(uniform, (3, 3), overlap=True).marginals.numpy()
     seconds[label] = time.perf_counter() - t0
-    realistic = OccupancyModel(
-        ex.grid, rays, GaussianRange(ex.sigma_cells), IndependentPrior(0.234, ex.grid.num_cells)
-    )
+    realistic = OccupancyModel(ex.grid, rays, GaussianRange(ex.sigma_cells), IndependentPrior(0.234, ex.grid.num_cells))
     stats = RunningStats(realistic)
     t0 = time.perf_counter()
     run_gibbs(CellGibbs(realistic), GIBBS_SWEEPS, stats, warmup=50, seed=seed, progress=False)
@@ -109,9 +105,7 @@ def run_simple2d(out: Path, seed: int = 0) -> dict:
 
     toy = toy_1d(num_cells=20, readings=THESIS_TOY_READINGS)
     trays = raycast(toy.grid, toy.scans)
-    exact = pose_constrained_1d(
-        OccupancyModel(toy.grid, trays, GaussianRange(3.0), IndependentPrior(0.5, 20))
-    )
+    exact = pose_constrained_1d(OccupancyModel(toy.grid, trays, GaussianRange(3.0), IndependentPrior(0.5, 20)))
     series = {
         "ground truth": toy.truth.astype(float),
         "exact posterior (Sec. 2.3.1)": exact.marginals.numpy(),

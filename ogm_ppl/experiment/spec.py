@@ -85,8 +85,17 @@ _NAME = re.compile(r"[A-Za-z0-9_.-]+\Z")
 MAP_KINDS = ("office", "corridor", "cluttered", "hall", "mixed")
 SWEEP_KEYS = {"map_seed": "m", "seed": "s", "pose_fraction": "pf", "beam_step": "bs"}
 REPEAT_KEYS = ("map_seed", "seed")
-READER_KEYS = ("strict", "max_usable_range", "usable_range_rule", "no_return", "no_return_threshold",
-               "min_range", "max_range", "messages", "apply_laser_offset")  # fmt: skip
+READER_KEYS = (
+    "strict",
+    "max_usable_range",
+    "usable_range_rule",
+    "no_return",
+    "no_return_threshold",
+    "min_range",
+    "max_range",
+    "messages",
+    "apply_laser_offset",
+)
 SCORES = ("f1", "auc", "max_precision", "nll_bits", "brier", "ece")
 
 
@@ -192,11 +201,15 @@ class ExperimentSpec:
     def to_json(self) -> dict:
         """The normalised spec (JSON-able)."""
         return {
-            "name": self.name, "seed": self.seed, "description": self.description, "source": self.source,
+            "name": self.name,
+            "seed": self.seed,
+            "description": self.description,
+            "source": self.source,
             "datasets": [asdict(d) for d in self.datasets],
             "algorithms": [asdict(a) for a in self.algorithms],
-            "metrics": asdict(self.metrics), "output": asdict(self.output),
-        }  # fmt: skip
+            "metrics": asdict(self.metrics),
+            "output": asdict(self.output),
+        }
 
 
 # ------------------------------------------------------------------------------------------ reading
@@ -309,16 +322,12 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
         p["border"] = t.get("border", "int", 20, lo=1, hi=min(size) // 4)
         p["resolution"] = t.get("resolution", "float", 0.05, lo=0, lo_open=True)
         p["map_seed"] = t.get("map_seed", "int", 0, sweep=True, lo=0)
-        p["seed"] = t.get(
-            "seed", "int", derive_seed(seed, "dataset", name, bits=32), sweep=True, lo=0
-        )
+        p["seed"] = t.get("seed", "int", derive_seed(seed, "dataset", name, bits=32), sweep=True, lo=0)
         p["poses"] = t.get("poses", "int", None, lo=1)
         p["beams"] = t.get("beams", "int", 720, lo=1)
         p["max_range_cells"] = t.get("max_range_cells", "float", 75.0, lo=0, lo_open=True)
         p["sigma_cells"] = t.get("sigma_cells", "float", 3.0, lo=0, lo_open=True)
-        p["pose_fraction"] = t.get(
-            "pose_fraction", "float", 1.0, sweep=True, lo=0, lo_open=True, hi=1
-        )
+        p["pose_fraction"] = t.get("pose_fraction", "float", 1.0, sweep=True, lo=0, lo_open=True, hi=1)
         p["beam_step"] = t.get("beam_step", "int", 1, sweep=True, lo=1)
         for bs in np.atleast_1d(p["beam_step"]):
             if bs > p["beams"]:
@@ -364,9 +373,7 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
         p["extent"] = ext
         p["margin"] = t.get("margin", "float", 1.0, lo=0)
         p["sigma_cells"] = t.get("sigma_cells", "float", 3.0, lo=0, lo_open=True)
-        p["pose_fraction"] = t.get(
-            "pose_fraction", "float", 1.0, sweep=True, lo=0, lo_open=True, hi=1
-        )
+        p["pose_fraction"] = t.get("pose_fraction", "float", 1.0, sweep=True, lo=0, lo_open=True, hi=1)
         p["beam_step"] = t.get("beam_step", "int", 1, sweep=True, lo=1)
         bt = _Table(source, f"{t.where}.benchmark", t.raw("benchmark", {}))
         p["benchmark"] = {
@@ -383,17 +390,20 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
         q = dict(p)
         q.update(zip(swept, combo))
         suffix = "".join(f"-{SWEEP_KEYS[k]}{v:g}" for k, v in zip(swept, combo))
-        cond = "".join(
-            f"-{SWEEP_KEYS[k]}{v:g}" for k, v in zip(swept, combo) if k not in REPEAT_KEYS
+        cond = "".join(f"-{SWEEP_KEYS[k]}{v:g}" for k, v in zip(swept, combo) if k not in REPEAT_KEYS)
+        base_sfx = "".join(f"-{SWEEP_KEYS[k]}{v:g}" for k, v in zip(swept, combo) if k in REPEAT_KEYS)
+        out.append(
+            DatasetSpec(
+                name=name + suffix,
+                entry=name,
+                kind=kind,
+                params=q,
+                condition=name + cond,
+                base=name + base_sfx,
+                base_params={"kind": kind, **{k: q[k] for k in base_keys}},
+                measurement_fraction=float(q["pose_fraction"]) / int(q["beam_step"]),
+            )
         )
-        base_sfx = "".join(
-            f"-{SWEEP_KEYS[k]}{v:g}" for k, v in zip(swept, combo) if k in REPEAT_KEYS
-        )
-        out.append(DatasetSpec(
-            name=name + suffix, entry=name, kind=kind, params=q, condition=name + cond, base=name + base_sfx,
-            base_params={"kind": kind, **{k: q[k] for k in base_keys}},
-            measurement_fraction=float(q["pose_fraction"]) / int(q["beam_step"]),
-        ))  # fmt: skip
     return out
 
 
@@ -413,9 +423,7 @@ def _algorithm(source: str, i: int, a) -> AlgorithmSpec:
     return AlgorithmSpec(name, kind, asdict(params))
 
 
-def parse_spec(
-    data: dict, source: str = "<dict>", base_dir: str | os.PathLike = "."
-) -> ExperimentSpec:
+def parse_spec(data: dict, source: str = "<dict>", base_dir: str | os.PathLike = ".") -> ExperimentSpec:
     """Validate a spec given as a dict (the parsed TOML); ``source`` names it in errors."""
     if not isinstance(data, dict):
         raise SpecError(f"{source}: a spec is a table, got {type(data).__name__}")
@@ -449,9 +457,7 @@ def parse_spec(
     names = [d.name for d in datasets]
     dup = next((n for n in names if names.count(n) > 1), None)
     if dup:
-        raise SpecError(
-            f"{source}: datasets: two entries expand to the dataset name {dup!r}; rename one"
-        )
+        raise SpecError(f"{source}: datasets: two entries expand to the dataset name {dup!r}; rename one")
     algorithms = [_algorithm(source, i, a) for i, a in enumerate(raw_alg)]
     anames = [a.name for a in algorithms]
     dup = next((n for n in anames if anames.count(n) > 1), None)
@@ -462,9 +468,7 @@ def parse_spec(
     if isinstance(thr, int) and not isinstance(thr, bool):
         if thr < 1:
             m.fail("thresholds", f"must be >= 1, got {thr}")
-        thresholds = (
-            tuple(np.round(np.linspace(0.01, 0.99, thr), 10).tolist()) if thr > 1 else (0.5,)
-        )
+        thresholds = tuple(np.round(np.linspace(0.01, 0.99, thr), 10).tolist()) if thr > 1 else (0.5,)
     elif (
         isinstance(thr, list)
         and thr
@@ -498,8 +502,17 @@ def parse_spec(
         dpi=o.get("dpi", "int", 100, lo=20, hi=600),
     )
     o.finish()
-    return ExperimentSpec(name, seed, description, tuple(datasets), tuple(algorithms), metrics, output,
-                          source, json.loads(json.dumps(data, default=str)))  # fmt: skip
+    return ExperimentSpec(
+        name,
+        seed,
+        description,
+        tuple(datasets),
+        tuple(algorithms),
+        metrics,
+        output,
+        source,
+        json.loads(json.dumps(data, default=str)),
+    )
 
 
 def load_spec(path: str | os.PathLike) -> ExperimentSpec:

@@ -178,17 +178,25 @@ def run_base(ds, out: str | Path, h: str) -> dict:
             else:
                 grid = log.grid(p["resolution"], p["margin"])
             b = p["benchmark"]
-            ev = evidence_grid_from_scans(
-                grid, log.scans, delta_by_name(b["delta"]), prior=b["prior"]
-            )
+            ev = evidence_grid_from_scans(grid, log.scans, delta_by_name(b["delta"]), prior=b["prior"])
             truth = (ev.probabilities.numpy() > b["threshold"]).reshape(grid.shape)
             mapped = ev.observed.numpy().reshape(grid.shape)
-            save_dataset(base_dir(out) / f"{ds.base}.scans.npz", log.scans, grid=grid, truth=truth,
-                         settings={"reader": p["reader"]}, provenance={"log": p["path"]})  # fmt: skip
+            save_dataset(
+                base_dir(out) / f"{ds.base}.scans.npz",
+                log.scans,
+                grid=grid,
+                truth=truth,
+                settings={"reader": p["reader"]},
+                provenance={"log": p["path"]},
+            )
             _savez(npz, grid=_grid_array(grid), truth=truth, mapped=mapped)
-            info = {"scans": int(log.scans.num_scans), "valid_readings": int(log.scans.num_valid),
-                    "benchmark_occupied": int(truth.sum()), "mapped_share": float(mapped.mean()),
-                    "log_counts": {k: int(v) for k, v in log.counts.items()}}  # fmt: skip
+            info = {
+                "scans": int(log.scans.num_scans),
+                "valid_readings": int(log.scans.num_valid),
+                "benchmark_occupied": int(truth.sum()),
+                "mapped_share": float(mapped.mean()),
+                "log_counts": {k: int(v) for k, v in log.counts.items()},
+            }
     rec = {
         "hash": h,
         "base": ds.base,
@@ -218,32 +226,49 @@ def run_dataset(ds, out: str | Path, h: str, _base=None) -> dict:
         if ds.kind == "simulated":
             from ogm_ppl.datasets.stop_and_scan import stop_and_scan
 
-            data = stop_and_scan(truth, grid, route=route, beams=p["beams"], max_range_cells=p["max_range_cells"],
-                                 sigma_cells=p["sigma_cells"], seed=p["seed"], pose_fraction=p["pose_fraction"],
-                                 beam_step=p["beam_step"])  # fmt: skip
+            data = stop_and_scan(
+                truth,
+                grid,
+                route=route,
+                beams=p["beams"],
+                max_range_cells=p["max_range_cells"],
+                sigma_cells=p["sigma_cells"],
+                seed=p["seed"],
+                pose_fraction=p["pose_fraction"],
+                beam_step=p["beam_step"],
+            )
             scans = data.scans
         else:
             full = load_dataset(base_dir(out) / f"{ds.base}.scans.npz").scans
             scans = full.subsample(pose_fraction=p["pose_fraction"], beam_step=p["beam_step"])
-        touched = (
-            evidence_grid_from_scans(grid, scans, delta_by_name("haehnel"))
-            .observed.numpy()
-            .reshape(grid.shape)
-        )
+        touched = evidence_grid_from_scans(grid, scans, delta_by_name("haehnel")).observed.numpy().reshape(grid.shape)
         if mapped is None:  # simulated: the near-mapped mask grows from what this dataset touched
             mapped = touched
-        save_dataset(dataset_path(out, ds), scans, grid=grid, truth=truth,
-                     settings={k: v for k, v in p.items() if k != "reader"} | {"reader": p.get("reader")},
-                     provenance={"experiment_dataset": ds.name, "base": ds.base})  # fmt: skip
+        save_dataset(
+            dataset_path(out, ds),
+            scans,
+            grid=grid,
+            truth=truth,
+            settings={k: v for k, v in p.items() if k != "reader"} | {"reader": p.get("reader")},
+            provenance={"experiment_dataset": ds.name, "base": ds.base},
+        )
         _savez(
             dataset_path(out, ds).with_suffix(".eval.npz"),
             truth=truth,
             mapped=mapped,
             touched=touched,
         )
-    rec = {"hash": h, "dataset": ds.name, "scans": int(scans.num_scans), "beams_per_scan": int(scans.beams_per_scan),
-           "valid_readings": int(scans.num_valid), "cells": int(grid.num_cells), "touched_share": float(touched.mean()),
-           "truth_occupied_share": float(truth.mean()), "seconds": time.perf_counter() - t0}  # fmt: skip
+    rec = {
+        "hash": h,
+        "dataset": ds.name,
+        "scans": int(scans.num_scans),
+        "beams_per_scan": int(scans.beams_per_scan),
+        "valid_readings": int(scans.num_valid),
+        "cells": int(grid.num_cells),
+        "touched_share": float(touched.mean()),
+        "truth_occupied_share": float(truth.mean()),
+        "seconds": time.perf_counter() - t0,
+    }
     _write_json(out / "datasets" / f"{ds.name}.json", rec)
     return rec
 
@@ -275,8 +300,19 @@ def _quick_scores(q, truth, mask, thresholds) -> dict:
 
 
 # ------------------------------------------------------------------------------------------ run
-def run_algorithm(ds, alg, chain: int, seed: int, metrics, output, out: str | Path, h: str, resume: bool = True,
-                  stop_after: int | None = None, _deps=None) -> dict | None:  # fmt: skip
+def run_algorithm(
+    ds,
+    alg,
+    chain: int,
+    seed: int,
+    metrics,
+    output,
+    out: str | Path,
+    h: str,
+    resume: bool = True,
+    stop_after: int | None = None,
+    _deps=None,
+) -> dict | None:
     """Run one algorithm (a registered map method, :mod:`ogm_ppl.methods`) on one dataset (one chain);
     writes ``marginals.npz`` (+ ``map.png``) and ``result.json`` under ``tasks/D/A/cN`` and returns the
     result record (the method's details, and the quick scores).
@@ -308,7 +344,7 @@ def run_algorithm(ds, alg, chain: int, seed: int, metrics, output, out: str | Pa
         where=f"experiment dataset {ds.name}",
     )
     t0 = time.perf_counter()
-    with task_env(), (_RNG_LOCK if method.stochastic else contextlib.nullcontext()):
+    with task_env(), _RNG_LOCK if method.stochastic else contextlib.nullcontext():
         result = method.run(alg.method_params(), problem, ctx)
     if not result.complete:
         return None
@@ -351,11 +387,23 @@ def run_score(ds, alg, metrics, output, out: str | Path, h: str, _deps=None) -> 
         c = M.precision_recall(q, truth, thresholds=thr, mask=m)
         i = int(np.argmax(c.f1))
         t = truth[m]
-        d = {"cells": int(m.sum()), "occupied": int(t.sum()), "best_f1": float(c.f1[i]),
-             "threshold": float(c.thresholds[i]), "precision": float(c.precision[i]), "recall": float(c.recall[i]),
-             "curve": {"thresholds": c.thresholds.tolist(), "precision": c.precision.tolist(),
-                       "recall": c.recall.tolist(), "f1": c.f1.tolist(), "tp": c.tp.tolist(), "fp": c.fp.tolist(),
-                       "fn": c.fn.tolist()}}  # fmt: skip
+        d = {
+            "cells": int(m.sum()),
+            "occupied": int(t.sum()),
+            "best_f1": float(c.f1[i]),
+            "threshold": float(c.thresholds[i]),
+            "precision": float(c.precision[i]),
+            "recall": float(c.recall[i]),
+            "curve": {
+                "thresholds": c.thresholds.tolist(),
+                "precision": c.precision.tolist(),
+                "recall": c.recall.tolist(),
+                "f1": c.f1.tolist(),
+                "tp": c.tp.tolist(),
+                "fp": c.fp.tolist(),
+                "fn": c.fn.tolist(),
+            },
+        }
         both = 0 < t.sum() < t.size
         if "auc" in metrics.scores:
             d["auc"] = M.roc_auc(q, truth, mask=m) if both else float("nan")
@@ -370,8 +418,16 @@ def run_score(ds, alg, metrics, output, out: str | Path, h: str, _deps=None) -> 
             d["ece"] = M.expected_calibration_error(q, truth, m)
         return d
 
-    rec = {"hash": h, "dataset": ds.name, "algorithm": alg.name, "condition": ds.condition, "entry": ds.entry,
-           "measurement_fraction": ds.measurement_fraction, "chains": alg.chains, "mask": block(mask)}  # fmt: skip
+    rec = {
+        "hash": h,
+        "dataset": ds.name,
+        "algorithm": alg.name,
+        "condition": ds.condition,
+        "entry": ds.entry,
+        "measurement_fraction": ds.measurement_fraction,
+        "chains": alg.chains,
+        "mask": block(mask),
+    }
     if metrics.touched_only:
         rec["touched"] = block(touched)
     path = score_path(out, ds, alg)

@@ -35,7 +35,9 @@ def patch_cells(model: OccupancyModel, anchors: np.ndarray, dr: np.ndarray, dc: 
     return np.where(ok, k, -1)
 
 
-def patch_shape(shape: int | str | tuple[int, int] | np.ndarray, ndim: int, max_cells: int = 20) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
+def patch_shape(
+    shape: int | str | tuple[int, int] | np.ndarray, ndim: int, max_cells: int = 20
+) -> tuple[npt.NDArray[np.int64], npt.NDArray[np.int64]]:
     """Row and column offsets of a patch shape (Fig. 3.1).
 
     ``shape``: an int ``L`` (1D: a run of ``L`` cells; 2D: an ``L``-cell horizontal run), ``(h, w)`` (a
@@ -71,8 +73,10 @@ def patch_shape(shape: int | str | tuple[int, int] | np.ndarray, ndim: int, max_
     if ndim == 1 and np.any(off[:, 0] != 0):
         raise ValueError("a 1D grid only takes patches along the row")
     if len(off) > max_cells:
-        raise ValueError(f"patches of {len(off)} cells mean 2^{len(off)} configurations; at most {max_cells} "
-                         "(more only for a table prior whose tiles are the patches)")  # fmt: skip
+        raise ValueError(
+            f"patches of {len(off)} cells mean 2^{len(off)} configurations; at most {max_cells} "
+            "(more only for a table prior whose tiles are the patches)"
+        )
     return np.ascontiguousarray(off[:, 0], dtype=np.int64), np.ascontiguousarray(off[:, 1], dtype=np.int64)
 
 

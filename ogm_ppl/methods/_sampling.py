@@ -4,7 +4,8 @@ r"""The run of a sampling method: ``burn_in + sweeps`` sweeps of a map kernel un
 With a checkpoint folder (``ctx.checkpoint_dir``) the run checkpoints every ``checkpoint_every`` sweeps
 and resumes from the checkpoint; it records the running marginals' scores (``ctx.score``) at ``record``
 evenly spaced sweeps after burn-in (``trace.json``, kept across resumes), and ``ctx.stop_after`` stops it
-after that many sweeps of this call with the checkpoint kept and no map. The caller removes the spent checkpoint once it has stored the map.
+after that many sweeps of this call with the checkpoint kept and no map. The caller removes the spent checkpoint
+once it has stored the map.
 """
 
 from __future__ import annotations
@@ -12,6 +13,7 @@ from __future__ import annotations
 import json
 import math
 from dataclasses import dataclass
+from typing import Any
 
 from ogm_ppl.io import atomic_write_text
 from ogm_ppl.methods._model import ModelParams
@@ -53,9 +55,7 @@ def _ckpt_sweep(path) -> int:
         return 0
 
 
-def run_kernel(
-    kernel, params: SamplingParams, problem: MapProblem, ctx: RunContext, details: dict
-) -> MapResult:
+def run_kernel(kernel, params: SamplingParams, problem: MapProblem, ctx: RunContext, details: dict) -> MapResult:
     """Run ``kernel`` as the module docstring says; ``details`` (the kernel's) go into the result."""
     from ogm_ppl.inference.mcmc import RunningStats, run_gibbs
 
@@ -70,9 +70,7 @@ def run_kernel(
             raise KeyboardInterrupt
         q = stats.marginals.numpy()
         if ctx.score is not None:
-            details["trace"] = [
-                {"sweep": r.sweeps, "samples": int(stats.n), "seconds": r.seconds, **ctx.score(q)}
-            ]
+            details["trace"] = [{"sweep": r.sweeps, "samples": int(stats.n), "seconds": r.seconds, **ctx.score(q)}]
         return MapResult(q, observed, details)
 
     folder = ctx.checkpoint_dir
@@ -94,7 +92,12 @@ def run_kernel(
     done, seconds = start, (trace[-1]["seconds"] if trace else 0.0)
     budget = ctx.stop_after
     details.update(resumed_from_sweep=start)
-    run_kw = {"warmup": warm, "seed": ctx.seed, "checkpoint": ckpt, "checkpoint_every": params.checkpoint_every}
+    run_kw: dict[str, Any] = {
+        "warmup": warm,
+        "seed": ctx.seed,
+        "checkpoint": ckpt,
+        "checkpoint_every": params.checkpoint_every,
+    }
     for mark in marks:
         if mark <= done:
             continue
@@ -110,9 +113,7 @@ def run_kernel(
             if stats.n and ctx.score is not None:
                 rec.update(ctx.score(stats.marginals.numpy()))
             trace.append(rec)
-            atomic_write_text(
-                trace_path, json.dumps({"trace": trace}, indent=1, sort_keys=True, allow_nan=True)
-            )
+            atomic_write_text(trace_path, json.dumps({"trace": trace}, indent=1, sort_keys=True, allow_nan=True))
         elif budget is None or budget > 0:
             raise KeyboardInterrupt  # interrupted (SIGINT): the checkpoint is kept for a resume
         if budget is not None and budget <= 0 and done < total:

@@ -33,6 +33,4 @@ def amortised(params: AmortisedParams, problem: MapProblem, ctx: RunContext) -> 
     model = problem.model()
     guide = load_guide(params.guide, model)
     q = guide.marginals(model).numpy()
-    return MapResult(
-        q, problem.rays.reached(), {"ray_cells": int(problem.rays.nnz), "trained_for": guide.trained_for}
-    )
+    return MapResult(q, problem.rays.reached(), {"ray_cells": int(problem.rays.nnz), "trained_for": guide.trained_for})

@@ -26,9 +26,7 @@ class GibbsParams(SamplingParams):
     patch: object = param(1, Patch(), "1: CellGibbs; a larger patch: PatchGibbs")
     scan: str = param("systematic", Choice(*SCANS), "order of the cells / patches in a sweep")
     update: str = param("gibbs", Choice("gibbs", "metropolised"), "heat bath or metropolised update")
-    p_rand_patch: float = param(
-        0.0, Float(0, 0.999), "PatchGibbs: probability of a random configuration (Alg. 2)"
-    )
+    p_rand_patch: float = param(0.0, Float(0, 0.999), "PatchGibbs: probability of a random configuration (Alg. 2)")
     random_patch: str = param(
         "mh",
         Choice("mh", "thesis"),
@@ -44,9 +42,7 @@ def gibbs(params: GibbsParams, problem: MapProblem, ctx: RunContext) -> MapResul
 
     model = params.model(problem)
     if params.patch == 1:
-        kernel = CellGibbs(
-            model, scan=params.scan, update=params.update, init=params.init, delta=params.init_delta
-        )
+        kernel = CellGibbs(model, scan=params.scan, update=params.update, init=params.init, delta=params.init_delta)
         details: dict = {"kernel": "CellGibbs"}
     else:
         kernel = PatchGibbs(

@@ -20,16 +20,10 @@ __all__ = ["OGMParams", "ogm"]
 
 @dataclass(frozen=True)
 class OGMParams:
-    delta: str = param(
-        "haehnel", DeltaName(), "the update term (delta_by_name: haehnel, p21, elfes_thesis, ...)"
-    )
+    delta: str = param("haehnel", DeltaName(), "the update term (delta_by_name: haehnel, p21, elfes_thesis, ...)")
     prior: float = param(0.5, Float(0, 1, lo_open=True), "prior occupancy l_0 = logit(prior) of every cell")
-    clamp: object = param(
-        None, Optional(Pair("log-odds")), "clamp the log-odds to [lo, hi] after each update"
-    )
-    fit: str = param(
-        "none", Choice("none", "setting"), "'setting': refit the term for the data's sigma and range"
-    )
+    clamp: object = param(None, Optional(Pair("log-odds")), "clamp the log-odds to [lo, hi] after each update")
+    fit: str = param("none", Choice("none", "setting"), "'setting': refit the term for the data's sigma and range")
     sigma_cells: float | None = param(
         None,
         Optional(Float(0, lo_open=True)),

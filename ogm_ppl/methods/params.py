@@ -280,9 +280,7 @@ class Pair(Kind):
 
     def value(self, v):
         ok = isinstance(v, (list, tuple)) and len(v) == 2
-        ok = ok and all(
-            isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v
-        )
+        ok = ok and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)
         if not ok or not v[0] < v[1]:
             raise _Bad(f"must be [lo, hi]{' ' + self.what if self.what else ''} with lo < hi, got {v!r}")
         return [float(v[0]), float(v[1])]
@@ -367,9 +365,7 @@ def param_fields(cls) -> list[tuple[str, Kind, Any, str]]:
     return out
 
 
-def parse_params(
-    cls, values: Mapping[str, Any], *, text: bool = False, defaults: Mapping[str, Any] | None = None
-):
+def parse_params(cls, values: Mapping[str, Any], *, text: bool = False, defaults: Mapping[str, Any] | None = None):
     """The dataclass ``cls`` from ``values`` (``text``: command-line strings), over ``defaults`` (values
     replacing the fields' own defaults, already valid). Unknown keys and bad values raise
     :class:`ParamError` naming the key; then ``cls.check(self)``, if defined, checks rules between fields."""

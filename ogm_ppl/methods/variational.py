@@ -23,16 +23,12 @@ __all__ = ["VIParams", "vi"]
 @dataclass(frozen=True)
 class VIParams(ModelParams):
     guide: str = param("mean_field", Choice("mean_field", "patch", "first_hit"), "the guide's family")
-    loss: str = param(
-        "exact", Choice("exact", "tracegraph", "rws"), "the objective (exact: closed-form ELBO)"
-    )
+    loss: str = param("exact", Choice("exact", "tracegraph", "rws"), "the objective (exact: closed-form ELBO)")
     steps: int = param(300, Int(lo=1), "SVI steps")
     lr: float = param(0.05, Float(0, lo_open=True), "Adam's learning rate")
     num_particles: int = param(64, Int(lo=1), "particles per step (tracegraph, rws)")
     patch: object = param(3, Patch(max_cells=12), "patch guide: the patch shape")
-    p_rand: float = param(
-        1e-3, Float(0, 1, hi_open=True), "sensor's uniform-outlier weight (reverse KL needs > 0)"
-    )
+    p_rand: float = param(1e-3, Float(0, 1, hi_open=True), "sensor's uniform-outlier weight (reverse KL needs > 0)")
 
     def check(self) -> None:
         super().check()
@@ -49,9 +45,7 @@ def vi(params: VIParams, problem: MapProblem, ctx: RunContext) -> MapResult:
 
     model = params.model(problem, p_rand=params.p_rand)
     if params.loss == "exact" and model.prior.cell_log_odds() is None:
-        raise ParamError(
-            "loss", f"the closed-form ELBO needs a prior with independent cells, not {params.prior!r}"
-        )
+        raise ParamError("loss", f"the closed-form ELBO needs a prior with independent cells, not {params.prior!r}")
     if params.guide == "mean_field":
         guide = MeanFieldGuide(model)
     elif params.guide == "patch":

@@ -281,7 +281,9 @@ class NeuralDelta(DeltaFamily):
         g = torch.Generator().manual_seed(seed)
         self.F = int(F)
         self.hidden = int(hidden)
-        self.net = nn.Sequential(nn.Linear(3, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, 1))
+        self.net = nn.Sequential(
+            nn.Linear(3, hidden), nn.Tanh(), nn.Linear(hidden, hidden), nn.Tanh(), nn.Linear(hidden, 1)
+        )
         with torch.no_grad():
             for p in self.net.parameters():
                 p.copy_(torch.randn(p.shape, generator=g) * (0.5 / math.sqrt(max(p.shape[-1], 1))))
@@ -289,7 +291,9 @@ class NeuralDelta(DeltaFamily):
 
     def table(self, n_kappa: int, n_z: int) -> torch.Tensor:
         kappa = torch.arange(n_kappa, dtype=torch.float64)[:, None].expand(n_kappa, n_z + 1)
-        z = torch.cat([torch.arange(n_z, dtype=torch.float64), torch.tensor([self.F + 1.0])])[None, :].expand(n_kappa, -1)
+        z = torch.cat([torch.arange(n_z, dtype=torch.float64), torch.tensor([self.F + 1.0])])[None, :].expand(
+            n_kappa, -1
+        )
         is_max = torch.zeros(n_kappa, n_z + 1, dtype=torch.float64)
         is_max[:, -1] = 1.0
         x = torch.stack([(kappa - z) / 10.0, z / self.F, is_max], -1)
@@ -302,18 +306,42 @@ class NeuralDelta(DeltaFamily):
         return f"F={self.F}, hidden={self.hidden}"
 
 
-
 # Table 2.2: p21, offsets -11 (and below) .. 9; 0 from 10 on.
 THESIS_P21 = (
-    -5.4028, -2.2993, -1.7025, -1.2979, -0.9722, -0.6836, -0.4341, -0.2476, -0.1083, 0.0051,
-    0.0719, 0.0995, 0.0877, 0.0564, 0.0242, -0.0077, -0.0215, -0.0213, -0.0149, -0.0068, 0.0034,
-)  # fmt: skip
+    -5.4028,
+    -2.2993,
+    -1.7025,
+    -1.2979,
+    -0.9722,
+    -0.6836,
+    -0.4341,
+    -0.2476,
+    -0.1083,
+    0.0051,
+    0.0719,
+    0.0995,
+    0.0877,
+    0.0564,
+    0.0242,
+    -0.0077,
+    -0.0215,
+    -0.0213,
+    -0.0149,
+    -0.0068,
+    0.0034,
+)
 
 
 #: The 1D setting of the thesis's fits (Section 2.5: ``F = 75`` cells, wall at ``f = 60``, ``sigma = 3``
 #: cells, 1000 datasets): the ``fitted_setting`` of the ``*_thesis`` terms of :func:`delta_by_name`.
-THESIS_SETTING = {"F": 75, "wall": 60, "sigma": 3.0, "num": 1000, "prior": "uniform",
-                  "source": "Merali 2020, Section 2.5 (Tables 2.1, 2.2)"}  # fmt: skip
+THESIS_SETTING = {
+    "F": 75,
+    "wall": 60,
+    "sigma": 3.0,
+    "num": 1000,
+    "prior": "uniform",
+    "source": "Merali 2020, Section 2.5 (Tables 2.1, 2.2)",
+}
 
 
 _FAMILIES: dict[str, type[DeltaFamily]] = {}  # filled below: class name -> class, for artefacts
@@ -402,8 +430,10 @@ def _delta_from_record_text(text: str, where: str) -> tuple[DeltaFamily, dict]:
     try:
         record = json.loads(text)
     except json.JSONDecodeError as e:
-        raise DeltaFileError(f"{where}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg}); "
-                             "expected a Delta artefact written by experiments/fit_deltas.py") from None  # fmt: skip
+        raise DeltaFileError(
+            f"{where}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg}); "
+            "expected a Delta artefact written by experiments/fit_deltas.py"
+        ) from None
     if not isinstance(record, dict):
         raise DeltaFileError(f"{where}: expected a JSON object, got {type(record).__name__}")
     if record.get("format") != 1:
@@ -428,8 +458,11 @@ def fitted_names() -> list[str]:
     from importlib import resources
 
     root = resources.files("ogm_ppl") / "fitted"
-    return sorted(p.name[len("delta_") : -len(".json")] for p in root.iterdir()
-                  if p.name.startswith("delta_") and p.name.endswith(".json") and p.name != "delta_cv.json")  # fmt: skip
+    return sorted(
+        p.name[len("delta_") : -len(".json")]
+        for p in root.iterdir()
+        if p.name.startswith("delta_") and p.name.endswith(".json") and p.name != "delta_cv.json"
+    )
 
 
 def load_fitted(name: str) -> tuple[DeltaFamily, dict]:
@@ -485,4 +518,6 @@ def fitted_setting(delta_or_name: DeltaFamily | str) -> dict | None:
     return None if setting is None else dict(setting)
 
 
-_FAMILIES.update({c.__name__: c for c in (BorensteinKoren, Moravec, MarshallBarfoot, Stachniss, Elfes, PN, NeuralDelta)})
+_FAMILIES.update(
+    {c.__name__: c for c in (BorensteinKoren, Moravec, MarshallBarfoot, Stachniss, Elfes, PN, NeuralDelta)}
+)

@@ -89,9 +89,13 @@ class MapDistribution(TorchDistribution):
     def __init__(self, prior, known_free: torch.Tensor | None = None, batch_shape=torch.Size(), validate_args=None):
         self.prior = prior
         K = prior.num_cells
-        self.known_free = torch.zeros(K, dtype=torch.bool) if known_free is None else torch.as_tensor(known_free, dtype=torch.bool)
+        self.known_free = (
+            torch.zeros(K, dtype=torch.bool) if known_free is None else torch.as_tensor(known_free, dtype=torch.bool)
+        )
         if self.known_free.shape != (K,):
-            raise ValueError(f"known_free must be a boolean mask of {K} cells, got shape {tuple(self.known_free.shape)}")
+            raise ValueError(
+                f"known_free must be a boolean mask of {K} cells, got shape {tuple(self.known_free.shape)}"
+            )
         self.latent = torch.nonzero(~self.known_free).flatten()
         super().__init__(torch.Size(batch_shape), torch.Size([len(self.latent)]), validate_args=validate_args)
 
@@ -105,7 +109,9 @@ class MapDistribution(TorchDistribution):
         if value.shape[-1:] == (K,):
             return value
         if value.shape[-1:] != (L,):
-            raise ValueError(f"site 'm' takes the {L} latent cells (or a full map of {K}), got shape {tuple(value.shape)}")
+            raise ValueError(
+                f"site 'm' takes the {L} latent cells (or a full map of {K}), got shape {tuple(value.shape)}"
+            )
         out = value.new_zeros(value.shape[:-1] + (K,))
         out[..., self.latent] = value
         return out
@@ -116,12 +122,15 @@ class MapDistribution(TorchDistribution):
             raise TypeError(
                 f"{type(self.prior).__name__} has no sample(): the model cannot draw maps from it (prior "
                 "predictive, Predictive, init_to_sample). Implement MapPrior.sample, or give MCMC/SVI an "
-                "initial map / a guide for site 'm'")
+                "initial map / a guide for site 'm'"
+            )
         maps = self.prior.sample_given_free(self.known_free, shape)
         maps = torch.as_tensor(maps, dtype=torch.float64)
         if maps.shape != shape + (self.prior.num_cells,) or not ((maps == 0) | (maps == 1)).all():
-            raise ValueError(f"{type(self.prior).__name__}.sample returned values other than 0/1 maps of shape "
-                             f"{tuple(shape + (self.prior.num_cells,))} (NaN parameters?)")
+            raise ValueError(
+                f"{type(self.prior).__name__}.sample returned values other than 0/1 maps of shape "
+                f"{tuple(shape + (self.prior.num_cells,))} (NaN parameters?)"
+            )
         return maps[..., self.latent]
 
     def log_prob(self, value):
@@ -295,8 +304,9 @@ class OccupancyModel:
                 del t
             else:
                 f = torch.where(none_col, F[a:b, None] + 1, col)
-            block = self.sensor.log_prob(z[a:b, None].expand(-1, Wb), f, F[a:b, None],
-                                         is_max[a:b, None].expand(-1, Wb)).to(torch.float64)  # fmt: skip
+            block = self.sensor.log_prob(
+                z[a:b, None].expand(-1, Wb), f, F[a:b, None], is_max[a:b, None].expand(-1, Wb)
+            ).to(torch.float64)
             block = torch.where(col <= lengths[a:b, None], block, -math.inf)
             if torch.isnan(block).any():
                 raise ValueError("the sensor model returned NaN log-likelihoods")
@@ -352,7 +362,9 @@ class OccupancyModel:
         if self._readings is None:
             r = self.rays
             F = torch.from_numpy(r.max_range_cells()).to(torch.float64)
-            self._readings = torch.where(torch.from_numpy(r.is_max.copy()), F, torch.from_numpy(r.range_cells).to(torch.float64))
+            self._readings = torch.where(
+                torch.from_numpy(r.is_max.copy()), F, torch.from_numpy(r.range_cells).to(torch.float64)
+            )
         return self._readings
 
     def _entry_table(self) -> torch.Tensor:
@@ -443,8 +455,10 @@ class OccupancyModel:
         checked here (:meth:`log_joint` gives ``-inf`` where one is occupied)."""
         maps = torch.as_tensor(maps)
         if maps.dim() == 0 or maps.shape[-1] != self.num_cells:
-            raise ValueError(f"{what} must have {self.num_cells} cells in the last dimension (the grid's), "
-                             f"got shape {tuple(maps.shape)}")
+            raise ValueError(
+                f"{what} must have {self.num_cells} cells in the last dimension (the grid's), "
+                f"got shape {tuple(maps.shape)}"
+            )
         _check_binary(maps, what)
         return maps.to(torch.float64)
 
@@ -516,8 +530,13 @@ class OccupancyModel:
         K, L = self.num_cells, len(self.latent)
         cells = []
         for i in range(L):
-            cells.append(pyro.sample(f"m_{int(self.latent[i])}", dist.Bernoulli(torch.tensor(0.5, dtype=torch.float64)),
-                                     infer={"enumerate": "parallel"}))  # fmt: skip
+            cells.append(
+                pyro.sample(
+                    f"m_{int(self.latent[i])}",
+                    dist.Bernoulli(torch.tensor(0.5, dtype=torch.float64)),
+                    infer={"enumerate": "parallel"},
+                )
+            )
         shape = torch.broadcast_shapes(*(c.shape for c in cells)) if cells else torch.Size()
         maps = torch.zeros(shape + (K,), dtype=torch.float64)
         for i, c in enumerate(cells):

@@ -11,15 +11,32 @@ from ogm_ppl.priors.independent import IndependentPrior
 from ogm_ppl.priors.local import LocalMapPrior
 from ogm_ppl.priors.mrf import MRFPrior, StencilPrior
 from ogm_ppl.priors.named import (
-           PRIOR_KINDS,
-           prior_by_name,
-           prior_kinds,
-           register_prior,
-           unregister_prior,
+    PRIOR_KINDS,
+    prior_by_name,
+    prior_kinds,
+    register_prior,
+    unregister_prior,
 )
 from ogm_ppl.priors.patch_table import PatchTablePrior
 from ogm_ppl.priors.tables import PriorTables, available_tables, load_tables, tables_by_name
 
-__all__ = ["BorderPatchPrior", "CompiledPrior", "DataDriven1DPrior", "IndependentPrior", "LocalMapPrior", "MRFPrior",
-           "MapPrior", "PRIOR_KINDS", "PatchTablePrior", "PriorTables", "StencilPrior", "available_tables",
-           "load_tables", "prior_by_name", "prior_kinds", "register_prior", "tables_by_name", "unregister_prior"]
+__all__ = [
+    "BorderPatchPrior",
+    "CompiledPrior",
+    "DataDriven1DPrior",
+    "IndependentPrior",
+    "LocalMapPrior",
+    "MRFPrior",
+    "MapPrior",
+    "PRIOR_KINDS",
+    "PatchTablePrior",
+    "PriorTables",
+    "StencilPrior",
+    "available_tables",
+    "load_tables",
+    "prior_by_name",
+    "prior_kinds",
+    "register_prior",
+    "tables_by_name",
+    "unregister_prior",
+]

@@ -85,8 +85,9 @@ class MapPrior:
         """Maps drawn from the prior, ``sample_shape x K`` (float 0/1)."""
         raise NotImplementedError  # pragma: no cover - interface
 
-    def sample_given_free(self, free: torch.Tensor, sample_shape=(), generator: torch.Generator | None = None,
-                          max_rounds: int = 200) -> torch.Tensor:  # fmt: skip
+    def sample_given_free(
+        self, free: torch.Tensor, sample_shape=(), generator: torch.Generator | None = None, max_rounds: int = 200
+    ) -> torch.Tensor:
         """Maps drawn from the prior conditioned on the ``free`` cells (boolean ``K``) being 0.
 
         Independent priors (:meth:`cell_log_odds` not ``None``) draw and clear those cells (exact). Others
@@ -113,8 +114,11 @@ class MapPrior:
         if len(todo):
             import warnings
 
-            warnings.warn(f"{type(self).__name__}: {len(todo)} of {n} prior draws still occupied a known-free "
-                          "cell after rejection; those cells were cleared (approximate)", stacklevel=2)  # fmt: skip
+            warnings.warn(
+                f"{type(self).__name__}: {len(todo)} of {n} prior draws still occupied a known-free "
+                "cell after rejection; those cells were cleared (approximate)",
+                stacklevel=2,
+            )
             draw = torch.as_tensor(self.sample((len(todo),), generator=generator), dtype=torch.float64).clone()
             draw[:, free] = 0.0
             out[todo] = draw

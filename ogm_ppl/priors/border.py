@@ -52,8 +52,17 @@ class BorderPatchPrior(LocalMapPrior):
 
     normalised = False
 
-    def __init__(self, shape, border_codes, inner_codes, counts, inner=(3, 3), outside: int = 1,
-                 unseen: str = "marginal", origin=(0, 0)) -> None:  # fmt: skip
+    def __init__(
+        self,
+        shape,
+        border_codes,
+        inner_codes,
+        counts,
+        inner=(3, 3),
+        outside: int = 1,
+        unseen: str = "marginal",
+        origin=(0, 0),
+    ) -> None:
         self.rows, self.cols, self.ndim = grid_shape(shape)
         self.num_cells = self.rows * self.cols
         self.inner = _patch_hw(inner, self.ndim)
@@ -100,14 +109,26 @@ class BorderPatchPrior(LocalMapPrior):
             seg_keys.append(mi)
             seg_logp.append(np.log(mc / mc.sum()))
             fallback = 1
-        self._compiled = tiles(self.rows, self.cols, geo, Li, self.inner, pad,
-                                  np.zeros(len(fill), np.int64), fill, seg_keys, seg_logp, fallback)  # fmt: skip
+        self._compiled = tiles(
+            self.rows,
+            self.cols,
+            geo,
+            Li,
+            self.inner,
+            pad,
+            np.zeros(len(fill), np.int64),
+            fill,
+            seg_keys,
+            seg_logp,
+            fallback,
+        )
         self.keys, self.log_probs = keys, logp
         self.border_codes = borders
         self.row_offsets = np.concatenate([[0], np.cumsum(np.bincount(binv))]).astype(np.int64)
         self.inner_codes = keys & ((np.int64(1) << Li) - 1)
-        self.mean_occupancy = float((cnt * np.array([bin(int(x)).count("1") for x in self.inner_codes])).sum()
-                                    / (cnt.sum() * Li))  # fmt: skip
+        self.mean_occupancy = float(
+            (cnt * np.array([bin(int(x)).count("1") for x in self.inner_codes])).sum() / (cnt.sum() * Li)
+        )
 
     def __repr__(self) -> str:
         return f"BorderPatchPrior(inner={self.inner}, borders={self.num_borders}, cells={self.num_cells})"

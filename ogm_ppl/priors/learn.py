@@ -132,9 +132,7 @@ class _Counter:
         self.perm3 = dihedral_permutations(3) if symmetries else np.arange(9)[None]
         self.perm5 = dihedral_permutations(5) if symmetries else np.arange(25)[None]
         self.base3 = torch.arange(512, dtype=torch.int64)
-        self.reverse = permute_codes(
-            torch.arange(2**line_length, dtype=torch.int64), np.arange(line_length)[::-1]
-        )
+        self.reverse = permute_codes(torch.arange(2**line_length, dtype=torch.int64), np.arange(line_length)[::-1])
 
     def add(self, occ_np: np.ndarray, known_np: np.ndarray | None) -> None:
         occ = torch.as_tensor(occ_np).to(torch.int32)
@@ -184,9 +182,7 @@ class _Counter:
         codes = torch.cat([self.c5_codes] + [permute_codes(u, p) for p in self.perm5])
         counts = torch.cat([self.c5_counts] + [n] * len(self.perm5))
         self.c5_codes, inv = torch.unique(codes, return_inverse=True)
-        self.c5_counts = torch.zeros(self.c5_codes.numel(), dtype=torch.int64).index_add_(
-            0, inv, counts
-        )
+        self.c5_counts = torch.zeros(self.c5_codes.numel(), dtype=torch.int64).index_add_(0, inv, counts)
 
     @staticmethod
     def _pairs(m, k) -> torch.Tensor:
@@ -276,9 +272,7 @@ def count_tables(
             if occ.ndim != 2:
                 raise ValueError(f"count_tables: map {n_maps} must be 2D, got shape {occ.shape}")
             if known is not None and known.shape != occ.shape:
-                raise ValueError(
-                    f"count_tables: map {n_maps}: known {known.shape} != occupancy {occ.shape}"
-                )
+                raise ValueError(f"count_tables: map {n_maps}: known {known.shape} != occupancy {occ.shape}")
             counter.add(occ, known)
             n_maps += 1
     finally:

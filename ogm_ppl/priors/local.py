@@ -117,8 +117,15 @@ def tiling(rows: int, cols: int, tile, pad, origin):
     ac = (c0 + tj.ravel() * w)[:, None] + off[None, :, 1]
     outside = ~((ar >= 0) & (ar < rows) & (ac >= 0) & (ac < cols))
     off_mask = (outside.astype(np.int64) << np.arange(len(off), dtype=np.int64)).sum(1)
-    return (np.ascontiguousarray(off[:, 0]), np.ascontiguousarray(off[:, 1]), r0, c0, int(t_rows), int(t_cols),
-            np.ascontiguousarray(off_mask, dtype=np.int64))  # fmt: skip
+    return (
+        np.ascontiguousarray(off[:, 0]),
+        np.ascontiguousarray(off[:, 1]),
+        r0,
+        c0,
+        int(t_rows),
+        int(t_cols),
+        np.ascontiguousarray(off_mask, dtype=np.int64),
+    )
 
 
 def tiles_log_prob(prior, maps):

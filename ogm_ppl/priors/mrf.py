@@ -87,8 +87,9 @@ class StencilPrior(LocalMapPrior):
         self.coupling = np.array([table[k][0] for k in keys], np.float64)
         self.bias = np.array([table[k][1] for k in keys], np.float64)
         self.unary = h
-        self._compiled = stencil(self.rows, self.cols, h, self.offsets[:, 0], self.offsets[:, 1], self.bias,
-                                 self.coupling)
+        self._compiled = stencil(
+            self.rows, self.cols, h, self.offsets[:, 0], self.offsets[:, 1], self.bias, self.coupling
+        )
         # per-cell sum of a_d over neighbours inside the grid
         r, c = np.divmod(np.arange(K), self.cols)
         nb = np.zeros(K)

@@ -173,17 +173,26 @@ def _border(shape, tables) -> MapPrior:
     from ogm_ppl.priors.border import BorderPatchPrior
 
     _two_d("border", shape)
-    return BorderPatchPrior(shape, *tables().border_table().triples(), inner=(3, 3))
+    border, inner_codes, count = tables().border_table().triples()
+    return BorderPatchPrior(shape, border, inner_codes, count, inner=(3, 3))
 
 
 def _border1(shape, tables) -> MapPrior:
     from ogm_ppl.priors.border import BorderPatchPrior
 
     _two_d("border1", shape)
-    return BorderPatchPrior(shape, *tables().border1_triples(), inner=(1, 1))
+    border, centre, count = tables().border1_triples()
+    return BorderPatchPrior(shape, border, centre, count, inner=(1, 1))
 
 
-for _kind, _factory in (("independent", _independent), ("mrf", _mrf(4)), ("mrf8", _mrf(8)),
-                        ("patch3", _patch3(None)), ("patch3_999", _patch3(0.999)), ("patch5", _patch5),
-                        ("border", _border), ("border1", _border1)):
+for _kind, _factory in (
+    ("independent", _independent),
+    ("mrf", _mrf(4)),
+    ("mrf8", _mrf(8)),
+    ("patch3", _patch3(None)),
+    ("patch3_999", _patch3(0.999)),
+    ("patch5", _patch5),
+    ("border", _border),
+    ("border1", _border1),
+):
     register_prior(_kind, _factory)

@@ -117,8 +117,9 @@ class PatchTablePrior(LocalMapPrior):
                 seg_logp.append(np.log(np.bincount(inv, weights=p)))
             seg_keys.append(keys)
         self._masks = masks
-        self._compiled = tiles(self.rows, self.cols, geo, L, self.patch, (0, 0), t_seg,
-                                  np.zeros(len(t_seg), np.int64), seg_keys, seg_logp)  # fmt: skip
+        self._compiled = tiles(
+            self.rows, self.cols, geo, L, self.patch, (0, 0), t_seg, np.zeros(len(t_seg), np.int64), seg_keys, seg_logp
+        )
         self.mean_occupancy = float((p * np.array([bin(int(x)).count("1") for x in c])).sum() / L)
 
     def __repr__(self) -> str:
@@ -153,5 +154,3 @@ class PatchTablePrior(LocalMapPrior):
                 ok = (r >= 0) & (r < self.rows) & (c >= 0) & (c < self.cols)
                 maps[:, (r * self.cols + c)[ok]] = (keys[:, ok] >> i) & 1
         return torch.from_numpy(maps).reshape(*shape, self.num_cells)
-
-

@@ -325,9 +325,7 @@ class PriorTables:
             "distinct5x5_999": int(self.patch_probs(5, 0.999)[0].size) if c5.size else 0,
             "distinct_border16": int(bt.borders.size),
             "max_inner_per_border16": int(per_border.max()) if per_border.size else 0,
-            "single_inner_border16_share": float((per_border == 1).mean())
-            if per_border.size
-            else 0.0,
+            "single_inner_border16_share": float((per_border == 1).mean()) if per_border.size else 0.0,
             "distinct_border8": int(seen8.sum()),
             "mixed_border8": int(((c18 > 0).sum(1) == 2).sum()),
             "psi4": self.psi(4),
@@ -379,9 +377,7 @@ def save_tables(tables: PriorTables, path) -> Path:
     arrays = {name: np.asarray(getattr(tables, name), dtype=np.int64) for name in _ARRAYS}
     arrays["codes5x5"] = arrays["codes5x5"].astype(np.int32)  # 25 bits fit
     _validate(arrays, str(path))
-    meta = json.dumps(
-        {"format": "ogm_ppl.prior_tables", "format_version": FORMAT_VERSION, **tables.provenance}
-    )
+    meta = json.dumps({"format": "ogm_ppl.prior_tables", "format_version": FORMAT_VERSION, **tables.provenance})
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
@@ -405,9 +401,7 @@ def load_tables(path) -> PriorTables:
     except FileNotFoundError:
         raise
     except Exception as e:  # zip errors, pickled objects, truncated files
-        raise ValueError(
-            f"prior tables {path}: not a readable npz file ({type(e).__name__}: {e})"
-        ) from e
+        raise ValueError(f"prior tables {path}: not a readable npz file ({type(e).__name__}: {e})") from e
     if "meta" not in data:
         raise ValueError(f"prior tables {path}: missing 'meta' (not an ogm_ppl prior-tables file)")
     try:
@@ -415,9 +409,7 @@ def load_tables(path) -> PriorTables:
     except json.JSONDecodeError as e:
         raise ValueError(f"prior tables {path}: 'meta' is not valid JSON ({e})") from e
     if meta.get("format") != "ogm_ppl.prior_tables":
-        raise ValueError(
-            f"prior tables {path}: format is {meta.get('format')!r}, expected 'ogm_ppl.prior_tables'"
-        )
+        raise ValueError(f"prior tables {path}: format is {meta.get('format')!r}, expected 'ogm_ppl.prior_tables'")
     if meta.get("format_version") != FORMAT_VERSION:
         raise ValueError(
             f"prior tables {path}: format_version {meta.get('format_version')!r} is not supported "

@@ -237,8 +237,9 @@ class KernelContract:
         from ogm_ppl.priors import IndependentPrior
 
         toy = toy_1d(num_cells=7, wall=1, readings=(3.0, 4.0, 2.0))
-        return OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(1.5),
-                              IndependentPrior(torch.linspace(0.2, 0.6, 7)))  # fmt: skip
+        return OccupancyModel(
+            toy.grid, raycast(toy.grid, toy.scans), GaussianRange(1.5), IndependentPrior(torch.linspace(0.2, 0.6, 7))
+        )
 
     def problem_2d(self):
         """An enumerable 2D problem (2 x 4 grid, 7 latent cells, max-range readings)."""
@@ -246,10 +247,16 @@ class KernelContract:
         from ogm_ppl.priors import IndependentPrior
 
         grid = Grid((2, 4), resolution=1.0)
-        scans = Scans([[0.5, 0.5, 0.0], [0.5, 0.5, 0.0], [3.5, 1.5, math.pi], [0.5, 0.5, math.pi / 2]],
-                      [0.0], [[2.2], [3.9], [1.4], [1.0]], max_range=3.9, over_range="max")  # fmt: skip
-        return OccupancyModel(grid, raycast(grid, scans), GaussianRange(0.9),
-                              IndependentPrior(torch.linspace(0.25, 0.55, 8)))  # fmt: skip
+        scans = Scans(
+            [[0.5, 0.5, 0.0], [0.5, 0.5, 0.0], [3.5, 1.5, math.pi], [0.5, 0.5, math.pi / 2]],
+            [0.0],
+            [[2.2], [3.9], [1.4], [1.0]],
+            max_range=3.9,
+            over_range="max",
+        )
+        return OccupancyModel(
+            grid, raycast(grid, scans), GaussianRange(0.9), IndependentPrior(torch.linspace(0.25, 0.55, 8))
+        )
 
     def problem_region(self):
         """A 3 x 4 grid (9 latent cells) for ``region=`` (:attr:`region`)."""
@@ -257,12 +264,24 @@ class KernelContract:
         from ogm_ppl.priors import IndependentPrior
 
         grid = Grid((3, 4), resolution=1.0)
-        poses = [[0.5, 0.5, 0.0], [0.5, 0.5, 0.0], [3.5, 2.5, math.pi], [0.5, 0.5, math.pi / 2],
-                 [1.5, 2.5, -math.pi / 2], [3.5, 2.5, -math.pi / 2]]  # fmt: skip
-        scans = Scans(np.array(poses), np.array([0.0]), np.array([[2.2], [3.9], [1.4], [2.1], [1.6], [1.2]]),
-                      max_range=3.9, over_range="max")  # fmt: skip
-        return OccupancyModel(grid, raycast(grid, scans), GaussianRange(0.9),
-                              IndependentPrior(torch.linspace(0.25, 0.55, 12)))  # fmt: skip
+        poses = [
+            [0.5, 0.5, 0.0],
+            [0.5, 0.5, 0.0],
+            [3.5, 2.5, math.pi],
+            [0.5, 0.5, math.pi / 2],
+            [1.5, 2.5, -math.pi / 2],
+            [3.5, 2.5, -math.pi / 2],
+        ]
+        scans = Scans(
+            np.array(poses),
+            np.array([0.0]),
+            np.array([[2.2], [3.9], [1.4], [2.1], [1.6], [1.2]]),
+            max_range=3.9,
+            over_range="max",
+        )
+        return OccupancyModel(
+            grid, raycast(grid, scans), GaussianRange(0.9), IndependentPrior(torch.linspace(0.25, 0.55, 12))
+        )
 
     def transition_matrix(self, kernel, rows=None) -> torch.Tensor | None:
         """The exact one-sweep matrix (``None``: unknown, only the statistical check runs)."""
@@ -337,12 +356,14 @@ class KernelContract:
         assert np.array_equal(runs[0], runs[1])
         sa, sb = a.state_dict(), b.state_dict()
         assert sa.keys() == sb.keys() and all(np.array_equal(sa[k], sb[k]) for k in sa)
-        bad = [({k: v for k, v in state.items() if k != "sweeps"}, "lacks sweeps"),
-               ({**state, "format": np.int64(99)}, "format 99"),
-               ({**state, "kind": np.str_("Nothing")}, "Nothing"),
-               ({**state, "m": state["m"][:-1]}, "shape"),
-               ({**state, "m": np.full_like(state["m"], 2)}, "0/1"),
-               ({**state, "updates": np.int64(-1)}, "updates")]  # fmt: skip
+        bad = [
+            ({k: v for k, v in state.items() if k != "sweeps"}, "lacks sweeps"),
+            ({**state, "format": np.int64(99)}, "format 99"),
+            ({**state, "kind": np.str_("Nothing")}, "Nothing"),
+            ({**state, "m": state["m"][:-1]}, "shape"),
+            ({**state, "m": np.full_like(state["m"], 2)}, "0/1"),
+            ({**state, "updates": np.int64(-1)}, "updates"),
+        ]
         for s, match in bad:
             with pytest.raises(KernelStateError, match=match):
                 self.make_kernel(model).load_state_dict(s)

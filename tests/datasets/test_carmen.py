@@ -132,14 +132,10 @@ def test_param_fov_resolution_and_offset(tmp_path):
     deg = ["PARAM laser_front_laser_fov 90 0 host 0", flaser([1.0, 1.0])]  # degrees, even n
     assert np.allclose(np.degrees(read_carmen(write(tmp_path, deg)).scans.angles[0]), [-45, 0])
     res = ["PARAM laser_frontlaser_resolution 2 0.0 nohost 0", flaser([1.0] * 4)]  # FHW spelling
-    assert np.allclose(
-        np.degrees(read_carmen(write(tmp_path, res)).scans.angles[0]), [-4, -2, 0, 2]
-    )
+    assert np.allclose(np.degrees(read_carmen(write(tmp_path, res)).scans.angles[0]), [-4, -2, 0, 2])
     off = ["PARAM robot_frontlaser_offset 0.5 nohost 0", flaser([1.0], (1.0, 1.0, math.pi / 2))]
     log = read_carmen(write(tmp_path, off))
-    assert log.settings["frontlaser_offset"] == 0.5 and log.scans.poses.tolist() == [
-        [1.0, 1.0, math.pi / 2]
-    ]
+    assert log.settings["frontlaser_offset"] == 0.5 and log.scans.poses.tolist() == [[1.0, 1.0, math.pi / 2]]
     moved = read_carmen(write(tmp_path, off), apply_laser_offset=True)
     assert np.allclose(moved.scans.poses, [[1.0, 1.5, math.pi / 2]])
     rear = ["RLASER 1 2.0 0 0 0 0 0 0 1 host 1", flaser([1.0])]
@@ -147,18 +143,16 @@ def test_param_fov_resolution_and_offset(tmp_path):
 
 
 def test_robotlaser1_geometry_max_range_and_auto_choice(tmp_path):
-    lines = [flaser([1.0, 2.0]), robotlaser([1.0, 9.0, 2.0], start=-0.2, res=0.1, max_range=8.0,
-                                            pose=(3.0, 4.0, 0.1), rem=(5.0, 6.0))]  # fmt: skip
+    lines = [
+        flaser([1.0, 2.0]),
+        robotlaser([1.0, 9.0, 2.0], start=-0.2, res=0.1, max_range=8.0, pose=(3.0, 4.0, 0.1), rem=(5.0, 6.0)),
+    ]
     log = read_carmen(write(tmp_path, lines))  # auto: ROBOTLASER1 only, FLASER counted as skipped
     assert log.skipped_types == {"FLASER": 1} and log.line_numbers.tolist() == [2]
-    assert np.allclose(log.scans.angles, [[-0.2, -0.1, 0.0]]) and log.scans.poses.tolist() == [
-        [3.0, 4.0, 0.1]
-    ]
+    assert np.allclose(log.scans.angles, [[-0.2, -0.1, 0.0]]) and log.scans.poses.tolist() == [[3.0, 4.0, 0.1]]
     assert log.scans.valid.tolist() == [[True, False, True]] and log.max_range == 8.0
     as_max = read_carmen(write(tmp_path, lines), no_return="max")
-    assert (
-        as_max.scans.is_max.tolist() == [[False, True, False]] and as_max.scans.ranges[0, 1] == 8.0
-    )
+    assert as_max.scans.is_max.tolist() == [[False, True, False]] and as_max.scans.ranges[0, 1] == 8.0
     both = read_carmen(write(tmp_path, lines), messages=("FLASER", "ROBOTLASER1"))
     s = both.scans
     assert s.ranges.shape == (2, 3) and s.valid.tolist() == [
@@ -191,10 +185,7 @@ def test_usable_range_rule(tmp_path):
     drop = read_carmen(path, max_usable_range=20.0)
     assert drop.scans.valid.tolist() == [[True, False, False, False]]
     clip = read_carmen(path, max_usable_range=20.0, usable_range_rule="max")
-    assert (
-        clip.scans.is_max.tolist() == [[False, True, True, False]]
-        and clip.scans.ranges[0, 2] == 20.0
-    )
+    assert clip.scans.is_max.tolist() == [[False, True, True, False]] and clip.scans.ranges[0, 2] == 20.0
 
 
 def test_subsampling(tmp_path):
@@ -205,9 +196,7 @@ def test_subsampling(tmp_path):
     assert frac.line_numbers.tolist() == [1, 3, 5, 7, 9]
     assert frac.scans.ranges[:, 0].tolist() == [1.0, 3.0, 5.0, 7.0, 9.0]
     half = read_carmen(path, beam_step=2, pose_fraction=0.1)
-    assert half.scans.ranges.shape == (1, 2) and np.allclose(
-        half.scans.angles, [[-math.pi / 2, 0.0]]
-    )
+    assert half.scans.ranges.shape == (1, 2) and np.allclose(half.scans.angles, [[-math.pi / 2, 0.0]])
     assert half.counts["beams"] == 2
     with pytest.raises(ValueError):
         read_carmen(path, pose_step=2, pose_fraction=0.5)
@@ -231,9 +220,7 @@ def test_subsampling(tmp_path):
     ],
 )
 def test_strict_error_names_file_line_and_field(tmp_path, bad, field):
-    path = write(
-        tmp_path, [flaser([1.0, 2.0]), "ODOM 0 0 0 0 0 0 1 host 1", bad, flaser([3.0, 4.0])]
-    )
+    path = write(tmp_path, [flaser([1.0, 2.0]), "ODOM 0 0 0 0 0 0 1 host 1", bad, flaser([3.0, 4.0])])
     with pytest.raises(CarmenFormatError) as e:
         read_carmen(path, messages=("FLASER", "ROBOTLASER1"))
     assert (e.value.line_no, e.value.field) == (3, field)
@@ -253,9 +240,7 @@ def test_empty_truncated_gzip_and_no_scans(tmp_path):
     empty.write_bytes(b"")
     with pytest.raises(CarmenFormatError, match="line 0"):
         read_carmen(empty)
-    data = gzip.compress(
-        ("\n".join(flaser([float(i)] * 50) for i in range(1, 200)) + "\n").encode()
-    )
+    data = gzip.compress(("\n".join(flaser([float(i)] * 50) for i in range(1, 200)) + "\n").encode())
     cut = tmp_path / "cut.log.gz"
     cut.write_bytes(data[: len(data) // 2])
     with pytest.raises(CarmenFormatError, match="gzip"):
@@ -400,13 +385,7 @@ def test_log_round_trips_through_a_dataset_file(tmp_path):
         flaser([1.0, 81.91, 3.0], (1.0, 2.0, 0.5)),
     ]
     log = read_carmen(write(tmp_path, lines), max_usable_range=2.5, usable_range_rule="max")
-    d = load_dataset(
-        save_dataset(tmp_path / "d.npz", log.scans, grid=log.grid(0.5), settings=log.settings)
-    )
+    d = load_dataset(save_dataset(tmp_path / "d.npz", log.scans, grid=log.grid(0.5), settings=log.settings))
     assert d.settings == log.settings and d.grid == log.grid(0.5)
-    assert np.array_equal(d.scans.ranges, log.scans.ranges) and np.array_equal(
-        d.scans.is_max, log.scans.is_max
-    )
-    assert d.scans.valid.tolist() == [[True, False, True]] and d.scans.is_max.tolist() == [
-        [False, False, True]
-    ]
+    assert np.array_equal(d.scans.ranges, log.scans.ranges) and np.array_equal(d.scans.is_max, log.scans.is_max)
+    assert d.scans.valid.tolist() == [[True, False, True]] and d.scans.is_max.tolist() == [[False, False, True]]

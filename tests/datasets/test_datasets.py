@@ -43,8 +43,10 @@ def test_simple_example_matches_the_thesis_setting():
     upper_right[41:, 45:] = True
     assert not rays.reached()[upper_right.ravel()].any()  # the closed room is never reached
     # readings scatter about the true first hit with sigma = 3 cells
-    probe = raycast(ex.grid, type(ex.scans)(ex.scans.poses, ex.scans.angles[0],
-                                            np.full((3, 720), ex.scans.max_range), ex.scans.max_range))
+    probe = raycast(
+        ex.grid,
+        type(ex.scans)(ex.scans.poses, ex.scans.angles[0], np.full((3, 720), ex.scans.max_range), ex.scans.max_range),
+    )
     f = first_hit(probe, ex.truth)
     hit = (f < probe.lengths) & ~rays.is_max
     true_range = probe.t_enter[probe.offsets[:-1][hit] + f[hit]]

@@ -48,9 +48,7 @@ def test_exclusion_list_effective():
     for n in fp.list_plans("ipa"):
         if fp.building_of("ipa", n) in ("intel", "freiburg79", "freiburg101", "freiburg52"):
             assert fp.excluded(n), n
-    assert fp.building_of("ipa", "Freiburg79_scan_furnitures") == fp.building_of(
-        "ipa", "freiburg_building79"
-    )
+    assert fp.building_of("ipa", "Freiburg79_scan_furnitures") == fp.building_of("ipa", "freiburg_building79")
     with pytest.raises(KeyError):
         fp.excluded("x", ["atlantis"])
 

@@ -52,9 +52,7 @@ def test_poses_are_free_clear_inside_and_connected(world, route):
     assert (clear[cells[:, 0], cells[:, 1]] > 2).all()
     lab, _ = ndimage.label(clear > 2, structure=np.ones((3, 3)))
     assert len(np.unique(lab[cells[:, 0], cells[:, 1]])) == 1  # all reachable from the start
-    assert (
-        not (cells[:, 0] >= 97).__and__(cells[:, 1] >= 102).any()
-    )  # never inside the closed closet
+    assert not (cells[:, 0] >= 97).__and__(cells[:, 1] >= 102).any()  # never inside the closed closet
 
 
 def test_coverage_is_reached(world, route):
@@ -100,9 +98,7 @@ def test_dataset_is_seeded(world, route):
 def test_sparser_variants_are_subsets(world, route):
     truth, grid = world
     full = stop_and_scan(truth, grid, route=route, max_range_cells=F, seed=2)
-    sparse = stop_and_scan(
-        truth, grid, route=route, max_range_cells=F, seed=2, pose_fraction=0.5, beam_step=4
-    )
+    sparse = stop_and_scan(truth, grid, route=route, max_range_cells=F, seed=2, pose_fraction=0.5, beam_step=4)
     idx = np.asarray(sparse.settings["pose_indices"])
     assert len(idx) == round(0.5 * len(route)) and idx[0] == 0 and idx[-1] == len(route) - 1
     assert np.all(np.diff(idx) > 0)

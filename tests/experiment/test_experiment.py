@@ -30,18 +30,9 @@ def serial_run(tmp_path_factory):
 
 def _numbers(out: Path) -> dict:
     m = json.loads((out / "metrics.json").read_text())
-    runs = [
-        {k: v for k, v in r.items() if k not in ("seconds", "trace", "resumed_from_sweep")}
-        for r in m["runs"]
-    ]
-    traces = [
-        [{k: v for k, v in t.items() if k != "seconds"} for t in r.get("trace", [])]
-        for r in m["runs"]
-    ]
-    maps = {
-        str(p.relative_to(out)): np.load(p)["marginals"]
-        for p in sorted(out.glob("tasks/**/marginals.npz"))
-    }
+    runs = [{k: v for k, v in r.items() if k not in ("seconds", "trace", "resumed_from_sweep")} for r in m["runs"]]
+    traces = [[{k: v for k, v in t.items() if k != "seconds"} for t in r.get("trace", [])] for r in m["runs"]]
+    maps = {str(p.relative_to(out)): np.load(p)["marginals"] for p in sorted(out.glob("tasks/**/marginals.npz"))}
     return {
         "scores": m["scores"],
         "pooled": m["pooled"],
@@ -158,17 +149,20 @@ def _plan(d):
 # ------------------------------------------------------------------------------------------ runs
 def test_serial_run_writes_outputs(serial_run, tmp_path):
     out = serial_run.out_dir
-    for f in ("metrics.json", "metrics.md", "spec.json", "datasets/office.npz", "datasets/office.eval.npz",
-              "maps/office/ogm.npz", "tasks/office/gibbs-border-L9/c1/result.json"):  # fmt: skip
+    for f in (
+        "metrics.json",
+        "metrics.md",
+        "spec.json",
+        "datasets/office.npz",
+        "datasets/office.eval.npz",
+        "maps/office/ogm.npz",
+        "tasks/office/gibbs-border-L9/c1/result.json",
+    ):
         assert (out / f).exists(), f
     assert not list(out.glob("tasks/**/gibbs.npz")), "spent checkpoints are removed"
     s = {(r["dataset"], r["algorithm"]): r for r in serial_run.scores}
     for r in s.values():
-        assert (
-            0.5 < r["mask"]["best_f1"] <= 1
-            and 0.5 < r["mask"]["auc"] <= 1
-            and "best_f1" in r["touched"]
-        )
+        assert 0.5 < r["mask"]["best_f1"] <= 1 and 0.5 < r["mask"]["auc"] <= 1 and "best_f1" in r["touched"]
     g = next(r for r in serial_run.runs if r["algorithm"] == "gibbs-border-L9")
     assert [t["sweep"] for t in g["trace"]] == [4, 6, 8] and all("f1" in t for t in g["trace"])
     md = (out / "metrics.md").read_text()
@@ -181,12 +175,16 @@ def test_figures_and_maps(tmp_path):
     d["algorithms"][1].update(sweeps=2, burn_in=0, chains=1, record=2)
     r = run_experiment(parse_spec(d, "fig.toml"), tmp_path, scheduler="serial", progress=False)
     names = {p.name for p in (tmp_path / "figures").glob("*.png")}
-    for n in ("pr_office-pf1.png", "f1_threshold_office-pf0.5.png", "f1_sparsity_office.png",
-              "fpfn_office-pf1.png", "fpfn_thresholds_office-pf0.5.png", "f1_time_office-pf1.png"):  # fmt: skip
+    for n in (
+        "pr_office-pf1.png",
+        "f1_threshold_office-pf0.5.png",
+        "f1_sparsity_office.png",
+        "fpfn_office-pf1.png",
+        "fpfn_thresholds_office-pf0.5.png",
+        "f1_time_office-pf1.png",
+    ):
         assert n in names, n
-    assert (tmp_path / "tasks/office-pf1/ogm/c0/map.png").exists() and (
-        tmp_path / "maps/office-pf1/ogm.png"
-    ).exists()
+    assert (tmp_path / "tasks/office-pf1/ogm/c0/map.png").exists() and (tmp_path / "maps/office-pf1/ogm.png").exists()
     assert len(r.pooled) == 4
 
 
@@ -220,8 +218,11 @@ def test_interrupted_gibbs_task_resumes_bit_for_bit(serial_run, tmp_path):
     out = tmp_path / "copy"
     shutil.copytree(serial_run.out_dir, out)
     spec = parse_spec(tiny(), "tiny.toml")
-    task = next(t for t in __import__("ogm_ppl.experiment", fromlist=["plan_tasks"]).plan_tasks(spec, out)
-                if t.id == "run/office/gibbs-border-L9/c0")  # fmt: skip
+    task = next(
+        t
+        for t in __import__("ogm_ppl.experiment", fromlist=["plan_tasks"]).plan_tasks(spec, out)
+        if t.id == "run/office/gibbs-border-L9/c0"
+    )
     task.done_file.unlink()
     assert T.run_algorithm(*task.args, stop_after=3) is None  # "killed" after 3 of 8 sweeps
     folder = task.done_file.parent
@@ -239,8 +240,10 @@ def test_ogm_update_terms_fitted_for_the_sensor_setting_or_warned(tmp_path):
     from ogm_ppl.inference.variational import FittedSettingWarning
 
     d = tiny()
-    d["algorithms"] = [{"name": "p21", "kind": "ogm", "delta": "p21"},
-                       {"name": "p21-fit", "kind": "ogm", "delta": "p21", "fit": "setting"}]  # fmt: skip
+    d["algorithms"] = [
+        {"name": "p21", "kind": "ogm", "delta": "p21"},
+        {"name": "p21-fit", "kind": "ogm", "delta": "p21", "fit": "setting"},
+    ]
     with pytest.warns(FittedSettingWarning, match="p21"):
         r = run_experiment(parse_spec(d, "fit.toml"), tmp_path, scheduler="serial", progress=False)
     runs = {x["algorithm"]: x for x in r.runs}

@@ -43,7 +43,9 @@ def _part(module: str) -> str | None:
     return None
 
 
-INFERENCE_FILES = sorted(p for p in (PKG / "inference").rglob("*.py") if p.parent != PKG / "inference" or p.stem != "__init__")
+INFERENCE_FILES = sorted(
+    p for p in (PKG / "inference").rglob("*.py") if p.parent != PKG / "inference" or p.stem != "__init__"
+)
 
 
 @pytest.mark.parametrize("path", INFERENCE_FILES, ids=lambda p: str(p.relative_to(PKG)))

@@ -144,9 +144,7 @@ def test_unknown_keys_are_refused_by_name(name):
 def test_bad_values_name_the_key(name, values, key, message):
     with pytest.raises(ParamError) as e:
         get_method(name).parse(values)
-    assert e.value.key == key and str(e.value).startswith(f"{key}: ") and message in str(e.value), str(
-        e.value
-    )
+    assert e.value.key == key and str(e.value).startswith(f"{key}: ") and message in str(e.value), str(e.value)
 
 
 def test_command_line_strings_are_parsed_by_kind():
@@ -268,9 +266,7 @@ def test_a_method_in_one_file_reaches_the_command_line(tmp_path, capsys):
         == 0
     )
     out = tmp_path / "toy"
-    assert (
-        main(["map", str(sim), "--method", toy_method.NAME, "--param", "level=0.7", "--out", str(out)]) == 0
-    )
+    assert main(["map", str(sim), "--method", toy_method.NAME, "--param", "level=0.7", "--out", str(out)]) == 0
     m = load_map(out / "map.npz")
     assert set(np.unique(m["probabilities"])) == {0.0, 0.7}
     report = json.loads((out / "report.json").read_text())

@@ -88,9 +88,15 @@ def test_elfes_floor_and_fixed_range():
 
 @pytest.mark.parametrize(
     "family",
-    [lambda: Stachniss(0.5, -0.8, 6.3), lambda: Elfes(2.0, -3.0), lambda: PN(torch.randn(7)),
-     lambda: Moravec(0.3, -0.2), lambda: MarshallBarfoot(0.4, 2), lambda: BorensteinKoren(0.3)],
-)  # fmt: skip
+    [
+        lambda: Stachniss(0.5, -0.8, 6.3),
+        lambda: Elfes(2.0, -3.0),
+        lambda: PN(torch.randn(7)),
+        lambda: Moravec(0.3, -0.2),
+        lambda: MarshallBarfoot(0.4, 2),
+        lambda: BorensteinKoren(0.3),
+    ],
+)
 def test_tables_have_correct_gradients(family):
     fam = family()
     names = [n for n, _ in fam.named_parameters()]
@@ -103,8 +109,15 @@ def test_tables_have_correct_gradients(family):
 
 
 def test_delta_by_name():
-    for name in ("haehnel", "moravec_thesis", "p21_thesis", "elfes_thesis", "stachniss_thesis",
-                 "marshall_barfoot_thesis", "borenstein_koren_thesis"):  # fmt: skip
+    for name in (
+        "haehnel",
+        "moravec_thesis",
+        "p21_thesis",
+        "elfes_thesis",
+        "stachniss_thesis",
+        "marshall_barfoot_thesis",
+        "borenstein_koren_thesis",
+    ):
         assert delta_by_name(name).table(5, 5).isfinite().all()
     with pytest.raises(ValueError, match="unknown Delta name"):
         delta_by_name("nope")
@@ -142,8 +155,14 @@ def test_load_delta_round_trip_and_malformed_files(tmp_path):
         "family": (variant(lambda r: r["delta"].update(family="os.system")), "unknown Delta family"),
         "nan": (variant(lambda r: r["delta"]["params"]["values"].__setitem__(3, float("nan"))), "non-finite"),
         "text": (variant(lambda r: r["delta"]["params"].update(values="abc")), "not numeric"),
-        "shape": (variant(lambda r: r["delta"].update(family="Moravec", params={"l_occ": [1.0, 2.0]})), "expects parameters"),
-        "missing": (variant(lambda r: r["delta"].update(family="Moravec", params={"l_occ": 1.0})), "expects parameters"),
+        "shape": (
+            variant(lambda r: r["delta"].update(family="Moravec", params={"l_occ": [1.0, 2.0]})),
+            "expects parameters",
+        ),
+        "missing": (
+            variant(lambda r: r["delta"].update(family="Moravec", params={"l_occ": 1.0})),
+            "expects parameters",
+        ),
     }
     for name, (text, message) in cases.items():
         p = tmp_path / f"{name}.json"

@@ -1,4 +1,3 @@
-
 import numpy as np
 import pytest
 import torch
@@ -11,8 +10,13 @@ from ogm_ppl.priors import IndependentPrior
 def test_first_hits_agree_with_compiled_kernel_and_a_loop():
     rng = np.random.default_rng(0)
     grid = Grid((12, 15), resolution=1.0)
-    scans = Scans(np.c_[rng.uniform(0, 15, 4), rng.uniform(0, 12, 4), rng.uniform(-3, 3, 4)],
-                  rng.uniform(-3, 3, 30), rng.uniform(0, 9, (4, 30)), max_range=8.0, over_range="max")  # fmt: skip
+    scans = Scans(
+        np.c_[rng.uniform(0, 15, 4), rng.uniform(0, 12, 4), rng.uniform(-3, 3, 4)],
+        rng.uniform(-3, 3, 30),
+        rng.uniform(0, 9, (4, 30)),
+        max_range=8.0,
+        over_range="max",
+    )
     rays = raycast(grid, scans)
     model = OccupancyModel(grid, rays, GaussianRange(1.0), IndependentPrior(0.3, grid.num_cells))
     maps = (torch.rand(5, grid.num_cells, generator=torch.Generator().manual_seed(1)) < 0.2).double()
@@ -85,8 +89,11 @@ def test_likelihood_of_in_grid_hits():
     # the sensor's ray reaches kappa 20 whatever the grid holds: max range is censored there
     # GaussianRange is evaluated on the range in continuous kappa r + 1/2; the wall cell 4 is entered
     # at 3.5 cells (kappa_c 4)
-    expected = s.log_prob(torch.tensor(2.5), 4, 20) + s.log_prob(torch.tensor(9.5), 4, 20) + \
-        s.log_prob(torch.tensor(0.0), 4, 20, is_max=True)  # fmt: skip
+    expected = (
+        s.log_prob(torch.tensor(2.5), 4, 20)
+        + s.log_prob(torch.tensor(9.5), 4, 20)
+        + s.log_prob(torch.tensor(0.0), 4, 20, is_max=True)
+    )
     assert model.log_likelihood(wall).item() == pytest.approx(expected.item(), abs=1e-12)
     assert model.known_free.tolist() == [True] + [False] * 5
 
@@ -115,8 +122,9 @@ def test_likelihood_table_built_in_blocks_equals_one_block(monkeypatch, sensor):
     angles = np.linspace(-np.pi, np.pi, 45, endpoint=False)
     ranges = rng.uniform(0.2, 2.9, size=(3, 45))
     ranges[:, ::7] = 3.0  # max range
-    scans = Scans(poses=[[1.0, 1.5, 0.0], [2.0, 1.0, 1.0], [3.5, 2.5, -2.0]], angles=angles, ranges=ranges,
-                  max_range=3.0)  # fmt: skip
+    scans = Scans(
+        poses=[[1.0, 1.5, 0.0], [2.0, 1.0, 1.0], [3.5, 2.5, -2.0]], angles=angles, ranges=ranges, max_range=3.0
+    )
     rays = raycast(grid, scans)
     assert (rays.range_len > rays.lengths).any()  # some rays leave the grid
     whole = OccupancyModel(grid, rays, sensor, IndependentPrior(0.3, grid.num_cells)).loglik_table

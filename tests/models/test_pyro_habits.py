@@ -45,8 +45,12 @@ def test_conditioning_on_new_readings_equals_a_model_of_those_readings(sensor):
     toy, model = toy_model(sensor)
     F = toy.scans.max_range
     new = torch.tensor([3.5, 9.0, F, 12.5, 0.0, 19.2])  # a max-range reading among them
-    other = OccupancyModel(toy.grid, raycast(toy.grid, Scans.one_d(new.numpy(), max_range=F, position=0.5)), sensor,
-                           IndependentPrior(0.3, 21))  # fmt: skip
+    other = OccupancyModel(
+        toy.grid,
+        raycast(toy.grid, Scans.one_d(new.numpy(), max_range=F, position=0.5)),
+        sensor,
+        IndependentPrior(0.3, 21),
+    )
     maps = random_maps(model)
     cond = poutine.condition(model.model, data={"z": new, "m": maps[:, model.latent]})
     tr = poutine.trace(cond).get_trace()
@@ -58,16 +62,27 @@ def test_new_readings_on_rays_cut_by_the_grid_edge_and_in_2d():
     # a 9-cell grid, a 20-cell sensor: readings past the edge recompute their kappa and entry distances
     readings = [3.0, 6.0, 11.0, 17.0, 20.0]
     grid = Grid.line(9)
-    model = OccupancyModel(grid, raycast(grid, Scans.one_d(readings, max_range=20.0)), PatternMatch(0.7), IndependentPrior(0.3, 9))
+    model = OccupancyModel(
+        grid, raycast(grid, Scans.one_d(readings, max_range=20.0)), PatternMatch(0.7), IndependentPrior(0.3, 9)
+    )
     new = torch.tensor([1.0, 14.0, 20.0, 8.0, 2.0])
-    other = OccupancyModel(grid, raycast(grid, Scans.one_d(new.numpy(), max_range=20.0)), PatternMatch(0.7), IndependentPrior(0.3, 9))
+    other = OccupancyModel(
+        grid, raycast(grid, Scans.one_d(new.numpy(), max_range=20.0)), PatternMatch(0.7), IndependentPrior(0.3, 9)
+    )
     torch.testing.assert_close(model.loglik_table_for(new), other.loglik_table, rtol=0, atol=1e-12)
     # 2D: the kappa of every observed reading is recomputed exactly, and its table
     g = torch.Generator().manual_seed(3)
     grid = Grid((10, 12), resolution=1.0)
-    poses = torch.stack([torch.rand(3, generator=g) * 12, torch.rand(3, generator=g) * 10, torch.rand(3, generator=g) * 6], 1)
-    scans = Scans(poses.numpy(), torch.linspace(-3, 3, 25).numpy(), (torch.rand(3, 25, generator=g) * 9).numpy(),
-                  max_range=8.0, over_range="max")  # fmt: skip
+    poses = torch.stack(
+        [torch.rand(3, generator=g) * 12, torch.rand(3, generator=g) * 10, torch.rand(3, generator=g) * 6], 1
+    )
+    scans = Scans(
+        poses.numpy(),
+        torch.linspace(-3, 3, 25).numpy(),
+        (torch.rand(3, 25, generator=g) * 9).numpy(),
+        max_range=8.0,
+        over_range="max",
+    )
     for sensor in (GaussianRange(1.0, 1e-3), PatternMatch(0.8)):
         m2 = OccupancyModel(grid, raycast(grid, scans), sensor, IndependentPrior(0.3, grid.num_cells))
         hit = ~torch.from_numpy(m2.rays.is_max)
@@ -88,13 +103,17 @@ def test_predictive_simulates_readings_and_maps_that_keep_pinned_cells_free(sens
     par = Predictive(model.model, num_samples=7, parallel=True)(readings=None)
     assert par["z"].shape == (7, R)
     # the unconditioned model (Pyro's habit) simulates as well
-    assert not torch.equal(poutine.trace(poutine.uncondition(model.model)).get_trace().nodes["z"]["value"], model.readings)
+    assert not torch.equal(
+        poutine.trace(poutine.uncondition(model.model)).get_trace().nodes["z"]["value"], model.readings
+    )
 
 
 def test_simulated_readings_follow_the_range_convention():
     # a wall entered at kappa 8 reads 7.5 cells on average (near face, Gaussian noise)
     grid = Grid.line(30)
-    model = OccupancyModel(grid, raycast(grid, Scans.one_d([5.0] * 2, max_range=25.0)), GaussianRange(1.0), IndependentPrior(0.3, 30))
+    model = OccupancyModel(
+        grid, raycast(grid, Scans.one_d([5.0] * 2, max_range=25.0)), GaussianRange(1.0), IndependentPrior(0.3, 30)
+    )
     wall = torch.zeros(30)
     wall[8:] = 1
     z = model.simulate_readings(wall.expand(4000, -1), generator=torch.Generator().manual_seed(0))
@@ -106,7 +125,9 @@ def test_simulated_readings_follow_the_range_convention():
 
 def test_prior_predictive_of_a_cut_ray_draws_outside_cells():
     grid = Grid.line(5)
-    model = OccupancyModel(grid, raycast(grid, Scans.one_d([3.0], max_range=20.0)), PatternMatch(1.0), IndependentPrior(0.5, 5))
+    model = OccupancyModel(
+        grid, raycast(grid, Scans.one_d([3.0], max_range=20.0)), PatternMatch(1.0), IndependentPrior(0.5, 5)
+    )
     z = model.simulate_readings(torch.zeros(4000, 5), generator=torch.Generator().manual_seed(0))
     # first hit past the edge at kappa 5 + i with probability 0.5^(i+1): the reading is its entry distance
     assert (z >= 4.5).all()
@@ -158,8 +179,12 @@ def test_log_joint_and_check_maps_reject_bad_maps():
     K = model.num_cells
     good = torch.zeros(K)
     assert torch.isfinite(model.log_joint(good))
-    for bad, msg in ((torch.zeros(K - 1), "21 cells"), (torch.full((K,), 0.5), "only 0 and 1"),
-                     (torch.full((K,), 2.0), "only 0 and 1"), (torch.full((K,), math.nan), "NaN")):  # fmt: skip
+    for bad, msg in (
+        (torch.zeros(K - 1), "21 cells"),
+        (torch.full((K,), 0.5), "only 0 and 1"),
+        (torch.full((K,), 2.0), "only 0 and 1"),
+        (torch.full((K,), math.nan), "NaN"),
+    ):
         with pytest.raises(ValueError, match=msg):
             model.log_joint(bad)
         with pytest.raises(ValueError, match="init map"):

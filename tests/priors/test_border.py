@@ -39,8 +39,15 @@ class TestCellGiven8Neighbours2D(PriorContract):
 
 def test_border_layout_and_conditionals():
     """The 16 border cells of a 3 x 3 patch are the ring of its 5 x 5 window in row-major order."""
-    p = BorderPatchPrior((5, 5), border_codes=[0, 0, 0xFFFF], inner_codes=[0, 0b000010000, 0x1FF],
-                         counts=[3, 1, 1], inner=(3, 3), origin=(1, 1), unseen="zero")  # fmt: skip
+    p = BorderPatchPrior(
+        (5, 5),
+        border_codes=[0, 0, 0xFFFF],
+        inner_codes=[0, 0b000010000, 0x1FF],
+        counts=[3, 1, 1],
+        inner=(3, 3),
+        origin=(1, 1),
+        unseen="zero",
+    )
     lp = p.compiled()
     ring = [(r, c) for r in range(-1, 4) for c in range(-1, 4) if not (0 <= r < 3 and 0 <= c < 3)]
     assert list(zip(lp.w_dr[9:].tolist(), lp.w_dc[9:].tolist())) == ring

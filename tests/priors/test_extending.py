@@ -42,8 +42,9 @@ def room():
     truth = np.zeros((16, 16), bool)
     truth[[0, -1], :] = truth[:, [0, -1]] = True
     grid = Grid(truth.shape, 1.0)
-    data = stop_and_scan(truth, grid, route=np.array([[8.5, 8.5, 0.0]]), beams=36, max_range_cells=12,
-                         sigma_cells=0.5, seed=0)
+    data = stop_and_scan(
+        truth, grid, route=np.array([[8.5, 8.5, 0.0]]), beams=36, max_range_cells=12, sigma_cells=0.5, seed=0
+    )
     return MapProblem(grid, data.scans, sigma_cells=0.5)
 
 
@@ -76,10 +77,32 @@ def test_the_command_line_names_it(tmp_path):
     from ogm_ppl.cli import load_map, main
 
     sim = tmp_path / "sim.npz"
-    assert main(["simulate", "--map", "office", "--size", "60", "--poses", "2", "--beams", "90",
-                 "--max-range-cells", "20", "--out", str(sim)]) == 0
+    assert (
+        main(
+            [
+                "simulate",
+                "--map",
+                "office",
+                "--size",
+                "60",
+                "--poses",
+                "2",
+                "--beams",
+                "90",
+                "--max-range-cells",
+                "20",
+                "--out",
+                str(sim),
+            ]
+        )
+        == 0
+    )
     out = tmp_path / "checker"
-    assert main(["map", str(sim), "--method", "gibbs", "--prior", KIND, "--sweeps", "3", "--warmup", "1",
-                 "--out", str(out)]) == 0
+    assert (
+        main(
+            ["map", str(sim), "--method", "gibbs", "--prior", KIND, "--sweeps", "3", "--warmup", "1", "--out", str(out)]
+        )
+        == 0
+    )
     assert load_map(out / "map.npz")["probabilities"].shape == (60, 60)
     assert toy_checkerboard.KIND == KIND

@@ -54,9 +54,7 @@ def _brute(occ, known, L=4, R=5):
                 cells[int(occ[r, c])] += 1
             for size in (3, 5):
                 if r + size <= H and c + size <= W and known[r : r + size, c : c + size].all():
-                    code = sum(
-                        int(occ[r + i // size, c + i % size]) << i for i in range(size * size)
-                    )
+                    code = sum(int(occ[r + i // size, c + i % size]) << i for i in range(size * size))
                     if size == 3:
                         c3[code] += 1
                     else:
@@ -176,9 +174,7 @@ def test_border_tables_are_marginals_of_5x5():
         assert cnt.sum() == t.counts5x5[border == x].sum()
         assert (np.diff(inn) > 0).all()
     inner_marg = np.bincount(inner, weights=t.counts5x5, minlength=512)
-    np.testing.assert_array_equal(
-        np.bincount(bt.inner, weights=bt.counts, minlength=512), inner_marg
-    )
+    np.testing.assert_array_equal(np.bincount(bt.inner, weights=bt.counts, minlength=512), inner_marg)
     assert bt.lookup(12345678)[0].size == 0 or 12345678 in bt.borders
     # 1-given-8 re-indexes the 3x3 table
     c18 = t.counts1given8()

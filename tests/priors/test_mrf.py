@@ -30,8 +30,13 @@ class TestMRF2D8(PriorContract):
 
 class TestAnisotropicStencil(PriorContract):
     def make_prior(self, num_cells):
-        return StencilPrior((3, 2), unary=np.linspace(-1, 1, 6), offsets=[(1, 0), (0, 1), (1, 1)],
-                            coupling=[1.5, -0.7, 0.4], bias=[-0.3, 0.2, 0.1])  # fmt: skip
+        return StencilPrior(
+            (3, 2),
+            unary=np.linspace(-1, 1, 6),
+            offsets=[(1, 0), (0, 1), (1, 1)],
+            coupling=[1.5, -0.7, 0.4],
+            bias=[-0.3, 0.2, 0.1],
+        )
 
 
 def test_thesis_log_odds_formula():

@@ -24,9 +24,7 @@ class TestDataDrivenPrior(PriorContract):
 
 def test_independent_prior_values_and_log_odds():
     p = IndependentPrior(0.234, 3)
-    assert p.log_prob(torch.tensor([1.0, 0.0, 0.0])).item() == pytest.approx(
-        math.log(0.234) + 2 * math.log(0.766)
-    )
+    assert p.log_prob(torch.tensor([1.0, 0.0, 0.0])).item() == pytest.approx(math.log(0.234) + 2 * math.log(0.766))
     torch.testing.assert_close(p.cell_log_odds(), torch.full((3,), math.log(0.234 / 0.766)))
     assert DataDriven1DPrior(4).cell_log_odds() is None
 
@@ -46,6 +44,7 @@ def test_bad_construction():
 
 def test_data_driven_prior_support():
     p = DataDriven1DPrior(4, start=1)
-    maps = torch.tensor([[0, 0, 0, 0], [0, 0, 0, 1], [0, 0, 1, 1], [0, 1, 1, 1],
-                         [1, 1, 1, 1], [0, 1, 0, 1]], dtype=torch.float64)  # fmt: skip
+    maps = torch.tensor(
+        [[0, 0, 0, 0], [0, 0, 0, 1], [0, 0, 1, 1], [0, 1, 1, 1], [1, 1, 1, 1], [0, 1, 0, 1]], dtype=torch.float64
+    )
     assert p.log_prob(maps).exp().tolist() == [0.25, 0.25, 0.25, 0.25, 0.0, 0.0]

@@ -28,7 +28,8 @@ every update is exact and the kept value always *equals* the sum from scratch, w
 (``tests/inference/mcmc/test_cell_sweep_layout.py`` checks it after every flip). ``S`` is chosen per model
 (:func:`fixed_point_bits`) so that no cell's sum can leave the int64 range; the conditional log-odds differ
 from the floating-point sum of the table by at most ``n_k 2^-S`` (``n_k``: rays through ``k``; ``S = 43``
-in the 500 x 500 reference scene, where a cell has up to 778 rays: a bound of 9e-11). Impossible readings (``-inf`` entries) are counted
+in the 500 x 500 reference scene, where a cell has up to 778 rays: a bound of 9e-11). Impossible readings (``-inf``
+entries) are counted
 apart: a term ``x - (-inf)`` adds to ``pos_k``, ``-inf - y`` to ``neg_k``, and ``-inf - -inf`` counts as no
 preference; ``d_k`` is then ``+inf`` (``pos_k > 0``), ``-inf`` (``neg_k > 0``) or ``nan`` (both: the state
 has no mass either way and the cell moves by a fair coin, see :func:`new_value`).
@@ -93,27 +94,43 @@ def fixed_point_bits(ll: np.ndarray, c_off: np.ndarray) -> int:
     bad = np.isnan(ll) | (ll == np.inf)
     if bad.any():
         r, j = np.argwhere(bad)[0]
-        raise ValueError(f"the likelihood table holds {ll[r, j]} at ray {r}, kappa {j}: log-likelihoods must be "
-                         "finite or -inf (an impossible reading)")  # fmt: skip
+        raise ValueError(
+            f"the likelihood table holds {ll[r, j]} at ray {r}, kappa {j}: log-likelihoods must be "
+            "finite or -inf (an impossible reading)"
+        )
     finite = ll[np.isfinite(ll)]
     big = float(np.abs(finite).max()) if finite.size else 0.0
     n = int(np.diff(c_off).max()) if len(c_off) > 1 else 0
     bound = n * (2.0 * big + 1.0) + 1.0  # in units of 2^S
     bits = min(60, math.floor(62 - math.log2(bound)))
     if bits < MIN_BITS:
-        raise ValueError(f"likelihood entries up to |{big:.3g}| over up to {n} rays a cell leave {bits} fraction "
-                         f"bits for the fixed-point sums (need {MIN_BITS})")  # fmt: skip
+        raise ValueError(
+            f"likelihood entries up to |{big:.3g}| over up to {n} rays a cell leave {bits} fraction "
+            f"bits for the fixed-point sums (need {MIN_BITS})"
+        )
     return bits
 
 
-def cell_state(m: np.ndarray, offsets, cells, c_off, c_ray, c_kappa, ll: np.ndarray,
-               bits: int | None = None) -> CellState:  # fmt: skip
+def cell_state(
+    m: np.ndarray, offsets, cells, c_off, c_ray, c_kappa, ll: np.ndarray, bits: int | None = None
+) -> CellState:
     """The state of map ``m`` (uint8, ``K``): every ray's first and second hits and every cell's ``d_k``,
     computed from scratch (one pass over the rays)."""
     bits = fixed_point_bits(ll, c_off) if bits is None else bits
-    st = CellState(np.ascontiguousarray(m, dtype=np.uint8), np.empty(len(offsets) - 1, RAY), np.zeros(len(m), np.int64),
-                   np.zeros(len(m), INF), _any_impossible(ll, offsets), offsets, cells, c_off, c_ray, c_kappa, ll,
-                   float(2.0**bits))  # fmt: skip
+    st = CellState(
+        np.ascontiguousarray(m, dtype=np.uint8),
+        np.empty(len(offsets) - 1, RAY),
+        np.zeros(len(m), np.int64),
+        np.zeros(len(m), INF),
+        _any_impossible(ll, offsets),
+        offsets,
+        cells,
+        c_off,
+        c_ray,
+        c_kappa,
+        ll,
+        float(2.0**bits),
+    )
     _fill(st)
     return st
 

@@ -59,8 +59,19 @@ class PatchState(NamedTuple):
 def patch_state(m: np.ndarray, f: np.ndarray, index) -> PatchState:
     """The :class:`PatchState` over the map ``m`` and first hits ``f`` (views: kept in step in place)."""
     R = len(index.offsets) - 1
-    return PatchState(m, f, np.zeros(len(m), np.bool_), np.full((R, 2), -1, np.int64), np.zeros(1, np.int64),
-                      index.offsets, index.cells, index.c_off, index.c_ray, index.c_kappa, index.ll)
+    return PatchState(
+        m,
+        f,
+        np.zeros(len(m), np.bool_),
+        np.full((R, 2), -1, np.int64),
+        np.zeros(1, np.int64),
+        index.offsets,
+        index.cells,
+        index.c_off,
+        index.c_ray,
+        index.c_kappa,
+        index.ll,
+    )
 
 
 class PatchGeometry(NamedTuple):
@@ -116,10 +127,18 @@ def ray_scratch(L, num_slots, dense, num_cands):
             b += 1
         lowbit[w] = b
     S = max(num_slots, 1)
-    return RayScratch(np.empty(S, np.int64), np.empty(S, np.int64), np.empty(S, np.int64),
-                      np.empty((S, max(L, 1)), np.int64), np.empty((S, max(L, 1)), np.int64),
-                      np.empty(max(L, 1), np.int64), np.empty(W, np.int64), lowbit, np.empty(W, np.float64),
-                      np.empty(max(W, num_cands, 1), np.float64))
+    return RayScratch(
+        np.empty(S, np.int64),
+        np.empty(S, np.int64),
+        np.empty(S, np.int64),
+        np.empty((S, max(L, 1)), np.int64),
+        np.empty((S, max(L, 1)), np.int64),
+        np.empty(max(L, 1), np.int64),
+        np.empty(W, np.int64),
+        lowbit,
+        np.empty(W, np.float64),
+        np.empty(max(W, num_cands, 1), np.float64),
+    )
 
 
 @nb.njit(cache=True)

@@ -32,8 +32,9 @@ def evidence_update(evidence, touched, offsets, cells, z, is_max, table, max_col
 
 
 @nb.njit(cache=True)
-def evidence_from_scans(u0, v0, du, dv, length, t_hit, is_max, rows, cols, evidence, touched,
-                        table, max_col, lo, hi, clamp):  # fmt: skip
+def evidence_from_scans(
+    u0, v0, du, dv, length, t_hit, is_max, rows, cols, evidence, touched, table, max_col, lo, hi, clamp
+):
     """Fused traversal and update: each ray is walked into a scratch buffer and applied at once,
     without materialising the CSR structure (same cells, same order, same numbers)."""
     R = u0.shape[0]
@@ -44,8 +45,9 @@ def evidence_from_scans(u0, v0, du, dv, length, t_hit, is_max, rows, cols, evide
     buf_t = np.empty(cap, np.float32)
     n_rows = table.shape[0]
     for r in range(R):
-        n, zr, _ = trace_ray(u0[r], v0[r], du[r], dv[r], length[r], t_hit[r], is_max[r], rows, cols,
-                             buf_cells, buf_t, 0, False)  # fmt: skip
+        n, zr, _ = trace_ray(
+            u0[r], v0[r], du[r], dv[r], length[r], t_hit[r], is_max[r], rows, cols, buf_cells, buf_t, 0, False
+        )
         col = max_col if is_max[r] else zr
         for j in range(min(n, n_rows)):
             d = table[j, col]

@@ -52,9 +52,7 @@ def _initial(model: OccupancyModel, init, seed) -> np.ndarray:
     return m
 
 
-def map_estimate(
-    model: OccupancyModel, init="occupied", max_sweeps: int = 100, seed: int = 0
-) -> MapEstimate:
+def map_estimate(model: OccupancyModel, init="occupied", max_sweeps: int = 100, seed: int = 0) -> MapEstimate:
     """Hill-climb to a local maximum of ``log p(m, z)``.
 
     Args:

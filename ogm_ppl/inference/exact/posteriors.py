@@ -34,9 +34,7 @@ def _bits(codes: torch.Tensor, L: int) -> torch.Tensor:
     return ((codes[:, None] >> torch.arange(L)) & 1).to(torch.float64)
 
 
-def brute_force(
-    model: OccupancyModel, max_cells: int = MAX_BRUTE_FORCE_CELLS, chunk: int = 1 << 15
-) -> WeightedMaps:
+def brute_force(model: OccupancyModel, max_cells: int = MAX_BRUTE_FORCE_CELLS, chunk: int = 1 << 15) -> WeightedMaps:
     """The full Bayesian posterior over all ``2^L`` maps of the latent cells (Eq. 2.5, 2.6).
 
     Pinned (known-free) cells stay 0. The unnormalised log joint of every map is kept (``2^L`` float64,

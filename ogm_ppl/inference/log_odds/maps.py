@@ -73,8 +73,10 @@ def _checked(table: torch.Tensor, delta) -> torch.Tensor:
     bad = ~torch.isfinite(table.detach())
     if bad.any():
         k, z = (int(v) for v in bad.nonzero()[0])
-        raise ValueError(f"{delta!r} gives a non-finite update term at kappa {k}, reading column {z}; "
-                         "check its parameters for NaN or infinity")  # fmt: skip
+        raise ValueError(
+            f"{delta!r} gives a non-finite update term at kappa {k}, reading column {z}; "
+            "check its parameters for NaN or infinity"
+        )
     return table
 
 
@@ -137,9 +139,18 @@ def evidence_grid(
     ev = np.full(K, l0, dtype=np.float64)
     touched = np.zeros(K, dtype=np.bool_)
     evidence_update(
-        ev, touched, rays.offsets, rays.cells, rays.z, rays.is_max,
-        np.ascontiguousarray(table.numpy()), max_col, float(lo), float(hi), clamp is not None,
-    )  # fmt: skip
+        ev,
+        touched,
+        rays.offsets,
+        rays.cells,
+        rays.z,
+        rays.is_max,
+        np.ascontiguousarray(table.numpy()),
+        max_col,
+        float(lo),
+        float(hi),
+        clamp is not None,
+    )
     return LogOddsMap(rays.grid, torch.from_numpy(ev), torch.from_numpy(touched))
 
 
@@ -164,7 +175,21 @@ def evidence_grid_from_scans(
     ev = np.full(grid.num_cells, l0, dtype=np.float64)
     touched = np.zeros(grid.num_cells, dtype=np.bool_)
     evidence_from_scans(
-        ri.u0, ri.v0, ri.du, ri.dv, ri.length, ri.range_cells, ri.is_max, grid.rows, grid.cols,
-        ev, touched, table, cap, lo, hi, clamp is not None,
-    )  # fmt: skip
+        ri.u0,
+        ri.v0,
+        ri.du,
+        ri.dv,
+        ri.length,
+        ri.range_cells,
+        ri.is_max,
+        grid.rows,
+        grid.cols,
+        ev,
+        touched,
+        table,
+        cap,
+        lo,
+        hi,
+        clamp is not None,
+    )
     return LogOddsMap(grid, torch.from_numpy(ev), torch.from_numpy(touched))

@@ -159,13 +159,16 @@ def run_chains(
     try:
         pickle.dumps(make_kernel)
     except Exception as e:
-        raise ValueError("make_kernel must be picklable to run chains in processes (use a class or "
-                         f"functools.partial, not a lambda): {e}") from None  # fmt: skip
+        raise ValueError(
+            "make_kernel must be picklable to run chains in processes (use a class or "
+            f"functools.partial, not a lambda): {e}"
+        ) from None
     if mp_context is None:
         mp_context = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
     ctx = multiprocessing.get_context(mp_context)
-    with ProcessPoolExecutor(max_workers=min(processes, num_chains), mp_context=ctx, initializer=_init_worker,
-                             initargs=(make_kernel,)) as pool:  # fmt: skip
+    with ProcessPoolExecutor(
+        max_workers=min(processes, num_chains), mp_context=ctx, initializer=_init_worker, initargs=(make_kernel,)
+    ) as pool:
         futures = [pool.submit(_run_chain, num_sweeps, trace_cells, warmup, seed + c) for c in range(num_chains)]
         states = [f.result() for f in tqdm(futures, desc="chains", disable=not progress)]
     model = make_kernel().model
@@ -177,8 +180,9 @@ def run_chains(
     return ChainsResult(out)
 
 
-def kl_trace(kernel, exact_marginals: torch.Tensor, checkpoints: Sequence[int], seed: int = 0,
-             eps: float = 1e-9) -> torch.Tensor:  # fmt: skip
+def kl_trace(
+    kernel, exact_marginals: torch.Tensor, checkpoints: Sequence[int], seed: int = 0, eps: float = 1e-9
+) -> torch.Tensor:
     """Summed cell KL ``D_KL(exact || running marginals)`` after each number of sweeps in
     ``checkpoints`` (Fig. 4.3); running marginals are clamped to ``[eps, 1 - eps]``."""
     checkpoints = sorted(int(c) for c in checkpoints)

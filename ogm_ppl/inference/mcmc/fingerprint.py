@@ -51,8 +51,13 @@ def _settings(kernel) -> dict:
     attributes of simple types."""
     if hasattr(kernel, "settings"):
         return kernel.settings()
-    return {k: v for k, v in sorted(vars(kernel).items()) if not k.startswith("_") and k not in ("model", "sweeps",
-            "transforms") and isinstance(v, (bool, int, float, str, tuple, type(None)))}  # fmt: skip
+    return {
+        k: v
+        for k, v in sorted(vars(kernel).items())
+        if not k.startswith("_")
+        and k not in ("model", "sweeps", "transforms")
+        and isinstance(v, (bool, int, float, str, tuple, type(None)))
+    }
 
 
 def fingerprint(kernel, stats) -> dict[str, str]:

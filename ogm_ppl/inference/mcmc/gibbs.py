@@ -24,7 +24,8 @@ positions, with replacement). All leave the posterior invariant.
 Table 6.6 (Section 6.2.1: sample only mapped cells or cells near them, Fig. 6.16b; see
 :func:`~ogm_ppl.metrics.near_mapped_mask`). The other cells keep their initial / current values, so the
 chain samples the *conditional* ``p(m_R' | m_rest, z)``, not the full posterior, where ``R'``
-(:meth:`~ogm_ppl.inference.mcmc.kernel.MapKernel.sampled_cells`) is the set of cells the kernel can change: the latent region cells for
+(:meth:`~ogm_ppl.inference.mcmc.kernel.MapKernel.sampled_cells`) is the set of cells the kernel can change: the
+latent region cells for
 single-cell kernels, every latent cell of the visited patches for :class:`PatchGibbs`.
 
 Priors with a compiled face (``prior.compiled()``, a bundle of :mod:`ogm_ppl.priors.compiled`: independent
@@ -100,8 +101,15 @@ class CellGibbs(MapKernel):
     torch.Size([50, 15])
     """
 
-    def __init__(self, model: OccupancyModel, scan: str = "systematic", update: str = "gibbs", init="ogm",
-                 delta="haehnel", region=None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        model: OccupancyModel,
+        scan: str = "systematic",
+        update: str = "gibbs",
+        init="ogm",
+        delta="haehnel",
+        region=None,
+    ) -> None:
         if update not in _UPDATES:
             raise ValueError(f"update must be one of {tuple(_UPDATES)}, got {update!r}")
         super().__init__(model, scan, init, delta, region)
@@ -186,8 +194,16 @@ class MetropolisCell(CellGibbs):
     (proposals only at latent region cells, ``len(latent ∩ region)`` per sweep).
     """
 
-    def __init__(self, model, proposal: str = "uniform", endpoint_weight: float = 4.0, scan: str = "random",
-                 init="ogm", delta="haehnel", region=None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        model,
+        proposal: str = "uniform",
+        endpoint_weight: float = 4.0,
+        scan: str = "random",
+        init="ogm",
+        delta="haehnel",
+        region=None,
+    ) -> None:
         super().__init__(model, scan, "metropolised", init, delta, region)
         if proposal not in ("uniform", "endpoint"):
             raise ValueError(f"proposal must be 'uniform' or 'endpoint', got {proposal!r}")
@@ -227,7 +243,8 @@ class PatchGibbs(MapKernel):
         model: an :class:`~ogm_ppl.OccupancyModel`.
         patch: the patch shape, see :func:`patch_shape` (``3`` for a 1D run of 3, ``(3, 3)``, ``"plus"``).
         scan: ``"systematic"`` / ``"permutation"`` visit a fixed set of patch positions (a tiling for runs
-            and rectangles in which a patch starts at column ``offset`` (or at ``(row, col)``); every cell's neighbourhood for other shapes);
+            and rectangles in which a patch starts at column ``offset`` (or at ``(row, col)``); every cell's
+            neighbourhood for other shapes);
             ``"random"`` (Algorithm 1) places the patch at uniformly random cells, ``ceil(K / L)`` times
             per sweep.
         p_rand_patch: Algorithm 2's probability of proposing a random configuration instead (0.001 in the
@@ -244,9 +261,19 @@ class PatchGibbs(MapKernel):
             speed-up the thesis suggests after Table 6.6 (Section 6.2.1): sample only cells near mapped cells.
     """
 
-    def __init__(self, model, patch=3, scan: str = "systematic", offset=0, p_rand_patch: float = 0.0,
-                 random_patch: str = "mh", update: str = "gibbs", init="ogm", delta="haehnel",
-                 region=None) -> None:  # fmt: skip
+    def __init__(
+        self,
+        model,
+        patch=3,
+        scan: str = "systematic",
+        offset=0,
+        p_rand_patch: float = 0.0,
+        random_patch: str = "mh",
+        update: str = "gibbs",
+        init="ogm",
+        delta="haehnel",
+        region=None,
+    ) -> None:
         if update not in _UPDATES:
             raise ValueError(f"update must be one of {tuple(_UPDATES)}, got {update!r}")
         super().__init__(model, scan, init, delta, region)
@@ -269,8 +296,10 @@ class PatchGibbs(MapKernel):
             raise ValueError("no patch holds a latent cell")
         self._hw = self._rectangle()
         if self.L > 20 and not (compiled is not None and compiled.tiles_patches(self._hw, self._anchors)):
-            raise ValueError(f"patches of {self.L} cells (2^{self.L} configurations) need a table prior whose "
-                             "tiles are the patches (same shape, aligned: offset = prior.origin)")  # fmt: skip
+            raise ValueError(
+                f"patches of {self.L} cells (2^{self.L} configurations) need a table prior whose "
+                "tiles are the patches (same shape, aligned: offset = prior.origin)"
+            )
 
     def _rectangle(self) -> tuple[int, int]:
         if self.dr.min() == 0 and self.dc.min() == 0 and len(self.dr) == (self.dr.max() + 1) * (self.dc.max() + 1):
@@ -287,11 +316,14 @@ class PatchGibbs(MapKernel):
         """``n x 2`` (row, col) patch positions for the systematic / permutation scans."""
         g = self.model.grid
         rows, cols = g.rows, g.cols
-        is_rect = (self.dr.min() == 0 and self.dc.min() == 0
-                   and len(self.dr) == (self.dr.max() + 1) * (self.dc.max() + 1))  # fmt: skip
+        is_rect = (
+            self.dr.min() == 0 and self.dc.min() == 0 and len(self.dr) == (self.dr.max() + 1) * (self.dc.max() + 1)
+        )
         if is_rect:
             h, w = int(self.dr.max()) + 1, int(self.dc.max()) + 1
-            orow, ocol = (0, int(self.offset)) if isinstance(self.offset, (int, np.integer)) else (int(o) for o in self.offset)
+            orow, ocol = (
+                (0, int(self.offset)) if isinstance(self.offset, (int, np.integer)) else (int(o) for o in self.offset)
+            )
             r0 = tiling_starts(orow, h, rows)
             c0 = tiling_starts(ocol, w, cols)
         else:

@@ -18,7 +18,8 @@ it stationary (Section 4.1, 4.2). Only what changes is computed: the prior throu
 for blocks of more than 48 cells) and the likelihood through the rays that cross the block
 (``sum_{n: B cap ray_n != {}} log p(z_n | f_n(m))``, Eq. 2.6).
 
-:class:`GuidedGibbs` is a :class:`~ogm_ppl.inference.mcmc.kernel.MapKernel` like :class:`~ogm_ppl.inference.mcmc.gibbs.CellGibbs`
+:class:`GuidedGibbs` is a :class:`~ogm_ppl.inference.mcmc.kernel.MapKernel` like
+:class:`~ogm_ppl.inference.mcmc.gibbs.CellGibbs`
 (one ``sample`` call is one sweep: with probability ``p_guide`` a pass of guide moves over the blocks,
 otherwise one sweep of the wrapped base kernel) and runs under ``pyro.infer.MCMC`` or
 :func:`~ogm_ppl.inference.mcmc.runner.run_gibbs`. By default it also starts from the guide's mode
@@ -70,8 +71,16 @@ class GuidedGibbs(MapKernel):
             configuration.
     """
 
-    def __init__(self, base, guide, block=(6, 6), p_guide: float = 0.5, init: str = "guide",
-                 random_offset: bool = True, proposal: str = "bernoulli") -> None:  # fmt: skip
+    def __init__(
+        self,
+        base,
+        guide,
+        block=(6, 6),
+        p_guide: float = 0.5,
+        init: str = "guide",
+        random_offset: bool = True,
+        proposal: str = "bernoulli",
+    ) -> None:
         if not 0.0 <= float(p_guide) <= 1.0:
             raise ValueError(f"p_guide must lie in [0, 1], got {p_guide}")
         if init not in _INITS:
@@ -186,7 +195,9 @@ class GuidedGibbs(MapKernel):
             raise ValueError("proposal='tiles' needs a 2D tile prior (PatchTablePrior: codes, probs, patch, origin)")
         th, tw = prior.patch
         if th * tw > 16:
-            raise ValueError(f"proposal='tiles' tabulates every configuration of a tile: up to 16 cells, not {th} x {tw}")
+            raise ValueError(
+                f"proposal='tiles' tabulates every configuration of a tile: up to 16 cells, not {th} x {tw}"
+            )
         if self.block == "all" or self.block[0] % th or self.block[1] % tw:
             raise ValueError(f"proposal='tiles' needs blocks of whole {th} x {tw} tiles, got {self.block!r}")
 
@@ -273,7 +284,7 @@ class GuidedGibbs(MapKernel):
 
     def _rays_of(self, cells: np.ndarray) -> np.ndarray:
         idx = self.model.rays.by_cell
-        parts = [idx.ray[idx.offsets[k]:idx.offsets[k + 1]] for k in cells.tolist()]
+        parts = [idx.ray[idx.offsets[k] : idx.offsets[k + 1]] for k in cells.tolist()]
         return np.unique(np.concatenate(parts + [np.zeros(0, np.int64)])).astype(np.int64)
 
     def _lik(self, maps: np.ndarray, rays: np.ndarray) -> np.ndarray:
@@ -310,11 +321,16 @@ class GuidedGibbs(MapKernel):
             lp = np.concatenate([[0.0], ((news - old) * self._prior_lo[cells]).sum(1)])
         elif len(cells) <= _MAX_PATCH_PRIOR:  # exact differences between configurations of the block
             configs = torch.from_numpy(np.concatenate([old[None, :], news]))
-            lp = torch.as_tensor(model.prior.log_prob_patch(torch.from_numpy(m), torch.from_numpy(cells), configs),
-                                 dtype=torch.float64).numpy()  # fmt: skip
+            lp = torch.as_tensor(
+                model.prior.log_prob_patch(torch.from_numpy(m), torch.from_numpy(cells), configs), dtype=torch.float64
+            ).numpy()
         else:
             lp = torch.as_tensor(model.prior.log_prob(torch.from_numpy(maps[:, :K])), dtype=torch.float64).numpy()
-        rays = self._rays_of(cells) if rays is None else np.asarray(rays.numpy() if isinstance(rays, torch.Tensor) else rays, np.int64)
+        rays = (
+            self._rays_of(cells)
+            if rays is None
+            else np.asarray(rays.numpy() if isinstance(rays, torch.Tensor) else rays, np.int64)
+        )
         lj = lp + self._lik(maps, rays)
         if np.isnan(lj).any():
             raise FloatingPointError("the log joint of a block move is NaN")
@@ -417,9 +433,14 @@ class GuidedGibbs(MapKernel):
         return OrderedDict([("sweeps", self.sweeps), ("guide accept", f"{self.acceptance_rate:.3f}")])
 
     def diagnostics(self):
-        return {"sweeps": self.sweeps, "guide_sweeps": self.guide_sweeps, "proposed": self._proposed,
-                "unchanged_proposals": self._same, "accepted": self._accepted,
-                "acceptance_rate": self.acceptance_rate}  # fmt: skip
+        return {
+            "sweeps": self.sweeps,
+            "guide_sweeps": self.guide_sweeps,
+            "proposed": self._proposed,
+            "unchanged_proposals": self._same,
+            "accepted": self._accepted,
+            "acceptance_rate": self.acceptance_rate,
+        }
 
     # ------------------------------------------------------------------ checkpoints
     def _extra_state(self) -> dict[str, np.ndarray]:

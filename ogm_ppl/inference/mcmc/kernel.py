@@ -44,6 +44,7 @@ __all__ = ["KernelStateError", "MapKernel", "initial_map", "region_cells"]
 
 SCANS = ("random", "permutation", "systematic")
 
+
 def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: float | None = None) -> torch.Tensor:
     """A starting map (``K`` float 0/1; pinned cells free).
 
@@ -128,8 +129,9 @@ class MapKernel(MCMCKernel):
     site = "m"
     STATE_FORMAT = 1
 
-    def __init__(self, model: OccupancyModel, scan: str = "systematic", init="ogm", delta="haehnel",
-                 region=None) -> None:  # fmt: skip
+    def __init__(
+        self, model: OccupancyModel, scan: str = "systematic", init="ogm", delta="haehnel", region=None
+    ) -> None:
         if scan not in SCANS:
             raise ValueError(f"scan must be one of {SCANS}, got {scan!r}")
         self.model = model
@@ -204,8 +206,9 @@ class MapKernel(MCMCKernel):
     def state(self) -> np.ndarray:
         """The current full map (live ``(K,)`` uint8 array; site ``"m"`` carries its latent cells)."""
         if not hasattr(self, "_m"):
-            raise RuntimeError(f"{type(self).__name__} has no state yet: call setup(), set_state() or "
-                               "load_state_dict() first")  # fmt: skip
+            raise RuntimeError(
+                f"{type(self).__name__} has no state yet: call setup(), set_state() or load_state_dict() first"
+            )
         return self._m
 
     def current_params(self) -> dict[str, torch.Tensor]:
@@ -284,9 +287,14 @@ class MapKernel(MCMCKernel):
     # --------------------------------------------------------------- checkpoints
     def state_dict(self) -> dict[str, np.ndarray]:
         """The kernel's state as flat arrays (module docstring), extras from :meth:`_extra_state`."""
-        d = {"format": np.asarray(self.STATE_FORMAT, np.int64), "kind": np.asarray(type(self).__qualname__),
-             "m": self.state.copy(), "sweeps": np.asarray(self.sweeps, np.int64),
-             "changes": np.asarray(self._changes, np.int64), "updates": np.asarray(self._updates, np.int64)}
+        d = {
+            "format": np.asarray(self.STATE_FORMAT, np.int64),
+            "kind": np.asarray(type(self).__qualname__),
+            "m": self.state.copy(),
+            "sweeps": np.asarray(self.sweeps, np.int64),
+            "changes": np.asarray(self._changes, np.int64),
+            "updates": np.asarray(self._updates, np.int64),
+        }
         extra = self._extra_state()
         clash = sorted(set(extra) & set(d))
         if clash:

@@ -183,14 +183,18 @@ def _load_checkpoint(path: Path, kernel, stats: RunningStats, seed: int, fp: dic
             if int(z["format"]) != _FORMAT:
                 raise CheckpointError(f"{path}: checkpoint format {int(z['format'])}, expected {_FORMAT}; {_HINT}")
             if int(z["num_cells"]) != kernel.model.num_cells:
-                raise CheckpointError(f"{path}: checkpoint of a map with {int(z['num_cells'])} cells, this model "
-                                      f"has {kernel.model.num_cells}; {_HINT}")  # fmt: skip
+                raise CheckpointError(
+                    f"{path}: checkpoint of a map with {int(z['num_cells'])} cells, this model "
+                    f"has {kernel.model.num_cells}; {_HINT}"
+                )
             if int(z["seed"]) != seed:
                 raise CheckpointError(f"{path}: checkpoint was written with seed {int(z['seed'])}, not {seed}; {_HINT}")
             differ = [k for k, v in fp.items() if f"fp_{k}" not in files or str(z[f"fp_{k}"]) != v]
             if differ:
-                raise CheckpointError(f"{path}: checkpoint belongs to another run: its {', '.join(differ)} "
-                                      f"differ from this run's; {_HINT}")  # fmt: skip
+                raise CheckpointError(
+                    f"{path}: checkpoint belongs to another run: its {', '.join(differ)} "
+                    f"differ from this run's; {_HINT}"
+                )
             kernel.load_state_dict({k[7:]: z[k] for k in z.files if k.startswith("kernel_")})
             stats.load_state_dict({k[6:]: z[k] for k in z.files if k.startswith("stats_")})
             torch.set_rng_state(torch.from_numpy(z["rng"].copy()))

@@ -138,7 +138,9 @@ def _run(model, mode, patches, centre, m_ref, keep, log_match=0.0, log_other=0.0
     return out.clamp(0.0, 1.0), (weights if keep else None)  # sums of exp may pass 1 by an ulp
 
 
-def online_patch_map(model: OccupancyModel, patch=3, offset=0, sensor: str = "forward", p_match: float = 0.9) -> PatchMap:
+def online_patch_map(
+    model: OccupancyModel, patch=3, offset=0, sensor: str = "forward", p_match: float = 0.9
+) -> PatchMap:
     """The online patch map (Section 3.1) with non-overlapping patches.
 
     Args:

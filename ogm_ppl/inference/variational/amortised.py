@@ -109,8 +109,9 @@ def feature_names(phase: tuple[int, int] = (3, 3)) -> list[str]:
     return list(_BASE_FEATURES) + [f"row_mod_{h}={i}" for i in range(h)] + [f"col_mod_{w}={j}" for j in range(w)]
 
 
-def evidence_features(model: OccupancyModel, readings: torch.Tensor | None = None, delta: str = "p21",
-                      phase: tuple[int, int] = (3, 3)) -> torch.Tensor:  # fmt: skip
+def evidence_features(
+    model: OccupancyModel, readings: torch.Tensor | None = None, delta: str = "p21", phase: tuple[int, int] = (3, 3)
+) -> torch.Tensor:
     r"""The readings rasterised per cell: ``C x rows x cols`` float32 (``... x C x rows x cols`` for a
     batch of readings ``... x R``; default the model's own readings).
 
@@ -160,8 +161,15 @@ def evidence_features(model: OccupancyModel, readings: torch.Tensor | None = Non
     seen = (n_pass + n_hit) > 0
     share = torch.where(seen, n_hit / (n_hit + n_pass).clamp(min=1), 0.0)
     pinned = model.known_free.to(torch.float64).expand(B, K)
-    chans = [torch.log1p(n_pass), torch.log1p(n_hit), share, lo.clamp(-_LOGODDS_CLIP, _LOGODDS_CLIP) / 4,
-             seen.to(torch.float64), pinned, torch.ones(B, K, dtype=torch.float64)]  # fmt: skip
+    chans = [
+        torch.log1p(n_pass),
+        torch.log1p(n_hit),
+        share,
+        lo.clamp(-_LOGODDS_CLIP, _LOGODDS_CLIP) / 4,
+        seen.to(torch.float64),
+        pinned,
+        torch.ones(B, K, dtype=torch.float64),
+    ]
     g = model.grid
     rows, cols = (g.rows, g.cols) if g.ndim == 2 else (1, g.num_cells)
     x = torch.stack(chans, 1).reshape(B, len(chans), rows, cols)
@@ -281,9 +289,17 @@ class AmortisedGuide(PyroModule):
     event shape ``L`` as the model's. Its weights are Pyro parameters ``"<name>.net.*"``.
     """
 
-    def __init__(self, model: OccupancyModel | None = None, *, channels: int = 16,
-                 dilations: tuple[int, ...] = (1, 2, 4, 1), phase: tuple[int, int] = (3, 3), delta: str = "p21",
-                 name: str | None = None, seed: int = 0) -> None:  # fmt: skip
+    def __init__(
+        self,
+        model: OccupancyModel | None = None,
+        *,
+        channels: int = 16,
+        dilations: tuple[int, ...] = (1, 2, 4, 1),
+        phase: tuple[int, int] = (3, 3),
+        delta: str = "p21",
+        name: str | None = None,
+        seed: int = 0,
+    ) -> None:
         super().__init__(guide_name(self, name))
         self.occupancy = model
         ph = tuple(phase)
@@ -345,8 +361,10 @@ class AmortisedGuide(PyroModule):
         if observations is not None and "z" in observations:
             readings = observations["z"]
         if readings is None:
-            raise ValueError("the amortised guide conditions on readings; got readings=None (the model "
-                             "simulates them then: there is nothing to amortise over)")  # fmt: skip
+            raise ValueError(
+                "the amortised guide conditions on readings; got readings=None (the model "
+                "simulates them then: there is nothing to amortise over)"
+            )
         z = None if isinstance(readings, str) and readings == OBSERVED else readings
         return pyro.sample("m", self.distribution(model, z))
 
@@ -358,15 +376,17 @@ class AmortisedGuide(PyroModule):
         return torch.where(model.known_free, 0.0, p)
 
     @torch.no_grad()
-    def sample_maps(self, model: OccupancyModel | None = None, n: int = 1,
-                    generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip
+    def sample_maps(
+        self, model: OccupancyModel | None = None, n: int = 1, generator: torch.Generator | None = None
+    ) -> torch.Tensor:
         """``n`` maps drawn from ``q(m | z)``: ``n x K`` float64 0/1, pinned cells 0."""
         p = self.marginals(model)
         u = torch.rand((int(n), p.numel()), generator=generator, dtype=torch.float64)
         return (u < p).to(torch.float64)
 
-    def log_prob(self, maps: torch.Tensor, model: OccupancyModel | None = None,
-                 readings: torch.Tensor | None = None) -> torch.Tensor:  # fmt: skip
+    def log_prob(
+        self, maps: torch.Tensor, model: OccupancyModel | None = None, readings: torch.Tensor | None = None
+    ) -> torch.Tensor:
         """``log q(m | z)`` of maps ``... x K`` (or latent values ``... x L``) -> ``...`` (pinned cells are
         not scored)."""
         model = self._model(model)
@@ -409,11 +429,15 @@ class AmortisedGuide(PyroModule):
         return path
 
     @classmethod
-    def load(cls, path: str | os.PathLike, model: OccupancyModel | None = None, name: str | None = None) -> AmortisedGuide:
+    def load(
+        cls, path: str | os.PathLike, model: OccupancyModel | None = None, name: str | None = None
+    ) -> AmortisedGuide:
         """A guide rebuilt from an artefact written by :meth:`save` (validated; :class:`GuideFileError`
         names the path and the problem)."""
         arch, state, meta = _read_artefact(Path(path))
-        guide = cls(model, channels=arch.channels, dilations=arch.dilations, phase=arch.phase, delta=arch.delta, name=name)
+        guide = cls(
+            model, channels=arch.channels, dilations=arch.dilations, phase=arch.phase, delta=arch.delta, name=name
+        )
         guide._set_weights(state)
         guide.trained_for = meta
         return guide
@@ -424,8 +448,11 @@ class AmortisedGuide(PyroModule):
         path = Path(path)
         arch, state, meta = _read_artefact(path)
         if arch != self.arch:
-            diff = [f"{k}: file {v!r}, guide {getattr(self.arch, k)!r}" for k, v in asdict(arch).items()
-                    if v != getattr(self.arch, k)]  # fmt: skip
+            diff = [
+                f"{k}: file {v!r}, guide {getattr(self.arch, k)!r}"
+                for k, v in asdict(arch).items()
+                if v != getattr(self.arch, k)
+            ]
             raise GuideFileError(f"{path}: a guide of another architecture ({'; '.join(diff)})")
         self._set_weights(state)
         self.trained_for = meta
@@ -452,8 +479,9 @@ def _read_artefact(path: Path) -> tuple[GuideArchitecture, dict[str, torch.Tenso
             arrays = {k: z[k] for k in z.files}
         except ValueError as e:
             if "pickle" in str(e):
-                raise GuideFileError(f"{path}: holds pickled Python objects; refused (a guide artefact is "
-                                     "plain arrays)") from None  # fmt: skip
+                raise GuideFileError(
+                    f"{path}: holds pickled Python objects; refused (a guide artefact is plain arrays)"
+                ) from None
             raise GuideFileError(f"{path}: damaged archive ({type(e).__name__}: {e})") from None
         except Exception as e:
             raise GuideFileError(f"{path}: damaged archive ({type(e).__name__}: {e})") from None
@@ -471,8 +499,9 @@ def _read_artefact(path: Path) -> tuple[GuideArchitecture, dict[str, torch.Tenso
     def ints(key: str, ndim: int) -> np.ndarray:
         a = arrays[key]
         if a.dtype.kind not in "iu" or a.ndim != ndim:
-            raise GuideFileError(f"{path}: field {key!r} must be an integer array of {ndim} dimensions, "
-                                 f"got {a.dtype} of shape {a.shape}")  # fmt: skip
+            raise GuideFileError(
+                f"{path}: field {key!r} must be an integer array of {ndim} dimensions, got {a.dtype} of shape {a.shape}"
+            )
         return a
 
     if text("kind") != _KIND:
@@ -480,8 +509,10 @@ def _read_artefact(path: Path) -> tuple[GuideArchitecture, dict[str, torch.Tenso
     if int(ints("format", 0)) != FORMAT:
         raise GuideFileError(f"{path}: artefact format {int(arrays['format'])}, this version reads {FORMAT}")
     if int(ints("feature_version", 0)) != FEATURE_VERSION:
-        raise GuideFileError(f"{path}: feature set version {int(arrays['feature_version'])}, this version "
-                             f"computes {FEATURE_VERSION}: the weights would read other inputs")  # fmt: skip
+        raise GuideFileError(
+            f"{path}: feature set version {int(arrays['feature_version'])}, this version "
+            f"computes {FEATURE_VERSION}: the weights would read other inputs"
+        )
     channels = int(ints("channels", 0))
     dilations = tuple(int(d) for d in ints("dilations", 1))
     ph = ints("phase", 1)
@@ -500,7 +531,7 @@ def _read_artefact(path: Path) -> tuple[GuideArchitecture, dict[str, torch.Tenso
     if not isinstance(meta, dict):
         raise GuideFileError(f"{path}: field 'meta' must be a JSON object")
     expected = {k: tuple(v.shape) for k, v in GuideNet(arch).state_dict().items()}
-    got = {k[len("param/"):]: a for k, a in arrays.items() if k.startswith("param/")}
+    got = {k[len("param/") :]: a for k, a in arrays.items() if k.startswith("param/")}
     extra = sorted(set(arrays) - set(fields) - {f"param/{k}" for k in expected})
     if extra:
         raise GuideFileError(f"{path}: unexpected entries {extra} for this architecture")
@@ -527,8 +558,9 @@ def shipped_guide(model: OccupancyModel | None = None) -> AmortisedGuide:
 
 
 # --------------------------------------------------------------------------------------- use (b)
-def guide_initial_map(guide: AmortisedGuide, model: OccupancyModel, how: str = "mode",
-                      generator: torch.Generator | None = None) -> torch.Tensor:  # fmt: skip
+def guide_initial_map(
+    guide: AmortisedGuide, model: OccupancyModel, how: str = "mode", generator: torch.Generator | None = None
+) -> torch.Tensor:
     """A starting map for Gibbs (``K`` float 0/1, pinned cells free) from the guide: ``"mode"`` (the
     mean-field mode, ``q_k > 1/2``) or ``"sample"`` (a draw from ``q(m | z)``). Pass it as ``init=`` to
     :class:`~ogm_ppl.inference.mcmc.gibbs.CellGibbs` / ``PatchGibbs``."""
@@ -587,9 +619,16 @@ class Scene:
         return model
 
 
-def random_scene(prior: MapPrior, shape: tuple[int, int], num_poses: int, beams: int = 120,
-                 max_range_cells: float = 12.0, sensor: SensorModel | None = None,
-                 rng: np.random.Generator | None = None, free: np.ndarray | None = None) -> Scene:  # fmt: skip
+def random_scene(
+    prior: MapPrior,
+    shape: tuple[int, int],
+    num_poses: int,
+    beams: int = 120,
+    max_range_cells: float = 12.0,
+    sensor: SensorModel | None = None,
+    rng: np.random.Generator | None = None,
+    free: np.ndarray | None = None,
+) -> Scene:
     """``num_poses`` 360 degree scans (``beams`` each, range ``max_range_cells``) from poses drawn uniformly
     over the grid (over the ``free`` cells of a ``rows x cols`` mask when given), yaw 0, resolution 1.
     ``sensor`` defaults to ``GaussianRange(1.0)``."""
@@ -607,4 +646,6 @@ def random_scene(prior: MapPrior, shape: tuple[int, int], num_poses: int, beams:
     xy = grid.cell_to_world(cells) + rng.uniform(-0.3, 0.3, (num_poses, 2))
     poses = np.c_[xy, np.zeros(num_poses)]
     angles = np.arange(beams) * (2 * np.pi / beams)
-    return Scene(grid, poses, angles, float(max_range_cells), sensor if sensor is not None else GaussianRange(1.0), prior)
+    return Scene(
+        grid, poses, angles, float(max_range_cells), sensor if sensor is not None else GaussianRange(1.0), prior
+    )

@@ -26,8 +26,7 @@ from torch import nn
 
 from ogm_ppl.models.delta import PN, DeltaFamily
 
-__all__ = ["FitData", "cross_entropy_loss", "fit_delta", "FitResult", "cross_validate", "warm_start_pn",
-           "minimise"]
+__all__ = ["FitData", "cross_entropy_loss", "fit_delta", "FitResult", "cross_validate", "warm_start_pn", "minimise"]
 
 
 class FitData(Protocol):
@@ -76,16 +75,25 @@ def fit_delta(family: DeltaFamily, data: FitData, max_iter: int = 500, tol: floa
     return minimise(family, lambda: cross_entropy_loss(family, data), max_iter=max_iter, tol=tol)
 
 
-def minimise(family: DeltaFamily, objective: Callable[[], torch.Tensor], max_iter: int = 500,
-             tol: float = 1e-10) -> FitResult:  # fmt: skip
+def minimise(
+    family: DeltaFamily, objective: Callable[[], torch.Tensor], max_iter: int = 500, tol: float = 1e-10
+) -> FitResult:
     """Minimise ``objective()`` (a scalar of the family's parameters) with the L-BFGS of :func:`fit_delta`:
     strong-Wolfe line search, gradient tolerance ``tol``; ``train_loss`` is ``objective()`` at the end."""
     params = [p for p in family.parameters() if p.requires_grad]
     if not params:
         with torch.no_grad():
             return FitResult(family, float(objective()), 0)
-    opt = torch.optim.LBFGS(params, lr=1.0, max_iter=max_iter, max_eval=2 * max_iter, tolerance_grad=tol,
-                            tolerance_change=1e-14, history_size=50, line_search_fn="strong_wolfe")  # fmt: skip
+    opt = torch.optim.LBFGS(
+        params,
+        lr=1.0,
+        max_iter=max_iter,
+        max_eval=2 * max_iter,
+        tolerance_grad=tol,
+        tolerance_change=1e-14,
+        history_size=50,
+        line_search_fn="strong_wolfe",
+    )
 
     def closure():
         opt.zero_grad()

@@ -32,8 +32,10 @@ __all__ = ["ExactELBO", "first_hit_elbo", "mean_field_elbo"]
 def _independent(model: OccupancyModel):
     lo = model.prior.cell_log_odds()
     if lo is None:
-        raise TypeError(f"the closed-form ELBO needs a prior with independent cells, not {model.prior!r}; "
-                        "use loss='rws' or 'tracegraph'")  # fmt: skip
+        raise TypeError(
+            f"the closed-form ELBO needs a prior with independent cells, not {model.prior!r}; "
+            "use loss='rws' or 'tracegraph'"
+        )
     lo = lo.to(torch.float64)
     log_on, log_off = nnf.logsigmoid(lo), nnf.logsigmoid(-lo)
     return log_on, log_off, log_off[model.known_free].sum()  # pinned cells: free in every map

@@ -55,7 +55,11 @@ class MeanFieldGuide(PyroModule):
         super().__init__(guide_name(self, name))
         self.occupancy = model
         K, L = model.num_cells, len(model.latent)
-        init = torch.zeros(L, dtype=torch.float64) if init_logits is None else torch.as_tensor(init_logits, dtype=torch.float64).clone()
+        init = (
+            torch.zeros(L, dtype=torch.float64)
+            if init_logits is None
+            else torch.as_tensor(init_logits, dtype=torch.float64).clone()
+        )
         if init.shape == (K,) and K != L:
             init = init[model.latent]
         if init.shape != (L,) or not torch.isfinite(init).all():
@@ -88,8 +92,14 @@ class PatchMapDistribution(TorchDistribution):
     arg_constraints: dict = {}
     support = constraints.independent(constraints.boolean, 1)
 
-    def __init__(self, logits: torch.Tensor, patches: torch.Tensor, num_cells: int, cells: torch.Tensor | None = None,
-                 validate_args=None):  # fmt: skip
+    def __init__(
+        self,
+        logits: torch.Tensor,
+        patches: torch.Tensor,
+        num_cells: int,
+        cells: torch.Tensor | None = None,
+        validate_args=None,
+    ):
         self.logits = logits - torch.logsumexp(logits, -1, keepdim=True)  # batch x P x W
         self.patches = patches
         self.num_cells = int(num_cells)
@@ -179,8 +189,16 @@ class PatchGuide(PyroModule):
             return self.distribution().marginals()
 
 
-def fit_guide(model: OccupancyModel, guide, steps: int = 1000, lr: float = 0.05, num_particles: int = 256,
-              seed: int = 0, progress: bool = False, loss: str = "tracegraph") -> list[float]:  # fmt: skip
+def fit_guide(
+    model: OccupancyModel,
+    guide,
+    steps: int = 1000,
+    lr: float = 0.05,
+    num_particles: int = 256,
+    seed: int = 0,
+    progress: bool = False,
+    loss: str = "tracegraph",
+) -> list[float]:
     """Train ``guide`` with ``SVI(model.model, guide, Adam(lr), <loss>)``.
 
     ``loss``: ``"tracegraph"`` (``TraceGraph_ELBO(num_particles, vectorised)``, score-function reverse
@@ -193,7 +211,6 @@ def fit_guide(model: OccupancyModel, guide, steps: int = 1000, lr: float = 0.05,
     from pyro.optim import Adam
     from tqdm.auto import tqdm
 
-
     valid = torch.arange(model.loglik_table.shape[1])[None, :] <= model.lengths[:, None]
     if loss != "exact" and torch.isinf(model.loglik_table[valid]).any():
         raise ValueError(
@@ -204,8 +221,13 @@ def fit_guide(model: OccupancyModel, guide, steps: int = 1000, lr: float = 0.05,
     if loss == "tracegraph":
         objective = TraceGraph_ELBO(num_particles=num_particles, vectorize_particles=True, max_plate_nesting=0)
     elif loss == "rws":
-        objective = ReweightedWakeSleep(num_particles=num_particles, insomnia=1.0, model_has_params=False,
-                                        vectorize_particles=True, max_plate_nesting=0)  # fmt: skip
+        objective = ReweightedWakeSleep(
+            num_particles=num_particles,
+            insomnia=1.0,
+            model_has_params=False,
+            vectorize_particles=True,
+            max_plate_nesting=0,
+        )
     elif loss == "exact":
         objective = ExactELBO()
     else:

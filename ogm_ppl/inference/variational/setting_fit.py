@@ -198,8 +198,7 @@ def reduced_cross_entropy_loss(family: DeltaFamily, r: ReducedFitData) -> torch.
     return (_ce(r.exact, lw).sum(1) + before + after).mean()
 
 
-def fit_on_data(name: str, data: FitData, *, reduce: bool = True, max_iter: int = 500,
-                tol: float = 1e-10) -> FitResult:  # fmt: skip
+def fit_on_data(name: str, data: FitData, *, reduce: bool = True, max_iter: int = 500, tol: float = 1e-10) -> FitResult:
     """Fit the family ``name`` (:func:`setting_family_names`) on ``data`` by L-BFGS (Section 2.5).
 
     ``reduce``: minimise the reduced loss (:func:`reduce_fit_data`); the full loss is evaluated at the end
@@ -226,8 +225,9 @@ def _one_thread() -> Iterator[None]:
         torch.set_num_threads(old)
 
 
-def _fit_one(name: str, family: DeltaFamily, data: FitData, best: FitResult | None, *, reduce: bool,
-             max_iter: int, tol: float) -> FitResult:  # fmt: skip
+def _fit_one(
+    name: str, family: DeltaFamily, data: FitData, best: FitResult | None, *, reduce: bool, max_iter: int, tol: float
+) -> FitResult:
     """One start point fitted; the better of it and ``best``."""
     bounds = _offset_bounds(family) if reduce else None
     r = reduce_fit_data(data, *bounds) if bounds is not None else None
@@ -238,8 +238,10 @@ def _fit_one(name: str, family: DeltaFamily, data: FitData, best: FitResult | No
         with torch.no_grad():
             full = float(cross_entropy_loss(family, data))
         if not abs(full - res.train_loss) <= 1e-9 * max(1.0, abs(full)):
-            raise RuntimeError(f"reduced loss {res.train_loss!r} != full loss {full!r} for {name}: "
-                               "the reduction does not hold for this family")  # fmt: skip
+            raise RuntimeError(
+                f"reduced loss {res.train_loss!r} != full loss {full!r} for {name}: "
+                "the reduction does not hold for this family"
+            )
         res = FitResult(family, full, res.iterations)
     return res if best is None or res.train_loss < best.train_loss else best
 
@@ -262,8 +264,17 @@ def _check_setting(sigma: float, F: int, wall: int, num: int, num_readings: tupl
         raise ValueError(f"num_readings must be (lo, hi) with 1 <= lo <= hi, got {num_readings!r}")
 
 
-def setting_file_name(name: str, sigma: float, F: int, *, wall: int | None = None, num: int = 1000,
-                      num_readings: tuple[int, int] = (1, 10), seed: int = 0, prior: str = "uniform") -> str:  # fmt: skip
+def setting_file_name(
+    name: str,
+    sigma: float,
+    F: int,
+    *,
+    wall: int | None = None,
+    num: int = 1000,
+    num_readings: tuple[int, int] = (1, 10),
+    seed: int = 0,
+    prior: str = "uniform",
+) -> str:
     """The cache file name of a setting fit, e.g. ``delta_p21_sigma1_F400_wall320_n1000_r1-10_seed0_uniform.json``."""
     wall = round(0.8 * F) if wall is None else wall
     lo, hi = num_readings
@@ -306,9 +317,21 @@ def fit_delta_for_setting(
     fit and write it there. Cost (measured on 2 busy cores, ``num = 1000``): data ~5-9 ms per dataset
     (7-9 s at ``F = 400``), the fit 0.1-5 s. :func:`fit_deltas_for_setting` fits several names on one data.
     """
-    return fit_deltas_for_setting([name], sigma, F, wall=wall, num=num, num_readings=num_readings, seed=seed,
-                                  prior=prior, heldout=heldout, reduce=reduce, max_iter=max_iter, tol=tol,
-                                  cache_dir=cache_dir)[name]  # fmt: skip
+    return fit_deltas_for_setting(
+        [name],
+        sigma,
+        F,
+        wall=wall,
+        num=num,
+        num_readings=num_readings,
+        seed=seed,
+        prior=prior,
+        heldout=heldout,
+        reduce=reduce,
+        max_iter=max_iter,
+        tol=tol,
+        cache_dir=cache_dir,
+    )[name]
 
 
 def fit_deltas_for_setting(
@@ -334,19 +357,29 @@ def fit_deltas_for_setting(
         wall = round(0.8 * F)
     _check_setting(sigma, F, wall, num, num_readings)  # type: ignore[arg-type]
     F, wall, num, seed = int(F), int(wall), int(num), int(seed)  # type: ignore[arg-type]
-    setting = {"num": num, "F": F, "wall": wall, "sigma": float(sigma), "num_readings": list(num_readings),
-               "seed": seed, "prior": prior}  # fmt: skip
+    setting = {
+        "num": num,
+        "F": F,
+        "wall": wall,
+        "sigma": float(sigma),
+        "num_readings": list(num_readings),
+        "seed": seed,
+        "prior": prior,
+    }
     out: dict[str, tuple[DeltaFamily, dict]] = {}
     paths: dict[str, Path] = {}
     for name in names if cache_dir is not None else ():
         paths[name] = path = Path(str(cache_dir)) / setting_file_name(
-            name, sigma, F, wall=wall, num=num, num_readings=num_readings, seed=seed, prior=prior)  # fmt: skip
+            name, sigma, F, wall=wall, num=num, num_readings=num_readings, seed=seed, prior=prior
+        )
         if path.exists():
             family, training = load_setting_fit(path)
             differs = {k: (training.get(k), v) for k, v in setting.items() if training.get(k) != v}
             if differs:
-                raise DeltaFileError(f"{path}: its training setting differs from the one asked for "
-                                     f"(file, asked): {differs}; delete the file to refit")  # fmt: skip
+                raise DeltaFileError(
+                    f"{path}: its training setting differs from the one asked for "
+                    f"(file, asked): {differs}; delete the file to refit"
+                )
             out[name] = family, training
     todo = [n for n in names if n not in out]
     if not todo:
@@ -355,8 +388,9 @@ def fit_deltas_for_setting(
     data = wall_datasets(num=num, F=F, wall=wall, sigma=sigma, num_readings=num_readings, prior=prior, seed=seed)
     test = None
     if heldout > 0:
-        test = wall_datasets(num=heldout, F=F, wall=wall, sigma=sigma, num_readings=num_readings, prior=prior,
-                             seed=seed + 1)  # fmt: skip
+        test = wall_datasets(
+            num=heldout, F=F, wall=wall, sigma=sigma, num_readings=num_readings, prior=prior, seed=seed + 1
+        )
     t_data = time.perf_counter() - t0
     for name in todo:
         t1 = time.perf_counter()
@@ -366,10 +400,18 @@ def fit_deltas_for_setting(
         if test is not None:
             with torch.no_grad():
                 held = float(cross_entropy_loss(res.family, test))
-        training = {**setting, "optimizer": "torch.optim.LBFGS(line_search_fn='strong_wolfe')",
-                    "max_iter": max_iter, "tol": tol, "reduced": bool(reduce), "function": _FUNCTION,
-                    "train_cross_entropy": res.train_loss, "heldout": heldout, "heldout_cross_entropy": held,
-                    "seconds": {"data": t_data, "fit": t_fit}}  # fmt: skip
+        training = {
+            **setting,
+            "optimizer": "torch.optim.LBFGS(line_search_fn='strong_wolfe')",
+            "max_iter": max_iter,
+            "tol": tol,
+            "reduced": bool(reduce),
+            "function": _FUNCTION,
+            "train_cross_entropy": res.train_loss,
+            "heldout": heldout,
+            "heldout_cross_entropy": held,
+            "seconds": {"data": t_data, "fit": t_fit},
+        }
         res.family.fitted_setting = {**training, "name": name}
         if name in paths:
             save_setting_fit(paths[name], name, res.family, training)
@@ -386,16 +428,27 @@ def save_setting_fit(path: str | Path, name: str, family: DeltaFamily, training:
 
     path = Path(path)
     path.parent.mkdir(parents=True, exist_ok=True)
-    record = {"format": 1, "name": name, "delta": family_to_dict(family), "training": training,
-              "train_cross_entropy": training.get("train_cross_entropy"),
-              "heldout_cross_entropy": training.get("heldout_cross_entropy")}  # fmt: skip
+    record = {
+        "format": 1,
+        "name": name,
+        "delta": family_to_dict(family),
+        "training": training,
+        "train_cross_entropy": training.get("train_cross_entropy"),
+        "heldout_cross_entropy": training.get("heldout_cross_entropy"),
+    }
     atomic_write_text(path, json.dumps(record, indent=1))
     return path
 
 
-_REQUIRED = {"sigma": "a positive number", "F": "an integer >= 2", "wall": "an integer in 1..F-1",
-             "num": "a positive integer", "seed": "an integer", "num_readings": "a list [lo, hi]",
-             "prior": "a string"}  # fmt: skip
+_REQUIRED = {
+    "sigma": "a positive number",
+    "F": "an integer >= 2",
+    "wall": "an integer in 1..F-1",
+    "num": "a positive integer",
+    "seed": "an integer",
+    "num_readings": "a list [lo, hi]",
+    "prior": "a string",
+}
 
 
 def load_setting_fit(path: str | Path) -> tuple[DeltaFamily, dict]:
@@ -463,8 +516,9 @@ def _fit_hint(name: str, sigma: float, F: float | None) -> str:
     return f"fit_delta_for_setting({base!r}, sigma={sigma:g}{f}{extra})"
 
 
-def check_delta_setting(delta_or_name: DeltaFamily | str, sigma_cells: float, F_cells: float | None = None,
-                        *, where: str = "") -> bool:  # fmt: skip
+def check_delta_setting(
+    delta_or_name: DeltaFamily | str, sigma_cells: float, F_cells: float | None = None, *, where: str = ""
+) -> bool:
     """Whether a term is used inside the setting it was fitted for; warns (:class:`FittedSettingWarning`)
     if not.
 
@@ -507,8 +561,12 @@ def check_delta_setting(delta_or_name: DeltaFamily | str, sigma_cells: float, F_
     fitted = f"sigma = {sigma_fit:g} cells" + (f", F = {F_fit:g} cells" if isinstance(F_fit, (int, float)) else "")
     at = f"sigma = {sigma_cells:g} cells" + ("" if F_cells is None else f", F = {F_cells:g} cells")
     loc = f" in {where}" if where else ""
-    warnings.warn(FittedSettingWarning(
-        f"Delta term {name!r} was fitted for {fitted} but is used at {at}{loc} ({'; '.join(bad)}); "
-        f"outside its setting it can erase walls or blur them. Fit it for this setting: "
-        f"{_fit_hint(str(name), sigma_cells, F_cells)}"), stacklevel=2)  # fmt: skip
+    warnings.warn(
+        FittedSettingWarning(
+            f"Delta term {name!r} was fitted for {fitted} but is used at {at}{loc} ({'; '.join(bad)}); "
+            f"outside its setting it can erase walls or blur them. Fit it for this setting: "
+            f"{_fit_hint(str(name), sigma_cells, F_cells)}"
+        ),
+        stacklevel=2,
+    )
     return False

@@ -64,8 +64,11 @@ class FirstHitMapDistribution(TorchDistribution):
 
     def expand(self, batch_shape, _instance=None):
         b = torch.Size(batch_shape)
-        return FirstHitMapDistribution(self.f_logits.expand(b + self.f_logits.shape[-1:]),
-                                       self.behind_logits.expand(b + self.behind_logits.shape[-1:]), self.order)  # fmt: skip
+        return FirstHitMapDistribution(
+            self.f_logits.expand(b + self.f_logits.shape[-1:]),
+            self.behind_logits.expand(b + self.behind_logits.shape[-1:]),
+            self.order,
+        )
 
     def sample(self, sample_shape=torch.Size()):
         shape = torch.Size(sample_shape) + self.batch_shape
@@ -85,8 +88,9 @@ class FirstHitMapDistribution(TorchDistribution):
         occ = x != 0
         j = torch.where(occ.any(-1), occ.to(torch.uint8).argmax(-1), L)
         lf = torch.gather(self.f_logits.expand(x.shape[:-1] + (L + 1,)), -1, j[..., None])[..., 0]
-        lb = -nnf.binary_cross_entropy_with_logits(self.behind_logits.expand(x.shape), x.to(self.behind_logits.dtype),
-                                                   reduction="none")  # fmt: skip
+        lb = -nnf.binary_cross_entropy_with_logits(
+            self.behind_logits.expand(x.shape), x.to(self.behind_logits.dtype), reduction="none"
+        )
         behind = torch.arange(L) > j[..., None]
         return lf + torch.where(behind, lb, 0.0).sum(-1)
 

@@ -47,8 +47,16 @@ class WallDatasets:
 
     def subset(self, idx) -> WallDatasets:
         idx = torch.as_tensor(idx, dtype=torch.long)
-        return WallDatasets([self.readings[i] for i in idx.tolist()], self.counts[idx], self.exact[idx],
-                            self.F, self.wall, self.sigma, self.prior, self.seed)  # fmt: skip
+        return WallDatasets(
+            [self.readings[i] for i in idx.tolist()],
+            self.counts[idx],
+            self.exact[idx],
+            self.F,
+            self.wall,
+            self.sigma,
+            self.prior,
+            self.seed,
+        )
 
 
 def wall_datasets(

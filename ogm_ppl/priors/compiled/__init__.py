@@ -18,7 +18,8 @@ registered functions of the bundle's type when it compiles a kernel for that typ
 per kind, with no branch on the kind anywhere.
 
 **Adding a kind** is one module: a ``typing.NamedTuple`` bundle (numba takes it as one argument; give it
-the Python methods ``sparse_patches()``, ``patch_capacity(L)`` and ``tiles_patches(hw, anchors)`` of the bundles here), its
+the Python methods ``sparse_patches()``, ``patch_capacity(L)`` and ``tiles_patches(hw, anchors)`` of the bundles
+here), its
 compiled conditionals as plain functions numba compiles inline, and one :func:`register` call; import the
 module below and add the class to :data:`CompiledPrior`. A prior then returns the bundle from
 ``compiled()``, and ``ogm_ppl.testing.PriorContract`` checks its conditionals against ``log_prob``.
@@ -43,6 +44,23 @@ from ogm_ppl.priors.compiled.sampling import patch_prior_batch, prior_gibbs_swee
 from ogm_ppl.priors.compiled.stencil import stencil
 from ogm_ppl.priors.compiled.tiles import tiles
 
-__all__ = ["CompiledPrior", "IndependentCells", "Stencil", "Tiles", "candidate_weights", "cell_log_odds",
-           "independent_cells", "is_additive", "kind_of", "patch_candidates", "patch_prior_batch", "patch_prior_weights",
-           "prior_gibbs_sweeps", "register", "registered", "scratch_capacity", "stencil", "tiles"]
+__all__ = [
+    "CompiledPrior",
+    "IndependentCells",
+    "Stencil",
+    "Tiles",
+    "candidate_weights",
+    "cell_log_odds",
+    "independent_cells",
+    "is_additive",
+    "kind_of",
+    "patch_candidates",
+    "patch_prior_batch",
+    "patch_prior_weights",
+    "prior_gibbs_sweeps",
+    "register",
+    "registered",
+    "scratch_capacity",
+    "stencil",
+    "tiles",
+]

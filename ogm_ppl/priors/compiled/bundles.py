@@ -16,30 +16,20 @@ import numpy as np
 __all__ = ["CompiledPrior", "IndependentCells", "Stencil", "Tiles"]
 
 
-def _dense_patches(self) -> bool:
-    """Whether patch updates may weigh a sparse support (so patches may exceed 20 cells): no."""
-    return False
-
-
-def _dense_capacity(self, L: int) -> int:
-    """Configurations a patch update of ``L`` cells may weigh: all ``2^L`` (``L <= 20``)."""
-    return max(1 << L if L <= 20 else 0, 2)
-
-
-def _no_tiles(self, hw, anchors) -> bool:
-    """Whether every patch is a tile of the prior's tiling: there is none."""
-    return False
-
-
 class IndependentCells(NamedTuple):
     """Cells independent a priori: ``log p(m) = sum_k m_k l_k + const``."""
 
     log_odds: np.ndarray  # K float64: l_k = log lambda_k - log(1 - lambda_k)
 
-    # every patch configuration is weighed (at most 2^20 of them), and no patch is a tile
-    sparse_patches = _dense_patches
-    patch_capacity = _dense_capacity
-    tiles_patches = _no_tiles
+    def sparse_patches(self) -> bool:
+        """Whether patch updates may weigh a sparse support (so patches may exceed 20 cells)."""
+        return False
+
+    def patch_capacity(self, L: int) -> int:
+        return max(1 << L if L <= 20 else 0, 2)
+
+    def tiles_patches(self, hw, anchors) -> bool:
+        return False
 
 
 class Stencil(NamedTuple):
@@ -54,10 +44,14 @@ class Stencil(NamedTuple):
     bias: np.ndarray  # D float64: a_d
     coupling: np.ndarray  # D float64: J_d
 
-    # every patch configuration is weighed (at most 2^20 of them), and no patch is a tile
-    sparse_patches = _dense_patches
-    patch_capacity = _dense_capacity
-    tiles_patches = _no_tiles
+    def sparse_patches(self) -> bool:
+        return False
+
+    def patch_capacity(self, L: int) -> int:
+        return max(1 << L if L <= 20 else 0, 2)
+
+    def tiles_patches(self, hw, anchors) -> bool:
+        return False
 
 
 class Tiles(NamedTuple):

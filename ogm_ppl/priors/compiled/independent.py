@@ -47,5 +47,6 @@ def _candidates(prior, patch, m, cands, n, tag, cand_lp, out, ts):
     independent_patch_weights(prior, patch, m, cands, n, out)
 
 
-register(IndependentCells, cell_log_odds=_cell, patch_prior_weights=_patch, candidate_weights=_candidates,
-         additive=True)
+register(
+    IndependentCells, cell_log_odds=_cell, patch_prior_weights=_patch, candidate_weights=_candidates, additive=True
+)

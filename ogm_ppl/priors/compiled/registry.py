@@ -31,8 +31,18 @@ from typing import NamedTuple
 import numpy as np
 from numba.extending import overload
 
-__all__ = ["Kind", "candidate_weights", "cell_log_odds", "is_additive", "kind_of", "patch_candidates",
-           "patch_prior_weights", "register", "registered", "scratch_capacity"]
+__all__ = [
+    "Kind",
+    "candidate_weights",
+    "cell_log_odds",
+    "is_additive",
+    "kind_of",
+    "patch_candidates",
+    "patch_prior_weights",
+    "register",
+    "registered",
+    "scratch_capacity",
+]
 
 
 class Kind(NamedTuple):
@@ -62,13 +72,26 @@ def _no_scratch(prior, L):
     return 1
 
 
-def register(bundle: type, *, cell_log_odds: Callable, patch_prior_weights: Callable, candidate_weights: Callable,
-             patch_candidates: Callable | None = None, scratch_capacity: Callable | None = None,
-             additive: bool = False) -> None:
+def register(
+    bundle: type,
+    *,
+    cell_log_odds: Callable,
+    patch_prior_weights: Callable,
+    candidate_weights: Callable,
+    patch_candidates: Callable | None = None,
+    scratch_capacity: Callable | None = None,
+    additive: bool = False,
+) -> None:
     """Register the compiled conditionals of the bundle class ``bundle`` (see the module docstring for each
     function's signature and meaning; the optional ones default to the dense, scratch-free versions)."""
-    _KINDS[bundle] = Kind(cell_log_odds, patch_prior_weights, patch_candidates or _dense_candidates,
-                          candidate_weights, scratch_capacity or _no_scratch, bool(additive))
+    _KINDS[bundle] = Kind(
+        cell_log_odds,
+        patch_prior_weights,
+        patch_candidates or _dense_candidates,
+        candidate_weights,
+        scratch_capacity or _no_scratch,
+        bool(additive),
+    )
 
 
 def registered() -> tuple[type, ...]:

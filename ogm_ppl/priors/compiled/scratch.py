@@ -33,6 +33,14 @@ class TileScratch(NamedTuple):
 def tile_scratch(num_cells, C):
     """A :class:`TileScratch` for a ``num_cells``-cell map and up to ``C`` touched tiles (and pairs)."""
     C = max(C, 1)
-    return TileScratch(np.full(num_cells, -1, np.int64), np.empty(C, np.int64), np.empty(C, np.int64),
-                       np.empty(C, np.int64), np.empty(C + 1, np.int64), np.empty(C, np.int64),
-                       np.empty(C, np.int64), np.empty(C + 1, np.int64), np.empty(C << MEMO_BITS, np.float64))
+    return TileScratch(
+        np.full(num_cells, -1, np.int64),
+        np.empty(C, np.int64),
+        np.empty(C, np.int64),
+        np.empty(C, np.int64),
+        np.empty(C + 1, np.int64),
+        np.empty(C, np.int64),
+        np.empty(C, np.int64),
+        np.empty(C + 1, np.int64),
+        np.empty(C << MEMO_BITS, np.float64),
+    )

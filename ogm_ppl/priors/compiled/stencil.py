@@ -23,9 +23,15 @@ __all__ = ["stencil", "stencil_cell_log_odds", "stencil_patch_weights"]
 
 def stencil(rows, cols, unary, dr, dc, bias, coupling) -> Stencil:
     """A :class:`Stencil` bundle from its weights (arrays made contiguous, of the kernels' dtypes)."""
-    return Stencil(rows=int(rows), cols=int(cols), unary=np.ascontiguousarray(unary, np.float64),
-                   dr=np.ascontiguousarray(dr, np.int64), dc=np.ascontiguousarray(dc, np.int64),
-                   bias=np.ascontiguousarray(bias, np.float64), coupling=np.ascontiguousarray(coupling, np.float64))
+    return Stencil(
+        rows=int(rows),
+        cols=int(cols),
+        unary=np.ascontiguousarray(unary, np.float64),
+        dr=np.ascontiguousarray(dr, np.int64),
+        dc=np.ascontiguousarray(dc, np.int64),
+        bias=np.ascontiguousarray(bias, np.float64),
+        coupling=np.ascontiguousarray(coupling, np.float64),
+    )
 
 
 @nb.njit(cache=True, inline="always")

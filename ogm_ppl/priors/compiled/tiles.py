@@ -25,8 +25,18 @@ from ogm_ppl.priors.compiled.bundles import Tiles
 from ogm_ppl.priors.compiled.registry import register
 from ogm_ppl.priors.compiled.scratch import MEMO_BITS
 
-__all__ = ["DENSE_MAX_BITS", "DENSE_MAX_ENTRIES", "tile_candidates", "tile_cell_log_odds", "tile_of_anchor",
-           "tile_patch_factors", "tile_patch_setup", "tiles", "tiles_log_prob_batch", "touch_capacity"]
+__all__ = [
+    "DENSE_MAX_BITS",
+    "DENSE_MAX_ENTRIES",
+    "tile_candidates",
+    "tile_cell_log_odds",
+    "tile_of_anchor",
+    "tile_patch_factors",
+    "tile_patch_setup",
+    "tiles",
+    "tiles_log_prob_batch",
+    "touch_capacity",
+]
 
 _I = np.zeros(0, np.int64)
 _F = np.zeros(0, np.float64)
@@ -436,13 +446,29 @@ def tiles(rows, cols, geometry, n_inner, tile, pad, t_seg, t_fill, seg_keys, seg
         keys.append(np.asarray(k, np.int64)[order])
         logp.append(np.asarray(lp, np.float64)[order])
         seg_off[s + 1] = seg_off[s] + len(k)
-    bundle = Tiles(rows=int(rows), cols=int(cols), w_dr=w_dr, w_dc=w_dc, n_inner=int(n_inner), t_h=int(tile[0]),
-                   t_w=int(tile[1]), t_r0=int(r0), t_c0=int(c0), t_rows=int(t_rows), t_cols=int(t_cols),
-                   pad_r=int(pad[0]), pad_c=int(pad[1]), t_seg=np.ascontiguousarray(t_seg, np.int64),
-                   t_fill=np.ascontiguousarray(t_fill, np.int64), seg_off=seg_off,
-                   keys=np.ascontiguousarray(np.concatenate(keys) if keys else _I, np.int64),
-                   logp=np.ascontiguousarray(np.concatenate(logp) if logp else _F, np.float64),
-                   fallback=int(fallback), dense=_F, dense_bits=-1)
+    bundle = Tiles(
+        rows=int(rows),
+        cols=int(cols),
+        w_dr=w_dr,
+        w_dc=w_dc,
+        n_inner=int(n_inner),
+        t_h=int(tile[0]),
+        t_w=int(tile[1]),
+        t_r0=int(r0),
+        t_c0=int(c0),
+        t_rows=int(t_rows),
+        t_cols=int(t_cols),
+        pad_r=int(pad[0]),
+        pad_c=int(pad[1]),
+        t_seg=np.ascontiguousarray(t_seg, np.int64),
+        t_fill=np.ascontiguousarray(t_fill, np.int64),
+        seg_off=seg_off,
+        keys=np.ascontiguousarray(np.concatenate(keys) if keys else _I, np.int64),
+        logp=np.ascontiguousarray(np.concatenate(logp) if logp else _F, np.float64),
+        fallback=int(fallback),
+        dense=_F,
+        dense_bits=-1,
+    )
     Lw = len(w_dr)
     if Lw <= DENSE_MAX_BITS and (len(seg_keys) << Lw) <= DENSE_MAX_ENTRIES:
         bundle = bundle._replace(dense=dense_factor_table(bundle), dense_bits=Lw)
@@ -501,5 +527,11 @@ def _capacity(prior, L):
     return touch_capacity(prior, L)
 
 
-register(Tiles, cell_log_odds=_cell, patch_prior_weights=_patch, patch_candidates=_cands, candidate_weights=_weights,
-         scratch_capacity=_capacity)
+register(
+    Tiles,
+    cell_log_odds=_cell,
+    patch_prior_weights=_patch,
+    patch_candidates=_cands,
+    candidate_weights=_weights,
+    scratch_capacity=_capacity,
+)

@@ -42,8 +42,7 @@ def test_brute_force_equals_pose_constrained(seed):
     torch.testing.assert_close(bf.marginals, pc.marginals, rtol=0, atol=1e-10)
     torch.testing.assert_close(bf.first_hit(0), pc.first_hit(0), rtol=0, atol=1e-10)
     torch.testing.assert_close(bf.pair_joint(), pc.pair_joint(torch.arange(K)), rtol=0, atol=1e-10)
-    torch.testing.assert_close(bf.mutual_information(), pc.mutual_information(torch.arange(K)),
-                               rtol=0, atol=1e-9)  # fmt: skip
+    torch.testing.assert_close(bf.mutual_information(), pc.mutual_information(torch.arange(K)), rtol=0, atol=1e-9)
     path = [1, K - 1] if K > 2 else [1]
     assert bf.prob_free(path) == pytest.approx(pc.prob_free(path), abs=1e-10)
     assert bf.log_evidence == pytest.approx(pc.log_evidence, abs=1e-9)
@@ -59,8 +58,7 @@ def test_data_driven_prior_matches_brute_force(seed):
     bf, pc = brute_force(model), pose_constrained_1d(model)
     torch.testing.assert_close(bf.marginals, pc.marginals, rtol=0, atol=1e-10)
     torch.testing.assert_close(bf.first_hit(0), pc.first_hit(0), rtol=0, atol=1e-10)
-    torch.testing.assert_close(bf.mutual_information(), pc.mutual_information(torch.arange(K + 1)),
-                               rtol=0, atol=1e-9)  # fmt: skip
+    torch.testing.assert_close(bf.mutual_information(), pc.mutual_information(torch.arange(K + 1)), rtol=0, atol=1e-9)
     assert bf.prob_free([2, 3]) == pytest.approx(pc.prob_free([2, 3]), abs=1e-10)
 
 
@@ -83,8 +81,12 @@ def test_thesis_toy_statistics():
 
 def tiny_2d(prior_kind="independent"):
     grid = Grid((3, 3), resolution=1.0)
-    scans = Scans([[0.5, 0.5, 0.0], [0.5, 0.5, math.pi / 2], [2.5, 2.5, math.pi], [2.5, 1.5, math.pi]],
-                  [0.0], [[1.2], [2.0], [1.5], [0.9]], max_range=2.5)  # fmt: skip
+    scans = Scans(
+        [[0.5, 0.5, 0.0], [0.5, 0.5, math.pi / 2], [2.5, 2.5, math.pi], [2.5, 1.5, math.pi]],
+        [0.0],
+        [[1.2], [2.0], [1.5], [0.9]],
+        max_range=2.5,
+    )
     rays = raycast(grid, scans)
     prior = IndependentPrior(torch.linspace(0.2, 0.7, 9)) if prior_kind == "independent" else None
     return OccupancyModel(grid, rays, GaussianRange(0.8), prior)

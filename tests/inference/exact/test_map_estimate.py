@@ -49,8 +49,9 @@ def test_generic_prior_path():
 
 def test_2d_map_and_bad_init():
     ex = simple_2d_example()
-    model = OccupancyModel(ex.grid, raycast(ex.grid, ex.scans), GaussianRange(3.0),
-                           IndependentPrior(0.5, ex.grid.num_cells))  # fmt: skip
+    model = OccupancyModel(
+        ex.grid, raycast(ex.grid, ex.scans), GaussianRange(3.0), IndependentPrior(0.5, ex.grid.num_cells)
+    )
     est = map_estimate(model)
     assert est.converged and np.isfinite(est.log_joint)
     sub = model.latent[torch.randperm(len(model.latent), generator=torch.Generator().manual_seed(0))[:200]]

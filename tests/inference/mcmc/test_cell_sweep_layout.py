@@ -19,6 +19,8 @@ from ogm_ppl.inference._kernels.cells import first_hits
 from ogm_ppl.priors import IndependentPrior, MRFPrior
 
 N = 24
+
+
 def scene(prior):
     rng = np.random.default_rng(5)
     truth = np.zeros((N, N), bool)
@@ -114,8 +116,11 @@ def compiled_state(arr, m):
 
 
 def orders(latent, rng):
-    return {"systematic": latent, "permutation": np.ascontiguousarray(latent[rng.permutation(len(latent))]),
-            "random": np.ascontiguousarray(latent[rng.integers(0, len(latent), len(latent))])}  # fmt: skip
+    return {
+        "systematic": latent,
+        "permutation": np.ascontiguousarray(latent[rng.permutation(len(latent))]),
+        "random": np.ascontiguousarray(latent[rng.integers(0, len(latent), len(latent))]),
+    }
 
 
 def second_hits(arr, m, f):
@@ -250,10 +255,29 @@ def test_draws_orders_and_uniforms():
 
 
 def test_new_value_shortcuts_are_exact():
-    los = [-math.inf, -800.0, -745.2, -41.0, -40.0000001, -40.0, -39.99, -20.0, -1e-300, -0.0, 0.0, 1e-300, 20.0,
-           39.99, 40.0, 40.0000001, 41.0, 800.0, math.inf, math.nan]  # fmt: skip
-    us = [0.0, 5e-324, 1e-20, 4.2e-18, 4.25e-18, 4.2483542552915889e-18, 4.3e-18, 1e-17, 0.25, 0.5,
-          0.9999999999999999]  # fmt: skip
+    los = [
+        -math.inf,
+        -800.0,
+        -745.2,
+        -41.0,
+        -40.0000001,
+        -40.0,
+        -39.99,
+        -20.0,
+        -1e-300,
+        -0.0,
+        0.0,
+        1e-300,
+        20.0,
+        39.99,
+        40.0,
+        40.0000001,
+        41.0,
+        800.0,
+        math.inf,
+        math.nan,
+    ]
+    us = [0.0, 5e-324, 1e-20, 4.2e-18, 4.25e-18, 4.2483542552915889e-18, 4.3e-18, 1e-17, 0.25, 0.5, 0.9999999999999999]
     for update in (cs.HEAT_BATH, cs.METROPOLISED):
         for lo in los:
             for u in us:

@@ -85,8 +85,13 @@ def priors_2d(shape):
         "indep": lambda: IndependentPrior(torch.linspace(0.2, 0.5, s[0] * s[1])),
         "mrf1": lambda: MRFPrior(s, order=1, psi=0.4, cell_prior=0.35),
         "mrf2": lambda: MRFPrior(s, order=2, psi=0.6, cell_prior=0.3),
-        "stencil": lambda: StencilPrior(s, unary=np.linspace(-1.0, 0.2, s[0] * s[1]), offsets=[(0, 1), (1, 0), (1, 1)],
-                                        coupling=[0.9, 0.7, -0.3], bias=0.1),
+        "stencil": lambda: StencilPrior(
+            s,
+            unary=np.linspace(-1.0, 0.2, s[0] * s[1]),
+            offsets=[(0, 1), (1, 0), (1, 1)],
+            coupling=[0.9, 0.7, -0.3],
+            bias=0.1,
+        ),
         "table3": lambda: PatchTablePrior(s, c3, n3, patch=(3, 3), origin=(1, 2)),
         "table5": lambda: PatchTablePrior(s, c5, n5, patch=(5, 5), origin=(2, 1)),
         "border3": lambda: BorderPatchPrior(s, *_border_table(16, 9, 2500, 3), inner=(3, 3)),
@@ -163,12 +168,16 @@ def cases() -> dict:
         if kernel.L > 12:
             return b""
         pcs = kernel.patches()
-        return b"".join(np.ascontiguousarray(kernel.patch_log_weights(p), np.float64).tobytes()
-                        for p in pcs[:: max(1, len(pcs) // 4)])
+        return b"".join(
+            np.ascontiguousarray(kernel.patch_log_weights(p), np.float64).tobytes()
+            for p in pcs[:: max(1, len(pcs) // 4)]
+        )
 
     # single-cell Gibbs: every prior route, scan and update rule; region on some
-    for pname, pf in {**{f"2d-{k}": (scene_2d, v) for k, v in P2.items()},
-                      **{f"1d-{k}": (scene_1d, v) for k, v in P1.items()}}.items():
+    for pname, pf in {
+        **{f"2d-{k}": (scene_2d, v) for k, v in P2.items()},
+        **{f"1d-{k}": (scene_1d, v) for k, v in P1.items()},
+    }.items():
         scene, prior = pf
         for scan in ("systematic", "permutation", "random"):
             for update in ("gibbs", "metropolised"):
@@ -176,71 +185,127 @@ def cases() -> dict:
                     if region and scan == "permutation":
                         continue
                     name = f"cell/{pname}/{scan}/{update}" + ("/region" if region else "")
-                    out[name] = chain(scene, prior, lambda m, r, s=scan, u=update: CellGibbs(m, scan=s, update=u, region=r),
-                                      seed=len(out), region=region, probe=cell_probe)
-    small = lambda p: (lambda: p((6, 6)))
+                    out[name] = chain(
+                        scene,
+                        prior,
+                        lambda m, r, s=scan, u=update: CellGibbs(m, scan=s, update=u, region=r),
+                        seed=len(out),
+                        region=region,
+                        probe=cell_probe,
+                    )
+    small = lambda p: lambda: p((6, 6))
     for scan in ("systematic", "random"):
         for update in ("gibbs", "metropolised"):
             out[f"cell/generic/{scan}/{update}"] = chain(
-                lambda pr: scene_2d(pr, n=6), small(lambda s: IsingLogProbOnly(*s)),
-                lambda m, r, s=scan, u=update: CellGibbs(m, scan=s, update=u), seed=len(out), probe=cell_probe)
+                lambda pr: scene_2d(pr, n=6),
+                small(lambda s: IsingLogProbOnly(*s)),
+                lambda m, r, s=scan, u=update: CellGibbs(m, scan=s, update=u),
+                seed=len(out),
+                probe=cell_probe,
+            )
     # Metropolis-Hastings flips
     for pname in ("indep", "mrf1", "border3"):
         for proposal, scan in (("uniform", "random"), ("uniform", "permutation"), ("endpoint", "random")):
             for region in (False, True):
                 out[f"mh/2d-{pname}/{proposal}/{scan}" + ("/region" if region else "")] = chain(
-                    scene_2d, P2[pname], lambda m, r, p=proposal, s=scan: MetropolisCell(m, proposal=p, scan=s, region=r),
-                    seed=len(out), region=region)
+                    scene_2d,
+                    P2[pname],
+                    lambda m, r, p=proposal, s=scan: MetropolisCell(m, proposal=p, scan=s, region=r),
+                    seed=len(out),
+                    region=region,
+                )
     # patch Gibbs, 1D runs
     for pname, prior in P1.items():
         for scan in ("systematic", "permutation", "random"):
             for update in ("gibbs", "metropolised"):
                 for prand, mode in ((0.0, "mh"), (0.3, "mh"), (0.3, "thesis")):
                     name = f"patch/1d-{pname}/run3/{scan}/{update}/p{prand}-{mode}"
-                    out[name] = chain(scene_1d, prior, lambda m, r, s=scan, u=update, p=prand, md=mode: PatchGibbs(
-                        m, 3, scan=s, update=u, p_rand_patch=p, random_patch=md, offset=1), seed=len(out),
-                        probe=patch_probe)
+                    out[name] = chain(
+                        scene_1d,
+                        prior,
+                        lambda m, r, s=scan, u=update, p=prand, md=mode: PatchGibbs(
+                            m, 3, scan=s, update=u, p_rand_patch=p, random_patch=md, offset=1
+                        ),
+                        seed=len(out),
+                        probe=patch_probe,
+                    )
         out[f"patch/1d-{pname}/run2/systematic/gibbs/region"] = chain(
-            scene_1d, prior, lambda m, r: PatchGibbs(m, 2, region=r), seed=len(out), region=True, probe=patch_probe)
+            scene_1d, prior, lambda m, r: PatchGibbs(m, 2, region=r), seed=len(out), region=True, probe=patch_probe
+        )
     # patch Gibbs, 2D shapes
-    shapes = {"rect2x2": ((2, 2), (0, 0)), "rect1x3": ((1, 3), (0, 1)), "plus": ("plus", 0), "rect3x3": ((3, 3), (1, 2))}
+    shapes = {
+        "rect2x2": ((2, 2), (0, 0)),
+        "rect1x3": ((1, 3), (0, 1)),
+        "plus": ("plus", 0),
+        "rect3x3": ((3, 3), (1, 2)),
+    }
     for pname, prior in P2.items():
         for sname, (shape, offset) in shapes.items():
             if pname == "table3" and sname != "rect3x3":
                 scans = ("systematic",)
             else:
                 scans = ("systematic", "permutation", "random")
-            for scan, update, prand, mode in (("systematic", "gibbs", 0.0, "mh"), ("permutation", "metropolised", 0.0, "mh"),
-                                              ("random", "gibbs", 0.25, "mh"), ("systematic", "gibbs", 0.25, "thesis"),
-                                              ("random", "metropolised", 0.0, "mh")):
+            for scan, update, prand, mode in (
+                ("systematic", "gibbs", 0.0, "mh"),
+                ("permutation", "metropolised", 0.0, "mh"),
+                ("random", "gibbs", 0.25, "mh"),
+                ("systematic", "gibbs", 0.25, "thesis"),
+                ("random", "metropolised", 0.0, "mh"),
+            ):
                 if scan in scans:
-                        name = f"patch/2d-{pname}/{sname}/{scan}/{update}/p{prand}-{mode}"
-                        out[name] = chain(scene_2d, prior, lambda m, r, sh=shape, o=offset, s=scan, u=update, p=prand,
-                                          md=mode: PatchGibbs(m, sh, scan=s, offset=o, update=u, p_rand_patch=p,
-                                                              random_patch=md), seed=len(out), probe=patch_probe)
+                    name = f"patch/2d-{pname}/{sname}/{scan}/{update}/p{prand}-{mode}"
+                    out[name] = chain(
+                        scene_2d,
+                        prior,
+                        lambda m, r, sh=shape, o=offset, s=scan, u=update, p=prand, md=mode: PatchGibbs(
+                            m, sh, scan=s, offset=o, update=u, p_rand_patch=p, random_patch=md
+                        ),
+                        seed=len(out),
+                        probe=patch_probe,
+                    )
             out[f"patch/2d-{pname}/{sname}/systematic/gibbs/region"] = chain(
-                scene_2d, prior, lambda m, r, sh=shape, o=offset: PatchGibbs(m, sh, offset=o, region=r), seed=len(out),
-                region=True, probe=patch_probe)
+                scene_2d,
+                prior,
+                lambda m, r, sh=shape, o=offset: PatchGibbs(m, sh, offset=o, region=r),
+                seed=len(out),
+                region=True,
+                probe=patch_probe,
+            )
     # tiles of table priors as patches, 5 x 5 included
     for pname, shape, origin in (("table5", (5, 5), (2, 1)), ("border3", (3, 3), (0, 0)), ("border2", (2, 2), (0, 0))):
         for scan in ("systematic", "permutation"):
             for update in ("gibbs", "metropolised"):
                 for prand, mode in ((0.0, "mh"), (0.2, "mh"), (0.2, "thesis")):
                     name = f"tiles/2d-{pname}/{scan}/{update}/p{prand}-{mode}"
-                    out[name] = chain(scene_2d, P2[pname], lambda m, r, sh=shape, o=origin, s=scan, u=update, p=prand,
-                                      md=mode: PatchGibbs(m, sh, scan=s, offset=o, update=u, p_rand_patch=p,
-                                                          random_patch=md), seed=len(out), probe=patch_probe)
+                    out[name] = chain(
+                        scene_2d,
+                        P2[pname],
+                        lambda m, r, sh=shape, o=origin, s=scan, u=update, p=prand, md=mode: PatchGibbs(
+                            m, sh, scan=s, offset=o, update=u, p_rand_patch=p, random_patch=md
+                        ),
+                        seed=len(out),
+                        probe=patch_probe,
+                    )
         out[f"tiles/2d-{pname}/systematic/gibbs/region"] = chain(
-            scene_2d, P2[pname], lambda m, r, sh=shape, o=origin: PatchGibbs(m, sh, offset=o, region=r),
-            seed=len(out), region=True, probe=patch_probe)
+            scene_2d,
+            P2[pname],
+            lambda m, r, sh=shape, o=origin: PatchGibbs(m, sh, offset=o, region=r),
+            seed=len(out),
+            region=True,
+            probe=patch_probe,
+        )
     for scan in ("systematic", "random"):
         for update in ("gibbs", "metropolised"):
             for prand, mode in ((0.0, "mh"), (0.3, "mh"), (0.3, "thesis")):
                 out[f"patch/generic/rect2x2/{scan}/{update}/p{prand}-{mode}"] = chain(
-                    lambda pr: scene_2d(pr, n=6), small(lambda s: IsingLogProbOnly(*s)),
-                    lambda m, r, s=scan, u=update, p=prand, md=mode: PatchGibbs(m, (2, 2), scan=s, update=u,
-                                                                             p_rand_patch=p, random_patch=md),
-                    seed=len(out), probe=patch_probe)
+                    lambda pr: scene_2d(pr, n=6),
+                    small(lambda s: IsingLogProbOnly(*s)),
+                    lambda m, r, s=scan, u=update, p=prand, md=mode: PatchGibbs(
+                        m, (2, 2), scan=s, update=u, p_rand_patch=p, random_patch=md
+                    ),
+                    seed=len(out),
+                    probe=patch_probe,
+                )
 
     # ICM
     def icm(scene, prior, init):
@@ -272,7 +337,9 @@ def cases() -> dict:
         out[f"patchmap/{sname}/offline"] = pmap(scene, lambda m, p=patch: offline_patch_map(m, p))
         out[f"patchmap/{sname}/offline-overlap"] = pmap(scene, lambda m, p=patch: offline_patch_map(m, p, overlap=True))
         out[f"patchmap/{sname}/online-forward"] = pmap(scene, lambda m, p=patch: online_patch_map(m, p))
-        out[f"patchmap/{sname}/online-inverse"] = pmap(scene, lambda m, p=patch: online_patch_map(m, p, sensor="inverse"))
+        out[f"patchmap/{sname}/online-inverse"] = pmap(
+            scene, lambda m, p=patch: online_patch_map(m, p, sensor="inverse")
+        )
     return out
 
 

@@ -17,8 +17,16 @@ def _model(readings=THESIS_TOY_READINGS, lam=0.3, sigma=3.0, K=16):
 
 def _interrupted(tmp_path, model):
     ck = tmp_path / "ck.npz"
-    run = run_gibbs(CellGibbs(model), 200, RunningStats(model, rays=[0]), seed=3, checkpoint=ck,
-                    checkpoint_every=20, stop_after=50, progress=False)  # fmt: skip
+    run = run_gibbs(
+        CellGibbs(model),
+        200,
+        RunningStats(model, rays=[0]),
+        seed=3,
+        checkpoint=ck,
+        checkpoint_every=20,
+        stop_after=50,
+        progress=False,
+    )
     assert run.interrupted and ck.exists()
     return ck
 

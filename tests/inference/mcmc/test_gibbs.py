@@ -21,10 +21,16 @@ def model_1d(K=6, readings=(3.0, 4.0, 2.0), sensor=None, prior=None):
 
 def model_2d(sensor=None):
     grid = Grid((2, 4), resolution=1.0)
-    scans = Scans([[0.5, 0.5, 0.0], [0.5, 0.5, 0.0], [3.5, 1.5, math.pi], [0.5, 0.5, math.pi / 2]],
-                  [0.0], [[2.2], [3.9], [1.4], [1.0]], max_range=3.9, over_range="max")  # fmt: skip
-    return OccupancyModel(grid, raycast(grid, scans), sensor or GaussianRange(0.9),
-                          IndependentPrior(torch.linspace(0.25, 0.55, 8)))  # fmt: skip
+    scans = Scans(
+        [[0.5, 0.5, 0.0], [0.5, 0.5, 0.0], [3.5, 1.5, math.pi], [0.5, 0.5, math.pi / 2]],
+        [0.0],
+        [[2.2], [3.9], [1.4], [1.0]],
+        max_range=3.9,
+        over_range="max",
+    )
+    return OccupancyModel(
+        grid, raycast(grid, scans), sensor or GaussianRange(0.9), IndependentPrior(torch.linspace(0.25, 0.55, 8))
+    )
 
 
 def states(model):
@@ -126,9 +132,16 @@ def test_exact_posterior_is_stationary_for_cell_gibbs(name):
 
 @pytest.mark.parametrize(
     "name, patch, p_rand",
-    [("1d_gauss", 2, 0.0), ("1d_gauss", 3, 0.3), ("1d_pattern", 3, 0.0), ("2d_gauss", (2, 2), 0.0),
-     ("2d_gauss", "plus", 0.2), ("1d_wall_prior", 3, 0.0), ("1d_wall_prior", 2, 0.25)],
-)  # fmt: skip
+    [
+        ("1d_gauss", 2, 0.0),
+        ("1d_gauss", 3, 0.3),
+        ("1d_pattern", 3, 0.0),
+        ("2d_gauss", (2, 2), 0.0),
+        ("2d_gauss", "plus", 0.2),
+        ("1d_wall_prior", 3, 0.0),
+        ("1d_wall_prior", 2, 0.25),
+    ],
+)
 def test_exact_posterior_is_stationary_for_patch_gibbs(name, patch, p_rand):
     model = MODELS[name]()
     pi = exact_pi(model)
@@ -191,8 +204,7 @@ def test_data_driven_prior_gibbs_agrees_with_exact():
     model = OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0), DataDriven1DPrior(12, 1))
     exact = pose_constrained_1d(model)
     stats = RunningStats(model)
-    run_gibbs(PatchGibbs(model, 3, p_rand_patch=0.001, init="free"), 1500, stats, warmup=50, seed=0,
-              progress=False)  # fmt: skip
+    run_gibbs(PatchGibbs(model, 3, p_rand_patch=0.001, init="free"), 1500, stats, warmup=50, seed=0, progress=False)
     assert (stats.marginals - exact.marginals).abs().max() < 4 * 0.5 * math.sqrt(20 / 1500)
 
 
@@ -206,11 +218,11 @@ def test_resume_is_bit_for_bit(tmp_path):
     for make in (lambda: CellGibbs(model, init="prior"), lambda: PatchGibbs(model, 3)):
         full = run_gibbs(make(), 400, stats(), warmup=10, seed=11, progress=False)
         ck = tmp_path / f"ck{id(make)}.npz"
-        part = run_gibbs(make(), 400, stats(), warmup=10, seed=11, checkpoint=ck, checkpoint_every=50,
-                         stop_after=123, progress=False)  # fmt: skip
+        part = run_gibbs(
+            make(), 400, stats(), warmup=10, seed=11, checkpoint=ck, checkpoint_every=50, stop_after=123, progress=False
+        )
         assert part.interrupted and part.sweeps == 123
-        rest = run_gibbs(make(), 400, stats(), warmup=10, seed=11, checkpoint=ck, checkpoint_every=50,
-                         progress=False)  # fmt: skip
+        rest = run_gibbs(make(), 400, stats(), warmup=10, seed=11, checkpoint=ck, checkpoint_every=50, progress=False)
         assert not rest.interrupted and rest.sweeps == 410
         assert np.array_equal(full.state, rest.state)
         assert torch.equal(full.stats.marginals, rest.stats.marginals)
@@ -265,8 +277,9 @@ def test_chains_diagnostics():
     from ogm_ppl.inference.mcmc.diagnostics import kl_trace, run_chains
 
     model = model_1d(8, readings=(4.0, 5.0, 4.0, 6.0))
-    res = run_chains(lambda: CellGibbs(model, init="prior"), num_chains=4, num_sweeps=800, trace_cells=[3, 4, 5],
-                     warmup=20)  # fmt: skip
+    res = run_chains(
+        lambda: CellGibbs(model, init="prior"), num_chains=4, num_sweeps=800, trace_cells=[3, 4, 5], warmup=20
+    )
     assert res.traces().shape == (4, 800, 3)
     rhat, n_eff = res.rhat(), res.ess()
     assert torch.all((rhat - 1).abs() < 0.05), rhat

@@ -31,8 +31,13 @@ def _table(nb, ni, seed, density=1.0):
 def model_2d(prior_fn, sensor=None):
     """2 x 4 grid, 7 latent cells (one pose cell pinned)."""
     grid = Grid((2, 4), resolution=1.0)
-    scans = Scans([[0.5, 0.5, 0.0], [0.5, 0.5, 0.0], [3.5, 1.5, math.pi], [0.5, 0.5, math.pi / 2]],
-                  [0.0], [[2.2], [3.9], [1.4], [1.0]], max_range=3.9, over_range="max")  # fmt: skip
+    scans = Scans(
+        [[0.5, 0.5, 0.0], [0.5, 0.5, 0.0], [3.5, 1.5, math.pi], [0.5, 0.5, math.pi / 2]],
+        [0.0],
+        [[2.2], [3.9], [1.4], [1.0]],
+        max_range=3.9,
+        over_range="max",
+    )
     return OccupancyModel(grid, raycast(grid, scans), sensor or GaussianRange(0.9), prior_fn((2, 4)))
 
 
@@ -59,8 +64,18 @@ def make(name):
 
 
 ALL = list(PRIORS_1D) + list(PRIORS_2D)
-PATCH = {"mrf1": 3, "mrf2": 2, "table3": 3, "border1": 2, "border2": 2, "mrf4": (2, 2), "mrf8": "plus",
-         "table2x2": (2, 2), "border8": (1, 2), "border2x2": (2, 2)}  # fmt: skip
+PATCH = {
+    "mrf1": 3,
+    "mrf2": 2,
+    "table3": 3,
+    "border1": 2,
+    "border2": 2,
+    "mrf4": (2, 2),
+    "mrf8": "plus",
+    "table2x2": (2, 2),
+    "border8": (1, 2),
+    "border2x2": (2, 2),
+}
 
 
 @pytest.mark.parametrize("name", ALL)
@@ -90,8 +105,10 @@ def test_exact_posterior_is_stationary_for_patch_gibbs(name, p_rand):
         torch.testing.assert_close(pi @ T, pi, rtol=0, atol=1e-12)
 
 
-@pytest.mark.parametrize("name, kind", [("mrf8", "cell"), ("border8", "cell"), ("table2x2", "patch"),
-                                        ("border2x2", "patch"), ("mrf4", "patch")])  # fmt: skip
+@pytest.mark.parametrize(
+    "name, kind",
+    [("mrf8", "cell"), ("border8", "cell"), ("table2x2", "patch"), ("border2x2", "patch"), ("mrf4", "patch")],
+)
 def test_compiled_sweep_draws_from_its_transition_row(name, kind):
     """One compiled sweep from a fixed state, repeated: next states follow the product of the update
     matrices (for tiles of table priors the compiled sweep enumerates the sparse support only)."""
@@ -125,15 +142,22 @@ def test_compiled_sweep_draws_from_its_transition_row(name, kind):
 def scene_3x4(prior):
     """A 3 x 4 grid (11 latent cells) seen by three poses: small enough for brute force."""
     grid = Grid((3, 4), resolution=1.0)
-    scans = Scans([[0.5, 0.5, 0.0], [0.5, 0.5, 0.6], [3.5, 2.5, math.pi], [3.5, 2.5, -2.2]], [0.0],
-                  [[2.6], [3.5], [2.2], [1.3]], max_range=3.5, over_range="max")  # fmt: skip
+    scans = Scans(
+        [[0.5, 0.5, 0.0], [0.5, 0.5, 0.6], [3.5, 2.5, math.pi], [3.5, 2.5, -2.2]],
+        [0.0],
+        [[2.6], [3.5], [2.2], [1.3]],
+        max_range=3.5,
+        over_range="max",
+    )
     return OccupancyModel(grid, raycast(grid, scans), GaussianRange(0.8), prior)
 
 
 LONG_RUN = {
     "mrf8-cell": (lambda: MRFPrior((3, 4), order=2, psi=0.5, cell_prior=0.3), None),
-    "table-patch": (lambda: PatchTablePrior((3, 4), np.arange(16), np.r_[20, np.arange(1, 15) % 3 + 1, 6],
-                                            patch=(2, 2)), (2, 2)),  # fmt: skip
+    "table-patch": (
+        lambda: PatchTablePrior((3, 4), np.arange(16), np.r_[20, np.arange(1, 15) % 3 + 1, 6], patch=(2, 2)),
+        (2, 2),
+    ),
     "border-cell": (lambda: BorderPatchPrior((3, 4), *_table(8, 1, 4), inner=(1, 1)), None),
     "border-patch": (lambda: BorderPatchPrior((3, 4), *_table(12, 4, 5), inner=(2, 2)), (2, 2)),
 }
@@ -145,8 +169,9 @@ def test_long_run_marginals_match_brute_force(name):
     model = scene_3x4(make_prior())
     assert len(model.latent) <= 14
     exact = brute_force(model).marginals
-    kernel = CellGibbs(model, init="free") if patch is None else PatchGibbs(model, patch, p_rand_patch=0.05,
-                                                                              init="free")  # fmt: skip
+    kernel = (
+        CellGibbs(model, init="free") if patch is None else PatchGibbs(model, patch, p_rand_patch=0.05, init="free")
+    )
     n = 4000
     stats = RunningStats(model)
     run_gibbs(kernel, n, stats, warmup=100, seed=1, progress=False)
@@ -175,8 +200,9 @@ def test_user_prior_on_the_2d_example_generic_and_stencil_agree():
     rays = raycast(ex.grid, ex.scans)
     h, J = -1.2, 1.5
     slow = OccupancyModel(ex.grid, rays, GaussianRange(3.0), IsingByLogProbOnly(64, 64, h, J))
-    fast = OccupancyModel(ex.grid, rays, GaussianRange(3.0),
-                          StencilPrior((64, 64), unary=h, offsets=[(0, 1), (1, 0)], coupling=J))  # fmt: skip
+    fast = OccupancyModel(
+        ex.grid, rays, GaussianRange(3.0), StencilPrior((64, 64), unary=h, offsets=[(0, 1), (1, 0)], coupling=J)
+    )
     ks, kf = CellGibbs(slow), CellGibbs(fast)
     ks.setup()
     kf.setup()

@@ -106,7 +106,7 @@ def test_whole_map_independence_sampler_is_stationary():
     model = MODELS["table2x2"]()
     pi = exact_pi(model).numpy()
     kernel = GuidedGibbs(CellGibbs(model), sharp_guide(model, 3), block="all", p_guide=1.0)
-    (cells, _), = kernel.blocks()
+    ((cells, _),) = kernel.blocks()
     assert np.array_equal(cells, model.latent.numpy())
     T = block_matrix(kernel, model, cells)
     np.testing.assert_allclose(pi @ T, pi, rtol=0, atol=1e-10)
@@ -201,8 +201,9 @@ def test_pyro_mcmc_and_checkpoint_resume(tmp_path):
     # an interrupted and resumed run equals an uninterrupted one, bit for bit
     full = run_gibbs(GuidedGibbs(CellGibbs(model), guide, block=(2, 2)), 40, seed=4, progress=False)
     ck = tmp_path / "c.npz"
-    part = run_gibbs(GuidedGibbs(CellGibbs(model), guide, block=(2, 2)), 40, seed=4, progress=False,
-                     checkpoint=ck, stop_after=17)  # fmt: skip
+    part = run_gibbs(
+        GuidedGibbs(CellGibbs(model), guide, block=(2, 2)), 40, seed=4, progress=False, checkpoint=ck, stop_after=17
+    )
     assert part.interrupted
     rest = run_gibbs(GuidedGibbs(CellGibbs(model), guide, block=(2, 2)), 40, seed=4, progress=False, checkpoint=ck)
     assert np.array_equal(rest.state, full.state)
@@ -253,7 +254,9 @@ def test_tile_proposals_leave_the_exact_posterior_stationary(block):
     q = kernel.proposal_log_prob(cells, configs).exp()
     n = 2000
     draws = np.stack([kernel._propose(cells) for _ in range(n)])
-    counts = torch.from_numpy(np.bincount((draws.astype(np.int64) << np.arange(L)).sum(1), minlength=2**L).astype(np.float64))
+    counts = torch.from_numpy(
+        np.bincount((draws.astype(np.int64) << np.arange(L)).sum(1), minlength=2**L).astype(np.float64)
+    )
     assert counts[q == 0].sum() == 0
     big = q * n >= 5
     assert multinomial_goodness_of_fit(q[big], counts[big], total_count=n) > 1e-3
@@ -263,8 +266,9 @@ def test_tile_proposal_chain_matches_brute_force():
     prior = PatchTablePrior((3, 4), np.arange(16), np.r_[20, np.arange(1, 15) % 3 + 1, 6], patch=(2, 2))
     model = scene_3x4(prior)
     exact = brute_force(model).marginals
-    kernel = GuidedGibbs(PatchGibbs(model, (2, 2)), AmortisedGuide(model, seed=5), block=(2, 2), p_guide=0.5,
-                         proposal="tiles")  # fmt: skip
+    kernel = GuidedGibbs(
+        PatchGibbs(model, (2, 2)), AmortisedGuide(model, seed=5), block=(2, 2), p_guide=0.5, proposal="tiles"
+    )
     n = 2000
     stats = RunningStats(model)
     run_gibbs(kernel, n, stats, warmup=50, seed=3, progress=False)

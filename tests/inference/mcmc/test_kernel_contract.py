@@ -44,8 +44,14 @@ class TestPatchGibbsRandPatch(KernelContract):
 
 class TestPatchGibbsMetropolisedPermutation(KernelContract):
     def make_kernel(self, model, region=None):
-        return PatchGibbs(model, 3 if model.grid.ndim == 1 else (1, 2), scan="permutation", update="metropolised",
-                          p_rand_patch=0.2, region=region)  # fmt: skip
+        return PatchGibbs(
+            model,
+            3 if model.grid.ndim == 1 else (1, 2),
+            scan="permutation",
+            update="metropolised",
+            p_rand_patch=0.2,
+            region=region,
+        )
 
 
 class TestPatchGibbsRandomScan(KernelContract):

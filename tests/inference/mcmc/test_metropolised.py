@@ -74,8 +74,11 @@ def test_metropolised_cell_update_is_stationary_and_dominates_heat_bath(name):
         assert ((T - H)[live][:, live] * (1 - eye[live][:, live]) >= -1e-12).all()
 
 
-@pytest.mark.parametrize("name, patch, p_rand", [("1d_gauss", 3, 0.0), ("1d_pattern", 2, 0.3), ("2d_gauss", "plus", 0.0),
-                                                 ("1d_wall_prior", 3, 0.2)] + [(n, PATCH[n], 0.0) for n in ALL])  # fmt: skip
+@pytest.mark.parametrize(
+    "name, patch, p_rand",
+    [("1d_gauss", 3, 0.0), ("1d_pattern", 2, 0.3), ("2d_gauss", "plus", 0.0), ("1d_wall_prior", 3, 0.2)]
+    + [(n, PATCH[n], 0.0) for n in ALL],
+)
 def test_metropolised_patch_update_is_stationary(name, patch, p_rand):
     model = _all_models()[name]()
     pi = exact_pi(model)
@@ -104,9 +107,19 @@ def _check_row(row, counts):
     assert multinomial_goodness_of_fit(row[big], counts[big], total_count=int(counts[big].sum())) > 1e-3
 
 
-@pytest.mark.parametrize("name, kind", [("1d_gauss", "cell"), ("mrf8", "cell"), ("border8", "cell"),
-                                        ("1d_gauss", "patch"), ("table2x2", "patch"), ("border2x2", "patch"),
-                                        ("mrf4", "patch"), ("1d_wall_prior", "cell")])  # fmt: skip
+@pytest.mark.parametrize(
+    "name, kind",
+    [
+        ("1d_gauss", "cell"),
+        ("mrf8", "cell"),
+        ("border8", "cell"),
+        ("1d_gauss", "patch"),
+        ("table2x2", "patch"),
+        ("border2x2", "patch"),
+        ("mrf4", "patch"),
+        ("1d_wall_prior", "cell"),
+    ],
+)
 def test_compiled_metropolised_sweep_draws_from_its_transition_row(name, kind):
     """One compiled systematic sweep, repeated from the posterior mode: the next states follow the product
     of the hand-built update matrices (chi-square)."""
@@ -165,8 +178,9 @@ def test_parallel_chains_equal_serial_chains():
     model = model_1d(6, readings=(3.0, 4.0, 3.0))
     make_kernel = partial(CellGibbs, model, update="metropolised", scan="permutation", init="prior")
     serial = run_chains(make_kernel, num_chains=3, num_sweeps=400, trace_cells=[2, 3], warmup=10, seed=11)
-    parallel = run_chains(make_kernel, num_chains=3, num_sweeps=400, trace_cells=[2, 3], warmup=10, seed=11,
-                          processes=2)  # fmt: skip
+    parallel = run_chains(
+        make_kernel, num_chains=3, num_sweeps=400, trace_cells=[2, 3], warmup=10, seed=11, processes=2
+    )
     for a, b in zip(serial.stats, parallel.stats):
         assert torch.equal(a.marginals, b.marginals)
         assert (a.trace() == b.trace()).all()
@@ -188,8 +202,13 @@ def test_pyro_mcmc_runs_several_chains_with_a_summary(capsys):
     pyro.set_rng_seed(0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", UserWarning)  # "Chains will be drawn sequentially" on 2 cores
-        mcmc = MCMC(CellGibbs(model, update="metropolised"), num_samples=300, warmup_steps=10, num_chains=2,
-                    disable_progbar=True)  # fmt: skip
+        mcmc = MCMC(
+            CellGibbs(model, update="metropolised"),
+            num_samples=300,
+            warmup_steps=10,
+            num_chains=2,
+            disable_progbar=True,
+        )
         mcmc.run()
     s = mcmc.get_samples(group_by_chain=True)["m"]
     assert s.shape == (2, 300, len(model.latent)) and (s[0] != s[1]).any()

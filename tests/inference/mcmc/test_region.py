@@ -18,8 +18,14 @@ SHAPE = (3, 4)  # K = 12 cells, 3 pose cells pinned: 9 latent, 512 maps
 
 def model_3x4(prior: str) -> OccupancyModel:
     grid = Grid(SHAPE, resolution=1.0)
-    poses = [[0.5, 0.5, 0.0], [0.5, 0.5, 0.0], [3.5, 2.5, math.pi], [0.5, 0.5, math.pi / 2], [1.5, 2.5, -math.pi / 2],
-             [3.5, 2.5, -math.pi / 2]]  # fmt: skip
+    poses = [
+        [0.5, 0.5, 0.0],
+        [0.5, 0.5, 0.0],
+        [3.5, 2.5, math.pi],
+        [0.5, 0.5, math.pi / 2],
+        [1.5, 2.5, -math.pi / 2],
+        [3.5, 2.5, -math.pi / 2],
+    ]
     ranges = np.array([[2.2], [3.9], [1.4], [2.1], [1.6], [1.2]])
     scans = Scans(np.array(poses), np.array([0.0]), ranges, max_range=3.9, over_range="max")
     priors = {
@@ -58,8 +64,7 @@ KERNELS = {
     "patch_random": lambda m, r: PatchGibbs(m, (1, 2), scan="random", init=INIT, region=r),
 }
 # the independent prior: ogm_ppl.testing.KernelContract (test_kernel_contract.py) checks it exactly
-CASES = [("mrf", "cell"), ("mrf", "patch2x2_offset"), ("table2x2", "patch2x2"),
-                                                 ("mrf", "patch_random")]  # fmt: skip
+CASES = [("mrf", "cell"), ("mrf", "patch2x2_offset"), ("table2x2", "patch2x2"), ("mrf", "patch_random")]
 
 
 @pytest.mark.parametrize("prior, kernel", CASES)
@@ -97,8 +102,9 @@ def test_region_forms_agree_and_none_is_the_whole_map():
     forms = [REGION, REGION[::-1].tolist() + [1], torch.from_numpy(mask_k), mask_k.reshape(SHAPE)]
     for f in forms:
         np.testing.assert_array_equal(CellGibbs(model, region=f).region, REGION)
-        np.testing.assert_array_equal(PatchGibbs(model, (2, 2), region=f)._anchors,
-                                      PatchGibbs(model, (2, 2), region=REGION)._anchors)  # fmt: skip
+        np.testing.assert_array_equal(
+            PatchGibbs(model, (2, 2), region=f)._anchors, PatchGibbs(model, (2, 2), region=REGION)._anchors
+        )
     full = PatchGibbs(model, (2, 2), region=np.ones(12, bool))
     np.testing.assert_array_equal(full._anchors, PatchGibbs(model, (2, 2))._anchors)
     np.testing.assert_array_equal(full.sampled_cells(), model.latent.numpy())
@@ -123,7 +129,10 @@ def test_bad_region_errors_clearly():
         (pinned, "latent"),
     ]
     for region, match in bad:
-        for make in (lambda r: CellGibbs(model, region=r), lambda r: PatchGibbs(model, (2, 2), region=r),
-                     lambda r: MetropolisCell(model, region=r)):  # fmt: skip
+        for make in (
+            lambda r: CellGibbs(model, region=r),
+            lambda r: PatchGibbs(model, (2, 2), region=r),
+            lambda r: MetropolisCell(model, region=r),
+        ):
             with pytest.raises(ValueError, match=match):
                 make(region)

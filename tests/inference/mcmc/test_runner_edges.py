@@ -10,13 +10,15 @@ from ogm_ppl.posterior import mutual_information_from_joint
 
 from ..exact.test_exact import model_1d
 
-MAPS = np.array([
-    [0, 1, 1, 0, 0, 1],
-    [0, 0, 1, 1, 0, 0],
-    [0, 1, 0, 1, 1, 0],
-    [0, 0, 0, 0, 0, 0],
-    [0, 1, 1, 1, 0, 1],
-])  # fmt: skip
+MAPS = np.array(
+    [
+        [0, 1, 1, 0, 0, 1],
+        [0, 0, 1, 1, 0, 0],
+        [0, 1, 0, 1, 1, 0],
+        [0, 0, 0, 0, 0, 0],
+        [0, 1, 1, 1, 0, 1],
+    ]
+)
 PAIRS = [[1, 2], [2, 3], [1, 4], [5, 1]]
 PATHS = [[1, 2], [4, 5], [0], [2, 3, 4]]
 
@@ -35,8 +37,9 @@ def test_running_stats_match_frequencies():
     np.testing.assert_allclose(st.prob_free().numpy(), free, rtol=0, atol=1e-15)  # 1/5, 2/5, 1, 1/5
     p = MAPS.mean(0)
     for j, (a, b) in enumerate(PAIRS):
-        mi = mutual_information_from_joint(torch.tensor([p[a], p[b]]),
-                                           torch.tensor([[p[a], pair[j]], [pair[j], p[b]]]))[0, 1]
+        mi = mutual_information_from_joint(
+            torch.tensor([p[a], p[b]]), torch.tensor([[p[a], pair[j]], [pair[j], p[b]]])
+        )[0, 1]
         assert st.mutual_information()[j].item() == pytest.approx(mi.item(), abs=1e-15)
 
 

@@ -75,8 +75,11 @@ def test_patch_maps_approach_exact_as_L_grows():
         model = OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(2.0), IndependentPrior(0.5, 31))
         exact = pose_constrained_1d(model).marginals[1:]
         for L in (1, 3, 5):
-            for name, pm in (("online", online_patch_map(model, L, offset=1)), ("offline", offline_patch_map(model, L, offset=1)),
-                             ("overlap", offline_patch_map(model, L, overlap=True))):  # fmt: skip
+            for name, pm in (
+                ("online", online_patch_map(model, L, offset=1)),
+                ("offline", offline_patch_map(model, L, offset=1)),
+                ("overlap", offline_patch_map(model, L, overlap=True)),
+            ):
                 q = pm.marginals[1:].clamp(1e-12, 1 - 1e-12)
                 kl.setdefault((name, L), []).append(float(kl_divergence(exact, q)))
     mean = {k: np.mean(v) for k, v in kl.items()}
@@ -89,15 +92,20 @@ def test_patch_maps_approach_exact_as_L_grows():
 
 def test_2d_patch_maps_and_reference():
     ex = simple_2d_example(num_beams=180)
-    model = OccupancyModel(ex.grid, raycast(ex.grid, ex.scans), GaussianRange(3.0), IndependentPrior(0.5, ex.grid.num_cells))
+    model = OccupancyModel(
+        ex.grid, raycast(ex.grid, ex.scans), GaussianRange(3.0), IndependentPrior(0.5, ex.grid.num_cells)
+    )
     ref = reference_map(model)
     assert ref[~model.rays.reached()].all()  # unknown cells reflect the beam
     for shape in ((3, 3), "plus", (2, 5)):
         tiles = tile_patches(model, shape)
         assert sorted(tiles[tiles >= 0].tolist()) == model.latent.tolist()  # each latent cell in one tile
     assert online_patch_map(model, "plus").marginals.shape == (ex.grid.num_cells,)
-    for pm in (online_patch_map(model, (3, 3)), offline_patch_map(model, (3, 3), reference=ref),
-               offline_patch_map(model, "plus", overlap=True, reference=ref)):  # fmt: skip
+    for pm in (
+        online_patch_map(model, (3, 3)),
+        offline_patch_map(model, (3, 3), reference=ref),
+        offline_patch_map(model, "plus", overlap=True, reference=ref),
+    ):
         p = pm.marginals
         assert torch.isfinite(p).all() and ((p >= 0) & (p <= 1)).all()
         assert p[model.known_free].sum() == 0
@@ -114,7 +122,11 @@ def test_bad_arguments():
     with pytest.raises(ValueError, match="runs, rectangles"):
         online_patch_map(model, [[0, 0], [0, 2]])
     grid = Grid((3, 3))
-    m2 = OccupancyModel(grid, raycast(grid, Scans([[0.5, 0.5, 0.0]], [0.0], [[1.5]], max_range=2.5)),
-                        GaussianRange(1.0), IndependentPrior(0.5, 9))  # fmt: skip
+    m2 = OccupancyModel(
+        grid,
+        raycast(grid, Scans([[0.5, 0.5, 0.0]], [0.0], [[1.5]], max_range=2.5)),
+        GaussianRange(1.0),
+        IndependentPrior(0.5, 9),
+    )
     with pytest.raises(ValueError, match="at most 16"):
         offline_patch_map(m2, (3, 6))

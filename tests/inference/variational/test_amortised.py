@@ -198,8 +198,9 @@ def test_save_load_round_trip_and_refusals(tmp_path):
 
 def test_works_on_a_1d_grid_and_any_2d_size():
     grid = Grid.line(8)
-    model = OccupancyModel(grid, raycast(grid, Scans.one_d([3.0, 5.0], max_range=6.0)), GaussianRange(1.0),
-                           IndependentPrior(0.3, 8))  # fmt: skip
+    model = OccupancyModel(
+        grid, raycast(grid, Scans.one_d([3.0, 5.0], max_range=6.0)), GaussianRange(1.0), IndependentPrior(0.3, 8)
+    )
     g = AmortisedGuide(model, phase=(0, 0))
     assert g.marginals().shape == (8,)
     for shape in [(5, 7), (13, 4)]:

@@ -38,8 +38,15 @@ def test_loss_matches_evidence_grid_and_metrics(small):
         assert float(cross_entropy_loss(fam, small)) == pytest.approx(total / len(small), rel=1e-10)
 
 
-@pytest.mark.parametrize("make", [lambda: Moravec(0.7, -0.4), lambda: Elfes(2.3, -3.0, max_kappa=20),
-                                  lambda: PN(torch.linspace(-1.0, 0.3, 5)), lambda: NeuralDelta(20, hidden=4)])  # fmt: skip
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: Moravec(0.7, -0.4),
+        lambda: Elfes(2.3, -3.0, max_kappa=20),
+        lambda: PN(torch.linspace(-1.0, 0.3, 5)),
+        lambda: NeuralDelta(20, hidden=4),
+    ],
+)
 def test_loss_gradient_is_correct(small, make):
     fam = make()
     names = [n for n, _ in fam.named_parameters()]
@@ -96,10 +103,19 @@ def test_shipped_artefacts_load_and_round_trip():
 def test_refit_from_the_shipped_seed_reproduces_the_shipped_parameters():
     rec = json.loads((resources.files("ogm_ppl") / "fitted" / "delta_moravec_opt.json").read_text())
     tr = rec["training"]
-    data = wall_datasets(num=tr["num"], F=tr["F"], wall=tr["wall"], sigma=tr["sigma"],
-                         num_readings=tuple(tr["num_readings"]), seed=tr["seed"])  # fmt: skip
-    for name, fam in (("moravec_opt", Moravec.haehnel()), ("marshall_barfoot_opt", MarshallBarfoot(1.3863, 2)),
-                      ("elfes_opt", Elfes(3.0, -10.0, max_kappa=tr["F"]))):  # fmt: skip
+    data = wall_datasets(
+        num=tr["num"],
+        F=tr["F"],
+        wall=tr["wall"],
+        sigma=tr["sigma"],
+        num_readings=tuple(tr["num_readings"]),
+        seed=tr["seed"],
+    )
+    for name, fam in (
+        ("moravec_opt", Moravec.haehnel()),
+        ("marshall_barfoot_opt", MarshallBarfoot(1.3863, 2)),
+        ("elfes_opt", Elfes(3.0, -10.0, max_kappa=tr["F"])),
+    ):
         fit_delta(fam, data, max_iter=tr["max_iter"], tol=tr["tol"])
         shipped, _ = load_fitted(name)
         for (k, a), (_, b) in zip(fam.state_dict().items(), shipped.state_dict().items()):

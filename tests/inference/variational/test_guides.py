@@ -14,8 +14,9 @@ from ogm_ppl.priors import IndependentPrior
 
 def model(K=8, p_rand=1e-3):
     toy = toy_1d(num_cells=K, wall=1, readings=[4.0, 5.0, 4.0])
-    return OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(1.5, p_rand=p_rand),
-                          IndependentPrior(0.5, K))  # fmt: skip
+    return OccupancyModel(
+        toy.grid, raycast(toy.grid, toy.scans), GaussianRange(1.5, p_rand=p_rand), IndependentPrior(0.5, K)
+    )
 
 
 def test_patch_distribution_normalises_and_samples():
@@ -42,7 +43,9 @@ def test_patch_distribution_normalises_and_samples():
 @pytest.mark.parametrize("make", [lambda m: MeanFieldGuide(m), lambda m: PatchGuide(m, 2)])
 def test_svi_fits_the_exact_posterior_approximately(make):
     toy = toy_1d(num_cells=12, readings=THESIS_TOY_READINGS)
-    m = OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0, p_rand=1e-3), IndependentPrior(0.5, 12))
+    m = OccupancyModel(
+        toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0, p_rand=1e-3), IndependentPrior(0.5, 12)
+    )
     exact = pose_constrained_1d(m).marginals
     guide = make(m)
     q0 = guide.marginals() if isinstance(guide, MeanFieldGuide) else None
@@ -112,8 +115,11 @@ def test_closed_form_elbo_equals_the_enumerated_expectation(make):
     with torch.no_grad():
         for p in guide.parameters():
             p.copy_(torch.randn(p.shape, generator=g))
-    d = guide.distribution() if isinstance(guide, FirstHitGuide) else __import__("pyro").distributions.Bernoulli(
-        logits=guide.logits).to_event(1)  # fmt: skip
+    d = (
+        guide.distribution()
+        if isinstance(guide, FirstHitGuide)
+        else __import__("pyro").distributions.Bernoulli(logits=guide.logits).to_event(1)
+    )
     expected, norm = _brute_elbo(model, d)
     assert abs(norm) < 1e-12
     assert guide.exact_elbo(model).item() == pytest.approx(expected, abs=1e-9)
@@ -125,9 +131,15 @@ def test_mean_field_closed_form_elbo_on_2d_rays():
     from ogm_ppl import Grid, Scans
 
     grid = Grid((3, 3), resolution=1.0)
-    scans = Scans([[0.5, 0.5, 0.0], [0.5, 0.5, _m.pi / 2], [2.5, 2.5, _m.pi], [2.5, 1.5, _m.pi]],
-                  [0.0], [[1.2], [2.0], [1.5], [0.9]], max_range=2.5)  # fmt: skip
-    model = OccupancyModel(grid, raycast(grid, scans), GaussianRange(0.8, 1e-3), IndependentPrior(torch.linspace(0.2, 0.7, 9)))
+    scans = Scans(
+        [[0.5, 0.5, 0.0], [0.5, 0.5, _m.pi / 2], [2.5, 2.5, _m.pi], [2.5, 1.5, _m.pi]],
+        [0.0],
+        [[1.2], [2.0], [1.5], [0.9]],
+        max_range=2.5,
+    )
+    model = OccupancyModel(
+        grid, raycast(grid, scans), GaussianRange(0.8, 1e-3), IndependentPrior(torch.linspace(0.2, 0.7, 9))
+    )
     guide = MeanFieldGuide(model)
     with torch.no_grad():
         guide.logits.copy_(torch.randn(len(model.latent), generator=torch.Generator().manual_seed(5)))
@@ -187,8 +199,13 @@ def test_mean_field_closed_form_elbo_has_finite_gradients_with_padded_rays():
     from ogm_ppl import Grid, Scans
 
     grid = Grid((4, 4), resolution=1.0)
-    scans = Scans([[0.5, 0.5, 0.0], [0.5, 0.5, 0.7], [3.5, 3.5, _m.pi], [3.5, 3.5, -2.0], [0.5, 3.5, -0.6]],
-                  [0.0], [[2.6], [3.3], [2.2], [1.3], [2.9]], max_range=4.0, over_range="max")  # fmt: skip
+    scans = Scans(
+        [[0.5, 0.5, 0.0], [0.5, 0.5, 0.7], [3.5, 3.5, _m.pi], [3.5, 3.5, -2.0], [0.5, 3.5, -0.6]],
+        [0.0],
+        [[2.6], [3.3], [2.2], [1.3], [2.9]],
+        max_range=4.0,
+        over_range="max",
+    )
     model = OccupancyModel(grid, raycast(grid, scans), GaussianRange(0.8, 1e-3), IndependentPrior(0.4, 16))
     assert torch.isinf(model.loglik_table).any()
     guide = MeanFieldGuide(model)

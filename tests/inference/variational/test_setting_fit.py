@@ -68,13 +68,23 @@ def _no_warning(fn):
 @pytest.fixture(scope="module")
 def small():
     # wall near the end, so some readings are max-range; and one with the wall far from both ends
-    return [wall_datasets(num=25, F=30, wall=27, sigma=3.0, num_readings=(1, 4), seed=2),
-            wall_datasets(num=25, F=60, wall=45, sigma=2.5, num_readings=(1, 4), seed=3)]  # fmt: skip
+    return [
+        wall_datasets(num=25, F=30, wall=27, sigma=3.0, num_readings=(1, 4), seed=2),
+        wall_datasets(num=25, F=60, wall=45, sigma=2.5, num_readings=(1, 4), seed=3),
+    ]
 
 
-@pytest.mark.parametrize("make", [lambda: PN(torch.linspace(-3, 0.5, 21)), lambda: PN(torch.tensor([-0.7])),
-                                  lambda: PN(torch.linspace(-2, 1, 4)), lambda: Moravec(0.7, -0.4),
-                                  lambda: BorensteinKoren(0.5), lambda: MarshallBarfoot(0.8, 3)])  # fmt: skip
+@pytest.mark.parametrize(
+    "make",
+    [
+        lambda: PN(torch.linspace(-3, 0.5, 21)),
+        lambda: PN(torch.tensor([-0.7])),
+        lambda: PN(torch.linspace(-2, 1, 4)),
+        lambda: Moravec(0.7, -0.4),
+        lambda: BorensteinKoren(0.5),
+        lambda: MarshallBarfoot(0.8, 3),
+    ],
+)
 def test_reduced_loss_and_gradient_equal_the_full_ones(small, make):
     for data in small:
         assert data.counts[:, -1].sum() > 0 or data.F == 60
@@ -194,20 +204,23 @@ def _good_record(fits) -> dict:
     return {"format": 1, "name": "moravec_opt", "delta": family_to_dict(fam), "training": json.loads(json.dumps(tr))}
 
 
-@pytest.mark.parametrize("corrupt, message", [
-    (lambda r: "{ not json", "not valid JSON"),
-    (lambda r: "", "empty file"),
-    (lambda r: {**r, "format": 7}, "unknown artefact format 7"),
-    (lambda r: {**r, "delta": {**r["delta"], "params": {"l_occ": float("nan"), "l_free": -1.0}}}, "non-finite"),
-    (lambda r: {**r, "delta": {**r["delta"], "family": "os.system"}}, "unknown Delta family"),
-    (lambda r: {k: v for k, v in r.items() if k != "training"}, "no 'training' block"),
-    (lambda r: {**r, "training": [1, 2]}, "'training' must be an object"),
-    (lambda r: {**r, "training": {k: v for k, v in r["training"].items() if k != "sigma"}}, r"lacks \['sigma'\]"),
-    (lambda r: {**r, "training": {**r["training"], "sigma": -3.0}}, "sigma must be a positive"),
-    (lambda r: {**r, "training": {**r["training"], "F": "75"}}, "F must be an integer"),
-    (lambda r: {**r, "training": {**r["training"], "wall": 90}}, "wall must be an integer in 1..F-1"),
-    (lambda r: {**r, "training": {**r["training"], "num_readings": [1]}}, "'num_readings' must be"),
-])  # fmt: skip
+@pytest.mark.parametrize(
+    "corrupt, message",
+    [
+        (lambda r: "{ not json", "not valid JSON"),
+        (lambda r: "", "empty file"),
+        (lambda r: {**r, "format": 7}, "unknown artefact format 7"),
+        (lambda r: {**r, "delta": {**r["delta"], "params": {"l_occ": float("nan"), "l_free": -1.0}}}, "non-finite"),
+        (lambda r: {**r, "delta": {**r["delta"], "family": "os.system"}}, "unknown Delta family"),
+        (lambda r: {k: v for k, v in r.items() if k != "training"}, "no 'training' block"),
+        (lambda r: {**r, "training": [1, 2]}, "'training' must be an object"),
+        (lambda r: {**r, "training": {k: v for k, v in r["training"].items() if k != "sigma"}}, r"lacks \['sigma'\]"),
+        (lambda r: {**r, "training": {**r["training"], "sigma": -3.0}}, "sigma must be a positive"),
+        (lambda r: {**r, "training": {**r["training"], "F": "75"}}, "F must be an integer"),
+        (lambda r: {**r, "training": {**r["training"], "wall": 90}}, "wall must be an integer in 1..F-1"),
+        (lambda r: {**r, "training": {**r["training"], "num_readings": [1]}}, "'num_readings' must be"),
+    ],
+)
 def test_corrupted_files_give_clear_errors(fits, tmp_path, corrupt, message):
     bad = corrupt(_good_record(fits))
     path = tmp_path / "delta_bad.json"
@@ -229,9 +242,16 @@ def test_no_warning_inside_the_setting():
     assert _no_warning(lambda: check_delta_setting(delta_by_name("moravec_opt"), 2.5, 100)) is True
 
 
-@pytest.mark.parametrize("sigma, F, why", [(1.0, 400, r"sigma 1 cells is not within 25% of 3; range F 400"),
-                                           (3.8, 75, "sigma 3.8"), (3.0, 160, "range F 160"),
-                                           (3.0, 37, "range F 37"), (2.2, None, "sigma 2.2")])  # fmt: skip
+@pytest.mark.parametrize(
+    "sigma, F, why",
+    [
+        (1.0, 400, r"sigma 1 cells is not within 25% of 3; range F 400"),
+        (3.8, 75, "sigma 3.8"),
+        (3.0, 160, "range F 160"),
+        (3.0, 37, "range F 37"),
+        (2.2, None, "sigma 2.2"),
+    ],
+)
 def test_warning_outside_the_setting(sigma, F, why):
     with pytest.warns(FittedSettingWarning, match=why) as rec:
         assert check_delta_setting("p21", sigma, F, where="experiment intel_5cm") is False
@@ -246,9 +266,12 @@ def test_which_terms_warn(fits):
     for d in ("haehnel", Moravec(1.0, -1.0), PN.zeros(3)):
         assert _no_warning(lambda: check_delta_setting(d, 0.1, 4000)) is True
     # the thesis's values were fitted at Section 2.5's setting: they warn, with the family to refit
-    for name, hint in (("p21_thesis", "'p21'"), ("moravec_thesis", "'moravec_opt'"),
-                       ("p21_dd", "'p21', sigma=1, F=400, prior='data_driven'"),
-                       ("elfes_opt", "'p21'")):  # fmt: skip
+    for name, hint in (
+        ("p21_thesis", "'p21'"),
+        ("moravec_thesis", "'moravec_opt'"),
+        ("p21_dd", "'p21', sigma=1, F=400, prior='data_driven'"),
+        ("elfes_opt", "'p21'"),
+    ):
         with pytest.warns(FittedSettingWarning, match=f"fit_delta_for_setting\\({hint}"):
             check_delta_setting(name, 1.0, 400)
     # a term fitted for sigma 1 carries its own setting
