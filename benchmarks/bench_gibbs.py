@@ -6,7 +6,7 @@ a plain-Python implementation of the same sweep (``ogm_ppl.reference.gibbs_cell_
 on a subset of cells and scaled). Also: patch sweeps (1D runs are not used in 2D: 3 x 3 and plus),
 scaling of sweep time with K and with the number of readings, the index memory for 2.25 M cells and
 200,000 rays (target < 2 GB), and peak RSS. The single-cell sweeps are also timed against the sweep before
-issue 14's item 3 (kept in ``sweep_before_after.py``), interleaved in this process after 20 warm-up
+the kept-sum rewrite (kept in ``sweep_before_after.py``), interleaved in this process after 20 warm-up
 sweeps, with the floor of that pair-summing sweep (one pass over its pair records). Writes out/bench/bench_gibbs.json.
 """
 
@@ -104,7 +104,7 @@ def main() -> dict:
         res[name] = sweep_time(kern, repeat=5, warmup=20) if "cell" in name else sweep_time(kern, repeat=1)
         print(f"  {name:<32} {res[name]:8.4f} s per sweep")
     print(
-        f"targets (issue 14): systematic < 20 ms: {res['cell, systematic'] * 1e3:.1f} ms; "
+        f"targets: systematic < 20 ms: {res['cell, systematic'] * 1e3:.1f} ms; "
         f"random < 60 ms: {res['cell, random'] * 1e3:.1f} ms (permutation {res['cell, permutation'] * 1e3:.1f} ms)"
     )
     before_after = interleaved(model, repeat=7)

@@ -6,7 +6,7 @@ In one process, interleaved (the fair comparison on a shared machine)::
 
 times ``CellGibbs.sample`` (heat bath) with the compiled sweep of this checkout (every cell's likelihood
 ratio kept in fixed point, updated when a flip moves a ray's first or second hit; order and uniforms drawn
-in compiled code) against the same kernel running the sweep as it was before issue 14's "sweep toward
+in compiled code) against the same kernel running the sweep as it was before the kept-sum rewrite ("sweep toward
 the floor" (kept below: 16-byte pair records summed at every visit, a walk along the ray for every first
 hit, torch's generator), alternating one sweep of each after 20 warm-up sweeps each, for the
 systematic, permutation and random scans; both chains start from the same map. Prints the best and
@@ -23,7 +23,7 @@ For the code in another checkout (one after the other, so only on a quiet machin
 
 prints the best and the median of 15 sweeps (ms), after 20 warm-up sweeps, for the systematic,
 permutation and random scans, heat bath. Works with
-the flat (before issue 12) and the role-grouped ``ogm_ppl.inference`` layout.
+the flat (older) and the role-grouped ``ogm_ppl.inference`` layout.
 """
 
 from __future__ import annotations
@@ -53,7 +53,7 @@ def main(root: str, repeat: int = 15) -> dict:
 
     try:
         from ogm_ppl.inference.mcmc.gibbs import CellGibbs
-    except ImportError:  # the layout before issue 12
+    except ImportError:  # the older flat layout
         from ogm_ppl.inference.gibbs import CellGibbs  # type: ignore[no-redef]
     import time
 
@@ -97,7 +97,7 @@ def main(root: str, repeat: int = 15) -> dict:
 
 
 # ----------------------------------------------------------------------------------------------------
-# The baseline: the compiled single-cell sweep before issue 14's item 3 (commit 9f68076), verbatim but
+# The baseline: the compiled single-cell sweep before the kept-sum rewrite (commit 9f68076), verbatim but
 # for names (heat bath, independent prior: the reference scene's), and a CellGibbs that runs it.
 _BASE_PAIR = np.dtype([("ll", np.float64), ("ray", np.int32), ("kappa", np.int32)], align=True)
 _BASE_RAY = np.dtype([("ll_hit", np.float64), ("f", np.int64)], align=True)
@@ -191,7 +191,7 @@ def _baseline():
     from ogm_ppl.inference.mcmc.kernel import MapKernel
 
     class BaselineCellGibbs(CellGibbs):
-        """:class:`CellGibbs` (heat bath, independent prior) running the sweep before issue 14's item 3."""
+        """:class:`CellGibbs` (heat bath, independent prior) running the sweep before the kept-sum rewrite."""
 
         def _prepare(self) -> None:
             if self._ready:
@@ -256,7 +256,7 @@ def interleaved(model, repeat: int = 7, scans=SCANS, warmup: int = 20) -> dict:
 
 
 def floors(model, repeat: int = 7) -> dict:
-    """The floor of a sweep that sums every cell's rays (the "before" kernel's and issue 14's earlier
+    """The floor of a sweep that sums every cell's rays (the "before" kernel's and the kept-sum sweep's earlier
     ones): best-of-``repeat`` times (seconds) of one pass over the pair records (16 bytes a (ray, cell)
     pair, by cell): ``"stream"`` sums their likelihoods; ``"stream + rays, systematic"`` also reads every
     pair's ray record, cell by cell in the systematic scan's order, and ``"... random"`` in a random

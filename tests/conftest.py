@@ -22,3 +22,14 @@ def _float64_and_seed():
     random.seed(0)
     yield
     torch.set_default_dtype(old)
+
+
+@pytest.fixture
+def simulated_dataset(tmp_path):
+    """A small dataset file written by ``ogm-ppl simulate`` (a 60 x 60 office, 2 stops x 90 beams)."""
+    from ogm_ppl.cli import main
+
+    sim = tmp_path / "sim.npz"
+    args = ["simulate", "--map", "office", "--size", "60", "--poses", "2", "--beams", "90"]
+    assert main([*args, "--max-range-cells", "20", "--out", str(sim)]) == 0
+    return sim

@@ -131,7 +131,7 @@ MODULES: dict[str, Module] = {
         "ogm_ppl/inference/exact/posteriors.py",
         (
             "tests/inference/exact/test_exact.py",
-            "tests/inference/exact/test_exact_edges.py",
+            "tests/inference/exact/test_exact_input_checks.py",
             "tests/inference/exact/test_pose_constrained_evidence.py",
             "tests/test_posterior.py",
         ),
@@ -159,13 +159,13 @@ MODULES: dict[str, Module] = {
     ),
     "patches_kernels": Module(
         "ogm_ppl/inference/_kernels/patches.py",
-        ("tests/inference/patch_map/test_patch_map.py", "tests/inference/patch_map/test_patch_map_edges.py"),
+        ("tests/inference/patch_map/test_patch_map.py", "tests/inference/patch_map/test_patch_map_weights.py"),
         sites=6,
         max_test_s=5,
     ),
     "runner": Module(
         "ogm_ppl/inference/mcmc/runner.py",
-        ("tests/inference/mcmc/test_checkpoint.py", "tests/inference/mcmc/test_runner_edges.py", *_GIBBS_TESTS),
+        ("tests/inference/mcmc/test_checkpoint.py", "tests/inference/mcmc/test_running_stats.py", *_GIBBS_TESTS),
         sites=8,
         max_test_s=5,
     ),

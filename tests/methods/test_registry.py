@@ -241,30 +241,10 @@ def test_command_line_defaults_map_onto_the_parameters():
 
 
 # ------------------------------------------------------------------------------------------ a new method
-def test_a_method_in_one_file_reaches_the_command_line(tmp_path, capsys):
+def test_a_method_in_one_file_reaches_the_command_line(tmp_path, capsys, simulated_dataset):
     from ogm_ppl.cli import load_map, main
 
-    sim = tmp_path / "sim.npz"
-    assert (
-        main(
-            [
-                "simulate",
-                "--map",
-                "office",
-                "--size",
-                "60",
-                "--poses",
-                "2",
-                "--beams",
-                "90",
-                "--max-range-cells",
-                "20",
-                "--out",
-                str(sim),
-            ]
-        )
-        == 0
-    )
+    sim = simulated_dataset
     out = tmp_path / "toy"
     assert main(["map", str(sim), "--method", toy_method.NAME, "--param", "level=0.7", "--out", str(out)]) == 0
     m = load_map(out / "map.npz")

@@ -14,8 +14,7 @@ from ogm_ppl.priors import prior_by_name, prior_kinds, unregister_prior
 from ogm_ppl.priors.compiled import Stencil
 from ogm_ppl.testing import PriorContract
 
-from . import toy_checkerboard
-from .toy_checkerboard import KIND, CheckerboardPrior
+from .toy_checkerboard import KIND, CheckerboardPrior  # registers the kind on import
 
 ROOT = Path(__file__).resolve().parents[2]
 
@@ -73,30 +72,10 @@ def test_a_spec_names_it(tmp_path):
     assert [x["algorithm"] for x in r.runs] == ["checker"]
 
 
-def test_the_command_line_names_it(tmp_path):
+def test_the_command_line_names_it(tmp_path, simulated_dataset):
     from ogm_ppl.cli import load_map, main
 
-    sim = tmp_path / "sim.npz"
-    assert (
-        main(
-            [
-                "simulate",
-                "--map",
-                "office",
-                "--size",
-                "60",
-                "--poses",
-                "2",
-                "--beams",
-                "90",
-                "--max-range-cells",
-                "20",
-                "--out",
-                str(sim),
-            ]
-        )
-        == 0
-    )
+    sim = simulated_dataset
     out = tmp_path / "checker"
     assert (
         main(
@@ -105,4 +84,3 @@ def test_the_command_line_names_it(tmp_path):
         == 0
     )
     assert load_map(out / "map.npz")["probabilities"].shape == (60, 60)
-    assert toy_checkerboard.KIND == KIND

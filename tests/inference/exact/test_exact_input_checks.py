@@ -1,4 +1,4 @@
-"""Exact-posterior behaviour the main tests leave open (found by `make mutate`, issue 15)."""
+"""Exact posteriors refuse the inputs they cannot handle (rays of different lengths, ...)."""
 
 import pytest
 

@@ -1,4 +1,4 @@
-"""Patch-map weights against brute force (found by `make mutate`, issue 15)."""
+"""Patch-map weights against brute force."""
 
 import numpy as np
 import torch

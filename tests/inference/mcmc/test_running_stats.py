@@ -1,5 +1,5 @@
-"""``RunningStats`` by hand (found by `make mutate`, issue 15): pair joints, path probabilities and
-their MI from a known list of maps."""
+"""``RunningStats`` against sums by hand: pair joints, path probabilities and their MI from a known list of
+maps."""
 
 import numpy as np
 import pytest
