@@ -53,14 +53,23 @@ def atomic_write(path: str | os.PathLike, mode: str = "wb", **open_kwargs: Any) 
         raise
 
 
+def _read_umask() -> int:
+    mask = os.umask(0)
+    os.umask(mask)
+    return mask
+
+
+#: the process umask, read once at import (``os.umask`` can only be read by setting it, which would race
+#: with files created by other threads)
+_UMASK = _read_umask()
+
+
 def _mode_for(path: Path) -> int:
-    """The target's current mode if it exists, else ``0o666`` less the process umask (as ``open`` does)."""
+    """The target's current mode if it exists, else ``0o666`` less the umask (as ``open`` gives)."""
     try:
         return os.stat(path).st_mode & 0o7777
     except FileNotFoundError:
-        umask = os.umask(0)
-        os.umask(umask)
-        return 0o666 & ~umask
+        return 0o666 & ~_UMASK
 
 
 def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> Path:

@@ -35,7 +35,7 @@ from ogm_ppl.inference.exact import brute_force
 from ogm_ppl.inference.mcmc.kernel import KernelStateError
 from ogm_ppl.inference.tiling import patch_cells
 
-__all__ = ["KernelContract", "enumerate_maps", "sweep_matrix"]
+__all__ = ["KernelContract", "enumerable_1d", "enumerable_2d", "enumerate_maps", "sweep_matrix"]
 
 
 def enumerate_maps(model) -> torch.Tensor:
@@ -219,6 +219,36 @@ def _check_draws(probs: torch.Tensor, counts: torch.Tensor, what: str) -> None:
     assert pval > 1e-3, f"{what}: chi-square p-value {pval:.2e}"
 
 
+def enumerable_1d(K: int = 6, readings=(3.0, 4.0, 2.0), sensor=None, prior=None):
+    """A 1D toy of ``K + 1`` cells (robot in cell 0, ``K`` latent), ``GaussianRange(1.5)`` and a graded
+    independent prior ``linspace(0.2, 0.6)`` unless given: small enough to enumerate its ``2^K`` maps."""
+    from ogm_ppl import GaussianRange, OccupancyModel, raycast
+    from ogm_ppl.datasets import toy_1d
+    from ogm_ppl.priors import IndependentPrior
+
+    toy = toy_1d(num_cells=K + 1, wall=1, readings=readings)
+    prior = prior if prior is not None else IndependentPrior(torch.linspace(0.2, 0.6, K + 1))
+    return OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), sensor or GaussianRange(1.5), prior)
+
+
+def enumerable_2d(sensor=None):
+    """A 2 x 4 grid (7 latent cells) with four max-range-capable readings, ``GaussianRange(0.9)`` unless
+    given, and a graded independent prior ``linspace(0.25, 0.55)``."""
+    from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
+    from ogm_ppl.priors import IndependentPrior
+
+    grid = Grid((2, 4), resolution=1.0)
+    scans = Scans(
+        [[0.5, 0.5, 0.0], [0.5, 0.5, 0.0], [3.5, 1.5, math.pi], [0.5, 0.5, math.pi / 2]],
+        [0.0],
+        [[2.2], [3.9], [1.4], [1.0]],
+        max_range=3.9,
+        over_range="max",
+    )
+    prior = IndependentPrior(torch.linspace(0.25, 0.55, 8))
+    return OccupancyModel(grid, raycast(grid, scans), sensor or GaussianRange(0.9), prior)
+
+
 class KernelContract:
     """Pytest mixin: a map kernel's contract (module docstring). Override :meth:`make_kernel`; optionally
     the problems, :meth:`transition_matrix`, ``supports_region`` and the sample sizes."""
@@ -231,32 +261,12 @@ class KernelContract:
         raise NotImplementedError
 
     def problem_1d(self):
-        """An enumerable 1D problem (6 latent cells, graded independent prior)."""
-        from ogm_ppl import GaussianRange, OccupancyModel, raycast
-        from ogm_ppl.datasets import toy_1d
-        from ogm_ppl.priors import IndependentPrior
-
-        toy = toy_1d(num_cells=7, wall=1, readings=(3.0, 4.0, 2.0))
-        return OccupancyModel(
-            toy.grid, raycast(toy.grid, toy.scans), GaussianRange(1.5), IndependentPrior(torch.linspace(0.2, 0.6, 7))
-        )
+        """An enumerable 1D problem (:func:`enumerable_1d`: 6 latent cells, graded independent prior)."""
+        return enumerable_1d()
 
     def problem_2d(self):
-        """An enumerable 2D problem (2 x 4 grid, 7 latent cells, max-range readings)."""
-        from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
-        from ogm_ppl.priors import IndependentPrior
-
-        grid = Grid((2, 4), resolution=1.0)
-        scans = Scans(
-            [[0.5, 0.5, 0.0], [0.5, 0.5, 0.0], [3.5, 1.5, math.pi], [0.5, 0.5, math.pi / 2]],
-            [0.0],
-            [[2.2], [3.9], [1.4], [1.0]],
-            max_range=3.9,
-            over_range="max",
-        )
-        return OccupancyModel(
-            grid, raycast(grid, scans), GaussianRange(0.9), IndependentPrior(torch.linspace(0.25, 0.55, 8))
-        )
+        """An enumerable 2D problem (:func:`enumerable_2d`: 2 x 4 grid, 7 latent cells, max-range readings)."""
+        return enumerable_2d()
 
     def problem_region(self):
         """A 3 x 4 grid (9 latent cells) for ``region=`` (:attr:`region`)."""

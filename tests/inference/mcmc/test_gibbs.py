@@ -5,40 +5,15 @@ import numpy as np
 import pytest
 import torch
 
-from ogm_ppl import GaussianRange, Grid, OccupancyModel, PatternMatch, Scans, raycast
+from ogm_ppl import GaussianRange, OccupancyModel, PatternMatch, raycast
 from ogm_ppl.datasets import THESIS_TOY_READINGS, toy_1d
 from ogm_ppl.inference.exact import brute_force, pose_constrained_1d
 from ogm_ppl.inference.mcmc.gibbs import CellGibbs, MetropolisCell, PatchGibbs
 from ogm_ppl.inference.mcmc.runner import RunningStats, run_gibbs
 from ogm_ppl.priors import DataDriven1DPrior, IndependentPrior
+from ogm_ppl.testing.kernels import enumerable_1d, enumerable_2d, enumerate_maps
 
-
-def model_1d(K=6, readings=(3.0, 4.0, 2.0), sensor=None, prior=None):
-    toy = toy_1d(num_cells=K + 1, wall=1, readings=readings)
-    prior = prior if prior is not None else IndependentPrior(torch.linspace(0.2, 0.6, K + 1))
-    return OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), sensor or GaussianRange(1.5), prior)
-
-
-def model_2d(sensor=None):
-    grid = Grid((2, 4), resolution=1.0)
-    scans = Scans(
-        [[0.5, 0.5, 0.0], [0.5, 0.5, 0.0], [3.5, 1.5, math.pi], [0.5, 0.5, math.pi / 2]],
-        [0.0],
-        [[2.2], [3.9], [1.4], [1.0]],
-        max_range=3.9,
-        over_range="max",
-    )
-    return OccupancyModel(
-        grid, raycast(grid, scans), sensor or GaussianRange(0.9), IndependentPrior(torch.linspace(0.25, 0.55, 8))
-    )
-
-
-def states(model):
-    L = len(model.latent)
-    maps = torch.zeros(2**L, model.num_cells, dtype=torch.float64)
-    codes = torch.arange(2**L)
-    maps[:, model.latent] = ((codes[:, None] >> torch.arange(L)) & 1).double()
-    return maps
+model_1d, model_2d, states = enumerable_1d, enumerable_2d, enumerate_maps
 
 
 def code_of(model, m) -> int:
