@@ -302,6 +302,18 @@ class ParallelTempering(MapKernel):
         """``n x K`` uint8: every rung's current map (a copy; row 0 the cold chain)."""
         return np.stack([k.state.copy() for k in self.rungs])
 
+    def set_rung_states(self, maps) -> None:
+        """Make ``maps`` (``n x K`` or ``n x L``, 0/1; row ``i`` for rung ``i``) the rungs' states
+        (:meth:`set_state` puts one map on every rung)."""
+        self._prepare()
+        maps = torch.as_tensor(maps)
+        if maps.dim() != 2 or maps.shape[0] != self.num_rungs:
+            raise ValueError(f"set_rung_states takes one map per rung ({self.num_rungs}), got {tuple(maps.shape)}")
+        for k, m in zip(self.rungs, maps):
+            k._set_state(m)
+        self._restored = True
+        self._set_state(maps[0])
+
     def sampled_cells(self) -> np.ndarray:
         return self.rungs[0].sampled_cells()
 

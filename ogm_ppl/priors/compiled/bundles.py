@@ -27,8 +27,10 @@ def _check_beta(beta) -> float:
 def _scaled(x: np.ndarray, beta: float) -> np.ndarray:
     """``beta * x`` for the finite entries of ``x``; infinite entries (``log 0 = -inf``, hard constraints)
     stay as they are, so ``beta = 0`` gives ``0`` on the support and keeps ``-inf`` off it."""
-    x = np.asarray(x, dtype=np.float64)
-    return np.ascontiguousarray(np.where(np.isfinite(x), x * beta, x), dtype=np.float64)
+    out = np.array(x, dtype=np.float64, order="C")  # a copy
+    finite = np.isfinite(out)
+    out[finite] *= beta
+    return out
 
 
 class IndependentCells(NamedTuple):
