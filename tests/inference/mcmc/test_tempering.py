@@ -10,7 +10,15 @@ import torch
 from pyro.distributions.testing.gof import multinomial_goodness_of_fit
 
 from ogm_ppl.inference.exact import brute_force
-from ogm_ppl.inference.mcmc import CellGibbs, KernelStateError, ParallelTempering, PatchGibbs
+from ogm_ppl.inference.mcmc import (
+    CellGibbs,
+    CheckpointError,
+    KernelStateError,
+    ParallelTempering,
+    PatchGibbs,
+    RunningStats,
+    run_gibbs,
+)
 from ogm_ppl.inference.mcmc.diagnostics import ess
 from ogm_ppl.inference.mcmc.tempering import TemperedPrior, check_ladder, geometric_ladder, tempered_model
 from ogm_ppl.priors import BorderPatchPrior, IndependentPrior, MRFPrior, PatchTablePrior
@@ -206,7 +214,7 @@ def test_cold_chain_marginals_match_brute_force():
     torch.manual_seed(1)
     pt.setup()
     params = pt.initial_params
-    N = 6000
+    N = 4000
     trace = np.empty((N, len(model.latent)), np.float64)
     for t in range(N):
         params = pt.sample(params)
@@ -306,3 +314,26 @@ def test_ladder_and_options():
     pt = ParallelTempering(model, (1.0, 0.5))
     with pytest.raises(ValueError, match="one map per rung"):
         pt.set_rung_states(torch.zeros(3, model.num_cells))
+
+
+def test_run_gibbs_resumes_a_tempering_run_bit_for_bit(tmp_path):
+    model = _model("mrf")
+    make = lambda: ParallelTempering(model, (1.0, 0.5, 0.25), swaps="random")
+    whole = run_gibbs(make(), 60, RunningStats(model), seed=2, progress=False)
+    ck = tmp_path / "pt.npz"
+    part = run_gibbs(
+        make(), 60, RunningStats(model), seed=2, checkpoint=ck, checkpoint_every=10, stop_after=25, progress=False
+    )
+    assert part.interrupted
+    rest = run_gibbs(make(), 60, RunningStats(model), seed=2, checkpoint=ck, progress=False)
+    assert np.array_equal(rest.state, whole.state)
+    torch.testing.assert_close(rest.stats.marginals, whole.stats.marginals, rtol=0, atol=0)
+    with pytest.raises(CheckpointError, match="kernel"):
+        run_gibbs(
+            ParallelTempering(model, (1.0, 0.4, 0.25), swaps="random"),
+            60,
+            RunningStats(model),
+            seed=2,
+            checkpoint=ck,
+            progress=False,
+        )
