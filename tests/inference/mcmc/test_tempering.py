@@ -337,3 +337,21 @@ def test_run_gibbs_resumes_a_tempering_run_bit_for_bit(tmp_path):
             checkpoint=ck,
             progress=False,
         )
+
+
+def test_pyro_mcmc_and_region():
+    from pyro.infer import MCMC
+
+    model = _model("mrf", latent=5)
+    mcmc = MCMC(ParallelTempering(model, (1.0, 0.5)), num_samples=20, warmup_steps=3, disable_progbar=True)
+    mcmc.run()
+    assert mcmc.get_samples()["m"].shape == (20, len(model.latent))
+    region = model.latent.numpy()[:2]
+    start = torch.ones(model.num_cells, dtype=torch.float64)
+    start[model.known_free] = 0
+    pt = ParallelTempering(model, (1.0, 0.4), region=region, init=start)
+    pt.setup()
+    _run(pt, 40, 0)
+    outside = np.setdiff1d(model.latent.numpy(), pt.sampled_cells())
+    assert len(outside) and (pt.rung_states()[:, outside] == 1).all()
+    assert np.array_equal(pt.sampled_cells(), region)
