@@ -209,6 +209,8 @@ class ParallelTempering(MapKernel):
             ``model``).
         region: as in the rung kernels (the cold chain samples the conditional ``p(m_R' | m_rest, z)``).
 
+    State: :meth:`set_state` (and a ``params["m"]`` that is not the kernel's own, in :meth:`sample`) puts
+    one map on every rung; :meth:`set_rung_states` gives each rung its own; :meth:`rung_states` reads them.
     Randomness: the rung kernels' draws and one uniform per swap move, all from torch's generator, so a
     seed fixes the run. :meth:`swap_rates` gives each pair's acceptance rate; :meth:`state_dict` holds every
     rung (``rung{i}.*``, each rung kernel's own entries) and the swap counters, and a kernel built with the
