@@ -285,7 +285,9 @@ def heldout_window():
     return grid, rays, np.flatnonzero(unseen.ravel()), sigma
 
 
-def coupled_priors(num_sweeps: int = 200, warmup: int = 50, rungs: int = 4, beta_min: float = 0.3) -> dict:
+def coupled_priors(
+    num_sweeps: int = 200, warmup: int = 50, rungs: int = 4, beta_min: float = 0.3, seed: int = 0
+) -> dict:
     """Plain 3 x 3 patch Gibbs vs parallel tempering from 3 starts under the learned coupled priors (module
     docstring): R-hat agreement over the unseen cells, seconds, ratios."""
     from ogm_ppl.priors.named import prior_by_name
@@ -301,11 +303,12 @@ def coupled_priors(num_sweeps: int = 200, warmup: int = 50, rungs: int = 4, beta
         "warmup": warmup,
         "betas": list(betas),
         "starts": ["ogm", "free", "prior"],
+        "seed": seed,
     }
     print(f"coupled priors: {grid.shape} window, {rays.num_rays} rays, {len(unseen)} unseen cells, betas {betas}")
     for name in ("mrf:houseexpo", "border:houseexpo"):
         model = OccupancyModel(grid, rays, GaussianRange(sigma), prior_by_name(name, grid.shape))
-        starts = start_maps(model, res["starts"], seed=0)
+        starts = start_maps(model, res["starts"], seed=seed)
         PatchGibbs(model, (3, 3)).sample(PatchGibbs(model, (3, 3)).initial_params)  # compile outside the timing
         makers = {
             "patch Gibbs": (partial(PatchGibbs, model, (3, 3)), num_sweeps, warmup),
@@ -326,7 +329,7 @@ def coupled_priors(num_sweeps: int = 200, warmup: int = 50, rungs: int = 4, beta
                 return k
 
             t = time.perf_counter()
-            chains = run_from_starts(tracked, starts, n, unseen, warmup=w, seed=0)
+            chains = run_from_starts(tracked, starts, n, unseen, warmup=w, seed=seed)
             sec = time.perf_counter() - t
             agree = rhat_agreement(chains)
             row = {k: v for k, v in agree.items() if k != "rhat"}
@@ -403,10 +406,11 @@ if __name__ == "__main__":
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--reference-only", action="store_true", help="only the 4-chain reference-scene part")
     ap.add_argument("--tempering-only", action="store_true", help="only the coupled-prior part (parallel tempering)")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the coupled-prior part's prior start and chains")
     args = ap.parse_args()
     t0 = time.perf_counter()
     if args.tempering_only:
-        res = {"coupled_priors": coupled_priors(), "total_s": time.perf_counter() - t0}
+        res = {"coupled_priors": coupled_priors(seed=args.seed), "total_s": time.perf_counter() - t0}
         print(f"total {res['total_s']:.0f} s; wrote {write_json('bench_mixing_coupled_priors', res)}")
         raise SystemExit(0)
     if args.reference_only:
