@@ -13,6 +13,15 @@ NumPyro's ``DiscreteGibbs`` (plain and ``modified=True``, Liu's metropolised Gib
 same problems when ``numpyro`` is installed (``pip install "ogm_ppl[peers]"``); its compile time is
 reported apart. Ratios are ours / NumPyro's modified sampler. Writes ``out/bench/bench_mixing.json``.
 ``--quick``: fewer sweeps and no reference scene (a smoke run); ``--reference-only``: the reference scene alone.
+
+Mixing under the strongly coupled learned priors (``--tempering-only``, about 2-3 min; also part of the full
+run): a 48 x 48 window of a held-out HouseExpo plan (never used to learn a table) with sparse stop-and-scan
+data as in ``experiments/heldout_priors.py`` (3 stops, 90 beams, 75-cell range, sigma 1 cell); under
+``mrf:houseexpo`` and ``border:houseexpo``, 3 x 3 patch Gibbs and parallel tempering over it
+(``ogm_ppl.inference.mcmc.tempering``; 4 rungs, geometric to beta = 0.3, prior and likelihood tempered) each
+run one chain from each of 3 starts (thresholded OGM, all free, a prior draw); reported: the fraction of the
+unseen near-mapped cells (no ray reached them) whose split R-hat over the 3 chains is below 1.05, the
+seconds, the swap rates, and the ratios vs plain Gibbs with the same sweeps and with the same time.
 """
 
 from __future__ import annotations
@@ -36,7 +45,17 @@ from _common import write_json
 from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
 from ogm_ppl.datasets import THESIS_TOY_READINGS, toy_1d
 from ogm_ppl.inference.exact import brute_force, pose_constrained_1d
-from ogm_ppl.inference.mcmc import CellGibbs, MetropolisCell, PatchGibbs, run_chains
+from ogm_ppl.inference.mcmc import (
+    CellGibbs,
+    MetropolisCell,
+    ParallelTempering,
+    PatchGibbs,
+    geometric_ladder,
+    rhat_agreement,
+    run_chains,
+    run_from_starts,
+    start_maps,
+)
 from ogm_ppl.inference.mcmc.diagnostics import ess as ess_of
 from ogm_ppl.priors import IndependentPrior
 
@@ -240,6 +259,101 @@ def reference_scene(num_sweeps: int) -> dict:
     return res
 
 
+# ----------------------------------------------------------------------------------------- coupled priors
+TEMPER_PLAN = ("houseexpo", "9f3a3b4917610fcc335719b8ed600b87", (64, 44), 48)  # corpus, plan, window corner, size
+
+
+def heldout_window():
+    """The held-out window of :data:`TEMPER_PLAN` and its sparse stop-and-scan data: (grid, rays, unseen
+    cell indices, sigma)."""
+    from ogm_ppl.datasets.floorplans import heldout_plans, load_plan
+    from ogm_ppl.datasets.stop_and_scan import stop_and_scan
+    from ogm_ppl.metrics import near_mapped_mask
+
+    corpus, name, (r0, c0), size = TEMPER_PLAN
+    if name not in heldout_plans(corpus):
+        raise RuntimeError(f"{name} is not a held-out {corpus} plan")
+    plan = load_plan(corpus, name)
+    truth = plan.occupancy[r0 : r0 + size, c0 : c0 + size]
+    known = plan.known[r0 : r0 + size, c0 : c0 + size]
+    grid = Grid(truth.shape, resolution=plan.resolution)
+    sigma = 1.0
+    data = stop_and_scan(truth, grid, num_poses=3, beams=90, max_range_cells=75.0, sigma_cells=sigma, seed=0)
+    rays = raycast(grid, data.scans)
+    reached = rays.reached().reshape(grid.shape)
+    unseen = near_mapped_mask(reached, 10.0) & known & ~reached
+    return grid, rays, np.flatnonzero(unseen.ravel()), sigma
+
+
+def coupled_priors(
+    num_sweeps: int = 200, warmup: int = 50, rungs: int = 4, beta_min: float = 0.3, seed: int = 0
+) -> dict:
+    """Plain 3 x 3 patch Gibbs vs parallel tempering from 3 starts under the learned coupled priors (module
+    docstring): R-hat agreement over the unseen cells, seconds, ratios."""
+    from ogm_ppl.priors.named import prior_by_name
+
+    grid, rays, unseen, sigma = heldout_window()
+    betas = geometric_ladder(rungs, beta_min)
+    res: dict = {
+        "plan": TEMPER_PLAN[1],
+        "window": [*TEMPER_PLAN[2], TEMPER_PLAN[3]],
+        "rays": rays.num_rays,
+        "unseen_cells": len(unseen),
+        "sweeps": num_sweeps,
+        "warmup": warmup,
+        "betas": list(betas),
+        "starts": ["ogm", "free", "prior"],
+        "seed": seed,
+    }
+    print(f"coupled priors: {grid.shape} window, {rays.num_rays} rays, {len(unseen)} unseen cells, betas {betas}")
+    for name in ("mrf:houseexpo", "border:houseexpo"):
+        model = OccupancyModel(grid, rays, GaussianRange(sigma), prior_by_name(name, grid.shape))
+        starts = start_maps(model, res["starts"], seed=seed)
+        PatchGibbs(model, (3, 3)).sample(PatchGibbs(model, (3, 3)).initial_params)  # compile outside the timing
+        makers = {
+            "patch Gibbs": (partial(PatchGibbs, model, (3, 3)), num_sweeps, warmup),
+            "parallel tempering": (
+                partial(ParallelTempering, model, betas, kernel="patch", patch=(3, 3), temper="both"),
+                num_sweeps,
+                warmup,
+            ),
+            "patch Gibbs, same time": (partial(PatchGibbs, model, (3, 3)), rungs * num_sweeps, rungs * warmup),
+        }
+        rows = {}
+        for label, (make, n, w) in makers.items():
+            kernels = []
+
+            def tracked(init, make=make, kernels=kernels):
+                k = make(init=init)
+                kernels.append(k)
+                return k
+
+            t = time.perf_counter()
+            chains = run_from_starts(tracked, starts, n, unseen, warmup=w, seed=seed)
+            sec = time.perf_counter() - t
+            agree = rhat_agreement(chains)
+            row = {k: v for k, v in agree.items() if k != "rhat"}
+            row["seconds"] = sec
+            if isinstance(kernels[0], ParallelTempering):
+                row["swap_rates"] = np.nanmean([k.swap_rates() for k in kernels], 0).tolist()
+            rows[label] = row
+        base = rows["patch Gibbs"]
+        for label, row in rows.items():
+            row["fraction_vs_patch_gibbs"] = (
+                row["fraction_below_all"] / base["fraction_below_all"] if base["fraction_below_all"] > 0 else None
+            )
+            row["seconds_vs_patch_gibbs"] = row["seconds"] / base["seconds"]
+            swaps = f"  swap rates {np.round(row['swap_rates'], 2).tolist()}" if "swap_rates" in row else ""
+            print(
+                f"  {name:17s} {label:23s} {row['seconds']:6.1f} s ({row['seconds_vs_patch_gibbs']:.1f}x)  "
+                f"R-hat < 1.05: {row['fraction_below_all']:.0%} of {row['cells']} unseen cells "
+                f"({row['fraction_below']:.0%} of {row['varying']} varying, {row['frozen_apart']} frozen apart)"
+                f"{swaps}"
+            )
+        res[name] = rows
+    return res
+
+
 def main(quick: bool = False) -> dict:
     out: dict = {"problems": {}}
     try:
@@ -283,6 +397,7 @@ def main(quick: bool = False) -> dict:
         out["problems"][pname] = rows
     if not quick:
         out["reference_scene"] = reference_scene(100)
+        out["coupled_priors"] = coupled_priors()
     return out
 
 
@@ -290,8 +405,14 @@ if __name__ == "__main__":
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--quick", action="store_true")
     ap.add_argument("--reference-only", action="store_true", help="only the 4-chain reference-scene part")
+    ap.add_argument("--tempering-only", action="store_true", help="only the coupled-prior part (parallel tempering)")
+    ap.add_argument("--seed", type=int, default=0, help="seed of the coupled-prior part's prior start and chains")
     args = ap.parse_args()
     t0 = time.perf_counter()
+    if args.tempering_only:
+        res = {"coupled_priors": coupled_priors(seed=args.seed), "total_s": time.perf_counter() - t0}
+        print(f"total {res['total_s']:.0f} s; wrote {write_json('bench_mixing_coupled_priors', res)}")
+        raise SystemExit(0)
     if args.reference_only:
         res = {"reference_scene": reference_scene(100), "total_s": time.perf_counter() - t0}
         print(f"wrote {write_json('bench_mixing_reference_scene', res)}")

@@ -18,9 +18,12 @@ from ogm_ppl.inference.mcmc import (
     CellGibbs,
     GibbsRun,
     MetropolisCell,
+    ParallelTempering,
     PatchGibbs,
     RunningStats,
+    geometric_ladder,
     run_gibbs,
+    tempered_model,
 )
 from ogm_ppl.inference.variational import (
     ExactELBO,
@@ -39,6 +42,7 @@ __all__ = [
     "MapEstimate",
     "MeanFieldGuide",
     "MetropolisCell",
+    "ParallelTempering",
     "PatchGibbs",
     "PatchGuide",
     "RunningStats",
@@ -46,10 +50,12 @@ __all__ = [
     "evidence_grid_from_scans",
     "exact",
     "fit_guide",
+    "geometric_ladder",
     "log_odds",
     "map_estimate",
     "mcmc",
     "patch_map",
     "run_gibbs",
+    "tempered_model",
     "variational",
 ]

@@ -10,6 +10,7 @@ r"""Map methods by name: one registry for every way the library makes a map.
 ``vi``             variational inference with a mean-field, patch or first-hit guide
 ``amortised``      the amortised guide's one-pass map ``q(m_k = 1 | z)``
 ``guided_gibbs``   Gibbs sweeps mixed with block proposals from the amortised guide
+``tempering``      parallel tempering: tempered Gibbs chains with swaps, the cold chain's marginals
 =================  ============================================================================
 
 Each has a parameter dataclass (:mod:`~ogm_ppl.methods.params`: kinds, ranges, unknown keys refused,

@@ -1,11 +1,21 @@
 """MCMC over whole maps (Chapter 4): the map-kernel base, Gibbs kernels for ``pyro.infer.MCMC``, guided
-Gibbs, the streaming runner with checkpoints, and convergence diagnostics."""
+Gibbs, parallel tempering, the streaming runner with checkpoints, and convergence diagnostics."""
 
-from ogm_ppl.inference.mcmc.diagnostics import ChainsResult, ess, kl_trace, run_chains, split_rhat
+from ogm_ppl.inference.mcmc.diagnostics import (
+    ChainsResult,
+    ess,
+    kl_trace,
+    rhat_agreement,
+    run_chains,
+    run_from_starts,
+    split_rhat,
+    start_maps,
+)
 from ogm_ppl.inference.mcmc.gibbs import CellGibbs, MetropolisCell, PatchGibbs
 from ogm_ppl.inference.mcmc.guided import GuidedGibbs
 from ogm_ppl.inference.mcmc.kernel import KernelStateError, MapKernel, initial_map
 from ogm_ppl.inference.mcmc.runner import CheckpointError, GibbsRun, RunningStats, run_gibbs
+from ogm_ppl.inference.mcmc.tempering import ParallelTempering, TemperedPrior, geometric_ladder, tempered_model
 
 __all__ = [
     "CellGibbs",
@@ -16,12 +26,19 @@ __all__ = [
     "KernelStateError",
     "MapKernel",
     "MetropolisCell",
+    "ParallelTempering",
     "PatchGibbs",
     "RunningStats",
+    "TemperedPrior",
     "ess",
+    "geometric_ladder",
     "initial_map",
     "kl_trace",
+    "rhat_agreement",
     "run_chains",
+    "run_from_starts",
     "run_gibbs",
     "split_rhat",
+    "start_maps",
+    "tempered_model",
 ]

@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 import multiprocessing
 import pickle
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from dataclasses import dataclass
 from typing import Any
@@ -24,7 +24,18 @@ from tqdm.auto import tqdm
 from ogm_ppl.inference.mcmc.runner import RunningStats, run_gibbs
 from ogm_ppl.metrics import kl_divergence
 
-__all__ = ["ChainsResult", "run_chains", "split_rhat", "ess", "effective_sample_size", "kl_trace"]
+__all__ = [
+    "STARTS",
+    "ChainsResult",
+    "effective_sample_size",
+    "ess",
+    "kl_trace",
+    "rhat_agreement",
+    "run_chains",
+    "run_from_starts",
+    "split_rhat",
+    "start_maps",
+]
 
 
 def _per_cell(fn, traces) -> torch.Tensor:
@@ -84,7 +95,10 @@ def ess(traces: np.ndarray | torch.Tensor) -> torch.Tensor:
 
 @dataclass
 class ChainsResult:
+    """The statistics of each chain (``stats[c]``), and the names of their starts (:func:`run_from_starts`)."""
+
     stats: list[RunningStats]
+    starts: list[str] | None = None
 
     @property
     def marginals(self) -> torch.Tensor:
@@ -197,3 +211,107 @@ def kl_trace(
         if i in checkpoints:
             out.append(float(kl_divergence(exact_marginals, (acc / i).clamp(eps, 1 - eps))))
     return torch.tensor(out, dtype=torch.float64)
+
+
+#: the named starts of :func:`start_maps`
+STARTS = ("ogm", "free", "occupied", "prior", "guide")
+
+
+def start_maps(
+    model, starts: Sequence[str] = ("ogm", "free", "prior"), seed: int = 0, delta="haehnel"
+) -> dict[str, torch.Tensor]:
+    """Dispersed starting maps, ``name -> K`` float64 0/1 map (pinned cells free), by name:
+
+    * ``"ogm"`` — traditional OGM thresholded at the mean prior occupancy (Section 4.1.2; ``delta``);
+    * ``"free"`` / ``"occupied"`` — every latent cell free / occupied;
+    * ``"prior"`` — a draw from the prior (torch's generator seeded with ``seed``; the global state is
+      restored afterwards);
+    * ``"guide"`` — the MAP of the shipped amortised guide (``q(m_k = 1 | z) > 1/2``, Section 2.5), for a
+      model the shipped guide fits.
+    """
+    from ogm_ppl.inference.mcmc.kernel import initial_map
+
+    out: dict[str, torch.Tensor] = {}
+    for name in starts:
+        if name not in STARTS:
+            raise ValueError(f"unknown start {name!r}; the starts are {STARTS}")
+        if name == "prior":
+            rng = torch.get_rng_state()
+            try:
+                torch.manual_seed(int(seed))
+                m = initial_map(model, "prior")
+            finally:
+                torch.set_rng_state(rng)
+        elif name == "guide":
+            from ogm_ppl.inference.variational.amortised import guide_initial_map, shipped_guide
+
+            m = initial_map(model, guide_initial_map(shipped_guide(model), model, "mode"))
+        else:
+            m = initial_map(model, name, delta)
+        out[name] = m.to(torch.float64)
+    return out
+
+
+def run_from_starts(
+    make_kernel: Callable[..., Any],
+    starts: Mapping[str, torch.Tensor],
+    num_sweeps: int,
+    trace_cells: Sequence[int],
+    warmup: int = 0,
+    seed: int = 0,
+    progress: bool = False,
+) -> ChainsResult:
+    """One chain from each start (``name -> K`` map, e.g. :func:`start_maps`), chain ``c`` built by
+    ``make_kernel(init=starts[name])`` (e.g. ``functools.partial(PatchGibbs, model, (3, 3))`` or
+    ``partial(ParallelTempering, model, betas)``) and run with seed ``seed + c``; ``warmup`` sweeps are
+    not recorded. Returns the chains' statistics (traces of ``trace_cells``) with their start names."""
+    if not starts:
+        raise ValueError("run_from_starts needs at least one start")
+    trace_cells = [int(c) for c in trace_cells]
+    out = []
+    for c, m in enumerate(starts.values()):
+        kernel = make_kernel(init=m)
+        stats = RunningStats(kernel.model, trace_cells=trace_cells)
+        run_gibbs(kernel, num_sweeps, stats, warmup=warmup, seed=seed + c, progress=progress)
+        out.append(stats)
+    return ChainsResult(out, list(starts))
+
+
+def rhat_agreement(traces, cells: Sequence[int] | np.ndarray | None = None, threshold: float = 1.05) -> dict:
+    r"""Agreement of chains from different starts: split R-hat (:func:`split_rhat`) per cell of ``traces``
+    (``chains x sweeps x traced cells``, or a :class:`ChainsResult`) over the positions ``cells`` of the
+    traced cells (default: all), and the fraction below ``threshold``.
+
+    Cells constant over every chain have no R-hat (NaN): the chains agree on them, but they say nothing
+    about mixing. Returns ``cells`` (how many), ``varying`` (those with an R-hat), ``frozen_apart`` (R-hat
+    ``inf``: each chain constant, not all at the same value), ``fraction_below`` (of the varying cells),
+    ``fraction_below_all`` (constant cells counted as agreeing), ``rhat_median``, ``rhat_max`` and the
+    per-cell ``rhat`` (``float64`` array).
+    """
+    x = traces.traces() if isinstance(traces, ChainsResult) else np.asarray(traces)
+    if x.ndim != 3:
+        raise ValueError(f"traces must be chains x sweeps x cells, got shape {x.shape}")
+    if x.shape[0] < 2 or x.shape[1] < 4:
+        raise ValueError(f"split R-hat needs at least 2 chains of 4 sweeps, got {x.shape[0]} of {x.shape[1]}")
+    if not threshold > 1.0:
+        raise ValueError(f"threshold must exceed 1, got {threshold}")
+    if cells is not None:
+        idx = np.asarray(cells, dtype=np.int64).reshape(-1)
+        if idx.size and (idx.min() < 0 or idx.max() >= x.shape[2]):
+            raise ValueError(f"cells must be positions in 0..{x.shape[2] - 1} of the traced cells")
+        x = x[:, :, idx]
+    n = x.shape[2]
+    rhat = split_rhat(x).numpy() if n else np.zeros(0)
+    ok = ~np.isnan(rhat)
+    below = rhat[ok] < threshold
+    return {
+        "cells": int(n),
+        "varying": int(ok.sum()),
+        "frozen_apart": int(np.isinf(rhat).sum()),
+        "fraction_below": float(below.mean()) if ok.any() else float("nan"),
+        "fraction_below_all": float((below.sum() + (~ok).sum()) / n) if n else float("nan"),
+        "rhat_median": float(np.median(rhat[ok])) if ok.any() else float("nan"),
+        "rhat_max": float(rhat[ok].max()) if ok.any() else float("nan"),
+        "threshold": float(threshold),
+        "rhat": rhat,
+    }

@@ -16,6 +16,23 @@ import numpy as np
 __all__ = ["CompiledPrior", "IndependentCells", "Stencil", "Tiles"]
 
 
+def _check_beta(beta) -> float:
+    """``beta`` as a float, checked: finite and ``>= 0``."""
+    b = float(beta)
+    if not (np.isfinite(b) and b >= 0.0):
+        raise ValueError(f"a tempering exponent beta must be finite and >= 0, got {beta!r}")
+    return b
+
+
+def _scaled(x: np.ndarray, beta: float) -> np.ndarray:
+    """``beta * x`` for the finite entries of ``x``; infinite entries (``log 0 = -inf``, hard constraints)
+    stay as they are, so ``beta = 0`` gives ``0`` on the support and keeps ``-inf`` off it."""
+    out = np.array(x, dtype=np.float64, order="C")  # a copy
+    finite = np.isfinite(out)
+    out[finite] *= beta
+    return out
+
+
 class IndependentCells(NamedTuple):
     """Cells independent a priori: ``log p(m) = sum_k m_k l_k + const``."""
 
@@ -27,6 +44,17 @@ class IndependentCells(NamedTuple):
 
     def patch_capacity(self, L: int) -> int:
         return max(1 << L if L <= 20 else 0, 2)
+
+    def tempered(self, beta: float) -> IndependentCells:
+        """``log p~(m)^beta = beta sum_k m_k l_k``: log-odds ``beta l_k`` (``+-inf`` kept).
+
+        Tempering (for parallel tempering, Geyer 1991): the bundle of ``p~(m)^beta``, every log-potential
+        times ``beta``; ``-inf`` (a configuration the prior forbids) stays ``-inf``. ``beta = 1`` returns
+        this very bundle; ``beta = 0`` gives the uniform distribution over the prior's support (the limit
+        ``beta -> 0+``). Same type, so the compiled kernels sample the tempered prior unchanged.
+        """
+        b = _check_beta(beta)
+        return self if b == 1.0 else self._replace(log_odds=_scaled(self.log_odds, b))
 
     def tiles_patches(self, hw, anchors) -> bool:
         return False
@@ -49,6 +77,21 @@ class Stencil(NamedTuple):
 
     def patch_capacity(self, L: int) -> int:
         return max(1 << L if L <= 20 else 0, 2)
+
+    def tempered(self, beta: float) -> Stencil:
+        """``beta h_k``, ``beta a_d``, ``beta J_d``: the conditional log-odds scale by ``beta``.
+
+        Tempering (for parallel tempering, Geyer 1991): the bundle of ``p~(m)^beta``, every log-potential
+        times ``beta``; ``-inf`` (a configuration the prior forbids) stays ``-inf``. ``beta = 1`` returns
+        this very bundle; ``beta = 0`` gives the uniform distribution over the prior's support (the limit
+        ``beta -> 0+``). Same type, so the compiled kernels sample the tempered prior unchanged.
+        """
+        b = _check_beta(beta)
+        if b == 1.0:
+            return self
+        return self._replace(
+            unary=_scaled(self.unary, b), bias=_scaled(self.bias, b), coupling=_scaled(self.coupling, b)
+        )
 
     def tiles_patches(self, hw, anchors) -> bool:
         return False
@@ -88,6 +131,20 @@ class Tiles(NamedTuple):
     def patch_capacity(self, L: int) -> int:
         seg = int(np.diff(self.seg_off).max()) if len(self.seg_off) > 1 else 0
         return max(1 << L if L <= 20 else 0, seg, 2)
+
+    def tempered(self, beta: float) -> Tiles:
+        """``beta log phi`` in every segment (the sparse values and the dense table alike); missing keys
+        (``phi = 0``) stay impossible, and the fallback reads the scaled values.
+
+        Tempering (for parallel tempering, Geyer 1991): the bundle of ``p~(m)^beta``, every log-potential
+        times ``beta``; ``-inf`` (a configuration the prior forbids) stays ``-inf``. ``beta = 1`` returns
+        this very bundle; ``beta = 0`` gives the uniform distribution over the prior's support (the limit
+        ``beta -> 0+``). Same type, so the compiled kernels sample the tempered prior unchanged.
+        """
+        b = _check_beta(beta)
+        if b == 1.0:
+            return self
+        return self._replace(logp=_scaled(self.logp, b), dense=_scaled(self.dense, b))
 
     def tiles_patches(self, hw, anchors) -> bool:
         """Whether every patch (``h x w`` rectangles at ``anchors``, ``n x 2``) is a tile of this tiling."""
