@@ -44,11 +44,12 @@ both modes.
 
 from __future__ import annotations
 
+import itertools
 import math
 import os
 from collections import defaultdict
 from collections.abc import Iterator
-from contextlib import contextmanager
+from contextlib import contextmanager, suppress
 from dataclasses import dataclass, field
 from fractions import Fraction
 from pathlib import Path
@@ -197,22 +198,26 @@ def _open_reader(path: Path) -> Iterator[tuple[object, str]]:
     kind = bag_kind(path)
     if kind is None:
         raise BagFormatError(
-            path, "not a ROS bag (expected a ROS 1 .bag file, or a ROS 2 bag folder with metadata.yaml or its .db3/.mcap)"
+            path,
+            "not a ROS bag (expected a ROS 1 .bag file, or a ROS 2 bag folder with metadata.yaml or its .db3/.mcap)",
         )
     if kind == "ros1" and path.suffix != ".bag":
         raise BagFormatError(path, "a ROS 1 bag must have the suffix .bag (the bag library tells versions apart by it)")
     if not path.is_dir() and kind != "ros1" and path.suffix != {"sqlite3": ".db3", "mcap": ".mcap"}[kind]:
-        raise BagFormatError(path, f"a bare ROS 2 {kind} file must have the suffix {'.db3' if kind == 'sqlite3' else '.mcap'}")
-    with _library_errors(path, "cannot open the bag"):
+        raise BagFormatError(
+            path, f"a bare ROS 2 {kind} file must have the suffix {'.db3' if kind == 'sqlite3' else '.mcap'}"
+        )
+    hint = "cannot open the bag" + (
+        " (a ROS 1 bag cut short has no index; `rosbag reindex` rebuilds it)" if kind == "ros1" else ""
+    )
+    with _library_errors(path, hint):
         reader = AnyReader([path], default_typestore=get_typestore(Stores.LATEST))
         reader.open()
     try:
         yield reader, kind
     finally:
-        try:
+        with suppress(Exception):  # closing a half-read corrupted file may fail again; the first error counts
             reader.close()
-        except Exception:  # noqa: S110 - closing a half-read corrupted file may fail again; the error is reported
-            pass
 
 
 def bag_topics(path: str | os.PathLike) -> list[tuple[str, str, int]]:
@@ -304,9 +309,7 @@ def _slerp(q0: np.ndarray, q1: np.ndarray, w: np.ndarray) -> np.ndarray:
     return np.where((w == 0)[:, None], q0, q)
 
 
-def _bracket(
-    samples: np.ndarray, t: np.ndarray, tol_ns: int
-) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def _bracket(samples: np.ndarray, t: np.ndarray, tol_ns: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """For each stamp ``t``: the last sample ``i0`` at or before it, the first ``i1`` at or after it,
     the weight ``w = (t - s[i0]) / (s[i1] - s[i0])`` (0 when they coincide) and whether both lie within
     ``tol_ns``. ``samples`` sorted (int64 ns)."""
@@ -530,7 +533,7 @@ def _poses_from_tf(path: Path, links: list, frames: list[str], stamps: np.ndarra
         q = np.tile([0.0, 0.0, 0.0, 1.0], (len(t_s), 1))
         tv = np.zeros((len(t_s), 3))
         good = np.ones(len(t_s), dtype=bool)
-        for child, par in zip(chain[:-1], chain[1:]):  # compose map -> ... -> laser from the top
+        for child, par in itertools.pairwise(chain):  # compose map -> ... -> laser from the top
             recs = by_link[(par, child)]
             dyn = [r for r in recs if not r[5]]
             if not dyn:  # a static link: its last value
@@ -608,13 +611,13 @@ def read_bag(
     ):
         if v not in allowed:
             raise ValueError(f"read_bag: {name} must be one of {allowed}, got {v!r}")
-    for name, v, lo in (
-        ("max_usable_range", max_usable_range, 0.0),
-        ("no_return_threshold", no_return_threshold, 0.0),
-        ("max_range", max_range, 0.0),
+    for opt, x in (
+        ("max_usable_range", max_usable_range),
+        ("no_return_threshold", no_return_threshold),
+        ("max_range", max_range),
     ):
-        if v is not None and not (isinstance(v, (int, float)) and math.isfinite(v) and v > lo):
-            raise ValueError(f"read_bag: {name} must be a finite number > 0 or None, got {v!r}")
+        if x is not None and not (isinstance(x, (int, float)) and math.isfinite(x) and x > 0):
+            raise ValueError(f"read_bag: {opt} must be a finite number > 0 or None, got {x!r}")
     if not (isinstance(min_range, (int, float)) and math.isfinite(min_range) and min_range >= 0):
         raise ValueError(f"read_bag: min_range must be a finite number >= 0, got {min_range!r}")
     if not (isinstance(pose_tolerance, (int, float)) and math.isfinite(pose_tolerance) and pose_tolerance >= 0):
@@ -664,7 +667,7 @@ def read_bag(
 
     idx = np.array([s[0] for s in scans], dtype=np.int64)
     stamps = np.array([s[1] for s in scans], dtype=np.int64)
-    tol_ns = int(round(pose_tolerance * 1e9))
+    tol_ns = round(pose_tolerance * 1e9)
     if tf:
         laser, have, pose_stamps = _poses_from_tf(path, links, [s[2] for s in scans], stamps, tol_ns, map_frame)
     else:
@@ -796,6 +799,7 @@ def write_bag(
     tf: bool = False,
     laser_offset: tuple[float, float, float] = (0.0, 0.0, 0.0),
     laser_height: float = 0.0,
+    map_to_odom: tuple[float, float, float] = (0.0, 0.0, 0.0),
     map_frame: str = "map",
     laser_frame: str = "laser",
 ) -> Path:
@@ -806,8 +810,8 @@ def write_bag(
     ``range_max = scans.max_range``; a max-range reading is written as ``range_max`` and an invalid beam as
     NaN (both no-return in the bag). The pose goes to ``pose_topic`` (``pose_type`` one of
     :data:`POSE_TYPES`) as the robot pose ``laser pose (x) laser_offset^-1``; with ``tf=True`` to ``/tf``
-    instead (``map -> odom`` identity at the first and last stamp, ``odom -> base_link`` per scan) and
-    the laser mounting ``base_link -> laser_frame`` (``laser_offset``, ``laser_height``) to ``/tf_static``.
+    instead (``map -> odom`` = ``map_to_odom`` and ``odom -> base_link`` with each scan) and the laser
+    mounting ``base_link -> laser_frame`` (``laser_offset``, ``laser_height``) to ``/tf_static``.
 
     Args:
         storage: ``"ros1"`` (a ``.bag`` file), ``"sqlite3"`` or ``"mcap"`` (a ROS 2 bag folder).
@@ -835,6 +839,7 @@ def write_bag(
     ns = np.round(stamps * 1e9).astype(np.int64)
     bag_ns = np.maximum.accumulate(ns)  # receive times never go back; header stamps may (the Intel log's do)
     ox, oy, oyaw = laser_offset
+    mx, my, myaw = map_to_odom
     # robot pose = laser pose (x) offset^-1
     yaw_r = scans.poses[:, 2] - oyaw
     c, s = np.cos(yaw_r), np.sin(yaw_r)
@@ -861,7 +866,7 @@ def write_bag(
             transform=T["geometry_msgs/msg/Transform"](translation=v, rotation=quat(yaw)),
         )
 
-    def ser(msg, typ: str) -> bytes:
+    def ser(msg, typ: str):
         return ts.serialize_ros1(msg, typ) if ros1 else ts.serialize_cdr(msg, typ)
 
     valid, is_max = np.asarray(scans.valid), np.asarray(scans.is_max)
@@ -877,18 +882,21 @@ def write_bag(
         if tf:
             c_tf = w.add_connection("/tf", TF_MESSAGE, typestore=ts)
             c_static = w.add_connection("/tf_static", TF_MESSAGE, typestore=ts)
-            mount = transform(int(ns[0]), base_frame, laser_frame, ox, oy, laser_height, oyaw)
+            mount = transform(int(ns.min()), base_frame, laser_frame, ox, oy, laser_height, oyaw)
             w.write(c_static, int(ns.min()), ser(T[TF_MESSAGE](transforms=[mount]), TF_MESSAGE))
-            for t, tb in sorted({(int(ns.min()), int(ns.min())), (int(ns.max()), int(bag_ns[-1]))}):
-                ident = transform(t, map_frame, "odom", 0.0, 0.0, 0.0, 0.0)
-                w.write(c_tf, tb, ser(T[TF_MESSAGE](transforms=[ident]), TF_MESSAGE))
         else:
             c_pose = w.add_connection(pose_topic, pose_type, typestore=ts)
         for k in range(scans.num_scans):
             t, tb = int(ns[k]), int(bag_ns[k])
             if tf:
-                link = transform(t, "odom", base_frame, float(rx[k]), float(ry[k]), 0.0, float(yaw_r[k]))
-                w.write(c_tf, tb, ser(T[TF_MESSAGE](transforms=[link]), TF_MESSAGE))
+                # odom -> base_link = (map -> odom)^-1 (x) robot pose
+                c0, s0 = math.cos(myaw), math.sin(myaw)
+                dx, dy = float(rx[k]) - mx, float(ry[k]) - my
+                odom = transform(t, map_frame, "odom", mx, my, 0.0, myaw)
+                link = transform(
+                    t, "odom", base_frame, c0 * dx + s0 * dy, -s0 * dx + c0 * dy, 0.0, float(yaw_r[k]) - myaw
+                )
+                w.write(c_tf, tb, ser(T[TF_MESSAGE](transforms=[odom, link]), TF_MESSAGE))
             else:
                 h = header(t, map_frame, k)
                 p = pose(float(rx[k]), float(ry[k]), float(yaw_r[k]))
