@@ -787,6 +787,19 @@ def _apply_rules(poses, angles, ranges, present, thr, rmin_msg, st) -> tuple[Sca
 
 
 # ------------------------------------------------------------------------------------- writing
+def typestore(storage: str):
+    """The ``rosbags`` typestore to write a bag of ``storage`` with: ROS 1 Noetic (with
+    ``tf2_msgs/TFMessage``, which its store lacks) or ROS 2 Humble."""
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    if storage != "ros1":
+        return get_typestore(Stores.ROS2_HUMBLE)
+    ts = get_typestore(Stores.ROS1_NOETIC)
+    if TF_MESSAGE not in ts.fielddefs:
+        ts.register(get_types_from_msg("geometry_msgs/TransformStamped[] transforms", TF_MESSAGE))
+    return ts
+
+
 def write_bag(
     path: str | os.PathLike,
     scans: Scans,
@@ -819,7 +832,6 @@ def write_bag(
     from rosbags.rosbag1 import Writer as Writer1
     from rosbags.rosbag2 import StoragePlugin
     from rosbags.rosbag2 import Writer as Writer2
-    from rosbags.typesys import Stores, get_typestore
 
     if storage not in STORAGES:
         raise ValueError(f"write_bag: storage must be one of {STORAGES}, got {storage!r}")
@@ -834,7 +846,7 @@ def write_bag(
         raise ValueError("write_bag: beam angles must be evenly spaced in every scan")
     path = Path(path)
     ros1 = storage == "ros1"
-    ts = get_typestore(Stores.ROS1_NOETIC if ros1 else Stores.ROS2_HUMBLE)
+    ts = typestore(storage)
     T = ts.types
     ns = np.round(stamps * 1e9).astype(np.int64)
     bag_ns = np.maximum.accumulate(ns)  # receive times never go back; header stamps may (the Intel log's do)
