@@ -16,6 +16,7 @@ from ogm_ppl.datasets.rosbag import (
     POSE_STAMPED,
     TF_MESSAGE,
     _angle64,
+    _widen_array,
     bag_kind,
     bag_topics,
     typestore,
@@ -309,6 +310,24 @@ def test_angles_of_the_laser_geometry_are_recovered():
         assert _angle64(float(np.float32(exact)), "decimal") == exact
     assert _angle64(float(np.float32(0.123456)), "decimal") == 0.123456  # not a fraction of pi: its decimal
     assert _angle64(float(np.float32(0.1)), "binary") == float(np.float32(0.1))
+
+
+def test_ranges_widen_to_the_shortest_decimal_of_their_float32():
+    """The vectorised widening equals numpy's shortest repr of every float32 (all bit patterns drawn at
+    random, sentinels and decimals), and "binary" keeps the float32 value."""
+    rng = np.random.default_rng(2)
+    a = np.concatenate(
+        [
+            rng.integers(0, 2**32, 200_000, dtype=np.uint64).astype(np.uint32).view(np.float32),
+            np.round(rng.uniform(0, 90, 50_000), 2).astype(np.float32),
+            np.array([0.0, -0.0, np.inf, -np.inf, np.nan, 81.83, 1e-40, 3e38], dtype=np.float32),
+        ]
+    ).reshape(-1, 2)
+    with np.errstate(all="ignore"):
+        ref = a.astype(str).astype(np.float64)
+    got = _widen_array(a, "decimal")
+    assert got.shape == a.shape and np.array_equal(got, ref, equal_nan=True)
+    assert np.array_equal(_widen_array(a, "binary"), a.astype(np.float64), equal_nan=True)
 
 
 # ------------------------------------------------------------------------- errors
