@@ -327,7 +327,8 @@ def _widen_array(a: np.ndarray, widen: str) -> np.ndarray:
     f = np.asarray(a, dtype=np.float32)
     shape = f.shape
     f = f.ravel()
-    x = f.astype(np.float64)
+    with np.errstate(invalid="ignore"):  # signalling NaN payloads
+        x = f.astype(np.float64)
     if widen == "binary":
         return x.reshape(shape)
     out = x.copy()

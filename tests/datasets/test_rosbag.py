@@ -324,10 +324,10 @@ def test_ranges_widen_to_the_shortest_decimal_of_their_float32():
         ]
     ).reshape(-1, 2)
     with np.errstate(all="ignore"):
-        ref = a.astype(str).astype(np.float64)
+        ref, binary = a.astype(str).astype(np.float64), a.astype(np.float64)
     got = _widen_array(a, "decimal")
     assert got.shape == a.shape and np.array_equal(got, ref, equal_nan=True)
-    assert np.array_equal(_widen_array(a, "binary"), a.astype(np.float64), equal_nan=True)
+    assert np.array_equal(_widen_array(a, "binary"), binary, equal_nan=True)
 
 
 # ------------------------------------------------------------------------- errors
