@@ -759,7 +759,8 @@ def read_bag(
     stamps = np.array([s[1] for s in scans], dtype=np.int64)
     tol_ns = round(pose_tolerance * 1e9)
     if tf:
-        laser, have, pose_stamps = _poses_from_tf(path, links, [s[2] for s in scans], stamps, tol_ns, map_frame)
+        frames = [s[2] for s in scans]
+        laser, have, pose_stamps = _poses_from_tf(path, links, frames, stamps, tol_ns, map_frame.lstrip("/"))
     else:
         laser, have = _poses_from_topic(poses, stamps, tol_ns, off)
         pose_stamps = np.sort(np.array([p[0] for p in poses], dtype=np.int64))
