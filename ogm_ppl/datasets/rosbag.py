@@ -38,8 +38,9 @@ scans' ``header.frame_id``) is followed through every link, the static laser mou
 naming the file, the topic, the 0-based message index on that topic and the field. With ``strict=False``
 a malformed message is skipped and listed in ``bad_messages``; when the storage itself fails part way
 (a truncated or corrupted file), every message read before is kept and ``bad_messages`` says where
-reading stopped. Files that cannot be opened at all (not a bag, no index, metadata unreadable) raise in
-both modes.
+reading stopped. A ROS 1 bag without a usable index (a recording cut short, ``.bag.active``) is read
+record by record in lenient mode, keeping every message before the cut; strict mode refuses it. Other
+files that cannot be opened (not a bag, a ROS 2 bag cut short, unreadable metadata) raise in both modes.
 """
 
 from __future__ import annotations
@@ -187,9 +188,89 @@ def _library_errors(path: Path, what: str, **where) -> Iterator[None]:
         raise BagFormatError(path, f"{what}: {text}", **where) from None
 
 
+class _LinearRos1:
+    """A ROS 1 bag read record by record from its start, without the index at its end (lenient mode):
+    a recording cut short (``.bag.active``, a full disk, a crash) keeps every message before the cut; in
+    an uncompressed chunk, every whole record of it. ``note`` says where reading stopped. Serves the
+    subset of ``AnyReader`` that :func:`read_bag` uses."""
+
+    def __init__(self, path: Path) -> None:
+        import io
+        import struct
+        from types import SimpleNamespace
+
+        from rosbags.rosbag1.reader import Header, RecordType, decompressors, normalize, read_bytes, read_uint32
+        from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+        from rosbags.typesys.msg import normalize_msgtype
+
+        conns: dict[int, SimpleNamespace] = {}
+        self._msgs: list[tuple[int, int, bytes]] = []
+        self.note: str | None = None
+
+        def records(src, end: int, chunk: int | None) -> None:  # chunk: the file offset of the chunk read
+            while src.tell() < end:
+                pos = src.tell()
+                try:
+                    header = Header.read(src)
+                    op = header.get_uint8("op")
+                    size = read_uint32(src)
+                    if op == RecordType.CHUNK and header.get_string("compression") == "none":
+                        data = src.read(size)  # a cut chunk: its whole records
+                        records(io.BytesIO(data), len(data), pos)
+                        if len(data) < size:
+                            raise ValueError(f"chunk cut short ({len(data)} of {size} bytes)")
+                        continue
+                    data = read_bytes(src, size)
+                    if op == RecordType.CHUNK:
+                        data = decompressors[header.get_string("compression")](data)
+                        records(io.BytesIO(data), len(data), pos)
+                    elif op == RecordType.CONNECTION:
+                        c = Header.read(io.BytesIO(struct.pack("<I", len(data)) + data))
+                        conns[header.get_uint32("conn")] = SimpleNamespace(
+                            topic=normalize(header.get_string("topic")),
+                            msgtype=normalize_msgtype(c.get_string("type")),
+                            msgdef=c.get_string("message_definition"),
+                        )
+                    elif op == RecordType.MSGDATA:
+                        self._msgs.append((header.get_uint32("conn"), header.get_time("time"), data))
+                except Exception as e:
+                    if self.note is None:
+                        where = f"at byte {pos}" if chunk is None else f"in the chunk at byte {chunk}, {pos} bytes in"
+                        self.note = f"{where}: {' '.join(str(e).split())[:200] or type(e).__name__}"
+                    if chunk is not None:
+                        raise
+                    return
+
+        with open(path, "rb") as f:
+            f.seek(0, os.SEEK_END)
+            end = f.tell()
+            f.seek(len(_ROS1_MAGIC))
+            with suppress(Exception):
+                records(f, end, None)
+        self.connections = list(conns.values())
+        self._by_id = conns
+        typs: dict = {}
+        for c in self.connections:
+            with suppress(Exception):  # a definition that does not parse: its messages fail to decode, counted
+                typs.update(get_types_from_msg(c.msgdef, c.msgtype))
+        self.typestore = get_typestore(Stores.EMPTY)
+        self.typestore.register(typs)
+
+    def messages(self, connections):
+        wanted = {id(c) for c in connections}
+        for cid, t, raw in sorted(self._msgs, key=lambda m: m[1]):
+            c = self._by_id.get(cid)
+            if c is not None and id(c) in wanted:
+                yield c, t, raw
+
+    def deserialize(self, raw: bytes, msgtype: str):
+        return self.typestore.deserialize_ros1(raw, msgtype)
+
+
 @contextmanager
-def _open_reader(path: Path) -> Iterator[tuple[object, str]]:
-    """An open ``rosbags`` AnyReader of ``path`` and its storage kind."""
+def _open_reader(path: Path, lenient: bool = False) -> Iterator[tuple[object, str]]:
+    """An open ``rosbags`` AnyReader of ``path`` and its storage kind; with ``lenient``, a ROS 1 bag whose
+    index is missing or damaged (or whose name does not end in ``.bag``) is read by :class:`_LinearRos1`."""
     from rosbags.highlevel import AnyReader
     from rosbags.typesys import Stores, get_typestore
 
@@ -202,22 +283,43 @@ def _open_reader(path: Path) -> Iterator[tuple[object, str]]:
             "not a ROS bag (expected a ROS 1 .bag file, or a ROS 2 bag folder with metadata.yaml or its .db3/.mcap)",
         )
     if kind == "ros1" and path.suffix != ".bag":
-        raise BagFormatError(path, "a ROS 1 bag must have the suffix .bag (the bag library tells versions apart by it)")
+        if lenient:
+            yield _linear(path), kind
+            return
+        raise BagFormatError(
+            path, "a ROS 1 bag must have the suffix .bag (or read it with strict=False / --lenient, record by record)"
+        )
     if not path.is_dir() and kind != "ros1" and path.suffix != {"sqlite3": ".db3", "mcap": ".mcap"}[kind]:
         raise BagFormatError(
             path, f"a bare ROS 2 {kind} file must have the suffix {'.db3' if kind == 'sqlite3' else '.mcap'}"
         )
     hint = "cannot open the bag" + (
-        " (a ROS 1 bag cut short has no index; `rosbag reindex` rebuilds it)" if kind == "ros1" else ""
+        " (a ROS 1 bag cut short has no index: strict=False / --lenient reads it record by record)"
+        if kind == "ros1"
+        else ""
     )
-    with _library_errors(path, hint):
-        reader = AnyReader([path], default_typestore=get_typestore(Stores.LATEST))
-        reader.open()
+    try:
+        with _library_errors(path, hint):
+            reader = AnyReader([path], default_typestore=get_typestore(Stores.LATEST))
+            reader.open()
+    except BagFormatError:
+        if not (lenient and kind == "ros1"):
+            raise
+        yield _linear(path), kind
+        return
     try:
         yield reader, kind
     finally:
         with suppress(Exception):  # closing a half-read corrupted file may fail again; the first error counts
             reader.close()
+
+
+def _linear(path: Path) -> _LinearRos1:
+    linear = _LinearRos1(path)
+    if not linear.connections:
+        raise BagFormatError(path, f"no connection records found reading record by record ({linear.note})")
+    linear.note = "no usable index, read record by record" + (f"; reading stopped {linear.note}" if linear.note else "")
+    return linear
 
 
 def bag_topics(path: str | os.PathLike) -> list[tuple[str, str, int]]:
@@ -738,7 +840,9 @@ def read_bag(
         else:
             poses.append(_pose_record(msg, msgtype))
 
-    with _open_reader(path) as (reader, kind):
+    with _open_reader(path, lenient=not strict) as (reader, kind):
+        if getattr(reader, "note", None):
+            bad.append(("", -1, reader.note))  # type: ignore[attr-defined]
         conns = _connections(path, reader, scan_topic, (LASER_SCAN,), "scan")
         if tf:
             tf_conns = [c for c in reader.connections if c.topic in ("/tf", "/tf_static")]  # type: ignore[attr-defined]
