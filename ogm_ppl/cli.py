@@ -598,7 +598,7 @@ def _bag_kwargs(args, path: Path, pose_required: bool = True) -> dict:
     info = None
     scan = args.scan_topic
     if scan is None or (args.pose_topic is None and not args.tf):
-        info = bag_info(path, laser=False)
+        info = bag_info(path, laser=False, strict=not args.lenient)
     if scan is None:
         assert info is not None
         lasers = info["laser_topics"]
@@ -1180,7 +1180,7 @@ def cmd_info(args) -> dict:
     path = args.input
     if _is_bag(path):
         kw = _bag_kwargs(args, path, pose_required=False)
-        info = bag_info(path, kw["scan_topic"])
+        info = bag_info(path, kw["scan_topic"], strict=not args.lenient)
         r: dict = {"input": str(path), "kind": "bag", "storage": info["storage"], "topics": info["topics"]}
         r["scan_topic"] = info.get("scan_topic")
         r["laser_frames"] = info.get("frames")

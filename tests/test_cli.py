@@ -546,3 +546,16 @@ def test_bag_errors_one_line(tmp_path, tiny_log, tiny_bags, capsys):
         assert rc == 2 and err.count("\n") == 1 and err.startswith("ogm-ppl: error: "), (argv, err)
         assert expected in err, (argv, err)
     assert not (tmp_path / "o").exists()
+
+
+def test_map_a_cut_ros1_bag_with_lenient(tmp_path, tiny_bags, capsys):
+    cut = tmp_path / "cut.bag.active"
+    data = tiny_bags["ros1"].read_bytes()
+    cut.write_bytes(data[: int(len(data) * 0.8)])
+    assert main(["map", str(cut), "--pose-topic", "/odom", "--out", str(tmp_path / "o")]) == 2
+    assert "--lenient reads it record by record" in capsys.readouterr().err
+    assert main(["map", str(cut), "--pose-topic", "/odom", "--lenient", "--out", str(tmp_path / "o")]) == 0
+    report = json.loads((tmp_path / "o" / "report.json").read_text())
+    assert 1 <= report["counts"]["scans"] < len(POSES) and report["counts"]["bad_messages"] == 1
+    assert report["bad_messages"][0]["reason"].startswith("no usable index, read record by record")
+    assert "## Skipped messages (--lenient)" in (tmp_path / "o" / "report.md").read_text()

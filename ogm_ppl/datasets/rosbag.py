@@ -256,6 +256,19 @@ class _LinearRos1:
         self.typestore = get_typestore(Stores.EMPTY)
         self.typestore.register(typs)
 
+    @property
+    def topics(self) -> dict:
+        from types import SimpleNamespace
+
+        count: dict[int, int] = defaultdict(int)
+        for cid, _, _ in self._msgs:
+            count[cid] += 1
+        out: dict = {}
+        for cid, c in self._by_id.items():
+            t = out.setdefault(c.topic, SimpleNamespace(msgtype=c.msgtype, msgcount=0))
+            t.msgcount += count[cid]
+        return out
+
     def messages(self, connections):
         wanted = {id(c) for c in connections}
         for cid, t, raw in sorted(self._msgs, key=lambda m: m[1]):
@@ -287,7 +300,7 @@ def _open_reader(path: Path, lenient: bool = False) -> Iterator[tuple[object, st
             yield _linear(path), kind
             return
         raise BagFormatError(
-            path, "a ROS 1 bag must have the suffix .bag (or read it with strict=False / --lenient, record by record)"
+            path, "a ROS 1 bag must have the suffix .bag (strict=False / --lenient reads it record by record)"
         )
     if not path.is_dir() and kind != "ros1" and path.suffix != {"sqlite3": ".db3", "mcap": ".mcap"}[kind]:
         raise BagFormatError(
@@ -333,15 +346,18 @@ def bag_topics(path: str | os.PathLike) -> list[tuple[str, str, int]]:
             )
 
 
-def bag_info(path: str | os.PathLike, scan_topic: str | None = None, *, laser: bool = True) -> dict:
+def bag_info(
+    path: str | os.PathLike, scan_topic: str | None = None, *, laser: bool = True, strict: bool = True
+) -> dict:
     """What a bag holds, without poses: its storage, topics, and the laser geometry of ``scan_topic``
     (default: the bag's only LaserScan topic, if it has one): scans, beam counts, angular increments,
     first and last beam angles, ``range_min`` / ``range_max`` values, the no-return beams (NaN, +Inf,
     ``>= range_max``), the stamps' duration and the scan rate; and the candidate pose sources. Malformed
     scan messages are counted, not raised (``bad_scans``). Angles in radians, ranges in metres.
-    ``laser=False``: the storage and topics only."""
+    ``laser=False``: the storage and topics only; ``strict=False``: a ROS 1 bag without its index is read
+    record by record (:func:`read_bag`)."""
     path = Path(path)
-    with _open_reader(path) as (reader, kind):
+    with _open_reader(path, lenient=not strict) as (reader, kind):
         with _library_errors(path, "cannot list the topics"):
             topics = sorted((n, str(i.msgtype), int(i.msgcount)) for n, i in reader.topics.items())  # type: ignore[attr-defined]
         lasers = [t for t, typ, _ in topics if typ == LASER_SCAN]
