@@ -38,9 +38,10 @@ scans' ``header.frame_id``) is followed through every link, the static laser mou
 naming the file, the topic, the 0-based message index on that topic and the field. With ``strict=False``
 a malformed message is skipped and listed in ``bad_messages``; when the storage itself fails part way
 (a truncated or corrupted file), every message read before is kept and ``bad_messages`` says where
-reading stopped. A ROS 1 bag without a usable index (a recording cut short, ``.bag.active``) is read
-record by record in lenient mode, keeping every message before the cut; strict mode refuses it. Other
-files that cannot be opened (not a bag, a ROS 2 bag cut short, unreadable metadata) raise in both modes.
+reading stopped. A ROS 1 bag without a usable index (a recording cut short, ``.bag.active``) or an MCAP
+file without its summary is read record by record in lenient mode, keeping every message before the cut;
+strict mode refuses it. Other files that cannot be opened (not a bag, a damaged sqlite3 database,
+unreadable metadata) raise in both modes.
 """
 
 from __future__ import annotations
@@ -280,6 +281,103 @@ class _LinearRos1:
         return self.typestore.deserialize_ros1(raw, msgtype)
 
 
+class _LinearMcap(_LinearRos1):
+    """An MCAP file read record by record from its start, without the summary at its end (lenient
+    mode): a ROS 2 recording cut short keeps every message before the cut (every whole record of an
+    uncompressed chunk). Same interface as :class:`_LinearRos1`; messages are CDR."""
+
+    def __init__(self, path: Path) -> None:
+        import io
+        import struct
+        from types import SimpleNamespace
+
+        from rosbags.rosbag2.storage_mcap import DECOMPRESSORS
+        from rosbags.typesys import Stores, get_types_from_idl, get_types_from_msg, get_typestore
+
+        schemas: dict[int, tuple[str, str, str]] = {}
+        conns: dict[int, SimpleNamespace] = {}
+        self._msgs: list[tuple[int, int, bytes]] = []
+        self.note: str | None = None
+
+        def take(src, n: int) -> bytes:
+            b = src.read(n)
+            if len(b) != n:
+                raise ValueError(f"record cut short ({len(b)} of {n} bytes)")
+            return b
+
+        def string(src) -> str:
+            return take(src, struct.unpack("<I", take(src, 4))[0]).decode()
+
+        def records(src, end: int, chunk: int | None) -> None:
+            while src.tell() < end:
+                pos = src.tell()
+                try:
+                    op = take(src, 1)[0]
+                    size = struct.unpack("<Q", take(src, 8))[0]
+                    if op == 0x06:  # chunk
+                        head = io.BytesIO(take(src, 28))
+                        _, _, usize, _ = struct.unpack("<QQQI", head.read(28))
+                        comp = string(src)
+                        rsize = struct.unpack("<Q", take(src, 8))[0]
+                        if comp == "":
+                            data = src.read(rsize)
+                            records(io.BytesIO(data), len(data), pos)
+                            if len(data) < rsize:
+                                raise ValueError(f"chunk cut short ({len(data)} of {rsize} bytes)")
+                        else:
+                            data = DECOMPRESSORS[comp](take(src, rsize), usize)
+                            records(io.BytesIO(data), len(data), pos)
+                        continue
+                    body = io.BytesIO(take(src, size))
+                    if op == 0x03:  # schema
+                        sid = struct.unpack("<H", body.read(2))[0]
+                        name, enc = string(body), string(body)
+                        schemas[sid] = (name, enc, take(body, struct.unpack("<I", take(body, 4))[0]).decode())
+                    elif op == 0x04:  # channel
+                        cid, sid = struct.unpack("<HH", body.read(4))
+                        topic = string(body)
+                        sch = schemas.get(sid, ("", "", ""))
+                        conns[cid] = SimpleNamespace(topic=topic, msgtype=sch[0], msgdef=sch[2], fmt=sch[1])
+                    elif op == 0x05:  # message
+                        cid, _, log_time, _ = struct.unpack("<HIQQ", take(body, 22))
+                        self._msgs.append((cid, log_time, body.read()))
+                    elif op == 0x02:  # footer: the end
+                        return
+                except Exception as e:
+                    if self.note is None:
+                        where = f"at byte {pos}" if chunk is None else f"in the chunk at byte {chunk}, {pos} bytes in"
+                        self.note = f"{where}: {' '.join(str(e).split())[:200] or type(e).__name__}"
+                    if chunk is not None:
+                        raise
+                    return
+
+        with open(path, "rb") as f:
+            f.seek(0, os.SEEK_END)
+            end = f.tell()
+            f.seek(len(_MCAP_MAGIC))
+            with suppress(Exception):
+                records(f, end, None)
+        self.connections = list(conns.values())
+        self._by_id = conns
+        typs: dict = {}
+        for c in self.connections:
+            with suppress(Exception):  # a definition that does not parse: its messages fail to decode, counted
+                typs.update(get_types_from_idl(c.msgdef) if "idl" in c.fmt else get_types_from_msg(c.msgdef, c.msgtype))
+        self.typestore = get_typestore(Stores.EMPTY)
+        self.typestore.register(typs)
+
+    def deserialize(self, raw: bytes, msgtype: str):
+        return self.typestore.deserialize_cdr(raw, msgtype)
+
+
+def _mcap_file(path: Path) -> Path | None:
+    """The .mcap file of a bag path: itself, or the only one in a bag folder."""
+    if path.is_file():
+        return path
+    files = sorted(path.glob("*.mcap"))
+    return files[0] if len(files) == 1 else None
+
+
 @contextmanager
 def _open_reader(path: Path, lenient: bool = False) -> Iterator[tuple[object, str]]:
     """An open ``rosbags`` AnyReader of ``path`` and its storage kind; with ``lenient``, a ROS 1 bag whose
@@ -297,7 +395,7 @@ def _open_reader(path: Path, lenient: bool = False) -> Iterator[tuple[object, st
         )
     if kind == "ros1" and path.suffix != ".bag":
         if lenient:
-            yield _linear(path), kind
+            yield _linear(path, kind), kind
             return
         raise BagFormatError(
             path, "a ROS 1 bag must have the suffix .bag (strict=False / --lenient reads it record by record)"
@@ -309,6 +407,8 @@ def _open_reader(path: Path, lenient: bool = False) -> Iterator[tuple[object, st
     hint = "cannot open the bag" + (
         " (a ROS 1 bag cut short has no index: strict=False / --lenient reads it record by record)"
         if kind == "ros1"
+        else " (an MCAP file cut short has no summary: strict=False / --lenient reads it record by record)"
+        if kind == "mcap"
         else ""
     )
     try:
@@ -316,9 +416,9 @@ def _open_reader(path: Path, lenient: bool = False) -> Iterator[tuple[object, st
             reader = AnyReader([path], default_typestore=get_typestore(Stores.LATEST))
             reader.open()
     except BagFormatError:
-        if not (lenient and kind == "ros1"):
+        if not (lenient and (kind == "ros1" or (kind == "mcap" and _mcap_file(path) is not None))):
             raise
-        yield _linear(path), kind
+        yield _linear(path, kind), kind
         return
     try:
         yield reader, kind
@@ -327,11 +427,19 @@ def _open_reader(path: Path, lenient: bool = False) -> Iterator[tuple[object, st
             reader.close()
 
 
-def _linear(path: Path) -> _LinearRos1:
-    linear = _LinearRos1(path)
+def _linear(path: Path, kind: str) -> _LinearRos1:
+    if kind == "mcap":
+        mcap = _mcap_file(path)
+        assert mcap is not None
+        linear: _LinearRos1 = _LinearMcap(mcap)
+    else:
+        linear = _LinearRos1(path)
     if not linear.connections:
         raise BagFormatError(path, f"no connection records found reading record by record ({linear.note})")
-    linear.note = "no usable index, read record by record" + (f"; reading stopped {linear.note}" if linear.note else "")
+    what = "index" if kind == "ros1" else "summary"
+    linear.note = f"no usable {what}, read record by record" + (
+        f"; reading stopped {linear.note}" if linear.note else ""
+    )
     return linear
 
 
