@@ -32,7 +32,8 @@ map frame and the yaw of its rotation). A scan whose stamp is more than ``pose_t
 either bracketing sample (or that lies outside the samples) has no pose; it is dropped and counted
 (``counts["no_pose"]``). A pose topic gives the robot's pose; ``laser_offset = (x, y, yaw)`` moves it to
 the laser (in the robot frame). With ``tf=True`` the chain ``map_frame -> ... -> laser frame`` (the
-scans' ``header.frame_id``) is followed through every link, the static laser mounting included.
+scans' ``header.frame_id``) is followed through every link, the static laser mounting included; a laser
+mounted upside down (its z axis pointing down) has its beam angles negated.
 
 **Errors.** With ``strict=True`` (default) the first malformed message raises :class:`BagFormatError`
 naming the file, the topic, the 0-based message index on that topic and the field. With ``strict=False``
@@ -691,7 +692,7 @@ def _scan_record(msg, widen: str) -> tuple:
     amax = _finite(msg.angle_max, "angle_max")
     if inc == 0 and n > 1:
         raise _MsgError("angle_increment", f"is 0 for {n} beams")
-    if abs(amin + (n - 1) * inc - amax) > 0.5 * abs(inc) + 1e-5:
+    if abs(amin + (n - 1) * inc - amax) > 1.01 * abs(inc) + 1e-5:  # some drivers are one increment off
         raise _MsgError(
             "angle_max",
             f"{amax!r} does not match angle_min + (n - 1) * angle_increment = {amin + (n - 1) * inc!r} ({n} beams)",
@@ -821,8 +822,9 @@ def _poses_from_topic(samples: list, stamps: np.ndarray, tol_ns: int, offset) ->
 
 
 def _poses_from_tf(path: Path, links: list, frames: list[str], stamps: np.ndarray, tol_ns: int, map_frame: str):
-    """Laser poses ``S x 3`` through the transform tree and which scans have one; the stamps of the
-    first dynamic link's samples."""
+    """Laser poses ``S x 3`` through the transform tree, which scans have one, which lasers are mounted
+    upside down (their z axis points down in the map: beam angles turn the other way), and the stamps of
+    the first dynamic link's samples."""
     by_link: dict[tuple[str, str], list] = defaultdict(list)
     parent: dict[str, str] = {}
     for rec in links:
@@ -833,6 +835,7 @@ def _poses_from_tf(path: Path, links: list, frames: list[str], stamps: np.ndarra
         by_link[(p, c)].append(rec)
     out = np.zeros((len(stamps), 3))
     ok = np.zeros(len(stamps), dtype=bool)
+    flipped = np.zeros(len(stamps), dtype=bool)
     first_dynamic = np.zeros(0, dtype=np.int64)
     for frame in sorted(set(frames)):
         sel = np.array([f == frame for f in frames], dtype=bool)
@@ -869,9 +872,10 @@ def _poses_from_tf(path: Path, links: list, frames: list[str], stamps: np.ndarra
             tv = lt + _qrot(lq, tv)
             q = _qmul(lq, q)
         out[sel, 0], out[sel, 1] = tv[:, 0], tv[:, 1]
-        out[sel, 2] = _yaw(q[:, 0], q[:, 1], q[:, 2], q[:, 3])
+        out[sel, 2] = _yaw(q[:, 0], q[:, 1], q[:, 2], q[:, 3])  # the heading of the laser's x axis
         ok[sel] = good
-    return out, ok, first_dynamic
+        flipped[sel] = _qrot(q, np.array([0.0, 0.0, 1.0]))[:, 2] < 0
+    return out, ok, flipped, first_dynamic
 
 
 def read_bag(
@@ -988,8 +992,9 @@ def read_bag(
     tol_ns = round(pose_tolerance * 1e9)
     if tf:
         frames = [s[2] for s in scans]
-        laser, have, pose_stamps = _poses_from_tf(path, links, frames, stamps, tol_ns, map_frame.lstrip("/"))
+        laser, have, flipped, pose_stamps = _poses_from_tf(path, links, frames, stamps, tol_ns, map_frame.lstrip("/"))
     else:
+        flipped = np.zeros(len(stamps), dtype=bool)
         laser, have = _poses_from_topic(poses, stamps, tol_ns, off)
         pose_stamps = np.sort(np.array([p[0] for p in poses], dtype=np.int64))
     keep_pose = np.flatnonzero(have)
@@ -1009,6 +1014,8 @@ def read_bag(
         present[k, :n] = True
         r32[k, :n] = s[7]
         angles[k, :n] = s[3] + s[4] * np.arange(n)
+        if flipped[keep_pose[k]]:
+            angles[k, :n] = -angles[k, :n]
     rmin_msg = np.array([s[5] for s in kept])
     thr = np.array([s[6] for s in kept])
     ranges = _widen_array(r32, widen)

@@ -174,8 +174,9 @@ def _write(path: Path, storage: str, messages: list[tuple[str, str, int, dict]])
         st = T["builtin_interfaces/msg/Time"](sec=t // 10**9, nanosec=t % 10**9)
         return T["std_msgs/msg/Header"](**({"seq": 0} if ros1 else {}), stamp=st, frame_id=frame)
 
-    def q(yaw, norm=1.0):
-        return T["geometry_msgs/msg/Quaternion"](x=0.0, y=0.0, z=norm * math.sin(yaw / 2), w=norm * math.cos(yaw / 2))
+    def q(yaw, norm=1.0, roll=0.0):  # roll about x, then yaw about z
+        cy, sy, cr, sr = math.cos(yaw / 2), math.sin(yaw / 2), math.cos(roll / 2), math.sin(roll / 2)
+        return T["geometry_msgs/msg/Quaternion"](x=norm * cy * sr, y=norm * sy * sr, z=norm * sy * cr, w=norm * cy * cr)
 
     def build(typ, t, f):
         if typ == LASER_SCAN:
@@ -196,13 +197,14 @@ def _write(path: Path, storage: str, messages: list[tuple[str, str, int, dict]])
             )
         if typ == TF_MESSAGE:
             out = []
-            for parent, child, x, y, yaw in f["tf"]:
+            for parent, child, x, y, yaw, *roll in f["tf"]:
                 v = T["geometry_msgs/msg/Vector3"](x=x, y=y, z=0.0)
+                rot = q(yaw, roll=roll[0] if roll else 0.0)
                 out.append(
                     T["geometry_msgs/msg/TransformStamped"](
                         header=hdr(t, parent),
                         child_frame_id=child,
-                        transform=T["geometry_msgs/msg/Transform"](translation=v, rotation=q(yaw)),
+                        transform=T["geometry_msgs/msg/Transform"](translation=v, rotation=rot),
                     )
                 )
             return T[TF_MESSAGE](transforms=out)
@@ -302,6 +304,20 @@ def test_tf_links_are_interpolated_and_composed(tmp_path):
     np.testing.assert_allclose(pose, [1.0 + 0.5 * math.cos(a), 0.5 * math.sin(a), a + np.pi / 2], atol=1e-12)
     with pytest.raises(BagFormatError, match="no transform chain from 'odom' to the laser frame 'laser'"):
         read_bag(p, "/scan", tf=True, map_frame="odom")
+
+
+def test_an_upside_down_laser_turns_its_beams_the_other_way(tmp_path):
+    """A laser mounted upside down (roll pi) and turned by yaw 0.3: its beam at +0.5 rad points to
+    0.3 - 0.5 in the map; the scan's yaw is the heading of the laser's x axis."""
+    msgs = [
+        ("/tf_static", TF_MESSAGE, 0, {"tf": [("base_link", "laser", 0.0, 0.0, 0.3, np.pi)]}),
+        ("/tf", TF_MESSAGE, 0, {"tf": [("map", "base_link", 1.0, 2.0, 0.0)]}),
+        _scan(S // 2, (1.0, 2.0), angle_min=-0.5, angle_increment=1.0),
+        ("/tf", TF_MESSAGE, S, {"tf": [("map", "base_link", 1.0, 2.0, 0.0)]}),
+    ]
+    s = read_bag(_write(tmp_path / "flip.bag", "ros1", msgs), "/scan", tf=True, pose_tolerance=1.0).scans
+    np.testing.assert_allclose(s.poses[0], [1.0, 2.0, 0.3], atol=1e-12)
+    np.testing.assert_allclose(s.world_angles()[0], [0.3 + 0.5, 0.3 - 0.5], atol=1e-12)
 
 
 def test_angles_of_the_laser_geometry_are_recovered():
