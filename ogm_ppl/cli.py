@@ -3,8 +3,9 @@
 Subcommands (``ogm-ppl SUBCOMMAND --help`` lists every option):
 
 ``map INPUT --out DIR``
-    Occupancy grid map of a CARMEN log (plain or gzip) or an ogm_ppl dataset file (``.npz``, told apart
-    by its zip magic ``PK``). Writes ``map.npz`` (probabilities, observed mask, grid, settings),
+    Occupancy grid map of a CARMEN log (plain or gzip), a ROS bag (ROS 1 ``.bag``, a ROS 2 bag folder or
+    its ``.db3`` / ``.mcap``: ``--scan-topic T`` and ``--pose-topic P`` or ``--tf``) or an ogm_ppl dataset
+    file (``.npz``); told apart by their magic bytes. Writes ``map.npz`` (probabilities, observed mask, grid, settings),
     ``map.png`` (thesis colour scale, one pixel per cell, unknown cells grey), a ROS ``map_server`` map in
     ``ros/`` (``map.yaml`` + ``map.pgm`` + the exact-probability sidecar ``map.npz``, which would clash with
     ours beside it), ``report.json`` and ``report.md``. ``--method NAME`` is any registered map method
@@ -15,8 +16,11 @@ Subcommands (``ogm-ppl SUBCOMMAND --help`` lists every option):
     The registered map methods, one line each, with their parameters (``NAME``: that method only).
 ``simulate --map KIND|PNG --out FILE.npz``
     A stop-and-scan dataset (Section 6.1) on a generated ground-truth map or a PNG floor plan.
-``convert LOG --out FILE.npz``
-    A CARMEN log as a dataset file.
+``convert LOG|BAG --out FILE.npz``
+    A CARMEN log or a ROS bag as a dataset file.
+``info LOG|BAG|DATASET``
+    What a log, bag or dataset file holds: scans, beams per scan, angular increment, field of view, range
+    limits, the no-return rule and its beams, extent, duration, scan and pose rates (``--json``).
 ``experiment SPEC``
     An experiment spec (TOML, :mod:`ogm_ppl.experiment`).
 ``run --out DIR``
@@ -50,6 +54,7 @@ from ogm_ppl.methods import MapProblem, ParamError, RunContext, get_method, meth
 
 if TYPE_CHECKING:
     from ogm_ppl.datasets.carmen import CarmenLog
+    from ogm_ppl.datasets.rosbag import BagLog
     from ogm_ppl.methods import MapMethod
     from ogm_ppl.scans import Scans
 
@@ -127,12 +132,13 @@ _finite = _number(float)
 
 
 def _add_reader_options(p: argparse.ArgumentParser, carmen_only: bool) -> None:
-    note = " (CARMEN logs only)" if carmen_only else ""
+    note = " (CARMEN logs and ROS bags)" if carmen_only else ""
     p.add_argument(
         "--lenient",
         action="store_true",
-        help="skip malformed log lines (listed in the report) instead of stopping at the first "
-        "one; by default a malformed line is an error naming file, line and field" + note,
+        help="skip malformed log lines or bag messages (listed in the report) instead of stopping at the "
+        "first one; by default a malformed line is an error naming file, line (bag: topic, message) and "
+        "field" + note,
     )
     p.add_argument(
         "--max-usable-range",
@@ -164,6 +170,50 @@ def _add_reader_options(p: argparse.ArgumentParser, carmen_only: bool) -> None:
     )
 
 
+def _add_bag_options(p: argparse.ArgumentParser, required_pose: bool = True) -> None:
+    g = p.add_argument_group("ROS bags (ogm_ppl.datasets.read_bag)")
+    g.add_argument(
+        "--scan-topic",
+        metavar="T",
+        help="the sensor_msgs/LaserScan topic (default: the bag's only LaserScan topic)",
+    )
+    src = g.add_mutually_exclusive_group()
+    src.add_argument(
+        "--pose-topic",
+        metavar="P",
+        help="poses from a nav_msgs/Odometry, geometry_msgs/PoseStamped or PoseWithCovarianceStamped topic"
+        + ("" if required_pose else " (default: the bag's only pose topic, else /tf if present)"),
+    )
+    src.add_argument(
+        "--tf",
+        action="store_true",
+        help="poses from /tf + /tf_static: --map-frame -> ... -> the scans' frame (laser mounting included)",
+    )
+    g.add_argument("--map-frame", default="map", metavar="F", help="world frame of --tf (default map)")
+    g.add_argument(
+        "--laser-offset",
+        type=_finite,
+        nargs=3,
+        metavar=("X", "Y", "YAW"),
+        help="the laser in the robot frame of --pose-topic (metres, radians; default 0 0 0)",
+    )
+    g.add_argument(
+        "--pose-tolerance",
+        type=_nonneg_float,
+        default=0.1,
+        metavar="S",
+        help="drop scans more than S seconds from the pose samples around them (default 0.1; counted)",
+    )
+
+
+_BAG_FLAGS = {
+    "--scan-topic": "scan_topic",
+    "--pose-topic": "pose_topic",
+    "--tf": "tf",
+    "--laser-offset": "laser_offset",
+}
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The ``ogm-ppl`` argument parser (subcommands ``map``, ``simulate``, ``convert``, ``run``)."""
     parser = _Parser(prog="ogm-ppl", description=__doc__.splitlines()[0])
@@ -179,18 +229,23 @@ def build_parser() -> argparse.ArgumentParser:
         dest="command",
         required=True,
         metavar="COMMAND",
-        help="map, methods, simulate, convert, experiment or run (COMMAND --help for its options)",
+        help="map, methods, simulate, convert, info, experiment or run (COMMAND --help for its options)",
     )
 
     # --------------------------------------------------------------------------------- map
     m = sub.add_parser(
         "map",
-        help="occupancy grid map of a CARMEN log or a dataset file",
-        description="Map INPUT (a CARMEN log, plain or gzip, or an ogm_ppl dataset .npz) into "
+        help="occupancy grid map of a CARMEN log, a ROS bag or a dataset file",
+        description="Map INPUT (a CARMEN log, plain or gzip, a ROS 1 or ROS 2 bag, or an ogm_ppl dataset .npz) into "
         "DIR: map.npz, map.png, ros/map.yaml + ros/map.pgm (+ sidecar), "
         "report.json, report.md.",
     )
-    m.add_argument("input", type=Path, metavar="INPUT", help="a CARMEN log (.log / .log.gz) or a dataset .npz")
+    m.add_argument(
+        "input",
+        type=Path,
+        metavar="INPUT",
+        help="a CARMEN log (.log / .log.gz), a ROS bag (.bag, a ROS 2 bag folder, .db3, .mcap) or a dataset .npz",
+    )
     m.add_argument("--out", type=Path, required=True, metavar="DIR", help="output directory (created)")
     m.add_argument(
         "--resolution",
@@ -298,6 +353,7 @@ def build_parser() -> argparse.ArgumentParser:
     )
     m.add_argument("--seed", type=_nonneg_int, default=0, metavar="S", help="random seed (>= 0, default 0)")
     _add_reader_options(m, carmen_only=True)
+    _add_bag_options(m)
     m.add_argument(
         "--thresholds",
         choices=("ros1", "nav2"),
@@ -353,10 +409,10 @@ def build_parser() -> argparse.ArgumentParser:
     # ----------------------------------------------------------------------------- convert
     c = sub.add_parser(
         "convert",
-        help="a CARMEN log as a dataset file",
-        description="Read a CARMEN log (plain or gzip) and save its scans as a dataset file.",
+        help="a CARMEN log or a ROS bag as a dataset file",
+        description="Read a CARMEN log (plain or gzip) or a ROS bag and save its scans as a dataset file.",
     )
-    c.add_argument("log", type=Path, metavar="LOG", help="the CARMEN log")
+    c.add_argument("log", type=Path, metavar="LOG|BAG", help="the CARMEN log or ROS bag")
     c.add_argument("--out", type=Path, required=True, metavar="FILE.npz", help="dataset file to write")
     c.add_argument(
         "--resolution",
@@ -365,6 +421,20 @@ def build_parser() -> argparse.ArgumentParser:
         help="also store a grid of this resolution covering the log (extent + 1 m margin)",
     )
     _add_reader_options(c, carmen_only=False)
+    _add_bag_options(c)
+
+    # -------------------------------------------------------------------------------- info
+    i = sub.add_parser(
+        "info",
+        help="what a log, bag or dataset file holds",
+        description="Scans, beams per scan, angular increment, field of view, range limits, the no-return "
+        "rule and its beams, extent, duration, scan and pose rates of a CARMEN log, a ROS bag or a dataset "
+        "file, as read with the given reader options.",
+    )
+    i.add_argument("input", type=Path, metavar="LOG|BAG|DATASET", help="a CARMEN log, a ROS bag or a dataset .npz")
+    i.add_argument("--json", action="store_true", help="print JSON instead of lines")
+    _add_reader_options(i, carmen_only=False)
+    _add_bag_options(i, required_pose=False)
 
     # --------------------------------------------------------------------------------- methods
     ms = sub.add_parser(
@@ -504,18 +574,78 @@ def _check_cells(rows: int, cols: int, limit: int) -> None:
 
 @dataclass
 class _Input:
-    kind: str  # "carmen" or "dataset"
+    kind: str  # "carmen", "bag" or "dataset"
     path: Path
     scans: Scans
     grid: Grid | None = None  # the dataset's own grid
     truth: np.ndarray | None = None
     log: CarmenLog | None = None
     settings: dict = field(default_factory=dict)
+    bag: BagLog | None = None
+
+
+def _is_bag(path: Path) -> bool:
+    from ogm_ppl.datasets.rosbag import bag_kind
+
+    return path.exists() and bag_kind(path) is not None
+
+
+def _bag_kwargs(args, path: Path, pose_required: bool = True) -> dict:
+    """read_bag's arguments from the bag options: the scan topic (the only LaserScan topic by default)
+    and one pose source; a clear error naming the flag otherwise."""
+    from ogm_ppl.datasets.rosbag import bag_info
+
+    info = None
+    scan = args.scan_topic
+    if scan is None or (args.pose_topic is None and not args.tf):
+        info = bag_info(path, laser=False, strict=not args.lenient)
+    if scan is None:
+        assert info is not None
+        lasers = info["laser_topics"]
+        if len(lasers) != 1:
+            raise CLIError(
+                f"{path}: give --scan-topic; the bag has {len(lasers)} LaserScan topics"
+                + (f" ({', '.join(lasers)})" if lasers else "")
+            )
+        scan = lasers[0]
+    pose, tf = args.pose_topic, bool(args.tf)
+    if pose is None and not tf:
+        assert info is not None
+        if pose_required:
+            cand = ", ".join(info["pose_topics"]) or "none"
+            raise CLIError(
+                f"{path}: give --pose-topic P (pose topics in the bag: {cand}) or --tf"
+                + (" (the bag has /tf)" if info["tf"] else " (the bag has no /tf)")
+            )
+        if len(info["pose_topics"]) == 1:
+            pose = info["pose_topics"][0]
+        elif info["tf"]:
+            tf = True
+        else:
+            return {"scan_topic": scan}
+    if tf and args.laser_offset is not None:
+        raise CLIError("--laser-offset applies to --pose-topic; with --tf the mounting comes from /tf_static")
+    kw = dict(scan_topic=scan, pose_topic=pose, tf=tf, pose_tolerance=args.pose_tolerance, **_reader_kwargs(args))
+    if tf:
+        kw["map_frame"] = args.map_frame
+    if args.laser_offset is not None:
+        kw["laser_offset"] = tuple(args.laser_offset)
+    return kw
+
+
+def _refuse_bag_flags(args, path: Path) -> None:
+    for flag, dest in _BAG_FLAGS.items():
+        if getattr(args, dest, None):
+            raise CLIError(f"{flag} applies to ROS bags; {path} is not one")
 
 
 def _read_input(args) -> _Input:
-    from ogm_ppl.datasets import load_dataset, read_carmen
+    from ogm_ppl.datasets import load_dataset, read_bag, read_carmen
 
+    if _is_bag(args.input):
+        bag = read_bag(args.input, **_bag_kwargs(args, args.input))
+        return _Input("bag", args.input, bag.scans, bag=bag)
+    _refuse_bag_flags(args, args.input)
     magic = _check_input(args.input)
     if magic[:2] == b"PK":
         for flag, value in (
@@ -524,7 +654,7 @@ def _read_input(args) -> _Input:
             ("--no-return", args.no_return),
         ):
             if value:
-                raise CLIError(f"{flag} applies to CARMEN logs; {args.input} is a dataset file")
+                raise CLIError(f"{flag} applies to CARMEN logs and ROS bags; {args.input} is a dataset file")
         ds = load_dataset(args.input)
         scans = ds.scans
         if args.pose_step != 1 or args.pose_fraction is not None or args.beam_step != 1:
@@ -692,7 +822,8 @@ def load_map(path: str | os.PathLike) -> dict:
 
 def _counts(inp: _Input) -> dict:
     s = inp.scans
-    present = int(inp.log.counts["beams"]) if inp.log is not None else int(s.num_readings)  # S x B
+    src = inp.log if inp.log is not None else inp.bag
+    present = int(src.counts["beams"]) if src is not None else int(s.num_readings)  # S x B
     c: dict[str, int | dict[str, int]] = {
         "scans": s.num_scans,
         "beams": present,
@@ -705,6 +836,10 @@ def _counts(inp: _Input) -> dict:
             c[k] = int(inp.log.counts.get(k, 0))
         c["bad_lines"] = len(inp.log.bad_lines)
         c["skipped_message_types"] = dict(inp.log.skipped_types)
+    if inp.bag is not None:
+        for k in ("no_return", "beyond_usable", "below_min", "scans_read", "no_pose", "pose_samples"):
+            c[k] = int(inp.bag.counts.get(k, 0))
+        c["bad_messages"] = len(inp.bag.bad_messages)
     return c
 
 
@@ -778,7 +913,7 @@ def _map(args, method, params) -> dict:
         bar.update()
     report = {
         "ogm_ppl_version": _version(),
-        "input": {"path": str(inp.path), "kind": inp.kind, "size_bytes": inp.path.stat().st_size},
+        "input": {"path": str(inp.path), "kind": inp.kind, "size_bytes": _size(inp.path)},
         "counts": _counts(inp),
         "grid": {
             "rows": grid.rows,
@@ -810,9 +945,22 @@ def _map(args, method, params) -> dict:
     }
     if inp.log is not None and args.lenient:
         report["bad_lines"] = [{"line": n, "reason": r} for n, r in inp.log.bad_lines[:1000]]
+    if inp.bag is not None:
+        report["bag"] = {"storage": inp.bag.storage, "scan_topic": inp.bag.scan_topic, "poses": inp.bag.pose_source}
+        if args.lenient:
+            report["bad_messages"] = [
+                {"topic": t, "message": i, "reason": r} for t, i, r in inp.bag.bad_messages[:1000]
+            ]
     atomic_write_text(out / "report.json", json.dumps(_jsonable(report), indent=2))
     atomic_write_text(out / "report.md", _report_md(report))
     return report
+
+
+def _size(path: Path) -> int:
+    """Bytes of a file, or of every file under a folder (a ROS 2 bag)."""
+    if path.is_dir():
+        return sum(p.stat().st_size for p in path.rglob("*") if p.is_file())
+    return path.stat().st_size
 
 
 def _fmt_s(x) -> str:
@@ -829,9 +977,16 @@ def _report_md(r: dict) -> str:
         f"{c['dropped_beams']:,}; max-range readings: {c['max_range_readings']:,}",
     ]
     if "no_return" in c:
+        bad = f"bad lines: {c['bad_lines']}" if "bad_lines" in c else f"bad messages: {c['bad_messages']}"
         lines.append(
             f"- dropped by rule: no return {c['no_return']:,}, beyond usable range "
-            f"{c['beyond_usable']:,}, below min range {c['below_min']:,}; bad lines: {c['bad_lines']}"
+            f"{c['beyond_usable']:,}, below min range {c['below_min']:,}; {bad}"
+        )
+    if "no_pose" in c:
+        b = r["bag"]
+        lines.append(
+            f"- bag ({b['storage']}): {c['scans_read']:,} scans on {b['scan_topic']}, {c['no_pose']:,} dropped "
+            f"without a pose; poses from {b['poses']} ({c['pose_samples']:,} samples)"
         )
     lines += [
         f"- grid: {g['cols']} x {g['rows']} cells ({g['cells']:,}) at {g['resolution_m']} m, origin "
@@ -848,6 +1003,9 @@ def _report_md(r: dict) -> str:
             f"{sc['best_threshold']:.2f}, ROC AUC {sc['roc_auc']:.3f}"
         )
     lines += ["", "Files: " + ", ".join(f"`{f}`" for f in r["files"]) + "."]
+    if r.get("bad_messages"):
+        lines += ["", "## Skipped messages (--lenient)", ""]
+        lines += [f"- {b['topic'] or 'storage'} message {b['message']}: {b['reason']}" for b in r["bad_messages"][:50]]
     if r.get("bad_lines"):
         lines += ["", "## Skipped lines (--lenient)", ""]
         lines += [f"- line {b['line']}: {b['reason']}" for b in r["bad_lines"][:50]]
@@ -929,9 +1087,34 @@ def cmd_simulate(args) -> dict:
 
 
 def cmd_convert(args) -> dict:
-    """``ogm-ppl convert``: CARMEN log -> dataset file."""
-    from ogm_ppl.datasets import read_carmen, save_dataset
+    """``ogm-ppl convert``: CARMEN log or ROS bag -> dataset file."""
+    from ogm_ppl.datasets import read_bag, read_carmen, save_dataset
 
+    if _is_bag(args.log):
+        kw = _bag_kwargs(args, args.log)
+        _prepare_out_file(args.out)
+        t0 = time.perf_counter()
+        bag = read_bag(args.log, **kw)
+        seconds = time.perf_counter() - t0
+        grid = bag.grid(args.resolution) if args.resolution else None
+        provenance = {
+            "tool": "ogm-ppl convert",
+            "source": str(args.log),
+            "reader": "ogm_ppl.datasets.read_bag",
+            "ogm_ppl_version": _version(),
+            "storage": bag.storage,
+            "bad_messages": len(bag.bad_messages),
+            "counts": bag.counts,
+        }
+        save_dataset(args.out, bag.scans, grid=grid, settings=_jsonable(bag.settings), provenance=_jsonable(provenance))
+        return {
+            "scans": bag.scans.num_scans,
+            "beams": bag.scans.beams_per_scan,
+            "bad_lines": len(bag.bad_messages),
+            "what": "bad messages",
+            "seconds": seconds,
+        }
+    _refuse_bag_flags(args, args.log)
     _check_input(args.log)
     _prepare_out_file(args.out)
     t0 = time.perf_counter()
@@ -952,8 +1135,136 @@ def cmd_convert(args) -> dict:
         "scans": log.scans.num_scans,
         "beams": log.scans.beams_per_scan,
         "bad_lines": len(log.bad_lines),
+        "what": "bad lines",
         "seconds": seconds,
     }
+
+
+def _deg(x: float) -> float:
+    return round(math.degrees(float(x)), 9)
+
+
+def _scan_stats(scans: Scans) -> dict:
+    """Beam geometry, range limits and extent of read scans (angles in degrees, lengths in metres)."""
+    a = scans.angles
+    inc = np.round(np.degrees(np.diff(a, axis=1)), 9) if scans.beams_per_scan > 1 else np.zeros((1, 1))
+    hit = scans.valid & ~scans.is_max
+    xmin, xmax, ymin, ymax = scans.extent()
+    return {
+        "scans": scans.num_scans,
+        "beams_per_scan": scans.beams_per_scan,
+        "angular_increment_deg": sorted({float(v) for v in np.unique(inc)})[:10],
+        "field_of_view_deg": _deg(float((a[:, -1] - a[:, 0]).max())),
+        "first_beam_deg": _deg(float(a[:, 0].min())),
+        "last_beam_deg": _deg(float(a[:, -1].max())),
+        "max_range_m": scans.max_range,
+        "min_range_m": scans.min_range,
+        "largest_hit_m": float(scans.ranges[hit].max()) if hit.any() else None,
+        "smallest_hit_m": float(scans.ranges[hit].min()) if hit.any() else None,
+        "valid_beams": scans.num_valid,
+        "max_range_readings": int(scans.is_max.sum()),
+        "extent_m": {"x": [xmin, xmax], "y": [ymin, ymax], "width": xmax - xmin, "height": ymax - ymin},
+    }
+
+
+def _rate(n: int, stamps: np.ndarray) -> float | None:
+    span = float(stamps.max() - stamps.min()) if len(stamps) else 0.0
+    return (n - 1) / span if span > 0 and n > 1 else None
+
+
+def cmd_info(args) -> dict:
+    """``ogm-ppl info``: what a CARMEN log, ROS bag or dataset file holds, read with the reader options."""
+    from ogm_ppl.datasets import load_dataset, read_bag, read_carmen
+    from ogm_ppl.datasets.rosbag import bag_info
+
+    path = args.input
+    if _is_bag(path):
+        kw = _bag_kwargs(args, path, pose_required=False)
+        info = bag_info(path, kw["scan_topic"], strict=not args.lenient)
+        r: dict = {"input": str(path), "kind": "bag", "storage": info["storage"], "topics": info["topics"]}
+        r["scan_topic"] = info.get("scan_topic")
+        r["laser_frames"] = info.get("frames")
+        r["message_range_min_m"] = info.get("range_min")
+        r["message_range_max_m"] = info.get("range_max")
+        r["no_return_rule"] = "NaN, +Inf or >= range_max of the message" + (
+            f", or >= {args.no_return_threshold} m" if getattr(args, "no_return_threshold", None) else ""
+        )
+        r["no_return_beams_in_bag"] = info.get("no_return_beams")
+        if "pose_topic" not in kw:  # the geometry from the scan messages alone
+            if info.get("scans"):
+                r["scans"] = info["scans"]
+                r["beams_per_scan"] = info["beams_per_scan"]
+                r["angular_increment_deg"] = [_deg(v) for v in info["angle_increment"]]
+                r["field_of_view_deg"] = _deg(info["field_of_view"])
+                r["first_beam_deg"], r["last_beam_deg"] = _deg(info["first_angle"]), _deg(info["last_angle"])
+                r["duration_s"], r["scan_rate_hz"] = info["duration"], info["scan_rate_hz"]
+            r["poses"] = "none found: give --pose-topic or --tf for the extent and the pose rate"
+            return r
+        bag = read_bag(path, **kw)
+        r.update(_scan_stats(bag.scans))
+        r["counts"] = bag.counts
+        r["poses"] = bag.pose_source
+        r["duration_s"] = float(np.ptp(bag.timestamps)) if len(bag.timestamps) else 0.0
+        r["scan_rate_hz"] = _rate(bag.scans.num_scans, bag.timestamps)
+        r["pose_rate_hz"] = _rate(len(bag.pose_timestamps), bag.pose_timestamps)
+        r["bad_messages"] = len(bag.bad_messages)
+        return r
+    _refuse_bag_flags(args, path)
+    magic = _check_input(path)
+    if magic[:2] == b"PK":
+        ds = load_dataset(path)
+        r = {"input": str(path), "kind": "dataset", **_scan_stats(ds.scans)}
+        r["grid"] = None if ds.grid is None else {"shape": list(ds.grid.shape), "resolution_m": ds.grid.resolution}
+        r["truth"] = ds.truth is not None
+        r["duration_s"] = r["scan_rate_hz"] = r["pose_rate_hz"] = None  # a dataset file keeps no stamps
+        return r
+    log = read_carmen(path, **_reader_kwargs(args))
+    st = log.settings
+    if st.get("no_return_threshold") is not None:
+        rule = f">= {st['no_return_threshold']} m (given)"
+    elif st.get("auto_no_return_threshold") is not None:
+        rule = f">= {st['auto_no_return_threshold']} m (the FLASER sentinel band of the log's largest reading)"
+    elif "ROBOTLASER1" in st.get("messages", []):
+        rule = ">= the max_range of each ROBOTLASER1 line"
+    else:
+        rule = "none (no sentinel band found)"
+    r = {"input": str(path), "kind": "carmen", "messages": st.get("messages"), **_scan_stats(log.scans)}
+    r["no_return_rule"] = rule
+    r["counts"] = log.counts
+    ts = log.timestamps
+    r["duration_s"] = float(np.ptp(ts)) if len(ts) else 0.0
+    r["scan_rate_hz"] = _rate(log.scans.num_scans, ts)
+    r["pose_rate_hz"] = r["scan_rate_hz"]  # every scan line carries its pose
+    odom = log.skipped_types.get("ODOM", 0)
+    r["odometry_rate_hz"] = odom / r["duration_s"] if odom and r["duration_s"] else None
+    r["bad_lines"] = len(log.bad_lines)
+    r["skipped_message_types"] = log.skipped_types
+    return r
+
+
+def _fmt_v(v) -> str:
+    if isinstance(v, float):
+        return f"{v:.6g}"
+    if isinstance(v, list):
+        return ", ".join(_fmt_v(x) for x in v) if v else "-"
+    if isinstance(v, dict):
+        return "; ".join(f"{k} {_fmt_v(x)}" for k, x in v.items())
+    return "-" if v is None else str(v)
+
+
+def _info_text(r: dict) -> str:
+    """``ogm-ppl info`` as aligned ``key: value`` lines (topics one a line)."""
+    lines = []
+    for k, v in r.items():
+        if k == "topics":
+            lines.append("topics:")
+            lines += [f"  {t['topic']}  {t['type']}  {t['messages']} messages" for t in v]
+        elif k == "laser" and isinstance(v, dict):
+            lines.append("laser (from the scan messages):")
+            lines += [f"  {kk}: {_fmt_v(vv)}" for kk, vv in v.items() if kk not in ("laser_topics",)]
+        else:
+            lines.append(f"{k}: {_fmt_v(v)}")
+    return "\n".join(lines)
 
 
 def _one_line(e: BaseException) -> str:
@@ -1051,9 +1362,12 @@ def main(argv: list[str] | None = None) -> int:
         elif args.command == "convert":
             r = cmd_convert(args)
             print(
-                f"ogm-ppl convert: {r['scans']} scans x {r['beams']} beams ({r['bad_lines']} bad lines "
+                f"ogm-ppl convert: {r['scans']} scans x {r['beams']} beams ({r['bad_lines']} {r['what']} "
                 f"skipped) -> {args.out}"
             )
+        elif args.command == "info":
+            r = cmd_info(args)
+            print(json.dumps(_jsonable(r), indent=2) if args.json else _info_text(r))
         return 0
     except (CLIError, CarmenFormatError, DatasetFileError, RosMapError, ValueError, OSError, MemoryError) as e:
         if show_tb:

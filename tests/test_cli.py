@@ -152,7 +152,7 @@ def test_every_option_has_help():
     for name, p in [("ogm-ppl", parser), *sub.choices.items()]:
         for a in p._actions:
             assert a.help, (name, a.option_strings or a.dest)
-    assert set(sub.choices) == {"map", "methods", "simulate", "convert", "experiment", "run"}
+    assert set(sub.choices) == {"map", "methods", "simulate", "convert", "info", "experiment", "run"}
 
 
 def test_map_carmen_log(tmp_path, tiny_log, capsys):
@@ -447,3 +447,115 @@ def test_experiment_subcommand(tmp_path, capsys):
     assert main(["experiment", str(bad), "--out", str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("ogm-ppl: error: ") and "bad.toml" in err and "Traceback" not in err
+
+
+# ------------------------------------------------------------------------------------- ROS bags
+@pytest.fixture(scope="module")
+def tiny_bags(tiny_log, tmp_path_factory):
+    """The tiny log as a ROS 1 bag (pose topic), an MCAP bag (pose topic) and a sqlite3 bag (/tf with a
+    laser mounting): rosbags' own writers via ogm_ppl.datasets.rosbag.write_bag."""
+    from ogm_ppl.datasets.rosbag import write_bag
+
+    tmp = tmp_path_factory.mktemp("bags")
+    log = read_carmen(tiny_log, max_usable_range=20.0)
+    s, t = log.scans, log.timestamps
+    return {
+        "ros1": write_bag(tmp / "tiny.bag", s, t),
+        "mcap": write_bag(tmp / "tiny_mcap", s, t, storage="mcap"),
+        "tf": write_bag(tmp / "tiny_tf", s, t, storage="sqlite3", tf=True, laser_offset=(0.1, 0.02, 0.05)),
+    }
+
+
+def test_map_of_a_bag_equals_the_map_of_the_log(tmp_path, tiny_log, tiny_bags):
+    # one grid for all (the automatic extent follows the hits, and the yaw through a quaternion may move
+    # one by an ulp)
+    common = ["--resolution", "0.1", "--size", "62", "52", "--origin", "-1.1", "-1.1", "--max-usable-range", "20"]
+    assert main(["map", str(tiny_log), *common, "--out", str(tmp_path / "log")]) == 0
+    ref = load_map(tmp_path / "log" / "map.npz")
+    for name, src in (
+        ("ros1", ["--pose-topic", "/odom"]),
+        ("mcap", ["--scan-topic", "/scan", "--pose-topic", "/odom"]),
+        ("tf", ["--tf"]),
+    ):
+        out = tmp_path / name
+        assert main(["map", str(tiny_bags[name]), *src, *common, "--out", str(out)]) == 0, name
+        m, report = _check_outputs(out)
+        assert m["grid"] == ref["grid"], name
+        assert np.array_equal(m["probabilities"], ref["probabilities"]), name
+        assert report["input"]["kind"] == "bag" and report["counts"]["no_pose"] == 0
+        assert report["bag"]["poses"] == ("tf" if name == "tf" else "/odom")
+        assert "bag (" in (out / "report.md").read_text()
+
+
+def test_convert_a_bag(tmp_path, tiny_log, tiny_bags, capsys):
+    out = tmp_path / "b.npz"
+    assert (
+        main(
+            ["convert", str(tiny_bags["mcap"]), "--pose-topic", "/odom", "--max-usable-range", "20", "--out", str(out)]
+        )
+        == 0
+    )
+    assert "0 bad messages skipped" in capsys.readouterr().out
+    ds, ref = load_dataset(out), read_carmen(tiny_log, max_usable_range=20.0).scans
+    assert np.array_equal(ds.scans.ranges, ref.ranges) and np.array_equal(ds.scans.valid, ref.valid)
+    np.testing.assert_allclose(ds.scans.poses, ref.poses, rtol=0, atol=1e-12)
+    assert ds.provenance["reader"] == "ogm_ppl.datasets.read_bag"
+
+
+def test_info_of_a_log_a_bag_and_a_dataset(tmp_path, tiny_log, tiny_bags, capsys):
+    def info(*argv):
+        assert main(["info", *map(str, argv), "--json"]) == 0
+        return json.loads(capsys.readouterr().out)
+
+    log = info(tiny_log, "--max-usable-range", "20")
+    assert (log["kind"], log["scans"], log["beams_per_scan"]) == ("carmen", len(POSES), 181)
+    assert log["angular_increment_deg"] == [1.0] and log["field_of_view_deg"] == 180.0
+    assert log["first_beam_deg"] == -90.0 and log["max_range_m"] == 20.0
+    assert log["duration_s"] == pytest.approx(len(POSES) - 1.0) and log["scan_rate_hz"] == pytest.approx(1.0)
+    x, y = log["extent_m"]["x"], log["extent_m"]["y"]
+    assert x[0] == pytest.approx(ROOM[0], abs=0.01) and y[1] == pytest.approx(ROOM[3], abs=0.01)
+    bag = info(tiny_bags["tf"], "--max-usable-range", "20")  # the only pose source, /tf, found by itself
+    assert bag["kind"] == "bag" and bag["storage"] == "sqlite3" and bag["poses"] == "tf"
+    for k in ("scans", "beams_per_scan", "angular_increment_deg", "field_of_view_deg", "max_range_m"):
+        assert bag[k] == log[k], k
+    assert bag["pose_rate_hz"] == pytest.approx(1.0) and bag["message_range_max_m"] == [20.0]
+    out = tmp_path / "d.npz"
+    assert main(["convert", str(tiny_log), "--out", str(out)]) == 0
+    capsys.readouterr()
+    ds = info(out)
+    assert ds["kind"] == "dataset" and ds["beams_per_scan"] == 181 and ds["duration_s"] is None
+    assert main(["info", str(tiny_bags["ros1"])]) == 0
+    text = capsys.readouterr().out
+    assert "angular_increment_deg: 1\n" in text and "/scan  sensor_msgs/msg/LaserScan  4 messages" in text
+
+
+def test_bag_errors_one_line(tmp_path, tiny_log, tiny_bags, capsys):
+    cases = [
+        (["map", tiny_bags["ros1"]], "give --pose-topic P (pose topics in the bag: /odom) or --tf"),
+        (["map", tiny_bags["ros1"], "--pose-topic", "/pose"], "no pose topic '/pose' in the bag"),
+        (["map", tiny_bags["ros1"], "--scan-topic", "/odom", "--pose-topic", "/odom"], "holds nav_msgs/msg/Odometry"),
+        (["map", tiny_bags["tf"], "--tf", "--laser-offset", "0", "0", "0"], "--laser-offset applies to --pose-topic"),
+        (["map", tiny_bags["tf"], "--tf", "--map-frame", "world"], "no transform chain from 'world'"),
+        (["map", tiny_log, "--tf"], "--tf applies to ROS bags"),
+        (["map", tiny_bags["ros1"], "--pose-topic", "/odom", "--tf"], "not allowed with argument"),
+        (["info", tiny_log, "--scan-topic", "/scan"], "--scan-topic applies to ROS bags"),
+    ]
+    for argv, expected in cases:
+        rc = main([*map(str, argv), "--out", str(tmp_path / "o")] if argv[0] == "map" else list(map(str, argv)))
+        err = capsys.readouterr().err
+        assert rc == 2 and err.count("\n") == 1 and err.startswith("ogm-ppl: error: "), (argv, err)
+        assert expected in err, (argv, err)
+    assert not (tmp_path / "o").exists()
+
+
+def test_map_a_cut_ros1_bag_with_lenient(tmp_path, tiny_bags, capsys):
+    cut = tmp_path / "cut.bag.active"
+    data = tiny_bags["ros1"].read_bytes()
+    cut.write_bytes(data[: int(len(data) * 0.8)])
+    assert main(["map", str(cut), "--pose-topic", "/odom", "--out", str(tmp_path / "o")]) == 2
+    assert "--lenient reads it record by record" in capsys.readouterr().err
+    assert main(["map", str(cut), "--pose-topic", "/odom", "--lenient", "--out", str(tmp_path / "o")]) == 0
+    report = json.loads((tmp_path / "o" / "report.json").read_text())
+    assert 1 <= report["counts"]["scans"] < len(POSES) and report["counts"]["bad_messages"] == 1
+    assert report["bad_messages"][0]["reason"].startswith("no usable index, read record by record")
+    assert "## Skipped messages (--lenient)" in (tmp_path / "o" / "report.md").read_text()

@@ -1,4 +1,4 @@
-"""Data: the thesis's toy problems, simulated range scans and stop-and-scan datasets, CARMEN logs, the
+"""Data: the thesis's toy problems, simulated range scans and stop-and-scan datasets, CARMEN logs, ROS bags, the
 dataset file format, floor-plan corpora and generated ground-truth maps (training data for learned
 priors, Section 6.1)."""
 
@@ -13,6 +13,7 @@ from ogm_ppl.datasets.floorplans import (
     training_plans,
 )
 from ogm_ppl.datasets.mapgen import generate_corpus, generate_map
+from ogm_ppl.datasets.rosbag import BagFormatError, BagLog, read_bag
 from ogm_ppl.datasets.simple2d import SimpleExample2D, simple_2d_example
 from ogm_ppl.datasets.simulate import first_hit, simulate_scans
 from ogm_ppl.datasets.stop_and_scan import StopAndScan, plan_route, route_coverage, stop_and_scan
@@ -22,6 +23,8 @@ from ogm_ppl.datasets.walls1d import WallDatasets, wall_datasets
 __all__ = [
     "REAL_LOG_BUILDINGS",
     "THESIS_TOY_READINGS",
+    "BagFormatError",
+    "BagLog",
     "CarmenFormatError",
     "CarmenLog",
     "Dataset",
@@ -39,6 +42,7 @@ __all__ = [
     "load_dataset",
     "load_plan",
     "plan_route",
+    "read_bag",
     "read_carmen",
     "route_coverage",
     "save_dataset",

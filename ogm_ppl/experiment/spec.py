@@ -8,7 +8,7 @@ fall back to a default).
 Tables (every key optional unless marked *required*; defaults in brackets)::
 
     [experiment]        name [file stem], seed [0], description [""]
-    [[datasets]]        kind = "simulated" | "log" (*required*), name (*required*, [A-Za-z0-9_.-]+)
+    [[datasets]]        kind = "simulated" | "log" | "bag" (*required*), name (*required*, [A-Za-z0-9_.-]+)
       simulated:        map ["office"; a mapgen kind or "mixed" = kinds in turn by map_seed],
                         size [500] (int or [rows, cols]), border [20], resolution [0.05] (m/cell),
                         map_seed [0], seed [derived], poses [route until coverage], beams [720],
@@ -18,6 +18,12 @@ Tables (every key optional unless marked *required*; defaults in brackets)::
                         extent [x0, y0, width, height] metres (else the log's extent + margin [1.0]),
                         sigma_cells [3.0] (the models' range noise), pose_fraction [1.0], beam_step [1],
                         benchmark [{delta = "haehnel", threshold = 0.20, prior = 0.5}]
+      bag:              a ROS bag (ogm_ppl.datasets.read_bag): path (*required*; a .bag file or a ROS 2 bag
+                        folder / .db3 / .mcap), scan_topic (*required*), pose_topic or tf = true (one is
+                        *required*), map_frame ["map"], laser_offset [[0, 0, 0]] (x, y, yaw of the laser in
+                        the robot frame; pose_topic only), pose_tolerance [0.1] (s), reader [{max_usable_range
+                        = 20.0}] (read_bag options: strict, max_usable_range, usable_range_rule, no_return,
+                        no_return_threshold, min_range, max_range, widen; checked here), and the keys of log
     [[algorithms]]      kind = a map method (*required*; ``ogm-ppl methods`` lists them with their
                         parameters), name (*required*), and the method's parameters (ogm_ppl.methods):
       ogm:              delta ["haehnel"], prior [0.5], clamp [none: [lo, hi] log-odds],
@@ -96,6 +102,17 @@ READER_KEYS = (
     "messages",
     "apply_laser_offset",
 )
+#: read_bag options a bag entry's reader table may set: (kind, lower bound, lower bound open, choices)
+BAG_READER_KEYS: dict[str, tuple] = {
+    "strict": ("bool", None, False, None),
+    "max_usable_range": ("float", 0, True, None),
+    "usable_range_rule": ("str", None, False, ("drop", "max")),
+    "no_return": ("str", None, False, ("drop", "max")),
+    "no_return_threshold": ("float", 0, True, None),
+    "min_range": ("float", 0, False, None),
+    "max_range": ("float", 0, True, None),
+    "widen": ("str", None, False, ("decimal", "binary")),
+}
 SCORES = ("f1", "auc", "max_precision", "nll_bits", "brier", "ece")
 
 
@@ -172,7 +189,7 @@ class MetricsSpec:
     def mask_for(self, dataset_kind: str) -> str:
         if self.mask != "auto":
             return self.mask
-        return "near_mapped" if dataset_kind == "log" else "all"
+        return "near_mapped" if dataset_kind in ("log", "bag") else "all"
 
 
 @dataclass(frozen=True)
@@ -303,7 +320,7 @@ def _named_entry(source: str, section: str, i: int, entry) -> tuple[_Table, str]
 
 def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[DatasetSpec]:
     t, name = _named_entry(source, "datasets", i, d)
-    kind = t.get("kind", "str", required=True, choices=("simulated", "log"))
+    kind = t.get("kind", "str", required=True, choices=("simulated", "log", "bag"))
     p: dict = {}
     if kind == "simulated":
         p["map"] = t.get("map", "str", "office", choices=MAP_KINDS)
@@ -348,14 +365,20 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
         if not path.is_absolute():
             path = (base_dir / path).resolve()
         if not path.exists():
-            t.fail("path", f"no such log file: {path}")
+            t.fail("path", f"no such {'log file' if kind == 'log' else 'bag'}: {path}")
         p["path"] = str(path)
         reader = t.raw("reader", {"max_usable_range": 20.0})
         rt = _Table(source, f"{t.where}.reader", reader)
         r = {}
-        for k in READER_KEYS:
-            if rt.has(k):
-                r[k] = rt.raw(k)
+        if kind == "bag":
+            p["bag"] = _bag_keys(t, path)
+            for k, (vk, lo, lo_open, choices) in BAG_READER_KEYS.items():
+                if rt.has(k):
+                    r[k] = rt.get(k, vk, lo=lo, lo_open=lo_open, choices=choices)
+        else:
+            for k in READER_KEYS:
+                if rt.has(k):
+                    r[k] = rt.raw(k)
         rt.finish()
         p["reader"] = r
         p["resolution"] = t.get("resolution", "float", 0.05, lo=0, lo_open=True)
@@ -383,6 +406,8 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
         }
         bt.finish()
         base_keys = ("path", "reader", "resolution", "extent", "margin", "benchmark")
+        if kind == "bag":
+            base_keys += ("bag",)
     t.finish()
     swept = [k for k in SWEEP_KEYS if isinstance(p.get(k), list)]
     out = []
@@ -405,6 +430,35 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
             )
         )
     return out
+
+
+def _bag_keys(t: _Table, path: Path) -> dict:
+    """The topics and pose options of a ``kind = "bag"`` entry (module docstring), checked here."""
+    from ogm_ppl.datasets.rosbag import bag_kind
+
+    if bag_kind(path) is None:
+        t.fail("path", f"not a ROS bag (a ROS 1 .bag file, or a ROS 2 bag folder or its .db3 / .mcap): {path}")
+    b: dict = {"scan_topic": t.get("scan_topic", "str", required=True)}
+    pose = t.get("pose_topic", "str", None)
+    tf = t.get("tf", "bool", False)
+    if (pose is None) == (not tf):
+        t.fail("pose_topic" if pose is not None else "tf", "give pose_topic or tf = true, one of them")
+    b["pose_topic"], b["tf"] = pose, tf
+    if t.has("map_frame") and not tf:
+        t.fail("map_frame", "applies to tf = true")
+    b["map_frame"] = t.get("map_frame", "str", "map")
+    off = t.raw("laser_offset", [0.0, 0.0, 0.0])
+    if not (
+        isinstance(off, list)
+        and len(off) == 3
+        and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in off)
+    ):
+        t.fail("laser_offset", f"must be [x, y, yaw] (metres, radians), got {off!r}")
+    if tf and any(off):
+        t.fail("laser_offset", "applies to pose_topic; with tf = true the mounting comes from /tf_static")
+    b["laser_offset"] = [float(x) for x in off]
+    b["pose_tolerance"] = t.get("pose_tolerance", "float", 0.1, lo=0)
+    return b
 
 
 def _algorithm(source: str, i: int, a) -> AlgorithmSpec:

@@ -4,8 +4,8 @@ output folder, so that the same call gives the same files in this process or on 
 =========  ============================================================== ==================================
 task       does                                                           done when (resume)
 =========  ============================================================== ==================================
-base       simulated: ground-truth map + planned route; log: the read     ``datasets/_base/B.json``
-           log, the benchmark map (traditional OGM of all readings > thr)
+base       simulated: ground-truth map + planned route; log, bag: the     ``datasets/_base/B.json``
+           read log or bag, the benchmark map (traditional OGM > thr)
 dataset    the readings of one dataset (``save_dataset``) + what it is    ``datasets/D.json``
            scored on (truth, mapped and touched cells: ``D.eval.npz``)
 run        one algorithm on one dataset (one chain): marginals            ``tasks/D/A/cN/result.json``
@@ -168,9 +168,14 @@ def run_base(ds, out: str | Path, h: str) -> dict:
                 "occupied_share": float(truth.mean()),
             }
         else:
-            from ogm_ppl.datasets.carmen import read_carmen
+            from ogm_ppl.datasets.carmen import CarmenLog, read_carmen
+            from ogm_ppl.datasets.rosbag import BagLog, read_bag
 
-            log = read_carmen(p["path"], **p["reader"])
+            log: CarmenLog | BagLog
+            if ds.kind == "bag":
+                log = read_bag(p["path"], **p["bag"], **p["reader"])
+            else:
+                log = read_carmen(p["path"], **p["reader"])
             if p["extent"] is not None:
                 x0, y0, w, hgt = p["extent"]
                 res = p["resolution"]
