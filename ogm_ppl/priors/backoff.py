@@ -53,6 +53,7 @@ __all__ = [
     "BACKOFF_FORMAT",
     "BackoffBorderPrior",
     "BackoffParams",
+    "backed_off_prior",
     "backoff_patch_probs",
     "border_log_likelihood",
     "fit_kappa",
@@ -258,6 +259,7 @@ class BackoffBorderPrior(LocalMapPrior):
     inner codes (also the candidates of a tile whose border was never seen), 2 ``log lambda_b`` keyed by
     border (``border_seg``), and the back-off's cumulative table ``back_cdf`` the escape move samples.
 
+    >>> import torch
     >>> p = BackoffBorderPrior((4,), [0, 3], [0, 1], [9, 9], kappa=1.0, back=[0.5, 0.5], inner=1)
     >>> bool(np.isfinite(p.log_prob(torch.tensor([0., 1., 0., 1.]))))
     True
@@ -334,3 +336,22 @@ class BackoffBorderPrior(LocalMapPrior):
     def sample(self, sample_shape=(), generator=None, num_sweeps: int = 100):
         """Maps drawn by ``num_sweeps`` single-cell Gibbs sweeps on the prior alone (from uniform noise)."""
         return self._gibbs_sample(sample_shape, generator, num_sweeps)
+
+
+def backed_off_prior(kind: str, shape, tables, corpus: str) -> LocalMapPrior:
+    """The named backed-off prior ``kind`` (``patch3_bo``, ``border_bo``, ``border1_bo``) over ``shape``
+    from ``tables``, with the hyper-parameters fitted for ``corpus`` (:func:`load_backoff_params`)."""
+    from ogm_ppl.priors.patch_table import PatchTablePrior
+
+    hp = load_backoff_params(corpus)
+    back3 = backoff_patch_probs(tables, hp.kappa_patch3)
+    if kind == "patch3_bo":
+        return PatchTablePrior(shape, codes=np.arange(512), counts=back3, patch=(3, 3))
+    if kind == "border_bo":
+        return BackoffBorderPrior(shape, *tables.border_table().triples(), kappa=hp.kappa_border, back=back3)
+    if kind == "border1_bo":
+        lam = tables.lam
+        return BackoffBorderPrior(
+            shape, *tables.border1_triples(), kappa=hp.kappa_border1, back=[1 - lam, lam], inner=(1, 1)
+        )
+    raise ValueError(f"unknown backed-off prior kind {kind!r}")

@@ -407,6 +407,7 @@ class PatchGibbs(MapKernel):
 
     def _escapes(self) -> bool:
         """Whether the prior's patch updates add the escape move (a backed-off table)."""
+        self._prepare()
         return self._compiled is not None and bool(getattr(self._compiled, "needs_escape", lambda: False)())
 
     def _patch_rule(self) -> PatchRule:
