@@ -254,10 +254,12 @@ class BackoffBorderPrior(LocalMapPrior):
         outside: value of cells off the grid (1: occupied, as walled maps; 0: free).
         origin: ``(row, col)`` where one tile starts.
 
-    The compiled face is a :class:`~ogm_ppl.priors.compiled.bundles.Tiles` bundle with three segments:
-    0 the counted pairs (smoothed ``log p(i | b)``), 1 the back-off ``log back(i)`` over all ``2^L``
-    inner codes (also the candidates of a tile whose border was never seen), 2 ``log lambda_b`` keyed by
-    border (``border_seg``), and the back-off's cumulative table ``back_cdf`` the escape move samples.
+    The compiled face is a :class:`~ogm_ppl.priors.compiled.bundles.Tiles` bundle with four segments:
+    0 the counted pairs (smoothed ``log p(i | b)``; the candidates ``S_b`` of a tile with a seen border),
+    1 the inner codes counted after any border with their ``log back(i)`` (the candidates of a tile whose
+    border was never seen), 2 ``log lambda_b`` keyed by border (``border_seg``), 3 ``log back(i)`` over
+    all ``2^L`` inner codes, and the back-off's cumulative table ``back_cdf`` the escape move samples.
+    The candidate sets are fixed by the tile's border, so the restricted heat bath stays exact.
 
     >>> import torch
     >>> p = BackoffBorderPrior((4,), [0, 3], [0, 1], [9, 9], kappa=1.0, back=[0.5, 0.5], inner=1)
@@ -294,6 +296,8 @@ class BackoffBorderPrior(LocalMapPrior):
         geo = tiling(self.rows, self.cols, self.inner, pad, origin)
         fill = geo[6] if outside else np.zeros_like(geo[6])
         all_inner = np.arange(1 << Li, dtype=np.int64)
+        # the candidates of a tile whose border was never seen: the inners counted after any border
+        seen_inner = np.unique(keys & ((np.int64(1) << Li) - 1))
         cdf = np.cumsum(backp)
         cdf /= cdf[-1]
         self._compiled = tiles(
@@ -305,8 +309,8 @@ class BackoffBorderPrior(LocalMapPrior):
             pad,
             np.zeros(len(fill), np.int64),
             fill,
-            [keys, all_inner, borders],
-            [logp, np.log(backp), log_lam],
+            [keys, seen_inner, borders, all_inner],
+            [logp, np.log(backp[seen_inner]), log_lam, np.log(backp)],
             fallback=1,
             border_seg=2,
             back_cdf=cdf,

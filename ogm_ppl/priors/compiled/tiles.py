@@ -82,7 +82,7 @@ def _sparse_factor(keys, logp, seg_off, backoff, bseg, n_inner, s, key):
     """``log phi(key)`` in segment ``s`` by binary search of the sorted keys. A key missing from the
     segment: with a border-weight segment ``bseg >= 0`` (a backed-off table) it is
     ``log lambda_b + log back(inner)``, ``lambda_b`` looked up by border in segment ``bseg`` (``1`` for a
-    border never seen) and ``back`` the segment ``backoff``, which holds every inner code in order; else
+    border never seen) and ``back`` the segment ``bseg + 1``, which holds every inner code in order; else
     it backs off to segment ``backoff`` (keyed by the inner bits; ``-1``: none) when the key's border was
     never seen, and is ``-inf`` otherwise. (Not inlined: a large inlined body slows the loops around it.)"""
     a, b = seg_off[s], seg_off[s + 1]
@@ -91,7 +91,7 @@ def _sparse_factor(keys, logp, seg_off, backoff, bseg, n_inner, s, key):
         return logp[i]
     if bseg >= 0:
         border = key >> n_inner
-        v = logp[seg_off[backoff] + (key & ((np.int64(1) << n_inner) - 1))]
+        v = logp[seg_off[bseg + 1] + (key & ((np.int64(1) << n_inner) - 1))]
         ba, bb = seg_off[bseg], seg_off[bseg + 1]
         j = _lower(keys, ba, bb, border)
         if j < bb and keys[j] == border:
@@ -455,13 +455,14 @@ def tiles(
     """A :class:`Tiles` bundle from a tiling (``geometry``: :func:`~ogm_ppl.priors.local.tiling`) and
     per-segment (keys, log-values) lists; windows of at most :data:`DENSE_MAX_BITS` cells also get the
     dense table. A backed-off table (:class:`~ogm_ppl.priors.backoff.BackoffBorderPrior`) names its
-    border-weight segment ``border_seg`` (keys: border codes, values ``log lambda_b``), has a ``fallback``
-    segment over every inner code in order, and passes the back-off table's cumulative sums
-    ``back_cdf`` (``2^n_inner``, last entry 1)."""
+    border-weight segment ``border_seg`` (keys: border codes, values ``log lambda_b``), followed by the
+    segment of ``log back`` over every inner code in order, and passes the back-off table's cumulative
+    sums ``back_cdf`` (``2^n_inner``, last entry 1); its ``fallback`` segment is then only the candidate
+    set of a tile whose border was never seen."""
     if border_seg >= 0:
-        fk = np.asarray(seg_keys[fallback])
+        fk = np.asarray(seg_keys[border_seg + 1])
         if not np.array_equal(fk, np.arange(1 << int(n_inner))):
-            raise ValueError("a backed-off table's fallback segment must hold every inner code in order")
+            raise ValueError("a backed-off table's back-off segment must hold every inner code in order")
         cdf = np.asarray(back_cdf, np.float64)
         if cdf.shape != (1 << int(n_inner),) or (np.diff(cdf) < 0).any() or cdf[-1] != 1.0:
             raise ValueError("back_cdf must be the non-decreasing cumulative sums of 2^n_inner entries, ending at 1")
