@@ -46,13 +46,17 @@ def _table(nb, ni, seed):
 
 def problems(seed):
     m2 = enumerable_2d()
-    yield "2x4 grid, 2x2 tiles | 12 border cells", OccupancyModel(
-        m2.grid, m2.rays, m2.sensor, BorderPatchPrior((2, 4), *_table(12, 4, seed), inner=(2, 2))
-    ), (2, 2)
+    yield (
+        "2x4 grid, 2x2 tiles | 12 border cells",
+        OccupancyModel(m2.grid, m2.rays, m2.sensor, BorderPatchPrior((2, 4), *_table(12, 4, seed), inner=(2, 2))),
+        (2, 2),
+    )
     m1 = enumerable_1d()
-    yield "1D, 6 latent cells, runs of 2 | 2 border cells", OccupancyModel(
-        m1.grid, m1.rays, m1.sensor, BorderPatchPrior((7,), *_table(2, 2, seed), inner=2)
-    ), 2
+    yield (
+        "1D, 6 latent cells, runs of 2 | 2 border cells",
+        OccupancyModel(m1.grid, m1.rays, m1.sensor, BorderPatchPrior((7,), *_table(2, 2, seed), inner=2)),
+        2,
+    )
 
 
 def main() -> None:

@@ -3,8 +3,9 @@ r"""``gibbs`` and ``metropolis``: MCMC over the full posterior ``p(m | z)`` (Cha
 ``gibbs``: single-cell Gibbs (:class:`~ogm_ppl.inference.mcmc.CellGibbs`, ``patch = 1``) or patch Gibbs
 (:class:`~ogm_ppl.inference.mcmc.PatchGibbs`, Algorithm 1; Algorithm 2 with ``p_rand_patch``), heat-bath or
 metropolised updates, or ``update = "thesis"``: the thesis's border update (Section 5.2.3), which draws
-each tile of a table prior from its own table and ignores its neighbours' factors (not exact). ``metropolis``: single-cell Metropolis-Hastings
-(:class:`~ogm_ppl.inference.mcmc.MetropolisCell`) with uniform or end-point proposals.
+each tile of a table prior from its own table and ignores its neighbours' factors (not exact).
+``metropolis``: single-cell Metropolis-Hastings (:class:`~ogm_ppl.inference.mcmc.MetropolisCell`) with
+uniform or end-point proposals.
 """
 
 from __future__ import annotations

@@ -91,7 +91,7 @@ def witten_bell(counts, kappa: float, back) -> np.ndarray:
     r"""A dense table smoothed towards ``back``: ``p(i) = (c_i + kappa T back_i) / (n + kappa T)``, ``T``
     the number of codes with ``c_i > 0`` (``counts`` and ``back``: ``(2^L,)``)."""
     c = np.asarray(counts, dtype=np.float64).ravel()
-    L = int(round(math.log2(c.size)))
+    L = c.size.bit_length() - 1
     p = _check_back(back, L)
     if not kappa > 0:
         raise ValueError(f"kappa must be positive, got {kappa}")
@@ -113,7 +113,7 @@ def witten_bell_border(border_codes, inner_codes, counts, kappa: float, back):
     i = np.asarray(inner_codes).astype(np.int64).ravel()
     c = np.asarray(counts, dtype=np.float64).ravel()
     back = np.asarray(back, dtype=np.float64)
-    L = int(round(math.log2(back.size)))
+    L = back.size.bit_length() - 1
     back = _check_back(back, L)
     if not kappa > 0:
         raise ValueError(f"kappa must be positive, got {kappa}")
@@ -139,8 +139,9 @@ def witten_bell_border(border_codes, inner_codes, counts, kappa: float, back):
 def _pair_log_probs(fit, val, kappa: float, back) -> tuple[np.ndarray, np.ndarray]:
     """``(log p_fit(i | b), count)`` of every validation pair, ``fit``/``val``: (border, inner, count)."""
     back = np.asarray(back, dtype=np.float64)
-    L = int(round(math.log2(back.size)))
-    borders, log_lam, keys, logp = witten_bell_border(*fit, kappa, back)
+    L = back.size.bit_length() - 1
+    fb, fi, fc = fit
+    borders, log_lam, keys, logp = witten_bell_border(fb, fi, fc, kappa, back)
     vb = np.asarray(val[0]).astype(np.int64)
     vi = np.asarray(val[1]).astype(np.int64)
     vc = np.asarray(val[2], dtype=np.float64)
@@ -352,10 +353,10 @@ def backed_off_prior(kind: str, shape, tables, corpus: str) -> LocalMapPrior:
     if kind == "patch3_bo":
         return PatchTablePrior(shape, codes=np.arange(512), counts=back3, patch=(3, 3))
     if kind == "border_bo":
-        return BackoffBorderPrior(shape, *tables.border_table().triples(), kappa=hp.kappa_border, back=back3)
+        b, i, c = tables.border_table().triples()
+        return BackoffBorderPrior(shape, b, i, c, kappa=hp.kappa_border, back=back3)
     if kind == "border1_bo":
         lam = tables.lam
-        return BackoffBorderPrior(
-            shape, *tables.border1_triples(), kappa=hp.kappa_border1, back=[1 - lam, lam], inner=(1, 1)
-        )
+        b, i, c = tables.border1_triples()
+        return BackoffBorderPrior(shape, b, i, c, kappa=hp.kappa_border1, back=[1 - lam, lam], inner=(1, 1))
     raise ValueError(f"unknown backed-off prior kind {kind!r}")

@@ -53,7 +53,7 @@ if TYPE_CHECKING:
 __all__ = ["PRIOR_KINDS", "CorpusTables", "prior_by_name", "prior_kinds", "register_prior", "unregister_prior"]
 
 #: the kinds the library ships (the module docstring's table)
-PRIOR_KINDS = ("independent", "mrf", "mrf8", "patch3", "patch3_999", "patch5", "border", "border1")
+PRIOR_KINDS: tuple[str, ...] = ("independent", "mrf", "mrf8", "patch3", "patch3_999", "patch5", "border", "border1")
 PRIOR_KINDS += ("patch3_bo", "border_bo", "border1_bo")
 DEFAULT_CORPUS = "houseexpo"
 

@@ -35,7 +35,6 @@ def _softmax(x: np.ndarray) -> np.ndarray:
 
 def _candidates(kernel, anchor, patch, m):
     lp = kernel._compiled
-    g = kernel.model.grid
     h, w = kernel._hw
     cap = kernel._patch_rule().capacity
     cands, clp = np.empty(cap, np.int64), np.empty(cap, np.float64)

@@ -120,6 +120,8 @@ def test_witten_bell_limits_and_dense_table():
     borders, log_lam, keys, logp = witten_bell_border([1, 1, 2], [0, 2, 3], [3, 1, 4], 0.5, back)
     assert borders.tolist() == [1, 2]
     np.testing.assert_allclose(np.exp(log_lam), [0.5 * 2 / (4 + 1), 0.5 / (4 + 0.5)])
+    assert keys.tolist() == [4 | 0, 4 | 2, 8 | 3]
+    np.testing.assert_allclose(np.exp(logp), [(3 + 1 * back[0]) / 5, (1 + 1 * back[2]) / 5, (4 + 0.5 * back[3]) / 4.5])
     with pytest.raises(ValueError, match="strictly positive"):
         witten_bell(c, 1.0, [0.5, 0.5, 0.0, 0.0])
 

@@ -639,7 +639,9 @@ def _candidate_sweep(ps, geo, anchors, prior, u, rule):
                 skipped += 1
                 continue
             if restricted(prior, t) and not rule.own_factor:
-                if _restricted_update(ps, patch, prior, u, i, rule, stamp, cands, n, t, cand_lp, logw, pair, pw, sc, ts):
+                if _restricted_update(
+                    ps, patch, prior, u, i, rule, stamp, cands, n, t, cand_lp, logw, pair, pw, sc, ts
+                ):
                     changed += 1
                 continue
             if n == 0:

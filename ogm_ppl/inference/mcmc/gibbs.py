@@ -60,7 +60,7 @@ from ogm_ppl.inference._kernels.gibbs import (
     patch_sweep,
     set_patch,
 )
-from ogm_ppl.inference.mcmc.kernel import MapKernel, initial_map
+from ogm_ppl.inference.mcmc.kernel import KernelStateError, MapKernel, initial_map
 from ogm_ppl.inference.tiling import patch_cells, patch_shape, tiling_starts
 from ogm_ppl.models.occupancy import OccupancyModel
 
@@ -404,6 +404,17 @@ class PatchGibbs(MapKernel):
         g = self.model.grid
         h, w = self._hw
         return PatchGeometry(self.dr, self.dc, h, w, g.rows, g.cols, self._pinned)
+
+    def _extra_state(self) -> dict[str, np.ndarray]:
+        return {"update": np.asarray(self.update)}
+
+    def _load_extra_state(self, state) -> None:
+        """A checkpoint taken with another update rule (say the thesis's inexact border update) is refused;
+        checkpoints that do not record the rule load as before."""
+        if "update" in state:
+            u = np.asarray(state["update"])
+            if u.shape != () or u.dtype.kind != "U" or str(u) != self.update:
+                raise KernelStateError(f"PatchGibbs state was taken with update={u!s}, this kernel has {self.update!r}")
 
     def _escapes(self) -> bool:
         """Whether the prior's patch updates add the escape move (a backed-off table)."""

@@ -163,3 +163,27 @@ def test_thesis_update_needs_tiles():
     model = enumerable_1d()
     with pytest.raises(ValueError, match="thesis"):
         PatchGibbs(model, 2, update="thesis")
+
+
+def test_update_rule_is_recorded_and_checked_in_checkpoints():
+    from ogm_ppl.inference.mcmc.kernel import KernelStateError
+
+    k = thesis_problem("thesis")
+    k.setup()
+    state = k.state_dict()
+    assert str(state["update"]) == "thesis"
+    other = thesis_problem("gibbs")
+    with pytest.raises(KernelStateError, match="update=thesis"):
+        other.load_state_dict(state)
+    thesis_problem("thesis").load_state_dict(state)
+
+
+def test_gibbs_method_takes_the_thesis_update():
+    from ogm_ppl.methods import get_method
+    from ogm_ppl.methods.params import ParamError
+
+    m = get_method("gibbs")
+    p = m.parse({"patch": [3, 3], "update": "thesis", "p_escape": 0.1})
+    assert p.update == "thesis" and p.p_escape == 0.1
+    with pytest.raises(ParamError, match="update"):
+        m.parse({"patch": 1, "update": "thesis"})
