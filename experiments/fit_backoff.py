@@ -43,6 +43,7 @@ from ogm_ppl.priors.backoff import (  # noqa: E402
 from ogm_ppl.priors.learn import count_tables  # noqa: E402
 
 CORPORA = ("generated", "houseexpo", "ipa", "dungeon")
+KAPPA_RANGE = (1e-6, 1e9)
 
 
 def _split(n: int) -> tuple[list[int], list[int]]:
@@ -84,13 +85,13 @@ def fit_corpus(corpus: str, quick: bool) -> dict:
     tv = count_tables(make_val(), symmetries=True, min_count_5x5=1, progress=False)
     counted = time.perf_counter() - t0
     ind = independent_table(tf.lam, 9)
-    k3, ll3 = fit_kappa(lambda k: table_log_likelihood(tf.counts3x3, tv.counts3x3, k, ind))
+    k3, ll3 = fit_kappa(lambda k: table_log_likelihood(tf.counts3x3, tv.counts3x3, k, ind), *KAPPA_RANGE)
     back3 = backoff_patch_probs(tf, k3)
     fb, vb = tf.border_table().triples(), tv.border_table().triples()
-    kb, llb = fit_kappa(lambda k: border_log_likelihood(fb, vb, k, back3))
+    kb, llb = fit_kappa(lambda k: border_log_likelihood(fb, vb, k, back3), *KAPPA_RANGE)
     back1 = np.array([1 - tf.lam, tf.lam])
     f1, v1 = tf.border1_triples(), tv.border1_triples()
-    k1, ll1 = fit_kappa(lambda k: border_log_likelihood(f1, v1, k, back1))
+    k1, ll1 = fit_kappa(lambda k: border_log_likelihood(f1, v1, k, back1), *KAPPA_RANGE)
     # references: the unsmoothed tables give -inf wherever a validation pair was never counted
     unseen_b = float(_unseen_share(fb, vb))
     unseen_1 = float(_unseen_share(f1, v1))
@@ -107,6 +108,12 @@ def fit_corpus(corpus: str, quick: bool) -> dict:
         "kappa_patch3": k3,
         "kappa_border": kb,
         "kappa_border1": k1,
+        # kappa at the search's lower end: the validation likelihood still grows as the smoothing vanishes
+        # (almost every validation pair was counted in the fit plans); the tables stay strictly positive
+        "kappa_at_lower_bound": [
+            name for name, k in (("patch3", k3), ("border", kb), ("border1", k1)) if k <= 1.001 * KAPPA_RANGE[0]
+        ],
+        "kappa_search_range": list(KAPPA_RANGE),
         "validation": {
             "patch3_mean_log_lik": ll3,
             "border_mean_log_lik": llb,
