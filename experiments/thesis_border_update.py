@@ -78,9 +78,7 @@ def main() -> None:
                 f"{g['total_variation']:.1e})",
                 flush=True,
             )
-    worst = {
-        k: max(r["thesis"][k] for r in rows) for k in ("max_abs_marginal_error", "total_variation")
-    }  # fmt: skip
+    worst = {k: max(r["thesis"][k] for r in rows) for k in ("max_abs_marginal_error", "total_variation")}
     print(f"worst over {len(rows)} problems: {worst}")
     doc = {
         "what": "stationary distribution of PatchGibbs(update='thesis') vs the exact posterior of the tiled joint",

@@ -270,8 +270,18 @@ class BackoffBorderPrior(LocalMapPrior):
 
     normalised = False
 
-    def __init__(self, shape, border_codes, inner_codes, counts, kappa: float, back, inner=(3, 3), outside: int = 1,
-                 origin=(0, 0)) -> None:  # fmt: skip
+    def __init__(
+        self,
+        shape,
+        border_codes,
+        inner_codes,
+        counts,
+        kappa: float,
+        back,
+        inner=(3, 3),
+        outside: int = 1,
+        origin=(0, 0),
+    ) -> None:
         self.rows, self.cols, self.ndim = grid_shape(shape)
         self.num_cells = self.rows * self.cols
         self.inner = _patch_hw(inner, self.ndim)

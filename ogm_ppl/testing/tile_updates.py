@@ -38,8 +38,9 @@ def _candidates(kernel, anchor, patch, m):
     h, w = kernel._hw
     cap = kernel._patch_rule().capacity
     cands, clp = np.empty(cap, np.int64), np.empty(cap, np.float64)
-    n, t = patch_candidates(lp, int(anchor[0]), int(anchor[1]), h, w, patch, int((patch >= 0).sum()), kernel._pinned,
-                            m, cands, clp)  # fmt: skip
+    n, t = patch_candidates(
+        lp, int(anchor[0]), int(anchor[1]), h, w, patch, int((patch >= 0).sum()), kernel._pinned, m, cands, clp
+    )
     return cands[:n].copy(), clp[:n].copy(), int(t)
 
 

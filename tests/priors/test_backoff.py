@@ -45,8 +45,9 @@ class TestBackoffCellGiven8Neighbours2D(PriorContract):
     def make_prior(self, num_cells):
         b, i, c = _table(8, 1, 2, 0.5)
         keep = b % 3 != 0  # a third of the borders unseen: they read the back-off table
-        return BackoffBorderPrior((2, num_cells // 2), b[keep], i[keep], c[keep], kappa=2.0, back=[0.7, 0.3],
-                                  inner=(1, 1), outside=0)  # fmt: skip
+        return BackoffBorderPrior(
+            (2, num_cells // 2), b[keep], i[keep], c[keep], kappa=2.0, back=[0.7, 0.3], inner=(1, 1), outside=0
+        )
 
 
 def _sparse_prior(seed=0):

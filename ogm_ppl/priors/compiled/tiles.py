@@ -449,9 +449,20 @@ def tiles_log_prob_batch(lp, maps, out):
 
 
 def tiles(
-    rows, cols, geometry, n_inner, tile, pad, t_seg, t_fill, seg_keys, seg_logp, fallback=-1, border_seg=-1,
+    rows,
+    cols,
+    geometry,
+    n_inner,
+    tile,
+    pad,
+    t_seg,
+    t_fill,
+    seg_keys,
+    seg_logp,
+    fallback=-1,
+    border_seg=-1,
     back_cdf=None,
-) -> Tiles:  # fmt: skip
+) -> Tiles:
     """A :class:`Tiles` bundle from a tiling (``geometry``: :func:`~ogm_ppl.priors.local.tiling`) and
     per-segment (keys, log-values) lists; windows of at most :data:`DENSE_MAX_BITS` cells also get the
     dense table. A backed-off table (:class:`~ogm_ppl.priors.backoff.BackoffBorderPrior`) names its
