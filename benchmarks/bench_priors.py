@@ -233,6 +233,33 @@ def table_5_1(rows: int = 200, cols: int = 320) -> dict:
     }
 
 
+def backoff_vs_sparse(rows: int = 200, cols: int = 320) -> dict:
+    """Border prior, L = 9, on the Table 5.1 scene: the sparse table next to its backed-off version
+    (Witten-Bell towards the smoothed 3 x 3 table, ``kappa`` of the houseexpo fit), same tables, same
+    kernel (``p_rand_patch = 0.001``), for a few escape probabilities (target: within 2x)."""
+    from ogm_ppl.priors.backoff import BackoffBorderPrior, load_backoff_params, witten_bell
+    from ogm_ppl.priors.backoff import independent_table as ind
+
+    grid, truth, scans = scaled_example(rows, cols)
+    rays = raycast(grid, scans)
+    triples = border_table(truth, 3)
+    hp = load_backoff_params("houseexpo")
+    c3 = np.bincount(window_codes(truth, 3), minlength=512)
+    back = witten_bell(c3, hp.kappa_patch3, ind(float(truth.mean()), 9))
+    sparse = BorderPatchPrior(grid.shape, *triples, inner=(3, 3))
+    bo = BackoffBorderPrior(grid.shape, *triples, kappa=hp.kappa_border, back=back, inner=(3, 3))
+    s0 = sweep_seconds(PatchGibbs(OccupancyModel(grid, rays, GaussianRange(3.0), sparse), (3, 3), p_rand_patch=0.001))
+    out = {"cells": grid.num_cells, "rays": rays.num_rays, "sparse_seconds": s0, "kappa": hp.kappa_border}
+    print(f"\nbacked-off border prior, L = 9, {rows} x {cols}: sparse table {s0:.4f} s per map sample")
+    model = OccupancyModel(grid, rays, GaussianRange(3.0), bo)
+    for pe in (0.05, 0.2, 1.0):
+        s = sweep_seconds(PatchGibbs(model, (3, 3), p_rand_patch=0.001, p_escape=pe))
+        out[f"backoff_p_escape_{pe}_seconds"] = s
+        out[f"backoff_p_escape_{pe}_ratio"] = s / s0
+        print(f"  backed off, p_escape = {pe}: {s:.4f} s = {s / s0:.2f}x the sparse table (target <= 2x)")
+    return out
+
+
 def mrf_overhead() -> dict:
     grid, scans = sparse_scene(
         500, 100, walls=max(4, 500 * 500 // 6000), seed=0, res=0.05, max_range_cells=75, sigma_cells=3.0, beams=720
@@ -259,9 +286,11 @@ def main(quick: bool = False) -> dict:
         small["extrapolated_1500x1500_seconds"] = small["seconds"] * scale
         print(f"  extrapolated to 1500 x 1500 (x{scale:.0f} cells): {small['seconds'] * scale:.2f} s per sample")
         payload["intel_size_quick_500"] = small
+        payload["backoff_quick_100x160"] = backoff_vs_sparse(100, 160)
         print("wrote", write_json("bench_priors_quick", payload))
         return payload
     payload = {"table_5_1": table_5_1(), "intel_size": intel_size(), "mrf_500": mrf_overhead()}
+    payload["backoff"] = backoff_vs_sparse()
     print("wrote", write_json("bench_priors", payload))
     return payload
 

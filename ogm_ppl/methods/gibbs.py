@@ -2,8 +2,10 @@ r"""``gibbs`` and ``metropolis``: MCMC over the full posterior ``p(m | z)`` (Cha
 
 ``gibbs``: single-cell Gibbs (:class:`~ogm_ppl.inference.mcmc.CellGibbs`, ``patch = 1``) or patch Gibbs
 (:class:`~ogm_ppl.inference.mcmc.PatchGibbs`, Algorithm 1; Algorithm 2 with ``p_rand_patch``), heat-bath or
-metropolised updates. ``metropolis``: single-cell Metropolis-Hastings
-(:class:`~ogm_ppl.inference.mcmc.MetropolisCell`) with uniform or end-point proposals.
+metropolised updates, or ``update = "thesis"``: the thesis's border update (Section 5.2.3), which draws
+each tile of a table prior from its own table and ignores its neighbours' factors (not exact).
+``metropolis``: single-cell Metropolis-Hastings (:class:`~ogm_ppl.inference.mcmc.MetropolisCell`) with
+uniform or end-point proposals.
 """
 
 from __future__ import annotations
@@ -25,7 +27,11 @@ SCANS = ("systematic", "permutation", "random")
 class GibbsParams(SamplingParams):
     patch: object = param(1, Patch(), "1: CellGibbs; a larger patch: PatchGibbs")
     scan: str = param("systematic", Choice(*SCANS), "order of the cells / patches in a sweep")
-    update: str = param("gibbs", Choice("gibbs", "metropolised"), "heat bath or metropolised update")
+    update: str = param(
+        "gibbs",
+        Choice("gibbs", "metropolised", "thesis"),
+        "heat bath, metropolised, or (PatchGibbs, table priors) the thesis's border update of Sec. 5.2.3",
+    )
     p_rand_patch: float = param(0.0, Float(0, 0.999), "PatchGibbs: probability of a random configuration (Alg. 2)")
     random_patch: str = param(
         "mh",
@@ -33,6 +39,14 @@ class GibbsParams(SamplingParams):
         "PatchGibbs: random configurations accepted by MH or always (the thesis)",
     )
     offset: int = param(0, Int(lo=0), "PatchGibbs: column of the tiling's first patch")
+    p_escape: float = param(
+        0.2, Float(0, 1, lo_open=True), "PatchGibbs, backed-off tables: probability of the escape move"
+    )
+
+    def check(self) -> None:
+        super().check()
+        if self.update == "thesis" and self.patch == 1:
+            raise ParamError("update", "'thesis' is the border update of patch Gibbs: use a patch, e.g. [3, 3]")
 
 
 @register_method("gibbs", GibbsParams, stochastic=True, sampler=True)
@@ -55,6 +69,7 @@ def gibbs(params: GibbsParams, problem: MapProblem, ctx: RunContext) -> MapResul
             update=params.update,
             init=params.init,
             delta=params.init_delta,
+            p_escape=params.p_escape,
         )
         details = {"kernel": "PatchGibbs", "patch": params.patch}
     return run_kernel(kernel, params, problem, ctx, details)

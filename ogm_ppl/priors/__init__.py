@@ -3,6 +3,7 @@ the 1D data-driven prior, pairwise stencil priors and the higher-order MRF (Sect
 patch tables (5.2.2) and border-conditioned tables (5.2.3). Each prior hands the compiled kernels one bundle
 of arrays (:meth:`MapPrior.compiled`, :mod:`ogm_ppl.priors.compiled`) or none (the generic path)."""
 
+from ogm_ppl.priors.backoff import BackoffBorderPrior
 from ogm_ppl.priors.base import MapPrior
 from ogm_ppl.priors.border import BorderPatchPrior
 from ogm_ppl.priors.compiled import CompiledPrior
@@ -21,6 +22,7 @@ from ogm_ppl.priors.patch_table import PatchTablePrior
 from ogm_ppl.priors.tables import PriorTables, available_tables, load_tables, tables_by_name
 
 __all__ = [
+    "BackoffBorderPrior",
     "BorderPatchPrior",
     "CompiledPrior",
     "DataDriven1DPrior",

@@ -15,6 +15,10 @@ statistics are closest to the thesis's):
 ``patch5:CORPUS``         5 x 5 tiles (sparse table of the configurations seen)
 ``border:CORPUS``         :class:`BorderPatchPrior`, a 3 x 3 patch given its 16 border cells (5.2.3)
 ``border1:CORPUS``        one cell given its 8 neighbours
+``patch3_bo:CORPUS``      ``patch3`` smoothed towards independent cells (Witten-Bell, every
+                          configuration positive; :mod:`~ogm_ppl.priors.backoff`)
+``border_bo:CORPUS``      ``border`` backed off to ``patch3_bo``, which backs off to independent cells
+``border1_bo:CORPUS``     ``border1`` backed off to ``(1 - lambda, lambda)``
 ========================  ==========================================================================
 
 The tables were learned on the corpus's *training* plans only, with the buildings of the real logs
@@ -49,7 +53,8 @@ if TYPE_CHECKING:
 __all__ = ["PRIOR_KINDS", "CorpusTables", "prior_by_name", "prior_kinds", "register_prior", "unregister_prior"]
 
 #: the kinds the library ships (the module docstring's table)
-PRIOR_KINDS = ("independent", "mrf", "mrf8", "patch3", "patch3_999", "patch5", "border", "border1")
+PRIOR_KINDS: tuple[str, ...] = ("independent", "mrf", "mrf8", "patch3", "patch3_999", "patch5", "border", "border1")
+PRIOR_KINDS += ("patch3_bo", "border_bo", "border1_bo")
 DEFAULT_CORPUS = "houseexpo"
 
 #: ``factory(shape, tables) -> MapPrior``: ``shape`` the grid's shape (a tuple), ``tables`` a
@@ -196,3 +201,17 @@ for _kind, _factory in (
     ("border1", _border1),
 ):
     register_prior(_kind, _factory)
+
+
+def _backed_off(kind: str) -> PriorFactory:
+    def build(shape, tables) -> MapPrior:
+        from ogm_ppl.priors.backoff import backed_off_prior
+
+        _two_d(kind, shape)
+        return backed_off_prior(kind, shape, tables(), tables.corpus or DEFAULT_CORPUS)
+
+    return build
+
+
+for _kind in ("patch3_bo", "border_bo", "border1_bo"):
+    register_prior(_kind, _backed_off(_kind))

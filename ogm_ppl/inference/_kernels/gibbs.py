@@ -21,6 +21,7 @@ Sweeps allocate their scratch once (:class:`RayScratch`, :class:`~ogm_ppl.priors
 
 from __future__ import annotations
 
+import math
 from typing import NamedTuple
 
 import numba as nb
@@ -36,6 +37,7 @@ from ogm_ppl.priors.compiled import (
     patch_candidates,
     scratch_capacity,
 )
+from ogm_ppl.priors.compiled.registry import escape_proposal, restricted
 from ogm_ppl.priors.compiled.scratch import tile_scratch
 
 
@@ -89,13 +91,18 @@ class PatchGeometry(NamedTuple):
 
 class PatchRule(NamedTuple):
     """How a patch update chooses: Algorithm 2's probability of a random configuration (accepted by
-    Metropolis-Hastings unless ``thesis_random``), Liu's metropolised Gibbs or heat bath, and the most
-    candidate configurations an update may weigh."""
+    Metropolis-Hastings unless ``thesis_random``), Liu's metropolised Gibbs or heat bath, the most
+    candidate configurations an update may weigh, the probability of the escape move of a restricted
+    candidate set (:func:`_candidate_sweep`), and ``own_factor`` (the thesis's border update of Section
+    5.2.3: a tile drawn from its own table times the likelihood, the neighbouring tiles' factors
+    ignored; not a Gibbs sampler of the tiled joint)."""
 
     p_rand_patch: float
     thesis_random: bool
     metropolised: bool
     capacity: int
+    p_escape: float = 0.0
+    own_factor: bool = False
 
 
 class RayScratch(NamedTuple):
@@ -521,6 +528,63 @@ def _add_lik(sc, ns, ll, n_live, cands, n, dense, logw):
 
 
 @nb.njit(cache=True)
+def _restricted_update(ps, patch, prior, u, i, rule, stamp, cands, n, t, cand_lp, logw, pair, pw, sc, ts):
+    r"""One exact update of a patch whose candidates ``cands[:n]`` (a set ``S`` fixed by the cells outside
+    the patch, e.g. the configurations a backed-off table counted after the tile's border) are only part
+    of the configurations with mass (:func:`~ogm_ppl.priors.compiled.restricted`). Two steps, each
+    leaving the full conditional ``pi(c) = p(c | rest, z)`` invariant:
+
+    (A) if the current ``c`` is in ``S``: heat bath (or metropolised Gibbs) on ``S``,
+        ``K_A(c, c') = pi(c') / pi(S)`` for ``c, c' in S``; else stay. Detailed balance:
+        ``pi(c) K_A(c, c') = pi(c) pi(c') / pi(S)`` is symmetric, and ``K_A`` is the identity off ``S``.
+    (B) with probability ``p_escape`` (the uniform ``u[3, i]``, rescaled to the proposal's uniform): an
+        independence Metropolis-Hastings move, ``c' ~ q`` (:func:`~ogm_ppl.priors.compiled.escape_proposal`,
+        e.g. the back-off table over all ``2^L`` configurations) accepted with
+        ``min(1, pi(c') q(c) / (pi(c) q(c')))`` (``u[4, i]``): detailed balance
+        ``pi(c) q(c') a(c, c') = min(pi(c) q(c'), pi(c') q(c))``.
+
+    A mixture / composition of ``pi``-invariant kernels is ``pi``-invariant, and (B) gives every
+    configuration with ``q > 0`` a positive chance in one step, so the chain is irreducible on the
+    configurations with mass. ``pi`` of (B) is the kind's full prior weight (the tile's own factor
+    ``pair_lp`` plus its neighbours', :func:`~ogm_ppl.priors.compiled.candidate_weights`) plus the
+    likelihood of the rays through the patch, collected once for both steps. Returns whether the patch
+    changed."""
+    m, ll = ps.m, ps.ll
+    cur = patch_config(patch, m)
+    new = cur
+    ns = -1
+    jc = -1
+    for x in range(n):
+        if cands[x] == cur:
+            jc = x
+            break
+    if jc >= 0 and n > 1:
+        candidate_weights(prior, patch, m, cands, n, t, cand_lp, logw, ts)
+        ns = collect_rays(ps, patch, stamp, sc)
+        lik_list(sc, ns, ll, cands, n, logw)
+        j = choose(logw, n, jc, u[0, i], u[2, i], rule.metropolised, sc.ew)
+        if j >= 0:
+            new = cands[j]
+    if new != cur:
+        set_patch(ps, patch, new)
+    pe = rule.p_escape
+    if pe > 0.0 and u[3, i] < pe:
+        prop, log_q = escape_proposal(prior, t, patch, m, u[3, i] / pe, pw)
+        if prop >= 0 and prop != new:
+            pair[0] = new
+            pair[1] = prop
+            candidate_weights(prior, patch, m, pair, 2, t, pw, pw, ts)
+            if ns < 0:
+                ns = collect_rays(ps, patch, stamp, sc)
+            lik_list(sc, ns, ll, pair, 2, pw)
+            d = pw[1] - pw[0] + log_q
+            if pw[0] == -np.inf or d >= 0.0 or (d > -np.inf and u[4, i] < math.exp(d)):
+                set_patch(ps, patch, prop)
+                new = prop
+    return new != cur
+
+
+@nb.njit(cache=True)
 def _candidate_sweep(ps, geo, anchors, prior, u, rule):
     """Patch updates that weigh only the configurations the prior allows given the rest
     (:func:`~ogm_ppl.priors.compiled.patch_candidates`: a tile's sparse support for table priors whose
@@ -574,12 +638,22 @@ def _candidate_sweep(ps, geo, anchors, prior, u, rule):
             if n < 0:
                 skipped += 1
                 continue
+            if restricted(prior, t) and not rule.own_factor:
+                if _restricted_update(
+                    ps, patch, prior, u, i, rule, stamp, cands, n, t, cand_lp, logw, pair, pw, sc, ts
+                ):
+                    changed += 1
+                continue
             if n == 0:
                 continue
             if n == 1:
                 j = 0  # the only configuration with mass (or, if it has none, the one to move to)
             else:
-                candidate_weights(prior, patch, m, cands, n, t, cand_lp, logw, ts)
+                if rule.own_factor and t >= 0:  # the thesis's border update: the tile's own table only
+                    for x in range(n):
+                        logw[x] = cand_lp[x]
+                else:
+                    candidate_weights(prior, patch, m, cands, n, t, cand_lp, logw, ts)
                 ns = collect_rays(ps, patch, stamp, sc)
                 _add_lik(sc, ns, ll, n_live, cands, n, t < 0, logw)
                 jc = -1

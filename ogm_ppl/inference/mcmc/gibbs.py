@@ -60,7 +60,7 @@ from ogm_ppl.inference._kernels.gibbs import (
     patch_sweep,
     set_patch,
 )
-from ogm_ppl.inference.mcmc.kernel import MapKernel, initial_map
+from ogm_ppl.inference.mcmc.kernel import KernelStateError, MapKernel, initial_map
 from ogm_ppl.inference.tiling import patch_cells, patch_shape, tiling_starts
 from ogm_ppl.models.occupancy import OccupancyModel
 
@@ -249,9 +249,19 @@ class PatchGibbs(MapKernel):
             per sweep.
         p_rand_patch: Algorithm 2's probability of proposing a random configuration instead (0.001 in the
             thesis), accepted by Metropolis-Hastings unless ``random_patch="thesis"``.
-        update: ``"gibbs"`` (the thesis's heat bath: draw the patch from its conditional) or
+        update: ``"gibbs"`` (the thesis's heat bath: draw the patch from its conditional),
             ``"metropolised"`` (propose one of the *other* configurations in proportion to its
-            conditional, accept by Metropolis-Hastings with ``min(1, (1 - p_cur) / (1 - p_new))``).
+            conditional, accept by Metropolis-Hastings with ``min(1, (1 - p_cur) / (1 - p_new))``) or
+            ``"thesis"``, the border update of Section 5.2.3 for table priors whose tiles are the patches:
+            each tile drawn from ``p(a_k | border_k) p(z | a_k, rest)`` over the table's support, the
+            factors of the neighbouring tiles (whose borders the tile forms) ignored. That is not a Gibbs
+            sampler of the tiled joint, nor of any joint in general: its stationary distribution differs
+            from the posterior (``experiments/thesis_border_update.py`` measures by how much).
+        p_escape: for backed-off tables (strictly positive, e.g. ``border_bo``), the probability per patch
+            update of the escape move (an independence Metropolis-Hastings proposal from the back-off
+            table after the heat bath on the counted configurations; see
+            :func:`~ogm_ppl.inference._kernels.gibbs._restricted_update`); it makes the chain irreducible.
+            Unused by other priors.
         region: ``None`` (the whole map) or cells (boolean mask of ``K`` cells or of the grid's shape, or
             cell indices): the systematic / permutation scans visit only the fixed patches that hold a
             latent region cell; the random scan places patches at latent region cells,
@@ -273,11 +283,15 @@ class PatchGibbs(MapKernel):
         init="ogm",
         delta="haehnel",
         region=None,
+        p_escape: float = 0.2,
     ) -> None:
-        if update not in _UPDATES:
-            raise ValueError(f"update must be one of {tuple(_UPDATES)}, got {update!r}")
+        if update not in (*_UPDATES, "thesis"):
+            raise ValueError(f"update must be one of {(*_UPDATES, 'thesis')}, got {update!r}")
+        if not 0.0 < p_escape <= 1.0:
+            raise ValueError(f"p_escape must lie in (0, 1], got {p_escape}")
         super().__init__(model, scan, init, delta, region)
         self.update = update
+        self.p_escape = float(p_escape)
         self._metropolised = update == "metropolised"
         compiled = model.prior.compiled()
         # patches of up to 62 cells where the prior's kind weighs only its sparse support (tiles as patches)
@@ -295,6 +309,14 @@ class PatchGibbs(MapKernel):
         if self.scan != "random" and len(self._anchors) == 0:
             raise ValueError("no patch holds a latent cell")
         self._hw = self._rectangle()
+        if update == "thesis" and not (
+            compiled is not None and scan != "random" and compiled.tiles_patches(self._hw, self._anchors)
+        ):
+            raise ValueError(
+                "update='thesis' draws each tile of a table prior from its own table: it needs a table "
+                "prior whose tiles are the patches (same shape, aligned: offset = prior.origin) and a "
+                "systematic or permutation scan"
+            )
         if self.L > 20 and not (compiled is not None and compiled.tiles_patches(self._hw, self._anchors)):
             raise ValueError(
                 f"patches of {self.L} cells (2^{self.L} configurations) need a table prior whose "
@@ -364,7 +386,8 @@ class PatchGibbs(MapKernel):
         else:
             anchors = self._order(self._anchors)
         n = len(anchors)
-        u = np.stack([self._uniforms(n), self._uniforms(n), self._uniforms(n)])  # choice, random patch, accept
+        rows = 5 if self._escapes() else 3  # choice, random patch, accept (, escape: proposal, accept)
+        u = np.stack([self._uniforms(n) for _ in range(rows)])
         self._updates += n
         if self._compiled is None:
             return self._python_sweep(anchors, u[0], u[1], u[2])
@@ -382,9 +405,32 @@ class PatchGibbs(MapKernel):
         h, w = self._hw
         return PatchGeometry(self.dr, self.dc, h, w, g.rows, g.cols, self._pinned)
 
+    def _extra_state(self) -> dict[str, np.ndarray]:
+        return {"update": np.asarray(self.update)}
+
+    def _load_extra_state(self, state) -> None:
+        """A checkpoint taken with another update rule (say the thesis's inexact border update) is refused;
+        checkpoints that do not record the rule load as before."""
+        if "update" in state:
+            u = np.asarray(state["update"])
+            if u.shape != () or u.dtype.kind != "U" or str(u) != self.update:
+                raise KernelStateError(f"PatchGibbs state was taken with update={u!s}, this kernel has {self.update!r}")
+
+    def _escapes(self) -> bool:
+        """Whether the prior's patch updates add the escape move (a backed-off table)."""
+        self._prepare()
+        return self._compiled is not None and bool(getattr(self._compiled, "needs_escape", lambda: False)())
+
     def _patch_rule(self) -> PatchRule:
         capacity = self._compiled.patch_capacity(self.L) if self._compiled is not None else 2
-        return PatchRule(self.p_rand_patch, self.thesis_random, self._metropolised, capacity)
+        return PatchRule(
+            self.p_rand_patch,
+            self.thesis_random,
+            self._metropolised,
+            capacity,
+            self.p_escape,
+            self.update == "thesis",
+        )
 
     def patch_log_weights(self, patch: np.ndarray) -> np.ndarray:
         """Unnormalised log conditional of each configuration of ``patch`` (grid cells, ``-1`` = none)

@@ -124,9 +124,18 @@ class Tiles(NamedTuple):
     # segment s (fallback resolved), so a lookup is one load instead of a binary search
     dense: np.ndarray  # S * 2^Lw float64 (empty: none)
     dense_bits: int  # Lw when ``dense`` is present, else -1
+    # backed-off (strictly positive) tables: the segment of log lambda_b keyed by border (-1: none), and
+    # the back-off table's cumulative sums over the 2^n_inner inner codes (the escape move's proposal)
+    border_seg: int = -1
+    back_cdf: np.ndarray = np.zeros(0, np.float64)
 
     def sparse_patches(self) -> bool:
         return True
+
+    def needs_escape(self) -> bool:
+        """Whether a tile's patch update weighs only part of the configurations with mass (a backed-off
+        table), so the sweep adds the escape move (and draws its uniforms)."""
+        return self.border_seg >= 0
 
     def patch_capacity(self, L: int) -> int:
         seg = int(np.diff(self.seg_off).max()) if len(self.seg_off) > 1 else 0

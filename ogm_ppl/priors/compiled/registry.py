@@ -16,6 +16,14 @@ are compiled for (inlined, so a sweep specialised for one kind runs that kind's 
   the candidates of :func:`patch_candidates` (default: :func:`patch_prior_weights`);
 * :func:`scratch_capacity` ``(prior, L)`` — the size of the :class:`~ogm_ppl.priors.compiled.scratch.TileScratch`
   a kind's patch weights need for ``L``-cell patches (default 1);
+* :func:`restricted` ``(prior, tag)`` — ``True`` when the candidates of :func:`patch_candidates` with this
+  ``tag`` are only part of the configurations with prior mass (a backed-off table's counted
+  configurations): the sweep then draws among them only when the current configuration is one of them,
+  and adds the kind's escape move (default ``False``);
+* :func:`escape_proposal` ``(prior, tag, patch, m, u, pair_lp)`` — the escape move's proposal from the
+  uniform ``u``: ``(prop, log q(cur) - log q(prop))`` (``prop = -1``: none), the kind's own weight of the
+  current and the proposed configuration in ``pair_lp[0], pair_lp[1]`` (the ``cand_lp`` of
+  :func:`candidate_weights` with this ``tag``); only called where :func:`restricted` holds;
 * :func:`is_additive` ``(prior)`` — ``True`` when a configuration's prior weight is the sum of its cells'
   :func:`cell_log_odds`, whatever the rest of the map (independent cells): patch kernels then weigh all
   ``2^L`` configurations in ``O(2^L)``.
@@ -35,12 +43,14 @@ __all__ = [
     "Kind",
     "candidate_weights",
     "cell_log_odds",
+    "escape_proposal",
     "is_additive",
     "kind_of",
     "patch_candidates",
     "patch_prior_weights",
     "register",
     "registered",
+    "restricted",
     "scratch_capacity",
 ]
 
@@ -54,6 +64,8 @@ class Kind(NamedTuple):
     candidate_weights: Callable
     scratch_capacity: Callable
     additive: bool
+    restricted: Callable
+    escape_proposal: Callable
 
 
 _KINDS: dict[type, Kind] = {}
@@ -72,6 +84,14 @@ def _no_scratch(prior, L):
     return 1
 
 
+def _unrestricted(prior, tag):
+    return False
+
+
+def _no_escape(prior, tag, patch, m, u, pair_lp):
+    return np.int64(-1), 0.0
+
+
 def register(
     bundle: type,
     *,
@@ -81,6 +101,8 @@ def register(
     patch_candidates: Callable | None = None,
     scratch_capacity: Callable | None = None,
     additive: bool = False,
+    restricted: Callable | None = None,
+    escape_proposal: Callable | None = None,
 ) -> None:
     """Register the compiled conditionals of the bundle class ``bundle`` (see the module docstring for each
     function's signature and meaning; the optional ones default to the dense, scratch-free versions)."""
@@ -91,6 +113,8 @@ def register(
         candidate_weights,
         scratch_capacity or _no_scratch,
         bool(additive),
+        restricted or _unrestricted,
+        escape_proposal or _no_escape,
     )
 
 
@@ -137,6 +161,14 @@ def is_additive(prior):
     return kind_of(prior).additive
 
 
+def restricted(prior, tag):
+    return kind_of(prior).restricted(prior, tag)
+
+
+def escape_proposal(prior, tag, patch, m, u, pair_lp):
+    return kind_of(prior).escape_proposal(prior, tag, patch, m, u, pair_lp)
+
+
 # numba checks that an implementation's signature is the overload's, so each typer spells it out
 @overload(cell_log_odds, inline="always")
 def _cell_log_odds(prior, k, m):
@@ -161,6 +193,16 @@ def _candidate_weights(prior, patch, m, cands, n, tag, cand_lp, out, ts):
 @overload(scratch_capacity, inline="always")
 def _scratch_capacity(prior, L):
     return _registered(prior, "scratch_capacity")
+
+
+@overload(restricted, inline="always")
+def _restricted(prior, tag):
+    return _registered(prior, "restricted")
+
+
+@overload(escape_proposal, inline="always")
+def _escape_proposal(prior, tag, patch, m, u, pair_lp):
+    return _registered(prior, "escape_proposal")
 
 
 @overload(is_additive, inline="always")

@@ -29,6 +29,7 @@ __all__ = [
     "DENSE_MAX_BITS",
     "DENSE_MAX_ENTRIES",
     "tile_candidates",
+    "tile_escape",
     "tile_cell_log_odds",
     "tile_of_anchor",
     "tile_patch_factors",
@@ -77,14 +78,25 @@ def _lower(keys, lo, hi, key):
 
 
 @nb.njit(cache=True)
-def _sparse_factor(keys, logp, seg_off, backoff, n_inner, s, key):
-    """``log phi(key)`` in segment ``s`` by binary search of the sorted keys, backing off to segment
-    ``backoff`` (keyed by the inner bits; ``-1``: none) when the key's border was never seen; ``-inf`` if
-    absent. (Not inlined: a large inlined body slows the loops around it.)"""
+def _sparse_factor(keys, logp, seg_off, backoff, bseg, n_inner, s, key):
+    """``log phi(key)`` in segment ``s`` by binary search of the sorted keys. A key missing from the
+    segment: with a border-weight segment ``bseg >= 0`` (a backed-off table) it is
+    ``log lambda_b + log back(inner)``, ``lambda_b`` looked up by border in segment ``bseg`` (``1`` for a
+    border never seen) and ``back`` the segment ``bseg + 1``, which holds every inner code in order; else
+    it backs off to segment ``backoff`` (keyed by the inner bits; ``-1``: none) when the key's border was
+    never seen, and is ``-inf`` otherwise. (Not inlined: a large inlined body slows the loops around it.)"""
     a, b = seg_off[s], seg_off[s + 1]
     i = _lower(keys, a, b, key)
     if i < b and keys[i] == key:
         return logp[i]
+    if bseg >= 0:
+        border = key >> n_inner
+        v = logp[seg_off[bseg + 1] + (key & ((np.int64(1) << n_inner) - 1))]
+        ba, bb = seg_off[bseg], seg_off[bseg + 1]
+        j = _lower(keys, ba, bb, border)
+        if j < bb and keys[j] == border:
+            v += logp[j]
+        return v
     if backoff >= 0:
         border = key >> n_inner
         j = _lower(keys, a, b, border << n_inner)
@@ -98,12 +110,12 @@ def _sparse_factor(keys, logp, seg_off, backoff, n_inner, s, key):
 
 
 @nb.njit(cache=True, inline="always")
-def _factor(dense, dense_bits, keys, logp, seg_off, backoff, n_inner, s, key):
+def _factor(dense, dense_bits, keys, logp, seg_off, backoff, bseg, n_inner, s, key):
     """``log phi(key)`` in segment ``s`` from arrays already bound to locals: one load from the dense table
     if ``dense_bits >= 0``, else :func:`_sparse_factor`."""
     if dense_bits >= 0:
         return dense[(s << dense_bits) | key]
-    return _sparse_factor(keys, logp, seg_off, backoff, n_inner, s, key)
+    return _sparse_factor(keys, logp, seg_off, backoff, bseg, n_inner, s, key)
 
 
 @nb.njit(cache=True, inline="always")
@@ -116,14 +128,16 @@ def _backoff(lp):
 def sparse_key_log_factor(lp, s, key):
     """``log phi(key)`` in segment ``s`` from the sorted keys (fallback for an unseen border; ``-inf`` if
     absent)."""
-    return _factor(lp.dense, -1, lp.keys, lp.logp, lp.seg_off, _backoff(lp), lp.n_inner, s, key)
+    return _factor(lp.dense, -1, lp.keys, lp.logp, lp.seg_off, _backoff(lp), lp.border_seg, lp.n_inner, s, key)
 
 
 @nb.njit(cache=True, inline="always")
 def key_log_factor(lp, s, key):
     """``log phi(key)`` in segment ``s``: one load from the dense table when there is one, else
     :func:`sparse_key_log_factor`."""
-    return _factor(lp.dense, lp.dense_bits, lp.keys, lp.logp, lp.seg_off, _backoff(lp), lp.n_inner, s, key)
+    return _factor(
+        lp.dense, lp.dense_bits, lp.keys, lp.logp, lp.seg_off, _backoff(lp), lp.border_seg, lp.n_inner, s, key
+    )
 
 
 @nb.njit(cache=True)
@@ -258,7 +272,7 @@ def tile_patch_factors(lp, nt, ts, cands, n, out):
     most ``2^shared`` lookups per update, however many candidates there are."""
     _bit_of, _touch, base, seg, pr_off, pr_pb, pr_wb, memo_off, memo = ts
     dense, db, keys, logp, seg_off = lp.dense, lp.dense_bits, lp.keys, lp.logp, lp.seg_off
-    backoff, n_inner = _backoff(lp), lp.n_inner
+    backoff, bseg, n_inner = _backoff(lp), lp.border_seg, lp.n_inner
     for j in range(n):
         s = out[j]
         if s == -np.inf:
@@ -276,10 +290,10 @@ def tile_patch_factors(lp, nt, ts, cands, n, out):
             if mo >= 0:
                 v = memo[mo + sub]
                 if v != v:
-                    v = _factor(dense, db, keys, logp, seg_off, backoff, n_inner, seg[q], key)
+                    v = _factor(dense, db, keys, logp, seg_off, backoff, bseg, n_inner, seg[q], key)
                     memo[mo + sub] = v
             else:
-                v = _factor(dense, db, keys, logp, seg_off, backoff, n_inner, seg[q], key)
+                v = _factor(dense, db, keys, logp, seg_off, backoff, bseg, n_inner, seg[q], key)
             s += v
             if s == -np.inf:
                 break
@@ -434,10 +448,35 @@ def tiles_log_prob_batch(lp, maps, out):
         out[b] = s
 
 
-def tiles(rows, cols, geometry, n_inner, tile, pad, t_seg, t_fill, seg_keys, seg_logp, fallback=-1) -> Tiles:
+def tiles(
+    rows,
+    cols,
+    geometry,
+    n_inner,
+    tile,
+    pad,
+    t_seg,
+    t_fill,
+    seg_keys,
+    seg_logp,
+    fallback=-1,
+    border_seg=-1,
+    back_cdf=None,
+) -> Tiles:
     """A :class:`Tiles` bundle from a tiling (``geometry``: :func:`~ogm_ppl.priors.local.tiling`) and
     per-segment (keys, log-values) lists; windows of at most :data:`DENSE_MAX_BITS` cells also get the
-    dense table."""
+    dense table. A backed-off table (:class:`~ogm_ppl.priors.backoff.BackoffBorderPrior`) names its
+    border-weight segment ``border_seg`` (keys: border codes, values ``log lambda_b``), followed by the
+    segment of ``log back`` over every inner code in order, and passes the back-off table's cumulative
+    sums ``back_cdf`` (``2^n_inner``, last entry 1); its ``fallback`` segment is then only the candidate
+    set of a tile whose border was never seen."""
+    if border_seg >= 0:
+        fk = np.asarray(seg_keys[border_seg + 1])
+        if not np.array_equal(fk, np.arange(1 << int(n_inner))):
+            raise ValueError("a backed-off table's back-off segment must hold every inner code in order")
+        cdf = np.asarray(back_cdf, np.float64)
+        if cdf.shape != (1 << int(n_inner),) or (np.diff(cdf) < 0).any() or cdf[-1] != 1.0:
+            raise ValueError("back_cdf must be the non-decreasing cumulative sums of 2^n_inner entries, ending at 1")
     w_dr, w_dc, r0, c0, t_rows, t_cols, _ = geometry
     seg_off = np.zeros(len(seg_keys) + 1, np.int64)
     keys, logp = [], []
@@ -468,6 +507,8 @@ def tiles(rows, cols, geometry, n_inner, tile, pad, t_seg, t_fill, seg_keys, seg
         fallback=int(fallback),
         dense=_F,
         dense_bits=-1,
+        border_seg=int(border_seg),
+        back_cdf=np.ascontiguousarray(back_cdf if border_seg >= 0 else _F, np.float64),
     )
     Lw = len(w_dr)
     if Lw <= DENSE_MAX_BITS and (len(seg_keys) << Lw) <= DENSE_MAX_ENTRIES:
@@ -499,6 +540,52 @@ def tile_candidate_weights(lp, patch, m, cands, n, t, cand_lp, out, ts):
     tile_patch_factors(lp, nt, ts, cands, n, out)
 
 
+@nb.njit(cache=True)
+def tile_escape(lp, t, patch, m, u, pair_lp):
+    """The escape proposal of a backed-off table for tile ``t`` (cells ``patch``, row-major, ``-1`` off
+    the grid or pinned): an inner code ``i' ~ back`` drawn by inverse CDF with the uniform ``u``
+    (``P(i') = back_cdf[i'] - back_cdf[i' - 1]``, exactly the chance the draw lands on ``i'``).
+
+    Returns ``(prop, log q(cur) - log q(prop))`` with ``prop`` the proposal as a live-bit code, and
+    writes tile ``t``'s own ``log phi`` of the current and the proposed configuration to
+    ``pair_lp[0], pair_lp[1]``. ``prop = -1`` (a rejected proposal, the state stays) when ``i'`` sets a
+    pinned cell or disagrees with the fill of a cell off the grid: the proposal kernel restricted to the
+    compatible codes, the rest of its mass left at the current state, is still an independence
+    proposal, so the Metropolis-Hastings ratio keeps ``q = back``."""
+    cdf = lp.back_cdf
+    Li = lp.n_inner
+    W = cdf.shape[0]
+    lo, hi = 0, W - 1
+    while lo < hi:  # the first code with cdf > u
+        mid = (lo + hi) >> 1
+        if cdf[mid] > u:
+            hi = mid
+        else:
+            lo = mid + 1
+    prop_inner = np.int64(lo)
+    key = tile_key(lp, t, m)
+    mask = (np.int64(1) << Li) - 1
+    cur_inner = key & mask
+    code = np.int64(0)
+    bit = 0
+    for i in range(Li):
+        v = (prop_inner >> i) & 1
+        if patch[i] >= 0:
+            if v:
+                code |= np.int64(1) << bit
+            bit += 1
+        elif v != ((cur_inner >> i) & 1):  # a cell the update cannot change (off the grid, pinned)
+            return np.int64(-1), 0.0
+    q_cur = cdf[cur_inner] - (cdf[cur_inner - 1] if cur_inner > 0 else 0.0)
+    q_prop = cdf[prop_inner] - (cdf[prop_inner - 1] if prop_inner > 0 else 0.0)
+    if q_cur <= 0.0 or q_prop <= 0.0:
+        return np.int64(-1), 0.0
+    s = lp.t_seg[t]
+    pair_lp[0] = key_log_factor(lp, s, key)
+    pair_lp[1] = key_log_factor(lp, s, (key & ~mask) | prop_inner)
+    return code, np.log(q_cur) - np.log(q_prop)
+
+
 def _cell(prior, k, m):
     return tile_cell_log_odds(prior, k, m)
 
@@ -527,6 +614,14 @@ def _capacity(prior, L):
     return touch_capacity(prior, L)
 
 
+def _restricted(prior, tag):
+    return tag >= 0 and prior.border_seg >= 0
+
+
+def _escape(prior, tag, patch, m, u, pair_lp):
+    return tile_escape(prior, tag, patch, m, u, pair_lp)
+
+
 register(
     Tiles,
     cell_log_odds=_cell,
@@ -534,4 +629,6 @@ register(
     patch_candidates=_cands,
     candidate_weights=_weights,
     scratch_capacity=_capacity,
+    restricted=_restricted,
+    escape_proposal=_escape,
 )
