@@ -15,6 +15,8 @@ statistics are closest to the thesis's):
 ``patch5:CORPUS``         5 x 5 tiles (sparse table of the configurations seen)
 ``border:CORPUS``         :class:`BorderPatchPrior`, a 3 x 3 patch given its 16 border cells (5.2.3)
 ``border1:CORPUS``        one cell given its 8 neighbours
+``field:CORPUS``          :class:`PatternFieldPrior`, every 3 x 3 window's learned potential (PL + PCD)
+``field2:CORPUS``         the same at two scales (3 x 3 windows of the map and of its 2 x 2 OR-pooling)
 ========================  ==========================================================================
 
 The tables were learned on the corpus's *training* plans only, with the buildings of the real logs
@@ -49,7 +51,7 @@ if TYPE_CHECKING:
 __all__ = ["PRIOR_KINDS", "CorpusTables", "prior_by_name", "prior_kinds", "register_prior", "unregister_prior"]
 
 #: the kinds the library ships (the module docstring's table)
-PRIOR_KINDS = ("independent", "mrf", "mrf8", "patch3", "patch3_999", "patch5", "border", "border1")
+PRIOR_KINDS = ("independent", "mrf", "mrf8", "patch3", "patch3_999", "patch5", "border", "border1", "field", "field2")
 DEFAULT_CORPUS = "houseexpo"
 
 #: ``factory(shape, tables) -> MapPrior``: ``shape`` the grid's shape (a tuple), ``tables`` a
@@ -185,6 +187,16 @@ def _border1(shape, tables) -> MapPrior:
     return BorderPatchPrior(shape, border, centre, count, inner=(1, 1))
 
 
+def _field(scales: int) -> PriorFactory:
+    def build(shape, tables) -> MapPrior:
+        from ogm_ppl.priors.pattern_field import field_by_name
+
+        _two_d("field" if scales == 1 else "field2", shape)
+        return field_by_name(tables.corpus or DEFAULT_CORPUS, shape, scales)
+
+    return build
+
+
 for _kind, _factory in (
     ("independent", _independent),
     ("mrf", _mrf(4)),
@@ -194,5 +206,7 @@ for _kind, _factory in (
     ("patch5", _patch5),
     ("border", _border),
     ("border1", _border1),
+    ("field", _field(1)),
+    ("field2", _field(2)),
 ):
     register_prior(_kind, _factory)
