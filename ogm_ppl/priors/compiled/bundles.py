@@ -110,6 +110,10 @@ class PatternField(NamedTuple):
     pcol: int
     theta: np.ndarray  # 2^(w w) float64: log-potential of each window code at scale 1
     theta2: np.ndarray  # 2^(w w) float64: the same at scale 2 (zeros when n_scales == 1)
+    # w = 3: delta[q << 9 | code] = theta[code | bit_q] - theta[code] for the window bit q = 8 - q' of the
+    # q'-th window holding a cell (one load per window in a cell's log-odds); empty for other w
+    delta: np.ndarray
+    delta2: np.ndarray
 
     def sparse_patches(self) -> bool:
         return False
@@ -122,7 +126,8 @@ class PatternField(NamedTuple):
 
     def tempered(self, beta: float) -> PatternField:
         """The bundle of ``beta * log p~`` (every log-potential times ``beta``)."""
-        return self._replace(theta=self.theta * float(beta), theta2=self.theta2 * float(beta))
+        b = float(beta)
+        return self._replace(theta=self.theta * b, theta2=self.theta2 * b, delta=self.delta * b, delta2=self.delta2 * b)
 
 
 #: any bundle a prior's ``compiled()`` may return (a new kind adds its class here and registers itself)

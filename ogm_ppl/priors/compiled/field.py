@@ -61,6 +61,8 @@ def pattern_field(rows: int, cols: int, w: int, theta, theta2=None) -> PatternFi
     if not (np.isfinite(t1).all() and np.isfinite(t2).all()):
         raise ValueError("pattern field log-potentials must be finite (the field is strictly positive)")
     return PatternField(
+        delta=_delta_table(t1, w),
+        delta2=_delta_table(t2, w),
         rows=int(rows),
         cols=int(cols),
         w=w,
@@ -70,6 +72,19 @@ def pattern_field(rows: int, cols: int, w: int, theta, theta2=None) -> PatternFi
         theta=t1,
         theta2=np.ascontiguousarray(t2),
     )
+
+
+def _delta_table(theta: np.ndarray, w: int) -> np.ndarray:
+    """``w = 3``: ``9 x 512`` float64 flattened, row ``q`` (window ``(a0, b0) = divmod(q, 3)`` of a cell's
+    neighbourhood; the cell is window bit ``8 - q``) = ``theta[code | bit] - theta[code]``; else empty."""
+    if w != 3:
+        return np.zeros(0)
+    codes = np.arange(512)
+    out = np.empty((9, 512))
+    for q in range(9):
+        bit = 1 << (8 - q)
+        out[q] = theta[codes | bit] - theta[codes & ~bit]
+    return np.ascontiguousarray(out.ravel())
 
 
 # ------------------------------------------------------------------ single cells
@@ -109,12 +124,51 @@ def _window_delta(theta, w, R, C, r, c, nbhd):
 
 
 @nb.njit(cache=True, inline="always")
-def field_cell_log_odds(lp, k, m):
-    """``log p~(m_k = 1, m_-k) - log p~(m_k = 0, m_-k)`` of a pattern field."""
+def _delta3(delta, nbhd):
+    """:func:`_window_delta` of an interior cell and ``w = 3`` from the delta table (one load per window;
+    window ``(a0, b0)`` holds the cell at bit ``(2 - a0) 3 + (2 - b0) = 8 - q``), shifts as constants."""
+    lo = 0.0
+    for a0 in range(3):
+        for b0 in range(3):
+            sh = a0 * 5 + b0
+            code = (nbhd >> sh) & 7
+            code |= ((nbhd >> (sh + 5)) & 7) << 3
+            code |= ((nbhd >> (sh + 10)) & 7) << 6
+            lo += delta[((a0 * 3 + b0) << 9) | code]
+    return lo
+
+
+@nb.njit(cache=True, inline="always")
+def _nbhd3(m, cols, r, c):
+    """The ``5 x 5`` neighbourhood of an interior cell ``(r, c)`` as 25 bits (row-major), centre cleared."""
+    nbhd = np.int64(0)
+    k0 = (r - 2) * cols + c - 2
+    for a in range(5):
+        k = k0 + a * cols
+        for b in range(5):
+            nbhd |= np.int64(m[k + b]) << (a * 5 + b)
+    return nbhd & ~np.int64(1 << 12)
+
+
+@nb.njit(cache=True, inline="always")
+def _pooled_nbhd3(m, rows, cols, pr, pc):
+    """The pooled ``5 x 5`` neighbourhood of an interior pooled cell ``(pr, pc)`` (parent cleared); the
+    cells of the pooled blocks all lie in the grid (pooled rows / columns ``<= pr + 2`` below the last)."""
+    nbhd = np.int64(0)
+    for a in range(5):
+        k = (2 * (pr - 2 + a)) * cols + 2 * (pc - 2)
+        for b in range(5):
+            v = m[k] | m[k + 1] | m[k + cols] | m[k + cols + 1]
+            nbhd |= np.int64(v) << (a * 5 + b)
+            k += 2
+    return nbhd & ~np.int64(1 << 12)
+
+
+@nb.njit(cache=True)
+def _edge_scale1(lp, r, c, m):
+    """Scale-1 log-odds of a cell near the edge (or ``w != 3``). (Not inlined: a large inlined body slows
+    the loops around it, and edge cells are few.)"""
     rows, cols, w = lp.rows, lp.cols, lp.w
-    theta = lp.theta
-    r = k // cols
-    c = k - r * cols
     S = 2 * w - 1
     nbhd = np.int64(0)
     for i in range(max(0, r - w + 1), min(rows, r + w)):
@@ -123,27 +177,53 @@ def field_cell_log_odds(lp, k, m):
             if m[i * cols + j]:
                 nbhd |= np.int64(1) << (base + j)
     nbhd &= ~(np.int64(1) << ((w - 1) * S + w - 1))
-    lo = _window_delta(theta, w, rows, cols, r, c, nbhd)
+    return _window_delta(lp.theta, w, rows, cols, r, c, nbhd)
+
+
+@nb.njit(cache=True)
+def _edge_scale2(lp, pr, pc, m):
+    """Scale-2 log-odds of a flip that changes the parent ``(pr, pc)`` near the pooled grid's edge."""
+    rows, cols, w = lp.rows, lp.cols, lp.w
+    P, Q = lp.prow, lp.pcol
+    S = 2 * w - 1
+    pn = np.int64(0)
+    for i in range(max(0, pr - w + 1), min(P, pr + w)):
+        base = (i - pr + w - 1) * S - pc + w - 1
+        for j in range(max(0, pc - w + 1), min(Q, pc + w)):
+            if (i != pr or j != pc) and _pooled(m, rows, cols, i, j):
+                pn |= np.int64(1) << (base + j)
+    return _window_delta(lp.theta2, w, P, Q, pr, pc, pn)
+
+
+@nb.njit(cache=True, inline="always")
+def field_cell_log_odds(lp, k, m):
+    """``log p~(m_k = 1, m_-k) - log p~(m_k = 0, m_-k)`` of a pattern field (``w = 3`` cells away from
+    the edges take a path with constant shifts and the delta tables; the others :func:`_edge_scale1`)."""
+    rows, cols = lp.rows, lp.cols
+    fast = lp.w == 3
+    r = k // cols
+    c = k - r * cols
+    if fast and 2 <= r < rows - 2 and 2 <= c < cols - 2:
+        lo = _delta3(lp.delta, _nbhd3(m, cols, r, c))
+    else:
+        lo = _edge_scale1(lp, r, c, m)
     if lp.n_scales == 2:
         pr = r >> 1
         pc = c >> 1
         # the parent changes with m_k only if the rest of its block is free
-        others = 0
         r2 = 2 * pr
         c2 = 2 * pc
+        others = 0
         for i in range(r2, min(r2 + 2, rows)):
             for j in range(c2, min(c2 + 2, cols)):
                 if (i != r or j != c) and m[i * cols + j]:
                     others = 1
         if others == 0:
-            P, Q = lp.prow, lp.pcol
-            pn = np.int64(0)
-            for i in range(max(0, pr - w + 1), min(P, pr + w)):
-                base = (i - pr + w - 1) * S - pc + w - 1
-                for j in range(max(0, pc - w + 1), min(Q, pc + w)):
-                    if (i != pr or j != pc) and _pooled(m, rows, cols, i, j):
-                        pn |= np.int64(1) << (base + j)
-            lo += _window_delta(lp.theta2, w, P, Q, pr, pc, pn)
+            # interior: the pooled 5 x 5 inside the pooled grid, and its blocks whole (2 (pr + 2) + 1 < rows)
+            if fast and 2 <= pr and 2 * pr + 5 < rows and 2 <= pc and 2 * pc + 5 < cols:
+                lo += _delta3(lp.delta2, _pooled_nbhd3(m, rows, cols, pr, pc))
+            else:
+                lo += _edge_scale2(lp, pr, pc, m)
     return lo
 
 
