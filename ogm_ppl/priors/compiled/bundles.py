@@ -110,8 +110,8 @@ class PatternField(NamedTuple):
     pcol: int
     theta: np.ndarray  # 2^(w w) float64: log-potential of each window code at scale 1
     theta2: np.ndarray  # 2^(w w) float64: the same at scale 2 (zeros when n_scales == 1)
-    # w = 3: delta[q << 9 | code] = theta[code | bit_q] - theta[code] for the window bit q = 8 - q' of the
-    # q'-th window holding a cell (one load per window in a cell's log-odds); empty for other w
+    # w = 3: delta[q << 8 | rest] = theta[code | bit] - theta[code] for the q-th window holding a cell (the
+    # cell is its bit 8 - q; rest = the other 8 bits); one load per window in a cell's log-odds; else empty
     delta: np.ndarray
     delta2: np.ndarray
 

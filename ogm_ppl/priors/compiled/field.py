@@ -75,15 +75,17 @@ def pattern_field(rows: int, cols: int, w: int, theta, theta2=None) -> PatternFi
 
 
 def _delta_table(theta: np.ndarray, w: int) -> np.ndarray:
-    """``w = 3``: ``9 x 512`` float64 flattened, row ``q`` (window ``(a0, b0) = divmod(q, 3)`` of a cell's
-    neighbourhood; the cell is window bit ``8 - q``) = ``theta[code | bit] - theta[code]``; else empty."""
+    """``w = 3``: ``9 x 256`` float64 flattened, row ``q`` (window ``(a0, b0) = divmod(q, 3)`` of a cell's
+    neighbourhood; the cell is window bit ``p = 8 - q``) indexed by the window's other 8 bits (bit ``p``
+    squeezed out: ``low | high >> 1``) = ``theta[code | bit] - theta[code]``; else empty."""
     if w != 3:
         return np.zeros(0)
-    codes = np.arange(512)
-    out = np.empty((9, 512))
+    out = np.empty((9, 256))
+    rest = np.arange(256)
     for q in range(9):
-        bit = 1 << (8 - q)
-        out[q] = theta[codes | bit] - theta[codes & ~bit]
+        p = 8 - q
+        code = (rest & ((1 << p) - 1)) | ((rest >> p) << (p + 1))
+        out[q] = theta[code | (1 << p)] - theta[code]
     return np.ascontiguousarray(out.ravel())
 
 
@@ -134,7 +136,8 @@ def _delta3(delta, nbhd):
             code = (nbhd >> sh) & 7
             code |= ((nbhd >> (sh + 5)) & 7) << 3
             code |= ((nbhd >> (sh + 10)) & 7) << 6
-            lo += delta[((a0 * 3 + b0) << 9) | code]
+            p = 8 - a0 * 3 - b0
+            lo += delta[((a0 * 3 + b0) << 8) | (code & ((1 << p) - 1)) | ((code >> (p + 1)) << p)]
     return lo
 
 
