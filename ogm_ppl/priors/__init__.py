@@ -1,7 +1,8 @@
-"""Priors over binary maps (Chapter 5) behind one interface (:class:`MapPrior`): the independent prior,
-the 1D data-driven prior, pairwise stencil priors and the higher-order MRF (Section 5.2.1), data-driven
-patch tables (5.2.2) and border-conditioned tables (5.2.3), and a learned multiscale field of patterns. Each prior hands the compiled kernels one bundle
-of arrays (:meth:`MapPrior.compiled`, :mod:`ogm_ppl.priors.compiled`) or none (the generic path)."""
+"""Priors over binary maps (Chapter 5) behind one interface (:class:`MapPrior`): the independent prior, the 1D
+data-driven prior, pairwise stencil priors and the higher-order MRF (Section 5.2.1), data-driven patch tables
+(5.2.2) and border-conditioned tables (5.2.3), and a learned multiscale field of patterns. Each prior hands
+the compiled kernels one bundle of arrays (:meth:`MapPrior.compiled`, :mod:`ogm_ppl.priors.compiled`) or none
+(the generic path)."""
 
 from ogm_ppl.priors.base import MapPrior
 from ogm_ppl.priors.border import BorderPatchPrior

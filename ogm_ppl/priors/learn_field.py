@@ -44,7 +44,16 @@ from ogm_ppl.priors.compiled import prior_gibbs_sweeps
 from ogm_ppl.priors.compiled.field import field_window_codes, pattern_field
 from ogm_ppl.priors.pattern_field import symmetry_orbits
 
-__all__ = ["FieldFit", "FieldStats", "data_crops", "field_stats", "fit_pattern_field", "fit_pl", "fit_pcd", "validation_pll"]
+__all__ = [
+    "FieldFit",
+    "FieldStats",
+    "data_crops",
+    "field_stats",
+    "fit_pattern_field",
+    "fit_pl",
+    "fit_pcd",
+    "validation_pll",
+]
 
 
 # ------------------------------------------------------------------ sufficient statistics
@@ -96,7 +105,10 @@ def _nbhd_keys(g, bad, w, two):
                 pc = c >> 1
                 if pr < h or pc < h or pr + h >= P or pc + h >= Q:
                     continue
-                if pb[pr + h + 1, pc + h + 1] - pb[pr - h, pc + h + 1] - pb[pr + h + 1, pc - h] + pb[pr - h, pc - h] > 0:
+                if (
+                    pb[pr + h + 1, pc + h + 1] - pb[pr - h, pc + h + 1] - pb[pr + h + 1, pc - h] + pb[pr - h, pc - h]
+                    > 0
+                ):
                     continue
                 free = 1
                 for i in range(2 * pr, min(2 * pr + 2, R)):
@@ -278,8 +290,11 @@ def fit_pl(stats: FieldStats, scales: int = 1, lambda_: float = 1e-4, max_iter: 
         val = float(pl.pll(p1, p2))
         loss = -val + 0.5 * lambda_ * sum(float((p**2).sum()) for p in params)
     if progress:
-        print(f"  PL: {len(pl.cnt):,} distinct neighbourhoods, objective {loss:.5f}, "
-              f"PLL/cell {val:.5f} ({time.perf_counter() - t0:.1f} s)", flush=True)
+        print(
+            f"  PL: {len(pl.cnt):,} distinct neighbourhoods, objective {loss:.5f}, "
+            f"PLL/cell {val:.5f} ({time.perf_counter() - t0:.1f} s)",
+            flush=True,
+        )
     th2 = None if p2 is None else p2.detach().numpy().copy()
     return p1.detach().numpy().copy(), th2, val
 
@@ -414,8 +429,10 @@ def fit_pcd(
             secs = time.perf_counter() - t0
             curve.append((it, gap, val_pll, round(secs, 2)))
             if progress:
-                print(f"  PCD it {it}: held-out gap {gap:.4f}, validation PLL/cell {val_pll:.5f} ({secs:.1f} s)",
-                      flush=True)
+                print(
+                    f"  PCD it {it}: held-out gap {gap:.4f}, validation PLL/cell {val_pll:.5f} ({secs:.1f} s)",
+                    flush=True,
+                )
             if gap < best_gap:
                 best_gap = gap
                 best = (it, p1.clone(), p2.clone(), occ())
@@ -443,6 +460,15 @@ def fit_pattern_field(
     tr, va = stats if stats is not None else (field_stats(train_maps, w, scales), field_stats(val_maps, w, scales))
     th, th2, _ = fit_pl(tr, scales, lambda_, progress=progress)
     return fit_pcd(
-        tr, va, th, th2, iterations=pcd_iterations, chains=chains, size=size, lambda_=lambda_, seed=seed,
-        init=init, progress=progress,
+        tr,
+        va,
+        th,
+        th2,
+        iterations=pcd_iterations,
+        chains=chains,
+        size=size,
+        lambda_=lambda_,
+        seed=seed,
+        init=init,
+        progress=progress,
     )

@@ -179,7 +179,7 @@ class PatternFieldPrior(LocalMapPrior):
         """The field's cell marginal ``P(m_k = 1)`` (the fitted value, or a seeded estimate from 8 prior
         Gibbs chains of 48 x 48 cells, 300 sweeps, centre 32 x 32 cells of the last 100 sweeps)."""
         if self.occupancy is None:
-            self.occupancy = estimate_occupancy(self._compiled.theta, self.w, self._compiled.theta2)
+            self.occupancy = estimate_occupancy(self.theta, self.w, self.theta2)
         return self.occupancy
 
 

@@ -95,8 +95,20 @@ def test_parameter_recovery_by_pl_and_pcd():
     err, spread = weighted_rms(th, train)
     assert spread > 0.5  # the conditionals are far from 0: recovering them is not trivial
     assert err < 0.1, (err, th, TRUE)
-    fit = fit_pcd(train, val, np.zeros(N_ORB), iterations=300, chains=8, size=40, lr=0.05, lambda_=1e-6,
-                  eval_every=20, seed=3, progress=False, init=data_crops(samples(8, 40, seed=4), 8, 40))
+    fit = fit_pcd(
+        train,
+        val,
+        np.zeros(N_ORB),
+        iterations=300,
+        chains=8,
+        size=40,
+        lr=0.05,
+        lambda_=1e-6,
+        eval_every=20,
+        seed=3,
+        progress=False,
+        init=data_crops(samples(8, 40, seed=4), 8, 40),
+    )
     err_pcd, _ = weighted_rms(fit.theta, train)
     assert fit.best_iteration > 0 and err_pcd < 0.15, (err_pcd, fit.theta, TRUE, fit.curve)
     # and the zero field is far off: the tolerances separate a fit from no fit

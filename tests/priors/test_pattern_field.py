@@ -149,8 +149,9 @@ def model_3x3(prior):
     """A 3 x 3 grid seen from two corners (8 latent cells: the pose cells pinned free, 256 maps)."""
     grid = Grid((3, 3), resolution=1.0)
     poses = [[0.5, 0.5, 0.0], [2.5, 2.5, math.pi], [0.5, 0.5, math.pi / 2], [2.5, 2.5, -math.pi / 2]]
-    scans = Scans(np.array(poses), np.array([0.0]), np.array([[2.2], [1.4], [2.9], [1.2]]), max_range=2.9,
-                  over_range="max")
+    scans = Scans(
+        np.array(poses), np.array([0.0]), np.array([[2.2], [1.4], [2.9], [1.2]]), max_range=2.9, over_range="max"
+    )
     return OccupancyModel(grid, raycast(grid, scans), GaussianRange(0.9), prior)
 
 
@@ -185,14 +186,15 @@ def _write(path, **arrays):
 
 def _good(n=102):
     z = np.zeros(n)
-    return dict(w=np.array(3), theta=z, occupancy=np.array(0.3), theta2_scale1=z, theta2_scale2=z,
-                occupancy2=np.array(0.3))
+    return dict(
+        w=np.array(3), theta=z, occupancy=np.array(0.3), theta2_scale1=z, theta2_scale2=z, occupancy2=np.array(0.3)
+    )
 
 
 def test_load_field_refuses_bad_files(tmp_path):
     assert load_field(_write(tmp_path / "ok.npz", **_good()))["w"] == 3
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
-    with pytest.raises(ValueError, match="junk.npz"):
+    with pytest.raises(ValueError, match=r"junk\.npz"):
         load_field(tmp_path / "junk.npz")
     bad = _good()
     del bad["theta2_scale2"]
@@ -212,7 +214,7 @@ def test_load_field_refuses_bad_files(tmp_path):
         load_field(_write(tmp_path / "occ.npz", **bad))
     bad = _good()
     bad["theta"] = np.array(["a"] * 102, dtype=object)
-    with pytest.raises(ValueError, match="obj.npz"):
+    with pytest.raises(ValueError, match=r"obj\.npz"):
         load_field(_write(tmp_path / "obj.npz", **bad))
 
 
