@@ -8,12 +8,14 @@ thesis; L = 1 is the 1 x 1 table, i.e. the learned cell prior) and border (p(pat
 given its 8 neighbours, 3 x 3 given 16 border cells, and 5 x 5 given 24, which the thesis did not
 compute). Tables are counted here from the example's own ground truth with its 8 flips/rotations (the
 learned corpus tables arrive separately). Also: a 500 x 500 / 72,000-ray single-cell sweep with the MRF
-prior next to the independent prior (target: within 1.5x), and the border prior with 3 x 3 patches at the
+prior and the pattern fields (``field`` / ``field2``) next to the independent prior (target: within
+1.5x), and the border prior with 3 x 3 patches at the
 size of the thesis's Intel Lab experiment 1 (a 1500 x 1500 map, about 82,000 rays; 1518 s per sample in
 the thesis) on a simulated walled map. Writes out/bench/bench_priors.json.
 
 ``--quick``: a smaller Table 5.1 map (100 x 160) and a 500 x 500 Intel-like map whose time is extrapolated
-to 1500 x 1500 (labelled as such), for iterating on a busy machine.
+to 1500 x 1500 (labelled as such), for iterating on a busy machine. ``--overhead``: only the 500 x 500
+single-cell sweep comparison (independent / MRF / pattern fields), to out/bench/bench_priors_overhead.json.
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ from ogm_ppl import GaussianRange, Grid, OccupancyModel, raycast
 from ogm_ppl.datasets import simulate_scans
 from ogm_ppl.datasets.simple2d import _truth
 from ogm_ppl.inference.mcmc.gibbs import CellGibbs, PatchGibbs
-from ogm_ppl.priors import BorderPatchPrior, IndependentPrior, MRFPrior, PatchTablePrior
+from ogm_ppl.priors import BorderPatchPrior, IndependentPrior, MRFPrior, PatchTablePrior, prior_by_name
 
 torch.set_default_dtype(torch.float64)
 THESIS = {  # Table 5.1, Matlab seconds per map sample (None: intractable / not computed)
@@ -275,10 +277,20 @@ def mrf_overhead() -> dict:
         out[f"mrf{order}_seconds"] = s
         out[f"mrf{order}_ratio"] = s / s_ind
         print(f"  MRF order {order}: {s:.4f} s = {s / s_ind:.2f}x the independent sweep (target <= 1.5x)")
+    for kind in ("field", "field2"):  # the pattern fields (3 x 3 windows, one / two scales) of houseexpo
+        model = OccupancyModel(grid, rays, GaussianRange(3.0), prior_by_name(f"{kind}:houseexpo", grid.shape))
+        s = sweep_seconds(CellGibbs(model))
+        out[f"{kind}_seconds"] = s
+        out[f"{kind}_ratio"] = s / s_ind
+        print(f"  pattern {kind}: {s:.4f} s = {s / s_ind:.2f}x the independent sweep (target <= 1.5x)")
     return out
 
 
-def main(quick: bool = False) -> dict:
+def main(quick: bool = False, overhead_only: bool = False) -> dict:
+    if overhead_only:
+        payload = {"mrf_500": mrf_overhead()}
+        print("wrote", write_json("bench_priors_overhead", payload))
+        return payload
     if quick:
         payload = {"table_5_1_quick_100x160": table_5_1(100, 160)}
         small = intel_size(500, poses=455, beams=180)
@@ -296,4 +308,4 @@ def main(quick: bool = False) -> dict:
 
 
 if __name__ == "__main__":
-    main(quick="--quick" in sys.argv[1:])
+    main(quick="--quick" in sys.argv[1:], overhead_only="--overhead" in sys.argv[1:])

@@ -1,7 +1,8 @@
-"""Priors over binary maps (Chapter 5) behind one interface (:class:`MapPrior`): the independent prior,
-the 1D data-driven prior, pairwise stencil priors and the higher-order MRF (Section 5.2.1), data-driven
-patch tables (5.2.2) and border-conditioned tables (5.2.3). Each prior hands the compiled kernels one bundle
-of arrays (:meth:`MapPrior.compiled`, :mod:`ogm_ppl.priors.compiled`) or none (the generic path)."""
+"""Priors over binary maps (Chapter 5) behind one interface (:class:`MapPrior`): the independent prior, the 1D
+data-driven prior, pairwise stencil priors and the higher-order MRF (Section 5.2.1), data-driven patch tables
+(5.2.2) and border-conditioned tables (5.2.3), and a learned multiscale field of patterns. Each prior hands
+the compiled kernels one bundle of arrays (:meth:`MapPrior.compiled`, :mod:`ogm_ppl.priors.compiled`) or none
+(the generic path)."""
 
 from ogm_ppl.priors.backoff import BackoffBorderPrior
 from ogm_ppl.priors.base import MapPrior
@@ -19,6 +20,7 @@ from ogm_ppl.priors.named import (
     unregister_prior,
 )
 from ogm_ppl.priors.patch_table import PatchTablePrior
+from ogm_ppl.priors.pattern_field import PatternFieldPrior
 from ogm_ppl.priors.tables import PriorTables, available_tables, load_tables, tables_by_name
 
 __all__ = [
@@ -32,6 +34,7 @@ __all__ = [
     "MapPrior",
     "PRIOR_KINDS",
     "PatchTablePrior",
+    "PatternFieldPrior",
     "PriorTables",
     "StencilPrior",
     "available_tables",

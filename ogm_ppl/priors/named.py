@@ -19,6 +19,8 @@ statistics are closest to the thesis's):
                           configuration positive; :mod:`~ogm_ppl.priors.backoff`)
 ``border_bo:CORPUS``      ``border`` backed off to ``patch3_bo``, which backs off to independent cells
 ``border1_bo:CORPUS``     ``border1`` backed off to ``(1 - lambda, lambda)``
+``field:CORPUS``          :class:`PatternFieldPrior`, every 3 x 3 window's learned potential (PL + PCD)
+``field2:CORPUS``         the same at two scales (3 x 3 windows of the map and of its 2 x 2 OR-pooling)
 ========================  ==========================================================================
 
 The tables were learned on the corpus's *training* plans only, with the buildings of the real logs
@@ -53,8 +55,21 @@ if TYPE_CHECKING:
 __all__ = ["PRIOR_KINDS", "CorpusTables", "prior_by_name", "prior_kinds", "register_prior", "unregister_prior"]
 
 #: the kinds the library ships (the module docstring's table)
-PRIOR_KINDS: tuple[str, ...] = ("independent", "mrf", "mrf8", "patch3", "patch3_999", "patch5", "border", "border1")
-PRIOR_KINDS += ("patch3_bo", "border_bo", "border1_bo")
+PRIOR_KINDS: tuple[str, ...] = (
+    "independent",
+    "mrf",
+    "mrf8",
+    "patch3",
+    "patch3_999",
+    "patch5",
+    "border",
+    "border1",
+    "patch3_bo",
+    "border_bo",
+    "border1_bo",
+    "field",
+    "field2",
+)
 DEFAULT_CORPUS = "houseexpo"
 
 #: ``factory(shape, tables) -> MapPrior``: ``shape`` the grid's shape (a tuple), ``tables`` a
@@ -190,6 +205,16 @@ def _border1(shape, tables) -> MapPrior:
     return BorderPatchPrior(shape, border, centre, count, inner=(1, 1))
 
 
+def _field(scales: int) -> PriorFactory:
+    def build(shape, tables) -> MapPrior:
+        from ogm_ppl.priors.pattern_field import field_by_name
+
+        _two_d("field" if scales == 1 else "field2", shape)
+        return field_by_name(tables.corpus or DEFAULT_CORPUS, shape, scales)
+
+    return build
+
+
 for _kind, _factory in (
     ("independent", _independent),
     ("mrf", _mrf(4)),
@@ -199,6 +224,8 @@ for _kind, _factory in (
     ("patch5", _patch5),
     ("border", _border),
     ("border1", _border1),
+    ("field", _field(1)),
+    ("field2", _field(2)),
 ):
     register_prior(_kind, _factory)
 

@@ -9,7 +9,9 @@ through :meth:`~ogm_ppl.priors.MapPrior.log_prob_patch`, correct but slow). The 
 * :class:`Stencil` — unary + pairwise weights per offset (:class:`~ogm_ppl.priors.MRFPrior`,
   :class:`~ogm_ppl.priors.StencilPrior`), :mod:`~ogm_ppl.priors.compiled.stencil`;
 * :class:`Tiles` — the factors of a tiling's windows (:class:`~ogm_ppl.priors.PatchTablePrior`,
-  :class:`~ogm_ppl.priors.BorderPatchPrior`), :mod:`~ogm_ppl.priors.compiled.tiles`.
+  :class:`~ogm_ppl.priors.BorderPatchPrior`), :mod:`~ogm_ppl.priors.compiled.tiles`;
+* :class:`PatternField` — a translation-invariant field of ``w x w`` window patterns at one or two scales
+  (:class:`~ogm_ppl.priors.PatternFieldPrior`), :mod:`~ogm_ppl.priors.compiled.field`.
 
 The kernels (``ogm_ppl.inference._kernels``) import this package and nothing else of ``ogm_ppl.priors``;
 they call the generic entry points of :mod:`~ogm_ppl.priors.compiled.registry` (``cell_log_odds``,
@@ -25,9 +27,10 @@ module below and add the class to :data:`CompiledPrior`. A prior then returns th
 ``compiled()``, and ``ogm_ppl.testing.PriorContract`` checks its conditionals against ``log_prob``.
 """
 
-from ogm_ppl.priors.compiled.bundles import CompiledPrior, IndependentCells, Stencil, Tiles
+from ogm_ppl.priors.compiled.bundles import CompiledPrior, IndependentCells, PatternField, Stencil, Tiles
 
 # the kinds register themselves on import
+from ogm_ppl.priors.compiled.field import pattern_field
 from ogm_ppl.priors.compiled.independent import independent_cells
 from ogm_ppl.priors.compiled.registry import (
     candidate_weights,
@@ -47,6 +50,7 @@ from ogm_ppl.priors.compiled.tiles import tiles
 __all__ = [
     "CompiledPrior",
     "IndependentCells",
+    "PatternField",
     "Stencil",
     "Tiles",
     "candidate_weights",
@@ -57,6 +61,7 @@ __all__ = [
     "patch_candidates",
     "patch_prior_batch",
     "patch_prior_weights",
+    "pattern_field",
     "prior_gibbs_sweeps",
     "register",
     "registered",

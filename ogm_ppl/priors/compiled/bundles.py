@@ -13,7 +13,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-__all__ = ["CompiledPrior", "IndependentCells", "Stencil", "Tiles"]
+__all__ = ["CompiledPrior", "IndependentCells", "PatternField", "Stencil", "Tiles"]
 
 
 def _check_beta(beta) -> float:
@@ -163,5 +163,38 @@ class Tiles(NamedTuple):
         return bool(((a[:, 0] - self.t_r0) % self.t_h == 0).all() and ((a[:, 1] - self.t_c0) % self.t_w == 0).all())
 
 
+class PatternField(NamedTuple):
+    r"""A translation-invariant field of ``w x w`` patterns, optionally at two scales:
+    ``log p~(m) = sum_windows theta[code] + sum_pooled windows theta2[code]`` (see
+    :mod:`~ogm_ppl.priors.compiled.field` for the codes and the pooled grid)."""
+
+    rows: int
+    cols: int
+    w: int  # window side
+    n_scales: int  # 1 or 2
+    prow: int  # pooled grid: ceil(rows / 2) x ceil(cols / 2)
+    pcol: int
+    theta: np.ndarray  # 2^(w w) float64: log-potential of each window code at scale 1
+    theta2: np.ndarray  # 2^(w w) float64: the same at scale 2 (zeros when n_scales == 1)
+    # w = 3: delta[q << 8 | rest] = theta[code | bit] - theta[code] for the q-th window holding a cell (the
+    # cell is its bit 8 - q; rest = the other 8 bits); one load per window in a cell's log-odds; else empty
+    delta: np.ndarray
+    delta2: np.ndarray
+
+    def sparse_patches(self) -> bool:
+        return False
+
+    def patch_capacity(self, L: int) -> int:
+        return max(1 << L if L <= 20 else 0, 2)
+
+    def tiles_patches(self, hw, anchors) -> bool:
+        return False
+
+    def tempered(self, beta: float) -> PatternField:
+        """The bundle of ``beta * log p~`` (every log-potential times ``beta``)."""
+        b = float(beta)
+        return self._replace(theta=self.theta * b, theta2=self.theta2 * b, delta=self.delta * b, delta2=self.delta2 * b)
+
+
 #: any bundle a prior's ``compiled()`` may return (a new kind adds its class here and registers itself)
-CompiledPrior = IndependentCells | Stencil | Tiles
+CompiledPrior = IndependentCells | Stencil | Tiles | PatternField

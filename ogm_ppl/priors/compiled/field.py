@@ -1,0 +1,435 @@
+r"""Compiled conditionals of the pattern-field kind (:class:`~ogm_ppl.priors.compiled.bundles.PatternField`).
+
+A strictly positive, translation-invariant field of patterns (Felzenszwalb & Oberlin, multiscale fields of
+patterns, NeurIPS 2014), a learned alternative to the patch tables of Section 5.2.2:
+
+.. math:: \log \tilde p(m) = \sum_{(r, c)} \theta\big[\mathrm{code}(m_{r:r+w,\, c:c+w})\big]
+          + \sum_{(i, j)} \theta_2\big[\mathrm{code}(\bar m_{i:i+w,\, j:j+w})\big],
+
+the first sum over every anchor of a ``w x w`` window wholly inside the ``rows x cols`` grid, the second
+(two scales only) over the windows wholly inside the *pooled* grid ``\bar m``. Codes follow the package's
+convention (row-major, little-endian: window cell ``a w + b`` is bit ``a w + b``).
+
+**The pooled grid.** ``\bar m`` has ``ceil(rows / 2) x ceil(cols / 2)`` cells; pooled cell ``(i, j)`` is
+the OR of the cells ``{2i, 2i + 1} x {2j, 2j + 1}`` that lie inside the grid. At an odd size the last
+pooled row (column) pools a ``1 x 2`` (``2 x 1``) block, and the corner a single cell: cells past the
+edge read as free, never as occupied.
+
+**Conditionals.** A cell's log-odds is ``sum_windows theta[base | bit] - theta[base]`` over the (at most
+``w^2``) windows holding it, ``base`` its code with the cell cleared; the cell's ``(2w - 1)^2``
+neighbourhood is read once into one integer and each window's code is cut from it by shifts. At scale 2
+the flip changes the pooled parent only when the other cells of its ``2 x 2`` block are free; then the
+pooled windows holding the parent add their terms the same way. A patch update reads, once, each window
+its live cells touch (base code with the patch cleared, and the (patch bit, window bit) pairs by which
+a candidate sets bits in it); a candidate then scatters its bits into those codes only.
+"""
+
+from __future__ import annotations
+
+import numba as nb
+import numpy as np
+
+from ogm_ppl.priors.compiled.bundles import PatternField
+from ogm_ppl.priors.compiled.registry import register
+
+__all__ = [
+    "MAX_WINDOW",
+    "field_cell_log_odds",
+    "field_log_prob_batch",
+    "field_patch_weights",
+    "field_window_codes",
+    "pattern_field",
+]
+
+#: the largest window side (``w^2 <= 16`` bits: the neighbourhood of a cell, ``(2w - 1)^2`` bits, fits an int64)
+MAX_WINDOW = 4
+
+
+def pattern_field(rows: int, cols: int, w: int, theta, theta2=None) -> PatternField:
+    """A :class:`PatternField` bundle: ``theta`` (and ``theta2`` for two scales) dense tables of
+    ``2^(w w)`` finite log-potentials."""
+    w = int(w)
+    if not 1 <= w <= MAX_WINDOW:
+        raise ValueError(f"pattern field window side must lie in 1..{MAX_WINDOW}, got {w}")
+    n = 1 << (w * w)
+    t1 = np.ascontiguousarray(theta, np.float64).reshape(-1)
+    if t1.shape != (n,):
+        raise ValueError(f"theta must have 2^(w w) = {n} entries, got {t1.shape}")
+    t2 = np.zeros(n) if theta2 is None else np.ascontiguousarray(theta2, np.float64).reshape(-1)
+    if t2.shape != (n,):
+        raise ValueError(f"theta2 must have 2^(w w) = {n} entries, got {t2.shape}")
+    if not (np.isfinite(t1).all() and np.isfinite(t2).all()):
+        raise ValueError("pattern field log-potentials must be finite (the field is strictly positive)")
+    return PatternField(
+        delta=_delta_table(t1, w),
+        delta2=_delta_table(t2, w),
+        rows=int(rows),
+        cols=int(cols),
+        w=w,
+        n_scales=1 if theta2 is None else 2,
+        prow=(int(rows) + 1) // 2,
+        pcol=(int(cols) + 1) // 2,
+        theta=t1,
+        theta2=np.ascontiguousarray(t2),
+    )
+
+
+def _delta_table(theta: np.ndarray, w: int) -> np.ndarray:
+    """``w = 3``: ``9 x 256`` float64 flattened, row ``q`` (window ``(a0, b0) = divmod(q, 3)`` of a cell's
+    neighbourhood; the cell is window bit ``p = 8 - q``) indexed by the window's other 8 bits (bit ``p``
+    squeezed out: ``low | high >> 1``) = ``theta[code | bit] - theta[code]``; else empty."""
+    if w != 3:
+        return np.zeros(0)
+    out = np.empty((9, 256))
+    rest = np.arange(256)
+    for q in range(9):
+        p = 8 - q
+        code = (rest & ((1 << p) - 1)) | ((rest >> p) << (p + 1))
+        out[q] = theta[code | (1 << p)] - theta[code]
+    return np.ascontiguousarray(out.ravel())
+
+
+# ------------------------------------------------------------------ single cells
+@nb.njit(cache=True, inline="always")
+def _pooled(m, rows, cols, i, j):
+    """Pooled cell ``(i, j)``: OR of the in-grid cells of the block ``{2i, 2i+1} x {2j, 2j+1}``."""
+    r = 2 * i
+    c = 2 * j
+    k = r * cols + c
+    v = m[k]
+    if c + 1 < cols:
+        v |= m[k + 1]
+    if r + 1 < rows:
+        v |= m[k + cols]
+        if c + 1 < cols:
+            v |= m[k + cols + 1]
+    return v
+
+
+@nb.njit(cache=True, inline="always")
+def _window_delta(theta, w, R, C, r, c, nbhd):
+    """``sum theta[base | bit] - theta[base]`` over the windows of an ``R x C`` grid holding ``(r, c)``;
+    ``nbhd`` holds the cell's neighbourhood, bit ``(i - r + w - 1) S + (j - c + w - 1)`` (``S = 2w - 1``) =
+    cell ``(i, j)``, with ``(r, c)`` itself cleared."""
+    S = 2 * w - 1
+    wmask = (np.int64(1) << w) - 1
+    lo = 0.0
+    for r0 in range(max(0, r - w + 1), min(r, R - w) + 1):
+        for c0 in range(max(0, c - w + 1), min(c, C - w) + 1):
+            sh = (r0 - r + w - 1) * S + (c0 - c + w - 1)
+            code = np.int64(0)
+            for a in range(w):
+                code |= ((nbhd >> (sh + a * S)) & wmask) << (a * w)
+            bit = np.int64(1) << ((r - r0) * w + (c - c0))
+            lo += theta[code | bit] - theta[code]
+    return lo
+
+
+@nb.njit(cache=True, inline="always")
+def _delta3(delta, nbhd):
+    """:func:`_window_delta` of an interior cell and ``w = 3`` from the delta table (one load per window;
+    window ``(a0, b0)`` holds the cell at bit ``(2 - a0) 3 + (2 - b0) = 8 - q``), shifts as constants."""
+    lo = 0.0
+    for a0 in range(3):
+        for b0 in range(3):
+            sh = a0 * 5 + b0
+            code = (nbhd >> sh) & 7
+            code |= ((nbhd >> (sh + 5)) & 7) << 3
+            code |= ((nbhd >> (sh + 10)) & 7) << 6
+            p = 8 - a0 * 3 - b0
+            lo += delta[((a0 * 3 + b0) << 8) | (code & ((1 << p) - 1)) | ((code >> (p + 1)) << p)]
+    return lo
+
+
+@nb.njit(cache=True, inline="always")
+def _nbhd3(m, cols, r, c):
+    """The ``5 x 5`` neighbourhood of an interior cell ``(r, c)`` as 25 bits (row-major), centre cleared."""
+    nbhd = np.int64(0)
+    k0 = (r - 2) * cols + c - 2
+    for a in range(5):
+        k = k0 + a * cols
+        for b in range(5):
+            nbhd |= np.int64(m[k + b]) << (a * 5 + b)
+    return nbhd & ~np.int64(1 << 12)
+
+
+@nb.njit(cache=True, inline="always")
+def _pooled_nbhd3(m, rows, cols, pr, pc):
+    """The pooled ``5 x 5`` neighbourhood of an interior pooled cell ``(pr, pc)`` (parent cleared); the
+    cells of the pooled blocks all lie in the grid (pooled rows / columns ``<= pr + 2`` below the last)."""
+    nbhd = np.int64(0)
+    for a in range(5):
+        k = (2 * (pr - 2 + a)) * cols + 2 * (pc - 2)
+        for b in range(5):
+            v = m[k] | m[k + 1] | m[k + cols] | m[k + cols + 1]
+            nbhd |= np.int64(v) << (a * 5 + b)
+            k += 2
+    return nbhd & ~np.int64(1 << 12)
+
+
+@nb.njit(cache=True)
+def _edge_scale1(lp, r, c, m):
+    """Scale-1 log-odds of a cell near the edge (or ``w != 3``). (Not inlined: a large inlined body slows
+    the loops around it, and edge cells are few.)"""
+    rows, cols, w = lp.rows, lp.cols, lp.w
+    S = 2 * w - 1
+    nbhd = np.int64(0)
+    for i in range(max(0, r - w + 1), min(rows, r + w)):
+        base = (i - r + w - 1) * S - c + w - 1
+        for j in range(max(0, c - w + 1), min(cols, c + w)):
+            if m[i * cols + j]:
+                nbhd |= np.int64(1) << (base + j)
+    nbhd &= ~(np.int64(1) << ((w - 1) * S + w - 1))
+    return _window_delta(lp.theta, w, rows, cols, r, c, nbhd)
+
+
+@nb.njit(cache=True)
+def _edge_scale2(lp, pr, pc, m):
+    """Scale-2 log-odds of a flip that changes the parent ``(pr, pc)`` near the pooled grid's edge."""
+    rows, cols, w = lp.rows, lp.cols, lp.w
+    P, Q = lp.prow, lp.pcol
+    S = 2 * w - 1
+    pn = np.int64(0)
+    for i in range(max(0, pr - w + 1), min(P, pr + w)):
+        base = (i - pr + w - 1) * S - pc + w - 1
+        for j in range(max(0, pc - w + 1), min(Q, pc + w)):
+            if (i != pr or j != pc) and _pooled(m, rows, cols, i, j):
+                pn |= np.int64(1) << (base + j)
+    return _window_delta(lp.theta2, w, P, Q, pr, pc, pn)
+
+
+@nb.njit(cache=True, inline="always")
+def field_cell_log_odds(lp, k, m):
+    """``log p~(m_k = 1, m_-k) - log p~(m_k = 0, m_-k)`` of a pattern field (``w = 3`` cells away from
+    the edges take a path with constant shifts and the delta tables; the others :func:`_edge_scale1`)."""
+    rows, cols = lp.rows, lp.cols
+    fast = lp.w == 3
+    r = k // cols
+    c = k - r * cols
+    if fast and 2 <= r < rows - 2 and 2 <= c < cols - 2:
+        lo = _delta3(lp.delta, _nbhd3(m, cols, r, c))
+    else:
+        lo = _edge_scale1(lp, r, c, m)
+    if lp.n_scales == 2:
+        pr = r >> 1
+        pc = c >> 1
+        # the parent changes with m_k only if the rest of its block is free
+        r2 = 2 * pr
+        c2 = 2 * pc
+        others = 0
+        for i in range(r2, min(r2 + 2, rows)):
+            for j in range(c2, min(c2 + 2, cols)):
+                if (i != r or j != c) and m[i * cols + j]:
+                    others = 1
+        if others == 0:
+            # interior: the pooled 5 x 5 inside the pooled grid, and its blocks whole (2 (pr + 2) + 1 < rows)
+            if fast and 2 <= pr and 2 * pr + 5 < rows and 2 <= pc and 2 * pc + 5 < cols:
+                lo += _delta3(lp.delta2, _pooled_nbhd3(m, rows, cols, pr, pc))
+            else:
+                lo += _edge_scale2(lp, pr, pc, m)
+    return lo
+
+
+# ------------------------------------------------------------------ patches
+@nb.njit(cache=True)
+def _scale_setup(w, R, C, cells_r, cells_c, n_live, is_live, value, anchors, base, pr_off, pr_pb, pr_wb):
+    """The windows of an ``R x C`` grid holding one of the ``n_live`` live cells ``(cells_r, cells_c)``:
+    per window its code with the live cells cleared (``base``; other cells read by ``value(i, j)``, given
+    as the 0/1 array ``value`` over the grid) and the pairs (live index, window bit). ``is_live``: grid
+    array, live index or -1. Returns the number of windows."""
+    nw = 0
+    npair = 0
+    pr_off[0] = 0
+    for x in range(n_live):
+        r = cells_r[x]
+        c = cells_c[x]
+        for r0 in range(max(0, r - w + 1), min(r, R - w) + 1):
+            for c0 in range(max(0, c - w + 1), min(c, C - w) + 1):
+                # a window is owned by the first live cell it holds: skip it if an earlier one is inside
+                first = True
+                for a in range(w):
+                    for b in range(w):
+                        q = is_live[(r0 + a) * C + c0 + b]
+                        if q >= 0 and q < x:
+                            first = False
+                if not first:
+                    continue
+                code = np.int64(0)
+                for a in range(w):
+                    for b in range(w):
+                        kk = (r0 + a) * C + c0 + b
+                        q = is_live[kk]
+                        if q >= 0:
+                            pr_pb[npair] = q
+                            pr_wb[npair] = a * w + b
+                            npair += 1
+                        elif value[kk]:
+                            code |= np.int64(1) << (a * w + b)
+                anchors[nw] = r0 * C + c0
+                base[nw] = code
+                nw += 1
+                pr_off[nw] = npair
+    return nw
+
+
+@nb.njit(cache=True)
+def field_patch_weights(lp, patch, m, cands, n, out, ts):
+    """``out[j] = log p~(patch = cands[j], rest)`` up to a constant in ``j``: the windows (and, at two
+    scales, the pooled windows) holding a live patch cell, read once, then scored per candidate."""
+    rows, cols, w = lp.rows, lp.cols, lp.w
+    theta, theta2 = lp.theta, lp.theta2
+    bit_of = ts.bit_of  # K int64, all -1 between updates
+    L = patch.shape[0]
+    nl = 0
+    for i in range(L):
+        if patch[i] >= 0:
+            nl += 1
+    cr = np.empty(max(nl, 1), np.int64)
+    cc = np.empty(max(nl, 1), np.int64)
+    b = 0
+    for i in range(L):
+        k = patch[i]
+        if k >= 0:
+            bit_of[k] = b
+            cr[b] = k // cols
+            cc[b] = k - cr[b] * cols
+            b += 1
+    cap = max(nl, 1) * w * w
+    anchors = np.empty(cap, np.int64)
+    base = np.empty(cap, np.int64)
+    pr_off = np.empty(cap + 1, np.int64)
+    pr_pb = np.empty(cap, np.int64)
+    pr_wb = np.empty(cap, np.int64)
+    nw = _scale_setup(w, rows, cols, cr, cc, nl, bit_of, m, anchors, base, pr_off, pr_pb, pr_wb)
+    for i in range(L):
+        if patch[i] >= 0:
+            bit_of[patch[i]] = -1
+    two = lp.n_scales == 2
+    npar = 0
+    P, Q = lp.prow, lp.pcol
+    fixed = np.zeros(max(nl, 1), np.int64)
+    pmask = np.zeros(max(nl, 1), np.int64)
+    base2 = np.empty(cap, np.int64)
+    p2_off = np.empty(cap + 1, np.int64)
+    p2_pb = np.empty(cap, np.int64)
+    p2_wb = np.empty(cap, np.int64)
+    nw2 = 0
+    if two:
+        # the pooled parents of the live cells: per parent the OR of its fixed cells and the mask of its patch bits
+        pr_ = np.empty(max(nl, 1), np.int64)
+        pc_ = np.empty(max(nl, 1), np.int64)
+        for x in range(nl):
+            i = cr[x] >> 1
+            j = cc[x] >> 1
+            q = -1
+            for y in range(npar):
+                if pr_[y] == i and pc_[y] == j:
+                    q = y
+            if q < 0:
+                q = npar
+                pr_[q] = i
+                pc_[q] = j
+                npar += 1
+            pmask[q] |= np.int64(1) << x
+        is_par = np.full(P * Q, -1, np.int64)
+        pooled = np.zeros(P * Q, np.uint8)
+        for y in range(npar):
+            is_par[pr_[y] * Q + pc_[y]] = y
+            f = 0
+            for a in range(2 * pr_[y], min(2 * pr_[y] + 2, rows)):
+                for bb in range(2 * pc_[y], min(2 * pc_[y] + 2, cols)):
+                    kk = a * cols + bb
+                    live = False
+                    for x in range(nl):
+                        if cr[x] * cols + cc[x] == kk:
+                            live = True
+                    if not live and m[kk]:
+                        f = 1
+            fixed[y] = f
+        # the pooled values the pooled windows read (only those near a parent are needed)
+        for y in range(npar):
+            for i in range(max(0, pr_[y] - w + 1), min(P, pr_[y] + w)):
+                for j in range(max(0, pc_[y] - w + 1), min(Q, pc_[y] + w)):
+                    if is_par[i * Q + j] < 0:
+                        pooled[i * Q + j] = _pooled(m, rows, cols, i, j)
+        anchors2 = np.empty(cap, np.int64)
+        nw2 = _scale_setup(w, P, Q, pr_, pc_, npar, is_par, pooled, anchors2, base2, p2_off, p2_pb, p2_wb)
+    for jx in range(n):
+        cand = cands[jx]
+        s = 0.0
+        for q in range(nw):
+            code = base[q]
+            for p in range(pr_off[q], pr_off[q + 1]):
+                code |= ((cand >> pr_pb[p]) & 1) << pr_wb[p]
+            s += theta[code]
+        if two:
+            pbits = np.int64(0)
+            for y in range(npar):
+                if fixed[y] or (cand & pmask[y]) != 0:
+                    pbits |= np.int64(1) << y
+            for q in range(nw2):
+                code = base2[q]
+                for p in range(p2_off[q], p2_off[q + 1]):
+                    code |= ((pbits >> p2_pb[p]) & 1) << p2_wb[p]
+                s += theta2[code]
+        out[jx] = s
+
+
+# ------------------------------------------------------------------ whole maps
+@nb.njit(cache=True)
+def field_window_codes(grid, w):
+    """The code of every ``w x w`` window of an ``R x C`` uint8 grid: ``(R - w + 1) x (C - w + 1)`` int64
+    (empty when the grid is smaller than the window)."""
+    R, C = grid.shape
+    nr = max(R - w + 1, 0)
+    nc = max(C - w + 1, 0)
+    out = np.zeros((nr, nc), np.int64)
+    for r0 in range(nr):
+        for c0 in range(nc):
+            code = np.int64(0)
+            for a in range(w):
+                for b in range(w):
+                    if grid[r0 + a, c0 + b]:
+                        code |= np.int64(1) << (a * w + b)
+            out[r0, c0] = code
+    return out
+
+
+@nb.njit(cache=True)
+def field_log_prob_batch(lp, maps, out):
+    """``log p~(m)`` for every row of ``maps`` (``B x K`` uint8)."""
+    rows, cols, w = lp.rows, lp.cols, lp.w
+    P, Q = lp.prow, lp.pcol
+    for bi in range(maps.shape[0]):
+        m = maps[bi]
+        g = m.reshape(rows, cols)
+        s = 0.0
+        codes = field_window_codes(g, w)
+        for r0 in range(codes.shape[0]):
+            for c0 in range(codes.shape[1]):
+                s += lp.theta[codes[r0, c0]]
+        if lp.n_scales == 2:
+            pg = np.zeros((P, Q), np.uint8)
+            for i in range(P):
+                for j in range(Q):
+                    pg[i, j] = _pooled(m, rows, cols, i, j)
+            codes = field_window_codes(pg, w)
+            for r0 in range(codes.shape[0]):
+                for c0 in range(codes.shape[1]):
+                    s += lp.theta2[codes[r0, c0]]
+        out[bi] = s
+
+
+def _cell(prior, k, m):
+    return field_cell_log_odds(prior, k, m)
+
+
+def _patch(prior, patch, m, cands, n, out, ts):
+    field_patch_weights(prior, patch, m, cands, n, out, ts)
+
+
+def _candidates(prior, patch, m, cands, n, tag, cand_lp, out, ts):
+    field_patch_weights(prior, patch, m, cands, n, out, ts)
+
+
+register(PatternField, cell_log_odds=_cell, patch_prior_weights=_patch, candidate_weights=_candidates)

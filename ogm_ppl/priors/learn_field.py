@@ -1,0 +1,474 @@
+r"""Learning a pattern field (:class:`~ogm_ppl.priors.PatternFieldPrior`) from training maps, in torch.
+
+The field ``log p~(m) = sum_windows theta[code]`` (``+ sum_pooled windows theta2[code]``) is fitted in two
+stages (Felzenszwalb & Oberlin 2014 fit by contrastive divergence; here pseudo-likelihood starts it):
+
+1. **Maximum pseudo-likelihood** (Besag):
+   ``max_theta  1/N sum_k log p(m_k | m_-k; theta) - lambda_/2 |theta|^2``, the sum over every cell whose
+   ``(2w - 1)^2`` neighbourhood (at two scales also its pooled parent's ``(2w - 1)^2`` pooled neighbourhood)
+   lies inside the grid and in known cells. The conditional depends on the data only through that
+   neighbourhood, so the objective is a weighted sum over the *distinct* neighbourhood codes
+   (:class:`FieldStats`): exact, and cheap enough for LBFGS. ``theta`` is tied over the 8 symmetries (one
+   parameter per orbit, :func:`~ogm_ppl.priors.pattern_field.symmetry_orbits`); the L2 penalty also fixes
+   the gauge (adding a constant to every ``theta`` leaves the conditionals unchanged).
+2. **Persistent contrastive divergence** (MCMC maximum likelihood, Tieleman 2008): per iteration,
+   ``grad = f_data - f_model - lambda_ theta``, where ``f`` are per-window orbit frequencies (scale 2: per
+   pooled window) of the training data (windows wholly in known cells) and of persistent prior-only Gibbs
+   chains (``chains x size x size`` maps, ``sweeps`` compiled sweeps per iteration,
+   :func:`~ogm_ppl.priors.compiled.prior_gibbs_sweeps`); Adam steps.
+
+The chains start from crops of the training maps (:func:`data_crops`; from noise a strongly coupled field
+freezes in noise-like states), and run ``burn_in`` sweeps under the PL solution first.
+
+**Stopping point.** Every ``eval_every`` iterations (and at the PL solution, iteration 0) the fit is scored
+on the validation maps by the *held-out frequency gap* ``|f_val - f_model|_1`` (summed over the scales):
+the distance of the model's window-orbit frequencies (from the persistent chains) to those of unseen
+maps, i.e. how far the moment conditions of maximum likelihood fail on held-out data. PL already
+maximises the conditional score; PCD's job is the generative fit, which this measures. The validation
+pseudo-log-likelihood per cell (mean log-probability of an unseen cell given its neighbourhood) is
+recorded beside it. The iterate with the smallest gap is returned, with the curve. Both stages are
+deterministic for a seed.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Iterable
+from dataclasses import dataclass, field
+
+import numba as nb
+import numpy as np
+import torch
+
+from ogm_ppl.priors.compiled import prior_gibbs_sweeps
+from ogm_ppl.priors.compiled.field import field_window_codes, pattern_field
+from ogm_ppl.priors.pattern_field import symmetry_orbits
+
+__all__ = [
+    "FieldFit",
+    "FieldStats",
+    "data_crops",
+    "field_stats",
+    "fit_pattern_field",
+    "fit_pl",
+    "fit_pcd",
+    "validation_pll",
+]
+
+
+# ------------------------------------------------------------------ sufficient statistics
+@nb.njit(cache=True)
+def _nbhd_keys(g, bad, w, two):
+    """Per eligible cell of a 2D grid the key of its conditional: bits ``0..S^2-1`` its ``S x S``
+    neighbourhood (``S = 2w - 1``, centre included); a cell is eligible when that neighbourhood lies in
+    the grid and in known cells (``bad``: 1 for unknown cells). With ``two`` also the two-scale keys of
+    the cells whose parent's pooled ``S x S`` neighbourhood lies in the pooled grid and in known pooled
+    cells: bit ``S^2`` = the rest of the cell's ``2 x 2`` block is free, bits ``S^2 + 1 ..`` the pooled
+    neighbourhood (parent cleared). Returns ``(keys1, keys2)``."""
+    R, C = g.shape
+    S = 2 * w - 1
+    h = w - 1
+    P = (R + 1) // 2
+    Q = (C + 1) // 2
+    pg = np.zeros((P, Q), np.uint8)
+    pbad = np.zeros((P, Q), np.uint8)
+    for r in range(R):
+        for c in range(C):
+            pg[r >> 1, c >> 1] |= g[r, c]
+            pbad[r >> 1, c >> 1] |= bad[r, c]
+    # prefix sums of unknown cells, to test a neighbourhood in O(1)
+    cb = np.zeros((R + 1, C + 1), np.int64)
+    for r in range(R):
+        for c in range(C):
+            cb[r + 1, c + 1] = cb[r, c + 1] + cb[r + 1, c] - cb[r, c] + bad[r, c]
+    pb = np.zeros((P + 1, Q + 1), np.int64)
+    for r in range(P):
+        for c in range(Q):
+            pb[r + 1, c + 1] = pb[r, c + 1] + pb[r + 1, c] - pb[r, c] + pbad[r, c]
+    out1 = np.empty(R * C, np.int64)
+    out2 = np.empty(R * C if two else 0, np.int64)
+    n1 = 0
+    n2 = 0
+    for r in range(h, R - h):
+        for c in range(h, C - h):
+            if cb[r + h + 1, c + h + 1] - cb[r - h, c + h + 1] - cb[r + h + 1, c - h] + cb[r - h, c - h] > 0:
+                continue
+            key = np.int64(0)
+            for a in range(S):
+                for b in range(S):
+                    if g[r - h + a, c - h + b]:
+                        key |= np.int64(1) << (a * S + b)
+            out1[n1] = key
+            n1 += 1
+            if two:
+                pr = r >> 1
+                pc = c >> 1
+                if pr < h or pc < h or pr + h >= P or pc + h >= Q:
+                    continue
+                if (
+                    pb[pr + h + 1, pc + h + 1] - pb[pr - h, pc + h + 1] - pb[pr + h + 1, pc - h] + pb[pr - h, pc - h]
+                    > 0
+                ):
+                    continue
+                free = 1
+                for i in range(2 * pr, min(2 * pr + 2, R)):
+                    for j in range(2 * pc, min(2 * pc + 2, C)):
+                        if (i != r or j != c) and g[i, j]:
+                            free = 0
+                key |= np.int64(free) << (S * S)
+                for a in range(S):
+                    for b in range(S):
+                        if (a != h or b != h) and pg[pr - h + a, pc - h + b]:
+                            key |= np.int64(1) << (S * S + 1 + a * S + b)
+                out2[n2] = key
+                n2 += 1
+    return out1[:n1], out2[:n2]
+
+
+def _pooled_np(g: np.ndarray) -> np.ndarray:
+    R, C = g.shape
+    x = np.zeros((R + R % 2, C + C % 2), np.uint8)
+    x[:R, :C] = g
+    return x.reshape(x.shape[0] // 2, 2, x.shape[1] // 2, 2).max((1, 3))
+
+
+@dataclass
+class FieldStats:
+    """Sufficient statistics of a set of maps for fitting a ``w x w`` field at one or two scales:
+    ``keys1``/``counts1`` the distinct one-scale conditional keys (:func:`_nbhd_keys`) and their counts,
+    ``keys2``/``counts2`` the two-scale ones (empty when ``scales == 1``), ``win1`` (``2^(w w)``) the counts
+    of the window codes wholly in known cells, ``win2`` those of the pooled grid."""
+
+    w: int
+    scales: int
+    keys1: np.ndarray
+    counts1: np.ndarray
+    keys2: np.ndarray
+    counts2: np.ndarray
+    win1: np.ndarray
+    win2: np.ndarray
+    n_maps: int = 0
+    n_cells: int = 0
+
+    def orbit_freq(self, scale: int = 1) -> np.ndarray:
+        """Per-window frequency of each orbit (``n_orbits``)."""
+        orbit, n = symmetry_orbits(self.w)
+        c = self.win1 if scale == 1 else self.win2
+        return np.bincount(orbit, c.astype(np.float64), n) / max(c.sum(), 1)
+
+
+def _as_pair(item):
+    if hasattr(item, "occupancy"):
+        return np.asarray(item.occupancy, bool), np.asarray(item.known, bool)
+    if isinstance(item, tuple):
+        return np.asarray(item[0], bool), np.asarray(item[1], bool)
+    a = np.asarray(item, bool)
+    return a, np.ones_like(a)
+
+
+def field_stats(maps: Iterable, w: int = 3, scales: int = 1) -> FieldStats:
+    """:class:`FieldStats` of a stream of maps (``H x W`` bool arrays, ``(occupancy, known)`` pairs, or
+    :class:`~ogm_ppl.datasets.floorplans.FloorPlan`\\ s)."""
+    if scales not in (1, 2):
+        raise ValueError(f"scales must be 1 or 2, got {scales}")
+    if scales == 2 and 2 * (2 * w - 1) ** 2 + 1 > 63:
+        raise ValueError(f"a two-scale key of w = {w} does not fit 63 bits")
+    n_codes = 1 << (w * w)
+    win1 = np.zeros(n_codes, np.int64)
+    win2 = np.zeros(n_codes, np.int64)
+    acc: list[list[np.ndarray]] = [[], [], [], []]
+    n_maps = n_cells = 0
+    for item in maps:
+        occ, known = _as_pair(item)
+        g = np.ascontiguousarray(occ & known, np.uint8)
+        bad = np.ascontiguousarray(~known, np.uint8)
+        for i, k in enumerate(_nbhd_keys(g, bad, w, scales == 2)):
+            u, c = np.unique(k, return_counts=True)
+            acc[2 * i].append(u)
+            acc[2 * i + 1].append(c)
+        c1 = field_window_codes(g, w)
+        b1 = field_window_codes(bad, w)
+        win1 += np.bincount(c1[b1 == 0], minlength=n_codes)
+        pg, pbad = _pooled_np(g), _pooled_np(bad)
+        c2 = field_window_codes(pg, w)
+        b2 = field_window_codes(pbad, w)
+        win2 += np.bincount(c2[b2 == 0], minlength=n_codes)
+        n_maps += 1
+        n_cells += occ.size
+    return FieldStats(w, scales, *_merge(acc[0], acc[1]), *_merge(acc[2], acc[3]), win1, win2, n_maps, n_cells)
+
+
+def _merge(keys: list[np.ndarray], counts: list[np.ndarray]) -> tuple[np.ndarray, np.ndarray]:
+    if not keys:
+        return np.zeros(0, np.int64), np.zeros(0, np.int64)
+    u, inv = np.unique(np.concatenate(keys), return_inverse=True)
+    return u.astype(np.int64), np.bincount(inv, np.concatenate(counts)).astype(np.int64)
+
+
+# ------------------------------------------------------------------ pseudo-likelihood
+class _PL:
+    """The pseudo-log-likelihood of :class:`FieldStats` as a torch function of the orbit parameters."""
+
+    def __init__(self, stats: FieldStats, scales: int):
+        w = stats.w
+        S = 2 * w - 1
+        h = w - 1
+        orbit, self.n = symmetry_orbits(w)
+        self.orbit = torch.from_numpy(np.array(orbit))
+        if scales == 2 and stats.scales != 2:
+            raise ValueError("two-scale pseudo-likelihood needs FieldStats of scales = 2")
+        keys = stats.keys2 if scales == 2 else stats.keys1
+        counts = stats.counts2 if scales == 2 else stats.counts1
+        centre = h * S + h
+        self.y = torch.from_numpy(((keys >> centre) & 1).astype(np.float64))
+        self.cnt = torch.from_numpy(counts.astype(np.float64))
+        self.N = float(counts.sum())
+        wm = (1 << w) - 1
+
+        def windows(nb):
+            c0, c1 = [], []
+            for r0 in range(w):  # window anchor relative to the neighbourhood's top-left
+                for q0 in range(w):
+                    code = np.zeros(len(nb), np.int64)
+                    for a in range(w):
+                        code |= ((nb >> ((r0 + a) * S + q0)) & wm) << (a * w)
+                    bit = 1 << ((h - r0) * w + (h - q0))
+                    code &= ~bit
+                    c0.append(code)
+                    c1.append(code | bit)
+            return torch.from_numpy(np.stack(c0, 1)), torch.from_numpy(np.stack(c1, 1))
+
+        self.c0, self.c1 = windows(keys & ((1 << (S * S)) - 1))
+        self.two = scales == 2
+        if self.two:
+            self.free = torch.from_numpy(((keys >> (S * S)) & 1).astype(np.float64))
+            self.p0, self.p1 = windows(keys >> (S * S + 1))
+
+    def log_odds(self, p1: torch.Tensor, p2: torch.Tensor | None) -> torch.Tensor:
+        t1 = p1[self.orbit]
+        lo = (t1[self.c1] - t1[self.c0]).sum(1)
+        if self.two and p2 is not None:
+            t2 = p2[self.orbit]
+            lo = lo + self.free * (t2[self.p1] - t2[self.p0]).sum(1)
+        return lo
+
+    def pll(self, p1, p2=None) -> torch.Tensor:
+        """Mean log-probability per cell of each cell given its neighbourhood."""
+        lo = self.log_odds(p1, p2)
+        return (self.cnt * torch.nn.functional.logsigmoid((2 * self.y - 1) * lo)).sum() / max(self.N, 1.0)
+
+
+def validation_pll(stats: FieldStats, theta, theta2=None) -> float:
+    """Mean validation pseudo-log-likelihood per cell (nats) of the orbit parameters."""
+    pl = _PL(stats, 2 if theta2 is not None else 1)
+    with torch.no_grad():
+        t2 = None if theta2 is None else torch.as_tensor(theta2, dtype=torch.float64)
+        return float(pl.pll(torch.as_tensor(theta, dtype=torch.float64), t2))
+
+
+def fit_pl(stats: FieldStats, scales: int = 1, lambda_: float = 1e-4, max_iter: int = 200, progress: bool = True):
+    """Maximum pseudo-likelihood orbit parameters ``(theta, theta2 or None, pll)`` by LBFGS (module docstring)."""
+    pl = _PL(stats, scales)
+    p1 = torch.zeros(pl.n, dtype=torch.float64, requires_grad=True)
+    params = [p1]
+    p2 = None
+    if scales == 2:
+        p2 = torch.zeros(pl.n, dtype=torch.float64, requires_grad=True)
+        params.append(p2)
+    opt = torch.optim.LBFGS(params, lr=1.0, max_iter=max_iter, line_search_fn="strong_wolfe", tolerance_grad=1e-9)
+
+    def closure():
+        opt.zero_grad()
+        pen = 0.5 * lambda_ * sum((p**2).sum() for p in params)
+        loss = -pl.pll(p1, p2) + pen
+        loss.backward()
+        return loss
+
+    t0 = time.perf_counter()
+    opt.step(closure)
+    with torch.no_grad():
+        val = float(pl.pll(p1, p2))
+        loss = -val + 0.5 * lambda_ * sum(float((p**2).sum()) for p in params)
+    if progress:
+        print(
+            f"  PL: {len(pl.cnt):,} distinct neighbourhoods, objective {loss:.5f}, "
+            f"PLL/cell {val:.5f} ({time.perf_counter() - t0:.1f} s)",
+            flush=True,
+        )
+    th2 = None if p2 is None else p2.detach().numpy().copy()
+    return p1.detach().numpy().copy(), th2, val
+
+
+# ------------------------------------------------------------------ persistent contrastive divergence
+def _chain_freq(maps: np.ndarray, size: int, w: int, orbit: np.ndarray, n: int, two: bool):
+    n_codes = 1 << (w * w)
+    c1 = np.zeros(n_codes, np.float64)
+    c2 = np.zeros(n_codes, np.float64)
+    for m in maps:
+        g = m.reshape(size, size)
+        c1 += np.bincount(field_window_codes(g, w).ravel(), minlength=n_codes)
+        if two:
+            c2 += np.bincount(field_window_codes(_pooled_np(g), w).ravel(), minlength=n_codes)
+    f1 = np.bincount(orbit, c1, n) / c1.sum()
+    f2 = np.bincount(orbit, c2, n) / max(c2.sum(), 1.0)
+    return f1, f2
+
+
+def data_crops(maps: Iterable, chains: int, size: int, seed: int = 0, tries: int = 200) -> np.ndarray:
+    """``chains x size^2`` uint8 crops of the maps (``(occupancy, known)`` pairs or bool arrays), each at a
+    seeded random map and offset, preferring crops wholly in known cells (unknown cells read as occupied)."""
+    pairs = [_as_pair(m) for m in maps]
+    pairs = [(o, k) for o, k in pairs if o.shape[0] >= size and o.shape[1] >= size]
+    if not pairs:
+        raise ValueError(f"no map is at least {size} x {size} cells")
+    rng = np.random.default_rng(seed)
+    out = np.empty((chains, size * size), np.uint8)
+    for b in range(chains):
+        for _ in range(tries):
+            o, k = pairs[int(rng.integers(len(pairs)))]
+            r = int(rng.integers(o.shape[0] - size + 1))
+            c = int(rng.integers(o.shape[1] - size + 1))
+            if k[r : r + size, c : c + size].all():
+                break
+        out[b] = (o | ~k)[r : r + size, c : c + size].ravel()
+    return out
+
+
+@dataclass
+class FieldFit:
+    """A fitted field: orbit parameters, the curve of ``(iteration, held-out frequency gap, validation PLL
+    per cell, seconds)`` and the chosen iteration (0: the PL solution)."""
+
+    w: int
+    theta: np.ndarray
+    theta2: np.ndarray | None
+    best_iteration: int
+    best_gap: float
+    curve: list = field(default_factory=list)
+    occupancy: float = float("nan")
+
+
+def fit_pcd(
+    train: FieldStats,
+    val: FieldStats,
+    theta,
+    theta2=None,
+    *,
+    iterations: int = 200,
+    chains: int = 16,
+    size: int = 64,
+    sweeps: int = 1,
+    burn_in: int = 50,
+    lr: float = 0.02,
+    lambda_: float = 1e-4,
+    eval_every: int = 20,
+    seed: int = 0,
+    init: np.ndarray | None = None,
+    progress: bool = True,
+) -> FieldFit:
+    """PCD from the orbit parameters ``theta`` (``theta2``), stopping point by validation PLL (module
+    docstring). Returns a :class:`FieldFit` whose ``occupancy`` is the chains' cell marginal at the
+    chosen iterate (the centre ``(size - 16)^2`` cells). ``init``: the chains' start (``chains x size^2``
+    uint8, e.g. :func:`data_crops`; default uniform noise)."""
+    w = train.w
+    orbit, n = symmetry_orbits(w)
+    orbit = np.asarray(orbit)
+    two = theta2 is not None
+    p1 = torch.tensor(theta, dtype=torch.float64)
+    p2 = torch.tensor(theta2, dtype=torch.float64) if two else torch.zeros(n, dtype=torch.float64)
+    fd1 = torch.from_numpy(train.orbit_freq(1))
+    fd2 = torch.from_numpy(train.orbit_freq(2))
+    fv1, fv2 = val.orbit_freq(1), val.orbit_freq(2)
+    vpl = _PL(val, 2 if two else 1)
+    rng = np.random.default_rng(seed)
+    if init is None:
+        maps = np.ascontiguousarray(rng.random((chains, size * size)) < 0.5, dtype=np.uint8)
+    else:
+        maps = np.array(init, dtype=np.uint8).reshape(chains, size * size)
+
+    def bundle():
+        t1 = p1.numpy()[orbit]
+        return pattern_field(size, size, w, t1, p2.numpy()[orbit] if two else None)
+
+    def occ():
+        return float(maps.reshape(chains, size, size)[:, 8:-8, 8:-8].mean())
+
+    def score(f1, f2):
+        gap = float(np.abs(fv1 - f1).sum()) + (float(np.abs(fv2 - f2).sum()) if two else 0.0)
+        with torch.no_grad():
+            return gap, float(vpl.pll(p1, p2 if two else None))
+
+    prior_gibbs_sweeps(bundle(), maps, burn_in, int(rng.integers(2**31 - 1)))
+    t0 = time.perf_counter()
+    best_gap, pll0 = score(*_chain_freq(maps, size, w, orbit, n, two))
+    curve = [(0, best_gap, pll0, 0.0)]
+    best = (0, p1.clone(), p2.clone(), occ())
+    if progress:
+        print(f"  PCD it 0 (PL): held-out gap {best_gap:.4f}, validation PLL/cell {pll0:.5f}", flush=True)
+    m1 = torch.zeros(n, dtype=torch.float64)
+    v1 = torch.zeros(n, dtype=torch.float64)
+    m2 = torch.zeros(n, dtype=torch.float64)
+    v2 = torch.zeros(n, dtype=torch.float64)
+    b1, b2, eps = 0.9, 0.999, 1e-8
+    for it in range(1, iterations + 1):
+        prior_gibbs_sweeps(bundle(), maps, sweeps, int(rng.integers(2**31 - 1)))
+        f1, f2 = _chain_freq(maps, size, w, orbit, n, two)
+        g1 = fd1 - torch.from_numpy(f1) - lambda_ * p1
+        m1 = b1 * m1 + (1 - b1) * g1
+        v1 = b2 * v1 + (1 - b2) * g1**2
+        p1 = p1 + lr * (m1 / (1 - b1**it)) / ((v1 / (1 - b2**it)).sqrt() + eps)
+        if two:
+            g2 = fd2 - torch.from_numpy(f2) - lambda_ * p2
+            m2 = b1 * m2 + (1 - b1) * g2
+            v2 = b2 * v2 + (1 - b2) * g2**2
+            p2 = p2 + lr * (m2 / (1 - b1**it)) / ((v2 / (1 - b2**it)).sqrt() + eps)
+        if it % eval_every == 0 or it == iterations:
+            # the chains have moved once under the new parameters: their frequencies score them
+            prior_gibbs_sweeps(bundle(), maps, sweeps, int(rng.integers(2**31 - 1)))
+            gap, val_pll = score(*_chain_freq(maps, size, w, orbit, n, two))
+            secs = time.perf_counter() - t0
+            curve.append((it, gap, val_pll, round(secs, 2)))
+            if progress:
+                print(
+                    f"  PCD it {it}: held-out gap {gap:.4f}, validation PLL/cell {val_pll:.5f} ({secs:.1f} s)",
+                    flush=True,
+                )
+            if gap < best_gap:
+                best_gap = gap
+                best = (it, p1.clone(), p2.clone(), occ())
+    it, q1, q2, oc = best
+    return FieldFit(w, q1.numpy(), q2.numpy() if two else None, it, best_gap, curve, oc)
+
+
+def fit_pattern_field(
+    train_maps: Iterable,
+    val_maps: Iterable,
+    w: int = 3,
+    scales: int = 1,
+    *,
+    lambda_: float = 1e-4,
+    pcd_iterations: int = 200,
+    chains: int = 16,
+    size: int = 64,
+    seed: int = 0,
+    progress: bool = True,
+    stats: tuple[FieldStats, FieldStats] | None = None,
+    init: np.ndarray | None = None,
+) -> FieldFit:
+    """PL then PCD (module docstring) on the training maps, stopping point by validation PLL. ``stats``:
+    precomputed ``(train, val)`` :class:`FieldStats` (of ``scales`` scales) instead of the maps."""
+    tr, va = stats if stats is not None else (field_stats(train_maps, w, scales), field_stats(val_maps, w, scales))
+    th, th2, _ = fit_pl(tr, scales, lambda_, progress=progress)
+    return fit_pcd(
+        tr,
+        va,
+        th,
+        th2,
+        iterations=pcd_iterations,
+        chains=chains,
+        size=size,
+        lambda_=lambda_,
+        seed=seed,
+        init=init,
+        progress=progress,
+    )

@@ -1,0 +1,115 @@
+"""Learning a pattern field: the sufficient statistics (unknown cells excluded), the pseudo-likelihood's
+conditionals equal the compiled ones, and parameter recovery by PL and by PCD from maps drawn by the
+compiled sampler of a known field."""
+
+import numpy as np
+import torch
+
+from ogm_ppl.inference._kernels.cell_sweep import prior_log_odds
+from ogm_ppl.priors.compiled import prior_gibbs_sweeps
+from ogm_ppl.priors.compiled.field import pattern_field
+from ogm_ppl.priors.learn_field import _PL, _nbhd_keys, data_crops, field_stats, fit_pcd, fit_pl
+from ogm_ppl.priors.pattern_field import PatternFieldPrior, orbits_to_table, symmetry_orbits
+
+W = 2
+N_ORB = symmetry_orbits(W)[1]
+TRUE = np.array([-0.6, 0.5, 0.2, -0.4, 0.3, 0.1])[:N_ORB]
+
+
+def conditional_table(theta):
+    """The identifiable quantity: the log-odds of an interior cell given each of its 256 neighbourhoods
+    (3 x 3 windows of a w = 2 field: the four windows holding the cell)."""
+    p = PatternFieldPrior((3, 3), theta, W)
+    codes = np.arange(512)
+    maps = ((codes[codes & 16 == 0][:, None] >> np.arange(9)) & 1).astype(np.uint8)
+    return np.array([prior_log_odds(p.compiled(), 4, np.ascontiguousarray(m)) for m in maps]), maps
+
+
+def samples(n, size, seed, sweeps=300):
+    b = pattern_field(size, size, W, orbits_to_table(TRUE, W))
+    rng = np.random.default_rng(seed)
+    maps = np.ascontiguousarray(rng.random((n, size * size)) < 0.5, dtype=np.uint8)
+    prior_gibbs_sweeps(b, maps, sweeps, seed)
+    return [m.reshape(size, size).astype(bool) for m in maps]
+
+
+def weighted_rms(est, maps_stats):
+    """RMS error of the conditional table, weighted by how often each neighbourhood occurs in the data."""
+    want, nb = conditional_table(TRUE)
+    got, _ = conditional_table(est)
+    S = 3
+    key = (nb.astype(np.int64) << np.arange(9)).sum(1)
+    freq = np.zeros(512)
+    np.add.at(freq, maps_stats.keys1 & ~np.int64(1 << 4), maps_stats.counts1)
+    wgt = freq[key] / freq[key].sum()
+    assert S == 2 * W - 1
+    return float(np.sqrt((wgt * (got - want) ** 2).sum())), float(np.sqrt((wgt * want**2).sum()))
+
+
+def test_window_counts_skip_unknown_cells():
+    rng = np.random.default_rng(0)
+    occ = rng.random((7, 8)) < 0.4
+    known = rng.random((7, 8)) < 0.85
+    st = field_stats([(occ, known)], 2, 2)
+    want = np.zeros(16, np.int64)
+    for r in range(6):
+        for c in range(7):
+            if known[r : r + 2, c : c + 2].all():
+                want[int(((occ & known)[r : r + 2, c : c + 2].ravel() << np.arange(4)).sum())] += 1
+    np.testing.assert_array_equal(st.win1, want)
+    # a cell counts in the PL sum only with its whole 3 x 3 neighbourhood known and inside the grid
+    n_elig = sum(known[r - 1 : r + 2, c - 1 : c + 2].all() for r in range(1, 6) for c in range(1, 7))
+    assert st.counts1.sum() == n_elig
+
+
+def test_pl_conditionals_equal_the_compiled_ones():
+    rng = np.random.default_rng(1)
+    th1, th2 = rng.normal(size=N_ORB), rng.normal(size=N_ORB)
+    p = PatternFieldPrior((6, 6), th1, W, th2)
+    for _ in range(5):
+        g = (rng.random((6, 6)) < 0.4).astype(np.uint8)
+        k1, k2 = _nbhd_keys(g, np.zeros_like(g), W, True)
+        cells1 = [r * 6 + c for r in range(1, 5) for c in range(1, 5)]
+        cells2 = [r * 6 + c for r in (2, 3) for c in (2, 3)]  # the parent's pooled 3 x 3 inside the 3 x 3 pooled grid
+        assert len(k1) == len(cells1) and len(k2) == len(cells2)
+        m = np.ascontiguousarray(g.ravel())
+        for keys, cells, scales in ((k2, cells2, 2), (k1, cells1, 1)):
+            st = field_stats([], W, 2)
+            st.keys1, st.counts1 = keys, np.ones(len(keys), np.int64)
+            st.keys2, st.counts2 = keys, np.ones(len(keys), np.int64)
+            pl = _PL(st, scales)
+            got = pl.log_odds(torch.tensor(th1), torch.tensor(th2) if scales == 2 else None).numpy()
+            q = p if scales == 2 else PatternFieldPrior((6, 6), th1, W)
+            want = [prior_log_odds(q.compiled(), k, m) for k in cells]
+            np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+
+
+def test_parameter_recovery_by_pl_and_pcd():
+    # 24 maps of 40 x 40 from the known field (300 compiled sweeps from noise: the field mixes within a few
+    # tens of sweeps), about 36,000 PL cells for 6 parameters: the standard error of a parameter is of order
+    # 1 / sqrt(36000 / 6) ~ 0.013 and of a conditional (a sum of 4 differences) ~ 0.05, so 0.1 is a
+    # 2-sigma-plus bound on the frequency-weighted RMS error; PCD adds the chains' Monte Carlo noise (0.15).
+    train = field_stats(samples(24, 40, seed=1), W, 1)
+    val = field_stats(samples(6, 40, seed=2), W, 1)
+    th, _, _ = fit_pl(train, 1, lambda_=1e-6, progress=False)
+    err, spread = weighted_rms(th, train)
+    assert spread > 0.5  # the conditionals are far from 0: recovering them is not trivial
+    assert err < 0.1, (err, th, TRUE)
+    fit = fit_pcd(
+        train,
+        val,
+        np.zeros(N_ORB),
+        iterations=300,
+        chains=8,
+        size=40,
+        lr=0.05,
+        lambda_=1e-6,
+        eval_every=20,
+        seed=3,
+        progress=False,
+        init=data_crops(samples(8, 40, seed=4), 8, 40),
+    )
+    err_pcd, _ = weighted_rms(fit.theta, train)
+    assert fit.best_iteration > 0 and err_pcd < 0.15, (err_pcd, fit.theta, TRUE, fit.curve)
+    # and the zero field is far off: the tolerances separate a fit from no fit
+    assert weighted_rms(np.zeros(N_ORB), train)[0] > 0.5
