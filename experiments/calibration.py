@@ -33,9 +33,11 @@ Kernels. ``--kernel`` names an entry of :data:`KERNELS`: ``factory(model, patch,
 sampler (e.g. parallel tempering) plugs in by adding an entry.
 
 Outputs under ``--out`` (default ``out/calibration/``): ``calibration.json`` (settings, provenance, one row per
-test corpus, train corpus, map, prior and mask), ``calibration.md`` (tables), ``reliability_<test>.png`` (one
-diagram per prior, pooled over maps, unseen cells), ``bars_<mask>.png`` (NLL and AUC per test corpus). A rerun
-with the same settings skips the (map, prior) pairs already in the JSON.
+test corpus, train corpus, map, prior and mask, with its reliability diagram), ``calibration_summary.json`` (the
+means over maps without the diagrams: what the docs snapshot), ``calibration.md`` (tables),
+``reliability_<test>.png`` (one diagram per prior, pooled over maps, unseen cells), ``bars_<mask>.png`` (NLL and
+AUC per test corpus) and ``matrix_unseen.png`` (NLL of every prior and training corpus on every test corpus).
+A rerun with the same settings skips the (map, prior) pairs already in the JSON.
 
     python experiments/calibration.py --quick        # smoke run, 1 small map per corpus, 3 priors
     python experiments/calibration.py                # the default matrix (see --help for the sizes)
@@ -468,6 +470,10 @@ def tables_md(summ: list[dict], settings: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _label(name: str, test: str) -> str:
+    return "independent (0.5)" if name == "independent" else name.replace(f":{test}", "")
+
+
 def figures(summ: list[dict], out: Path) -> list[Path]:
     """``reliability_<test>.png`` (unseen cells, priors learned on the test corpus and OGM) and
     ``bars_<mask>.png`` (NLL and AUC per test corpus)."""
@@ -498,7 +504,7 @@ def figures(summ: list[dict], out: Path) -> list[Path]:
         fig, axes = plt.subplots(2, len(tests), figsize=(3.6 * len(tests), 6), squeeze=False)
         for j, test in enumerate(tests):
             sel = [s for s in summ if s["test"] == test and s["mask"] == mask and s["train"] in (test, "none")]
-            labels = [s["prior_name"].replace(f":{test}", "") for s in sel]
+            labels = [_label(s["prior_name"], test) for s in sel]
             for i, key in enumerate(("nll_bits", "auc")):
                 ax = axes[i, j]
                 ax.bar(range(len(sel)), [s[key] for s in sel], color="C0")
@@ -509,6 +515,28 @@ def figures(summ: list[dict], out: Path) -> list[Path]:
         fig.suptitle(f"{mask} cells, priors learned on the test corpus", fontsize=10)
         fig.tight_layout()
         p = out / f"bars_{mask}.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        paths.append(p)
+    unseen = [s for s in summ if s["mask"] == "unseen" and s["prior"] != "ogm"]
+    names = list(dict.fromkeys(s["prior_name"] for s in unseen))
+    if names:
+        nll = np.full((len(names), len(tests)), np.nan)
+        for s in unseen:
+            nll[names.index(s["prior_name"]), tests.index(s["test"])] = s["nll_bits"]
+        fig, ax = plt.subplots(figsize=(1.4 * len(tests) + 2.5, 0.28 * len(names) + 1.2))
+        im = ax.imshow(nll, cmap="viridis_r", aspect="auto")
+        for (i, j), v in np.ndenumerate(nll):
+            if np.isfinite(v):
+                ax.text(
+                    j, i, f"{v:.2f}", ha="center", va="center", fontsize=6, color="w" if v > np.nanmean(nll) else "k"
+                )
+        ax.set_xticks(range(len(tests)), tests, fontsize=8)
+        ax.set_yticks(range(len(names)), names, fontsize=6)
+        ax.set_xlabel("test corpus")
+        fig.colorbar(im, ax=ax, label="NLL on unseen cells (bits/cell)")
+        fig.tight_layout()
+        p = out / "matrix_unseen.png"
         fig.savefig(p, dpi=110)
         plt.close(fig)
         paths.append(p)
@@ -597,6 +625,11 @@ def main(argv=None) -> dict:
                 save()
     save()
     summ = summary(rows)
+    brief = [{k: v for k, v in r.items() if k != "reliability"} for r in summ]
+    atomic_write_text(
+        out / "calibration_summary.json",
+        json.dumps({"provenance": prov, "settings": settings, "summary": brief}, separators=(",", ":")),
+    )
     md = tables_md(summ, settings)
     atomic_write_text(out / "calibration.md", md)
     figs = [] if args.no_figures else figures(summ, out)
