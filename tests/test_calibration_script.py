@@ -118,3 +118,22 @@ def test_prior_names_cover_the_matrix_once(cal):
         ("border:ipa", "ipa"),
     ]
     assert math.isclose(cal.RHAT_THRESHOLD, 1.05)
+
+
+def test_a_prior_over_the_support_limit_is_skipped(cal):
+    import numpy as np
+
+    from ogm_ppl.priors.named import prior_by_name
+
+    truth = np.zeros((24, 24), dtype=bool)
+    truth[[0, -1], :] = truth[:, [0, -1]] = True
+    truth[12, :14] = True
+    t = cal.TestMap("generated", "box", "box", truth, np.ones_like(truth), 0.05)
+    args = cal.parse_args([*TINY, "--max-support", "100"])
+    scene = cal.make_scene(t, args)
+    assert cal.support(prior_by_name("patch3:houseexpo", (24, 24)), (3, 3)) == 512
+    assert cal.support(prior_by_name("mrf:houseexpo", (24, 24)), None) == 2
+    assert "512 configurations" in cal.run_prior(scene, "patch3:houseexpo", args)["skipped"]
+    res = cal.run_prior(scene, "mrf:houseexpo", args)
+    assert res["patch"] is None and len(res["seconds_per_chain"]) == 3
+    assert res["scores"]["unseen"]["cells"] == res["rhat_cells"] == int(scene.masks["unseen"].sum())
