@@ -63,7 +63,7 @@ import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ogm_ppl import GaussianRange, Grid, OccupancyModel, raycast
+from ogm_ppl import GaussianRange, Grid, OccupancyModel, Rays, raycast
 from ogm_ppl.datasets import floorplans as fp
 from ogm_ppl.datasets.mapgen import KINDS as MAP_KINDS
 from ogm_ppl.datasets.mapgen import generate_map
@@ -286,7 +286,7 @@ def _patch_overrides(items: Sequence[str]) -> dict[str, tuple[int, int] | None]:
 class Scene:
     tmap: TestMap
     grid: Grid
-    rays: object
+    rays: Rays
     masks: dict[str, np.ndarray]  # K bool each
 
 
@@ -313,7 +313,7 @@ def _scores(scene: Scene, q: np.ndarray, unknown=None) -> dict[str, dict]:
     out = {}
     for mask_name in MASKS:
         mask = scene.masks[mask_name]
-        s = prediction_scores(q, truth, mask=mask, unknown=unknown)
+        s: dict = dict(prediction_scores(q, truth, mask=mask, unknown=unknown))
         s["reliability"] = reliability(q, truth, mask=mask).to_dict()
         out[mask_name] = s
     return out
@@ -493,8 +493,8 @@ def tables_md(summ: list[dict], settings: dict) -> str:
     for k in kinds:
         cells = []
         for test in tests:
-            s = next((s for s in names if s["prior_name"] == k and s["test"] == test), None)
-            cells.append("" if s is None else f"{_fmt(s['nll_bits'])} / {_fmt(s['auc'])}")
+            hit = [s for s in names if s["prior_name"] == k and s["test"] == test]
+            cells.append(f"{_fmt(hit[0]['nll_bits'])} / {_fmt(hit[0]['auc'])}" if hit else "")
         lines.append(f"| {k} | " + " | ".join(cells) + " |")
     return "\n".join(lines) + "\n"
 
@@ -653,7 +653,7 @@ def main(argv=None) -> dict:
                 scene = scene or make_scene(t, args)
                 if name == OGM_LABEL:
                     scores, secs = run_ogm(scene)
-                    result = {"scores": scores, "seconds": secs}
+                    result: dict = {"scores": scores, "seconds": secs}
                 else:
                     result = run_prior(scene, name, args, overrides)
                     if "skipped" in result:
