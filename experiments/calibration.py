@@ -9,9 +9,9 @@ simulate a sparse stop-and-scan dataset (a few stops, a few beams) and estimate 
 sampling: single-cell Gibbs (Section 4.1) for priors whose compiled bundle weighs dense conditionals, patch
 Gibbs over the prior's tile (``L = 9`` for the 3 x 3 tile priors, Algorithm 2) when the bundle weighs a sparse
 support (``sparse_patches()``: tile tables leave single-cell moves stuck). A prior whose update would weigh
-more than ``--max-support`` configurations (the 5 x 5 tables of the richer corpora hold up to 2 x 10^5) is
-skipped and listed. Traditional OGM with the fitted ``p21`` update is the baseline row (never-observed cells
-keep ``q = 0.5``).
+more than ``--max-support`` configurations (:func:`support`; the 5 x 5 tables of the richer corpora hold up to
+2 x 10^5) is skipped and listed. Traditional OGM with the fitted ``p21`` update is the baseline row (never-observed
+cells keep ``q = 0.5``).
 
 Scored cells: the near-mapped mask ``N`` (cells within 10 cells of a cell some ray reached, Fig. 6.16b) and its
 *unseen* cells ``U`` (cells of ``N`` no ray reached): NLL in bits per cell
@@ -327,14 +327,16 @@ def run_ogm(scene: Scene) -> tuple[dict[str, dict], float]:
 
 
 def support(prior, patch: tuple[int, int] | None) -> int:
-    """How many configurations one update weighs at most: ``2`` for a single cell, else the compiled bundle's
-    ``patch_capacity(L)`` (``2^L`` for a dense patch, the largest segment of a sparse tile table), ``2^L``
+    """How many configurations one update weighs at most: ``2`` for a single cell, else
+    ``min(patch_capacity(L), 2^L)``: the compiled bundle's bound (the largest segment of a sparse tile table, which
+    for a border prior counts whole windows) capped by the ``2^L`` configurations ``L`` cells have; ``2^L``
     without a bundle."""
     if patch is None:
         return 2
     L = int(np.prod(patch))
     c = prior.compiled()
-    return int(c.patch_capacity(L)) if c is not None else 1 << L
+    cap = int(c.patch_capacity(L)) if c is not None else 1 << L
+    return min(cap, 1 << L)
 
 
 def run_prior(scene: Scene, name: str, args, patch_override=None) -> dict:
