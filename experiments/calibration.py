@@ -37,9 +37,9 @@ sampler (e.g. parallel tempering) plugs in by adding an entry.
 Outputs under ``--out`` (default ``out/calibration/``): ``calibration.json`` (settings, provenance, one row per
 test corpus, train corpus, map, prior and mask, with its reliability diagram), ``calibration_summary.json`` (the
 means over maps without the diagrams: what the docs snapshot), ``calibration.md`` (tables),
-``reliability_<test>.png`` (one diagram per prior, pooled over maps, unseen cells), ``bars_<mask>.png`` (NLL and
-AUC per test corpus) and ``matrix_unseen.png`` (NLL of every prior and training corpus on every test corpus).
-A rerun with the same settings skips the (map, prior) pairs already in the JSON.
+``reliability_<test>.png`` (one diagram per prior, pooled over maps, unseen cells, bins of 20 cells or more),
+``bars_<mask>.png`` (NLL and AUC per test corpus) and ``matrix_unseen.png`` (NLL of every prior and training
+corpus on every test corpus). A rerun with the same settings skips the (map, prior) pairs already in the JSON.
 
     python experiments/calibration.py --quick        # smoke run, 1 small map per corpus, 3 priors
     python experiments/calibration.py                # the default matrix (see --help for the sizes)
@@ -521,7 +521,7 @@ def figures(summ: list[dict], out: Path) -> list[Path]:
         rows = -(-len(sel) // cols)
         fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 3.2 * rows), squeeze=False)
         for ax, s in zip(axes.flat, sel):
-            plot_reliability({s["prior_name"]: Reliability.from_dict(s["reliability"])}, ax=ax)
+            plot_reliability({s["prior_name"]: Reliability.from_dict(s["reliability"])}, ax=ax, min_count=20)
             ax.set_title(s["prior_name"], fontsize=8)
         for ax in list(axes.flat)[len(sel) :]:
             ax.set_visible(False)
