@@ -415,18 +415,21 @@ def _rows_for(test, t: TestMap, name, train, kernel, result) -> list[dict]:
     return rows
 
 
-def _load_previous(path: Path, settings: dict, fresh: bool) -> list[dict]:
+def _load_previous(path: Path, settings: dict, fresh: bool) -> tuple[list[dict], list[dict]]:
+    """The rows and the runs (provenance and seconds of each earlier call) of ``path``, if it exists and shares
+    :data:`RUN_KEYS` with ``settings``."""
     if fresh or not path.is_file():
-        return []
+        return [], []
     try:
         doc = json.loads(path.read_text())
         rows, old = doc["rows"], doc["settings"]
+        runs = doc.get("runs", [])
     except (OSError, ValueError, KeyError, TypeError) as e:
         raise SystemExit(f"{path}: not a calibration result ({type(e).__name__}: {e}); use --fresh") from None
     differ = [k for k in RUN_KEYS if old.get(k) != settings.get(k)]
     if differ:
         raise SystemExit(f"{path}: its settings differ in {differ}; rerun with --fresh or another --out")
-    return rows
+    return rows, runs
 
 
 def _mean(rows, key) -> float:
@@ -620,7 +623,7 @@ def main(argv=None) -> dict:
     out = Path(args.out)
     path = out / "calibration.json"
     settings = {k: v for k, v in vars(args).items() if k not in ("out", "fresh", "no_figures")}
-    rows = _load_previous(path, settings, args.fresh)
+    rows, runs = _load_previous(path, settings, args.fresh)
     done = {_row_key(r) for r in rows}
     skipped: list[dict] = []
     skipped_keys: set[tuple] = set()
@@ -635,7 +638,8 @@ def main(argv=None) -> dict:
             "settings": settings,
             "rows": rows,
             "skipped": skipped,
-            "seconds": time.perf_counter() - t_all,
+            "runs": [*runs, {"provenance": prov, "seconds": time.perf_counter() - t_all}],
+            "seconds": sum(r["seconds"] for r in runs) + time.perf_counter() - t_all,
         }
         atomic_write_text(path, json.dumps(doc, indent=1))
 

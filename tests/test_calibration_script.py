@@ -70,6 +70,8 @@ def test_tiny_matrix_writes_rows_tables_figures_and_resumes(cal, tmp_path, monke
     monkeypatch.setattr(cal, "run_ogm", never)
     again = cal.main([*TINY, "--out", str(tmp_path), "--no-figures"])
     assert len(again["rows"]) == len(rows)
+    runs = json.loads((tmp_path / "calibration.json").read_text())["runs"]
+    assert len(runs) == 2 and runs[0]["seconds"] == doc["runs"][0]["seconds"]
     with pytest.raises(SystemExit, match="settings differ in \\['sweeps'\\]"):
         cal.main([*TINY[:-4], "--sweeps", "17", "--burn", "4", "--out", str(tmp_path)])
 
