@@ -272,7 +272,9 @@ def _calibration(doc: dict) -> Table:
 
     own = {(key(s), s["test"]): s for s in summ if s["train"] in (s["test"], "none")}
     rows = []
-    for k in dict.fromkeys(k for k, _ in own):
+    order = ["ogm", "uniform", *doc["settings"]["priors"]]
+    keys = sorted(dict.fromkeys(k for k, _ in own), key=lambda k: order.index(k) if k in order else len(order))
+    for k in keys:
         cells = []
         for t in tests:
             s = own.get((k, t))
@@ -289,6 +291,7 @@ def _calibration(doc: dict) -> Table:
         header=["method", *(f"{t} {m}" for t in tests for m in ("NLL", "ECE", "AUC"))],
         rows=rows,
         provenance=doc["provenance"],
+        note=f"– : skipped, an update would weigh more than {settings['max_support']} configurations",
     )
 
 
