@@ -23,7 +23,7 @@ Agreement of chains. Each prior runs ``C = 3`` chains from different starts: tra
 prior's mean, the all-free map and a draw from the prior (``prior.sample``). The marginals scored are pooled over
 the chains, ``q = (1/C) sum_c q^(c)``; split R-hat (:func:`~ogm_ppl.inference.mcmc.diagnostics.split_rhat`) per
 unseen cell over the ``C`` chains' kept sweeps gives the share of unseen cells with ``R-hat < 1.05`` (cells that
-keep one value in every sweep of every chain agree and count below).
+keep one value in every sweep of every chain agree and count below; ``rhat_below_varying`` leaves them out).
 
 Leakage. A prior is never scored on a map it was learned from: :func:`check_heldout` rebuilds each shipped
 table's training set from its recorded provenance (plan names checked against the stored SHA-256; the generated
@@ -370,6 +370,7 @@ def run_prior(scene: Scene, name: str, args, patch_override=None) -> dict:
         "seconds_per_chain": [float(s) for s in secs],
         "patch": None if patch is None else list(patch),
         "rhat_below": float(agree.mean()) if len(unseen) else float("nan"),
+        "rhat_below_varying": float((rh[~np.isnan(rh)] < RHAT_THRESHOLD).mean()) if (~np.isnan(rh)).any() else math.nan,
         "rhat_max": float(np.nanmax(rh)) if np.isfinite(rh).any() else float("nan"),
         "rhat_cells": len(unseen),
     }
@@ -408,7 +409,7 @@ def _rows_for(test, t: TestMap, name, train, kernel, result) -> list[dict]:
             **{k: v for k, v in s.items()},
             "seconds": result["seconds"],
         }
-        for k in ("seconds_per_chain", "patch", "rhat_below", "rhat_max", "rhat_cells"):
+        for k in ("seconds_per_chain", "patch", "rhat_below", "rhat_below_varying", "rhat_max", "rhat_cells"):
             if k in result:
                 row[k] = result[k]
         rows.append(row)

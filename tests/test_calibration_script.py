@@ -47,6 +47,8 @@ def test_tiny_matrix_writes_rows_tables_figures_and_resumes(cal, tmp_path, monke
                 assert sum(r["reliability"]["count"]) == r["cells"]
             if name != "traditional OGM (p21)":
                 assert 0 <= unseen["rhat_below"] <= 1 and unseen["rhat_cells"] == unseen["cells"]
+                v = unseen["rhat_below_varying"]
+                assert (0 <= v <= unseen["rhat_below"]) or math.isnan(v)  # frozen cells count as agreeing
         assert by["patch3:houseexpo", "unseen"]["patch"] == [3, 3] and by["mrf:houseexpo", "unseen"]["patch"] is None
         assert by["independent", "unseen"]["train"] == "none"
     doc = json.loads((tmp_path / "calibration.json").read_text())
