@@ -41,6 +41,10 @@ means over maps without the diagrams: what the docs snapshot), ``calibration.md`
 ``bars_<mask>.png`` (NLL and AUC per test corpus) and ``matrix_unseen.png`` (NLL of every prior and training
 corpus on every test corpus). A rerun with the same settings skips the (map, prior) pairs already in the JSON.
 
+Measured run times: the default run (2 maps per corpus, every shipped kind x every shipped corpus, 512 rows,
+16 skipped) took 23.5 min wall on 2 AMD EPYC cores that other jobs shared (load average 4-5 for most of it);
+``--quick`` took 15 s once numba had compiled its kernels. Two runs of the default gave identical numbers.
+
     python experiments/calibration.py --quick        # smoke run, 1 small map per corpus, 3 priors
     python experiments/calibration.py                # the default matrix (see --help for the sizes)
     python experiments/calibration.py --priors patch3 border --train houseexpo --test ipa dungeon
