@@ -32,6 +32,8 @@ __all__ = [
     "nll_bits",
     "brier_score",
     "expected_calibration_error",
+    "Reliability",
+    "reliability",
     "occupied_iou",
     "prediction_scores",
 ]
@@ -192,18 +194,112 @@ def brier_score(estimate, truth, mask=None) -> float:
     return float(np.mean((est - tru) ** 2)) if est.size else float("nan")
 
 
+@dataclass(frozen=True)
+class Reliability:
+    r"""A reliability diagram's numbers: ``bins`` equal-width probability bins ``B_b = [b/B, (b+1)/B)`` (the
+    last one closed), and per bin the number of cells ``n_b``, the sum of their probabilities
+    ``S_b = sum_{k in B_b} q_k`` and the number of them occupied ``O_b = sum_{k in B_b} m_k``.
+
+    Sums, not means, so that diagrams of several maps pool by adding (:meth:`pooled`); the means
+    ``mean_q = S_b / n_b`` and ``occupied = O_b / n_b`` are NaN for an empty bin.
+    """
+
+    edges: np.ndarray  # B + 1 float64
+    count: np.ndarray  # B int64: n_b
+    sum_q: np.ndarray  # B float64: S_b
+    sum_occupied: np.ndarray  # B float64: O_b
+
+    @property
+    def mean_q(self) -> np.ndarray:
+        """``S_b / n_b``: the mean predicted probability of bin ``b`` (NaN if empty)."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(self.count > 0, self.sum_q / np.maximum(self.count, 1), np.nan)
+
+    @property
+    def occupied(self) -> np.ndarray:
+        """``O_b / n_b``: the share of bin ``b``'s cells that are occupied (NaN if empty)."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.where(self.count > 0, self.sum_occupied / np.maximum(self.count, 1), np.nan)
+
+    @property
+    def ece(self) -> float:
+        r""":math:`\mathrm{ECE} = \sum_b \frac{n_b}{n} |\bar q_b - \bar m_b| = \frac{1}{n} \sum_b |S_b - O_b|`
+        (NaN for no cells)."""
+        n = int(self.count.sum())
+        return float(np.abs(self.sum_q - self.sum_occupied).sum() / n) if n else float("nan")
+
+    def to_dict(self) -> dict[str, list]:
+        """JSON-ready lists (``edges``, ``count``, ``sum_q``, ``sum_occupied``)."""
+        return {
+            "edges": self.edges.tolist(),
+            "count": self.count.tolist(),
+            "sum_q": self.sum_q.tolist(),
+            "sum_occupied": self.sum_occupied.tolist(),
+        }
+
+    @classmethod
+    def from_dict(cls, d: dict) -> Reliability:
+        """The inverse of :meth:`to_dict`, checked: ``B + 1`` increasing edges and ``B`` of each sum."""
+        try:
+            edges = np.asarray(d["edges"], dtype=np.float64)
+            count = np.asarray(d["count"], dtype=np.int64)
+            sum_q = np.asarray(d["sum_q"], dtype=np.float64)
+            sum_occ = np.asarray(d["sum_occupied"], dtype=np.float64)
+        except (KeyError, TypeError, ValueError) as e:
+            raise ValueError(f"not a reliability record ({type(e).__name__}: {e})") from None
+        B = len(count)
+        if edges.shape != (B + 1,) or sum_q.shape != (B,) or sum_occ.shape != (B,) or not (np.diff(edges) > 0).all():
+            raise ValueError(
+                f"a reliability record needs B + 1 increasing edges and B counts and sums; got {len(edges)} edges, "
+                f"{B} counts, {len(sum_q)} and {len(sum_occ)} sums"
+            )
+        return cls(edges, count, sum_q, sum_occ)
+
+    @staticmethod
+    def pooled(parts) -> Reliability:
+        """The diagram of the union of the cells of ``parts`` (same bins): counts and sums added."""
+        parts = list(parts)
+        if not parts:
+            raise ValueError("pooled needs at least one reliability diagram")
+        e = parts[0].edges
+        if any(p.edges.shape != e.shape or not np.allclose(p.edges, e) for p in parts):
+            raise ValueError("pooled needs diagrams with the same bins")
+        return Reliability(
+            e.copy(),
+            np.sum([p.count for p in parts], axis=0),
+            np.sum([p.sum_q for p in parts], axis=0),
+            np.sum([p.sum_occupied for p in parts], axis=0),
+        )
+
+
+def reliability(estimate, truth, mask=None, bins: int = 10) -> Reliability:
+    r"""The reliability diagram of cell probabilities ``q`` against the binary truth ``m``.
+
+    Cell ``k`` falls in bin ``b = min(floor(B q_k), B - 1)`` of ``B = bins`` equal-width bins; returned are
+    ``n_b``, ``S_b = sum q_k`` and ``O_b = sum m_k`` per bin (:class:`Reliability`). A calibrated map has
+    ``O_b / n_b ~ S_b / n_b`` in every bin.
+    """
+    if int(bins) < 1:
+        raise ValueError(f"bins must be >= 1, got {bins}")
+    bins = int(bins)
+    est, tru = _flat(estimate, truth, mask)
+    if ((est < 0) | (est > 1)).any():
+        i = int(np.flatnonzero((est < 0) | (est > 1))[0])
+        raise ValueError(f"estimate must hold probabilities in [0, 1]; (masked) index {i} is {est[i]}")
+    b = np.minimum((est * bins).astype(np.int64), bins - 1)
+    return Reliability(
+        np.linspace(0.0, 1.0, bins + 1),
+        np.bincount(b, minlength=bins).astype(np.int64),
+        np.bincount(b, weights=est, minlength=bins).astype(np.float64),
+        np.bincount(b, weights=tru.astype(np.float64), minlength=bins),
+    )
+
+
 def expected_calibration_error(estimate, truth, mask=None, bins: int = 10) -> float:
     r"""Expected calibration error over ``bins`` equal-width probability bins:
-    :math:`\sum_b \frac{n_b}{n} |\bar q_b - \bar m_b|` (mean probability vs occupied share per bin)."""
-    est, tru = _flat(estimate, truth, mask)
-    if est.size == 0:
-        return float("nan")
-    b = np.minimum((est * bins).astype(np.int64), bins - 1)
-    n = np.bincount(b, minlength=bins)
-    sq = np.bincount(b, weights=est, minlength=bins)
-    sm = np.bincount(b, weights=tru.astype(float), minlength=bins)
-    keep = n > 0
-    return float(np.sum(np.abs(sq[keep] - sm[keep])) / est.size)
+    :math:`\sum_b \frac{n_b}{n} |\bar q_b - \bar m_b|` (mean probability vs occupied share per bin;
+    :attr:`Reliability.ece` of :func:`reliability`)."""
+    return reliability(estimate, truth, mask, bins).ece
 
 
 def occupied_iou(estimate, truth, mask=None, threshold: float = 0.5, unknown=None) -> float:

@@ -1,4 +1,5 @@
-"""Pictures a researcher expects: 2D maps on the thesis colour scale, 1D marginal bars, P-R curves.
+"""Pictures a researcher expects: 2D maps on the thesis colour scale, 1D marginal bars, P-R curves,
+reliability diagrams.
 
 The colour scale of Fig. 1.10g runs white -> yellow -> red -> black for ``p = 0 -> 1`` (darker is more
 likely occupied); a cell at the prior 0.5 is red-orange. Matplotlib is imported lazily (Agg backend
@@ -11,7 +12,15 @@ from collections.abc import Mapping
 
 import numpy as np
 
-__all__ = ["thesis_cmap", "plot_map", "plot_marginals_1d", "plot_first_hit", "plot_mutual_information", "plot_pr_curve"]
+__all__ = [
+    "thesis_cmap",
+    "plot_map",
+    "plot_marginals_1d",
+    "plot_first_hit",
+    "plot_mutual_information",
+    "plot_pr_curve",
+    "plot_reliability",
+]
 
 
 def _plt():
@@ -142,4 +151,35 @@ def plot_pr_curve(curves: Mapping[str, tuple[np.ndarray, np.ndarray]], ax=None):
     ax.set_xlim(0, 1)
     ax.set_ylim(0, 1.02)
     ax.legend(fontsize=7)
+    return ax
+
+
+def plot_reliability(diagrams: Mapping, ax=None, title: str | None = None, min_count: int = 1):
+    r"""Reliability diagrams: ``{name: Reliability}`` (:func:`ogm_ppl.metrics.reliability`), each the occupied
+    share ``O_b / n_b`` of its bins against their mean probability ``S_b / n_b`` (bins holding fewer than
+    ``min_count`` cells left out), over the diagonal of perfect calibration; the legend gives each ECE.
+    With one diagram the share of cells per bin is drawn as grey bars (right axis)."""
+    plt = _plt()
+    if ax is None:
+        _, ax = plt.subplots(figsize=(4, 4))
+    ax.plot([0, 1], [0, 1], color="0.6", lw=0.8, ls="--")
+    for name, rel in diagrams.items():
+        keep = rel.count >= max(1, int(min_count))
+        ax.plot(rel.mean_q[keep], rel.occupied[keep], marker="o", ms=3, lw=1, label=f"{name} (ECE {rel.ece:.3f})")
+    if len(diagrams) == 1:
+        (rel,) = diagrams.values()
+        share = rel.count / max(int(rel.count.sum()), 1)
+        twin = ax.twinx()
+        twin.bar(rel.edges[:-1], share, width=np.diff(rel.edges), align="edge", color="0.85", zorder=0)
+        twin.set_ylim(0, 1)
+        twin.set_ylabel("share of cells", fontsize=8)
+        ax.set_zorder(twin.get_zorder() + 1)
+        ax.patch.set_visible(False)
+    ax.set_xlabel("predicted P(occupied)")
+    ax.set_ylabel("occupied share")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1)
+    ax.legend(fontsize=6, loc="upper left")
+    if title:
+        ax.set_title(title, fontsize=9)
     return ax

@@ -143,3 +143,64 @@ def test_empty_mask_gives_nan_scores_quietly():
         out = prediction_scores(est, tru, mask=np.zeros(3, dtype=bool))
     assert out["cells"] == 0
     assert all(np.isnan(v) for k, v in out.items() if k != "cells")
+
+
+# ----------------------- reliability diagrams
+
+
+def test_reliability_against_hand_computed_bins():
+    """Six cells in 10 bins: 0.05 -> bin 0; 0.15, 0.12 -> bin 1; 0.55 -> bin 5; 0.95 and 1.0 -> bin 9 (the last
+    bin is closed). ECE = (|0.05 - 0| + |0.27 - 1| + |0.55 - 1| + |1.95 - 1|) / 6."""
+    from ogm_ppl.metrics import expected_calibration_error, reliability
+
+    q = np.array([0.05, 0.15, 0.12, 0.55, 0.95, 1.0])
+    m = np.array([False, True, False, True, True, False])
+    r = reliability(q, m)
+    np.testing.assert_array_equal(r.edges, np.linspace(0, 1, 11))
+    np.testing.assert_array_equal(r.count, [1, 2, 0, 0, 0, 1, 0, 0, 0, 2])
+    np.testing.assert_allclose(r.sum_q, [0.05, 0.27, 0, 0, 0, 0.55, 0, 0, 0, 1.95], atol=1e-15)
+    np.testing.assert_array_equal(r.sum_occupied, [0, 1, 0, 0, 0, 1, 0, 0, 0, 1])
+    np.testing.assert_allclose(r.mean_q[[0, 1, 5, 9]], [0.05, 0.135, 0.55, 0.975])
+    np.testing.assert_allclose(r.occupied[[0, 1, 5, 9]], [0.0, 0.5, 1.0, 0.5])
+    assert np.isnan(r.mean_q[2]) and np.isnan(r.occupied[2])
+    assert r.ece == pytest.approx(2.18 / 6)
+    assert expected_calibration_error(q, m) == pytest.approx(2.18 / 6)
+    # two bins: {0.05, 0.15, 0.12} and {0.55, 0.95, 1.0}: (|0.32 - 1| + |2.5 - 2|) / 6
+    assert reliability(q, m, bins=2).ece == pytest.approx(1.18 / 6)
+    # one bin: |mean q - mean m|
+    assert reliability(q, m, bins=1).ece == pytest.approx(abs(q.mean() - m.mean()))
+    # a mask keeps cells 1 and 4 only
+    rm = reliability(q, m, mask=[False, True, False, False, True, False])
+    assert rm.count.sum() == 2 and rm.ece == pytest.approx((0.85 + 0.05) / 2)
+
+
+def test_reliability_pools_by_adding_and_round_trips():
+    from ogm_ppl.metrics import Reliability, reliability
+
+    rng = np.random.default_rng(1)
+    q, m = rng.random(50), rng.random(50) < 0.3
+    whole = reliability(q, m)
+    parts = Reliability.pooled([reliability(q[:20], m[:20]), reliability(q[20:], m[20:])])
+    np.testing.assert_array_equal(parts.count, whole.count)
+    np.testing.assert_allclose(parts.sum_q, whole.sum_q)
+    assert parts.ece == pytest.approx(whole.ece)
+    back = Reliability.from_dict(whole.to_dict())
+    np.testing.assert_array_equal(back.count, whole.count)
+    assert back.ece == whole.ece
+    with pytest.raises(ValueError, match="B \\+ 1 increasing edges"):
+        Reliability.from_dict({**whole.to_dict(), "count": [1, 2]})
+    with pytest.raises(ValueError, match="not a reliability record"):
+        Reliability.from_dict({"edges": [0, 1]})
+    with pytest.raises(ValueError, match="same bins"):
+        Reliability.pooled([whole, reliability(q, m, bins=4)])
+
+
+def test_reliability_refuses_bad_input_and_an_empty_mask_is_nan():
+    from ogm_ppl.metrics import reliability
+
+    with pytest.raises(ValueError, match=r"\[0, 1\]"):
+        reliability([0.2, 1.5], [True, False])
+    with pytest.raises(ValueError, match="bins must be >= 1"):
+        reliability([0.2], [True], bins=0)
+    r = reliability([0.2, 0.7], [False, True], mask=[False, False])
+    assert r.count.sum() == 0 and math.isnan(r.ece)

@@ -1,0 +1,704 @@
+r"""Priors as predictors of what was not seen, and how well calibrated they are (thesis Chapter 5, 5.2.1-5.2.3).
+
+The protocol. On held-out maps of each *test corpus* (``generated``: maps drawn by
+:mod:`ogm_ppl.datasets.mapgen` from seeds disjoint from those the shipped ``generated`` tables counted;
+``houseexpo``, ``ipa``, ``dungeon``: :func:`~ogm_ppl.datasets.floorplans.heldout_plans`, the buildings of the
+real logs left out) we crop a ``window x window`` map (the window holding the most free cells next to a wall),
+simulate a sparse stop-and-scan dataset (a few stops, a few beams) and estimate the posterior marginals
+``q_k = p(m_k = 1 | z)`` with every prior learned on every *training corpus* (a test x train matrix) by Gibbs
+sampling: single-cell Gibbs (Section 4.1) for priors whose compiled bundle weighs dense conditionals, patch
+Gibbs over the prior's tile (``L = 9`` for the 3 x 3 tile priors, Algorithm 2) when the bundle weighs a sparse
+support (``sparse_patches()``: tile tables leave single-cell moves stuck). A prior whose update would weigh
+more than ``--max-support`` configurations (:func:`support`; the 5 x 5 tables of the richer corpora hold up to
+2 x 10^5) is skipped and listed. Traditional OGM with the fitted ``p21`` update is the baseline row (never-observed
+cells keep ``q = 0.5``).
+
+Scored cells: the near-mapped mask ``N`` (cells within 10 cells of a cell some ray reached, Fig. 6.16b) and its
+*unseen* cells ``U`` (cells of ``N`` no ray reached): NLL in bits per cell
+``-1/|M| sum_k log2 q_k^{m_k} (1 - q_k)^{1 - m_k}``, ECE and the reliability diagram (10 equal-width bins),
+Brier score, ROC AUC, best F1 and occupied-class IoU at 0.5 (never-observed cells counted free, the convention
+of learned map-prediction work), plus the seconds each method took.
+
+Agreement of chains. Each prior runs ``C = 3`` chains from different starts: traditional OGM thresholded at the
+prior's mean, the all-free map and a draw from the prior (``prior.sample``). The marginals scored are pooled over
+the chains, ``q = (1/C) sum_c q^(c)``; split R-hat (:func:`~ogm_ppl.inference.mcmc.diagnostics.split_rhat`) per
+unseen cell over the ``C`` chains' kept sweeps gives the share of unseen cells with ``R-hat < 1.05`` (cells that
+keep one value in every sweep of every chain agree and count below; ``rhat_below_varying`` leaves them out).
+
+Leakage. A prior is never scored on a map it was learned from: :func:`check_heldout` rebuilds each shipped
+table's training set from its recorded provenance (plan names checked against the stored SHA-256; the generated
+corpus's seed streams), and refuses a test map that is in it (or shares a building with it), and any plan of a
+real-log building, before anything runs.
+
+Kernels. ``--kernel`` names an entry of :data:`KERNELS`: ``factory(model, patch, init) -> kernel`` (a
+:class:`~ogm_ppl.inference.mcmc.kernel.MapKernel` that :func:`~ogm_ppl.inference.run_gibbs` drives); another
+sampler (e.g. parallel tempering) plugs in by adding an entry.
+
+Outputs under ``--out`` (default ``out/calibration/``): ``calibration.json`` (settings, provenance, one row per
+test corpus, train corpus, map, prior and mask, with its reliability diagram), ``calibration_summary.json`` (the
+means over maps without the diagrams: what the docs snapshot), ``calibration.md`` (tables),
+``reliability_<test>.png`` (one diagram per prior, pooled over maps, unseen cells, bins of 20 cells or more),
+``bars_<mask>.png`` (NLL and AUC per test corpus) and ``matrix_unseen.png`` (NLL of every prior and training
+corpus on every test corpus). A rerun with the same settings skips the (map, prior) pairs already in the JSON.
+
+Measured run times: the default run (2 maps per corpus, every shipped kind x every shipped corpus, 512 rows,
+16 skipped) took 23.5 min wall on 2 AMD EPYC cores that other jobs shared (load average 4-5 for most of it);
+``--quick`` took 15 s once numba had compiled its kernels. Two runs of the default gave identical numbers.
+
+    python experiments/calibration.py --quick        # smoke run, 1 small map per corpus, 3 priors
+    python experiments/calibration.py                # the default matrix (see --help for the sizes)
+    python experiments/calibration.py --priors patch3 border --train houseexpo --test ipa dungeon
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import math
+import sys
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+
+from ogm_ppl import GaussianRange, Grid, OccupancyModel, Rays, raycast
+from ogm_ppl.datasets import floorplans as fp
+from ogm_ppl.datasets.mapgen import KINDS as MAP_KINDS
+from ogm_ppl.datasets.mapgen import generate_map
+from ogm_ppl.datasets.stop_and_scan import stop_and_scan
+from ogm_ppl.inference import CellGibbs, PatchGibbs, RunningStats, evidence_grid, run_gibbs
+from ogm_ppl.inference.mcmc.diagnostics import split_rhat
+from ogm_ppl.io import atomic_write_text
+from ogm_ppl.metrics import Reliability, near_mapped_mask, prediction_scores, reliability
+from ogm_ppl.models import delta_by_name
+from ogm_ppl.priors.named import prior_by_name, prior_kinds
+from ogm_ppl.priors.tables import FITTED_DIR, available_tables
+
+TEST_CORPORA: tuple[str, ...] = ("generated", "houseexpo", "ipa", "dungeon")
+#: held-out generated map ``i`` is ``generate_map(KINDS[i % 4], seed=GENERATED_HELDOUT_SEED + i)``: a root seed
+#: stream, never one of the spawned children ``SeedSequence(seed).spawn(n)`` the tables counted
+GENERATED_HELDOUT_SEED = 50_000
+STARTS: tuple[str, ...] = ("ogm", "free", "prior")
+METRICS: tuple[str, ...] = ("nll_bits", "ece", "brier", "auc", "best_f1", "iou")
+MASKS: tuple[str, ...] = ("unseen", "near")
+OGM_LABEL = "traditional OGM (p21)"
+RHAT_THRESHOLD = 1.05
+#: settings a resumed run must share with the JSON it extends
+RUN_KEYS = (
+    "window",
+    "generated_shape",
+    "poses",
+    "beams",
+    "range_cells",
+    "sigma",
+    "sweeps",
+    "burn",
+    "seed",
+    "kernel",
+    "patch",
+)
+
+
+class LeakageError(ValueError):
+    """A test map belongs to the training set of the prior to be scored on it."""
+
+
+# --------------------------------------------------------------------------------------- held-out maps
+@dataclass(frozen=True)
+class TestMap:
+    """One held-out map: ``truth``, ``known`` ``H x W`` bool (True = occupied / known), its corpus and name
+    (``plan@rROW,cCOL`` for a window of a larger plan), metres per cell."""
+
+    corpus: str
+    name: str
+    plan: str
+    truth: np.ndarray
+    known: np.ndarray
+    resolution: float
+
+
+def choose_window(occupancy: np.ndarray, known: np.ndarray, window: int, stride: int = 4) -> tuple[int, int]:
+    """Top-left corner of the ``window x window`` crop holding the most *wall-side* cells (known free cells
+    with an occupied 4-neighbour), scanned with ``stride``; ``(0, 0)`` when the map is no larger.
+
+    Summed-area table of the wall-side map ``w``: the count of a window at ``(r, c)`` is
+    ``S[r+h, c+w] - S[r, c+w] - S[r+h, c] + S[r, c]``.
+    """
+    H, W = occupancy.shape
+    h, w = min(window, H), min(window, W)
+    free = known & ~occupancy
+    occ = np.pad(occupancy & known, 1)
+    side = free & (occ[:-2, 1:-1] | occ[2:, 1:-1] | occ[1:-1, :-2] | occ[1:-1, 2:])
+    S = np.zeros((H + 1, W + 1), dtype=np.int64)
+    S[1:, 1:] = side.cumsum(0).cumsum(1)
+    rs = np.unique(np.r_[np.arange(0, H - h + 1, stride), H - h])
+    cs = np.unique(np.r_[np.arange(0, W - w + 1, stride), W - w])
+    R, C = np.meshgrid(rs, cs, indexing="ij")
+    count = S[R + h, C + w] - S[R, C + w] - S[R + h, C] + S[R, C]
+    i = np.unravel_index(int(np.argmax(count)), count.shape)
+    return int(R[i]), int(C[i])
+
+
+def _crop(corpus, plan, occupancy, known, resolution, window) -> TestMap:
+    r0, c0 = choose_window(occupancy, known, window)
+    h, w = min(window, occupancy.shape[0]), min(window, occupancy.shape[1])
+    name = plan if (h, w) == occupancy.shape else f"{plan}@r{r0},c{c0}"
+    sl = (slice(r0, r0 + h), slice(c0, c0 + w))
+    return TestMap(corpus, name, plan, occupancy[sl].copy(), known[sl].copy(), resolution)
+
+
+def generated_seed(i: int) -> int:
+    """The integer seed of held-out generated map ``i``."""
+    return GENERATED_HELDOUT_SEED + int(i)
+
+
+def heldout_maps(corpus: str, n: int, window: int, generated_shape: int = 160) -> list[TestMap]:
+    """The first ``n`` held-out maps of ``corpus`` (natural order of the held-out plans, real-log buildings
+    left out; plans with fewer than 200 free cells in their window skipped), each cropped to ``window``.
+    ``generated``: ``generate_map(KINDS[i % 4], (generated_shape,) * 2, seed=generated_seed(i))``."""
+    out: list[TestMap] = []
+    if corpus == "generated":
+        for i in range(n):
+            kind = MAP_KINDS[i % len(MAP_KINDS)]
+            m = generate_map(kind, (generated_shape, generated_shape), seed=generated_seed(i), border=20)
+            out.append(_crop(corpus, f"{kind}/seed{generated_seed(i)}", m, np.ones_like(m), 0.05, window))
+        return out
+    names = fp.heldout_plans(corpus, exclude_buildings=tuple(fp.REAL_LOG_BUILDINGS))
+    for name in names:
+        if len(out) == n:
+            break
+        p = fp.load_plan(corpus, name)
+        t = _crop(corpus, name, p.occupancy, p.known, p.resolution or 0.05, window)
+        if (t.known & ~t.truth).sum() >= 200:
+            out.append(t)
+    return out
+
+
+# --------------------------------------------------------------------------------------------- leakage
+def _tables_provenance(corpus: str) -> dict:
+    path = FITTED_DIR / f"prior_{corpus}.json"
+    try:
+        prov = json.loads(path.read_text())["provenance"]
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise LeakageError(f"{path}: cannot read the tables' provenance ({type(e).__name__}: {e})") from None
+    if not isinstance(prov, dict):
+        raise LeakageError(f"{path}: 'provenance' is not an object")
+    return prov
+
+
+def training_set(corpus: str) -> set[str]:
+    """Names of the maps the shipped tables of ``corpus`` were learned from, rebuilt from their provenance
+    (``ogm_ppl/fitted/prior_<corpus>.json``). Floor plans: ``training_plans(corpus, excluded_buildings,
+    limit=plans)``, checked against the recorded SHA-256 of the names; ``generated``: ``"seedstream:E/K"``
+    for each spawned child (entropy ``E``, spawn key ``K``) of the recorded seed."""
+    prov = _tables_provenance(corpus)
+    path = FITTED_DIR / f"prior_{corpus}.json"
+    if corpus == "generated":
+        try:
+            children = np.random.SeedSequence(int(prov["seed"])).spawn(int(prov["n"]))
+        except (KeyError, TypeError, ValueError) as e:
+            raise LeakageError(f"{path}: provenance lacks the generator's seed and n ({e})") from None
+        return {f"seedstream:{c.entropy}/{tuple(c.spawn_key)}" for c in children}
+    try:
+        names = fp.training_plans(corpus, exclude_buildings=tuple(prov["excluded_buildings"]), limit=int(prov["plans"]))
+        want = prov["plan_names_sha256"]
+    except (KeyError, TypeError, ValueError) as e:
+        raise LeakageError(f"{path}: provenance lacks plans / excluded_buildings / plan_names_sha256 ({e})") from None
+    got = hashlib.sha256("\n".join(names).encode()).hexdigest()
+    if got != want:
+        raise LeakageError(
+            f"{path}: the training plans rebuilt from its provenance hash to {got[:12]}..., not the recorded "
+            f"{want[:12]}...: the floor-plan data changed since the tables were learned"
+        )
+    return set(names)
+
+
+def _identity(corpus: str, plan: str) -> str:
+    """What :func:`training_set` would call the map ``plan`` of ``corpus``."""
+    if corpus == "generated":
+        seed = int(plan.rsplit("seed", 1)[1])
+        s = np.random.SeedSequence(seed)
+        return f"seedstream:{s.entropy}/{tuple(s.spawn_key)}"
+    return plan
+
+
+def check_heldout(test_corpus: str, plans: Sequence[str], train_corpus: str | None, train: set[str] | None = None):
+    """Refuse (:class:`LeakageError`) to score a prior learned on ``train_corpus`` on ``plans`` of
+    ``test_corpus`` if one of them is a plan of a real-log building, or (same corpus) one of the training
+    maps (``train``, default :func:`training_set`) or of the same building as one of them. ``train_corpus``
+    ``None``: a prior learned from nothing (the uniform prior); only the real-log check applies."""
+    for p in plans:
+        if test_corpus != "generated" and fp.excluded(p):
+            raise LeakageError(f"{test_corpus} plan {p!r} is of a real-log building; it is excluded everywhere")
+    if train_corpus is None or train_corpus != test_corpus:
+        return
+    train = training_set(train_corpus) if train is None else train
+    ids = {_identity(test_corpus, p): p for p in plans}
+    clash = sorted(ids[i] for i in set(ids) & train)
+    if test_corpus != "generated":
+        buildings = {fp.building_of(test_corpus, t) for t in train}
+        clash += sorted(p for p in plans if p not in clash and fp.building_of(test_corpus, p) in buildings)
+    if clash:
+        raise LeakageError(
+            f"{len(clash)} {test_corpus} test map(s) are in (or share a building with) the training set of the "
+            f"{train_corpus} tables: {clash[:3]}"
+        )
+
+
+# ---------------------------------------------------------------------------------------------- kernels
+def default_patch(prior) -> tuple[int, int] | None:
+    """The patch a prior is sampled with: its tile (``t_h x t_w``, else 3 x 3) when its compiled bundle
+    weighs a sparse support (``sparse_patches()``), ``None`` (single-cell Gibbs) otherwise or for a 1 x 1 tile."""
+    c = prior.compiled()
+    if c is None or not c.sparse_patches():
+        return None
+    hw = (int(getattr(c, "t_h", 3)), int(getattr(c, "t_w", 3)))
+    return None if hw == (1, 1) else hw
+
+
+def _gibbs(model, patch, init):
+    return CellGibbs(model, init=init) if patch is None else PatchGibbs(model, patch, init=init)
+
+
+#: ``name -> factory(model, patch, init)``; ``patch`` ``None`` means single cells, ``init`` one of :data:`STARTS`
+KERNELS: dict[str, Callable] = {"gibbs": _gibbs}
+
+
+def _patch_overrides(items: Sequence[str]) -> dict[str, tuple[int, int] | None]:
+    out: dict[str, tuple[int, int] | None] = {}
+    for it in items:
+        kind, _, spec = it.partition("=")
+        try:
+            if spec in ("1", "1x1"):
+                out[kind] = None
+            else:
+                r, c = (int(v) for v in spec.lower().split("x"))
+                out[kind] = (r, c)
+        except ValueError:
+            raise SystemExit(f"--patch takes KIND=RxC (e.g. border1=3x3) or KIND=1, got {it!r}") from None
+    return out
+
+
+# ------------------------------------------------------------------------------------------- one map
+@dataclass
+class Scene:
+    tmap: TestMap
+    grid: Grid
+    rays: Rays
+    masks: dict[str, np.ndarray]  # K bool each
+
+
+def make_scene(t: TestMap, args) -> Scene:
+    grid = Grid(t.truth.shape, resolution=t.resolution)
+    data = stop_and_scan(
+        t.truth,
+        grid,
+        num_poses=args.poses,
+        beams=args.beams,
+        max_range_cells=args.range_cells,
+        sigma_cells=args.sigma,
+        seed=args.seed,
+    )
+    rays = raycast(grid, data.scans)
+    reached = rays.reached().reshape(grid.shape)
+    near = near_mapped_mask(reached, 10.0) & t.known
+    unseen = near & ~reached
+    return Scene(t, grid, rays, {"near": near.ravel(), "unseen": unseen.ravel()})
+
+
+def _scores(scene: Scene, q: np.ndarray, unknown=None) -> dict[str, dict]:
+    truth = scene.tmap.truth.ravel()
+    out = {}
+    for mask_name in MASKS:
+        mask = scene.masks[mask_name]
+        s: dict = dict(prediction_scores(q, truth, mask=mask, unknown=unknown))
+        s["reliability"] = reliability(q, truth, mask=mask).to_dict()
+        out[mask_name] = s
+    return out
+
+
+def run_ogm(scene: Scene) -> tuple[dict[str, dict], float]:
+    t0 = time.perf_counter()
+    ogm = evidence_grid(scene.rays, delta_by_name("p21"))
+    q = ogm.probabilities.numpy()
+    return _scores(scene, q, unknown=~ogm.observed.numpy()), time.perf_counter() - t0
+
+
+def support(prior, patch: tuple[int, int] | None) -> int:
+    """How many configurations one update weighs at most: ``2`` for a single cell, else
+    ``min(patch_capacity(L), 2^L)``: the compiled bundle's bound (the largest segment of a sparse tile table, which
+    for a border prior counts whole windows) capped by the ``2^L`` configurations ``L`` cells have; ``2^L``
+    without a bundle."""
+    if patch is None:
+        return 2
+    L = int(np.prod(patch))
+    c = prior.compiled()
+    cap = int(c.patch_capacity(L)) if c is not None else 1 << L
+    return min(cap, 1 << L)
+
+
+def run_prior(scene: Scene, name: str, args, patch_override=None) -> dict:
+    """``C`` chains (:data:`STARTS`) under the prior ``name``; pooled marginals scored, split R-hat of the
+    unseen cells. Returns ``{"scores": {mask: ...}, "seconds", "patch", "rhat_below", "rhat_max", ...}``, or
+    ``{"skipped": reason}`` when one update would weigh more than ``args.max_support`` configurations."""
+    prior = prior_by_name(name, scene.grid.shape)
+    kind = name.partition(":")[0]
+    patch = patch_override[kind] if patch_override and kind in patch_override else default_patch(prior)
+    n_support = support(prior, patch)
+    if n_support > args.max_support:
+        return {"skipped": f"a {patch} patch update weighs up to {n_support} configurations (> --max-support)"}
+    model = OccupancyModel(scene.grid, scene.rays, GaussianRange(args.sigma), prior)
+    unseen = np.flatnonzero(scene.masks["unseen"])
+    make = KERNELS[args.kernel]
+    marg, traces, secs = [], [], []
+    for j, init in enumerate(STARTS):
+        t0 = time.perf_counter()
+        kernel = make(model, patch, init)
+        stats = RunningStats(model, trace_cells=unseen)
+        run_gibbs(kernel, args.sweeps, stats, warmup=args.burn, seed=args.seed + 1000 * j, progress=False)
+        marg.append(stats.marginals.numpy())
+        traces.append(stats.trace())
+        secs.append(time.perf_counter() - t0)
+    q = np.clip(np.mean(marg, axis=0), 0.0, 1.0)
+    rh = split_rhat(np.stack(traces)).numpy() if len(unseen) else np.zeros(0)
+    agree = np.where(np.isnan(rh), 0.0, rh) < RHAT_THRESHOLD
+    return {
+        "scores": _scores(scene, q),
+        "seconds": float(sum(secs)),
+        "seconds_per_chain": [float(s) for s in secs],
+        "patch": None if patch is None else list(patch),
+        "rhat_below": float(agree.mean()) if len(unseen) else float("nan"),
+        "rhat_below_varying": float((rh[~np.isnan(rh)] < RHAT_THRESHOLD).mean()) if (~np.isnan(rh)).any() else math.nan,
+        "rhat_max": float(np.nanmax(rh)) if np.isfinite(rh).any() else float("nan"),
+        "rhat_cells": len(unseen),
+    }
+
+
+# ----------------------------------------------------------------------------------------- the matrix
+def prior_names(kinds: Sequence[str], train: Sequence[str]) -> list[tuple[str, str | None]]:
+    """``(prior name, training corpus)`` pairs: ``KIND:CORPUS`` for every kind and training corpus (a name that
+    already holds ``:CORPUS`` is kept), and the uniform ``independent`` (trained on nothing) once."""
+    out: list[tuple[str, str | None]] = []
+    for k in kinds:
+        if ":" in k:
+            out.append((k, k.partition(":")[2]))
+            continue
+        if k == "independent":
+            out.append(("independent", None))
+        out += [(f"{k}:{c}", c) for c in train]
+    return list(dict.fromkeys(out))
+
+
+def _row_key(r: dict) -> tuple:
+    return (r["test"], r["plan"], r["prior_name"])
+
+
+def _rows_for(test, t: TestMap, name, train, kernel, result) -> list[dict]:
+    rows = []
+    for mask, s in result["scores"].items():
+        row = {
+            "test": test,
+            "train": train or "none",
+            "plan": t.name,
+            "prior": name.partition(":")[0] if name != OGM_LABEL else "ogm",
+            "prior_name": name,
+            "kernel": kernel,
+            "mask": mask,
+            **{k: v for k, v in s.items()},
+            "seconds": result["seconds"],
+        }
+        for k in ("seconds_per_chain", "patch", "rhat_below", "rhat_below_varying", "rhat_max", "rhat_cells"):
+            if k in result:
+                row[k] = result[k]
+        rows.append(row)
+    return rows
+
+
+def _load_previous(path: Path, settings: dict, fresh: bool) -> tuple[list[dict], list[dict]]:
+    """The rows and the runs (provenance and seconds of each earlier call) of ``path``, if it exists and shares
+    :data:`RUN_KEYS` with ``settings``."""
+    if fresh or not path.is_file():
+        return [], []
+    try:
+        doc = json.loads(path.read_text())
+        rows, old = doc["rows"], doc["settings"]
+        runs = doc.get("runs", [])
+    except (OSError, ValueError, KeyError, TypeError) as e:
+        raise SystemExit(f"{path}: not a calibration result ({type(e).__name__}: {e}); use --fresh") from None
+    differ = [k for k in RUN_KEYS if old.get(k) != settings.get(k)]
+    if differ:
+        raise SystemExit(f"{path}: its settings differ in {differ}; rerun with --fresh or another --out")
+    return rows, runs
+
+
+def _mean(rows, key) -> float:
+    v = [r[key] for r in rows if r.get(key) is not None and not (isinstance(r[key], float) and math.isnan(r[key]))]
+    return float(np.mean(v)) if v else float("nan")
+
+
+def summary(rows: list[dict]) -> list[dict]:
+    """Means over maps per (test, train, prior name, mask): the tables' and the figures' numbers, with the
+    reliability diagram pooled over the maps."""
+    groups: dict[tuple, list[dict]] = {}
+    for r in rows:
+        groups.setdefault((r["test"], r["train"], r["prior_name"], r["mask"]), []).append(r)
+    out = []
+    for (test, train, name, mask), g in groups.items():
+        rel = Reliability.pooled(Reliability.from_dict(r["reliability"]) for r in g)
+        out.append(
+            {
+                "test": test,
+                "train": train,
+                "prior_name": name,
+                "prior": g[0]["prior"],
+                "mask": mask,
+                "maps": len(g),
+                **{k: _mean(g, k) for k in (*METRICS, "seconds", "rhat_below")},
+                "ece_pooled": rel.ece,
+                "reliability": rel.to_dict(),
+            }
+        )
+    return out
+
+
+def _fmt(x) -> str:
+    return "" if x is None or (isinstance(x, float) and math.isnan(x)) else f"{x:.3f}"
+
+
+def tables_md(summ: list[dict], settings: dict) -> str:
+    tests = list(dict.fromkeys(s["test"] for s in summ))
+    lines = [
+        "# Priors as predictors of unseen cells: prediction and calibration\n",
+        f"Settings: {json.dumps(settings)}\n",
+        "Means over the held-out maps. `rhat<1.05`: share of unseen cells whose split R-hat over the chains from "
+        "OGM, all-free and prior-draw starts is below 1.05. Priors learned on the test corpus:\n",
+    ]
+    for mask in MASKS:
+        for test in tests:
+            sel = [s for s in summ if s["test"] == test and s["mask"] == mask and s["train"] in (test, "none")]
+            if not sel:
+                continue
+            lines += [
+                f"\n**{test}**, {mask} cells ({sel[0]['maps']} maps)\n",
+                "| method | " + " | ".join(METRICS) + " | rhat<1.05 | seconds |",
+                "|---" * (len(METRICS) + 3) + "|",
+            ]
+            for s in sel:
+                vals = " | ".join(_fmt(s[k]) for k in METRICS)
+                lines.append(f"| {s['prior_name']} | {vals} | {_fmt(s['rhat_below'])} | {s['seconds']:.1f} |")
+    names = [s for s in summ if s["mask"] == "unseen" and s["prior"] != "ogm"]
+    kinds = list(dict.fromkeys(s["prior_name"] for s in names))
+    lines += [
+        "\n**Across corpora**: NLL (bits/cell) / AUC on the unseen cells, prior (rows, with its training corpus) "
+        "against the test corpus (columns)\n",
+        "| prior | " + " | ".join(tests) + " |",
+        "|---" * (len(tests) + 1) + "|",
+    ]
+    for k in kinds:
+        cells = []
+        for test in tests:
+            hit = [s for s in names if s["prior_name"] == k and s["test"] == test]
+            cells.append(f"{_fmt(hit[0]['nll_bits'])} / {_fmt(hit[0]['auc'])}" if hit else "")
+        lines.append(f"| {k} | " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def _label(name: str, test: str) -> str:
+    return "independent (0.5)" if name == "independent" else name.replace(f":{test}", "")
+
+
+def figures(summ: list[dict], out: Path) -> list[Path]:
+    """``reliability_<test>.png`` (unseen cells, priors learned on the test corpus and OGM) and
+    ``bars_<mask>.png`` (NLL and AUC per test corpus)."""
+    from ogm_ppl.viz import _plt, plot_reliability
+
+    plt = _plt()
+    paths = []
+    tests = list(dict.fromkeys(s["test"] for s in summ))
+    for test in tests:
+        sel = [s for s in summ if s["test"] == test and s["mask"] == "unseen" and s["train"] in (test, "none")]
+        if not sel:
+            continue
+        cols = min(4, len(sel))
+        rows = -(-len(sel) // cols)
+        fig, axes = plt.subplots(rows, cols, figsize=(3.2 * cols, 3.2 * rows), squeeze=False)
+        for ax, s in zip(axes.flat, sel):
+            plot_reliability({s["prior_name"]: Reliability.from_dict(s["reliability"])}, ax=ax, min_count=20)
+            ax.set_title(s["prior_name"], fontsize=8)
+        for ax in list(axes.flat)[len(sel) :]:
+            ax.set_visible(False)
+        fig.suptitle(f"{test}: reliability on unseen cells ({sel[0]['maps']} maps pooled)", fontsize=10)
+        fig.tight_layout()
+        p = out / f"reliability_{test}.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        paths.append(p)
+    for mask in MASKS:
+        fig, axes = plt.subplots(2, len(tests), figsize=(3.6 * len(tests), 6), squeeze=False)
+        for j, test in enumerate(tests):
+            sel = [s for s in summ if s["test"] == test and s["mask"] == mask and s["train"] in (test, "none")]
+            labels = [_label(s["prior_name"], test) for s in sel]
+            for i, key in enumerate(("nll_bits", "auc")):
+                ax = axes[i, j]
+                ax.bar(range(len(sel)), [s[key] for s in sel], color="C0")
+                ax.set_xticks(range(len(sel)), labels, rotation=70, fontsize=7)
+                ax.set_ylabel({"nll_bits": "NLL (bits/cell)", "auc": "ROC AUC"}[key], fontsize=8)
+                if i == 0:
+                    ax.set_title(test, fontsize=9)
+        fig.suptitle(f"{mask} cells, priors learned on the test corpus", fontsize=10)
+        fig.tight_layout()
+        p = out / f"bars_{mask}.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        paths.append(p)
+    unseen = [s for s in summ if s["mask"] == "unseen" and s["prior"] != "ogm"]
+    names = list(dict.fromkeys(s["prior_name"] for s in unseen))
+    if names:
+        nll = np.full((len(names), len(tests)), np.nan)
+        for s in unseen:
+            nll[names.index(s["prior_name"]), tests.index(s["test"])] = s["nll_bits"]
+        fig, ax = plt.subplots(figsize=(1.4 * len(tests) + 2.5, 0.28 * len(names) + 1.2))
+        im = ax.imshow(nll, cmap="viridis_r", aspect="auto")
+        for (i, j), v in np.ndenumerate(nll):
+            if np.isfinite(v):
+                ax.text(
+                    j, i, f"{v:.2f}", ha="center", va="center", fontsize=6, color="w" if v > np.nanmean(nll) else "k"
+                )
+        ax.set_xticks(range(len(tests)), tests, fontsize=8)
+        ax.set_yticks(range(len(names)), names, fontsize=6)
+        ax.set_xlabel("test corpus")
+        fig.colorbar(im, ax=ax, label="NLL on unseen cells (bits/cell)")
+        fig.tight_layout()
+        p = out / "matrix_unseen.png"
+        fig.savefig(p, dpi=110)
+        plt.close(fig)
+        paths.append(p)
+    return paths
+
+
+def parse_args(argv=None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--test", nargs="+", default=list(TEST_CORPORA), choices=TEST_CORPORA, help="test corpora")
+    ap.add_argument("--train", nargs="+", default=None, help="training corpora of the tables (default: all shipped)")
+    ap.add_argument("--priors", nargs="+", default=None, help="prior kinds or names (default: every registered kind)")
+    ap.add_argument("--plans", type=int, default=2, help="held-out maps per test corpus")
+    ap.add_argument("--window", type=int, default=96, help="maps are cropped to this many cells a side")
+    ap.add_argument("--generated-shape", type=int, default=160, help="side of the held-out generated maps")
+    ap.add_argument("--poses", type=int, default=3, help="stops of the sparse route")
+    ap.add_argument("--beams", type=int, default=90, help="beams per 360-degree scan")
+    ap.add_argument("--range-cells", type=float, default=75.0)
+    ap.add_argument("--sigma", type=float, default=1.0, help="range noise, cells")
+    ap.add_argument("--sweeps", type=int, default=200, help="kept sweeps per chain")
+    ap.add_argument("--burn", type=int, default=50, help="warm-up sweeps per chain")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--kernel", default="gibbs", choices=sorted(KERNELS), help="sampler (an entry of KERNELS)")
+    ap.add_argument("--patch", nargs="*", default=[], help="per-kind patch override: KIND=RxC or KIND=1")
+    ap.add_argument(
+        "--max-support",
+        type=int,
+        default=4096,
+        help="skip a prior whose patch update weighs more configurations than this (5 x 5 tables)",
+    )
+    ap.add_argument("--out", default="out/calibration")
+    ap.add_argument("--fresh", action="store_true", help="ignore rows already in the output JSON")
+    ap.add_argument("--no-figures", action="store_true")
+    ap.add_argument("--quick", action="store_true", help="smoke run: 1 map of 48 cells per corpus, 3 priors")
+    args = ap.parse_args(argv)
+    if args.quick:
+        args.plans, args.window, args.sweeps, args.burn = 1, 48, 40, 10
+        args.generated_shape = 96
+        args.priors = args.priors or ["independent", "mrf", "border"]
+        args.train = args.train or ["houseexpo"]
+    args.train = args.train or available_tables()
+    args.priors = args.priors or list(prior_kinds())
+    return args
+
+
+def main(argv=None) -> dict:
+    from benchmarks._common import provenance
+
+    args = parse_args(argv)
+    torch.set_num_threads(1)
+    out = Path(args.out)
+    path = out / "calibration.json"
+    settings = {k: v for k, v in vars(args).items() if k not in ("out", "fresh", "no_figures")}
+    rows, runs = _load_previous(path, settings, args.fresh)
+    done = {_row_key(r) for r in rows}
+    skipped: list[dict] = []
+    skipped_keys: set[tuple] = set()
+    overrides = _patch_overrides(args.patch)
+    pairs = prior_names(args.priors, args.train)
+    prov = provenance()
+    t_all = time.perf_counter()
+
+    def save():
+        doc = {
+            "provenance": prov,
+            "settings": settings,
+            "rows": rows,
+            "skipped": skipped,
+            "runs": [*runs, {"provenance": prov, "seconds": time.perf_counter() - t_all}],
+            "seconds": sum(r["seconds"] for r in runs) + time.perf_counter() - t_all,
+        }
+        atomic_write_text(path, json.dumps(doc, indent=1))
+
+    for test in args.test:
+        maps = heldout_maps(test, args.plans, args.window, args.generated_shape)
+        for _, train in pairs:  # refuse leakage before anything runs
+            check_heldout(test, [t.plan for t in maps], train)
+        print(
+            f"[{test}] {len(maps)} held-out maps: " + ", ".join(f"{t.name} {t.truth.shape}" for t in maps), flush=True
+        )
+        for t in maps:
+            scene = None
+            todo = [(OGM_LABEL, None)] + pairs
+            for name, train in todo:
+                if (test, t.name, name) in done:
+                    continue
+                scene = scene or make_scene(t, args)
+                if name == OGM_LABEL:
+                    scores, secs = run_ogm(scene)
+                    result: dict = {"scores": scores, "seconds": secs}
+                else:
+                    result = run_prior(scene, name, args, overrides)
+                    if "skipped" in result:
+                        if (test, t.name, name) not in skipped_keys:
+                            skipped.append({"test": test, "plan": t.name, "prior_name": name, **result})
+                            skipped_keys.add((test, t.name, name))
+                        print(f"  {test} {t.name[:28]}: {name:<22} skipped: {result['skipped']}", flush=True)
+                        continue
+                rows += _rows_for(test, t, name, train, args.kernel, result)
+                done.add((test, t.name, name))
+                u = result["scores"]["unseen"]
+                rh = f", rhat<1.05 {result['rhat_below']:.2f}" if "rhat_below" in result else ""
+                print(
+                    f"  {test} {t.name[:28]}: {name:<22} NLL {u['nll_bits']:.3f} AUC {_fmt(u['auc'])} "
+                    f"ECE {u['ece']:.3f}{rh} ({result['seconds']:.1f} s, {time.perf_counter() - t_all:.0f} s in all)",
+                    flush=True,
+                )
+                save()
+    save()
+    summ = summary(rows)
+    brief = [{k: v for k, v in r.items() if k != "reliability"} for r in summ]
+    atomic_write_text(
+        out / "calibration_summary.json",
+        json.dumps(
+            {"provenance": prov, "settings": settings, "summary": brief, "skipped": skipped}, separators=(",", ":")
+        ),
+    )
+    md = tables_md(summ, settings)
+    atomic_write_text(out / "calibration.md", md)
+    figs = [] if args.no_figures else figures(summ, out)
+    print(md)
+    print(f"wrote {path}, {out / 'calibration.md'}" + (f" and {len(figs)} figures" if figs else ""), flush=True)
+    return {"rows": rows, "summary": summ, "path": path}
+
+
+if __name__ == "__main__":
+    main()

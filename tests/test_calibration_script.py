@@ -1,0 +1,143 @@
+"""experiments/calibration.py on tiny settings: the matrix runs and writes what it promises, a rerun resumes,
+the patch rule follows the compiled bundle, and a test map in a prior's training set is refused."""
+
+import importlib.util
+import json
+import math
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+PATH = Path(__file__).resolve().parents[1] / "experiments" / "calibration.py"
+
+
+@pytest.fixture(scope="module")
+def cal():
+    spec = importlib.util.spec_from_file_location("calibration_experiment", PATH)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules["calibration_experiment"] = mod  # dataclasses look their module up
+    spec.loader.exec_module(mod)
+    threads = torch.get_num_threads()
+    yield mod
+    torch.set_num_threads(threads)
+    sys.modules.pop("calibration_experiment", None)
+
+
+TINY = (
+    "--test houseexpo generated --train houseexpo --priors independent mrf patch3 --plans 1 --window 36 "
+    "--generated-shape 80 --poses 2 --beams 45 --range-cells 30 --sweeps 16 --burn 4"
+).split()
+
+
+def test_tiny_matrix_writes_rows_tables_figures_and_resumes(cal, tmp_path, monkeypatch):
+    res = cal.main([*TINY, "--out", str(tmp_path)])
+    rows = res["rows"]
+    names = ["traditional OGM (p21)", "independent", "independent:houseexpo", "mrf:houseexpo", "patch3:houseexpo"]
+    for test in ("houseexpo", "generated"):
+        sel = [r for r in rows if r["test"] == test]
+        assert [r["prior_name"] for r in sel if r["mask"] == "unseen"] == names
+        by = {(r["prior_name"], r["mask"]): r for r in sel}
+        for name in names:
+            near, unseen = by[name, "near"], by[name, "unseen"]
+            assert 0 < unseen["cells"] < near["cells"] <= 36 * 36
+            for r in (near, unseen):
+                assert r["nll_bits"] > 0 and 0 <= r["ece"] <= 1 and 0 <= r["brier"] <= 1 and r["seconds"] >= 0
+                assert sum(r["reliability"]["count"]) == r["cells"]
+            if name != "traditional OGM (p21)":
+                assert 0 <= unseen["rhat_below"] <= 1 and unseen["rhat_cells"] == unseen["cells"]
+                v = unseen["rhat_below_varying"]
+                assert (0 <= v <= unseen["rhat_below"]) or math.isnan(v)  # frozen cells count as agreeing
+        assert by["patch3:houseexpo", "unseen"]["patch"] == [3, 3] and by["mrf:houseexpo", "unseen"]["patch"] is None
+        assert by["independent", "unseen"]["train"] == "none"
+    doc = json.loads((tmp_path / "calibration.json").read_text())
+    brief = json.loads((tmp_path / "calibration_summary.json").read_text())
+    assert len(brief["summary"]) == 2 * 2 * len(names) and "reliability" not in brief["summary"][0]
+    assert {"command", "commit", "machine"} <= set(doc["provenance"]) and doc["settings"]["sweeps"] == 16
+    md = (tmp_path / "calibration.md").read_text()
+    assert "| patch3:houseexpo |" in md and "Across corpora" in md
+    assert {p.name for p in tmp_path.glob("*.png")} == {
+        "matrix_unseen.png",
+        "reliability_houseexpo.png",
+        "reliability_generated.png",
+        "bars_unseen.png",
+        "bars_near.png",
+    }
+
+    def never(*a, **k):
+        raise AssertionError("a resumed run recomputed a row it had")
+
+    monkeypatch.setattr(cal, "run_prior", never)
+    monkeypatch.setattr(cal, "run_ogm", never)
+    again = cal.main([*TINY, "--out", str(tmp_path), "--no-figures"])
+    assert len(again["rows"]) == len(rows)
+    runs = json.loads((tmp_path / "calibration.json").read_text())["runs"]
+    assert len(runs) == 2 and runs[0]["seconds"] == doc["runs"][0]["seconds"]
+    with pytest.raises(SystemExit, match="settings differ in \\['sweeps'\\]"):
+        cal.main([*TINY[:-4], "--sweeps", "17", "--burn", "4", "--out", str(tmp_path)])
+
+
+def test_default_patch_follows_the_compiled_bundle(cal):
+    from ogm_ppl.priors.named import prior_by_name
+
+    shape = (12, 12)
+    got = {k: cal.default_patch(prior_by_name(f"{k}:houseexpo", shape)) for k in ("mrf", "patch3", "border", "border1")}
+    assert got == {"mrf": None, "patch3": (3, 3), "border": (3, 3), "border1": None}
+    assert cal._patch_overrides(["border1=3x3", "patch3=1"]) == {"border1": (3, 3), "patch3": None}
+
+
+def test_a_map_in_the_training_set_is_refused(cal):
+    from ogm_ppl.datasets import floorplans as fp
+
+    train = cal.training_set("houseexpo")
+    assert train == set(fp.training_plans("houseexpo", limit=len(train)))
+    held = fp.heldout_plans("houseexpo")
+    cal.check_heldout("houseexpo", held, "houseexpo")  # the split is disjoint
+    cal.check_heldout("ipa", fp.heldout_plans("ipa", exclude_buildings=tuple(fp.REAL_LOG_BUILDINGS)), "ipa")
+    leaked = sorted(train)[0]
+    with pytest.raises(cal.LeakageError, match="training set of the houseexpo tables"):
+        cal.check_heldout("houseexpo", [held[0], leaked], "houseexpo")
+    cal.check_heldout("houseexpo", [leaked], "ipa")  # another corpus's tables: no overlap by construction
+    with pytest.raises(cal.LeakageError, match="share a building"):
+        cal.check_heldout("ipa", ["office_a"], "ipa", train={"office_a_furnitures"})
+    with pytest.raises(cal.LeakageError, match="real-log building"):
+        cal.check_heldout("ipa", ["intel_map"], None)
+    # generated: held-out maps are root seed streams, the tables counted spawned children
+    gen = cal.training_set("generated")
+    assert len(gen) == 100 and cal._identity("generated", "office/seed0") not in gen
+    cal.check_heldout("generated", [f"office/seed{cal.generated_seed(i)}" for i in range(4)], "generated")
+    with pytest.raises(cal.LeakageError, match="generated"):
+        cal.check_heldout("generated", ["hall/seed7"], "generated", train={cal._identity("generated", "hall/seed7")})
+
+
+def test_prior_names_cover_the_matrix_once(cal):
+    got = cal.prior_names(["independent", "mrf", "border:ipa", "mrf"], ["houseexpo", "ipa"])
+    assert got == [
+        ("independent", None),
+        ("independent:houseexpo", "houseexpo"),
+        ("independent:ipa", "ipa"),
+        ("mrf:houseexpo", "houseexpo"),
+        ("mrf:ipa", "ipa"),
+        ("border:ipa", "ipa"),
+    ]
+    assert math.isclose(cal.RHAT_THRESHOLD, 1.05)
+
+
+def test_a_prior_over_the_support_limit_is_skipped(cal):
+    import numpy as np
+
+    from ogm_ppl.priors.named import prior_by_name
+
+    truth = np.zeros((24, 24), dtype=bool)
+    truth[[0, -1], :] = truth[:, [0, -1]] = True
+    truth[12, :14] = True
+    t = cal.TestMap("generated", "box", "box", truth, np.ones_like(truth), 0.05)
+    args = cal.parse_args([*TINY, "--max-support", "100"])
+    scene = cal.make_scene(t, args)
+    assert cal.support(prior_by_name("patch3:houseexpo", (24, 24)), (3, 3)) == 512
+    assert cal.support(prior_by_name("mrf:houseexpo", (24, 24)), None) == 2
+    assert "512 configurations" in cal.run_prior(scene, "patch3:houseexpo", args)["skipped"]
+    res = cal.run_prior(scene, "mrf:houseexpo", args)
+    assert res["patch"] is None and len(res["seconds_per_chain"]) == 3
+    assert res["scores"]["unseen"]["cells"] == res["rhat_cells"] == int(scene.masks["unseen"].sum())
