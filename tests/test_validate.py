@@ -74,7 +74,7 @@ def test_finite_number_names_the_option(value, exc):
 
 def test_finite_number_bounds():
     assert finite_number(0, "x", minimum=0.0) == 0.0
-    with pytest.raises(ValueError, match="> 0.0"):
+    with pytest.raises(ValueError, match=r"> 0\.0"):
         finite_number(0, "x", minimum=0.0, strict=True)
     with pytest.raises(ValueError, match="<= 1"):
         finite_number(2, "x", maximum=1)

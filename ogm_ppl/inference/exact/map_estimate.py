@@ -18,7 +18,6 @@ import numpy as np
 import torch
 
 from ogm_ppl._validate import as_binary_maps
-
 from ogm_ppl.inference._kernels import cell_sweep as cs
 from ogm_ppl.models.occupancy import OccupancyModel
 

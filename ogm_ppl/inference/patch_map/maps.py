@@ -27,7 +27,6 @@ import numpy as np
 import torch
 
 from ogm_ppl._validate import as_binary_maps
-
 from ogm_ppl.inference._kernels.cells import first_hits
 from ogm_ppl.inference._kernels.gibbs import patch_state
 from ogm_ppl.inference._kernels.patches import INVERSE, OFFLINE, ONLINE, PatchSensor, patch_map_all
