@@ -175,7 +175,8 @@ def _read_text(path: Path, strict: bool, bad: list[tuple[int, str]]) -> str:
             raw = _decompress_prefix(raw)
             raw = raw[: raw.rfind(b"\n") + 1]  # the last, cut-off line is not a good line
             stop = raw.count(b"\n") + 1
-            msg = f"corrupt or truncated gzip stream ({e}); read the {stop - 1} whole lines before it, stopped at line {stop}"
+            msg = f"corrupt or truncated gzip stream ({e}); read the {stop - 1} whole lines before it, "
+            msg += f"stopped at line {stop}"
             bad.append((stop, msg))
             warnings.warn(f"{path}: {msg}", CarmenReadWarning, stacklevel=3)
     return raw.decode("latin-1")
