@@ -254,3 +254,42 @@ def test_ogm_update_terms_fitted_for_the_sensor_setting_or_warned(tmp_path):
     assert len(list((tmp_path / "deltas").glob("delta_p21_sigma1_F30_*.json"))) == 1  # cached for reruns
     with pytest.raises(SpecError, match="cannot refit 'haehnel'"):
         parse_spec({**d, "algorithms": [{"name": "h", "kind": "ogm", "delta": "haehnel", "fit": "setting"}]}, "x")
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda d: d.setdefault("experiment", {}).update(name="../escape"), "experiment.name: may hold only"),
+        (lambda d: d.setdefault("experiment", {}).update(name="/tmp/abs"), "experiment.name: may hold only"),
+        (lambda d: d.setdefault("experiment", {}).update(name="a/b"), "experiment.name: may hold only"),
+        (lambda d: d.setdefault("experiment", {}).update(name=".."), "experiment.name: may hold only"),
+        (lambda d: d["datasets"][0].update(name=".."), "datasets[0] ('..').name: may hold only"),
+        (lambda d: d["algorithms"][0].update(name="..\\x"), "name: may hold only"),
+    ],
+)
+def test_names_that_leave_the_output_folder_are_refused(edit, message):
+    """Names become file and folder names under ``--out``: a spec must not be able to write elsewhere."""
+    d = tomllib.loads(SMOKE.read_text())
+    edit(d)
+    with pytest.raises(SpecError) as e:
+        parse_spec(d, "smoke.toml")
+    assert str(e.value).startswith("smoke.toml: ") and message in str(e.value), str(e.value)
+
+
+@pytest.mark.parametrize(
+    "reader, message",
+    [
+        ({"max_usable_range": "20"}, "reader.max_usable_range: must be a finite number"),
+        ({"max_usable_range": -5.0}, "reader.max_usable_range: must be > 0"),
+        ({"no_return_threshold": float("nan")}, "reader.no_return_threshold: must be a finite number"),
+        ({"min_range": -1}, "reader.min_range: must be >= 0"),
+        ({"strict": "yes"}, "reader.strict: must be true or false"),
+        ({"no_return": "keep"}, "reader.no_return: must be one of"),
+    ],
+)
+def test_reader_options_checked_at_validation(reader, message):
+    d = tomllib.loads(SMOKE.read_text())
+    d["datasets"].append({"name": "x", "kind": "log", "path": str(SMOKE), "reader": reader})
+    with pytest.raises(SpecError) as e:
+        parse_spec(d, "smoke.toml")
+    assert "datasets[1] ('x')." + message in str(e.value), str(e.value)
