@@ -293,3 +293,19 @@ def test_reader_options_checked_at_validation(reader, message):
     with pytest.raises(SpecError) as e:
         parse_spec(d, "smoke.toml")
     assert "datasets[1] ('x')." + message in str(e.value), str(e.value)
+
+
+def test_unreachable_scheduler_fails_within_seconds(tmp_path):
+    """A scheduler address nobody listens on: a ConnectionError naming it, within a few seconds."""
+    import socket
+    import time
+
+    from ogm_ppl.experiment.runner import SCHEDULER_TIMEOUT_S
+
+    with socket.socket() as s:  # a free port, closed again: nothing listens there
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    t0 = time.monotonic()
+    with pytest.raises(ConnectionError, match=rf"127\.0\.0\.1:{port}"):
+        run_experiment(parse_spec(tiny(), "tiny.toml"), tmp_path, scheduler=f"tcp://127.0.0.1:{port}", progress=False)
+    assert time.monotonic() - t0 < SCHEDULER_TIMEOUT_S + 10
