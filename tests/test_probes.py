@@ -96,23 +96,27 @@ PROBES: dict[str, str] = {
     "p = save_dataset(P('d.npz'), Scans([0.0, 0.0, 0.0], [0.0], [1.0], max_range=4.0))\n"
     "b = open(p, 'rb').read(); open(p, 'wb').write(b[: len(b) // 2]); load_dataset(p)",
     # Delta artefacts
-    "delta-negative-F": "from ogm_ppl.models import load_delta\nr = shipped('neural_opt'); r['delta']['fixed']['F'] = -75\n"
+    "delta-negative-F": "from ogm_ppl.models import load_delta\n"
+    "r = shipped('neural_opt'); r['delta']['fixed']['F'] = -75\n"
     "load_delta(write_json(P('d.json'), r))",
     "delta-huge-hidden": "from ogm_ppl.models import load_delta\nr = shipped('neural_opt');"
     " r['delta']['fixed']['hidden'] = 10**9\nload_delta(write_json(P('d.json'), r))",
     "delta-elfes-negative-max-kappa": "from ogm_ppl.models import load_delta\nr = shipped('elfes_opt');"
     " r['delta']['fixed']['max_kappa'] = -3\nload_delta(write_json(P('d.json'), r))",
-    "delta-nan-training": "from ogm_ppl.models import load_delta\nr = shipped('p21'); r['training']['sigma'] = float('nan')\n"
+    "delta-nan-training": "from ogm_ppl.models import load_delta\n"
+    "r = shipped('p21'); r['training']['sigma'] = float('nan')\n"
     "load_delta(write_json(P('d.json'), r))",
     "delta-truncated": "from ogm_ppl.models import load_delta\n"
     "open(P('d.json'), 'w').write(json.dumps(shipped('p21'))[:100]); load_delta(P('d.json'))",
     # experiment specs
-    "spec-name-dotdot": "from ogm_ppl.experiment import parse_spec\nd = smoke(); d.setdefault('experiment', {})['name'] = '../x'\n"
+    "spec-name-dotdot": "from ogm_ppl.experiment import parse_spec\n"
+    "d = smoke(); d.setdefault('experiment', {})['name'] = '../x'\n"
     "parse_spec(d, 'smoke.toml')",
     "spec-name-absolute": "from ogm_ppl.experiment import parse_spec\nd = smoke();"
     " d.setdefault('experiment', {})['name'] = '/tmp/x'\nparse_spec(d, 'smoke.toml')",
     "spec-reader-string": "from ogm_ppl.experiment import parse_spec\nd = smoke(); d['datasets'].append({'name': 'x',"
-    " 'kind': 'log', 'path': flaser_log(P('a.log')), 'reader': {'max_usable_range': '20'}})\nparse_spec(d, 'smoke.toml')",
+    " 'kind': 'log', 'path': flaser_log(P('a.log')), 'reader': {'max_usable_range': '20'}})\n"
+    "parse_spec(d, 'smoke.toml')",
     "spec-truncated-toml": "from ogm_ppl.experiment import load_spec\n"
     "t = open(os.path.join(ROOT, 'experiments', 'specs', 'smoke.toml')).read()\n"
     "open(P('s.toml'), 'w').write(t[: len(t) // 3]); load_spec(P('s.toml'))",
@@ -128,9 +132,11 @@ PROBES: dict[str, str] = {
     "tables-pickle": "from ogm_ppl.priors.tables import load_tables\n"
     "np.savez(P('t.npz'), codes=np.array([object()], dtype=object)); load_tables(P('t.npz'))",
     # Gibbs checkpoints
-    "checkpoint-garbage": "from ogm_ppl.inference import CellGibbs, run_gibbs\nopen(P('c.npz'), 'wb').write(b'junk' * 10)\n"
+    "checkpoint-garbage": "from ogm_ppl.inference import CellGibbs, run_gibbs\n"
+    "open(P('c.npz'), 'wb').write(b'junk' * 10)\n"
     "run_gibbs(CellGibbs(toy_model()), 5, checkpoint=P('c.npz'), progress=False)",
-    "checkpoint-foreign-npz": "from ogm_ppl.inference import CellGibbs, run_gibbs\nnp.savez(P('c.npz'), x=np.zeros(2))\n"
+    "checkpoint-foreign-npz": "from ogm_ppl.inference import CellGibbs, run_gibbs\n"
+    "np.savez(P('c.npz'), x=np.zeros(2))\n"
     "run_gibbs(CellGibbs(toy_model()), 5, checkpoint=P('c.npz'), progress=False)",
     "checkpoint-other-warmup": "from ogm_ppl.inference import CellGibbs, run_gibbs\nm = toy_model()\n"
     "run_gibbs(CellGibbs(m), 20, warmup=5, checkpoint=P('c.npz'), stop_after=3, progress=False)\n"
