@@ -447,3 +447,22 @@ def test_experiment_subcommand(tmp_path, capsys):
     assert main(["experiment", str(bad), "--out", str(tmp_path / "b")]) == 2
     err = capsys.readouterr().err
     assert err.startswith("ogm-ppl: error: ") and "bad.toml" in err and "Traceback" not in err
+
+
+def test_map_output_folder_is_all_old_or_all_new(tmp_path, tiny_log, monkeypatch):
+    """An interruption while ``ogm-ppl map`` writes (here: in the ROS map) leaves the previous run's
+    outputs, all of them, untouched; the folder never mixes two runs."""
+    import ogm_ppl.rosmap
+
+    out = tmp_path / "out"
+    assert main(["map", str(tiny_log), "--resolution", "0.1", "--out", str(out)]) == 0
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ogm_ppl.rosmap, "save_ros_map", interrupted)
+    assert main(["map", str(tiny_log), "--resolution", "0.2", "--out", str(out)]) != 0
+    after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert after == before
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".out")) == []
