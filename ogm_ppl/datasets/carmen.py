@@ -350,14 +350,14 @@ def read_carmen(
         a :class:`CarmenLog`.
     """
     path = Path(path)
-    for name, v, lo, strict_lo in (
+    for opt, value, lo, strict_lo in (
         ("max_usable_range", max_usable_range, 0.0, True),
         ("no_return_threshold", no_return_threshold, 0.0, True),
         ("max_range", max_range, 0.0, True),
         ("min_range", min_range, 0.0, False),
     ):
-        if v is not None:
-            finite_number(v, f"read_carmen: {name}", minimum=lo, strict=strict_lo)
+        if value is not None:
+            finite_number(value, f"read_carmen: {opt}", minimum=lo, strict=strict_lo)
     for name, v, allowed in (
         ("usable_range_rule", usable_range_rule, ("drop", "max")),
         ("no_return", no_return, ("drop", "max")),

@@ -234,7 +234,7 @@ def load_dataset(path: str | os.PathLike) -> Dataset:
         if g.dtype.kind != "f" or g.shape not in ((4,), (5,)) or not np.all(np.isfinite(g)):
             raise DatasetFileError(path, f"entry 'grid' must hold shape, resolution, origin; got {g!r}")
         try:
-            grid = Grid(tuple(float(s) for s in g[:-3]), float(g[-3]), (float(g[-2]), float(g[-1])))
+            grid = Grid(tuple(g[:-3].tolist()), float(g[-3]), (float(g[-2]), float(g[-1])))
         except ValueError as e:
             raise DatasetFileError(path, f"entry 'grid' is not a valid grid ({e})") from None
     truth = a.get("truth")
