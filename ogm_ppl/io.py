@@ -101,7 +101,7 @@ class StagedFolder:
 
     >>> import tempfile, pathlib
     >>> d = pathlib.Path(tempfile.mkdtemp()) / "out"
-    >>> s = StagedFolder(d); _ = atomic_write_text(s.path / "a.txt", "new"); s.commit()
+    >>> s = StagedFolder(d); _ = atomic_write_text(s.path / "a.txt", "new"); _ = s.commit()
     >>> sorted(p.name for p in d.iterdir())
     ['a.txt']
     """
