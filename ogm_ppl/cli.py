@@ -49,7 +49,7 @@ import numpy as np
 
 from ogm_ppl.datasets.mapgen import KINDS
 from ogm_ppl.grid import Grid
-from ogm_ppl.io import atomic_write, atomic_write_text
+from ogm_ppl.io import StagedFolder, atomic_write, atomic_write_text
 from ogm_ppl.methods import MapProblem, ParamError, RunContext, get_method, method_names, methods
 
 if TYPE_CHECKING:
@@ -894,7 +894,8 @@ def _map(args, method, params) -> dict:
         t0 = time.perf_counter()
         settings = _jsonable({k: v for k, v in vars(args).items() if k not in ("traceback",)})
         settings["method_details"] = _jsonable(details)
-        out = args.out
+        stage = StagedFolder(args.out)  # the folder is all old or all new outputs, whatever interrupts this
+        out = stage.path
         _atomic_savez(
             out / "map.npz",
             format=np.array(MAP_FORMAT),
@@ -953,6 +954,7 @@ def _map(args, method, params) -> dict:
             ]
     atomic_write_text(out / "report.json", json.dumps(_jsonable(report), indent=2))
     atomic_write_text(out / "report.md", _report_md(report))
+    stage.commit()
     return report
 
 

@@ -18,6 +18,15 @@ import numpy as np
 __all__ = ["Grid"]
 
 
+def _cell_count(value: object, i: int, shape: object) -> int:
+    """``shape[i]`` as an int, refusing non-integral values (``20.5``) and non-numbers instead of truncating."""
+    if isinstance(value, bool | np.bool_) or not isinstance(value, int | float | np.integer | np.floating):
+        raise TypeError(f"Grid.shape[{i}] must be an integer, got {value!r} in {shape!r}")
+    if not np.isfinite(value) or float(value) != int(value):
+        raise ValueError(f"Grid.shape[{i}] must be a whole number of cells, got {value!r} in {shape!r}")
+    return int(value)
+
+
 @dataclass(frozen=True)
 class Grid:
     """A regular 1D or 2D grid.
@@ -39,9 +48,10 @@ class Grid:
     origin: tuple[float, float] = (0.0, 0.0)
 
     def __post_init__(self) -> None:
-        shape = tuple(int(s) for s in np.atleast_1d(self.shape))
-        if len(shape) not in (1, 2):
+        raw = np.atleast_1d(np.asarray(self.shape, dtype=object))
+        if raw.ndim != 1 or len(raw) not in (1, 2):
             raise ValueError(f"Grid.shape must have 1 or 2 entries, got {self.shape!r}")
+        shape = tuple(_cell_count(s, i, self.shape) for i, s in enumerate(raw))
         for i, s in enumerate(shape):
             if s <= 0:
                 raise ValueError(f"Grid.shape[{i}] must be positive, got {s}")

@@ -18,12 +18,14 @@ from __future__ import annotations
 
 import contextlib
 import os
+import shutil
 import tempfile
+import weakref
 from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["atomic_write", "atomic_write_bytes", "atomic_write_text"]
+__all__ = ["StagedFolder", "atomic_write", "atomic_write_bytes", "atomic_write_text"]
 
 
 @contextlib.contextmanager
@@ -84,3 +86,53 @@ def atomic_write_bytes(path: str | os.PathLike, data: bytes) -> Path:
     with atomic_write(path, "wb") as f:
         f.write(data)
     return Path(path)
+
+
+class StagedFolder:
+    """Write a folder's outputs so that a reader sees all the old ones or all the new ones, never a mix.
+
+    Files go into :attr:`path`, a hidden sibling ``.NAME.staging-XXXX`` of ``target`` (same file system, so
+    renames are atomic). :meth:`commit` swaps it in with two renames: ``target -> .NAME.old-XXXX``, then
+    staging ``-> target``; entries of the old folder that the new one does not have (caches, checkpoints)
+    are then moved across, and the old folder is deleted. An interruption before the first rename leaves
+    ``target`` untouched (the staging folder is removed when this object is collected or at exit); one
+    between the two renames (two system calls) leaves the old outputs whole in ``.NAME.old-XXXX``, which the
+    next :class:`StagedFolder` for ``target`` puts back.
+
+    >>> import tempfile, pathlib
+    >>> d = pathlib.Path(tempfile.mkdtemp()) / "out"
+    >>> s = StagedFolder(d); _ = atomic_write_text(s.path / "a.txt", "new"); _ = s.commit()
+    >>> sorted(p.name for p in d.iterdir())
+    ['a.txt']
+    """
+
+    def __init__(self, target: str | os.PathLike) -> None:
+        self.target = Path(target)
+        parent = self.target.parent
+        parent.mkdir(parents=True, exist_ok=True)
+        if not self.target.exists():  # a swap interrupted between its two renames: put the old folder back
+            olds = sorted(parent.glob(f".{self.target.name}.old-*"))
+            if olds:
+                os.replace(olds[-1], self.target)
+        self.path = Path(tempfile.mkdtemp(dir=parent, prefix=f".{self.target.name}.staging-"))
+        self._done = False
+        self._finalizer = weakref.finalize(self, shutil.rmtree, str(self.path), True)
+
+    def commit(self) -> Path:
+        """Swap the staged outputs in (see the class docstring); returns ``target``."""
+        if self._done:
+            raise RuntimeError(f"{self.target}: staged outputs already committed")
+        old = None
+        if self.target.exists():
+            old = Path(tempfile.mkdtemp(dir=self.target.parent, prefix=f".{self.target.name}.old-"))
+            os.rmdir(old)
+            os.replace(self.target, old)
+        os.replace(self.path, self.target)
+        self._done = True
+        self._finalizer.detach()
+        if old is not None:
+            for entry in old.iterdir():
+                if not (self.target / entry.name).exists():
+                    os.replace(entry, self.target / entry.name)
+            shutil.rmtree(old, ignore_errors=True)
+        return self.target

@@ -559,3 +559,22 @@ def test_map_a_cut_ros1_bag_with_lenient(tmp_path, tiny_bags, capsys):
     assert 1 <= report["counts"]["scans"] < len(POSES) and report["counts"]["bad_messages"] == 1
     assert report["bad_messages"][0]["reason"].startswith("no usable index, read record by record")
     assert "## Skipped messages (--lenient)" in (tmp_path / "o" / "report.md").read_text()
+
+
+def test_map_output_folder_is_all_old_or_all_new(tmp_path, tiny_log, monkeypatch):
+    """An interruption while ``ogm-ppl map`` writes (here: in the ROS map) leaves the previous run's
+    outputs, all of them, untouched; the folder never mixes two runs."""
+    import ogm_ppl.rosmap
+
+    out = tmp_path / "out"
+    assert main(["map", str(tiny_log), "--resolution", "0.1", "--out", str(out)]) == 0
+    before = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+
+    def interrupted(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(ogm_ppl.rosmap, "save_ros_map", interrupted)
+    assert main(["map", str(tiny_log), "--resolution", "0.2", "--out", str(out)]) != 0
+    after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
+    assert after == before
+    assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".out")) == []

@@ -35,3 +35,20 @@ def test_one_d_grid():
 def test_bad_grid(kwargs, field):
     with pytest.raises(ValueError, match=field):
         Grid(**kwargs)
+
+
+@pytest.mark.parametrize("shape", [(20.5, 20), (20, float("nan")), (2.0000001,)])
+def test_fractional_shape_refused(shape):
+    """A fractional cell count is refused, not truncated (``Grid((20.5, 20))`` is not ``(20, 20)``)."""
+    with pytest.raises(ValueError, match=r"shape\[\d\] must be a whole number"):
+        Grid(shape)
+
+
+@pytest.mark.parametrize("shape", [("20", 20), (True, 3), (None, 3)])
+def test_non_numeric_shape_refused(shape):
+    with pytest.raises(TypeError, match=r"shape\[\d\] must be an integer"):
+        Grid(shape)
+
+
+def test_integral_float_and_numpy_shapes_accepted():
+    assert Grid((20.0, np.int64(3))).shape == (20, 3)

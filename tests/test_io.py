@@ -5,7 +5,7 @@ import os
 import numpy as np
 import pytest
 
-from ogm_ppl.io import atomic_write, atomic_write_bytes, atomic_write_text
+from ogm_ppl.io import StagedFolder, atomic_write, atomic_write_bytes, atomic_write_text
 
 
 def test_new_file_gets_the_mode_open_would_give(tmp_path):
@@ -44,3 +44,39 @@ def test_parent_folder_is_created_and_mode_is_checked(tmp_path):
     with pytest.raises(ValueError, match="mode"):
         with atomic_write(tmp_path / "d", "a"):
             pass
+
+
+def test_staged_folder_all_old_until_commit_then_all_new(tmp_path):
+    """Outputs staged beside the folder: before commit the folder holds only the old outputs; after it
+    only the new ones, with entries the new run did not write (caches) kept; no staging folder left."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "map.npz").write_text("old map")
+    (out / "report.json").write_text("old report")
+    (out / "cache").mkdir()
+    s = StagedFolder(out)
+    atomic_write_text(s.path / "map.npz", "new map")
+    atomic_write_text(s.path / "report.json", "new report")
+    assert (out / "map.npz").read_text() == "old map" and (out / "report.json").read_text() == "old report"
+    s.commit()
+    assert (out / "map.npz").read_text() == "new map" and (out / "report.json").read_text() == "new report"
+    assert (out / "cache").is_dir()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+
+
+def test_staged_folder_interrupted_leaves_the_old_folder(tmp_path):
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "report.json").write_text("old")
+    s = StagedFolder(out)
+    atomic_write_text(s.path / "map.npz", "new")
+    del s  # interrupted before commit: the staging folder goes, the old outputs stay
+    import gc
+
+    gc.collect()
+    assert sorted(p.name for p in out.iterdir()) == ["report.json"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
+    # a swap cut between its two renames: the old folder is put back by the next run
+    os.replace(out, tmp_path / ".out.old-abc")
+    StagedFolder(out)
+    assert (out / "report.json").read_text() == "old"

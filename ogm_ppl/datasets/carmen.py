@@ -50,6 +50,7 @@ import gzip
 import math
 import os
 import re
+import warnings
 import zlib
 from collections import Counter, defaultdict
 from dataclasses import dataclass, field
@@ -57,10 +58,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ogm_ppl._validate import finite_number
 from ogm_ppl.grid import Grid
 from ogm_ppl.scans import Scans
 
-__all__ = ["CarmenFormatError", "CarmenLog", "read_carmen"]
+__all__ = ["CarmenFormatError", "CarmenLog", "CarmenReadWarning", "read_carmen"]
 
 _LASER_TYPES = ("FLASER", "ROBOTLASER1")
 _TYPE_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
@@ -102,6 +104,10 @@ _NUMERIC_PARAMS = {
     "robot_frontlaser_offset": False,
     "robot_front_laser_max": False,
 }
+
+
+class CarmenReadWarning(UserWarning):
+    """Lenient reading stopped early (a damaged gzip stream): the message names the file and the line."""
 
 
 class CarmenFormatError(ValueError):
@@ -166,14 +172,29 @@ def _read_text(path: Path, strict: bool, bad: list[tuple[int, str]]) -> str:
         except (OSError, EOFError, zlib.error) as e:
             if strict:
                 raise CarmenFormatError(path, 0, "gzip", f"corrupt or truncated gzip stream ({e})") from None
-            d = zlib.decompressobj(16 + zlib.MAX_WBITS)
-            try:
-                raw = d.decompress(raw)
-            except zlib.error:
-                raw = b""
+            raw = _decompress_prefix(raw)
             raw = raw[: raw.rfind(b"\n") + 1]  # the last, cut-off line is not a good line
-            bad.append((0, f"corrupt or truncated gzip stream ({e}); read up to the last whole line"))
+            stop = raw.count(b"\n") + 1
+            msg = f"corrupt or truncated gzip stream ({e}); read the {stop - 1} whole lines before it, "
+            msg += f"stopped at line {stop}"
+            bad.append((stop, msg))
+            warnings.warn(f"{path}: {msg}", CarmenReadWarning, stacklevel=3)
     return raw.decode("latin-1")
+
+
+def _decompress_prefix(raw: bytes, chunk: int = 256) -> bytes:
+    """The bytes a damaged gzip stream yields before the damage: fed ``chunk`` bytes at a time, so a
+    corrupt block loses at most the output of its own chunk, never what came before."""
+    d = zlib.decompressobj(16 + zlib.MAX_WBITS)
+    out: list[bytes] = []
+    for i in range(0, len(raw), chunk):
+        try:
+            out.append(d.decompress(raw[i : i + chunk]))
+        except zlib.error:
+            break
+        if d.eof:
+            break
+    return b"".join(out)
 
 
 # ------------------------------------------------------------------------------- line layouts
@@ -329,6 +350,14 @@ def read_carmen(
         a :class:`CarmenLog`.
     """
     path = Path(path)
+    for opt, value, lo, strict_lo in (
+        ("max_usable_range", max_usable_range, 0.0, True),
+        ("no_return_threshold", no_return_threshold, 0.0, True),
+        ("max_range", max_range, 0.0, True),
+        ("min_range", min_range, 0.0, False),
+    ):
+        if value is not None:
+            finite_number(value, f"read_carmen: {opt}", minimum=lo, strict=strict_lo)
     for name, v, allowed in (
         ("usable_range_rule", usable_range_rule, ("drop", "max")),
         ("no_return", no_return, ("drop", "max")),

@@ -34,6 +34,7 @@ checks everything and raises :class:`DatasetFileError` naming the file, what is 
 from __future__ import annotations
 
 import json
+import math
 import os
 import zipfile
 import zlib
@@ -70,6 +71,8 @@ _REQUIRED = (
     "settings",
     "provenance",
 )
+#: settings the library reads back as numbers (the simulation's range noise in cells, used by `ogm-ppl map`)
+_NUMERIC_SETTINGS = ("sigma_cells",)
 _HINT = "was it written by ogm_ppl.datasets.save_dataset?"
 _KINDS = {"f": "float", "U": "string", "iu": "integer", "b": "bool"}
 
@@ -231,7 +234,7 @@ def load_dataset(path: str | os.PathLike) -> Dataset:
         if g.dtype.kind != "f" or g.shape not in ((4,), (5,)) or not np.all(np.isfinite(g)):
             raise DatasetFileError(path, f"entry 'grid' must hold shape, resolution, origin; got {g!r}")
         try:
-            grid = Grid(tuple(int(s) for s in g[:-3]), float(g[-3]), (float(g[-2]), float(g[-1])))
+            grid = Grid(tuple(g[:-3].tolist()), float(g[-3]), (float(g[-2]), float(g[-1])))
         except ValueError as e:
             raise DatasetFileError(path, f"entry 'grid' is not a valid grid ({e})") from None
     truth = a.get("truth")
@@ -243,6 +246,8 @@ def load_dataset(path: str | os.PathLike) -> Dataset:
             )
         if truth.dtype.kind == "f" and not np.all(np.isfinite(truth)):
             raise DatasetFileError(path, "entry 'truth' has non-finite values")
+    if a["poses"].shape[0] == 0:
+        raise DatasetFileError(path, "entry 'poses' holds no scans (0 rows)", "a dataset needs at least one scan")
     try:
         scans = Scans(
             a["poses"],
@@ -256,4 +261,9 @@ def load_dataset(path: str | os.PathLike) -> Dataset:
         if isinstance(e, DatasetFileError):
             raise
         raise DatasetFileError(path, f"holds invalid scans: {e}") from None
-    return Dataset(scans, grid, truth, _dict(path, a, "settings"), _dict(path, a, "provenance"))
+    settings = _dict(path, a, "settings")
+    for key in _NUMERIC_SETTINGS:
+        v = settings.get(key)
+        if v is not None and (isinstance(v, bool) or not isinstance(v, int | float) or not math.isfinite(v) or v <= 0):
+            raise DatasetFileError(path, f"entry 'settings', field {key!r} must be a number > 0 or null, got {v!r}")
+    return Dataset(scans, grid, truth, settings, _dict(path, a, "provenance"))

@@ -175,6 +175,10 @@ def _execute_serial(todo: list[Task], progress: bool):
     return results, failed
 
 
+#: seconds to wait for a ``--scheduler`` address to answer before giving up
+SCHEDULER_TIMEOUT_S = 5.0
+
+
 def _client(scheduler, workers):
     """``(client, owned)``: a Client for ``scheduler`` and whether we must close it (and its cluster)."""
     from distributed import Client, LocalCluster
@@ -188,7 +192,13 @@ def _client(scheduler, workers):
         )
         return Client(cluster), True
     if isinstance(scheduler, str):
-        return Client(scheduler), True
+        try:
+            return Client(scheduler, timeout=SCHEDULER_TIMEOUT_S), True
+        except (OSError, TimeoutError) as e:
+            raise ConnectionError(
+                f"cannot reach the dask scheduler at {scheduler!r} within {SCHEDULER_TIMEOUT_S:g} s "
+                f"({type(e).__name__}: {e}); is it running, and is the address host:port?"
+            ) from None
     raise TypeError(f"scheduler must be None, 'serial', an address or a distributed.Client, got {scheduler!r}")
 
 

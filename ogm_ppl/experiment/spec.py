@@ -306,6 +306,13 @@ def _check_delta(t: _Table, key: str, default: str) -> str:
     return name
 
 
+def _check_name(t: _Table, name: str) -> None:
+    """A name that becomes a file or folder name under ``--out``: letters, digits, ``_ . -``, not starting
+    with a dot (so never ``..``, a path separator or an absolute path: nothing is written outside)."""
+    if not _NAME.match(name) or name.startswith("."):
+        t.fail("name", f"may hold only letters, digits, '_', '.', '-' and not start with '.', got {name!r}")
+
+
 def _named_entry(source: str, section: str, i: int, entry) -> tuple[_Table, str]:
     """The table of ``section[i]`` (named in errors by index and name) and its validated name."""
     where = f"{section}[{i}]"
@@ -313,8 +320,7 @@ def _named_entry(source: str, section: str, i: int, entry) -> tuple[_Table, str]
         where += f" ({entry['name']!r})"
     t = _Table(source, where, entry)
     name = t.get("name", "str", required=True)
-    if not _NAME.match(name):
-        t.fail("name", f"may hold only letters, digits, '_', '.', '-', got {name!r}")
+    _check_name(t, name)
     return t, name
 
 
@@ -379,6 +385,17 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
             for k in READER_KEYS:
                 if rt.has(k):
                     r[k] = rt.raw(k)
+            for k in ("max_usable_range", "no_return_threshold", "max_range"):
+                if k in r:
+                    r[k] = rt.get(k, "float", lo=0, lo_open=True)
+            if "min_range" in r:
+                r["min_range"] = rt.get("min_range", "float", lo=0)
+            for k in ("strict", "apply_laser_offset"):
+                if k in r:
+                    rt.get(k, "bool")
+            for k in ("usable_range_rule", "no_return"):
+                if k in r:
+                    rt.get(k, "str", choices=("drop", "max"))
         rt.finish()
         p["reader"] = r
         p["resolution"] = t.get("resolution", "float", 0.05, lo=0, lo_open=True)
@@ -488,7 +505,11 @@ def parse_spec(data: dict, source: str = "<dict>", base_dir: str | os.PathLike =
         )
     e = _Table(source, "experiment", data.get("experiment", {}))
     stem = Path(source).stem if source != "<dict>" else "experiment"
-    name = e.get("name", "str", stem)
+    if e.has("name"):
+        name = e.get("name", "str")
+        _check_name(e, name)
+    else:
+        name = e.get("name", "str", stem)
     seed = e.get("seed", "int", 0, lo=0)
     description = e.raw("description", "")
     if not isinstance(description, str):
@@ -573,9 +594,13 @@ def load_spec(path: str | os.PathLike) -> ExperimentSpec:
     """Read and validate a TOML spec file (module docstring); raises :class:`SpecError`."""
     path = Path(path)
     try:
-        text = path.read_text()
+        text = path.read_text(encoding="utf-8")
     except FileNotFoundError:
         raise SpecError(f"{path}: no such spec file") from None
+    except UnicodeDecodeError as e:
+        raise SpecError(f"{path}: not a UTF-8 text file (byte {e.start}: {e.reason}); a spec is TOML") from None
+    except OSError as e:
+        raise SpecError(f"{path}: cannot read it ({e.strerror or e})") from None
     try:
         data = tomllib.loads(text)
     except tomllib.TOMLDecodeError as e:

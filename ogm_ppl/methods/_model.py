@@ -44,3 +44,31 @@ class ModelParams:
 def patch_arg(patch):
     """A patch parameter as the kernels take it (``[h, w]`` -> ``(h, w)``)."""
     return tuple(patch) if isinstance(patch, list) else patch
+
+
+#: the most patch configurations a patch method may enumerate in one run (``patches x 2^L x passes``);
+#: at the tens of nanoseconds one configuration costs, 2^33 is several minutes
+MAX_PATCH_CONFIGURATIONS = 1 << 33
+
+
+def check_patch_work(patch, ndim: int, num_cells: int, passes: int, overlap: bool, what: str) -> None:
+    """Refuse a patch run that would enumerate more than :data:`MAX_PATCH_CONFIGURATIONS` configurations.
+
+    Every patch update enumerates all ``2^L`` configurations of its ``L`` cells (Sections 3.2, 4.3), so a
+    run costs ``patches x 2^L x passes`` of them (``patches``: ``K`` centred on every cell with ``overlap``,
+    else the ``K / L`` tiles). Raises :class:`ParamError` on ``patch``
+    naming the count and the limit (as brute force names ``max_cells``)."""
+    from ogm_ppl.inference.tiling import patch_shape
+
+    dr, _ = patch_shape(patch_arg(patch), ndim, max_cells=64)
+    L = len(dr)
+    num_patches_per_pass = num_cells if overlap else -(-num_cells // L)
+    work = float(num_patches_per_pass) * float(2**L) * int(passes)
+    if work > MAX_PATCH_CONFIGURATIONS:
+        raise ParamError(
+            "patch",
+            f"{what} with {L}-cell patches enumerates {num_patches_per_pass:,.0f} x 2^{L} x {passes} = {work:.3g} "
+            f"configurations, over the limit of 2^33 = {MAX_PATCH_CONFIGURATIONS:.3g} "
+            f"(ogm_ppl.methods._model.MAX_PATCH_CONFIGURATIONS, hours of work); use a smaller patch, fewer sweeps "
+            f"or a smaller map",
+        )

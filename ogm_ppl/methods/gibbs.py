@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ogm_ppl.methods._model import patch_arg
+from ogm_ppl.methods._model import check_patch_work, patch_arg
 from ogm_ppl.methods._sampling import SamplingParams, run_kernel
 from ogm_ppl.methods.params import Choice, Float, Int, ParamError, Patch, param
 from ogm_ppl.methods.problem import MapProblem, MapResult, RunContext
@@ -59,6 +59,8 @@ def gibbs(params: GibbsParams, problem: MapProblem, ctx: RunContext) -> MapResul
         kernel = CellGibbs(model, scan=params.scan, update=params.update, init=params.init, delta=params.init_delta)
         details: dict = {"kernel": "CellGibbs"}
     else:
+        passes = (params.burn_in + params.sweeps) * params.chains
+        check_patch_work(params.patch, problem.grid.ndim, problem.grid.num_cells, passes, False, "PatchGibbs")
         kernel = PatchGibbs(
             model,
             patch=patch_arg(params.patch),

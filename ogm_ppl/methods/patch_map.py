@@ -9,7 +9,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ogm_ppl.methods._model import ModelParams, patch_arg
+from ogm_ppl.methods._model import ModelParams, check_patch_work, patch_arg
 from ogm_ppl.methods.params import Bool, Choice, ParamError, Patch, param
 from ogm_ppl.methods.problem import MapProblem, MapResult, RunContext
 from ogm_ppl.methods.registry import register_method
@@ -34,6 +34,7 @@ def patch_map(params: PatchMapParams, problem: MapProblem, ctx: RunContext) -> M
     """The patch map (Section 3.2): patch posteriors against a reference map, read as cell marginals."""
     from ogm_ppl.inference.patch_map import offline_patch_map, online_patch_map
 
+    check_patch_work(params.patch, problem.grid.ndim, problem.grid.num_cells, 1, params.overlap, "the patch map")
     model = params.model(problem)
     if params.mode == "offline":
         pm = offline_patch_map(model, patch_arg(params.patch), overlap=params.overlap)

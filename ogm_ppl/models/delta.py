@@ -188,6 +188,8 @@ class Elfes(DeltaFamily):
             raise ValueError(f"Elfes.prior must lie in (0, 1), got {prior!r}")
         self.sigma = _param(sigma)
         self.l_min = _param(l_min)
+        if max_kappa is not None and (isinstance(max_kappa, bool) or int(max_kappa) != max_kappa or max_kappa < 0):
+            raise ValueError(f"Elfes.max_kappa must be None or an integer >= 0 (cells), got {max_kappa!r}")
         self.prior = float(prior)
         self.max_kappa = None if max_kappa is None else int(max_kappa)
 
@@ -276,8 +278,17 @@ class NeuralDelta(DeltaFamily):
         seed: initial weights (deterministic).
     """
 
+    #: the most hidden units per layer accepted (a ``hidden x hidden`` weight matrix: 4096 is 128 MiB)
+    MAX_HIDDEN = 4096
+
     def __init__(self, F: int = 75, hidden: int = 16, seed: int = 0) -> None:
         super().__init__()
+        if isinstance(F, bool) or not isinstance(F, int | float) or int(F) != F or F < 1:
+            raise ValueError(f"NeuralDelta.F (the sensor's range in cells) must be an integer >= 1, got {F!r}")
+        if isinstance(hidden, bool) or not isinstance(hidden, int | float) or int(hidden) != hidden:
+            raise ValueError(f"NeuralDelta.hidden must be an integer, got {hidden!r}")
+        if not 1 <= hidden <= self.MAX_HIDDEN:
+            raise ValueError(f"NeuralDelta.hidden must lie in 1..{self.MAX_HIDDEN} (units per layer), got {hidden!r}")
         g = torch.Generator().manual_seed(seed)
         self.F = int(F)
         self.hidden = int(hidden)
@@ -443,6 +454,8 @@ def _delta_from_record_text(text: str, where: str) -> tuple[DeltaFamily, dict]:
     training = record.get("training")
     if training is not None and not isinstance(training, dict):
         raise DeltaFileError(f"{where}: 'training' must be an object, got {type(training).__name__}")
+    if training is not None:
+        _check_training(training, where)
     try:
         family = family_from_dict(record["delta"])
     except ValueError as e:
@@ -451,6 +464,38 @@ def _delta_from_record_text(text: str, where: str) -> tuple[DeltaFamily, dict]:
         name = record.get("name")
         family.fitted_setting = {**training, **({"name": name} if isinstance(name, str) else {})}
     return family, record
+
+
+#: the training block's fields read as numbers (the 1D setting, Section 2.5), and whether they must be > 0
+_TRAINING_NUMBERS = {"sigma": True, "F": True, "wall": False, "num": True}
+
+
+def _non_finite(value, where: str) -> str | None:
+    """The dotted path of the first NaN / infinity in a JSON value, or None."""
+    if isinstance(value, float) and not math.isfinite(value):
+        return where
+    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, list) else ()
+    for k, v in items:
+        bad = _non_finite(v, f"{where}.{k}" if isinstance(value, dict) else f"{where}[{k}]")
+        if bad is not None:
+            return bad
+    return None
+
+
+def _check_training(training: dict, where: str) -> None:
+    """A ``training`` block: no NaN / infinity anywhere (they would switch the fitted-setting check off),
+    and the setting's numbers (``sigma``, ``F``, ``wall``, ``num``) numbers in range."""
+    bad = _non_finite(training, "training")
+    if bad is not None:
+        raise DeltaFileError(f"{where}: field {bad!r} is not a finite number")
+    for key, positive in _TRAINING_NUMBERS.items():
+        if key not in training:
+            continue
+        v = training[key]
+        if isinstance(v, bool) or not isinstance(v, int | float) or (v <= 0 if positive else v < 0):
+            raise DeltaFileError(
+                f"{where}: field 'training.{key}' must be a number {'>' if positive else '>='} 0, got {v!r}"
+            )
 
 
 def fitted_names() -> list[str]:

@@ -57,6 +57,7 @@ import torch
 from pyro.distributions.torch_distribution import TorchDistribution
 from torch.distributions import constraints
 
+from ogm_ppl._validate import as_binary_maps, check_binary
 from ogm_ppl.priors.base import MapPrior
 from ogm_ppl.raycast import Rays
 from ogm_ppl.sensors import SensorModel
@@ -145,12 +146,7 @@ class MapDistribution(TorchDistribution):
         return lp
 
 
-def _check_binary(maps: torch.Tensor, what: str) -> None:
-    if maps.is_floating_point() and not torch.isfinite(maps).all():
-        raise ValueError(f"{what} holds NaN or infinite values")
-    bad = (maps != 0) & (maps != 1)
-    if bad.any():
-        raise ValueError(f"{what} must hold only 0 and 1, found {maps[bad].flatten()[0].item()!r}")
+_check_binary = check_binary
 
 
 class ReadingsDistribution(TorchDistribution):
@@ -452,15 +448,9 @@ class OccupancyModel:
         """Validate maps ``... x K`` (or ``K``): the right number of cells, values 0/1 only, no NaN.
 
         Returns them as float64; raises ``ValueError`` naming ``what`` otherwise. Pinned cells are not
-        checked here (:meth:`log_joint` gives ``-inf`` where one is occupied)."""
-        maps = torch.as_tensor(maps)
-        if maps.dim() == 0 or maps.shape[-1] != self.num_cells:
-            raise ValueError(
-                f"{what} must have {self.num_cells} cells in the last dimension (the grid's), "
-                f"got shape {tuple(maps.shape)}"
-            )
-        _check_binary(maps, what)
-        return maps.to(torch.float64)
+        checked here (:meth:`log_joint` gives ``-inf`` where one is occupied). Strings and other non-numeric
+        values raise ``TypeError``."""
+        return as_binary_maps(maps, self.num_cells, what)
 
     def _dense_rays(self) -> torch.Tensor:
         """``R x Lmax`` cell indices, padded with ``K`` (a dummy always-free column)."""

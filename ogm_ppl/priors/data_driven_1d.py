@@ -44,7 +44,8 @@ class DataDriven1DPrior(MapPrior):
         ray = maps[..., self.start :]
         monotone = (ray[..., 1:] >= ray[..., :-1]).all(-1) if self.n > 1 else torch.ones_like(before)
         ok = before & monotone
-        return torch.where(ok, -math.log(self.n + 1), -math.inf)
+        lp = torch.tensor(-math.log(self.n + 1), dtype=torch.float64)  # float64: a bare float gives float32
+        return torch.where(ok, lp, torch.tensor(-math.inf, dtype=torch.float64))
 
     def sample(self, sample_shape=(), generator=None):
         shape = torch.Size(sample_shape)

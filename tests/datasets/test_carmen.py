@@ -2,6 +2,7 @@
 
 import gzip
 import math
+import re
 import time
 from pathlib import Path
 
@@ -11,7 +12,7 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from ogm_ppl.datasets import CarmenFormatError, read_carmen
-from ogm_ppl.datasets.carmen import flaser_angles
+from ogm_ppl.datasets.carmen import CarmenReadWarning, flaser_angles
 
 DATA = Path(__file__).resolve().parents[3] / "shared" / "data"  # shared/ beside the repository
 INTEL = DATA / "intel-lab" / "intel-corrected.log.gz"
@@ -245,9 +246,47 @@ def test_empty_truncated_gzip_and_no_scans(tmp_path):
     cut.write_bytes(data[: len(data) // 2])
     with pytest.raises(CarmenFormatError, match="gzip"):
         read_carmen(cut)
-    log = read_carmen(cut, strict=False)
-    assert log.bad_lines[0][0] == 0 and 0 < log.scans.num_scans < 199
+    with pytest.warns(CarmenReadWarning, match="stopped at line"):
+        log = read_carmen(cut, strict=False)
+    assert log.bad_lines[0][0] == log.scans.num_scans + 1 and 0 < log.scans.num_scans < 199
     assert log.scans.ranges[:, 0].tolist() == list(range(1, log.scans.num_scans + 1))
+
+
+def test_lenient_gzip_with_a_flipped_byte_keeps_the_lines_before_it(tmp_path):
+    """One flipped byte in the middle of the deflate data: strict mode names the gzip stream; lenient mode
+    keeps the scans before the damage (at least those in the first third of the stream) and warns with the
+    line at which it stopped."""
+    n = 400
+    text = "\n".join(flaser([float(i % 97 + 1)] * 40, ts=float(i)) for i in range(n)) + "\n"
+    data = bytearray(gzip.compress(text.encode(), compresslevel=6))
+    data[len(data) // 2] ^= 0xFF
+    path = tmp_path / "flip.log.gz"
+    path.write_bytes(bytes(data))
+    with pytest.raises(CarmenFormatError, match="gzip"):
+        read_carmen(path)
+    with pytest.warns(CarmenReadWarning, match=r"flip\.log\.gz.*stopped at line (\d+)") as rec:
+        log = read_carmen(path, strict=False)
+    stop = int(re.search(r"stopped at line (\d+)", str(rec[0].message)).group(1))
+    assert n // 3 < log.scans.num_scans < n
+    assert stop > log.scans.num_scans  # every line before the stop line is read (bad ones are listed)
+    good = log.scans.ranges[:, 0]
+    assert good[: n // 3].tolist() == [float(i % 97 + 1) for i in range(n // 3)]
+
+
+@pytest.mark.parametrize(
+    "option, value, exc",
+    [
+        ("no_return_threshold", float("nan"), ValueError),
+        ("max_usable_range", -5.0, ValueError),
+        ("max_usable_range", "20", TypeError),
+        ("max_range", float("inf"), ValueError),
+        ("min_range", -1.0, ValueError),
+    ],
+)
+def test_bad_numeric_options_name_the_option(tmp_path, option, value, exc):
+    path = write(tmp_path, [flaser([1.0, 81.83, 2.0])])
+    with pytest.raises(exc, match=f"read_carmen: {option}"):
+        read_carmen(path, **{option: value})
 
 
 # ------------------------------------------------------------------------------------ fuzzing

@@ -94,6 +94,15 @@ BAD = {
     "grid": (lambda p: rewrite(p, grid=np.array([3.0, 4.0, -0.5, 0.0, 0.0])), "'grid'"),
     "truth": (lambda p: rewrite(p, truth=np.zeros((4, 3))), "'truth'"),
     "truth-nan": (lambda p: rewrite(p, truth=np.full((3, 4), np.nan)), "non-finite"),
+    "grid-fraction": (lambda p: rewrite(p, grid=np.array([3.5, 4.0, 0.5, 0.0, 0.0])), "whole number"),
+    "no-scans": (
+        lambda p: rewrite(
+            p, poses=np.zeros((0, 3)), angles=np.zeros((0, 3)), ranges=np.zeros((0, 3)), valid=np.zeros((0, 3), bool)
+        ),
+        "no scans",
+    ),
+    "sigma-text": (lambda p: rewrite(p, settings=np.array('{"sigma_cells": "abc"}')), "'sigma_cells'"),
+    "sigma-negative": (lambda p: rewrite(p, settings=np.array('{"sigma_cells": -1}')), "'sigma_cells'"),
     "zip-member": (lambda p: _zip_with(p, "poses.npy", b"\x93NUMPY garbage"), "corrupt"),
 }
 

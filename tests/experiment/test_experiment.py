@@ -326,3 +326,58 @@ def test_bag_entry_errors_name_the_key(room_bag, entry, message):
     d = _bag_spec(log_path, log_path, pose_topic="/odom")
     with pytest.raises(SpecError, match=r"datasets\[1\] \('bag'\)\.path: not a ROS bag"):
         parse_spec(d, "bags.toml")
+
+
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda d: d.setdefault("experiment", {}).update(name="../escape"), "experiment.name: may hold only"),
+        (lambda d: d.setdefault("experiment", {}).update(name="/tmp/abs"), "experiment.name: may hold only"),
+        (lambda d: d.setdefault("experiment", {}).update(name="a/b"), "experiment.name: may hold only"),
+        (lambda d: d.setdefault("experiment", {}).update(name=".."), "experiment.name: may hold only"),
+        (lambda d: d["datasets"][0].update(name=".."), "datasets[0] ('..').name: may hold only"),
+        (lambda d: d["algorithms"][0].update(name="..\\x"), "name: may hold only"),
+    ],
+)
+def test_names_that_leave_the_output_folder_are_refused(edit, message):
+    """Names become file and folder names under ``--out``: a spec must not be able to write elsewhere."""
+    d = tomllib.loads(SMOKE.read_text())
+    edit(d)
+    with pytest.raises(SpecError) as e:
+        parse_spec(d, "smoke.toml")
+    assert str(e.value).startswith("smoke.toml: ") and message in str(e.value), str(e.value)
+
+
+@pytest.mark.parametrize(
+    "reader, message",
+    [
+        ({"max_usable_range": "20"}, "reader.max_usable_range: must be a finite number"),
+        ({"max_usable_range": -5.0}, "reader.max_usable_range: must be > 0"),
+        ({"no_return_threshold": float("nan")}, "reader.no_return_threshold: must be a finite number"),
+        ({"min_range": -1}, "reader.min_range: must be >= 0"),
+        ({"strict": "yes"}, "reader.strict: must be true or false"),
+        ({"no_return": "keep"}, "reader.no_return: must be one of"),
+    ],
+)
+def test_reader_options_checked_at_validation(reader, message):
+    d = tomllib.loads(SMOKE.read_text())
+    d["datasets"].append({"name": "x", "kind": "log", "path": str(SMOKE), "reader": reader})
+    with pytest.raises(SpecError) as e:
+        parse_spec(d, "smoke.toml")
+    assert "datasets[1] ('x')." + message in str(e.value), str(e.value)
+
+
+def test_unreachable_scheduler_fails_within_seconds(tmp_path):
+    """A scheduler address nobody listens on: a ConnectionError naming it, within a few seconds."""
+    import socket
+    import time
+
+    from ogm_ppl.experiment.runner import SCHEDULER_TIMEOUT_S
+
+    with socket.socket() as s:  # a free port, closed again: nothing listens there
+        s.bind(("127.0.0.1", 0))
+        port = s.getsockname()[1]
+    t0 = time.monotonic()
+    with pytest.raises(ConnectionError, match=rf"127\.0\.0\.1:{port}"):
+        run_experiment(parse_spec(tiny(), "tiny.toml"), tmp_path, scheduler=f"tcp://127.0.0.1:{port}", progress=False)
+    assert time.monotonic() - t0 < SCHEDULER_TIMEOUT_S + 10

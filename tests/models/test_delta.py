@@ -171,3 +171,52 @@ def test_load_delta_round_trip_and_malformed_files(tmp_path):
             load_delta(p)
     with pytest.raises(DeltaFileError, match="no such file"):
         load_delta(tmp_path / "absent.json")
+
+
+def _shipped(name):
+    import json
+    from importlib import resources
+
+    return json.loads((resources.files("ogm_ppl") / "fitted" / f"delta_{name}.json").read_text())
+
+
+def _edit(rec, path, value):
+    d = rec
+    for k in path[:-1]:
+        d = d[k]
+    d[path[-1]] = value
+    return rec
+
+
+@pytest.mark.parametrize(
+    "artefact, path, value, message",
+    [
+        ("neural_opt", ("delta", "fixed", "F"), -75, r"NeuralDelta\.F .*>= 1, got -75"),
+        ("neural_opt", ("delta", "fixed", "hidden"), 10**9, r"NeuralDelta\.hidden must lie in 1\.\.4096"),
+        ("elfes_opt", ("delta", "fixed", "max_kappa"), -3, r"Elfes\.max_kappa must be None or an integer >= 0"),
+        ("p21", ("training", "sigma"), float("nan"), r"field 'training\.sigma' is not a finite number"),
+        ("p21", ("training", "num_readings"), [1, float("inf")], r"'training\.num_readings\[1\]'"),
+        ("p21", ("training", "F"), -75, r"'training\.F' must be a number > 0"),
+        ("p21", ("training", "sigma"), "3", r"'training\.sigma' must be a number > 0"),
+    ],
+)
+def test_artefact_settings_refused_with_file_and_field(tmp_path, artefact, path, value, message):
+    """Settings that would change the map (a negative ``F``), crash deep in torch (a negative ``max_kappa``),
+    exhaust memory (a huge hidden layer) or switch the fitted-setting check off (NaN in ``training``) are
+    refused on loading, naming the file and the field."""
+    import json
+
+    from ogm_ppl.models import DeltaFileError, load_delta
+
+    rec = _edit(_shipped(artefact), path, value)
+    p = tmp_path / f"{artefact}.json"
+    p.write_text(json.dumps(rec))
+    with pytest.raises(DeltaFileError, match=rf"{artefact}\.json: .*{message}"):
+        load_delta(p)
+
+
+def test_every_shipped_artefact_still_loads():
+    from ogm_ppl.models.delta import fitted_names, load_fitted
+
+    for name in fitted_names():
+        assert load_fitted(name)[0].table(5, 5).isfinite().all(), name

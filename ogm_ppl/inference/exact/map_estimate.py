@@ -17,6 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ogm_ppl._validate import as_binary_maps
 from ogm_ppl.inference._kernels import cell_sweep as cs
 from ogm_ppl.models.occupancy import OccupancyModel
 
@@ -45,9 +46,7 @@ def _initial(model: OccupancyModel, init, seed) -> np.ndarray:
         else:
             raise ValueError(f"init must be 'occupied', 'free', 'random' or a map, got {init!r}")
     else:
-        m = np.asarray(torch.as_tensor(init).detach().cpu().numpy() != 0, dtype=np.uint8).ravel()
-        if m.shape != (K,):
-            raise ValueError(f"init map must have {K} cells, got {m.shape}")
+        m = as_binary_maps(init, K, "init map", flatten=True).numpy().astype(np.uint8)
     m[model.known_free.numpy()] = 0
     return m
 

@@ -105,7 +105,7 @@ def pose_constrained_1d(model: OccupancyModel) -> ChainPosterior1D:
     ll = model.loglik_table[:, : n + 1].sum(0)  # log prod_n p(z_n | f = j), j = 0..n (n = none)
     prior = model.prior
     if isinstance(prior, IndependentPrior):
-        lam = torch.where(pinned, 0.0, prior.lambda_[cells])
+        lam = torch.where(pinned, torch.zeros((), dtype=torch.float64), prior.lambda_[cells].to(torch.float64))
         log_on = torch.log(lam)  # -inf on pinned cells
         log_off = torch.log1p(-lam)
         free_before = torch.cat([log_off.new_zeros(1), torch.cumsum(log_off, 0)])  # n + 1
@@ -122,7 +122,10 @@ def pose_constrained_1d(model: OccupancyModel) -> ChainPosterior1D:
         last_pinned = int(pos[pinned].max()) if pinned.any() else -1
         # the wall may start at any cell from the prior's start on, behind every pinned (free) cell
         wall_ok = (pos >= prior.start) & (pos > last_pinned)
-        log_pf_prior = torch.cat([torch.where(wall_ok, 0.0, -math.inf), torch.zeros(1)])
+        f64 = dict(dtype=torch.float64)  # float64 throughout: where() of bare floats gives float32
+        log_pf_prior = torch.cat(
+            [torch.where(wall_ok, torch.tensor(0.0, **f64), torch.tensor(-math.inf, **f64)), torch.zeros(1, **f64)]
+        )
         log_pf_prior = log_pf_prior - math.log(prior.n + 1)  # each of the n + 1 maps, Fig. 5.1
         behind = torch.ones(n, dtype=torch.float64)
     else:

@@ -6,8 +6,10 @@ stores one short hash per component and refuses a checkpoint whose hashes differ
 * ``grid``: shape, resolution, origin;
 * ``readings``: the rays (cells, readings in kappa and in range, max-range flags) and the pinned cells;
 * ``sensor``: the per-ray log-likelihood table (it depends on the sensor model and its parameters);
-* ``prior``: the prior's type and its ``log_prob`` of eight seeded random maps (a functional fingerprint:
-  it sees any parameter that changes the prior, whatever the prior stores);
+* ``prior``: the prior's type, the arrays of its compiled bundle (the tables themselves: two table priors of
+  one kind built from different corpora differ there even where every test map scores ``-inf``), the arrays
+  and plain settings the prior holds, and its ``log_prob`` of seeded random maps of several densities (a
+  functional fingerprint for priors that keep their parameters elsewhere);
 * ``kernel``: the kernel's type and its public settings (scan order, patch shape, initialisation, ...);
 * ``stats``: the tracked rays, pairs, paths and traced cells.
 """
@@ -37,13 +39,43 @@ def digest(*parts) -> str:
     return h.hexdigest()[:16]
 
 
+def _simple(v) -> bool:
+    """Values whose ``repr`` is the same in every process (no object addresses)."""
+    if isinstance(v, bool | int | float | str | type(None) | np.generic):
+        return True
+    return isinstance(v, tuple) and all(_simple(x) for x in v)
+
+
+def _tables(obj) -> list:
+    """The arrays and plain settings ``obj`` holds: every NamedTuple field, or the public attributes by
+    sorted name (private ones may be caches filled later, which must not change the digest)."""
+    if hasattr(obj, "_asdict"):
+        items = list(obj._asdict().items())
+    else:
+        items = [(k, v) for k, v in sorted(vars(obj).items()) if not k.startswith("_")]
+    out: list = []
+    for k, v in items:
+        if isinstance(v, np.ndarray | torch.Tensor) or _simple(v):
+            out += [k, v]
+    return out
+
+
 def _priordigest(prior, num_cells: int) -> str:
+    """The prior's type, its compiled bundle's tables (every array: the patch tables, stencil weights,
+    border segments), the arrays and plain settings it holds, and its ``log_prob`` of seeded maps at
+    densities 0, 0.05, 0.3, 0.6 and 1 (for priors whose state is neither)."""
+    parts: list = [type(prior).__qualname__]
+    bundle = prior.compiled() if hasattr(prior, "compiled") else None
+    if bundle is not None:
+        parts += [type(bundle).__qualname__, *_tables(bundle)]
+    parts += _tables(prior)
     g = torch.Generator().manual_seed(12345)
-    maps = (torch.rand(8, num_cells, generator=g, dtype=torch.float64) < 0.3).to(torch.float64)
+    u = torch.rand(8, num_cells, generator=g, dtype=torch.float64)
+    maps = torch.cat([(u < q).to(torch.float64) for q in (0.0, 0.05, 0.3, 0.6, 1.0001)])
     with torch.no_grad():
         lp = torch.as_tensor(prior.log_prob(maps), dtype=torch.float64)
     lp = torch.where(torch.isfinite(lp), torch.round(lp * 1e6) / 1e6, lp)
-    return digest(type(prior).__qualname__, lp)
+    return digest(*parts, lp)
 
 
 def _settings(kernel) -> dict:

@@ -32,7 +32,7 @@ from ogm_ppl.posterior import mutual_information_from_joint
 
 __all__ = ["CheckpointError", "GibbsRun", "RunningStats", "run_gibbs"]
 
-_FORMAT = 3  # the kernel's entries follow MapKernel.state_dict (its own format: kernel_format)
+_FORMAT = 4  # the kernel's entries follow MapKernel.state_dict (its own format: kernel_format)
 
 
 class CheckpointError(ValueError):
@@ -152,12 +152,13 @@ class GibbsRun:
     state: np.ndarray
 
 
-def _save_checkpoint(path: Path, kernel, stats: RunningStats, sweep: int, seed: int, fp: dict) -> None:
+def _save_checkpoint(path: Path, kernel, stats: RunningStats, sweep: int, seed: int, warmup: int, fp: dict) -> None:
     payload: dict[str, np.ndarray] = {f"kernel_{k}": np.asarray(v) for k, v in kernel.state_dict().items()}
     payload.update({f"stats_{k}": np.asarray(v) for k, v in stats.state_dict().items()})
     payload["rng"] = torch.get_rng_state().numpy()
     payload["sweep"] = np.asarray(sweep, np.int64)
     payload["seed"] = np.asarray(seed, np.int64)
+    payload["warmup"] = np.asarray(warmup, np.int64)
     payload["format"] = np.asarray(_FORMAT, np.int64)
     payload["num_cells"] = np.asarray(kernel.model.num_cells, np.int64)
     for k, v in fp.items():
@@ -169,7 +170,7 @@ def _save_checkpoint(path: Path, kernel, stats: RunningStats, sweep: int, seed: 
 _HINT = "delete it (or pass another checkpoint path) to start a fresh run"
 
 
-def _load_checkpoint(path: Path, kernel, stats: RunningStats, seed: int, fp: dict) -> int:
+def _load_checkpoint(path: Path, kernel, stats: RunningStats, seed: int, warmup: int, fp: dict) -> int:
     try:
         z = np.load(path, allow_pickle=False)
     except Exception as e:  # BadZipFile, OSError, ValueError (pickled or not an npz), EOFError
@@ -177,7 +178,7 @@ def _load_checkpoint(path: Path, kernel, stats: RunningStats, seed: int, fp: dic
     with z:
         try:
             files = set(z.files)
-            missing = [k for k in ("format", "num_cells", "seed", "sweep", "rng") if k not in files]
+            missing = [k for k in ("format", "num_cells", "seed", "sweep", "rng", "warmup") if k not in files]
             if missing:
                 raise CheckpointError(f"{path}: not an ogm_ppl Gibbs checkpoint (no {', '.join(missing)}); {_HINT}")
             if int(z["format"]) != _FORMAT:
@@ -189,6 +190,11 @@ def _load_checkpoint(path: Path, kernel, stats: RunningStats, seed: int, fp: dic
                 )
             if int(z["seed"]) != seed:
                 raise CheckpointError(f"{path}: checkpoint was written with seed {int(z['seed'])}, not {seed}; {_HINT}")
+            if int(z["warmup"]) != warmup:
+                raise CheckpointError(
+                    f"{path}: checkpoint was written with warmup {int(z['warmup'])}, not {warmup} (the samples "
+                    f"counted so far depend on it); {_HINT}"
+                )
             differ = [k for k, v in fp.items() if f"fp_{k}" not in files or str(z[f"fp_{k}"]) != v]
             if differ:
                 raise CheckpointError(
@@ -226,7 +232,8 @@ def run_gibbs(
             ``current_params``, ``sample``, ``state``, ``state_dict`` / ``load_state_dict``).
         stats: where statistics accumulate (default: marginals only).
         seed: seeds torch's generator at the start of a fresh run (a resumed run restores its state).
-        checkpoint: an ``.npz`` path; if it exists the run resumes from it.
+        checkpoint: an ``.npz`` path; if it exists the run resumes from it (with the same ``seed``,
+            ``warmup``, model, kernel and statistics, else :class:`CheckpointError`).
         store_every: keep every ``store_every``-th sample (bit-packed ``.npy``) in ``store_dir``.
         stop_after: stop (as if interrupted) after this many sweeps of this call: for tests.
     """
@@ -241,7 +248,7 @@ def run_gibbs(
     start = 0
     fp = fingerprint(kernel, stats) if ckpt is not None else {}
     if ckpt is not None and ckpt.exists():
-        start = _load_checkpoint(ckpt, kernel, stats, seed, fp)
+        start = _load_checkpoint(ckpt, kernel, stats, seed, warmup, fp)
     else:
         torch.manual_seed(seed)  # before set-up: a drawn initial map ("prior") follows the seed too
         kernel.setup(warmup)
@@ -272,7 +279,7 @@ def run_gibbs(
             done = i + 1
             bar.update(1)
             if ckpt is not None and done % checkpoint_every == 0:
-                _save_checkpoint(ckpt, kernel, stats, done, seed, fp)
+                _save_checkpoint(ckpt, kernel, stats, done, seed, warmup, fp)
             if stop["flag"] or (stop_after is not None and done - start >= stop_after):
                 stop["flag"] = True
                 break
@@ -281,7 +288,7 @@ def run_gibbs(
         if old is not None:
             signal.signal(signal.SIGINT, old)
         if ckpt is not None:
-            _save_checkpoint(ckpt, kernel, stats, done, seed, fp)
+            _save_checkpoint(ckpt, kernel, stats, done, seed, warmup, fp)
     return GibbsRun(stats, done, time.perf_counter() - t0, bool(stop["flag"]) and done < total, kernel.state.copy())
 
 

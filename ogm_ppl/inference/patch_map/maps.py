@@ -26,6 +26,7 @@ from functools import cached_property
 import numpy as np
 import torch
 
+from ogm_ppl._validate import as_binary_maps
 from ogm_ppl.inference._kernels.cells import first_hits
 from ogm_ppl.inference._kernels.gibbs import patch_state
 from ogm_ppl.inference._kernels.patches import INVERSE, OFFLINE, ONLINE, PatchSensor, patch_map_all
@@ -169,9 +170,7 @@ def reference_map(model: OccupancyModel, reference="map") -> np.ndarray:
 
         ref = map_estimate(model, init="occupied").map.numpy()
     else:
-        ref = torch.as_tensor(reference, dtype=torch.float64).flatten().numpy()
-        if ref.shape != (model.num_cells,):
-            raise ValueError(f"reference must have {model.num_cells} cells, got {ref.shape}")
+        ref = as_binary_maps(reference, model.num_cells, "reference map", flatten=True).numpy()
     m = (ref != 0).astype(np.uint8)
     m[~model.rays.reached()] = 1
     m[model.known_free.numpy()] = 0

@@ -74,3 +74,31 @@ def test_unreadable_checkpoint_names_the_path(tmp_path, content):
         ck.write_bytes(content)
     with pytest.raises(CheckpointError, match=r"bad\.npz: .*(start a fresh run)"):
         run_gibbs(CellGibbs(model), 100, RunningStats(model), seed=3, checkpoint=ck, progress=False)
+
+
+@pytest.mark.parametrize("a, b", [("border:generated", "border:houseexpo"), ("patch3:generated", "patch3:houseexpo")])
+def test_prior_fingerprint_sees_the_tables(a, b):
+    """Two table priors of one kind from different corpora: every seeded random test map may score
+    ``-inf`` under both, but their tables differ, and so do the fingerprints."""
+    from ogm_ppl.inference.mcmc.fingerprint import fingerprint
+    from ogm_ppl.priors.named import prior_by_name
+
+    fps = []
+    for name in (a, b, a):
+        prior = prior_by_name(name, (6, 6))
+        toy = toy_1d(num_cells=36, readings=THESIS_TOY_READINGS[:1], wall=8)
+        model = OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0), prior)
+        fps.append(fingerprint(CellGibbs(model), RunningStats(model))["prior"])
+    assert fps[0] != fps[1] and fps[0] == fps[2]
+
+
+def test_resume_with_another_warmup_is_refused(tmp_path):
+    model = _model()
+    ck = tmp_path / "ck.npz"
+    run_gibbs(
+        CellGibbs(model), 50, warmup=30, seed=3, checkpoint=ck, checkpoint_every=10, stop_after=20, progress=False
+    )
+    with pytest.raises(CheckpointError, match=r"ck\.npz: checkpoint was written with warmup 30, not 0"):
+        run_gibbs(CellGibbs(model), 50, warmup=0, seed=3, checkpoint=ck, progress=False)
+    r = run_gibbs(CellGibbs(model), 50, warmup=30, seed=3, checkpoint=ck, progress=False)
+    assert r.sweeps == 80 and r.stats.n == 50
