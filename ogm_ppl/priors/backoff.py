@@ -328,6 +328,12 @@ class BackoffBorderPrior(LocalMapPrior):
         )
         self.keys, self.log_probs = keys, logp
         self.border_codes, self.log_lambda = borders, log_lam
+        # the counted inner patches' cell occupancy (as BorderPatchPrior's): the threshold of the "ogm"
+        # initial map (ogm_ppl.inference.mcmc.kernel.initial_map), which otherwise falls back to 0.5 and
+        # starts every unobserved cell (a map's solid outer border, wall interiors) free
+        cnt = np.asarray(counts, dtype=np.float64).ravel()
+        ones = np.array([bin(int(x)).count("1") for x in np.asarray(inner_codes).astype(np.int64).ravel()])
+        self.mean_occupancy = float((cnt * ones).sum() / (cnt.sum() * Li)) if cnt.sum() > 0 else 0.5
 
     def __repr__(self) -> str:
         return f"BackoffBorderPrior(inner={self.inner}, borders={len(self.border_codes)}, kappa={self.kappa:.3g})"

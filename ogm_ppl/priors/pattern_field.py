@@ -148,6 +148,8 @@ class PatternFieldPrior(LocalMapPrior):
         if occupancy is not None and not 0.0 <= float(occupancy) <= 1.0:
             raise ValueError(f"occupancy must lie in [0, 1], got {occupancy}")
         self.occupancy = None if occupancy is None else float(occupancy)
+        if self.occupancy is not None:  # the "ogm" initial map's threshold (initial_map; else 0.5)
+            self.mean_occupancy = self.occupancy
         self._compiled = pattern_field(self.rows, self.cols, self.w, self.theta, self.theta2)
         self._t1 = torch.from_numpy(self.theta)
         self._t2 = None if self.theta2 is None else torch.from_numpy(self.theta2)
