@@ -912,9 +912,9 @@ def read_bag(
         pose_tolerance: seconds; a scan farther than this from the pose samples around it is dropped.
         strict: raise :class:`BagFormatError` on the first malformed message (default); with False,
             skip malformed messages and list them in ``bad_messages``.
-        max_usable_range, usable_range_rule, no_return, no_return_threshold, min_range, max_range,
-            pose_step, pose_fraction, beam_step: as :func:`~ogm_ppl.datasets.carmen.read_carmen` (the
-            no-return rule for bags is in the module docstring).
+        max_usable_range: as :func:`~ogm_ppl.datasets.carmen.read_carmen`; likewise ``usable_range_rule``,
+            ``no_return``, ``no_return_threshold``, ``min_range``, ``max_range``, ``pose_step``,
+            ``pose_fraction`` and ``beam_step`` (the no-return rule for bags is in the module docstring).
         widen: ``"decimal"`` or ``"binary"``: how float32 fields become float64 (module docstring).
 
     Returns:
