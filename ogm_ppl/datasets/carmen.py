@@ -62,7 +62,7 @@ from ogm_ppl._validate import finite_number
 from ogm_ppl.grid import Grid
 from ogm_ppl.scans import Scans
 
-__all__ = ["CarmenFormatError", "CarmenLog", "CarmenReadWarning", "read_carmen"]
+__all__ = ["CarmenFormatError", "CarmenLog", "CarmenReadWarning", "ScanLog", "read_carmen"]
 
 _LASER_TYPES = ("FLASER", "ROBOTLASER1")
 _TYPE_RE = re.compile(r"[A-Za-z_][A-Za-z0-9_]*\Z")
@@ -118,8 +118,26 @@ class CarmenFormatError(ValueError):
         super().__init__(f"{self.path}, line {line_no}, field {field!r}: {message}")
 
 
+class ScanLog:
+    """What every log reader returns beside its own bookkeeping: ``scans`` (:class:`~ogm_ppl.scans.Scans`), their
+    extent and a grid that covers it (:class:`CarmenLog`, :class:`~ogm_ppl.datasets.rosbag.BagLog`)."""
+
+    scans: Scans
+
+    def extent(self) -> tuple[float, float, float, float]:
+        """``(xmin, xmax, ymin, ymax)`` in metres of the poses and the end points of all hits."""
+        return self.scans.extent()
+
+    def grid(self, resolution: float, margin: float = 1.0) -> Grid:
+        """A 2D :class:`Grid` covering :meth:`extent` plus ``margin`` metres on every side."""
+        xmin, xmax, ymin, ymax = self.extent()
+        cols = math.ceil((xmax - xmin + 2 * margin) / resolution)
+        rows = math.ceil((ymax - ymin + 2 * margin) / resolution)
+        return Grid((max(rows, 1), max(cols, 1)), resolution, (xmin - margin, ymin - margin))
+
+
 @dataclass
-class CarmenLog:
+class CarmenLog(ScanLog):
     """A CARMEN log read into scans (see the module docstring for every rule applied).
 
     Attributes:
@@ -144,17 +162,6 @@ class CarmenLog:
     line_numbers: np.ndarray = field(repr=False)
     timestamps: np.ndarray = field(repr=False)
     counts: dict[str, int] = field(default_factory=dict)
-
-    def extent(self) -> tuple[float, float, float, float]:
-        """``(xmin, xmax, ymin, ymax)`` in metres of the poses and the end points of all hits."""
-        return self.scans.extent()
-
-    def grid(self, resolution: float, margin: float = 1.0) -> Grid:
-        """A 2D :class:`Grid` covering :meth:`extent` plus ``margin`` metres on every side."""
-        xmin, xmax, ymin, ymax = self.extent()
-        cols = math.ceil((xmax - xmin + 2 * margin) / resolution)
-        rows = math.ceil((ymax - ymin + 2 * margin) / resolution)
-        return Grid((max(rows, 1), max(cols, 1)), resolution, (xmin - margin, ymin - margin))
 
 
 class _LineError(Exception):

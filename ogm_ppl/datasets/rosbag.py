@@ -59,7 +59,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ogm_ppl.grid import Grid
+from ogm_ppl.datasets.carmen import ScanLog
 from ogm_ppl.scans import Scans
 
 __all__ = ["BagFormatError", "BagLog", "bag_info", "bag_kind", "bag_topics", "read_bag", "typestore", "write_bag"]
@@ -103,7 +103,7 @@ class BagFormatError(ValueError):
 
 
 @dataclass
-class BagLog:
+class BagLog(ScanLog):
     """Scans read from a bag (every rule applied is in the module docstring).
 
     Attributes:
@@ -133,17 +133,6 @@ class BagLog:
     timestamps: np.ndarray = field(repr=False)
     pose_timestamps: np.ndarray = field(repr=False)
     counts: dict[str, int] = field(default_factory=dict)
-
-    def extent(self) -> tuple[float, float, float, float]:
-        """``(xmin, xmax, ymin, ymax)`` in metres of the poses and the end points of all hits."""
-        return self.scans.extent()
-
-    def grid(self, resolution: float, margin: float = 1.0) -> Grid:
-        """A 2D :class:`Grid` covering :meth:`extent` plus ``margin`` metres on every side."""
-        xmin, xmax, ymin, ymax = self.extent()
-        cols = math.ceil((xmax - xmin + 2 * margin) / resolution)
-        rows = math.ceil((ymax - ymin + 2 * margin) / resolution)
-        return Grid((max(rows, 1), max(cols, 1)), resolution, (xmin - margin, ymin - margin))
 
 
 # ------------------------------------------------------------------------------------- opening
