@@ -231,9 +231,9 @@ def enumerable_1d(K: int = 6, readings=(3.0, 4.0, 2.0), sensor=None, prior=None)
     return OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), sensor or GaussianRange(1.5), prior)
 
 
-def enumerable_2d(sensor=None):
+def enumerable_2d(sensor=None, prior=None):
     """A 2 x 4 grid (7 latent cells) with four max-range-capable readings, ``GaussianRange(0.9)`` unless
-    given, and a graded independent prior ``linspace(0.25, 0.55)``."""
+    given, and ``prior`` (default: a graded independent prior ``linspace(0.25, 0.55)``)."""
     from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
     from ogm_ppl.priors import IndependentPrior
 
@@ -245,7 +245,7 @@ def enumerable_2d(sensor=None):
         max_range=3.9,
         over_range="max",
     )
-    prior = IndependentPrior(torch.linspace(0.25, 0.55, 8))
+    prior = prior if prior is not None else IndependentPrior(torch.linspace(0.25, 0.55, 8))
     return OccupancyModel(grid, raycast(grid, scans), sensor or GaussianRange(0.9), prior)
 
 

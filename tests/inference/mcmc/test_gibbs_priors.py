@@ -16,6 +16,7 @@ from ogm_ppl.inference.exact.map_estimate import map_estimate
 from ogm_ppl.inference.mcmc.gibbs import CellGibbs, PatchGibbs
 from ogm_ppl.inference.mcmc.runner import RunningStats, run_gibbs
 from ogm_ppl.priors import BorderPatchPrior, MapPrior, MRFPrior, PatchTablePrior, StencilPrior
+from ogm_ppl.testing.kernels import enumerable_2d
 
 from .test_gibbs import cell_update_matrix, code_of, exact_pi, model_1d, patch_update_matrix, states
 
@@ -29,16 +30,8 @@ def _table(nb, ni, seed, density=1.0):
 
 
 def model_2d(prior_fn, sensor=None):
-    """2 x 4 grid, 7 latent cells (one pose cell pinned)."""
-    grid = Grid((2, 4), resolution=1.0)
-    scans = Scans(
-        [[0.5, 0.5, 0.0], [0.5, 0.5, 0.0], [3.5, 1.5, math.pi], [0.5, 0.5, math.pi / 2]],
-        [0.0],
-        [[2.2], [3.9], [1.4], [1.0]],
-        max_range=3.9,
-        over_range="max",
-    )
-    return OccupancyModel(grid, raycast(grid, scans), sensor or GaussianRange(0.9), prior_fn((2, 4)))
+    """The 2 x 4 enumerable problem of ``ogm_ppl.testing.kernels`` (7 latent cells) under ``prior_fn((2, 4))``."""
+    return enumerable_2d(sensor, prior=prior_fn((2, 4)))
 
 
 PRIORS_1D = {
