@@ -6,9 +6,10 @@ window, half the beams and half / 10 % of the poses (the thesis's Experiments 2 
 thesis's benchmark (traditional OGM from all readings, thresholded at p > 0.20) on the near-mapped mask
 (Fig. 6.16b), and on the cells each experiment's own readings touched. Algorithms: traditional OGM
 (Hähnel), log-odds OGM with the p21 update term refitted for this sensor setting (Table 2.2 form, Section
-2.5: the shipped p21 was fitted for 3-cell noise and a 75-cell range) and Gibbs sampling with the
-border-conditioned data-driven patch prior at L = 9 (Section 5.2.3, learned from the HouseExpo floor
-plans, which do not hold the Intel building).
+2.5: the shipped p21 was fitted for 3-cell noise and a 75-cell range) and Gibbs sampling at L = 9 with the
+learned prior that :func:`headline_prior` names: the one that mapped sparse simulated scans of held-out
+*training* plans best (``experiments/select_headline_prior.py`` writes ``ogm_ppl/fitted/headline_prior.json``;
+the choice never looks at the Intel log, and the corpus holds no plan of the Intel building).
 
 It is an ordinary experiment spec (:func:`headline_spec`) run by :func:`~ogm_ppl.experiment.run_experiment`
 (dask, resumable); :func:`run_intel_headline` adds the summary table and a figure of the sparsest maps.
@@ -20,6 +21,7 @@ import json
 import os
 import sys
 import time
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -27,10 +29,70 @@ import numpy as np
 from ogm_ppl.experiment.simple2d import run_simple2d
 from ogm_ppl.io import atomic_write_text
 
-__all__ = ["INTEL_LOG", "find_shared_file", "headline_spec", "run_headline", "run_intel_headline"]
+__all__ = [
+    "INTEL_LOG",
+    "HeadlinePrior",
+    "find_shared_file",
+    "headline_prior",
+    "headline_spec",
+    "run_headline",
+    "run_intel_headline",
+]
 
 #: the Intel Lab log, relative to the shared data folder
 INTEL_LOG = "intel-lab/intel-corrected.log.gz"
+#: the ``format`` field of ``headline_prior.json``
+HEADLINE_PRIOR_FORMAT = "ogm_ppl.headline_prior"
+_HEADLINE_PRIOR = Path(__file__).resolve().parents[1] / "fitted" / "headline_prior.json"
+_UPDATES = ("gibbs", "thesis")
+
+
+@dataclass(frozen=True)
+class HeadlinePrior:
+    """The headline's prior: ``name`` (``"KIND:CORPUS"`` for :func:`~ogm_ppl.priors.prior_by_name`), the
+    patch-Gibbs ``update`` and the mean validation scores it was chosen by (``means``: candidate -> scores)."""
+
+    kind: str
+    corpus: str
+    update: str
+    means: dict
+
+    @property
+    def name(self) -> str:
+        return f"{self.kind}:{self.corpus}"
+
+    @property
+    def label(self) -> str:
+        how = ", the thesis's border update" if self.update == "thesis" else ""
+        return f"Gibbs, {self.kind} prior ({self.corpus}{how}), L = 9"
+
+
+def headline_prior(path: str | os.PathLike | None = None) -> HeadlinePrior:
+    """Read and validate the selection that ``experiments/select_headline_prior.py`` wrote (default: the
+    shipped ``ogm_ppl/fitted/headline_prior.json``). Raises ``ValueError`` naming the file and the field that
+    is wrong (not JSON, another format, an unknown prior kind or corpus, an unknown update)."""
+    from ogm_ppl.priors.named import prior_kinds
+    from ogm_ppl.priors.tables import available_tables
+
+    path = Path(path) if path is not None else _HEADLINE_PRIOR
+    try:
+        doc = json.loads(path.read_text())
+    except (OSError, ValueError) as e:
+        raise ValueError(f"{path}: cannot read the headline prior selection ({type(e).__name__}: {e})") from None
+    if not isinstance(doc, dict) or doc.get("format") != HEADLINE_PRIOR_FORMAT:
+        raise ValueError(f"{path}: not a headline prior selection (format must be {HEADLINE_PRIOR_FORMAT!r})")
+    checks = (
+        ("prior", prior_kinds()),
+        ("corpus", tuple(available_tables())),
+        ("update", _UPDATES),
+    )
+    for key, allowed in checks:
+        if doc.get(key) not in allowed:
+            raise ValueError(f"{path}: {key!r} is {doc.get(key)!r}; one of {', '.join(map(str, allowed))} expected")
+    means = doc.get("means", {})
+    if not isinstance(means, dict):
+        raise ValueError(f"{path}: 'means' is not an object")
+    return HeadlinePrior(doc["prior"], doc["corpus"], doc["update"], means)
 
 
 def find_shared_file(relative: str) -> Path | None:
@@ -46,12 +108,21 @@ def find_shared_file(relative: str) -> Path | None:
     return None
 
 
-def headline_spec(log: str | os.PathLike, *, quick: bool = False, sigma_cells: float = 0.5, sweeps: int = 60) -> dict:
+def headline_spec(
+    log: str | os.PathLike,
+    *,
+    quick: bool = False,
+    sigma_cells: float = 0.5,
+    sweeps: int = 60,
+    prior: HeadlinePrior | None = None,
+) -> dict:
     """The headline spec as a dict (:func:`~ogm_ppl.experiment.parse_spec` validates it).
 
     ``quick`` (tests): 10 cm cells, only the 10 % subset, 6 sweeps. ``sigma_cells``: range noise of the
     Gibbs sensor model in cells (default 0.5 cell = 2.5 cm; see the README's Intel section for why not 3).
+    ``prior``: the Gibbs prior (default :func:`headline_prior`, the shipped selection).
     """
+    prior = headline_prior() if prior is None else prior
     res, fractions, n = (0.10, [0.1], 6) if quick else (0.05, [0.5, 0.1], sweeps)
     gibbs = {
         "kind": "gibbs",
@@ -61,6 +132,7 @@ def headline_spec(log: str | os.PathLike, *, quick: bool = False, sigma_cells: f
         "checkpoint_every": 5,
         "record": 3,
         "sigma_cells": float(sigma_cells),
+        "update": prior.update,
     }
     return {
         "experiment": {
@@ -88,7 +160,7 @@ def headline_spec(log: str | os.PathLike, *, quick: bool = False, sigma_cells: f
         "algorithms": [
             {"name": "ogm", "kind": "ogm", "delta": "haehnel"},
             {"name": "p21", "kind": "ogm", "delta": "p21", "fit": "setting"},
-            {"name": "border-L9", "prior": "border:houseexpo", **gibbs},
+            {"name": "learned-L9", "prior": prior.name, **gibbs},
         ],
         "metrics": {
             "mask": "near_mapped",
@@ -104,11 +176,16 @@ def headline_spec(log: str | os.PathLike, *, quick: bool = False, sigma_cells: f
 LABELS = {
     "ogm": "traditional OGM (Hähnel)",
     "p21": "log-odds OGM, p21 fitted for this sensor",
-    "border-L9": "Gibbs, border prior, L = 9",
 }
 
 
-def _maps_figure(result, out: Path) -> Path:
+def _label(name: str, prior: HeadlinePrior | None = None) -> str:
+    if name == "learned-L9" and prior is not None:
+        return prior.label
+    return LABELS.get(name, name)
+
+
+def _maps_figure(result, out: Path, prior: HeadlinePrior) -> Path:
     """The sparsest experiment's maps beside the benchmark (Fig. 6.13-6.15 style)."""
     from ogm_ppl.experiment.figures import _plt, _save_closed
     from ogm_ppl.experiment.tasks import base_dir, score_path
@@ -129,14 +206,14 @@ def _maps_figure(result, out: Path) -> Path:
             q,
             None,
             ax,
-            f"{LABELS.get(a.name, a.name)}\n{100 * ds.measurement_fraction:.3g} % of readings",
+            f"{_label(a.name, prior)}\n{100 * ds.measurement_fraction:.3g} % of readings",
             colorbar=False,
         )
     fig.tight_layout()
     return _save_closed(plt, fig, out / "intel_maps.png", 90)
 
 
-def _table(result) -> list[str]:
+def _table(result, prior: HeadlinePrior) -> list[str]:
     conds = list(dict.fromkeys(p["condition"] for p in result.pooled))
     frac = {p["condition"]: p["measurement_fraction"] for p in result.pooled}
     head = "| map | " + " | ".join(f"{100 * frac[c]:.3g} % of readings: F1 / AUC / touched F1" for c in conds) + " |"
@@ -152,7 +229,7 @@ def _table(result) -> list[str]:
             cells.append(
                 f"{m['best_f1']:.3f} / {m.get('auc', float('nan')):.3f} / {t.get('best_f1', float('nan')):.3f}"
             )
-        lines.append(f"| {LABELS.get(a.name, a.name)} | " + " | ".join(cells) + " |")
+        lines.append(f"| {_label(a.name, prior)} | " + " | ".join(cells) + " |")
     return lines
 
 
@@ -180,11 +257,12 @@ def run_intel_headline(
                 f"the Intel Lab log ({INTEL_LOG}) is not under $OGM_PPL_DATA or ../shared/data beside the "
                 "checkout; pass --log PATH"
             )
-    spec = parse_spec(headline_spec(log, quick=quick), "<headline>")
+    prior = headline_prior()
+    spec = parse_spec(headline_spec(log, quick=quick, prior=prior), "<headline>")
     t0 = time.perf_counter()
     result = run_experiment(spec, out / "intel", scheduler=scheduler, workers=workers, progress=progress)
     seconds = time.perf_counter() - t0
-    fig = _maps_figure(result, out)
+    fig = _maps_figure(result, out, prior)
     ds0 = spec.datasets[0]
     p = ds0.params
     gib = next(a for a in spec.algorithms if a.records_metrics).params  # the sampler of the spec
@@ -196,9 +274,11 @@ def run_intel_headline(
         + " of the poses. Benchmark: traditional OGM from all readings, p > 0.20; scored over the cells within "
         "10 cells of a benchmark-mapped cell (Fig. 6.16b) and over the cells the experiment's readings touched. "
         f"Gibbs: {gib['sweeps']} sweeps after {gib['burn_in']} burn-in from the thresholded OGM map, "
-        f"sigma {p['sigma_cells']:g} cell(s), border prior learned from HouseExpo (not the Intel building).",
+        f"sigma {p['sigma_cells']:g} cell(s). Prior: {prior.name} (update {prior.update}), chosen by "
+        "`experiments/select_headline_prior.py` on sparse simulated scans of held-out training plans "
+        "(never on this log; the corpus holds no plan of the Intel building).",
         "",
-        *_table(result),
+        *_table(result, prior),
         "",
         f"Run time {seconds:.0f} s. Figures: `intel_maps.png` (the sparsest experiment's maps beside the benchmark), "
         "`intel/figures/` (P-R curves, F1 against threshold, sparsity and time); tables: `intel/metrics.md`.",
@@ -212,6 +292,7 @@ def run_intel_headline(
             for r in result.pooled
         ],
         "figure": str(fig),
+        "prior": {"name": prior.name, "update": prior.update, "chosen_by": "experiments/select_headline_prior.py"},
     }
     atomic_write_text(out / "intel_headline.json", json.dumps(doc, indent=1, default=str, allow_nan=True))
     return {"markdown": md, "json": doc}
@@ -231,8 +312,8 @@ def run_headline(
     progress: bool = False,
 ) -> dict:
     """What ``make run`` does: the real-data headline (:mod:`ogm_ppl.experiment.headline`: the Intel Lab
-    log, sparse, traditional OGM against Gibbs with a learned border prior) and the simulated examples;
-    writes the figures, ``report.md`` and ``report.json`` into ``out``.
+    log, sparse, traditional OGM against Gibbs with the learned prior of :func:`headline_prior`) and the
+    simulated examples; writes the figures, ``report.md`` and ``report.json`` into ``out``.
 
     Without the Intel log (no ``log`` and none under the shared data folder) the report says so and holds
     the simulated part only.
