@@ -60,9 +60,12 @@ class MapPrior:
 
     def outside_occupancy(self) -> float:
         """Occupancy probability ``lambda_out`` of a cell outside the map, used to marginalise the part of
-        a ray beyond the grid edge (:class:`~ogm_ppl.models.OccupancyModel`). Default 0.5 (the uniform
-        prior); priors override it with their cell marginal."""
-        return 0.5
+        a ray beyond the grid edge (:class:`~ogm_ppl.models.OccupancyModel`): the prior's cell marginal
+        ``P(m_k = 1)`` away from the edges. Default: the prior's ``mean_occupancy`` attribute where it has one
+        (the table priors: the occupied share of the cells their tables counted), else 0.5 (the uniform
+        prior). Priors whose cell marginal is not a parameter override it (:class:`~ogm_ppl.priors.MRFPrior`
+        estimates it by prior Gibbs sampling)."""
+        return float(getattr(self, "mean_occupancy", 0.5))
 
     def cell_log_odds(self) -> torch.Tensor | None:
         """Per-cell prior log-odds ``l(lambda_k)`` if cells are independent a priori, else ``None``."""

@@ -144,13 +144,19 @@ class MRFPrior(StencilPrior):
             order ``n`` connects the ``2 n`` nearest cells.
         psi: edge weight between unequal neighbours, ``0 < psi <= 1`` (1: no correlation).
         cell_prior: ``lambda``, the cell prior (scalar or ``K``).
+        outside: ``lambda_out`` of :meth:`outside_occupancy` (the occupancy of cells beyond the grid edge);
+            ``None``: the MRF's own cell marginal, estimated by prior Gibbs sampling. The named MRFs
+            (``mrf:CORPUS``) pass the corpus's occupied share, the marginal their fit aims at: a strongly
+            coupled fit is in an ordered phase whose sampled marginal is near 0 or 1.
 
     >>> p = MRFPrior((3, 3), order=1, psi=0.5)
     >>> float(p.compiled().coupling[0]) == -2 * math.log(0.5)
     True
     """
 
-    def __init__(self, shape, order: int = 1, psi: float = 0.5, cell_prior=0.5) -> None:
+    def __init__(self, shape, order: int = 1, psi: float = 0.5, cell_prior=0.5, outside: float | None = None) -> None:
+        if outside is not None and not 0.0 <= float(outside) <= 1.0:
+            raise ValueError(f"MRFPrior.outside must lie in [0, 1], got {outside}")
         if not 0.0 < float(psi) <= 1.0:
             raise ValueError(f"MRFPrior.psi must lie in (0, 1], got {psi}")
         lam = np.asarray(cell_prior, np.float64)
@@ -163,6 +169,40 @@ class MRFPrior(StencilPrior):
         super().__init__(shape, np.log(lam) - np.log1p(-lam), _mrf_offsets(int(order), ndim), -2.0 * lp, lp)
         self.order, self.psi, self.cell_prior = int(order), float(psi), lam
         self.mean_occupancy = float(lam.mean())
+        self._outside = None if outside is None else float(outside)
 
     def __repr__(self) -> str:
         return f"MRFPrior(shape={self.shape}, order={self.order}, psi={self.psi:.4g})"
+
+    def outside_occupancy(self) -> float:
+        """``outside`` if given, else the MRF's cell marginal ``P(m_k = 1)`` away from the edges: ``lambda``
+        itself for an independent MRF (``psi = 1`` or order 0); otherwise estimated once (seeded, cached) by
+        compiled prior Gibbs chains on a ``48 x 48`` grid (``48`` cells in 1D) with the mean cell prior:
+        8 chains from uniform noise, 300 sweeps, the centre cells of the last 100 sweeps (every 10th).
+        (``mean_occupancy``, the conditional ``lambda``, is not the marginal once ``psi < 1`` and
+        ``lambda != 0.5``.)"""
+        lam = float(self.cell_prior.mean())
+        if self._outside is None and (self.psi == 1.0 or self.order == 0):
+            return lam
+        if self._outside is None:
+            self._outside = _estimate_marginal(self.order, self.psi, lam, len(self.shape))
+        return self._outside
+
+
+def _estimate_marginal(order: int, psi: float, lam: float, ndim: int, size: int = 48, chains: int = 8) -> float:
+    """``P(m_k = 1)`` of a stationary MRF by compiled prior Gibbs (see :meth:`MRFPrior.outside_occupancy`)."""
+    from ogm_ppl.priors.compiled import prior_gibbs_sweeps
+
+    shape = (size, size) if ndim == 2 else (size,)
+    bundle = MRFPrior(shape, order=order, psi=psi, cell_prior=lam).compiled()
+    rng = np.random.default_rng(0)
+    maps = np.ascontiguousarray(rng.random((chains, int(np.prod(shape)))) < 0.5, dtype=np.uint8)
+    prior_gibbs_sweeps(bundle, maps, 200, 0)
+    edge = 8 if ndim == 2 else 4
+    tot = 0.0
+    for i in range(10):
+        prior_gibbs_sweeps(bundle, maps, 10, 1 + i)
+        g = maps.reshape((chains, *shape))
+        g = g[:, edge:-edge, edge:-edge] if ndim == 2 else g[:, edge:-edge]
+        tot += float(g.mean())
+    return tot / 10

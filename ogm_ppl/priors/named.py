@@ -161,7 +161,8 @@ def _mrf(conn: int) -> PriorFactory:
         from ogm_ppl.priors.mrf import MRFPrior
 
         lam_c, psi = tables().mrf_fit(conn)
-        return MRFPrior(shape, order=1 if conn == 4 else 2, psi=min(1.0, psi), cell_prior=lam_c)
+        order = 1 if conn == 4 else 2
+        return MRFPrior(shape, order=order, psi=min(1.0, psi), cell_prior=lam_c, outside=float(tables().lam))
 
     return build
 
