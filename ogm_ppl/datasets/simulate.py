@@ -37,6 +37,9 @@ def simulate_scans(
 ) -> Scans:
     """Range scans of ``truth`` (a boolean map of ``grid.shape``) from ``poses`` (``S x 3``).
 
+    A sensor sits in a free cell (the convention of :class:`~ogm_ppl.OccupancyModel`, which pins the cells
+    holding a pose free): a pose in an occupied cell of ``truth`` is refused (``ValueError`` naming it).
+
     Args:
         angles: beam angles relative to the yaw (``B``).
         max_range: metres.
@@ -54,6 +57,15 @@ def simulate_scans(
     S, B = poses.shape[0], angles.shape[-1]
     probe = Scans(poses, angles, np.full((S, B), max_range), max_range)
     rays = raycast(grid, probe)
+    own = rays.cells[rays.offsets[:-1]]
+    inside = truth.ravel()[own]
+    if inside.any():
+        ray = int(np.flatnonzero(inside)[0])
+        i = ray // max(B, 1)
+        r, c = divmod(int(own[ray]), grid.shape[-1])
+        raise ValueError(
+            f"pose {i} ({poses[i, 0]:g}, {poses[i, 1]:g}) lies in occupied cell (row {r}, col {c}) of truth"
+        )
     f = first_hit(rays, truth)
     hit = f < rays.lengths
     idx = np.minimum(f, rays.lengths - 1) + rays.offsets[:-1]

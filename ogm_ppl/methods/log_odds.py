@@ -65,14 +65,14 @@ def _delta(params: OGMParams, problem: MapProblem, ctx: RunContext):
         keep = ("F", "wall", "sigma", "num", "prior", "train_cross_entropy")
         return delta, {"delta_setting": setting, "delta_fitted": {k: training.get(k) for k in keep}}
     delta = delta_by_name(params.delta)
-    if not known:
-        return delta, {}
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        check_delta_setting(delta, sigma, F, where=ctx.where or "this map")
+        # the noise of a real log is not known: the range alone is checked
+        check_delta_setting(delta, sigma if known else None, F, where=ctx.where or "this map")
     for w in caught:
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
-    return delta, {"delta_setting": setting, "warnings": [str(w.message) for w in caught]}
+    checked = setting if known else {"F_cells": F}
+    return delta, {"delta_setting": checked, "warnings": [str(w.message) for w in caught]}
 
 
 def _clamp(clamp) -> tuple[float, float] | None:
@@ -91,6 +91,7 @@ def ogm(params: OGMParams, problem: MapProblem, ctx: RunContext) -> MapResult:
         delta,
         prior=params.prior,
         clamp=_clamp(params.clamp),
+        check_setting=False,  # _delta checked it, with the noise where it is known
     )
     details = {"ray_cast": "fused with the update (evidence_grid_from_scans)", **details}
     return MapResult(ev.probabilities.numpy(), ev.observed.numpy(), details)

@@ -403,9 +403,15 @@ class OccupancyModel:
     def simulate_readings(self, maps: torch.Tensor, generator: torch.Generator | None = None) -> torch.Tensor:
         """Readings (``... x R``, values of site ``"z"``) drawn from the sensor given maps ``... x K``: every
         ray's first hit (a ray cut by the grid edge with no hit in the grid draws the cells beyond under
-        ``lambda_out``), the sensor's reading, converted back to a range in cells."""
+        ``lambda_out``), the sensor's reading, converted back to a range in cells.
+
+        Maps with an occupied pinned cell (a sensor inside a wall: zero mass under the model) are refused
+        (``ValueError``). With ``known_free=None`` the sensor's own cell is latent; an occupied one is the
+        first hit at ``kappa = 0``, the thesis's ``f = 0`` (continuous kappa 0, a mean range of -1/2 cell)."""
         r = self.rays
         maps = torch.as_tensor(maps, dtype=torch.float64)
+        if self.known_free.any() and (maps[..., self.known_free] != 0).any():
+            raise ValueError("simulate_readings: a map occupies a cell pinned free (a cell holding a sensor)")
         f = self.first_hits(maps)  # ... x R
         lengths = self.lengths
         assert r.range_len is not None  # Rays.__post_init__ always fills it

@@ -133,3 +133,31 @@ def test_likelihood_table_built_in_blocks_equals_one_block(monkeypatch, sensor):
     assert torch.equal(torch.isinf(whole), torch.isinf(blocked))
     fin = torch.isfinite(whole)
     assert torch.equal(whole[fin], blocked[fin])
+
+
+def test_several_rays_marginalise_the_outside_cells_each_on_their_own():
+    # the documented condition of the cut-ray model (docs/guide/model.md): four readings along one line
+    # through a 9-cell grid (range 12) each sum the 4 outside cells out on their own; a 13-cell grid holding
+    # those cells shares them. For one ray the two agree (test above); for four they differ.
+    from ogm_ppl.inference import exact
+
+    def model(K):
+        rays = raycast(Grid.line(K), Scans.one_d([7.2, 9.5, 9.8, 10.1], max_range=12.0))
+        return OccupancyModel(Grid.line(K), rays, GaussianRange(1.0), IndependentPrior(0.5, K))
+
+    per_ray = exact.brute_force(model(9)).marginals
+    shared = exact.brute_force(model(13)).marginals[:9]
+    assert per_ray[8].item() == pytest.approx(0.00758, abs=5e-5)
+    assert shared[8].item() == pytest.approx(0.01033, abs=5e-5)
+    one = [
+        exact.brute_force(
+            OccupancyModel(
+                Grid.line(K),
+                raycast(Grid.line(K), Scans.one_d([9.5], max_range=12.0)),
+                GaussianRange(1.0),
+                IndependentPrior(0.5, K),
+            )
+        ).marginals[:9]
+        for K in (9, 13)
+    ]
+    torch.testing.assert_close(one[0], one[1], rtol=0, atol=1e-12)

@@ -14,6 +14,7 @@ gradients, so that Delta can be fitted by gradient (Section 2.5).
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -95,14 +96,35 @@ def _check_clamp(clamp, l0: float):
     return lo, hi
 
 
+def _check_range(delta: DeltaFamily, F_cells: float, where: str) -> None:
+    """The shared fitted-setting check (range only), warning from the caller's caller."""
+    import warnings
+
+    from ogm_ppl.inference.variational.setting_fit import check_delta_setting
+
+    if not (math.isfinite(F_cells) and F_cells > 0):
+        return
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        check_delta_setting(delta, None, F_cells, where=where)
+    for w in caught:
+        warnings.warn(w.message, stacklevel=3)
+
+
 def evidence_grid(
     rays: Rays,
     delta: DeltaFamily,
     prior: float = 0.5,
     clamp: tuple[float, float] | None = None,
     differentiable: bool = False,
+    check_setting: bool = True,
 ) -> LogOddsMap:
     """Traditional OGM over all rays at once (Eq. 2.10).
+
+    A fitted term (e.g. the shipped ``p21``) used at a maximum range far from the one it was fitted for
+    warns (:class:`~ogm_ppl.inference.variational.FittedSettingWarning`, the check of
+    :func:`~ogm_ppl.inference.variational.check_delta_setting` on the rays' median range in cells; the noise is
+    not known here). ``check_setting=False`` skips it (callers that have checked with the noise).
 
     Args:
         rays: from :func:`~ogm_ppl.raycast.raycast`.
@@ -122,6 +144,8 @@ def evidence_grid(
     l0 = _logit(prior)
     K = rays.grid.num_cells
     lo, hi = _check_clamp(clamp, l0)
+    if check_setting and rays.num_rays:
+        _check_range(delta, float(np.median(rays.max_range_cells())), "evidence_grid")
     if differentiable:
         if clamp is not None:
             raise ValueError("clamping is sequential and not differentiable; pass clamp=None")
@@ -160,14 +184,18 @@ def evidence_grid_from_scans(
     delta: DeltaFamily,
     prior: float = 0.5,
     clamp: tuple[float, float] | None = None,
+    check_setting: bool = True,
 ) -> LogOddsMap:
     """Traditional OGM straight from scans: traversal and update fused in one compiled pass.
 
     Gives the numbers of ``evidence_grid(raycast(grid, scans), delta, ...)`` without building the
-    ray -> cells structure: the fast path for large maps when only the evidence grid is wanted.
+    ray -> cells structure: the fast path for large maps when only the evidence grid is wanted. The same
+    setting check (``check_setting``) on ``scans.max_range / grid.resolution``.
     """
     l0 = _logit(prior)
     lo, hi = _check_clamp(clamp, l0)
+    if check_setting:
+        _check_range(delta, float(scans.max_range) / float(grid.resolution), "evidence_grid_from_scans")
     ri = ray_inputs(grid, scans)
     cap = ri.capacity()
     with torch.no_grad():

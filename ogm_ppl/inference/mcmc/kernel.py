@@ -62,7 +62,7 @@ def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: f
             mean = float(torch.sigmoid(lo).mean()) if lo is not None else getattr(model.prior, "mean_occupancy", 0.5)
             thr = threshold if threshold is not None else mean
             d = delta_by_name(delta) if isinstance(delta, str) else delta
-            m = (evidence_grid(model.rays, d).probabilities > thr).to(torch.float64)
+            m = (evidence_grid(model.rays, d, check_setting=False).probabilities > thr).to(torch.float64)
         elif init == "prior":
             m = model.prior.sample().to(torch.float64)
         elif init == "occupied":

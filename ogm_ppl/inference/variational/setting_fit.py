@@ -517,7 +517,7 @@ def _fit_hint(name: str, sigma: float, F: float | None) -> str:
 
 
 def check_delta_setting(
-    delta_or_name: DeltaFamily | str, sigma_cells: float, F_cells: float | None = None, *, where: str = ""
+    delta_or_name: DeltaFamily | str, sigma_cells: float | None, F_cells: float | None = None, *, where: str = ""
 ) -> bool:
     """Whether a term is used inside the setting it was fitted for; warns (:class:`FittedSettingWarning`)
     if not.
@@ -525,7 +525,8 @@ def check_delta_setting(
     The term's setting is :func:`~ogm_ppl.models.delta.fitted_setting` (the artefact's ``training``
     block). Outside means ``|sigma_cells - sigma_fit| > 25 %`` of ``sigma_fit`` (:data:`SIGMA_TOLERANCE`)
     or, if ``F_cells`` is given, ``F_cells`` and ``F_fit`` differ by more than a factor 2
-    (:data:`F_FACTOR`). Both are in cells at the map's resolution (``sigma_m / resolution``,
+    (:data:`F_FACTOR`); ``sigma_cells=None`` (the noise is not known, e.g. a real log) checks ``F`` alone. Both
+    are in cells at the map's resolution (``sigma_m / resolution``,
     ``max_range_m / resolution``). Terms that hold no setting (``"haehnel"``: hand-set, or a family made by
     hand) never warn and return ``True``; the thesis's ``*_thesis`` values hold the setting Section 2.5
     states (sigma 3, F 75) and do warn. ``where`` (e.g. ``"experiment intel_5cm"``) goes into the message.
@@ -540,8 +541,8 @@ def check_delta_setting(
     >>> caught[0].category.__name__, "fit_delta_for_setting('p21', sigma=1, F=400)" in str(caught[0].message)
     ('FittedSettingWarning', True)
     """
-    if not (math.isfinite(sigma_cells) and sigma_cells > 0):
-        raise ValueError(f"sigma_cells must be a positive number, got {sigma_cells!r}")
+    if sigma_cells is not None and not (math.isfinite(sigma_cells) and sigma_cells > 0):
+        raise ValueError(f"sigma_cells must be a positive number or None, got {sigma_cells!r}")
     if F_cells is not None and not (math.isfinite(F_cells) and F_cells > 0):
         raise ValueError(f"F_cells must be a positive number or None, got {F_cells!r}")
     setting = fitted_setting(delta_or_name)
@@ -550,7 +551,7 @@ def check_delta_setting(
     sigma_fit = float(setting["sigma"])
     F_fit = setting.get("F")
     bad = []
-    if abs(sigma_cells - sigma_fit) > SIGMA_TOLERANCE * sigma_fit:
+    if sigma_cells is not None and abs(sigma_cells - sigma_fit) > SIGMA_TOLERANCE * sigma_fit:
         bad.append(f"sigma {sigma_cells:g} cells is not within {SIGMA_TOLERANCE:.0%} of {sigma_fit:g}")
     if F_cells is not None and isinstance(F_fit, (int, float)) and F_fit > 0:
         if max(F_cells / F_fit, F_fit / F_cells) > F_FACTOR:
@@ -559,13 +560,16 @@ def check_delta_setting(
         return True
     name = setting.get("name") or (delta_or_name if isinstance(delta_or_name, str) else type(delta_or_name).__name__)
     fitted = f"sigma = {sigma_fit:g} cells" + (f", F = {F_fit:g} cells" if isinstance(F_fit, (int, float)) else "")
-    at = f"sigma = {sigma_cells:g} cells" + ("" if F_cells is None else f", F = {F_cells:g} cells")
+    at = ", ".join(
+        ([] if sigma_cells is None else [f"sigma = {sigma_cells:g} cells"])
+        + ([] if F_cells is None else [f"F = {F_cells:g} cells"])
+    )
     loc = f" in {where}" if where else ""
     warnings.warn(
         FittedSettingWarning(
             f"Delta term {name!r} was fitted for {fitted} but is used at {at}{loc} ({'; '.join(bad)}); "
             f"outside its setting it can erase walls or blur them. Fit it for this setting: "
-            f"{_fit_hint(str(name), sigma_cells, F_cells)}"
+            f"{_fit_hint(str(name), sigma_fit if sigma_cells is None else sigma_cells, F_cells)}"
         ),
         stacklevel=2,
     )

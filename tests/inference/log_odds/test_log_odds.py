@@ -195,3 +195,25 @@ def test_log_odds_map_is_immutable():
         m.log_odds = torch.zeros(6)
     with pytest.raises(dataclasses.FrozenInstanceError):
         m.observed = torch.ones(6, dtype=torch.bool)
+
+
+def test_fitted_term_far_from_its_range_warns_in_evidence_grid():
+    # the one shared setting check: the shipped p21 was fitted for F = 75 cells; a 400-cell range
+    # (20 m at 5 cm) warns from evidence_grid and from the fused path; 75 cells and haehnel do not
+    import warnings
+
+    from ogm_ppl.inference.variational import FittedSettingWarning
+    from ogm_ppl.models import delta_by_name
+
+    grid = Grid((40, 40), resolution=0.05)
+    far = Scans([[1.0, 1.0, 0.0]], [0.0, 0.5], [[0.5, 0.6]], max_range=20.0)
+    near = Scans([[1.0, 1.0, 0.0]], [0.0, 0.5], [[0.5, 0.6]], max_range=3.75)
+    with pytest.warns(FittedSettingWarning, match=r"'p21'.*F = 400 cells.*evidence_grid"):
+        evidence_grid(raycast(grid, far), delta_by_name("p21"))
+    with pytest.warns(FittedSettingWarning, match="evidence_grid_from_scans"):
+        evidence_grid_from_scans(grid, far, delta_by_name("p21"))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        evidence_grid(raycast(grid, near), delta_by_name("p21"))
+        evidence_grid(raycast(grid, far), delta_by_name("haehnel"))
+        evidence_grid(raycast(grid, far), delta_by_name("p21"), check_setting=False)
