@@ -441,7 +441,12 @@ def test_experiment_subcommand(tmp_path, capsys):
     spec = Path(__file__).resolve().parent.parent / "experiments" / "specs" / "smoke.toml"
     out = tmp_path / "smoke"
     assert main(["experiment", str(spec), "--scheduler", "serial", "--quiet", "--out", str(out)]) == 0
-    assert (out / "metrics.md").exists() and "tasks run" in capsys.readouterr().out
+    got = capsys.readouterr()
+    assert (out / "metrics.md").exists() and "tasks run" in got.out and got.err == ""  # --quiet: nothing
+    # without a terminal (captured stderr) and without --quiet: plain progress lines, first and last
+    assert main(["experiment", str(spec), "--scheduler", "serial", "--no-resume", "--out", str(out)]) == 0
+    lines = capsys.readouterr().err.splitlines()
+    assert lines[0].startswith("tasks: 0/") and lines[-1].endswith("done") and "\r" not in "".join(lines)
     bad = tmp_path / "bad.toml"
     bad.write_text("[experiment]\nname = 3\n")
     assert main(["experiment", str(bad), "--out", str(tmp_path / "b")]) == 2

@@ -28,6 +28,7 @@ import numpy as np
 from ogm_ppl.experiment import tasks as T
 from ogm_ppl.experiment.spec import ExperimentSpec, derive_seed, load_spec
 from ogm_ppl.io import atomic_write_text
+from ogm_ppl.progress import Progress
 
 __all__ = ["ExperimentResult", "ExperimentError", "run_experiment", "plan_tasks"]
 
@@ -160,18 +161,18 @@ def plan_tasks(spec: ExperimentSpec, out: Path, resume: bool = True) -> list[Tas
 
 # ------------------------------------------------------------------------------------------ executing
 def _execute_serial(todo: list[Task], progress: bool):
-    from tqdm.auto import tqdm
-
     results, failed = {}, {}
-    for t in tqdm(todo, disable=not progress, desc="tasks", unit="task"):
-        bad = [d for d in t.deps if d in failed]
-        if bad:
-            failed[t.id] = f"dependency {bad[0]} failed"
-            continue
-        try:
-            results[t.id] = t.fn(*t.args, **t.kwargs)
-        except Exception as e:  # keep going: independent tasks still finish, and a rerun resumes
-            failed[t.id] = f"{type(e).__name__}: {e}"
+    with Progress(len(todo), "tasks", enabled=progress) as bar:
+        for t in todo:
+            bad = [d for d in t.deps if d in failed]
+            if bad:
+                failed[t.id] = f"dependency {bad[0]} failed"
+            else:
+                try:
+                    results[t.id] = t.fn(*t.args, **t.kwargs)
+                except Exception as e:  # keep going: independent tasks still finish, and a rerun resumes
+                    failed[t.id] = f"{type(e).__name__}: {e}"
+            bar.update(note=t.id)
     return results, failed
 
 
@@ -204,7 +205,6 @@ def _client(scheduler, workers):
 
 def _execute_dask(todo: list[Task], client, progress: bool):
     from distributed import as_completed
-    from tqdm.auto import tqdm
 
     futures: dict[str, object] = {}  # task id -> dask Future
     by_future: dict[str, str] = {}  # Future key -> task id
@@ -218,16 +218,15 @@ def _execute_dask(todo: list[Task], client, progress: bool):
         futures[t.id] = f
         by_future[f.key] = t.id
     results, failed = {}, {}
-    bar = tqdm(total=len(todo), disable=not progress, desc="tasks", unit="task")
-    for f in as_completed(list(futures.values())):
-        tid = by_future[f.key]
-        if f.status == "finished":
-            results[tid] = f.result()
-        else:
-            e = f.exception()
-            failed[tid] = f"{type(e).__name__}: {e}"
-        bar.update(1)
-    bar.close()
+    with Progress(len(todo), "tasks", enabled=progress) as bar:
+        for f in as_completed(list(futures.values())):
+            tid = by_future[f.key]
+            if f.status == "finished":
+                results[tid] = f.result()
+            else:
+                e = f.exception()
+                failed[tid] = f"{type(e).__name__}: {e}"
+            bar.update(note=tid)
     return results, failed
 
 
@@ -243,7 +242,8 @@ def run_experiment(
         workers: LocalCluster size.
         resume: skip tasks already done with the same settings and resume stopped Gibbs runs from their
             checkpoints; ``False`` recomputes everything.
-        progress: a progress bar over tasks.
+        progress: progress over tasks (:class:`~ogm_ppl.progress.Progress`: a bar on a terminal, plain
+            lines to stderr otherwise).
 
     Returns:
         an :class:`ExperimentResult`; raises :class:`ExperimentError` (with ``.result``) if tasks failed,

@@ -1,0 +1,117 @@
+"""Progress of long runs: a tqdm bar on an interactive terminal, plain lines otherwise.
+
+A run whose output goes to a log file or a pipe (a batch job, ``make run > log``, CI) gets no bar (its
+carriage returns make logs unreadable) but one line at the start, one at most every ``every`` seconds while
+it runs and one at the end::
+
+    tasks: 0/40 (0 %), 0 s
+    tasks: 7/40 (18 %), 63 s, ~5 min left; last: run/office/gibbs-border-L9/c1
+    tasks: 40/40 (100 %), 371 s, done
+
+>>> import io
+>>> s = io.StringIO()
+>>> with Progress(3, "tasks", stream=s, every=0.0) as p:
+...     p.update(note="a"); p.update(); p.update()
+>>> s.getvalue().splitlines()[0], s.getvalue().splitlines()[-1].endswith("done")
+('tasks: 0/3 (0 %), 0 s', True)
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from typing import IO
+
+__all__ = ["Progress", "interactive"]
+
+
+def interactive(stream: IO | None = None) -> bool:
+    """Whether ``stream`` (default ``sys.stderr``) is an interactive terminal."""
+    stream = sys.stderr if stream is None else stream
+    try:
+        return bool(stream.isatty())
+    except (AttributeError, ValueError):
+        return False
+
+
+def _duration(s: float) -> str:
+    return f"{s:.0f} s" if s < 120 else f"{s / 60:.0f} min"
+
+
+class Progress:
+    """Progress over ``total`` steps: tqdm when ``stream`` is a terminal, plain lines otherwise.
+
+    Args:
+        total: number of steps.
+        desc: what is counted (the line's prefix).
+        unit: tqdm's unit.
+        enabled: ``False`` prints nothing.
+        every: seconds between plain lines (the first and last lines always print).
+        stream: where to write (default ``sys.stderr``).
+        bar: force the tqdm bar (``True``) or plain lines (``False``); default: :func:`interactive`.
+    """
+
+    def __init__(
+        self,
+        total: int,
+        desc: str,
+        *,
+        unit: str = "task",
+        enabled: bool = True,
+        every: float = 10.0,
+        stream: IO | None = None,
+        bar: bool | None = None,
+    ) -> None:
+        self.total, self.desc, self.enabled, self.every = int(total), desc, bool(enabled), float(every)
+        self.stream = sys.stderr if stream is None else stream
+        self.done = 0
+        self._t0 = time.perf_counter()
+        self._last = -float("inf")
+        self._bar = None
+        if not self.enabled:
+            return
+        if interactive(self.stream) if bar is None else bar:
+            from tqdm.auto import tqdm
+
+            self._bar = tqdm(total=self.total, desc=desc, unit=unit, file=self.stream)
+        else:
+            self._line()
+
+    def _line(self, note: str = "", final: bool = False) -> None:
+        el = time.perf_counter() - self._t0
+        pct = 100.0 * self.done / self.total if self.total else 100.0
+        parts = [f"{self.desc}: {self.done}/{self.total} ({pct:.0f} %), {_duration(el)}"]
+        if final:
+            parts.append("done")
+        elif 0 < self.done < self.total:
+            parts.append(f"~{_duration(el / self.done * (self.total - self.done))} left")
+        line = ", ".join(parts) + (f"; last: {note}" if note and not final else "")
+        print(line, file=self.stream, flush=True)
+        self._last = time.perf_counter()
+
+    def update(self, n: int = 1, note: str = "") -> None:
+        """``n`` more steps done; ``note`` (e.g. the task's name) goes into the next plain line."""
+        self.done += int(n)
+        if not self.enabled:
+            return
+        if self._bar is not None:
+            self._bar.update(n)
+        elif time.perf_counter() - self._last >= self.every and self.done < self.total:
+            self._line(note)
+
+    def close(self) -> None:
+        """The last line (plain mode) or closing the bar."""
+        if not self.enabled:
+            return
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None
+        elif self._last != float("inf"):
+            self._line(final=True)
+            self._last = float("inf")
+
+    def __enter__(self) -> Progress:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()

@@ -1,0 +1,36 @@
+"""ogm_ppl.progress: plain lines off a terminal (first, throttled, last), nothing when disabled."""
+
+import io
+
+from ogm_ppl.progress import Progress, interactive
+
+
+def test_plain_lines_first_every_and_last(monkeypatch):
+    now = [0.0]
+    monkeypatch.setattr("ogm_ppl.progress.time.perf_counter", lambda: now[0])
+    s = io.StringIO()
+    assert not interactive(s)
+    p = Progress(4, "tasks", stream=s, every=10.0)  # first line at t = 0
+    for t, note in ((5.0, "a"), (12.0, "b"), (30.0, "c"), (31.0, "d")):
+        now[0] = t
+        p.update(note=note)  # a line when 10 s passed since the last one, never for the last step
+    now[0] = 40.0
+    p.close()
+    lines = s.getvalue().splitlines()
+    assert lines[0] == "tasks: 0/4 (0 %), 0 s"
+    assert lines[1] == "tasks: 2/4 (50 %), 12 s, ~12 s left; last: b"
+    assert lines[2] == "tasks: 3/4 (75 %), 30 s, ~10 s left; last: c"
+    assert lines[3] == "tasks: 4/4 (100 %), 40 s, done" and len(lines) == 4
+
+
+def test_disabled_prints_nothing_and_close_is_idempotent():
+    s = io.StringIO()
+    with Progress(3, "x", stream=s, enabled=False) as p:
+        p.update()
+    assert s.getvalue() == ""
+    s = io.StringIO()
+    p = Progress(1, "x", stream=s, every=0.0)
+    p.update()
+    p.close()
+    p.close()
+    assert s.getvalue().count("done") == 1
