@@ -463,6 +463,13 @@ def build_parser() -> argparse.ArgumentParser:
     e.add_argument("--workers", type=_pos_int, default=None, help="LocalCluster workers (default: one per core)")
     e.add_argument("--no-resume", action="store_true", help="rerun tasks that are already done")
     e.add_argument("--quiet", action="store_true", help="no progress output")
+    e.add_argument(
+        "--algorithms",
+        nargs="+",
+        metavar="NAME",
+        default=None,
+        help="run only these algorithms of the spec (a later run into the same --out resumes the rest)",
+    )
 
     # --------------------------------------------------------------------------------- run
     run = sub.add_parser("run", help="the headline experiment: maps, figures and a report")
@@ -1298,6 +1305,8 @@ def cmd_experiment(args) -> int:
 
     try:
         spec = load_spec(args.spec)
+        if args.algorithms:
+            spec = spec.only(args.algorithms)
     except SpecError as e:
         raise CLIError(str(e)) from None
     out = args.out if args.out is not None else Path("out") / "experiments" / spec.name

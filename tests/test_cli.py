@@ -447,6 +447,20 @@ def test_experiment_subcommand(tmp_path, capsys):
     assert main(["experiment", str(spec), "--scheduler", "serial", "--no-resume", "--out", str(out)]) == 0
     lines = capsys.readouterr().err.splitlines()
     assert lines[0].startswith("tasks: 0/") and lines[-1].endswith("done") and "\r" not in "".join(lines)
+    # a subset of the algorithms, then an unknown one (refused by name)
+    sub = tmp_path / "sub"
+    from ogm_ppl.experiment import load_spec
+
+    first = load_spec(spec).algorithms[0].name
+    assert (
+        main(["experiment", str(spec), "--scheduler", "serial", "--quiet", "--out", str(sub), "--algorithms", first])
+        == 0
+    )
+    ran = json.loads((sub / "spec.json").read_text())["algorithms"]
+    assert [a["name"] for a in ran] == [first]
+    capsys.readouterr()
+    assert main(["experiment", str(spec), "--out", str(sub), "--algorithms", "nope"]) == 2
+    assert "no algorithm 'nope'" in capsys.readouterr().err
     bad = tmp_path / "bad.toml"
     bad.write_text("[experiment]\nname = 3\n")
     assert main(["experiment", str(bad), "--out", str(tmp_path / "b")]) == 2

@@ -65,7 +65,7 @@ import os
 import re
 import sys
 import zlib
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -214,6 +214,17 @@ class ExperimentSpec:
     output: OutputSpec = field(default_factory=OutputSpec)
     source: str = "<dict>"
     raw: dict = field(default_factory=dict, repr=False)
+
+    def only(self, algorithms) -> ExperimentSpec:
+        """The same spec with only the named algorithms (in the spec's order): run a subset now, the rest
+        later into the same output folder (a rerun resumes every task already done). Raises
+        :class:`SpecError` naming an unknown algorithm."""
+        names = list(dict.fromkeys(algorithms))
+        known = [a.name for a in self.algorithms]
+        unknown = [n for n in names if n not in known]
+        if unknown:
+            raise SpecError(f"{self.source}: no algorithm {unknown[0]!r} in the spec; it has {', '.join(known)}")
+        return replace(self, algorithms=tuple(a for a in self.algorithms if a.name in names))
 
     def to_json(self) -> dict:
         """The normalised spec (JSON-able)."""
