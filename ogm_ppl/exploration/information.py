@@ -92,6 +92,7 @@ _SQRT2 = math.sqrt(2.0)
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 _GAUSS, _PATTERN = 0, 1
 _FAR = 38.0  # |standardised distance| beyond which a normal bin mass underflows (< 1e-300)
+_WINDOW = 8.5  # bins farther than this many sigma from a first hit get no Gaussian mass (< 1e-17)
 
 
 # --------------------------------------------------------------------------- candidate rays
@@ -405,6 +406,45 @@ def _coord(kind, t_enter, off, kap):
     return float(kap)
 
 
+@nb.njit(cache=True, inline="always")
+def _fill_row(kind, row, J, f, none, F, sigma, p_rand, width, p_occ, tails):
+    """``row[j] = P(outcome j | f)`` for ``j = 0..J``. The Gaussian part is evaluated on the bins within
+    ``_WINDOW`` standard deviations of ``f`` only (beyond, a bin's mass is below ``1e-17``), one ``erfc``
+    per bin edge (``tails``: scratch of ``J + 1``)."""
+    if kind != 0 or none:
+        for j in range(J + 1):
+            row[j] = _bin_prob(kind, j, J, f, none, F, sigma, p_rand, width, p_occ)
+        return
+    for j in range(J):
+        a = -0.5 + j * width
+        b = min(-0.5 + (j + 1) * width, F + 0.5)
+        row[j] = p_rand * (b - a) / (F + 1.0) if p_rand > 0.0 else 0.0
+    row[J] = (1.0 - p_rand) * 0.5 * math.erfc((F + 0.5 - f) / (sigma * _SQRT2))
+    lo = max(0, int(math.floor((f - _WINDOW * sigma + 0.5) / width)))
+    hi = min(J - 1, int(math.floor((f + _WINDOW * sigma + 0.5) / width)))
+    if hi < lo:
+        return
+    # edges lo..hi+1 as signed standardised distances; tails[k] = the smaller tail mass at edge k
+    for k in range(lo, hi + 2):
+        if k == 0:
+            tails[k] = 0.0
+        else:
+            e = F + 0.5 if k == J else -0.5 + k * width
+            x = (e - f) / sigma
+            tails[k] = 0.5 * math.erfc(abs(x) / _SQRT2)
+    for j in range(lo, hi + 1):
+        xa = -np.inf if j == 0 else (-0.5 + j * width - f) / sigma
+        eb = F + 0.5 if j + 1 == J else -0.5 + (j + 1) * width
+        xb = (eb - f) / sigma
+        if xa > 0.0:
+            g = tails[j] - tails[j + 1]
+        elif xb < 0.0:
+            g = tails[j + 1] - tails[j]
+        else:
+            g = 1.0 - tails[j] - tails[j + 1]
+        row[j] += (1.0 - p_rand) * max(g, 0.0)
+
+
 @nb.njit(cache=True, parallel=True)
 def _beam_mi_kernel(pf, offsets, t_enter, Fray, kind, sigma, p_rand, width, p_occ):
     """``I(f_r; z_r)`` in nats for every ray ``r`` from its first-hit distribution ``pf[r, :len_r + 1]``."""
@@ -421,6 +461,7 @@ def _beam_mi_kernel(pf, offsets, t_enter, Fray, kind, sigma, p_rand, width, p_oc
         if ns <= 1:
             continue  # a certain first hit carries no information
         rows = np.empty((ns, J + 1))
+        tails = np.empty(J + 2)
         ps = np.empty(ns)
         q = np.zeros(J + 1)
         i = 0
@@ -430,18 +471,19 @@ def _beam_mi_kernel(pf, offsets, t_enter, Fray, kind, sigma, p_rand, width, p_oc
                 continue
             none = kap == n
             f = 0.0 if none else _coord(kind, t_enter, offsets[r], kap)
+            _fill_row(kind, rows[i], J, f, none, F, sigma, p_rand, width, p_occ, tails)
             for j in range(J + 1):
-                v = _bin_prob(kind, j, J, f, none, F, sigma, p_rand, width, p_occ)
-                rows[i, j] = v
-                q[j] += p * v
+                q[j] += p * rows[i, j]
             ps[i] = p
             i += 1
         mi = 0.0
         for i in range(ns):
+            acc = 0.0
             for j in range(J + 1):
                 v = rows[i, j]
                 if v > 0.0:
-                    mi += ps[i] * v * math.log(v / q[j])
+                    acc += v * math.log(v / q[j])
+            mi += ps[i] * acc
         out[r] = max(mi, 0.0)
     return out
 
