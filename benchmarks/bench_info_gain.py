@@ -94,7 +94,7 @@ def main(argv=None) -> dict:
     ap.add_argument("--beams", type=int, default=360)
     ap.add_argument("--samples", type=int, default=64)
     ap.add_argument("--draws", type=int, default=64, help="nested Monte-Carlo draws per candidate (scan MI)")
-    ap.add_argument("--baseline-candidates", type=int, default=10, help="candidates the torch baseline runs on")
+    ap.add_argument("--baseline-candidates", type=int, default=4, help="candidates the torch baseline runs on")
     ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args(argv)
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -171,7 +172,7 @@ def test_finer_bins_never_lose_information_and_converge(problem):
     model, maps, pi, cr = problem
     sensor = GaussianRange(0.8)
     vals = [beam_information(model.grid, sensor, maps, cr, weights=pi, bin_width=w) for w in (1, 0.5, 0.25, 1 / 64)]
-    for coarse, fine in zip(vals, vals[1:]):
+    for coarse, fine in itertools.pairwise(vals):
         assert (fine >= coarse - 1e-12).all()
     assert (vals[1] - vals[0]).max() > 1e-3  # refinement matters here, so the check above can fail
     fine2 = beam_information(model.grid, sensor, maps, cr, weights=pi, bin_width=1 / 128)
@@ -192,7 +193,7 @@ def exact_scan_mi(pi, rows_per_beam):
     "sensor, w", [(PatternMatch(0.75), None), (GaussianRange(0.8), 1.0), (GaussianRange(0.6, p_rand=0.15), 1.0)]
 )
 def test_scan_estimator_is_within_its_standard_error_of_the_exact_mi(problem, sensor, w):
-    model, maps, pi, cr3 = problem
+    model, maps, pi, _cr3 = problem
     beams = np.array([0.0, 0.05, math.pi / 2])  # two beams along one row: redundant through the map
     cr = candidate_rays(model.grid, POSES, beams, MAX_RANGE)
     res = scan_information(
@@ -216,7 +217,7 @@ def test_scan_estimator_is_within_its_standard_error_of_the_exact_mi(problem, se
 
 
 def test_scan_estimator_of_continuous_readings_matches_the_fine_bin_limit(problem):
-    model, maps, pi, cr = problem
+    model, maps, pi, _cr = problem
     sensor = GaussianRange(0.7, p_rand=0.05)
     one = candidate_rays(model.grid, POSES, np.array([math.pi / 4]), MAX_RANGE)
     res = scan_information(model.grid, sensor, maps, one, num_draws=6000, generator=torch.Generator().manual_seed(2),
@@ -227,7 +228,7 @@ def test_scan_estimator_of_continuous_readings_matches_the_fine_bin_limit(proble
 
 
 def test_scan_with_a_seed_is_reproducible(problem):
-    model, maps, pi, cr = problem
+    model, maps, _pi, cr = problem
     run = [
         scan_information(model.grid, GaussianRange(0.8), maps[:50], cr, num_draws=64,
                          generator=torch.Generator().manual_seed(5))
@@ -277,10 +278,10 @@ def test_independent_information_of_sample_marginals_differs_from_the_samples(pr
 
 # ------------------------------------------------------------------ bad input
 def test_bad_input_is_refused_with_what_is_wrong(problem):
-    model, maps, pi, cr = problem
+    model, maps, _pi, cr = problem
     grid = model.grid
     s = GaussianRange(0.9)
-    with pytest.raises(ValueError, match="candidate pose 1 .* off the grid"):
+    with pytest.raises(ValueError, match=r"candidate pose 1 .* off the grid"):
         candidate_rays(grid, [[0.5, 0.5, 0.0], [4.5, 0.5, 0.0]], ANGLES, MAX_RANGE)
     with pytest.raises(ValueError, match="candidate set is empty"):
         candidate_rays(grid, np.zeros((0, 3)), ANGLES, MAX_RANGE)
