@@ -317,7 +317,7 @@ def _weight_of(x, word, w):
     return acc
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True)
 def _first_hits_kernel(packed, w, valid_mask, offsets, cells, pose_cells, B, Wmax):
     """Per ray, the weight of the samples with first hit at each kappa (last column: none), conditioned
     on the pose cell free; ``totals[c]`` the weight of the samples with candidate ``c``'s cell free."""
@@ -329,7 +329,7 @@ def _first_hits_kernel(packed, w, valid_mask, offsets, cells, pose_cells, B, Wma
     for c in range(C):
         for k in range(W):
             totals[c] += _weight_of(~packed[pose_cells[c], k] & valid_mask[k], k, w)
-    for r in nb.prange(R):
+    for r in range(R):
         c = r // B
         if totals[c] <= 0.0:
             continue
@@ -450,12 +450,12 @@ def _fill_row(kind, row, J, f, none, F, sigma, p_rand, width, p_occ, tails):
         row[j] += (1.0 - p_rand) * max(g, 0.0)
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True)
 def _beam_mi_kernel(pf, offsets, t_enter, Fray, kind, sigma, p_rand, width, p_occ):
     """``I(f_r; z_r)`` in nats for every ray ``r`` from its first-hit distribution ``pf[r, :len_r + 1]``."""
     R = offsets.shape[0] - 1
     out = np.zeros(R)
-    for r in nb.prange(R):
+    for r in range(R):
         n = offsets[r + 1] - offsets[r]
         F = Fray[r]
         J = _num_outcomes(kind, F, width)
@@ -517,7 +517,7 @@ def _log_reading(kind, binned, y, jb, is_max, J, f, none, F, sigma, p_rand, widt
     return lg
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True)
 def _scan_mi_kernel(
     packed, w, valid_mask, offsets, cells, t_enter, Fray, pose_cells, B, kind, binned, sigma, p_rand, width, p_occ,
     u_pick, eps, u_a, u_b,
@@ -531,7 +531,7 @@ def _scan_mi_kernel(
     mean = np.full(C, np.nan)
     var = np.full(C, np.nan)
     one = np.uint64(1)
-    for c in nb.prange(C):
+    for c in range(C):
         # the samples with the candidate's cell free, renormalised
         loc = np.full(S, -1, np.int64)
         vs = np.empty(S, np.int64)
