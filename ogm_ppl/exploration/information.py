@@ -100,6 +100,20 @@ _NEGLIGIBLE = 1e-15  # first hits of smaller probability are left out of the per
 _WINDOW = 8.5  # bins farther than this many sigma from a first hit get no Gaussian mass (< 1e-17)
 
 
+def _log_tail_table(step: int = 512, top: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
+    """``log Q(x)`` and its derivative ``-phi(x) / Q(x)`` at ``x = i / step``, ``0 <= x <= top``
+    (``Q = 1 - Phi``, the normal upper tail), for :func:`_tail`."""
+    x = np.arange(int(top * step) + 2) / step
+    q = np.array([0.5 * math.erfc(v / _SQRT2) for v in x])
+    phi = np.exp(-0.5 * x * x - _LOG_SQRT_2PI)
+    return np.log(q), -phi / q
+
+
+_TAIL_STEP = 512
+_LOGQ, _DLOGQ = _log_tail_table(_TAIL_STEP)
+_TAIL_TOP = (len(_LOGQ) - 2) / _TAIL_STEP
+
+
 # --------------------------------------------------------------------------- candidate rays
 @dataclass(frozen=True, eq=False)
 class CandidateRays:
@@ -369,6 +383,28 @@ def _phi_diff(lo, hi):
 
 
 @nb.njit(cache=True, inline="always")
+def _tail(x):
+    """``Q(x) = 1 - Phi(x)`` for ``x >= 0`` by cubic Hermite interpolation of ``log Q`` on a ``1/512`` grid
+    (relative error below ``1e-13``, tested against ``erfc``; four times cheaper than ``erfc``), ``erfc``
+    beyond ``x = 10``."""
+    if x >= _TAIL_TOP:
+        return 0.5 * math.erfc(x / _SQRT2)
+    u = x * _TAIL_STEP
+    i = int(u)
+    t = u - i
+    h = 1.0 / _TAIL_STEP
+    t2 = t * t
+    t3 = t2 * t
+    y = (
+        (2.0 * t3 - 3.0 * t2 + 1.0) * _LOGQ[i]
+        + (t3 - 2.0 * t2 + t) * h * _DLOGQ[i]
+        + (3.0 * t2 - 2.0 * t3) * _LOGQ[i + 1]
+        + (t3 - t2) * h * _DLOGQ[i + 1]
+    )
+    return math.exp(y)
+
+
+@nb.njit(cache=True, inline="always")
 def _num_outcomes(kind, F, width):
     """``J``: hit outcomes of a ray (the max-range outcome is index ``J``)."""
     if kind == 0:
@@ -414,8 +450,8 @@ def _coord(kind, t_enter, off, kap):
 @nb.njit(cache=True, inline="always")
 def _fill_row(kind, row, J, f, none, F, sigma, p_rand, width, p_occ, tails):
     """``row[j] = P(outcome j | f)`` for ``j = 0..J``. The Gaussian part is evaluated on the bins within
-    ``_WINDOW`` standard deviations of ``f`` only (beyond, a bin's mass is below ``1e-17``), one ``erfc``
-    per bin edge (``tails``: scratch of ``J + 1``)."""
+    ``_WINDOW`` standard deviations of ``f`` only (beyond, a bin's mass is below ``1e-17``), one normal tail
+    (:func:`_tail`) per bin edge (``tails``: scratch of ``J + 1``)."""
     if kind != 0 or none:
         for j in range(J + 1):
             row[j] = _bin_prob(kind, j, J, f, none, F, sigma, p_rand, width, p_occ)
@@ -436,7 +472,7 @@ def _fill_row(kind, row, J, f, none, F, sigma, p_rand, width, p_occ, tails):
         else:
             e = F + 0.5 if k == J else -0.5 + k * width
             x = (e - f) / sigma
-            tails[k] = 0.5 * math.erfc(abs(x) / _SQRT2)
+            tails[k] = _tail(abs(x))
     for j in range(lo, hi + 1):
         xa = -np.inf if j == 0 else (-0.5 + j * width - f) / sigma
         eb = F + 0.5 if j + 1 == J else -0.5 + (j + 1) * width

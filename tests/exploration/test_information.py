@@ -343,3 +343,11 @@ def test_bad_input_is_refused_with_what_is_wrong(problem):
         beam_information(grid, s, maps, cr, bin_width=0.0)
     with pytest.raises(TypeError, match="no compiled reading model"):
         beam_information(grid, object(), maps, cr)
+
+
+def test_tabulated_normal_tail_matches_erfc():
+    from ogm_ppl.exploration.information import _tail
+
+    for x in np.concatenate([np.linspace(0, 12, 20011), np.random.default_rng(0).uniform(0, 10, 5000)]):
+        exact = 0.5 * math.erfc(x / math.sqrt(2))
+        assert abs(_tail(x) / exact - 1) < 1e-13, x
