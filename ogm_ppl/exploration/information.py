@@ -220,7 +220,10 @@ def candidate_rays(
                 f"candidate pose {c} = {P[c].tolist()} lies inside an obstacle (cell {rc[c].tolist()} is occupied)"
             )
     scans = Scans(P, A, np.full((P.shape[0], A.shape[0]), mr), max_range=mr)
-    ri = ray_inputs(grid, scans)
+    try:
+        ri = ray_inputs(grid, scans)
+    except ValueError as e:  # a 1D grid with a beam off the row: name the candidate and beam
+        raise ValueError(f"candidate beams (reading i is candidate i // {A.shape[0]}, beam i % {A.shape[0]}): {e}") from e
     offsets, cells, t_enter, _, _, range_len = traverse_all(
         ri.u0, ri.v0, ri.du, ri.dv, ri.length, ri.range_cells, ri.is_max, grid.rows, grid.cols
     )
