@@ -223,7 +223,8 @@ def candidate_rays(
     try:
         ri = ray_inputs(grid, scans)
     except ValueError as e:  # a 1D grid with a beam off the row: name the candidate and beam
-        raise ValueError(f"candidate beams (reading i is candidate i // {A.shape[0]}, beam i % {A.shape[0]}): {e}") from e
+        B = A.shape[0]
+        raise ValueError(f"candidate beams (reading i is candidate i // {B}, beam i % {B}): {e}") from e
     offsets, cells, t_enter, _, _, range_len = traverse_all(
         ri.u0, ri.v0, ri.du, ri.dv, ri.length, ri.range_cells, ri.is_max, grid.rows, grid.cols
     )
