@@ -9,8 +9,12 @@ maps of 500 x 500 cells of ``ogm_ppl.datasets.mapgen.iter_corpus(100, (500, 500)
 ``ipa`` = their training plans (``training_plans``: the buildings of the real logs excluded), ``dungeon`` =
 the first 300 training plans; rasterised by ``load_plan``'s defaults (outside = occupied, 20-cell margin).
 Every tenth map (index 9, 19, ...) is the validation split that picks the stopping point; the rest train.
-A 3 x 3 field (102 orbit parameters per scale) is fitted by pseudo-likelihood, then by persistent
-contrastive divergence (``ogm_ppl.priors.learn_field``; settings in ``SETTINGS``), with an L2 penalty.
+A 3 x 3 field (102 orbit parameters per scale) is fitted by pseudo-likelihood with an L2 penalty centred on
+the potentials of a 2 x 2 field fitted the same way (``backoff_potentials``: patterns the plans never showed are
+scored by the smaller field, not by 0), then tempered: the power ``beta`` of the field whose prior samples,
+from the all-free and from the all-occupied map alike, come closest to the validation maps' window frequencies
+(``fit_tempered``; ``ogm_ppl.priors.learn_field``; settings in ``SETTINGS``). The untempered PL field is in an
+ordered phase (the sampler keeps each start's phase); the chosen ``beta`` lies just below its transition.
 """
 
 from __future__ import annotations
@@ -22,6 +26,7 @@ import json
 import sys
 import time
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -31,25 +36,26 @@ sys.path.insert(0, str(ROOT))
 from ogm_ppl.datasets import floorplans as fp  # noqa: E402
 from ogm_ppl.datasets.mapgen import iter_corpus  # noqa: E402
 from ogm_ppl.io import atomic_write_bytes, atomic_write_text  # noqa: E402
-from ogm_ppl.priors.learn_field import data_crops, field_stats, fit_pcd, fit_pl  # noqa: E402
+from ogm_ppl.priors.learn_field import backoff_potentials, field_stats, fit_pl, fit_tempered  # noqa: E402
 from ogm_ppl.priors.pattern_field import FIELD_FORMAT_VERSION, FITTED_DIR, load_field  # noqa: E402
 
 CORPORA = ("generated", "houseexpo", "ipa", "dungeon")
-SETTINGS = {
+SETTINGS: dict[str, Any] = {
     "w": 3,
-    "lambda_": 1e-3,
+    "backoff_w": 2,
+    "backoff_lambda_": 1e-3,
+    "lambda_": 1e-2,
     "pl_max_iter": 200,
-    "pcd_iterations": 300,
-    "pcd_chains": 16,
-    "pcd_size": 64,
-    "pcd_sweeps_per_iteration": 1,
-    "pcd_burn_in": 50,
-    "pcd_lr": 0.05,
-    "pcd_init": "crops of the training maps (data_crops, seed)",
-    "eval_every": 20,
+    "penalty": "lambda_/2 |theta - theta0|^2, theta0 = backoff_potentials(2 x 2 PL field); scale 2 centred at 0",
+    "betas": [round(float(b), 3) for b in np.arange(0.3, 1.0001, 0.025)],
+    "agree": 0.1,
+    "check_size": 64,
+    "check_chains": 4,
+    "check_sweeps": 300,
     "seed": 0,
     "validation": "maps with index % 10 == 9",
-    "stopping": "smallest held-out frequency gap |f_val - f_model|_1 (iteration 0 = the PL solution)",
+    "stopping": "largest beta whose chains from all-free and all-occupied agree on occupancy within `agree` "
+    "(smallest mean held-out gap |f_val - f_model|_1 among those)",
 }
 
 
@@ -86,48 +92,46 @@ def fit_corpus(corpus: str, out_dir: Path, quick: bool) -> dict:
     val = [m for i, m in enumerate(maps) if i % 10 == 9]
     tr = field_stats(train, s["w"], 2)
     va = field_stats(val, s["w"], 2)
+    tr_small = field_stats(train, s["backoff_w"], 1)
     t_stats = time.perf_counter() - t0
     print(f"{corpus}: {len(train)} training / {len(val)} validation maps, statistics in {t_stats:.1f} s", flush=True)
-    init = data_crops(train, s["pcd_chains"], s["pcd_size"], s["seed"])
-    fits = {}
+    phi, _, pll_small = fit_pl(tr_small, 1, s["backoff_lambda_"], s["pl_max_iter"])
+    theta0 = backoff_potentials(phi, s["backoff_w"], s["w"])
+    fits: dict = {"backoff": {"w": s["backoff_w"], "phi": phi.tolist(), "train_pll": pll_small}}
     arrays: dict[str, np.ndarray] = {"w": np.array(s["w"], np.int64)}
+    betas = s["betas"][::3] if quick else s["betas"]
     for scales in (1, 2):
         t1 = time.perf_counter()
         print(f" {corpus}, {scales} scale(s):", flush=True)
-        th, th2, pll = fit_pl(tr, scales, s["lambda_"], s["pl_max_iter"])
-        fit = fit_pcd(
-            tr,
+        th, th2, pll = fit_pl(tr, scales, s["lambda_"], s["pl_max_iter"], theta0=theta0)
+        fit = fit_tempered(
             va,
             th,
             th2,
-            iterations=2 * s["eval_every"] if quick else s["pcd_iterations"],
-            chains=s["pcd_chains"],
-            size=s["pcd_size"],
-            sweeps=s["pcd_sweeps_per_iteration"],
-            burn_in=s["pcd_burn_in"],
-            lr=s["pcd_lr"],
-            lambda_=s["lambda_"],
-            eval_every=s["eval_every"],
+            betas=betas,
+            size=s["check_size"],
+            chains=s["check_chains"],
+            sweeps=s["check_sweeps"],
+            agree=s["agree"],
             seed=s["seed"],
-            init=init,
         )
         fits[f"scales{scales}"] = {
             "train_pll_at_pl": pll,
-            "best_iteration": fit.best_iteration,
+            "beta": fit.beta,
             "best_heldout_gap": fit.best_gap,
-            "validation_curve_columns": ["iteration", "heldout_gap", "validation_pll_per_cell", "seconds"],
-            "validation_curve": [list(c) for c in fit.curve],
+            "search_columns": ["beta", "heldout_gap_mean_of_starts", "occupancy_from_free", "occupancy_from_occupied"],
+            "search": [list(c) for c in fit.curve],
             "occupancy": fit.occupancy,
             "seconds": round(time.perf_counter() - t1, 2),
         }
         if scales == 1:
             arrays["theta"], arrays["occupancy"] = fit.theta, np.array(fit.occupancy)
         else:
-            arrays["theta2_scale1"], arrays["theta2_scale2"] = fit.theta, fit.theta2
+            arrays["theta2_scale1"], arrays["theta2_scale2"] = fit.theta, np.asarray(fit.theta2)
             arrays["occupancy2"] = np.array(fit.occupancy)
     lam = tr.win1 @ ((np.arange(len(tr.win1)) >> (s["w"] * s["w"] // 2)) & 1) / max(tr.win1.sum(), 1)
     buf = io.BytesIO()
-    np.savez(buf, **arrays)
+    np.savez(buf, **arrays)  # type: ignore[arg-type]
     path = atomic_write_bytes(out_dir / f"field_{corpus}.npz", buf.getvalue())
     load_field(path)  # what we ship must load
     info = {
@@ -154,9 +158,10 @@ def fit_corpus(corpus: str, out_dir: Path, quick: bool) -> dict:
 def main(argv=None) -> None:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--corpus", action="append", choices=CORPORA, help="fit only these (repeatable)")
-    ap.add_argument("--quick", action="store_true", help="10 maps per corpus, 40 PCD iterations, out/field_quick")
+    ap.add_argument("--quick", action="store_true", help="10 maps per corpus, 5 powers beta, out/field_quick")
+    ap.add_argument("--out", default=None, help="output folder (default ogm_ppl/fitted, or out/field_quick)")
     args = ap.parse_args(argv)
-    out = ROOT / "out" / "field_quick" if args.quick else FITTED_DIR
+    out = Path(args.out) if args.out else (ROOT / "out" / "field_quick" if args.quick else FITTED_DIR)
     for corpus in args.corpus or CORPORA:
         fit_corpus(corpus, out, args.quick)
 
