@@ -38,7 +38,8 @@ Two changes fix the prior:
    smaller, smoother field scores them (a restoring force; noise now coarsens to plan-like textures).
 4. **Tempering** (:func:`fit_tempered`): the tempered family ``beta theta`` has a sharp transition between
    a disordered phase and the two ordered ones; the chosen ``beta`` is the largest whose chains from the
-   all-free and the all-occupied map agree, closest to the validation maps' window frequencies.
+   all-free and the all-occupied map agree, closest to the validation maps' window frequencies, with a
+   unary bias (:func:`unary_orbits`) that gives the prior samples the training maps' occupied share.
    :func:`fit_pattern_field` is this recipe.
 """
 
@@ -68,6 +69,7 @@ __all__ = [
     "fit_mle",
     "fit_pcd",
     "fit_tempered",
+    "unary_orbits",
     "validation_pll",
 ]
 
@@ -502,7 +504,7 @@ def fit_pattern_field(
     lambda_: float = 1e-2,
     backoff_w: int | None = 2,
     backoff_lambda_: float = 1e-3,
-    betas: Iterable[float] = tuple(np.round(np.arange(0.3, 1.0001, 0.025), 3)),
+    betas: Iterable[float] = tuple(np.round(np.arange(0.3, 1.0001, 0.05), 3)),
     size: int = 64,
     seed: int = 0,
     progress: bool = True,
@@ -510,7 +512,8 @@ def fit_pattern_field(
     """The shipped recipe (module docstring): a ``backoff_w x backoff_w`` field by PL (penalty
     ``backoff_lambda_``), the ``w x w`` field by PL with the penalty ``lambda_/2 |theta - theta0|^2`` centred
     on its :func:`backoff_potentials` (``backoff_w = None``: centred at 0), then :func:`fit_tempered` on the
-    validation maps (chains of ``size x size``)."""
+    validation maps (chains of ``size x size``), its bias matched to the training windows' centre-cell
+    occupied share."""
     train_maps, val_maps = list(train_maps), list(val_maps)
     tr, va = field_stats(train_maps, w, scales), field_stats(val_maps, w, scales)
     theta0 = None
@@ -518,7 +521,8 @@ def fit_pattern_field(
         phi, _, _ = fit_pl(field_stats(train_maps, backoff_w, 1), 1, backoff_lambda_, progress=progress)
         theta0 = backoff_potentials(phi, backoff_w, w)
     th, th2, _ = fit_pl(tr, scales, lambda_, progress=progress, theta0=theta0)
-    return fit_tempered(va, th, th2, betas=betas, size=size, seed=seed, progress=progress)
+    occ = float(tr.win1 @ ((np.arange(len(tr.win1)) >> (w * w // 2)) & 1) / max(tr.win1.sum(), 1))
+    return fit_tempered(va, th, th2, betas=betas, occupancy=occ, size=size, seed=seed, progress=progress)
 
 
 # ------------------------------------------------------------------ MCMC maximum likelihood, checked from both phases
@@ -721,12 +725,29 @@ def fit_mle(
     return FieldFit(w, qs[0], qs[1] if two else None, it, gap, curve, oc)
 
 
+def unary_orbits(w: int = 3) -> np.ndarray:
+    """Per orbit the share of occupied cells of its windows (``popcount / w^2``): adding ``b`` times this to
+    the orbit parameters adds ``b`` to the log-odds of every cell whose ``w^2`` windows lie in the grid
+    (a unary term, the field's bias)."""
+    orbit, n = symmetry_orbits(w)
+    codes = np.arange(1 << (w * w), dtype=np.int64)
+    pop = ((codes[:, None] >> np.arange(w * w)) & 1).sum(1) / (w * w)
+    return np.bincount(np.asarray(orbit), pop, n) / np.bincount(np.asarray(orbit), minlength=n)
+
+
+def _logit(p: float) -> float:
+    p = min(max(p, 1e-3), 1 - 1e-3)
+    return float(np.log(p / (1 - p)))
+
+
 def fit_tempered(
     val: FieldStats,
     theta,
     theta2=None,
     *,
-    betas: Iterable[float] = tuple(np.round(np.arange(0.3, 1.0001, 0.025), 3)),
+    betas: Iterable[float] = tuple(np.round(np.arange(0.3, 1.0001, 0.05), 3)),
+    occupancy: float | None = None,
+    bias_steps: int = 3,
     size: int = 64,
     chains: int = 4,
     sweeps: int = 300,
@@ -734,8 +755,9 @@ def fit_tempered(
     seed: int = 0,
     progress: bool = True,
 ) -> FieldFit:
-    r"""The power ``beta`` of a fitted field (``p_beta(m) propto p~(m)^beta``: every potential times ``beta``):
-    the strongest coupling whose prior samples do not depend on the start, closest to the validation maps.
+    r"""The power ``beta`` of a fitted field (``p_beta(m) propto p~(m)^beta``: every potential times ``beta``),
+    with an optional unary bias: the strongest coupling whose prior samples do not depend on the start,
+    closest to the validation maps.
 
     A pseudo-likelihood fit of maps as regular as rasterised floor plans (conditional entropy near 0) is
     an ordered field: the compiled sampler keeps the all-free map almost free and the all-occupied one
@@ -745,21 +767,32 @@ def fit_tempered(
     when their cell marginals differ by at most ``agree``; among the agreeing powers the one with the
     smallest mean held-out gap ``|f_val - f_model|_1`` of the two starts wins (the gap falls as ``beta``
     grows towards the transition, so this is the largest agreeing ``beta``: the longest correlations that
-    still mix). When no power agrees, the smallest larger-of-the-two gap wins. ``curve`` holds ``(beta,
-    mean gap, occupancy from all-free, occupancy from all-occupied)``, ``best_gap`` the winner's mean gap,
-    ``occupancy`` the mean of the two marginals at the chosen ``beta``. Deterministic for a seed.
+    still mix). When no power agrees, the smallest larger-of-the-two gap wins.
+
+    **Bias.** With a target ``occupancy`` (e.g. the training maps' cell share), the scale-1 parameters get
+    ``+ b`` :func:`unary_orbits` (a log-odds shift ``b`` per cell), ``b`` set at each ``beta`` by
+    ``bias_steps`` fixed-point steps ``b <- b + logit(target) - logit(mean occupancy of the two starts)``
+    (exact for independent cells; started from the previous ``beta``'s ``b``), then scored as above.
+
+    ``curve`` holds ``(beta, mean gap, occupancy from all-free, occupancy from all-occupied, b)``,
+    ``best_gap`` the winner's mean gap, ``occupancy`` the mean of the two marginals at the chosen ``beta``.
+    The returned ``theta`` includes the bias. Deterministic for a seed.
     """
     two = theta2 is not None
+    w = val.w
     th = np.asarray(theta, np.float64)
     th2 = None if not two else np.asarray(theta2, np.float64)
+    u = unary_orbits(w)
     curve = []
     best = None
+    b = 0.0
     t0 = time.perf_counter()
-    for beta in betas:
+
+    def run(beta: float, b: float):
         rows = sampler_check(
-            beta * th,
+            beta * th + b * u,
             None if th2 is None else beta * th2,
-            val.w,
+            w,
             val,
             sizes=(size,),
             starts=("free", "occupied"),
@@ -767,20 +800,27 @@ def fit_tempered(
             sweeps=sweeps,
             seed=seed,
         )
-        gaps = [r["gap"] for r in rows]
-        occ = {r["start"]: r["occupancy"] for r in rows}
+        return [r["gap"] for r in rows], {r["start"]: r["occupancy"] for r in rows}
+
+    for beta in betas:
+        gaps, occ = run(beta, b)
+        if occupancy is not None:
+            for _ in range(bias_steps):
+                b += float(np.clip(_logit(occupancy) - _logit(0.5 * (occ["free"] + occ["occupied"])), -2.0, 2.0))
+                gaps, occ = run(beta, b)
         ok = abs(occ["free"] - occ["occupied"]) <= agree
         key = (0 if ok else 1, float(np.mean(gaps)) if ok else max(gaps))
-        curve.append((float(beta), float(np.mean(gaps)), occ["free"], occ["occupied"]))
+        curve.append((float(beta), float(np.mean(gaps)), occ["free"], occ["occupied"], b))
         if progress:
             print(
-                f"  beta {beta:.3f}: held-out gap {np.mean(gaps):.4f} (worse start {max(gaps):.4f}), occupancy "
-                f"from free {occ['free']:.3f} / occupied {occ['occupied']:.3f} ({time.perf_counter() - t0:.1f} s)",
+                f"  beta {beta:.3f}, bias {b:+.3f}: held-out gap {np.mean(gaps):.4f} (worse start {max(gaps):.4f}), "
+                f"occupancy from free {occ['free']:.3f} / occupied {occ['occupied']:.3f} "
+                f"({time.perf_counter() - t0:.1f} s)",
                 flush=True,
             )
         if best is None or key < best[3]:
-            best = (float(beta), float(np.mean(gaps)), 0.5 * (occ["free"] + occ["occupied"]), key)
+            best = (float(beta), float(np.mean(gaps)), 0.5 * (occ["free"] + occ["occupied"]), key, b)
     if best is None:
         raise ValueError("betas must not be empty")
-    beta, score, occ, _ = best
-    return FieldFit(val.w, beta * th, None if th2 is None else beta * th2, 0, score, curve, occ, beta)
+    beta, score, occ_best, _, b = best
+    return FieldFit(w, beta * th + b * u, None if th2 is None else beta * th2, 0, score, curve, occ_best, beta)
