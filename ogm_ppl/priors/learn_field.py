@@ -735,11 +735,6 @@ def unary_orbits(w: int = 3) -> np.ndarray:
     return np.bincount(np.asarray(orbit), pop, n) / np.bincount(np.asarray(orbit), minlength=n)
 
 
-def _logit(p: float) -> float:
-    p = min(max(p, 1e-3), 1 - 1e-3)
-    return float(np.log(p / (1 - p)))
-
-
 def fit_tempered(
     val: FieldStats,
     theta,
@@ -747,7 +742,8 @@ def fit_tempered(
     *,
     betas: Iterable[float] = tuple(np.round(np.arange(0.3, 1.0001, 0.05), 3)),
     occupancy: float | None = None,
-    bias_steps: int = 3,
+    bias_steps: int = 5,
+    bias_range: float = 1.5,
     size: int = 64,
     chains: int = 4,
     sweeps: int = 300,
@@ -767,12 +763,14 @@ def fit_tempered(
     when their cell marginals differ by at most ``agree``; among the agreeing powers the one with the
     smallest mean held-out gap ``|f_val - f_model|_1`` of the two starts wins (the gap falls as ``beta``
     grows towards the transition, so this is the largest agreeing ``beta``: the longest correlations that
-    still mix). When no power agrees, the smallest larger-of-the-two gap wins.
+    still mix). With a target ``occupancy`` a power also needs its mean marginal within ``agree`` of it. When
+    no power qualifies, the smallest larger-of-the-two gap wins.
 
     **Bias.** With a target ``occupancy`` (e.g. the training maps' cell share), the scale-1 parameters get
     ``+ b`` :func:`unary_orbits` (a log-odds shift ``b`` per cell), ``b`` set at each ``beta`` by
-    ``bias_steps`` fixed-point steps ``b <- b + logit(target) - logit(mean occupancy of the two starts)``
-    (exact for independent cells; started from the previous ``beta``'s ``b``), then scored as above.
+    ``bias_steps`` bisection steps on ``[b' - bias_range, b' + bias_range]`` (``b'`` the previous ``beta``'s
+    bias, 0 at first) of the mean occupancy of the two starts against the target (the occupancy rises
+    with ``b``; near the transition steeply, so fixed-point steps overshoot), then scored as above.
 
     ``curve`` holds ``(beta, mean gap, occupancy from all-free, occupancy from all-occupied, b)``,
     ``best_gap`` the winner's mean gap, ``occupancy`` the mean of the two marginals at the chosen ``beta``.
@@ -803,12 +801,19 @@ def fit_tempered(
         return [r["gap"] for r in rows], {r["start"]: r["occupancy"] for r in rows}
 
     for beta in betas:
-        gaps, occ = run(beta, b)
-        if occupancy is not None:
+        if occupancy is None or bias_steps < 1:
+            gaps, occ = run(beta, b)
+        else:
+            lo, hi = b - bias_range, b + bias_range
             for _ in range(bias_steps):
-                b += float(np.clip(_logit(occupancy) - _logit(0.5 * (occ["free"] + occ["occupied"])), -2.0, 2.0))
+                b = 0.5 * (lo + hi)
                 gaps, occ = run(beta, b)
-        ok = abs(occ["free"] - occ["occupied"]) <= agree
+                if 0.5 * (occ["free"] + occ["occupied"]) > occupancy:
+                    hi = b
+                else:
+                    lo = b
+        mean_occ = 0.5 * (occ["free"] + occ["occupied"])
+        ok = abs(occ["free"] - occ["occupied"]) <= agree and (occupancy is None or abs(mean_occ - occupancy) <= agree)
         key = (0 if ok else 1, float(np.mean(gaps)) if ok else max(gaps))
         curve.append((float(beta), float(np.mean(gaps)), occ["free"], occ["occupied"], b))
         if progress:

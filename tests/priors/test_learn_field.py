@@ -189,12 +189,14 @@ def test_unary_orbits_shift_every_interior_log_odds_by_the_bias():
 
 
 def test_fit_tempered_bias_reaches_the_target_occupancy():
-    # the zero field has independent cells: one fixed-point step sets b = logit(0.3) up to the Monte Carlo
-    # error of the first occupancy estimate (standard error 0.005 on 0.5, 0.02 in logit); the final
-    # marginal (4 chains x 2 starts x 24^2 centre cells x 10 reads, s.e. 0.002) lies within 0.02 of 0.3
+    # the zero field has independent cells: P(m_k = 1) = sigmoid(b), so 6 bisection steps on [-1.5, 1.5]
+    # put b within 3 / 64 ~ 0.05 of logit(0.3) = -0.85 (plus the Monte Carlo error of each step's
+    # occupancy, s.e. 0.002 from 4 chains x 2 starts x 24^2 centre cells x 10 reads: 0.01 in logit), and
+    # the final marginal within 0.02 of 0.3
     val = field_stats(samples(4, 40, seed=9), W, 1)
     fit = fit_tempered(
-        val, np.zeros(N_ORB), betas=(1.0,), occupancy=0.3, bias_steps=2, size=40, sweeps=100, seed=3, progress=False
+        val, np.zeros(N_ORB), betas=(1.0,), occupancy=0.3, bias_steps=6, size=40, sweeps=100, seed=3, progress=False
     )
     assert abs(fit.curve[0][4] - np.log(0.3 / 0.7)) < 0.1, fit.curve
     assert abs(fit.occupancy - 0.3) < 0.02, fit.curve
+    np.testing.assert_allclose(fit.theta, fit.curve[0][4] * unary_orbits(W), rtol=0, atol=1e-12)
