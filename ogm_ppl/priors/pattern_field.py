@@ -12,7 +12,9 @@ position counts (no tiling seams), and with finite ``theta`` every map has posit
 potentials are tied over the 8 symmetries of the square: ``theta`` is given by one value per orbit of
 window codes (102 orbits for ``w = 3``; :func:`symmetry_orbits`, :func:`orbits_to_table`). ``log_prob``
 omits ``log Z`` (``normalised = False``); the Gibbs kernels read ``w^2`` lookups per scale per cell.
-Learned by :mod:`ogm_ppl.priors.learn_field`; shipped fits: :func:`load_field`, ``field:CORPUS``.
+Learned by :mod:`ogm_ppl.priors.learn_field` (pseudo-likelihood shrunk to a ``2 x 2`` field, then tempered to
+the strongest coupling whose prior samples agree from the all-free and all-occupied maps, with a bias giving
+them the training occupied share); shipped fits: :func:`load_field`, ``field:CORPUS``.
 """
 
 from __future__ import annotations

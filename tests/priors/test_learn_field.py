@@ -1,6 +1,7 @@
 """Learning a pattern field: the sufficient statistics (unknown cells excluded), the pseudo-likelihood's
-conditionals equal the compiled ones, and parameter recovery by PL and by PCD from maps drawn by the
-compiled sampler of a known field."""
+conditionals equal the compiled ones, parameter recovery by PL and by PCD from maps drawn by the
+compiled sampler of a known field, the backoff centre equals the smaller field, the sampler check tells a
+mixing field from a bistable one, and the tempering search recovers the power of a known field."""
 
 import numpy as np
 import torch
@@ -8,7 +9,18 @@ import torch
 from ogm_ppl.inference._kernels.cell_sweep import prior_log_odds
 from ogm_ppl.priors.compiled import prior_gibbs_sweeps
 from ogm_ppl.priors.compiled.field import pattern_field
-from ogm_ppl.priors.learn_field import _PL, _nbhd_keys, data_crops, field_stats, fit_pcd, fit_pl
+from ogm_ppl.priors.learn_field import (
+    _PL,
+    _nbhd_keys,
+    backoff_potentials,
+    data_crops,
+    field_stats,
+    fit_pcd,
+    fit_pl,
+    fit_tempered,
+    sampler_check,
+    unary_orbits,
+)
 from ogm_ppl.priors.pattern_field import PatternFieldPrior, orbits_to_table, symmetry_orbits
 
 W = 2
@@ -113,3 +125,78 @@ def test_parameter_recovery_by_pl_and_pcd():
     assert fit.best_iteration > 0 and err_pcd < 0.15, (err_pcd, fit.theta, TRUE, fit.curve)
     # and the zero field is far off: the tolerances separate a fit from no fit
     assert weighted_rms(np.zeros(N_ORB), train)[0] > 0.5
+
+
+def test_backoff_potentials_give_the_small_field_away_from_the_edges():
+    # every 2 x 2 window holding a cell at least 2 cells from the edges lies in four 3 x 3 windows of the
+    # grid, so the cell's log-odds under the spread potentials equal those of the 2 x 2 field (exactly)
+    rng = np.random.default_rng(5)
+    phi = rng.normal(size=N_ORB)
+    big = PatternFieldPrior((7, 8), backoff_potentials(phi, 2, 3), 3).compiled()
+    small = PatternFieldPrior((7, 8), phi, 2).compiled()
+    for _ in range(5):
+        m = np.ascontiguousarray((rng.random(56) < 0.5).astype(np.uint8))
+        for r in range(2, 5):
+            for c in range(2, 6):
+                k = r * 8 + c
+                assert abs(prior_log_odds(big, k, m) - prior_log_odds(small, k, m)) < 1e-12
+    # and a cell on the edge sees fewer windows: the two fields differ there (the check can fail)
+    m = np.zeros(56, np.uint8)
+    assert abs(prior_log_odds(big, 0, m) - prior_log_odds(small, 0, m)) > 1e-3
+
+
+def test_sampler_check_tells_mixing_from_two_phases():
+    # the zero field: independent fair cells; 4 chains x 16^2 centre cells x 10 reads 10 sweeps apart
+    # (independent under the zero field) = 10,240 draws, standard error 0.005: 0.025 is 5 sigma
+    rows = sampler_check(np.zeros(N_ORB), None, W, sizes=(32,), chains=4, sweeps=100, keep=100, seed=0)
+    assert [r["start"] for r in rows] == ["free", "occupied"]
+    for r in rows:
+        assert abs(r["occupancy"] - 0.5) < 0.025, rows
+    # a strongly coupled 2 x 2 field (uniform windows favoured by 3 nats): each start keeps its phase
+    orb = symmetry_orbits(W)[0]
+    phi = np.zeros(N_ORB)
+    phi[[orb[0], orb[15]]] = 3.0
+    rows = sampler_check(phi, None, W, sizes=(32,), chains=4, sweeps=100, seed=0)
+    assert rows[0]["occupancy"] < 0.05 and rows[1]["occupancy"] > 0.95, rows
+    # the gap to maps of the known field is small for it and large for the zero field
+    ref = field_stats(samples(8, 40, seed=6), W, 1)
+    g_true = sampler_check(TRUE, None, W, ref, sizes=(40,), chains=4, sweeps=150, seed=1)
+    g_zero = sampler_check(np.zeros(N_ORB), None, W, ref, sizes=(40,), chains=4, sweeps=150, seed=1)
+    assert max(r["gap"] for r in g_true) < 0.05 < 0.2 < min(r["gap"] for r in g_zero), (g_true, g_zero)
+
+
+def test_fit_tempered_recovers_the_power_of_a_known_field():
+    # handed TRUE / 0.8, the search over beta must pick 0.8: the known field mixes (both starts agree at
+    # every beta here) and its window frequencies move by ~0.05 in L1 per 0.2 of beta, several times the
+    # Monte Carlo spread of the gap (4 chains x 38^2 windows x 10 reads)
+    val = field_stats(samples(8, 40, seed=7), W, 1)
+    fit = fit_tempered(val, TRUE / 0.8, betas=(0.4, 0.6, 0.8, 1.0, 1.2), size=40, sweeps=150, seed=2, progress=False)
+    assert fit.beta == 0.8, fit.curve
+    np.testing.assert_allclose(fit.theta, TRUE, rtol=0, atol=1e-12)
+    assert all(abs(c[2] - c[3]) <= 0.1 for c in fit.curve)
+
+
+def test_unary_orbits_shift_every_interior_log_odds_by_the_bias():
+    rng = np.random.default_rng(8)
+    th = rng.normal(size=symmetry_orbits(3)[1])
+    a = PatternFieldPrior((6, 7), th, 3).compiled()
+    b = PatternFieldPrior((6, 7), th + 0.7 * unary_orbits(3), 3).compiled()
+    m = np.ascontiguousarray((rng.random(42) < 0.5).astype(np.uint8))
+    for r in range(2, 4):
+        for c in range(2, 5):
+            k = r * 7 + c
+            assert abs(prior_log_odds(b, k, m) - prior_log_odds(a, k, m) - 0.7) < 1e-12
+
+
+def test_fit_tempered_bias_reaches_the_target_occupancy():
+    # the zero field has independent cells: P(m_k = 1) = sigmoid(b), so 6 bisection steps on [-1.5, 1.5]
+    # put b within 3 / 64 ~ 0.05 of logit(0.3) = -0.85 (plus the Monte Carlo error of each step's
+    # occupancy, s.e. 0.002 from 4 chains x 2 starts x 24^2 centre cells x 10 reads: 0.01 in logit), and
+    # the final marginal within 0.02 of 0.3
+    val = field_stats(samples(4, 40, seed=9), W, 1)
+    fit = fit_tempered(
+        val, np.zeros(N_ORB), betas=(1.0,), occupancy=0.3, bias_steps=6, size=40, sweeps=100, seed=3, progress=False
+    )
+    assert abs(fit.curve[0][4] - np.log(0.3 / 0.7)) < 0.1, fit.curve
+    assert abs(fit.occupancy - 0.3) < 0.02, fit.curve
+    np.testing.assert_allclose(fit.theta, fit.curve[0][4] * unary_orbits(W), rtol=0, atol=1e-12)
