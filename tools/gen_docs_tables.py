@@ -140,6 +140,13 @@ HEADLINE_LABELS = {
 }
 
 
+def _headline_label(name: str, prior: dict | None) -> str:
+    if name == "learned-L9" and prior:
+        how = ", the thesis's border update" if prior.get("update") == "thesis" else ""
+        return f"Gibbs, {prior['name']} prior{how} (chosen on training plans), L = 9"
+    return HEADLINE_LABELS.get(name, name)
+
+
 def _headline(doc: dict) -> Table:
     pooled = doc["intel"]["pooled"]
     conds = list(dict.fromkeys(p["condition"] for p in pooled))
@@ -155,7 +162,7 @@ def _headline(doc: dict) -> Table:
                 if p is None
                 else f"{_f(p['mask'].get('best_f1'))} / {_f(p['mask'].get('auc'))} / {_f(p['touched'].get('best_f1'))}"
             )
-        rows.append([HEADLINE_LABELS.get(a, a), *cells])
+        rows.append([_headline_label(a, doc["intel"].get("prior")), *cells])
     return Table(
         caption="Intel Lab log at 5 cm, half the beams: best F1 / ROC AUC / best F1 on the touched cells",
         header=["map", *(f"{100 * frac[c]:.3g} % of the readings" for c in conds)],
