@@ -1,0 +1,30 @@
+"""Exploration: where a robot should look next, from posterior samples of the map.
+
+:mod:`ogm_ppl.exploration.information` computes the mutual information between the map and the readings
+of candidate sensor poses (per beam exactly, per scan by nested Monte Carlo) and the independent-cell
+baseline of FSMI / FCMI.
+"""
+
+from ogm_ppl.exploration.information import (
+    CandidateRays,
+    ScanInformation,
+    beam_information,
+    candidate_rays,
+    first_hit_distribution,
+    independent_first_hits,
+    independent_information,
+    reading_distribution,
+    scan_information,
+)
+
+__all__ = [
+    "CandidateRays",
+    "ScanInformation",
+    "beam_information",
+    "candidate_rays",
+    "first_hit_distribution",
+    "independent_first_hits",
+    "independent_information",
+    "reading_distribution",
+    "scan_information",
+]
