@@ -16,8 +16,9 @@ The loop (:func:`explore`), from a start pose on a ground-truth plan:
 Rules (:class:`Method`):
 
 ``frontier``
-    (a) the geodesically nearest reachable frontier cell (a known-free cell next to an unobserved one) on
-    traditional OGM, frontier cells within ``min_step_cells`` of an earlier stop given up (its scan did not
+    (a) the geodesically nearest reachable goal cell within ``clearance_cells + 1`` cells (Chebyshev) of a
+    frontier cell (a known-free cell next to an unobserved one) on traditional OGM; frontier clusters of fewer
+    than ``min_cluster`` cells are ignored and frontier cells near an earlier stop given up (its scan did not
     resolve them): the simulator's rule in :mod:`ogm_ppl.datasets.stop_and_scan` without its look-ahead at
     the truth.
 ``ogm_info``
@@ -89,6 +90,7 @@ class Robot:
         stride: lattice spacing of the candidate cells. risk_weight: the planner's cells per nat of risk.
         min_step_cells: least distance (cells) of a candidate from the robot; a frontier cell this close to
             an earlier stop is given up.
+        min_cluster: frontier clusters (8-connected) of fewer cells are ignored (a gap the robot does not fit).
         samples: posterior maps per stop (rules ``sample_info``; also the P(path free) of their paths).
         sweeps: chain sweeps after each new scan before sampling; thin: sweeps between samples.
         delta: the update term of the traditional OGM every run keeps.
@@ -108,6 +110,7 @@ class Robot:
     stride: int = 4
     risk_weight: float = 4.0
     min_step_cells: float = 2.0
+    min_cluster: int = 5
     samples: int = 32
     sweeps: int = 10
     thin: int = 1
@@ -115,7 +118,7 @@ class Robot:
     ogm_gate: str = "threshold"
 
     def __post_init__(self) -> None:
-        for k in ("beams", "stride", "samples", "thin"):
+        for k in ("beams", "stride", "samples", "thin", "min_cluster"):
             v = getattr(self, k)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"Robot.{k} must be a positive integer, got {v!r}")
@@ -509,6 +512,10 @@ def _choose(method, robot, planner, grid, cell, q, q_ogm, samples, observed, sto
         done.ravel()[np.asarray(stops_done)] = True
         near = ndimage.distance_transform_edt(~done) <= reach * np.sqrt(2.0) + robot.min_step_cells
         fr &= ~near.ravel()
+    lab, n = ndimage.label(fr.reshape(grid.shape), structure=np.ones((3, 3), bool))
+    sizes = np.bincount(lab.ravel(), minlength=n + 1)
+    sizes[0] = 0
+    fr &= (sizes[lab] >= robot.min_cluster).ravel()
     goals = ndimage.maximum_filter(fr.reshape(grid.shape), size=2 * reach + 1, mode="constant").ravel()
     if method.rule == "sample_info":
         route_map = q
