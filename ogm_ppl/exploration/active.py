@@ -91,6 +91,8 @@ class Robot:
         min_step_cells: least distance (cells) of a candidate from the robot; a frontier cell this close to
             an earlier stop is given up.
         min_cluster: frontier clusters (8-connected) of fewer cells are ignored (a gap the robot does not fit).
+        max_candidates: information rules score at most this many candidates per stop (a seeded uniform
+            subset of the gated ones).
         samples: posterior maps per stop (rules ``sample_info``; also the P(path free) of their paths).
         sweeps: chain sweeps after each new scan before sampling; thin: sweeps between samples.
         delta: the update term of the traditional OGM every run keeps.
@@ -111,6 +113,7 @@ class Robot:
     risk_weight: float = 4.0
     min_step_cells: float = 2.0
     min_cluster: int = 5
+    max_candidates: int = 400
     samples: int = 32
     sweeps: int = 10
     thin: int = 1
@@ -118,7 +121,7 @@ class Robot:
     ogm_gate: str = "threshold"
 
     def __post_init__(self) -> None:
-        for k in ("beams", "stride", "samples", "thin", "min_cluster"):
+        for k in ("beams", "stride", "samples", "thin", "min_cluster", "max_candidates"):
             v = getattr(self, k)
             if isinstance(v, bool) or not isinstance(v, (int, np.integer)) or v < 1:
                 raise ValueError(f"Robot.{k} must be a positive integer, got {v!r}")
@@ -483,7 +486,7 @@ def explore(
                 break
             goal, cand, info = _choose(
                 method, robot, planner, grid, cell, q, q_ogm, samples, ogm.observed, stops_done, sensor,
-                info_angles, max_range, d0,
+                info_angles, max_range, d0, np.random.default_rng(streams[i].spawn(1)[0]),
             )  # fmt: skip
             if goal is None:
                 stopped = "no candidate"
@@ -503,8 +506,11 @@ def explore(
     return ExplorationRun(records, np.array(route[: len(records)]), stopped, q, settings)
 
 
-def _choose(method, robot, planner, grid, cell, q, q_ogm, samples, observed, stops_done, sensor, angles, max_range, d0):
-    """``(index of the chosen candidate or None, candidates, info)``."""
+def _choose(
+    method, robot, planner, grid, cell, q, q_ogm, samples, observed, stops_done, sensor, angles, max_range, d0, rng=None
+):
+    """``(index of the chosen candidate or None, candidates, info)``; ``rng`` draws the subset of candidates
+    scored when more than ``robot.max_candidates`` pass the gate."""
     fr = frontier_mask(grid, q_ogm, observed)  # the goals: cells within reach of a frontier cell
     reach = int(np.ceil(robot.clearance_cells)) + 1  # a goal lies this close (Chebyshev) to its frontier cell
     if method.rule == "frontier" and stops_done:  # frontier cells an earlier stop could not resolve are given up
@@ -542,6 +548,9 @@ def _choose(method, robot, planner, grid, cell, q, q_ogm, samples, observed, sto
         return j, cand, info
     if len(cand) == 0:
         return None, cand, info
+    if len(cand) > robot.max_candidates:
+        rng = np.random.default_rng(0) if rng is None else rng
+        cand = cand.subset(np.sort(rng.choice(len(cand), robot.max_candidates, replace=False)))
     info_mod = _information()
     rays = info_mod.candidate_rays(grid, cand.poses, angles, max_range)
     if method.rule == "ogm_info":

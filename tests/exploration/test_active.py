@@ -133,7 +133,11 @@ def test_bad_starts_and_settings_are_refused(office):
 
 
 def test_path_to_reads_the_first_stop_at_the_level():
-    recs = [{"path_length": 0.0, "coverage": 0.2}, {"path_length": 1.5, "coverage": 0.9}, {"path_length": 3.0, "coverage": 1}]
+    recs = [
+        {"path_length": 0.0, "coverage": 0.2},
+        {"path_length": 1.5, "coverage": 0.9},
+        {"path_length": 3.0, "coverage": 1},
+    ]
     assert path_to(recs, "coverage", 0.9) == 1.5
     assert path_to(recs, "coverage", 1.1) == np.inf
 
@@ -165,7 +169,9 @@ def test_rebuild_mapper_continues_its_chain_and_samples_the_model_of_all_scans(o
     from ogm_ppl.datasets.simulate import simulate_scans
 
     truth, grid = office
-    scans = simulate_scans(grid, truth, np.array([[1.0, 1.0, 0.0], [2.0, 1.5, 0.0]]), np.linspace(0, 6, 40), 0.6, 1.0, 0)
+    scans = simulate_scans(
+        grid, truth, np.array([[1.0, 1.0, 0.0], [2.0, 1.5, 0.0]]), np.linspace(0, 6, 40), 0.6, 1.0, 0
+    )
     torch.manual_seed(0)
     m = RebuildMapper(grid, GaussianRange(1.0), IndependentPrior(0.5, grid.num_cells), sweeps=2)
     m.add_scans(_one(scans, 0))
