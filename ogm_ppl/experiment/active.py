@@ -206,7 +206,8 @@ def run_active_task(
     with np.load(plan_file, allow_pickle=False) as z:
         truth, known, res = z["truth"].astype(bool), z["known"].astype(bool), float(z["resolution"])
     grid = Grid(truth.shape, resolution=res)
-    m = Method(**{k: (tuple(v) if k == "patch" and v is not None else v) for k, v in method.items()})
+    kw: dict = {k: (tuple(v) if k == "patch" and v is not None else v) for k, v in method.items()}
+    m = Method(**kw)
     t0 = time.perf_counter()
     with task_env():
         run = explore(
@@ -336,13 +337,12 @@ def _curves(result: ActiveResult, path: Path) -> Path:
         if not rs:
             continue
         for ax, (k, _) in zip(axes, keys):
-            ys = []
+            rows = []
             for r in rs:
                 d = np.array([s["path_length"] for s in r["records"]])
                 v = np.array([s[k] for s in r["records"]])
-                ys.append(v[np.searchsorted(d, x, side="right") - 1])  # the value after the last stop before x
-            ys = np.array(ys)
-            lo, med, hi = np.quantile(ys, [0.25, 0.5, 0.75], axis=0)
+                rows.append(v[np.searchsorted(d, x, side="right") - 1])  # the value after the last stop before x
+            lo, med, hi = np.quantile(np.array(rows), [0.25, 0.5, 0.75], axis=0)
             (line,) = ax.plot(x, med, label=f"{m['name']} ({len(rs)} runs)")
             ax.fill_between(x, lo, hi, color=line.get_color(), alpha=0.2)
     for ax, (k, label) in zip(axes, keys):

@@ -255,7 +255,12 @@ def run_experiment(
         from ogm_ppl.experiment.active import run_active
 
         return run_active(  # type: ignore[return-value]
-            spec, out_dir, scheduler=scheduler, workers=workers, resume=resume, progress=progress
+            spec,  # type: ignore[arg-type]
+            out_dir,
+            scheduler=scheduler,
+            workers=workers,
+            resume=resume,
+            progress=progress,
         )
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)

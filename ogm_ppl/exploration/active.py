@@ -48,7 +48,7 @@ import importlib
 import time
 from collections.abc import Callable
 from dataclasses import asdict, dataclass, field
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 import torch
@@ -251,7 +251,7 @@ class RebuildMapper:
         self.grid, self.sensor, self.prior = grid, sensor, prior
         self.sweeps, self.thin, self.patch = int(sweeps), int(thin), patch
         self._scans: list[Scans] = []
-        self.kernel = None
+        self.kernel: Any = None
         self._sum = np.zeros(grid.num_cells)
         self._n = 0
 
@@ -447,7 +447,7 @@ def explore(
         if method.rule == "sample_info":
             from ogm_ppl.priors.named import prior_by_name
 
-            pr = prior if prior is not None else prior_by_name(method.prior, grid.shape)
+            pr = prior if prior is not None else prior_by_name(str(method.prior), grid.shape)
             if mapper_factory is not None:
                 mapper = mapper_factory(grid, sensor, pr, robot, seed, method.patch)
             else:

@@ -84,7 +84,7 @@ def test_nearest_frontier_picks_the_geodesically_nearest_reachable_frontier():
     robot = Robot(clearance_cells=1.0, min_step_cells=2.0)
     planner = PathPlanner(grid, robot.clearance_cells, robot.risk_weight)
     start = 15 * 30 + 4
-    j, cand, info = _choose(
+    j, cand, _ = _choose(
         Method("frontier", "frontier"), robot, planner, grid, start, q, q, None, observed, [], GaussianRange(1.0),
         np.zeros(4), 0.5, 0.5,
     )  # fmt: skip

@@ -26,9 +26,9 @@ def _room(rows=20, cols=30, door=True):
 
 def test_poses_off_the_grid_inside_an_obstacle_and_empty_are_refused():
     grid, q = _room()
-    with pytest.raises(CandidateError, match="pose 1 .* off the grid"):
+    with pytest.raises(CandidateError, match=r"pose 1 .* off the grid"):
         check_candidate_poses(grid, [[0.5, 0.5, 0.0], [5.0, 0.5, 0.0]])
-    with pytest.raises(CandidateError, match="pose 0 .* inside an obstacle .*cell \\(5, 15\\)"):
+    with pytest.raises(CandidateError, match=r"pose 0 .* inside an obstacle .*cell \(5, 15\)"):
         check_candidate_poses(grid, [[1.55, 0.55, 0.0]], occupied=q > 0.5)
     with pytest.raises(CandidateError, match="empty"):
         check_candidate_poses(grid, np.zeros((0, 3)))
@@ -39,7 +39,7 @@ def test_poses_off_the_grid_inside_an_obstacle_and_empty_are_refused():
         planner.goal_paths([0.55, 1.05, 0.0], [[1.55, 0.55, 0.0]], q)
     with pytest.raises(CandidateError, match="empty"):
         planner.goal_paths([0.55, 1.05, 0.0], np.zeros((0, 3)), q)
-    with pytest.raises(CandidateError, match="robot pose 0 .* off the grid"):
+    with pytest.raises(CandidateError, match=r"robot pose 0 .* off the grid"):
         planner.goal_paths([-1.0, 1.05, 0.0], [[0.55, 0.55, 0.0]], q)
     with pytest.raises(ValueError, match="zero samples"):
         planner.goal_paths([0.55, 1.05, 0.0], [[0.55, 0.55, 0.0]], q, np.zeros((0, grid.num_cells), np.uint8))
