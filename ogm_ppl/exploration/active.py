@@ -65,9 +65,12 @@ __all__ = [
     "Mapper",
     "Method",
     "OGMMapper",
+    "OnlineMapper",
     "RebuildMapper",
     "Robot",
     "choose_start",
+    "default_mapper",
+    "kernel_for",
     "explore",
     "path_to",
     "stop_metrics",
@@ -307,14 +310,41 @@ class RebuildMapper:
         return torch.from_numpy(self._sum / self._n)
 
 
-def _online_mapper(grid, sensor, prior, robot: Robot, seed: int, patch):
-    """An :class:`~ogm_ppl.inference.online.OnlineMap` when the module is there, else None."""
-    try:
-        online = importlib.import_module("ogm_ppl.inference.online")
-    except ImportError:
-        return None
-    kw = {} if patch is None else {"kernel": "patch", "patch": tuple(patch)}
-    return online.OnlineMap(grid, sensor, prior, seed=seed, **kw)
+class OnlineMapper:
+    """The :class:`Mapper` face of an :class:`~ogm_ppl.inference.online.OnlineMap` (the model and the chain
+    grown in place, no rebuild): ``add_scans`` adds the scans and runs ``sweeps`` sweeps by its schedule,
+    then restarts the running mean, so :attr:`marginals` is the mean of the states :meth:`samples` returned
+    (as for :class:`RebuildMapper`)."""
+
+    def __init__(self, online_map, sweeps: int, thin: int = 1) -> None:
+        self.map, self.sweeps, self.thin = online_map, int(sweeps), int(thin)
+
+    def add_scans(self, scans: Scans) -> None:
+        self.map.add_scans(scans, self.sweeps)
+        self.map.reset_marginals()
+
+    def samples(self, num_samples: int) -> torch.Tensor:
+        return self.map.samples(int(num_samples), self.thin)
+
+    @property
+    def marginals(self) -> torch.Tensor:
+        return self.map.marginals
+
+
+def default_mapper(grid: Grid, sensor, prior, robot: Robot, seed: int, patch=None) -> Mapper:
+    """The mapper of rule ``sample_info``: the online map (:class:`OnlineMapper`, single-cell Gibbs) where
+    :func:`kernel_for` would pick single cells and :mod:`ogm_ppl.inference.online` is there, else
+    :class:`RebuildMapper` (patch Gibbs: tile-table priors, whose single-cell moves stick)."""
+    c = prior.compiled()
+    cells = patch is None and not (c is not None and c.sparse_patches())
+    if cells:
+        try:
+            online = importlib.import_module("ogm_ppl.inference.online")
+        except ImportError:
+            online = None
+        if online is not None:
+            return OnlineMapper(online.OnlineMap(grid, sensor, prior, seed=int(seed) % 2**63), robot.sweeps, robot.thin)
+    return RebuildMapper(grid, sensor, prior, sweeps=robot.sweeps, thin=robot.thin, patch=patch)
 
 
 # ------------------------------------------------------------------------------------------ metrics
@@ -405,7 +435,7 @@ def explore(
         stop_coverage: end once this share of the start's free component has been observed.
         mask: cells scored (default all); ``target`` of the coverage: the free cells 4-connected to the start.
         mapper_factory: ``factory(grid, sensor, prior, robot, seed, patch) -> Mapper`` for rule
-            ``sample_info`` (default: the online map when present, else :class:`RebuildMapper`).
+            ``sample_info`` (default :func:`default_mapper`).
         prior: a :class:`~ogm_ppl.priors.MapPrior` to use instead of ``prior_by_name(method.prior)``.
 
     The run is a function of ``seed``: the start, the range noise of stop ``i`` (its own stream
@@ -448,12 +478,8 @@ def explore(
             from ogm_ppl.priors.named import prior_by_name
 
             pr = prior if prior is not None else prior_by_name(str(method.prior), grid.shape)
-            if mapper_factory is not None:
-                mapper = mapper_factory(grid, sensor, pr, robot, seed, method.patch)
-            else:
-                mapper = _online_mapper(grid, sensor, pr, robot, seed, method.patch) or RebuildMapper(
-                    grid, sensor, pr, sweeps=robot.sweeps, thin=robot.thin, patch=method.patch
-                )
+            make = mapper_factory if mapper_factory is not None else default_mapper
+            mapper = make(grid, sensor, pr, robot, seed, method.patch)
         cell = r0 * grid.cols + c0
         route = [np.array([*grid.cell_to_world(np.array([[r0, c0]]))[0], 0.0])]
         stops_done: list[int] = []

@@ -10,7 +10,8 @@ body, swept set :math:`W(\pi)`) is free, and its probability under the current m
     \prod_{c \in W(\pi)} (1 - p_c) & \text{marginals only (cells independent)} \end{cases}
 
 (the exact path probability of :meth:`~ogm_ppl.posterior.MapPosterior.prob_free` for the empirical posterior
-of the samples; its cell-independence approximation for a traditional occupancy grid). The thesis's Section
+of the samples; its cell-independence approximation for a traditional occupancy grid). The cells of the
+robot's disk at the start are left out of :math:`W(\pi)`: it stands there already. The thesis's Section
 2.6 names this query as what a correlated map answers and an independent one only approximates.
 
 The path itself is the shortest path (Dijkstra, :mod:`scipy.sparse.csgraph`) on the 8-connected graph of
@@ -180,8 +181,9 @@ def _trace_paths(pred, source, goals):  # pragma: no cover - compiled
 
 
 @nb.njit(cache=True)
-def _swept(offs, cells, rows, cols, dr, dc):  # pragma: no cover - compiled
-    """CSR of the swept sets ``W(path)``: unique cells within the disk offsets ``(dr, dc)`` of a path cell."""
+def _swept(offs, cells, rows, cols, dr, dc, skip):  # pragma: no cover - compiled
+    """CSR of the swept sets ``W(path)``: unique cells within the disk offsets ``(dr, dc)`` of a path cell,
+    leaving out the cells where ``skip`` (``K`` bool) is set."""
     n = offs.size - 1
     stamp = np.full(rows * cols, -1, np.int64)
     out_offs = np.zeros(n + 1, np.int64)
@@ -195,7 +197,7 @@ def _swept(offs, cells, rows, cols, dr, dc):  # pragma: no cover - compiled
                 if r < 0 or r >= rows or c < 0 or c >= cols:
                     continue
                 v = r * cols + c
-                if stamp[v] != i:
+                if stamp[v] != i and not skip[v]:
                     stamp[v] = i
                     buf[m] = v
                     m += 1
@@ -246,17 +248,28 @@ def _check_map(grid: Grid, marginals, samples):
 
 
 def path_free_probability(
-    grid: Grid, path_offsets, path_cells, *, marginals=None, samples=None, clearance_cells: float = 0.0
+    grid: Grid,
+    path_offsets,
+    path_cells,
+    *,
+    marginals=None,
+    samples=None,
+    clearance_cells: float = 0.0,
+    exclude=None,
 ) -> np.ndarray:
     r"""``P(path free | z)`` of each path (CSR ``path_offsets`` ``C + 1``, ``path_cells`` flat cells): the
     share of ``samples`` (``S x K``) in which every cell within ``clearance_cells`` of the path is free, or
-    (``samples`` None) :math:`\prod_{c \in W} (1 - p_c)` from ``marginals`` (``K``). ``C`` float64."""
+    (``samples`` None) :math:`\prod_{c \in W} (1 - p_c)` from ``marginals`` (``K``). ``exclude``: flat cells
+    left out of every swept set (the robot's own disk: it is there already). ``C`` float64."""
     offs = np.asarray(path_offsets, dtype=np.int64)
     cells = np.asarray(path_cells, dtype=np.int64)
     if cells.size and (cells.min() < 0 or cells.max() >= grid.num_cells):
         raise ValueError(f"path cells must lie in 0..{grid.num_cells - 1}")
     dr, dc = _disk(float(clearance_cells))
-    w_offs, w_cells = _swept(offs, cells, grid.rows, grid.cols, dr, dc)
+    skip = np.zeros(grid.num_cells, dtype=np.bool_)
+    if exclude is not None:
+        skip[np.asarray(exclude, dtype=np.int64)] = True
+    w_offs, w_cells = _swept(offs, cells, grid.rows, grid.cols, dr, dc, skip)
     if samples is not None:
         _, s = _check_map(grid, np.zeros(grid.num_cells), samples)
         return _p_free_samples(w_offs, w_cells, s)
@@ -330,7 +343,13 @@ class PathPlanner:
         seg = np.where(starts[1:], 0.0, step_len)  # no step between two paths
         cum = np.concatenate([[0.0], np.cumsum(seg)])
         dist = (cum[offs[1:] - 1] - cum[offs[:-1]]) * self.grid.resolution
-        pf = path_free_probability(self.grid, offs, cells, marginals=q, samples=s, clearance_cells=self.clearance_cells)
+        sr, sc = divmod(int(start_cell), self.grid.cols)
+        r, c = sr + self._dr, sc + self._dc
+        inside = (r >= 0) & (r < self.grid.rows) & (c >= 0) & (c < self.grid.cols)
+        own = r[inside] * self.grid.cols + c[inside]  # the robot's disk now: not part of any path's risk
+        pf = path_free_probability(
+            self.grid, offs, cells, marginals=q, samples=s, clearance_cells=self.clearance_cells, exclude=own
+        )
         rc = np.stack(np.divmod(goals, self.grid.cols), axis=1)
         poses = np.column_stack([self.grid.cell_to_world(rc), np.zeros(goals.size)]) if goals.size else np.zeros((0, 3))
         return Candidates(goals, poses, dist, pf, offs, cells, np.zeros(goals.size, dtype=bool))

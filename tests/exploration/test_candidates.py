@@ -132,3 +132,19 @@ def test_frontier_mask_marks_known_free_cells_next_to_unobserved_ones():
     expect = np.zeros((6, 6), bool)
     expect[:, 2] = True
     np.testing.assert_array_equal(f, expect)
+
+
+def test_the_robots_own_disk_is_no_part_of_a_paths_risk():
+    """A robot that stopped with a wall cell inside its disk can still drive away from it."""
+    grid = Grid((15, 15), 0.1)
+    q = np.zeros((15, 15))
+    q[7, 6] = 1.0  # next to the robot at (7, 7)
+    planner = PathPlanner(grid, clearance_cells=1.0)
+    c = planner.candidates(7 * 15 + 7, q.ravel(), threshold=0.9, stride=3)
+    assert len(c) > 0 and c.p_free.min() == 1.0
+    away = (c.cells % 15) >= 9
+    assert away.any()
+    # a path that passes the cell's disk later still pays for it
+    grid_path = np.array([7 * 15 + 7, 7 * 15 + 8])
+    p = path_free_probability(grid, [0, 2], grid_path[::-1], marginals=q.ravel(), clearance_cells=1.0)
+    assert p[0] == pytest.approx(1e-9, rel=1e-6)
