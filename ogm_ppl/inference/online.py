@@ -61,7 +61,7 @@ from ogm_ppl.raycast import Rays, raycast
 from ogm_ppl.scans import Scans
 from ogm_ppl.sensors import SensorModel
 
-__all__ = ["OnlineMap", "OnlineStats"]
+__all__ = ["OnlineMap", "OnlineStats", "Replay", "replay"]
 
 _UPDATES = {"gibbs": cs.HEAT_BATH, "metropolised": cs.METROPOLISED}
 _MIX = 0x9E3779B97F4A7C15
@@ -499,3 +499,70 @@ def _ragged_cols(lengths: np.ndarray) -> np.ndarray:
     """``0..len_r`` for every ray, concatenated."""
     n = lengths + 1
     return np.arange(int(n.sum())) - np.repeat(np.cumsum(n) - n, n)
+
+
+@dataclass
+class Replay:
+    """What :func:`replay` returns: the final marginals (``K``), the observed cells (``K`` bool), the
+    snapshots ``(scans so far, K marginals)``, the seconds each scan took (add + sweeps) and the chain."""
+
+    probabilities: np.ndarray
+    observed: np.ndarray
+    snapshots: list[tuple[int, np.ndarray]]
+    seconds_per_scan: np.ndarray
+    online: OnlineMap
+
+
+def replay(
+    grid: Grid,
+    scans: Scans,
+    sensor: SensorModel,
+    prior,
+    *,
+    burn_in: int = 0,
+    sweeps: int = 100,
+    snapshot_every: int | None = None,
+    progress: bool = False,
+    **online_kw,
+) -> Replay:
+    """Replay ``scans`` one scan at a time into an :class:`OnlineMap` (``online_kw``: its options), then
+    run ``burn_in`` full sweeps and ``sweeps`` full sweeps whose mean is the map. ``snapshot_every = k``
+    keeps the marginals (of the sweeps since the latest scan) after every ``k``-th scan."""
+    import time
+
+    if snapshot_every is not None and snapshot_every < 1:
+        raise ValueError(f"snapshot_every must be a positive number of scans, got {snapshot_every}")
+    om = OnlineMap(grid, sensor, prior, **online_kw)
+    S = scans.num_scans
+    times = np.zeros(S)
+    snaps: list[tuple[int, np.ndarray]] = []
+    steps = range(S)
+    if progress:
+        from tqdm.auto import tqdm
+
+        steps = tqdm(steps, desc="online scans", unit="scan", leave=False)
+    assert scans.valid is not None  # Scans.__post_init__ always sets the S x B mask
+    for i in steps:
+        if not scans.valid[i].any():
+            continue  # a scan without a reading adds nothing
+        t0 = time.perf_counter()
+        om.add_scans(_one(scans, i))
+        times[i] = time.perf_counter() - t0
+        if snapshot_every is not None and (i + 1) % snapshot_every == 0:
+            snaps.append((i + 1, om.marginals.numpy().copy()))
+    om.sweep(burn_in, focus=False)
+    om.reset_marginals()
+    om.sweep(sweeps, focus=False)
+    return Replay(om.marginals.numpy().copy(), om.observed, snaps, times, om)
+
+
+def _one(scans: Scans, i: int) -> Scans:
+    assert scans.valid is not None
+    return Scans(
+        scans.poses[i : i + 1],
+        scans.angles[i : i + 1],
+        scans.ranges[i : i + 1],
+        scans.max_range,
+        valid=scans.valid[i : i + 1],
+        min_range=scans.min_range,
+    )

@@ -71,7 +71,7 @@ def _ll(st, r, x):
     return st.ll[st.offsets[r] + r + x]
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _add_term(st, c, r, x, y, sign):
     """``d_c += sign * (ll[r, x] - ll[r, y])`` in fixed point (or the count of an infinite term)."""
     a = _ll(st, r, x)
@@ -87,7 +87,7 @@ def _add_term(st, c, r, x, y, sign):
         st.inf[c].neg += sign
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _ray_term(st, r, kap, f, s, sign):
     """Add ``sign * c_r(kap)`` for a ray whose first and second hits are ``f``, ``s``."""
     c = st.cells[st.offsets[r] + kap]
@@ -97,7 +97,7 @@ def _ray_term(st, r, kap, f, s, sign):
         _add_term(st, c, r, f, s, sign)
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _retarget(st, r, f1, s1):
     """Move ray ``r``'s first / second hits to ``f1``, ``s1``, updating the kept sums of the cells it reaches."""
     f0 = st.rays[r].f
@@ -231,7 +231,7 @@ def any_impossible(ll, offsets, r0, r1):
     return False
 
 
-@nb.njit(cache=True, inline="always")
+@nb.njit(cache=True)
 def _set_cell(st, k, v):
     """``m[k] = v`` with every ray's hits and every kept sum in step (as ``cell_sweep._set_cell``)."""
     st.m[k] = v
