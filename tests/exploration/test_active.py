@@ -182,3 +182,28 @@ def test_rebuild_mapper_continues_its_chain_and_samples_the_model_of_all_scans(o
     np.testing.assert_allclose(m.marginals.numpy(), s.double().mean(0).numpy())
     with pytest.raises(ValueError, match="another maximum range"):
         m.add_scans(simulate_scans(grid, truth, np.array([[1.0, 1.0, 0.0]]), np.linspace(0, 6, 40), 0.5, 1.0, 0))
+
+
+def test_default_mapper_is_the_online_map_for_single_cell_priors_and_the_rebuild_for_tile_tables(office):
+    from ogm_ppl.datasets.simulate import simulate_scans
+    from ogm_ppl.exploration.active import OnlineMapper, default_mapper
+    from ogm_ppl.priors.named import prior_by_name
+
+    truth, grid = office
+    sensor = GaussianRange(1.0)
+    ind = default_mapper(grid, sensor, prior_by_name("independent", grid.shape), ROBOT, 3)
+    tab = default_mapper(grid, sensor, prior_by_name("patch3:houseexpo", grid.shape), ROBOT, 3)
+    assert isinstance(ind, OnlineMapper) and isinstance(tab, RebuildMapper)
+    # the online map and the rebuilt model hold the same model of the scans so far
+    scans = simulate_scans(
+        grid, truth, np.array([[1.0, 1.0, 0.0], [2.0, 1.5, 0.0]]), np.linspace(0, 6, 40), 0.6, 1.0, 0
+    )
+    ref = RebuildMapper(grid, sensor, prior_by_name("independent", grid.shape), sweeps=1)
+    for i in range(2):
+        ind.add_scans(_one(scans, i))
+        ref.add_scans(_one(scans, i))
+    a, b = ind.map.model, ref.kernel.model
+    assert a.rays.num_rays == b.rays.num_rays == 80
+    np.testing.assert_array_equal(a.known_free.numpy(), b.known_free.numpy())
+    s = ind.samples(4)
+    np.testing.assert_allclose(ind.marginals.numpy(), s.double().mean(0).numpy())  # the mean of what it returned
