@@ -104,6 +104,8 @@ class Robot:
             planner's conventional use of an evidence grid), or ``"product"``, the independent product
             :math:`\prod (1 - p_c)` of its marginals (with the Haehnel update a cell one beam crossed holds
             ``p = 0.2``, so any path past a few such cells falls below a 0.9 gate).
+        max_path_length: end the run at the first stop reached after driving this many metres (a budget
+            that compares rules at equal path length whatever their step sizes).
     """
 
     beams: int = 90
@@ -122,6 +124,7 @@ class Robot:
     thin: int = 1
     delta: str = "haehnel"
     ogm_gate: str = "threshold"
+    max_path_length: float = float("inf")
 
     def __post_init__(self) -> None:
         for k in ("beams", "stride", "samples", "thin", "min_cluster", "max_candidates"):
@@ -140,6 +143,8 @@ class Robot:
             v = float(getattr(self, k))
             if not (np.isfinite(v) and v >= 0):
                 raise ValueError(f"Robot.{k} must be a finite number >= 0, got {v!r}")
+        if not float(self.max_path_length) > 0:
+            raise ValueError(f"Robot.max_path_length must be > 0 metres, got {self.max_path_length!r}")
         if self.ogm_gate not in ("threshold", "product"):
             raise ValueError(f"Robot.ogm_gate must be 'threshold' or 'product', got {self.ogm_gate!r}")
         if not 0 < self.threshold <= 1:
@@ -507,6 +512,9 @@ def explore(
             records.append(rec)
             if rec["coverage"] >= stop_coverage:
                 stopped = "coverage"
+                break
+            if path_length >= robot.max_path_length:
+                stopped = "path length"
                 break
             if i == stops - 1:
                 break

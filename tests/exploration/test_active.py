@@ -207,3 +207,11 @@ def test_default_mapper_is_the_online_map_for_single_cell_priors_and_the_rebuild
     np.testing.assert_array_equal(a.known_free.numpy(), b.known_free.numpy())
     s = ind.samples(4)
     np.testing.assert_allclose(ind.marginals.numpy(), s.double().mean(0).numpy())  # the mean of what it returned
+
+
+def test_a_path_budget_ends_the_run(office):
+    truth, grid = office
+    robot = Robot(beams=60, max_range_cells=12, sigma_cells=1.0, max_path_length=1.0)
+    run = explore(truth, grid, Method("ogm", "ogm_info"), robot, stops=30, seed=0)
+    d = [r["path_length"] for r in run.records]
+    assert run.stopped == "path length" and d[-1] >= 1.0 > d[-2]
