@@ -13,8 +13,10 @@ and ``z_new ~ p(z_new | m)`` the forward sensor model (Section 2.6). All values 
 (static world, Section 2.6), so ``I(m; z_b | z) = I(f_b; z_b | z)``: a finite sum over the first-hit
 distribution of the beam across the samples (``p(f_b = kappa)``: the weight of the samples whose first
 occupied cell on the beam is ``kappa``; last outcome: none on the ray) and over the sensor's readings.
-The result is **exact for the empirical posterior** of the samples (for the weighted maps given), up to
-floating-point rounding.
+The result is **exact for the empirical posterior** of the samples (for the weighted maps given): two
+documented cut-offs keep it fast and change it by less than ``1e-13`` bits: first hits of probability
+``<= 1e-15`` are left out, and a normal bin farther than 8.5 standard deviations from the first hit (mass
+``< 1e-17``) gets no Gaussian mass.
 
 **How readings are discretised.** A discrete sensor (``continuous_range = False``,
 :class:`~ogm_ppl.sensors.PatternMatch`) reads a kappa ``0..F`` or max range: the sum runs over those
@@ -38,7 +40,9 @@ estimated by ``N = num_draws`` draws ``(s_n, Z_n)``; the inner mean over the sam
 so for the empirical posterior the estimator is unbiased and its standard error is the sample standard
 deviation over ``sqrt(N)``. (As an estimate of the MI under the true posterior it is the nested Monte-Carlo
 estimator, consistent as ``S`` grows.) Continuous readings are scored by their density unless
-``bin_width`` is given.
+``bin_width`` is given. Under the empirical posterior ``I(m; Z) <= H(samples) <= log2 S`` bits: a scan that
+tells the ``S`` samples apart saturates there, so candidates compare only below that ceiling (more samples
+raise it); the per-beam values have no such ceiling per beam but add up information the beams share.
 
 **Baseline** (:func:`independent_information`): the independent-cell information gain that FSMI (Zhang et
 al., ICRA 2019) and FCMI (Henderson et al., ICRA 2020) compute: per beam, ``I(f_b; z_b)`` under the product
@@ -56,7 +60,7 @@ it are taken as free (a beam leaving the grid with no hit in it gives the no-hit
 >>> cr = candidate_rays(g, [[0.5, 0.5, 0.0]], [0.0], max_range=5.0)
 >>> wall_at = lambda k: np.eye(6, dtype=np.uint8)[k]
 >>> samples = np.stack([wall_at(1), wall_at(4)])  # half the samples: wall at 1, half: wall at 4
->>> round(float(beam_information(g, GaussianRange(0.3), samples, cr)[0, 0]), 4)  # one bit, up to the overlap of the bins
+>>> round(float(beam_information(g, GaussianRange(0.3), samples, cr)[0, 0]), 4)  # one bit
 1.0
 """
 
@@ -92,6 +96,22 @@ _SQRT2 = math.sqrt(2.0)
 _LOG_SQRT_2PI = 0.5 * math.log(2.0 * math.pi)
 _GAUSS, _PATTERN = 0, 1
 _FAR = 38.0  # |standardised distance| beyond which a normal bin mass underflows (< 1e-300)
+_NEGLIGIBLE = 1e-15  # first hits of smaller probability are left out of the per-beam sum (< 1e-13 bits)
+_WINDOW = 8.5  # bins farther than this many sigma from a first hit get no Gaussian mass (< 1e-17)
+
+
+def _log_tail_table(step: int = 512, top: float = 10.0) -> tuple[np.ndarray, np.ndarray]:
+    """``log Q(x)`` and its derivative ``-phi(x) / Q(x)`` at ``x = i / step``, ``0 <= x <= top``
+    (``Q = 1 - Phi``, the normal upper tail), for :func:`_tail`."""
+    x = np.arange(int(top * step) + 2) / step
+    q = np.array([0.5 * math.erfc(v / _SQRT2) for v in x])
+    phi = np.exp(-0.5 * x * x - _LOG_SQRT_2PI)
+    return np.log(q), -phi / q
+
+
+_TAIL_STEP = 512
+_LOGQ, _DLOGQ = _log_tail_table(_TAIL_STEP)
+_TAIL_TOP = (len(_LOGQ) - 2) / _TAIL_STEP
 
 
 # --------------------------------------------------------------------------- candidate rays
@@ -200,7 +220,11 @@ def candidate_rays(
                 f"candidate pose {c} = {P[c].tolist()} lies inside an obstacle (cell {rc[c].tolist()} is occupied)"
             )
     scans = Scans(P, A, np.full((P.shape[0], A.shape[0]), mr), max_range=mr)
-    ri = ray_inputs(grid, scans)
+    try:
+        ri = ray_inputs(grid, scans)
+    except ValueError as e:  # a 1D grid with a beam off the row: name the candidate and beam
+        B = A.shape[0]
+        raise ValueError(f"candidate beams (reading i is candidate i // {B}, beam i % {B}): {e}") from e
     offsets, cells, t_enter, _, _, range_len = traverse_all(
         ri.u0, ri.v0, ri.du, ri.dv, ri.length, ri.range_cells, ri.is_max, grid.rows, grid.cols
     )
@@ -311,7 +335,7 @@ def _weight_of(x, word, w):
     return acc
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True)
 def _first_hits_kernel(packed, w, valid_mask, offsets, cells, pose_cells, B, Wmax):
     """Per ray, the weight of the samples with first hit at each kappa (last column: none), conditioned
     on the pose cell free; ``totals[c]`` the weight of the samples with candidate ``c``'s cell free."""
@@ -323,7 +347,7 @@ def _first_hits_kernel(packed, w, valid_mask, offsets, cells, pose_cells, B, Wma
     for c in range(C):
         for k in range(W):
             totals[c] += _weight_of(~packed[pose_cells[c], k] & valid_mask[k], k, w)
-    for r in nb.prange(R):
+    for r in range(R):
         c = r // B
         if totals[c] <= 0.0:
             continue
@@ -363,10 +387,32 @@ def _phi_diff(lo, hi):
 
 
 @nb.njit(cache=True, inline="always")
+def _tail(x):
+    """``Q(x) = 1 - Phi(x)`` for ``x >= 0`` by cubic Hermite interpolation of ``log Q`` on a ``1/512`` grid
+    (relative error below ``1e-13``, tested against ``erfc``; four times cheaper than ``erfc``), ``erfc``
+    beyond ``x = 10``."""
+    if x >= _TAIL_TOP:
+        return 0.5 * math.erfc(x / _SQRT2)
+    u = x * _TAIL_STEP
+    i = int(u)
+    t = u - i
+    h = 1.0 / _TAIL_STEP
+    t2 = t * t
+    t3 = t2 * t
+    y = (
+        (2.0 * t3 - 3.0 * t2 + 1.0) * _LOGQ[i]
+        + (t3 - 2.0 * t2 + t) * h * _DLOGQ[i]
+        + (3.0 * t2 - 2.0 * t3) * _LOGQ[i + 1]
+        + (t3 - t2) * h * _DLOGQ[i + 1]
+    )
+    return math.exp(y)
+
+
+@nb.njit(cache=True, inline="always")
 def _num_outcomes(kind, F, width):
     """``J``: hit outcomes of a ray (the max-range outcome is index ``J``)."""
     if kind == 0:
-        return int(math.ceil((F + 1.0) / width - 1e-12))
+        return math.ceil((F + 1.0) / width - 1e-12)
     return int(F) + 1
 
 
@@ -405,43 +451,84 @@ def _coord(kind, t_enter, off, kap):
     return float(kap)
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True, inline="always")
+def _fill_row(kind, row, J, f, none, F, sigma, p_rand, width, p_occ, tails):
+    """``row[j] = P(outcome j | f)`` for ``j = 0..J``. The Gaussian part is evaluated on the bins within
+    ``_WINDOW`` standard deviations of ``f`` only (beyond, a bin's mass is below ``1e-17``), one normal tail
+    (:func:`_tail`) per bin edge (``tails``: scratch of ``J + 1``)."""
+    if kind != 0 or none:
+        for j in range(J + 1):
+            row[j] = _bin_prob(kind, j, J, f, none, F, sigma, p_rand, width, p_occ)
+        return
+    for j in range(J):
+        a = -0.5 + j * width
+        b = min(-0.5 + (j + 1) * width, F + 0.5)
+        row[j] = p_rand * (b - a) / (F + 1.0) if p_rand > 0.0 else 0.0
+    row[J] = (1.0 - p_rand) * 0.5 * math.erfc((F + 0.5 - f) / (sigma * _SQRT2))
+    lo = max(0, math.floor((f - _WINDOW * sigma + 0.5) / width))
+    hi = min(J - 1, math.floor((f + _WINDOW * sigma + 0.5) / width))
+    if hi < lo:
+        return
+    # edges lo..hi+1 as signed standardised distances; tails[k] = the smaller tail mass at edge k
+    for k in range(lo, hi + 2):
+        if k == 0:
+            tails[k] = 0.0
+        else:
+            e = F + 0.5 if k == J else -0.5 + k * width
+            x = (e - f) / sigma
+            tails[k] = _tail(abs(x))
+    for j in range(lo, hi + 1):
+        xa = -np.inf if j == 0 else (-0.5 + j * width - f) / sigma
+        eb = F + 0.5 if j + 1 == J else -0.5 + (j + 1) * width
+        xb = (eb - f) / sigma
+        if xa > 0.0:
+            g = tails[j] - tails[j + 1]
+        elif xb < 0.0:
+            g = tails[j + 1] - tails[j]
+        else:
+            g = 1.0 - tails[j] - tails[j + 1]
+        row[j] += (1.0 - p_rand) * max(g, 0.0)
+
+
+@nb.njit(cache=True)
 def _beam_mi_kernel(pf, offsets, t_enter, Fray, kind, sigma, p_rand, width, p_occ):
     """``I(f_r; z_r)`` in nats for every ray ``r`` from its first-hit distribution ``pf[r, :len_r + 1]``."""
     R = offsets.shape[0] - 1
     out = np.zeros(R)
-    for r in nb.prange(R):
+    for r in range(R):
         n = offsets[r + 1] - offsets[r]
         F = Fray[r]
         J = _num_outcomes(kind, F, width)
         ns = 0
         for kap in range(n + 1):
-            if pf[r, kap] > 0.0:
+            if pf[r, kap] > _NEGLIGIBLE:
                 ns += 1
         if ns <= 1:
             continue  # a certain first hit carries no information
         rows = np.empty((ns, J + 1))
+        tails = np.empty(J + 2)
         ps = np.empty(ns)
         q = np.zeros(J + 1)
         i = 0
         for kap in range(n + 1):
             p = pf[r, kap]
-            if p <= 0.0:
+            if p <= _NEGLIGIBLE:
                 continue
             none = kap == n
             f = 0.0 if none else _coord(kind, t_enter, offsets[r], kap)
+            _fill_row(kind, rows[i], J, f, none, F, sigma, p_rand, width, p_occ, tails)
             for j in range(J + 1):
-                v = _bin_prob(kind, j, J, f, none, F, sigma, p_rand, width, p_occ)
-                rows[i, j] = v
-                q[j] += p * v
+                q[j] += p * rows[i, j]
             ps[i] = p
             i += 1
         mi = 0.0
         for i in range(ns):
+            acc = 0.0
             for j in range(J + 1):
                 v = rows[i, j]
                 if v > 0.0:
-                    mi += ps[i] * v * math.log(v / q[j])
+                    acc += v * math.log(v / q[j])
+            mi += ps[i] * acc
         out[r] = max(mi, 0.0)
     return out
 
@@ -470,7 +557,7 @@ def _log_reading(kind, binned, y, jb, is_max, J, f, none, F, sigma, p_rand, widt
     return lg
 
 
-@nb.njit(cache=True, parallel=True)
+@nb.njit(cache=True)
 def _scan_mi_kernel(
     packed, w, valid_mask, offsets, cells, t_enter, Fray, pose_cells, B, kind, binned, sigma, p_rand, width, p_occ,
     u_pick, eps, u_a, u_b,
@@ -484,7 +571,7 @@ def _scan_mi_kernel(
     mean = np.full(C, np.nan)
     var = np.full(C, np.nan)
     one = np.uint64(1)
-    for c in nb.prange(C):
+    for c in range(C):
         # the samples with the candidate's cell free, renormalised
         loc = np.full(S, -1, np.int64)
         vs = np.empty(S, np.int64)
@@ -582,13 +669,13 @@ def _scan_mi_kernel(
                     if is_max:
                         jb = J
                     else:
-                        jb = min(max(int(math.floor((y + 0.5) / width)), 0), J - 1)
+                        jb = min(max(math.floor((y + 0.5) / width), 0), J - 1)
                 else:
                     truth = J if none0 else f0
                     if u_a[c, t, b] < p_occ:
                         jb = truth
                     else:
-                        u = min(int(math.floor(u_b[c, t, b] * (F + 1.0))), int(F))
+                        u = min(math.floor(u_b[c, t, b] * (F + 1.0)), int(F))
                         jb = u + 1 if u >= truth else u
                 for g in range(gnum[b]):
                     fg = gval[b, g]

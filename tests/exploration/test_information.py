@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -108,15 +109,17 @@ def test_reading_bins_integrate_the_sensor_density(sensor, w):
         fv = F + 1 if none else fi
         mx = sensor.log_prob(torch.tensor(0.0), torch.tensor(fv), torch.tensor(F), torch.tensor(True)).exp()
         assert abs(float(rows[i, J]) - float(mx)) < 1e-12
-        for j in range(J):
-            a = -0.5 + j * w if j else -0.5 - 12 * float(sensor.sigma)
-            b = min(-0.5 + (j + 1) * w, F + 0.5)
-            pieces = [(a, b)] if j else [(a, -0.5 - 1e-12), (-0.5, b)]  # the uniform part starts at -1/2
-            integral = 0.0
-            for lo, hi in pieces:
-                z = torch.linspace(lo, hi, 20001)
-                integral += float(torch.trapezoid(sensor.log_prob(z, torch.tensor(fv), torch.tensor(F)).exp(), z))
-            assert abs(float(rows[i, j]) - integral) < 2e-7, (i, j)
+        # every bin by the trapezoid rule on 20001 points (bin 0 from -1/2 - 12 sigma, split at -1/2 where the
+        # uniform part starts), all bins in one call of the sensor's density
+        lo = torch.tensor([-0.5 + j * w for j in range(J)])
+        hi = torch.clamp(lo + w, max=F + 0.5)
+        t = torch.linspace(0, 1, 20001)
+        z = lo[:, None] + (hi - lo)[:, None] * t
+        z0 = -0.5 - 12 * float(sensor.sigma) + (12 * float(sensor.sigma) - 1e-12) * t
+        dens = sensor.log_prob(torch.cat([z, z0[None]]), torch.tensor(fv), torch.tensor(F)).exp()
+        integral = torch.trapezoid(dens, torch.cat([z, z0[None]]), dim=1)
+        integral[0] += integral[-1]
+        assert (rows[i, :J] - integral[:J]).abs().max() < 2e-7, i
 
 
 def test_pattern_match_outcomes_are_the_sensors_probabilities():
@@ -167,11 +170,35 @@ def test_repeated_samples_equal_their_weights(problem):
             assert (pf[r, n + 1 :] == 0).all()
 
 
+def test_beam_information_of_posterior_draws_converges_to_the_exact_mi(problem):
+    """S exact posterior draws: the plug-in error is within 5 delta-method standard deviations
+    ``sqrt(Var_m[D(p(z | m) || p(z))] / S)`` plus an O(1/S) bias allowance."""
+    model, maps, pi, cr = problem
+    sensor = GaussianRange(0.9)
+    S = 20000
+    idx = torch.multinomial(pi, S, replacement=True, generator=torch.Generator().manual_seed(8))
+    got = beam_information(model.grid, sensor, maps[idx].to(torch.uint8), cr)
+    worst = 0.0
+    for c in range(len(POSES)):
+        pc = conditioned(pi, maps, cr, c)
+        n_kept = int((maps[idx][:, int(cr.pose_cells[c])] == 0).sum())
+        for b in range(len(ANGLES)):
+            rows = ref_map_rows(cr, sensor, maps, c, b)
+            q = pc @ rows
+            d = torch.where(rows > 0, rows * torch.log(torch.where(rows > 0, rows, 1.0) / q), 0.0).sum(1) / LN2
+            exact = float(pc @ d)
+            sd = math.sqrt(float(pc @ (d - exact) ** 2) / n_kept)
+            err = abs(float(got[c, b]) - exact)
+            assert err < 5 * sd + rows.shape[1] / n_kept / LN2, (c, b, err, sd)
+            worst = max(worst, err)
+    assert worst > 0  # the draws are not the exact weights
+
+
 def test_finer_bins_never_lose_information_and_converge(problem):
     model, maps, pi, cr = problem
     sensor = GaussianRange(0.8)
     vals = [beam_information(model.grid, sensor, maps, cr, weights=pi, bin_width=w) for w in (1, 0.5, 0.25, 1 / 64)]
-    for coarse, fine in zip(vals, vals[1:]):
+    for coarse, fine in itertools.pairwise(vals):
         assert (fine >= coarse - 1e-12).all()
     assert (vals[1] - vals[0]).max() > 1e-3  # refinement matters here, so the check above can fail
     fine2 = beam_information(model.grid, sensor, maps, cr, weights=pi, bin_width=1 / 128)
@@ -192,7 +219,7 @@ def exact_scan_mi(pi, rows_per_beam):
     "sensor, w", [(PatternMatch(0.75), None), (GaussianRange(0.8), 1.0), (GaussianRange(0.6, p_rand=0.15), 1.0)]
 )
 def test_scan_estimator_is_within_its_standard_error_of_the_exact_mi(problem, sensor, w):
-    model, maps, pi, cr3 = problem
+    model, maps, pi, _cr3 = problem
     beams = np.array([0.0, 0.05, math.pi / 2])  # two beams along one row: redundant through the map
     cr = candidate_rays(model.grid, POSES, beams, MAX_RANGE)
     res = scan_information(
@@ -216,7 +243,7 @@ def test_scan_estimator_is_within_its_standard_error_of_the_exact_mi(problem, se
 
 
 def test_scan_estimator_of_continuous_readings_matches_the_fine_bin_limit(problem):
-    model, maps, pi, cr = problem
+    model, maps, pi, _cr = problem
     sensor = GaussianRange(0.7, p_rand=0.05)
     one = candidate_rays(model.grid, POSES, np.array([math.pi / 4]), MAX_RANGE)
     res = scan_information(model.grid, sensor, maps, one, num_draws=6000, generator=torch.Generator().manual_seed(2),
@@ -227,7 +254,7 @@ def test_scan_estimator_of_continuous_readings_matches_the_fine_bin_limit(proble
 
 
 def test_scan_with_a_seed_is_reproducible(problem):
-    model, maps, pi, cr = problem
+    model, maps, _pi, cr = problem
     run = [
         scan_information(model.grid, GaussianRange(0.8), maps[:50], cr, num_draws=64,
                          generator=torch.Generator().manual_seed(5))
@@ -277,10 +304,10 @@ def test_independent_information_of_sample_marginals_differs_from_the_samples(pr
 
 # ------------------------------------------------------------------ bad input
 def test_bad_input_is_refused_with_what_is_wrong(problem):
-    model, maps, pi, cr = problem
+    model, maps, _pi, cr = problem
     grid = model.grid
     s = GaussianRange(0.9)
-    with pytest.raises(ValueError, match="candidate pose 1 .* off the grid"):
+    with pytest.raises(ValueError, match=r"candidate pose 1 .* off the grid"):
         candidate_rays(grid, [[0.5, 0.5, 0.0], [4.5, 0.5, 0.0]], ANGLES, MAX_RANGE)
     with pytest.raises(ValueError, match="candidate set is empty"):
         candidate_rays(grid, np.zeros((0, 3)), ANGLES, MAX_RANGE)
@@ -316,3 +343,11 @@ def test_bad_input_is_refused_with_what_is_wrong(problem):
         beam_information(grid, s, maps, cr, bin_width=0.0)
     with pytest.raises(TypeError, match="no compiled reading model"):
         beam_information(grid, object(), maps, cr)
+
+
+def test_tabulated_normal_tail_matches_erfc():
+    from ogm_ppl.exploration.information import _tail
+
+    for x in np.concatenate([np.linspace(0, 12, 20011), np.random.default_rng(0).uniform(0, 10, 5000)]):
+        exact = 0.5 * math.erfc(x / math.sqrt(2))
+        assert abs(_tail(x) / exact - 1) < 1e-13, x
