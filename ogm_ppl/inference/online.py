@@ -30,9 +30,12 @@ The state then equals, bit for bit, the offline state of the same map and rays b
 **Focused sweeps and the schedule.** After adding scans, ``sweeps`` (default ``sweeps_per_scan``) sweeps
 run; sweep number ``t`` (counted from 1 over the chain's life) is a *full* sweep over every latent cell of
 the grid when ``full_every > 0`` and ``t % full_every == 0``, and otherwise a *focused* sweep over the
-latent cells of the focus region: every cell the rays of the latest ``add_scans`` cross (up to their
-maximum range or the grid edge), dilated by ``margin`` cells (Chebyshev). Every cell is thus visited at
-least once every ``full_every`` sweeps. Each sweep is a systematic pass of heat-bath (or metropolised)
+latent cells of the focus region: the cells where the rays of the latest ``add_scans`` end (their
+readings' cells in the grid) and the new rays' current first and second hits (an occupied cell in front of
+a reading is what the reading contradicts; for a ray without a hit, its last cell), dilated by ``margin``
+cells (Chebyshev). The free cells along the new rays between the sensor and the reading get strong
+free evidence and are left to the full sweeps. Every cell is thus visited at least once every
+``full_every`` sweeps. Each sweep is a systematic pass of heat-bath (or metropolised)
 single-cell updates of the posterior given *all* scans so far, so each leaves that posterior invariant
 (a focused sweep is the ``region=`` kernel of :class:`~ogm_ppl.inference.mcmc.CellGibbs` on the focus
 cells); the full sweeps make the chain irreducible over the whole map. Cells whose pose the new scans
@@ -174,6 +177,7 @@ class OnlineMap:
         self.kernel, self.update, self.seed = kernel, update, int(seed)
         self.sweeps_per_scan, self.full_every, self.margin = int(sweeps_per_scan), int(full_every), int(margin)
         self._compiled = compiled
+        self._outside = _Outside(prior)
         self._rule = _UPDATES[update]
         K = grid.num_cells
         if isinstance(init, str):
@@ -211,8 +215,8 @@ class OnlineMap:
             np.zeros(K, np.int64),
             np.zeros(K, np.int64),
             np.zeros(K, np.int64),
-            np.zeros(1024, np.int64),
-            np.zeros(1024, np.int64),
+            np.zeros(1024, np.int32),
+            np.zeros(1024, np.int32),
             np.zeros(32, np.float64),
             float(2.0**self._bits),
         )
@@ -309,8 +313,14 @@ class OnlineMap:
         n_new = rays.num_rays
         if n_new == 0:
             raise ValueError("add_scans: the scans give no ray")
-        # likelihood rows of the new rays only, by the offline model's code (known_free=None: no pinning here)
-        table = OccupancyModel(self.grid, rays, self.sensor, self.prior, known_free=None).loglik_table.numpy()
+        # likelihood rows of the new rays only, by the offline model's code (known_free=None: no pinning here);
+        # one torch thread: on tables of a scan's size, more threads cost more than they save
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)
+        try:
+            table = OccupancyModel(self.grid, rays, self.sensor, self._outside, known_free=None).loglik_table.numpy()
+        finally:
+            torch.set_num_threads(threads)
         lengths = rays.lengths
         ragged = table[np.repeat(np.arange(n_new), lengths + 1), _ragged_cols(lengths)]
         bad = np.isnan(ragged) | (ragged == np.inf)
@@ -366,9 +376,13 @@ class OnlineMap:
             ok.set_cell(st, int(k), 0)
         self._latent = np.flatnonzero(~self._pinned).astype(np.int64)
         self._reached |= rays.reached()
-        # the focus region: the new rays' cells, dilated
+        # the focus region: where the new rays end, and their first and second hits, dilated
         touched = np.zeros(self.grid.num_cells, bool)
-        touched[rays.cells] = True
+        touched[rays.endpoint_cells()] = True
+        ends = st.offsets[R0:R1] + np.minimum(st.rays["f"][R0:R1], lengths - 1)
+        touched[st.cells[ends]] = True
+        ends = st.offsets[R0:R1] + np.minimum(st.rays["s"][R0:R1], lengths - 1)
+        touched[st.cells[ends]] = True
         g = self.grid
         rows, cols = (1, g.num_cells) if g.ndim == 1 else g.shape
         region = ok.dilate(touched, rows, cols, self.margin)
@@ -493,6 +507,17 @@ class OnlineMap:
             "inf_neg": st.inf["neg"].copy(),
             "ll": st.ll[: self._nnz + self._R].copy(),
         }
+
+
+class _Outside:
+    """What the likelihood rows read of the prior: its size and ``lambda_out`` (computed once)."""
+
+    def __init__(self, prior) -> None:
+        self.num_cells = prior.num_cells
+        self._lam = float(prior.outside_occupancy())
+
+    def outside_occupancy(self) -> float:
+        return self._lam
 
 
 def _ragged_cols(lengths: np.ndarray) -> np.ndarray:
