@@ -104,12 +104,13 @@ def _same_sensor(a: SensorModel, b: SensorModel) -> bool:
     return True
 
 
-def _grow(a: np.ndarray, n: int, fill=0) -> np.ndarray:
-    """``a`` with room for at least ``n`` items along axis 0 (capacity doubled)."""
+def _grow(a: np.ndarray, n: int) -> np.ndarray:
+    """``a`` with room for at least ``n`` items along axis 0 (capacity doubled; the new room is not
+    initialised: only the live part is ever read)."""
     if a.shape[0] >= n:
         return a
     cap = max(n, 2 * a.shape[0], 16)
-    out = np.full((cap,) + a.shape[1:], fill, dtype=a.dtype) if fill is not None else np.empty((cap,) + a.shape[1:], a.dtype)
+    out = np.empty((cap,) + a.shape[1:], a.dtype)
     out[: a.shape[0]] = a
     return out
 
@@ -336,9 +337,9 @@ class OnlineMap:
         offsets[R0 + 1 : R1 + 1] = e0 + rays.offsets[1:]
         cells = _grow(st.cells, e1)
         cells[e0:e1] = rays.cells
-        ll = _grow(st.ll, e1 + R1, fill=None)
+        ll = _grow(st.ll, e1 + R1)
         ll[e0 + R0 : e1 + R1] = ragged
-        rec = _grow(st.rays, R1, fill=None)
+        rec = _grow(st.rays, R1)
         any_inf = bool(st.any_inf or ok.any_impossible(ll, offsets, R0, R1))
         c_ray, c_kappa, self._used = ok.add_cell_entries(
             st.c_start, st.c_len, st.c_cap, st.c_ray, st.c_kappa, self._used, offsets, cells, R0, R1
