@@ -796,7 +796,9 @@ def _compute_map(
     return np.mean(probs, axis=0) if chains > 1 else probs[0], result.observed, details
 
 
-def _online_map(args, method: MapMethod, params, problem: MapProblem, times: dict) -> tuple[np.ndarray, np.ndarray, dict]:
+def _online_map(
+    args, method: MapMethod, params, problem: MapProblem, times: dict
+) -> tuple[np.ndarray, np.ndarray, dict]:
     """``--online``: the scans replayed one at a time into :class:`~ogm_ppl.inference.online.OnlineMap`
     (:func:`~ogm_ppl.inference.online.replay`); the snapshots ride in ``details["_snapshots"]``."""
     from ogm_ppl.inference.online import replay

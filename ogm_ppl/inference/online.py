@@ -261,11 +261,34 @@ class OnlineMap:
     def stats(self) -> OnlineStats:
         """Live sizes and allocated capacities."""
         st = self._st
-        nbytes = sum(getattr(st, f).nbytes for f in ("m", "rays", "d", "inf", "offsets", "cells", "c_start",
-                                                     "c_len", "c_cap", "c_ray", "c_kappa", "ll"))
+        nbytes = sum(
+            getattr(st, f).nbytes
+            for f in (
+                "m",
+                "rays",
+                "d",
+                "inf",
+                "offsets",
+                "cells",
+                "c_start",
+                "c_len",
+                "c_cap",
+                "c_ray",
+                "c_kappa",
+                "ll",
+            )
+        )
         return OnlineStats(
-            self._scans, self._R, self._nnz, st.rays.shape[0], st.cells.shape[0], self._used,
-            st.c_ray.shape[0], self._bits, self.rescales, int(nbytes),
+            self._scans,
+            self._R,
+            self._nnz,
+            st.rays.shape[0],
+            st.cells.shape[0],
+            self._used,
+            st.c_ray.shape[0],
+            self._bits,
+            self.rescales,
+            int(nbytes),
         )
 
     # ------------------------------------------------------------------ adding scans
@@ -361,8 +384,20 @@ class OnlineMap:
             rescale = R0 > 0
             self._bits = bits
         self._st = st = ok.OnlineState(
-            st.m, rec, st.d, st.inf, any_inf, offsets, cells, st.c_start, st.c_len, st.c_cap,
-            c_ray, c_kappa, ll, float(2.0**self._bits),
+            st.m,
+            rec,
+            st.d,
+            st.inf,
+            any_inf,
+            offsets,
+            cells,
+            st.c_start,
+            st.c_len,
+            st.c_cap,
+            c_ray,
+            c_kappa,
+            ll,
+            float(2.0**self._bits),
         )
         self._R, self._nnz = R1, e1
         if rescale:  # exact sums of the old rays at the new scale (their terms are finite or counted
@@ -388,6 +423,9 @@ class OnlineMap:
         rows, cols = (1, g.num_cells) if g.ndim == 1 else g.shape
         region = ok.dilate(touched, rows, cols, self.margin)
         self._focus = np.ascontiguousarray(region[~self._pinned[region]], dtype=np.int64)
+        assert (
+            rays.reading is not None and rays.range_len is not None and rays.geometry is not None
+        )  # raycast fills them
         self._meta.append(
             {
                 "t_enter": rays.t_enter,
