@@ -3,18 +3,19 @@ rebuild (the online version asked for in the thesis's future work, Section 7.2: 
 to areas with new measurements"; the sampler is the single-cell Gibbs of Section 4.1, Eq. 4.2).
 
 **What grows, and what it costs.** :meth:`OnlineMap.add_scans` ray-casts only the new scans, computes the
-likelihood rows ``log p(z_r | f)`` of the new rays only (the same code as
-:class:`~ogm_ppl.models.occupancy.OccupancyModel`, so the rows equal those of a model built from scratch),
+likelihood rows ``log p(z_r | f)`` of the new rays only (the code of
+:class:`~ogm_ppl.models.occupancy.OccupancyModel` on the new rays alone: the rows agree with those of a model
+built from scratch to within 2 ulp, as torch's vectorised and scalar loops may round the last bit apart),
 appends them to a ray index held with spare capacity (:mod:`~ogm_ppl.inference._kernels.online`: rays in
 CSR form, a ragged likelihood table of ``nnz + R`` floats, the transposed cell -> (ray, kappa) index in a
 pool of per-cell blocks), and updates the chain's state for the new rays only: their first and second hits
 ``f_r, s_r`` at the current map, and their terms in the kept sums ``d_k`` of the cells they reach. The
 ray-side arrays double when full (amortised ``O(1)`` a ray-cell entry); the cell pool doubles and compacts.
-**Memory bound:** with ``nnz`` ray-cell entries, ``R`` rays and ``K`` cells, the arrays hold at most
-``2 nnz`` cells and ``2 (nnz + R)`` table entries on the ray side and ``2 (2 nnz + 4 K)`` (ray, kappa)
-pairs in the pool, i.e. at most about ``16 (2 nnz + R) + 64 nnz + 128 K + 40 K`` bytes (int64/float64),
-about 9x the ``nnz`` entries' 8 bytes of the offline CSR and well under the offline dense table's
-``8 R (max len + 1)`` when rays differ in length.
+**Memory bound:** with ``nnz`` ray-cell entries, ``R`` rays and ``K`` cells, the ray side holds at most
+``2 nnz`` cells (int64), ``2 (nnz + R)`` table entries (float64) and ``2 R`` offsets and hit records, and
+the cell pool at most ``2 (2 nnz + 4 K)`` (ray, kappa) pairs of int32, so the online arrays take at most
+``64 nnz + 64 R + 105 K`` bytes (:meth:`OnlineMap.stats` reports them). The offline model of the same
+scans holds its CSR and transposed index (``24 nnz``) and a dense table of ``8 R (max len + 1)`` bytes.
 
 **Fixed-point scale.** The kept sums are integers in units of ``2^-S``
 (:mod:`~ogm_ppl.inference._kernels.cell_sweep`). Offline, ``S`` comes from the largest ``|log p|`` and the
@@ -24,8 +25,10 @@ max |ll|`` (starting at twice the first scans' largest entry), and uses ``S = mi
 log2(n_cap (2 b_cap + 1) + 1)))``, the offline rule at the caps, so no sum can overflow while the caps
 hold. When new rays exceed a cap it is doubled; if ``S`` then drops, every ``d_k`` is recomputed from the
 hits at the new ``S`` (exact, ``O(nnz)``; at most ``log2`` of the growth of the caps times over a run).
-The state then equals, bit for bit, the offline state of the same map and rays built with
-``bits = OnlineMap.bits`` (tested).
+The state then equals, bit for bit, the from-scratch state (:func:`~ogm_ppl.inference._kernels.cell_sweep.cell_state`)
+of the same map, rays and table at ``bits = OnlineMap.bits``; against the table of a model rebuilt from
+scratch the sums were equal too in every test (a last-bit difference of an entry changes its fixed-point
+value only if it lies within an ulp of a rounding boundary).
 
 **Focused sweeps and the schedule.** After adding scans, ``sweeps`` (default ``sweeps_per_scan``) sweeps
 run; sweep number ``t`` (counted from 1 over the chain's life) is a *full* sweep over every latent cell of
@@ -353,6 +356,8 @@ class OnlineMap:
         finite = ragged[np.isfinite(ragged)]
         big = float(np.abs(finite).max()) if finite.size else 0.0
         R0, R1 = self._R, self._R + n_new
+        if R1 >= 2**31:
+            raise ValueError(f"an online map holds fewer than 2^31 rays (the cell index stores int32), got {R1}")
         e0, e1 = self._nnz, self._nnz + rays.nnz
         st = self._st
         # grow the ray side and append
@@ -364,22 +369,25 @@ class OnlineMap:
         ll[e0 + R0 : e1 + R1] = ragged
         rec = _grow(st.rays, R1)
         any_inf = bool(st.any_inf or ok.any_impossible(ll, offsets, R0, R1))
+        # the fixed-point scale: caps on the rays a cell holds and on |ll| (module docstring), checked
+        # before anything is changed so that a refused scan leaves the map as it was
+        n_max = int((st.c_len + np.bincount(rays.cells, minlength=self.grid.num_cells)).max())
+        n_cap, b_cap = self._n_cap, self._b_cap
+        while n_max > n_cap:
+            n_cap *= 2
+        if big > b_cap:
+            b_cap = max(2.0 * big, 2.0 * b_cap, 1.0)
+        bits = _bits_for(n_cap, b_cap)
+        if bits < cs.MIN_BITS:
+            raise ValueError(
+                f"likelihood entries up to |{b_cap:.3g}| over up to {n_cap} rays a cell leave "
+                f"{bits} fraction bits for the fixed-point sums (need {cs.MIN_BITS})"
+            )
+        self._n_cap, self._b_cap = n_cap, b_cap
+        rescale = False
         c_ray, c_kappa, self._used = ok.add_cell_entries(
             st.c_start, st.c_len, st.c_cap, st.c_ray, st.c_kappa, self._used, offsets, cells, R0, R1
         )
-        # the fixed-point scale: caps on the rays a cell holds and on |ll| (module docstring)
-        n_max = int(st.c_len.max()) if len(st.c_len) else 0
-        rescale = False
-        while n_max > self._n_cap:
-            self._n_cap *= 2
-        if big > self._b_cap:
-            self._b_cap = max(2.0 * big, 2.0 * self._b_cap, 1.0)
-        bits = _bits_for(self._n_cap, self._b_cap)
-        if bits < cs.MIN_BITS:
-            raise ValueError(
-                f"likelihood entries up to |{self._b_cap:.3g}| over up to {self._n_cap} rays a cell leave "
-                f"{bits} fraction bits for the fixed-point sums (need {cs.MIN_BITS})"
-            )
         if bits != self._bits:
             rescale = R0 > 0
             self._bits = bits
