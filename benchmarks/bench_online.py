@@ -49,6 +49,7 @@ from ogm_ppl.scans import Scans
 
 INTEL = Path(__file__).resolve().parents[2] / "shared" / "data" / "intel-lab" / "intel-corrected.log.gz"
 SWEEPS_PER_SCAN, FULL_EVERY, MARGIN, FINAL, REFERENCE = 2, 100, 2, 20, 60
+INIT_NEW = "hits"  # newly reached cells start from the scan's hits, as the offline chains start from OGM
 
 
 def _first(scans: Scans, n: int) -> Scans:
@@ -68,7 +69,16 @@ def main(argv: list[str] | None = None) -> int:
     print(f"Intel: {S} scans x {scans.beams_per_scan} beams, grid {grid.shape} at 5 cm", flush=True)
 
     # ---- online replay
-    om = OnlineMap(grid, sensor, prior, seed=1, sweeps_per_scan=SWEEPS_PER_SCAN, full_every=FULL_EVERY, margin=MARGIN)
+    om = OnlineMap(
+        grid,
+        sensor,
+        prior,
+        seed=1,
+        sweeps_per_scan=SWEEPS_PER_SCAN,
+        full_every=FULL_EVERY,
+        margin=MARGIN,
+        init_new=INIT_NEW,
+    )
     om.add_scans(_one(scans, 0))  # compiles the kernels (not timed)
     t = np.zeros(S)
     focus = np.zeros(S, np.int64)
@@ -159,6 +169,7 @@ def main(argv: list[str] | None = None) -> int:
                 "sweeps_per_scan": SWEEPS_PER_SCAN,
                 "full_every": FULL_EVERY,
                 "margin": MARGIN,
+                "init_new": INIT_NEW,
                 "final_sweeps": FINAL,
                 "reference_sweeps": REFERENCE,
             },

@@ -138,6 +138,11 @@ class OnlineMap:
             regions are not visited).
         margin: cells added around the new rays' cells to form the focus region.
         init: the starting map: ``"free"`` or a ``K`` 0/1 map.
+        init_new: ``"keep"`` (default: cells keep their state when rays first reach them) or ``"hits"``: a
+            latent cell that the new rays are the first to reach starts occupied if one of them ends in it and
+            free otherwise (the inverse sensor model, like the thresholded-OGM start of the offline chains).
+            That is a restart of those cells, not a move of the chain: the chain then converges again from
+            there (the cells had no readings before, so only prior draws are lost).
         initial_rays_per_cell: the first cap ``n_cap`` of the fixed-point scale (module docstring).
 
     Attributes:
@@ -157,6 +162,7 @@ class OnlineMap:
         full_every: int = 10,
         margin: int = 2,
         init="free",
+        init_new: str = "keep",
         initial_rays_per_cell: int = 256,
     ) -> None:
         if kernel != "cell":
@@ -175,6 +181,9 @@ class OnlineMap:
         for name, v in (("sweeps_per_scan", sweeps_per_scan), ("full_every", full_every), ("margin", margin)):
             if int(v) != v or v < 0:
                 raise ValueError(f"{name} must be a non-negative integer, got {v!r}")
+        if init_new not in ("keep", "hits"):
+            raise ValueError(f"init_new must be 'keep' or 'hits', got {init_new!r}")
+        self.init_new = init_new
         if initial_rays_per_cell < 1:
             raise ValueError(f"initial_rays_per_cell must be positive, got {initial_rays_per_cell}")
         self.grid, self.sensor, self.prior = grid, sensor, prior
@@ -419,7 +428,14 @@ class OnlineMap:
         for k in newly[st.m[newly] != 0].tolist():
             ok.set_cell(st, int(k), 0)
         self._latent = np.flatnonzero(~self._pinned).astype(np.int64)
-        self._reached |= rays.reached()
+        reached = rays.reached()
+        if self.init_new == "hits":  # restart the cells these rays are the first to reach (init_new)
+            first_seen = reached & ~self._reached & ~self._pinned
+            hit = np.zeros(self.grid.num_cells, bool)
+            hit[rays.endpoint_cells()] = True
+            for k in np.flatnonzero(first_seen & (hit != st.m.astype(bool))).tolist():
+                ok.set_cell(st, int(k), int(hit[k]))
+        self._reached |= reached
         # the focus region: where the new rays end, and their first and second hits, dilated
         touched = np.zeros(self.grid.num_cells, bool)
         touched[rays.endpoint_cells()] = True

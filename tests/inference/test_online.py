@@ -233,3 +233,17 @@ def test_cli_map_online_with_snapshots(tmp_path):
     assert np.all(p[wall[:, 0], wall[:, 1]] > 0.6) and np.all(p[inside[:, 0], inside[:, 1]] < 0.3)
     assert main([*argv[:-2], "--snapshots", "2", "--out", str(tmp_path / "o2")]) == 2  # needs --online
     assert main([*argv[:4], "--method", "p21", "--online", "--out", str(tmp_path / "o3")]) == 2  # not gibbs
+
+
+def test_init_new_hits_starts_first_seen_cells_from_the_scan():
+    grid, scans = _scene(num_scans=2)
+    om = OnlineMap(grid, GaussianRange(1.0), _prior("independent", (N, N)), sweeps_per_scan=0, init_new="hits")
+    om.add_scans(_part(scans, 0, 1))
+    rays = raycast(grid, _part(scans, 0, 1))
+    hit = np.zeros(grid.num_cells, bool)
+    hit[rays.endpoint_cells()] = True
+    expect = hit & ~om.pinned.numpy()
+    assert np.array_equal(om.state.numpy().astype(bool), expect)
+    _assert_same_as_rebuilt(om, grid, _part(scans, 0, 1), GaussianRange(1.0), _prior("independent", (N, N)))
+    with pytest.raises(ValueError, match="init_new"):
+        OnlineMap(grid, GaussianRange(1.0), _prior("independent", (N, N)), init_new="ogm")
