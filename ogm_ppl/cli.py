@@ -775,7 +775,7 @@ def _compute_map(
     its ``chains`` (chain ``c`` seeded ``--seed + c``); warnings become lines ``ogm-ppl: warning: ...``."""
     sigma = float(inp.settings.get("sigma_cells") or 0) or None
     problem = MapProblem(grid, inp.scans, sigma_cells=sigma)
-    if args.online:
+    if getattr(args, "online", False):
         return _online_map(args, method, params, problem, times)
     chains = int(getattr(params, "chains", 1))
     probs, ray, total = [], None, 0.0
@@ -796,7 +796,9 @@ def _compute_map(
     return np.mean(probs, axis=0) if chains > 1 else probs[0], result.observed, details
 
 
-def _online_map(args, method: MapMethod, params, problem: MapProblem, times: dict) -> tuple[np.ndarray, np.ndarray, dict]:
+def _online_map(
+    args, method: MapMethod, params, problem: MapProblem, times: dict
+) -> tuple[np.ndarray, np.ndarray, dict]:
     """``--online``: the scans replayed one at a time into :class:`~ogm_ppl.inference.online.OnlineMap`
     (:func:`~ogm_ppl.inference.online.replay`); the snapshots ride in ``details["_snapshots"]``."""
     from ogm_ppl.inference.online import replay
@@ -943,7 +945,7 @@ def _map(args, method, params) -> dict:
         grid = _make_grid(args, inp)
         bar.update()
         bar.set_postfix_str("mapping")
-        if args.snapshots is not None and not args.online:
+        if getattr(args, "snapshots", None) is not None and not getattr(args, "online", False):
             raise CLIError("--snapshots needs --online")
         probs, observed, details = _compute_map(args, method, params, inp, grid, times)
         snapshots = details.pop("_snapshots", None)

@@ -3,18 +3,19 @@ rebuild (the online version asked for in the thesis's future work, Section 7.2: 
 to areas with new measurements"; the sampler is the single-cell Gibbs of Section 4.1, Eq. 4.2).
 
 **What grows, and what it costs.** :meth:`OnlineMap.add_scans` ray-casts only the new scans, computes the
-likelihood rows ``log p(z_r | f)`` of the new rays only (the same code as
-:class:`~ogm_ppl.models.occupancy.OccupancyModel`, so the rows equal those of a model built from scratch),
+likelihood rows ``log p(z_r | f)`` of the new rays only (the code of
+:class:`~ogm_ppl.models.occupancy.OccupancyModel` on the new rays alone: the rows agree with those of a model
+built from scratch to within 2 ulp, as torch's vectorised and scalar loops may round the last bit apart),
 appends them to a ray index held with spare capacity (:mod:`~ogm_ppl.inference._kernels.online`: rays in
 CSR form, a ragged likelihood table of ``nnz + R`` floats, the transposed cell -> (ray, kappa) index in a
 pool of per-cell blocks), and updates the chain's state for the new rays only: their first and second hits
 ``f_r, s_r`` at the current map, and their terms in the kept sums ``d_k`` of the cells they reach. The
 ray-side arrays double when full (amortised ``O(1)`` a ray-cell entry); the cell pool doubles and compacts.
-**Memory bound:** with ``nnz`` ray-cell entries, ``R`` rays and ``K`` cells, the arrays hold at most
-``2 nnz`` cells and ``2 (nnz + R)`` table entries on the ray side and ``2 (2 nnz + 4 K)`` (ray, kappa)
-pairs in the pool, i.e. at most about ``16 (2 nnz + R) + 64 nnz + 128 K + 40 K`` bytes (int64/float64),
-about 9x the ``nnz`` entries' 8 bytes of the offline CSR and well under the offline dense table's
-``8 R (max len + 1)`` when rays differ in length.
+**Memory bound:** with ``nnz`` ray-cell entries, ``R`` rays and ``K`` cells, the ray side holds at most
+``2 nnz`` cells (int64), ``2 (nnz + R)`` table entries (float64) and ``2 R`` offsets and hit records, and
+the cell pool at most ``2 (2 nnz + 4 K)`` (ray, kappa) pairs of int32, so the online arrays take at most
+``64 nnz + 64 R + 105 K`` bytes (:meth:`OnlineMap.stats` reports them). The offline model of the same
+scans holds its CSR and transposed index (``24 nnz``) and a dense table of ``8 R (max len + 1)`` bytes.
 
 **Fixed-point scale.** The kept sums are integers in units of ``2^-S``
 (:mod:`~ogm_ppl.inference._kernels.cell_sweep`). Offline, ``S`` comes from the largest ``|log p|`` and the
@@ -24,15 +25,20 @@ max |ll|`` (starting at twice the first scans' largest entry), and uses ``S = mi
 log2(n_cap (2 b_cap + 1) + 1)))``, the offline rule at the caps, so no sum can overflow while the caps
 hold. When new rays exceed a cap it is doubled; if ``S`` then drops, every ``d_k`` is recomputed from the
 hits at the new ``S`` (exact, ``O(nnz)``; at most ``log2`` of the growth of the caps times over a run).
-The state then equals, bit for bit, the offline state of the same map and rays built with
-``bits = OnlineMap.bits`` (tested).
+The state then equals, bit for bit, the from-scratch state (:func:`~ogm_ppl.inference._kernels.cell_sweep.cell_state`)
+of the same map, rays and table at ``bits = OnlineMap.bits``; against the table of a model rebuilt from
+scratch the sums were equal too in every test (a last-bit difference of an entry changes its fixed-point
+value only if it lies within an ulp of a rounding boundary).
 
 **Focused sweeps and the schedule.** After adding scans, ``sweeps`` (default ``sweeps_per_scan``) sweeps
 run; sweep number ``t`` (counted from 1 over the chain's life) is a *full* sweep over every latent cell of
 the grid when ``full_every > 0`` and ``t % full_every == 0``, and otherwise a *focused* sweep over the
-latent cells of the focus region: every cell the rays of the latest ``add_scans`` cross (up to their
-maximum range or the grid edge), dilated by ``margin`` cells (Chebyshev). Every cell is thus visited at
-least once every ``full_every`` sweeps. Each sweep is a systematic pass of heat-bath (or metropolised)
+latent cells of the focus region: the cells where the rays of the latest ``add_scans`` end (their
+readings' cells in the grid) and the new rays' current first and second hits (an occupied cell in front of
+a reading is what the reading contradicts; for a ray without a hit, its last cell), dilated by ``margin``
+cells (Chebyshev). The free cells along the new rays between the sensor and the reading get strong
+free evidence and are left to the full sweeps. Every cell is thus visited at least once every
+``full_every`` sweeps. Each sweep is a systematic pass of heat-bath (or metropolised)
 single-cell updates of the posterior given *all* scans so far, so each leaves that posterior invariant
 (a focused sweep is the ``region=`` kernel of :class:`~ogm_ppl.inference.mcmc.CellGibbs` on the focus
 cells); the full sweeps make the chain irreducible over the whole map. Cells whose pose the new scans
@@ -101,12 +107,13 @@ def _same_sensor(a: SensorModel, b: SensorModel) -> bool:
     return True
 
 
-def _grow(a: np.ndarray, n: int, fill=0) -> np.ndarray:
-    """``a`` with room for at least ``n`` items along axis 0 (capacity doubled)."""
+def _grow(a: np.ndarray, n: int) -> np.ndarray:
+    """``a`` with room for at least ``n`` items along axis 0 (capacity doubled; the new room is not
+    initialised: only the live part is ever read)."""
     if a.shape[0] >= n:
         return a
     cap = max(n, 2 * a.shape[0], 16)
-    out = np.full((cap,) + a.shape[1:], fill, dtype=a.dtype) if fill is not None else np.empty((cap,) + a.shape[1:], a.dtype)
+    out = np.empty((cap,) + a.shape[1:], a.dtype)
     out[: a.shape[0]] = a
     return out
 
@@ -131,6 +138,11 @@ class OnlineMap:
             regions are not visited).
         margin: cells added around the new rays' cells to form the focus region.
         init: the starting map: ``"free"`` or a ``K`` 0/1 map.
+        init_new: ``"keep"`` (default: cells keep their state when rays first reach them) or ``"hits"``: a
+            latent cell that the new rays are the first to reach starts occupied if one of them ends in it and
+            free otherwise (the inverse sensor model, like the thresholded-OGM start of the offline chains).
+            That is a restart of those cells, not a move of the chain: the chain then converges again from
+            there (the cells had no readings before, so only prior draws are lost).
         initial_rays_per_cell: the first cap ``n_cap`` of the fixed-point scale (module docstring).
 
     Attributes:
@@ -150,6 +162,7 @@ class OnlineMap:
         full_every: int = 10,
         margin: int = 2,
         init="free",
+        init_new: str = "keep",
         initial_rays_per_cell: int = 256,
     ) -> None:
         if kernel != "cell":
@@ -168,12 +181,16 @@ class OnlineMap:
         for name, v in (("sweeps_per_scan", sweeps_per_scan), ("full_every", full_every), ("margin", margin)):
             if int(v) != v or v < 0:
                 raise ValueError(f"{name} must be a non-negative integer, got {v!r}")
+        if init_new not in ("keep", "hits"):
+            raise ValueError(f"init_new must be 'keep' or 'hits', got {init_new!r}")
+        self.init_new = init_new
         if initial_rays_per_cell < 1:
             raise ValueError(f"initial_rays_per_cell must be positive, got {initial_rays_per_cell}")
         self.grid, self.sensor, self.prior = grid, sensor, prior
         self.kernel, self.update, self.seed = kernel, update, int(seed)
         self.sweeps_per_scan, self.full_every, self.margin = int(sweeps_per_scan), int(full_every), int(margin)
         self._compiled = compiled
+        self._outside = _Outside(prior)
         self._rule = _UPDATES[update]
         K = grid.num_cells
         if isinstance(init, str):
@@ -211,8 +228,8 @@ class OnlineMap:
             np.zeros(K, np.int64),
             np.zeros(K, np.int64),
             np.zeros(K, np.int64),
-            np.zeros(1024, np.int64),
-            np.zeros(1024, np.int64),
+            np.zeros(1024, np.int32),
+            np.zeros(1024, np.int32),
             np.zeros(32, np.float64),
             float(2.0**self._bits),
         )
@@ -256,11 +273,34 @@ class OnlineMap:
     def stats(self) -> OnlineStats:
         """Live sizes and allocated capacities."""
         st = self._st
-        nbytes = sum(getattr(st, f).nbytes for f in ("m", "rays", "d", "inf", "offsets", "cells", "c_start",
-                                                     "c_len", "c_cap", "c_ray", "c_kappa", "ll"))
+        nbytes = sum(
+            getattr(st, f).nbytes
+            for f in (
+                "m",
+                "rays",
+                "d",
+                "inf",
+                "offsets",
+                "cells",
+                "c_start",
+                "c_len",
+                "c_cap",
+                "c_ray",
+                "c_kappa",
+                "ll",
+            )
+        )
         return OnlineStats(
-            self._scans, self._R, self._nnz, st.rays.shape[0], st.cells.shape[0], self._used,
-            st.c_ray.shape[0], self._bits, self.rescales, int(nbytes),
+            self._scans,
+            self._R,
+            self._nnz,
+            st.rays.shape[0],
+            st.cells.shape[0],
+            self._used,
+            st.c_ray.shape[0],
+            self._bits,
+            self.rescales,
+            int(nbytes),
         )
 
     # ------------------------------------------------------------------ adding scans
@@ -309,8 +349,14 @@ class OnlineMap:
         n_new = rays.num_rays
         if n_new == 0:
             raise ValueError("add_scans: the scans give no ray")
-        # likelihood rows of the new rays only, by the offline model's code (known_free=None: no pinning here)
-        table = OccupancyModel(self.grid, rays, self.sensor, self.prior, known_free=None).loglik_table.numpy()
+        # likelihood rows of the new rays only, by the offline model's code (known_free=None: no pinning here);
+        # one torch thread: on tables of a scan's size, more threads cost more than they save
+        threads = torch.get_num_threads()
+        torch.set_num_threads(1)
+        try:
+            table = OccupancyModel(self.grid, rays, self.sensor, self._outside, known_free=None).loglik_table.numpy()
+        finally:
+            torch.set_num_threads(threads)
         lengths = rays.lengths
         ragged = table[np.repeat(np.arange(n_new), lengths + 1), _ragged_cols(lengths)]
         bad = np.isnan(ragged) | (ragged == np.inf)
@@ -319,6 +365,8 @@ class OnlineMap:
         finite = ragged[np.isfinite(ragged)]
         big = float(np.abs(finite).max()) if finite.size else 0.0
         R0, R1 = self._R, self._R + n_new
+        if R1 >= 2**31:
+            raise ValueError(f"an online map holds fewer than 2^31 rays (the cell index stores int32), got {R1}")
         e0, e1 = self._nnz, self._nnz + rays.nnz
         st = self._st
         # grow the ray side and append
@@ -326,32 +374,47 @@ class OnlineMap:
         offsets[R0 + 1 : R1 + 1] = e0 + rays.offsets[1:]
         cells = _grow(st.cells, e1)
         cells[e0:e1] = rays.cells
-        ll = _grow(st.ll, e1 + R1, fill=None)
+        ll = _grow(st.ll, e1 + R1)
         ll[e0 + R0 : e1 + R1] = ragged
-        rec = _grow(st.rays, R1, fill=None)
+        rec = _grow(st.rays, R1)
         any_inf = bool(st.any_inf or ok.any_impossible(ll, offsets, R0, R1))
+        # the fixed-point scale: caps on the rays a cell holds and on |ll| (module docstring), checked
+        # before anything is changed so that a refused scan leaves the map as it was
+        n_max = int((st.c_len + np.bincount(rays.cells, minlength=self.grid.num_cells)).max())
+        n_cap, b_cap = self._n_cap, self._b_cap
+        while n_max > n_cap:
+            n_cap *= 2
+        if big > b_cap:
+            b_cap = max(2.0 * big, 2.0 * b_cap, 1.0)
+        bits = _bits_for(n_cap, b_cap)
+        if bits < cs.MIN_BITS:
+            raise ValueError(
+                f"likelihood entries up to |{b_cap:.3g}| over up to {n_cap} rays a cell leave "
+                f"{bits} fraction bits for the fixed-point sums (need {cs.MIN_BITS})"
+            )
+        self._n_cap, self._b_cap = n_cap, b_cap
+        rescale = False
         c_ray, c_kappa, self._used = ok.add_cell_entries(
             st.c_start, st.c_len, st.c_cap, st.c_ray, st.c_kappa, self._used, offsets, cells, R0, R1
         )
-        # the fixed-point scale: caps on the rays a cell holds and on |ll| (module docstring)
-        n_max = int(st.c_len.max()) if len(st.c_len) else 0
-        rescale = False
-        while n_max > self._n_cap:
-            self._n_cap *= 2
-        if big > self._b_cap:
-            self._b_cap = max(2.0 * big, 2.0 * self._b_cap, 1.0)
-        bits = _bits_for(self._n_cap, self._b_cap)
-        if bits < cs.MIN_BITS:
-            raise ValueError(
-                f"likelihood entries up to |{self._b_cap:.3g}| over up to {self._n_cap} rays a cell leave "
-                f"{bits} fraction bits for the fixed-point sums (need {cs.MIN_BITS})"
-            )
         if bits != self._bits:
             rescale = R0 > 0
             self._bits = bits
         self._st = st = ok.OnlineState(
-            st.m, rec, st.d, st.inf, any_inf, offsets, cells, st.c_start, st.c_len, st.c_cap,
-            c_ray, c_kappa, ll, float(2.0**self._bits),
+            st.m,
+            rec,
+            st.d,
+            st.inf,
+            any_inf,
+            offsets,
+            cells,
+            st.c_start,
+            st.c_len,
+            st.c_cap,
+            c_ray,
+            c_kappa,
+            ll,
+            float(2.0**self._bits),
         )
         self._R, self._nnz = R1, e1
         if rescale:  # exact sums of the old rays at the new scale (their terms are finite or counted
@@ -365,14 +428,28 @@ class OnlineMap:
         for k in newly[st.m[newly] != 0].tolist():
             ok.set_cell(st, int(k), 0)
         self._latent = np.flatnonzero(~self._pinned).astype(np.int64)
-        self._reached |= rays.reached()
-        # the focus region: the new rays' cells, dilated
+        reached = rays.reached()
+        if self.init_new == "hits":  # restart the cells these rays are the first to reach (init_new)
+            first_seen = reached & ~self._reached & ~self._pinned
+            hit = np.zeros(self.grid.num_cells, bool)
+            hit[rays.endpoint_cells()] = True
+            for k in np.flatnonzero(first_seen & (hit != st.m.astype(bool))).tolist():
+                ok.set_cell(st, int(k), int(hit[k]))
+        self._reached |= reached
+        # the focus region: where the new rays end, and their first and second hits, dilated
         touched = np.zeros(self.grid.num_cells, bool)
-        touched[rays.cells] = True
+        touched[rays.endpoint_cells()] = True
+        ends = st.offsets[R0:R1] + np.minimum(st.rays["f"][R0:R1], lengths - 1)
+        touched[st.cells[ends]] = True
+        ends = st.offsets[R0:R1] + np.minimum(st.rays["s"][R0:R1], lengths - 1)
+        touched[st.cells[ends]] = True
         g = self.grid
         rows, cols = (1, g.num_cells) if g.ndim == 1 else g.shape
         region = ok.dilate(touched, rows, cols, self.margin)
         self._focus = np.ascontiguousarray(region[~self._pinned[region]], dtype=np.int64)
+        assert (
+            rays.reading is not None and rays.range_len is not None and rays.geometry is not None
+        )  # raycast fills them
         self._meta.append(
             {
                 "t_enter": rays.t_enter,
@@ -493,6 +570,17 @@ class OnlineMap:
             "inf_neg": st.inf["neg"].copy(),
             "ll": st.ll[: self._nnz + self._R].copy(),
         }
+
+
+class _Outside:
+    """What the likelihood rows read of the prior: its size and ``lambda_out`` (computed once)."""
+
+    def __init__(self, prior) -> None:
+        self.num_cells = prior.num_cells
+        self._lam = float(prior.outside_occupancy())
+
+    def outside_occupancy(self) -> float:
+        return self._lam
 
 
 def _ragged_cols(lengths: np.ndarray) -> np.ndarray:

@@ -212,3 +212,38 @@ def test_enumerate_maps_order_matches_online_state():
     maps = enumerate_maps(om.model)
     om.set_state(maps[5])
     assert torch.equal(om.state.double(), maps[5])
+
+
+def test_cli_map_online_with_snapshots(tmp_path):
+    from ogm_ppl.cli import load_map, main
+    from tests.test_cli import POSES, write_log
+
+    log = write_log(tmp_path / "tiny.log")
+    out = tmp_path / "out"
+    argv = ["map", str(log), "--resolution", "0.1", "--method", "gibbs", "--sweeps", "5", "--out", str(out)]
+    assert main([*argv, "--online", "--snapshots", "2"]) == 0
+    m = load_map(out / "map.npz")
+    report = __import__("json").loads((out / "report.json").read_text())
+    assert report["method"]["kernel"] == "OnlineMap" and report["method"]["online"]["scans"] == len(POSES)
+    assert "snapshots.npz" in report["files"]
+    with np.load(out / "snapshots.npz", allow_pickle=False) as z:
+        assert z["scans"].tolist() == [2, 4] and z["probabilities"].shape == (2, *m["grid"].shape)
+    g, p = m["grid"], m["probabilities"]
+    wall, inside = g.world_to_cell([[4.02, 1.5], [2.0, 3.02]]), g.world_to_cell([[2.0, 1.0], [3.0, 2.5]])
+    assert np.all(p[wall[:, 0], wall[:, 1]] > 0.6) and np.all(p[inside[:, 0], inside[:, 1]] < 0.3)
+    assert main([*argv[:-2], "--snapshots", "2", "--out", str(tmp_path / "o2")]) == 2  # needs --online
+    assert main([*argv[:4], "--method", "p21", "--online", "--out", str(tmp_path / "o3")]) == 2  # not gibbs
+
+
+def test_init_new_hits_starts_first_seen_cells_from_the_scan():
+    grid, scans = _scene(num_scans=2)
+    om = OnlineMap(grid, GaussianRange(1.0), _prior("independent", (N, N)), sweeps_per_scan=0, init_new="hits")
+    om.add_scans(_part(scans, 0, 1))
+    rays = raycast(grid, _part(scans, 0, 1))
+    hit = np.zeros(grid.num_cells, bool)
+    hit[rays.endpoint_cells()] = True
+    expect = hit & ~om.pinned.numpy()
+    assert np.array_equal(om.state.numpy().astype(bool), expect)
+    _assert_same_as_rebuilt(om, grid, _part(scans, 0, 1), GaussianRange(1.0), _prior("independent", (N, N)))
+    with pytest.raises(ValueError, match="init_new"):
+        OnlineMap(grid, GaussianRange(1.0), _prior("independent", (N, N)), init_new="ogm")

@@ -15,7 +15,7 @@ second hits ``f_r < s_r``, every cell's kept fixed-point sum ``d_k = sum_r c_r(k
   whose block is full moves to a new block of twice the size at the end of the pool; when the pool is full
   it is compacted (live blocks copied in cell order, each with its grown capacity) into a pool of twice the
   capacity it then needs. Since ``c_cap[k] < 2 c_len[k] + 4``, the pool holds at most
-  ``2 (2 nnz + 4 K_t)`` slots (``K_t``: cells some ray crosses), i.e. memory linear in ``nnz``.
+  ``2 (2 nnz + 4 K_t)`` slots (``K_t``: cells some ray crosses) of two int32, i.e. memory linear in ``nnz``.
 
 Entries are appended in ray order, so each cell's list stays ordered by ray as in
 :class:`~ogm_ppl.raycast.CellIndex`. The updates are those of the offline kernel (``_add_term``,
@@ -52,8 +52,8 @@ class OnlineState(NamedTuple):
     c_start: np.ndarray  # K int64: where cell k's block starts in the pool
     c_len: np.ndarray  # K int64: live entries of cell k
     c_cap: np.ndarray  # K int64: slots of cell k's block
-    c_ray: np.ndarray  # pool int64: ray of each entry
-    c_kappa: np.ndarray  # pool int64: the cell's position on that ray
+    c_ray: np.ndarray  # pool int32: ray of each entry
+    c_kappa: np.ndarray  # pool int32: the cell's position on that ray
     ll: np.ndarray  # >= nnz + R float64, ragged: log p(z_r | first hit at kappa) at offsets[r] + r + kappa
     scale: float  # 2^S: a finite entry x counts as rint(x * scale)
 
@@ -155,8 +155,8 @@ def add_cell_entries(c_start, c_len, c_cap, c_ray, c_kappa, used, offsets, cells
             else:
                 total += c_cap[k]
         size = max(2 * total, 1024)
-        nr = np.empty(size, np.int64)
-        nk = np.empty(size, np.int64)
+        nr = np.empty(size, np.int32)
+        nk = np.empty(size, np.int32)
         pos = 0
         for k in range(K):
             cap = c_cap[k]
@@ -237,8 +237,8 @@ def _set_cell(st, k, v):
     st.m[k] = v
     a = st.c_start[k]
     for p in range(a, a + st.c_len[k]):
-        r = st.c_ray[p]
-        kap = st.c_kappa[p]
+        r = np.int64(st.c_ray[p])
+        kap = np.int64(st.c_kappa[p])
         f = st.rays[r].f
         s = st.rays[r].s
         if v:
