@@ -352,6 +352,18 @@ def build_parser() -> argparse.ArgumentParser:
         "(default 3x3): HxW, an int L (a run of L cells), 'plus' or 'square'",
     )
     m.add_argument("--seed", type=_nonneg_int, default=0, metavar="S", help="random seed (>= 0, default 0)")
+    m.add_argument(
+        "--online",
+        action="store_true",
+        help="replay the scans one at a time into an online single-cell Gibbs chain (--method gibbs; "
+        "ogm_ppl.inference.online): focused sweeps after each scan, then --warmup and --sweeps full sweeps",
+    )
+    m.add_argument(
+        "--snapshots",
+        type=_pos_int,
+        metavar="K",
+        help="with --online: also write snapshots.npz, the marginals after every K-th scan",
+    )
     _add_reader_options(m, carmen_only=True)
     _add_bag_options(m)
     m.add_argument(
@@ -770,6 +782,8 @@ def _compute_map(
     its ``chains`` (chain ``c`` seeded ``--seed + c``); warnings become lines ``ogm-ppl: warning: ...``."""
     sigma = float(inp.settings.get("sigma_cells") or 0) or None
     problem = MapProblem(grid, inp.scans, sigma_cells=sigma)
+    if getattr(args, "online", False):
+        return _online_map(args, method, params, problem, times)
     chains = int(getattr(params, "chains", 1))
     probs, ray, total = [], None, 0.0
     with warnings.catch_warnings(record=True) as caught:
@@ -787,6 +801,49 @@ def _compute_map(
     times["ray_cast_s"], times["map_s"] = ray, total
     details = {**dataclasses.asdict(params), **result.details, "seed": args.seed, "chains": chains}
     return np.mean(probs, axis=0) if chains > 1 else probs[0], result.observed, details
+
+
+def _online_map(
+    args, method: MapMethod, params, problem: MapProblem, times: dict
+) -> tuple[np.ndarray, np.ndarray, dict]:
+    """``--online``: the scans replayed one at a time into :class:`~ogm_ppl.inference.online.OnlineMap`
+    (:func:`~ogm_ppl.inference.online.replay`); the snapshots ride in ``details["_snapshots"]``."""
+    from ogm_ppl.inference.online import replay
+    from ogm_ppl.sensors import GaussianRange
+
+    if method.name != "gibbs" or params.patch != 1 or params.chains != 1 or params.update == "thesis":
+        raise CLIError("--online runs one single-cell Gibbs chain: use --method gibbs (patch 1, one chain)")
+    t0 = time.perf_counter()
+    r = replay(
+        problem.grid,
+        problem.scans,
+        GaussianRange(problem.sigma(params.sigma_cells)),
+        problem.prior(params.prior, params.lam),
+        burn_in=params.burn_in,
+        sweeps=params.sweeps,
+        snapshot_every=args.snapshots,
+        progress=_progress(),
+        seed=args.seed,
+        update=params.update,
+    )
+    times["ray_cast_s"], times["map_s"] = None, time.perf_counter() - t0
+    om = r.online
+    details = {
+        **dataclasses.asdict(params),
+        "kernel": "OnlineMap",
+        "seed": args.seed,
+        "online": {
+            "scans": om.num_scans,
+            "sweeps_per_scan": om.sweeps_per_scan,
+            "full_every": om.full_every,
+            "margin": om.margin,
+            "sweeps_total": om.sweeps_done,
+            "full_sweeps": om.full_sweeps,
+            "mean_seconds_per_scan": float(r.seconds_per_scan.mean()),
+        },
+        "_snapshots": r.snapshots,
+    }
+    return r.probabilities, r.observed, details
 
 
 def _atomic_savez(path: Path, **arrays) -> None:
@@ -895,7 +952,10 @@ def _map(args, method, params) -> dict:
         grid = _make_grid(args, inp)
         bar.update()
         bar.set_postfix_str("mapping")
+        if getattr(args, "snapshots", None) is not None and not getattr(args, "online", False):
+            raise CLIError("--snapshots needs --online")
         probs, observed, details = _compute_map(args, method, params, inp, grid, times)
+        snapshots = details.pop("_snapshots", None)
         bar.update()
         bar.set_postfix_str("writing")
         t0 = time.perf_counter()
@@ -913,6 +973,12 @@ def _map(args, method, params) -> dict:
             method=np.array(args.method),
             settings=np.array(json.dumps(settings)),
         )
+        if snapshots:
+            _atomic_savez(
+                out / "snapshots.npz",
+                scans=np.array([n for n, _ in snapshots], dtype=np.int64),
+                probabilities=np.stack([p.reshape(grid.shape) for _, p in snapshots]),
+            )
         save_map_png(out / "map.png", probs, observed, grid)
         (out / "ros").mkdir(exist_ok=True)
         ros = save_ros_map(out / "ros" / "map.yaml", probs, grid, unknown=~observed, thresholds=args.thresholds)
@@ -947,7 +1013,8 @@ def _map(args, method, params) -> dict:
             str(Path("ros") / ros.sidecar.name),
             "report.json",
             "report.md",
-        ],
+        ]
+        + (["snapshots.npz"] if snapshots else []),
         "scores_vs_truth": _scores(probs, observed, inp, grid),
         "settings": settings,
     }

@@ -250,7 +250,18 @@ def run_experiment(
         after writing what the finished tasks allow.
     """
     t0 = time.perf_counter()
-    spec = spec_or_path if isinstance(spec_or_path, ExperimentSpec) else load_spec(spec_or_path)
+    spec = spec_or_path if not isinstance(spec_or_path, (str, os.PathLike)) else load_spec(spec_or_path)
+    if getattr(spec, "kind", "map") == "active":  # an active-mapping spec (ogm_ppl.experiment.active)
+        from ogm_ppl.experiment.active import run_active
+
+        return run_active(  # type: ignore[return-value]
+            spec,  # type: ignore[arg-type]
+            out_dir,
+            scheduler=scheduler,
+            workers=workers,
+            resume=resume,
+            progress=progress,
+        )
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     if spec.source != "<dict>" and Path(spec.source).exists():

@@ -7,7 +7,8 @@ fall back to a default).
 
 Tables (every key optional unless marked *required*; defaults in brackets)::
 
-    [experiment]        name [file stem], seed [0], description [""]
+    [experiment]        name [file stem], seed [0], description [""], kind ["map"; "active": an active-mapping
+                        spec, its own tables: ogm_ppl.experiment.active]
     [[datasets]]        kind = "simulated" | "log" | "bag" (*required*), name (*required*, [A-Za-z0-9_.-]+)
       simulated:        map ["office"; a mapgen kind or "mixed" = kinds in turn by map_seed],
                         size [500] (int or [rows, cols]), border [20], resolution [0.05] (m/cell),
@@ -509,6 +510,11 @@ def parse_spec(data: dict, source: str = "<dict>", base_dir: str | os.PathLike =
     """Validate a spec given as a dict (the parsed TOML); ``source`` names it in errors."""
     if not isinstance(data, dict):
         raise SpecError(f"{source}: a spec is a table, got {type(data).__name__}")
+    exp = data.get("experiment")
+    if isinstance(exp, dict) and exp.get("kind", "map") == "active":  # active mapping: its own tables
+        from ogm_ppl.experiment.active import parse_active_spec
+
+        return parse_active_spec(data, source, base_dir)  # type: ignore[return-value]
     unknown = sorted(set(data) - {"experiment", "datasets", "algorithms", "metrics", "output"})
     if unknown:
         raise SpecError(
@@ -522,6 +528,7 @@ def parse_spec(data: dict, source: str = "<dict>", base_dir: str | os.PathLike =
     else:
         name = e.get("name", "str", stem)
     seed = e.get("seed", "int", 0, lo=0)
+    e.get("kind", "str", "map", choices=("map", "active"))
     description = e.raw("description", "")
     if not isinstance(description, str):
         e.fail("description", "must be a string")

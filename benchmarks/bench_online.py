@@ -1,0 +1,218 @@
+"""Online mapping of the Intel log at 5 cm (:mod:`ogm_ppl.inference.online`): time per scan, memory, and the
+map against offline chains.
+
+The Intel log (Section 6.2: 5 cm cells, readings at or beyond 20 m dropped, 180 beams a scan) replayed scan by
+scan into an :class:`~ogm_ppl.inference.online.OnlineMap` (independent prior 0.5, ``GaussianRange(1 cell)``,
+``sweeps_per_scan`` focused sweeps after each scan, every ``full_every``-th sweep full), then ``FINAL`` full
+sweeps whose mean is the map. Measured:
+
+* the time per scan (ray casting, the new likelihood rows, the growth of the index and state, and the
+  focused sweeps), its median / mean / 95th percentile, against the target of 50 ms;
+* peak RSS after the replay, and the bytes the online arrays hold;
+* the *rebuild-per-scan baseline* in the same run: ray-cast every scan so far, build the model and a
+  CellGibbs state, and run the same focused sweeps, at a few points of the log (too slow for every scan);
+  its cost grows with the scans so far, so the mean over the log is interpolated linearly;
+* the map: Intel has no ground truth, so both the online map and an offline chain (``CellGibbs`` from the
+  thresholded-OGM start, as ``ogm-ppl map --method gibbs``) with the same number of single-cell updates in
+  all (the online focused sweeps are small, so that is fewer full sweeps than the online sweep count) are
+  scored by best F1 against a longer offline reference chain (another seed, OGM start), thresholded at 0.5,
+  over the cells some beam reached; an offline chain of the same updates from the online chain's all-free
+  start tells the effect of the start from that of the focused schedule.
+
+    python benchmarks/bench_online.py [--scans N]   (writes out/bench/bench_online.json)
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+
+import argparse
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, os.path.dirname(__file__))
+from _common import peak_rss_mb, write_json
+
+from ogm_ppl import GaussianRange, OccupancyModel, raycast
+from ogm_ppl.datasets.carmen import read_carmen
+from ogm_ppl.inference.mcmc.gibbs import CellGibbs
+from ogm_ppl.inference.online import OnlineMap, _one
+from ogm_ppl.metrics import best_f1
+from ogm_ppl.priors import IndependentPrior
+from ogm_ppl.scans import Scans
+
+INTEL = Path(__file__).resolve().parents[2] / "shared" / "data" / "intel-lab" / "intel-corrected.log.gz"
+SWEEPS_PER_SCAN, FULL_EVERY, MARGIN, FINAL, REFERENCE = 2, 100, 2, 20, 60
+INIT_NEW = "hits"  # newly reached cells start from the scan's hits, as the offline chains start from OGM
+
+
+def _first(scans: Scans, n: int) -> Scans:
+    return Scans(scans.poses[:n], scans.angles[:n], scans.ranges[:n], scans.max_range, valid=scans.valid[:n])
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--scans", type=int, default=None, help="replay only the first N scans (default: all)")
+    args = ap.parse_args(argv)
+    torch.set_num_threads(1)
+    log = read_carmen(INTEL, max_usable_range=20.0)
+    scans = log.scans if args.scans is None else _first(log.scans, args.scans)
+    grid = log.grid(0.05)
+    sensor, prior = GaussianRange(1.0), IndependentPrior(0.5, grid.num_cells)
+    S = scans.num_scans
+    print(f"Intel: {S} scans x {scans.beams_per_scan} beams, grid {grid.shape} at 5 cm", flush=True)
+
+    # ---- online replay
+    om = OnlineMap(
+        grid,
+        sensor,
+        prior,
+        seed=1,
+        sweeps_per_scan=SWEEPS_PER_SCAN,
+        full_every=FULL_EVERY,
+        margin=MARGIN,
+        init_new=INIT_NEW,
+    )
+    om.add_scans(_one(scans, 0))  # compiles the kernels (not timed)
+    t = np.zeros(S)
+    focus = np.zeros(S, np.int64)
+    for i in range(1, S):
+        if not scans.valid[i].any():
+            continue
+        t0 = time.perf_counter()
+        om.add_scans(_one(scans, i))
+        t[i] = time.perf_counter() - t0
+        focus[i] = len(om.focus)
+    t = t[1:][t[1:] > 0]
+    rss_online = peak_rss_mb()
+    updates_online = int(focus.sum()) * (SWEEPS_PER_SCAN - SWEEPS_PER_SCAN / FULL_EVERY) + om.full_sweeps * len(
+        om._latent
+    )
+    t0 = time.perf_counter()
+    om.sweep(FINAL, focus=False)
+    final_s = time.perf_counter() - t0
+    q_online = om.marginals.numpy()
+    st = om.stats()
+    print(
+        f"online: per scan median {1e3 * np.median(t):.1f} ms, mean {1e3 * t.mean():.1f} ms, "
+        f"p95 {1e3 * np.percentile(t, 95):.1f} ms (target 50); mean focus {focus[1:].mean():.0f} cells; "
+        f"peak RSS {rss_online:.0f} MiB, online arrays {st.nbytes / 2**20:.0f} MiB for nnz {st.nnz:,}",
+        flush=True,
+    )
+
+    # ---- rebuild-per-scan baseline at a few points of the log
+    points = sorted({max(1, S // 10), max(1, S // 4)})
+    rebuild = {}
+    for n in points:
+        sub = _first(scans, n)
+        t0 = time.perf_counter()
+        model = OccupancyModel(grid, raycast(grid, sub), sensor, prior)
+        k = CellGibbs(model, init="free")
+        k.setup()
+        for _ in range(SWEEPS_PER_SCAN):
+            k._sweep()
+        rebuild[n] = time.perf_counter() - t0
+        del model, k
+        print(f"rebuild at {n} scans: {rebuild[n]:.2f} s", flush=True)
+    xs, ys = np.array(list(rebuild)), np.array(list(rebuild.values()))
+    slope, icpt = np.polyfit(xs, ys, 1) if len(xs) > 1 else (ys[0] / xs[0], 0.0)
+    rebuild_mean = float(icpt + slope * (S + 1) / 2)  # mean of the linear cost over scans 1..S
+
+    # ---- offline chains on all scans: the same single-cell updates, and a longer reference
+    t0 = time.perf_counter()
+    model = OccupancyModel(grid, raycast(grid, scans), sensor, prior)
+    build_s = time.perf_counter() - t0
+    K_lat = len(model.latent)
+    same = max(FINAL + 1, round(updates_online / K_lat) + FINAL)
+    observed = model.rays.reached()
+
+    def chain(seed: int, total: int, counted: int, init="ogm") -> tuple[np.ndarray, float]:
+        torch.manual_seed(seed)
+        k = CellGibbs(model, init=init)  # "ogm": the thresholded-OGM start of ogm-ppl map --method gibbs
+        k.setup()
+        t0 = time.perf_counter()
+        for _ in range(total - counted):
+            k._sweep()
+        acc = np.zeros(model.num_cells)
+        for _ in range(counted):
+            k._sweep()
+            acc += k.state
+        return acc / counted, time.perf_counter() - t0
+
+    q_off, off_s = chain(2, same, FINAL)
+    q_free, _ = chain(4, same, FINAL, init="free")  # the online chain's start: tells the start from the schedule
+    q_ref, ref_s = chain(3, REFERENCE + FINAL, REFERENCE)
+    truth = q_ref > 0.5
+    f1_online = best_f1(q_online, truth, mask=observed)[0]
+    f1_off = best_f1(q_off, truth, mask=observed)[0]
+    f1_free = best_f1(q_free, truth, mask=observed)[0]
+    print(
+        f"offline: model {build_s:.1f} s; same updates = {same} full sweeps ({off_s:.1f} s); reference "
+        f"{REFERENCE + FINAL} sweeps ({ref_s:.1f} s)\nbest F1 vs reference: online {f1_online:.4f}, offline "
+        f"{f1_off:.4f} (from free: {f1_free:.4f}), difference {f1_online - f1_off:+.4f} (target within 0.01)\n"
+        f"rebuild-per-scan / online per scan: {rebuild_mean / t.mean():.0f}x (mean over the log, interpolated)",
+        flush=True,
+    )
+    write_json(
+        "bench_online",
+        {
+            "scans": S,
+            "beams": scans.beams_per_scan,
+            "grid": list(grid.shape),
+            "settings": {
+                "sweeps_per_scan": SWEEPS_PER_SCAN,
+                "full_every": FULL_EVERY,
+                "margin": MARGIN,
+                "init_new": INIT_NEW,
+                "final_sweeps": FINAL,
+                "reference_sweeps": REFERENCE,
+            },
+            "online": {
+                "per_scan_ms": {
+                    "median": 1e3 * float(np.median(t)),
+                    "mean": 1e3 * float(t.mean()),
+                    "p95": 1e3 * float(np.percentile(t, 95)),
+                    "max": 1e3 * float(t.max()),
+                },
+                "target_ms": 50.0,
+                "mean_focus_cells": float(focus[1:].mean()),
+                "sweeps": om.sweeps_done,
+                "full_sweeps": om.full_sweeps,
+                "final_sweeps_s": final_s,
+                "peak_rss_mib_after_replay": rss_online,
+                "array_bytes": st.nbytes,
+                "nnz": st.nnz,
+                "rays": st.rays,
+                "bits": st.bits,
+                "rescales": st.rescales,
+            },
+            "rebuild_per_scan_s": {str(k): v for k, v in rebuild.items()},
+            "rebuild_mean_s_interpolated": rebuild_mean,
+            "speedup_vs_rebuild": rebuild_mean / float(t.mean()),
+            "offline": {
+                "model_build_s": build_s,
+                "same_update_sweeps": same,
+                "same_update_s": off_s,
+                "reference_sweeps": REFERENCE + FINAL,
+                "reference_s": ref_s,
+            },
+            "best_f1_vs_reference": {
+                "online": f1_online,
+                "offline_same_updates": f1_off,
+                "offline_same_updates_from_free": f1_free,
+            },
+            "f1_difference": f1_online - f1_off,
+            "peak_rss_mib": peak_rss_mb(),
+        },
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
