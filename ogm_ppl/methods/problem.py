@@ -27,8 +27,8 @@ if TYPE_CHECKING:
 
 __all__ = ["DEFAULT_SIGMA_CELLS", "MapProblem", "MapResult", "RunContext"]
 
-#: range noise (cells) of the models when neither the method nor the data says: about the scatter of a
-#: corrected real log at 5 cm
+#: range noise of the models in cells when neither the method nor the data gives one (about the scatter of
+#: a corrected real log at 5 cm)
 DEFAULT_SIGMA_CELLS = 1.0
 
 
