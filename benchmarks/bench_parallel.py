@@ -116,13 +116,16 @@ def main(argv: list[str] | None = None) -> dict:
     log = read_carmen(intel_log_path(), max_usable_range=20.0)
     scans = log.scans.subsample(pose_fraction=POSE_FRACTION[a.experiment], beam_step=2)
     rays = raycast(grid, scans)
-    prior = IndependentPrior(0.3, grid.num_cells) if a.prior == "independent" else MRFPrior(grid.shape, psi=0.5, cell_prior=0.3)
+    if a.prior == "independent":
+        prior = IndependentPrior(0.3, grid.num_cells)
+    else:
+        prior = MRFPrior(grid.shape, psi=0.5, cell_prior=0.3)
     model = OccupancyModel(grid, rays, GaussianRange(3.0), prior)
     model.ray_index()
     build_s = time.perf_counter() - t
     del log
     release_memory()
-    print(f"grid {n} x {n}, {rays.num_rays} rays, build {build_s:.1f} s, RSS {rss_mb():.0f} MiB, load {load0}", flush=True)
+    print(f"grid {n} x {n}, {rays.num_rays} rays, build {build_s:.1f} s, RSS {rss_mb():.0f} MiB, load {load0}")
 
     torch.manual_seed(0)
     serial = CellGibbs(model)
@@ -130,7 +133,7 @@ def main(argv: list[str] | None = None) -> dict:
     init = serial.initial_params
     serial_s, serial_times = timed_sweeps(serial, a.sweeps)
     rss_serial = peak_rss_mb()
-    print(f"serial CellGibbs: {serial_s:.3f} s/sweep {np.round(serial_times, 3)}; peak RSS {rss_serial:.0f} MiB", flush=True)
+    print(f"serial CellGibbs: {serial_s:.3f} s/sweep {np.round(serial_times, 3)}; peak RSS {rss_serial:.0f} MiB")
     del serial
     gc.collect()
     release_memory()

@@ -9,28 +9,32 @@ is the largest coordinate difference of two of its cells along either axis,
 
 **Tiles and colours.** The grid is cut into ``T x T`` tiles, tile ``(a, b)`` holding rows ``[aT, aT + T)``
 and columns ``[bT, bT + T)`` (a 1D grid: one row of tiles), of colour ``2 (a mod 2) + (b mod 2)``, four
-colours in a 2 x 2 checkerboard. A cell is *short* when every ray through it has extent ``<= T``, else
-*long*; ``T`` must be at least the prior's extent.
+colours in a 2 x 2 checkerboard. A factor is *confined* when it holds cells of at most one tile of each
+colour; a cell is *short* when every ray through it is confined, else *long*. ``T`` must be at least the
+prior's extent.
 
-**The rule.** *If a factor ``F`` has ``e(F) <= T``, it holds cells of at most one tile of each colour.*
-Proof: let cells ``x in (a, b)`` and ``y in (a', b')`` of ``F`` lie in distinct tiles of one colour. Then
-``a = a' (mod 2)`` and ``b = b' (mod 2)``, and the tiles differ, so ``|a - a'| >= 2`` or ``|b - b'| >= 2``;
-say ``a' >= a + 2``. Then ``row(y) >= a'T >= (a + 2) T`` and ``row(x) <= aT + T - 1``, so
-``row(y) - row(x) >= T + 1 > e(F)``: a contradiction. Hence two short cells ``k, k'`` in distinct tiles of
-one colour share no factor: a ray through ``k`` is short, so it does not reach ``k'``'s tile, and a prior
-window holding both would have extent ``> T``. So ``k'`` lies outside the Markov blanket of ``k``, and the
-conditional ``p(m_k | m_-k, z)`` that an update of ``k`` draws from does not depend on any cell that the
-other tiles of the colour update. Updating the short cells of all tiles of one colour at once (each tile
-by its own sequential scan) therefore gives exactly the map that updating the tiles one after another
-gives, in any order of the tiles: a *colour phase* is a composition of single-cell Gibbs updates, each
-``pi``-invariant, so the sweep (the four colour phases, then the long cells one after another) leaves the
-posterior invariant. Every visited cell is updated once per sweep (systematic / permutation scans) or,
-for the random scan, each tile and the long cells draw as many updates (with replacement) as they hold cells.
+**The rule.** *A factor ``F`` with ``e(F) <= T`` is confined.* Proof: let cells ``x in (a, b)`` and
+``y in (a', b')`` of ``F`` lie in distinct tiles of one colour. Then ``a = a' (mod 2)`` and
+``b = b' (mod 2)``, and the tiles differ, so ``|a - a'| >= 2`` or ``|b - b'| >= 2``; say ``a' >= a + 2``.
+Then ``row(y) >= a'T >= (a + 2) T`` and ``row(x) <= aT + T - 1``, so ``row(y) - row(x) >= T + 1 > e(F)``:
+a contradiction. So every prior window is confined, and so is every ray of extent ``<= T`` (a longer ray
+may be too, if it crosses only tiles of distinct colours; :func:`tile_layout` checks each ray).
+
+**Why a phase is exact.** Two short cells ``k, k'`` in distinct tiles of one colour share no factor: a ray
+through both would not be confined (and ``k`` would be long), a prior window through both would have
+extent ``> T``. So ``k'`` lies outside the Markov blanket of ``k``, and the conditional
+``p(m_k | m_-k, z)`` that an update of ``k`` draws from does not depend on any cell that the other tiles
+of the colour update. Updating the short cells of all tiles of one colour at once (each tile by its own
+sequential scan) therefore gives exactly the map that updating the tiles one after another gives, in any
+order of the tiles: a *colour phase* is a composition of single-cell Gibbs updates, each ``pi``-invariant,
+so the sweep (the four colour phases, then the long cells one after another) leaves the posterior
+invariant. Every visited cell is updated once per sweep (systematic / permutation scans) or, for the
+random scan, each tile and the long cells draw as many updates (with replacement) as they hold cells.
 
 **The kept sums under threads.** The single-cell state
 (:mod:`~ogm_ppl.inference._kernels.cell_sweep`) keeps, per cell, the fixed-point sum ``d_k`` of its rays'
 terms, and a flip of ``k`` rewrites it along the rays through ``k`` (their first / second hits move).
-Those rays are short, so every cell they write lies in ``k``'s tile or in a tile of *another* colour;
+Those rays are confined, so every cell they write lies in ``k``'s tile or in a tile of *another* colour;
 their ``f, s`` records are touched by ``k``'s tile alone, and so is every ``m`` entry and every kept sum
 of the tiles of the phase's colour (the only ones read during the phase). But two tiles of one colour may
 write the sum of one cell of another colour through different rays: a data race. Writes into a cell of
@@ -64,6 +68,7 @@ __all__ = [
     "atomic_add",
     "chromatic_sweep",
     "colour_of_tile",
+    "confined_rays",
     "prior_extent",
     "ray_extents",
     "tile_layout",
@@ -97,7 +102,7 @@ class TileLayout(NamedTuple):
     """The tiles of a chromatic sweep: ``T x T`` tiles on a ``rows x cols`` grid (``n_tr x n_tc`` of them,
     tile ``t = a n_tc + b``), the short cells to visit grouped by tile (CSR ``tile_off`` / ``tile_cells``,
     row-major within a tile), the non-empty tiles of each colour (CSR ``col_off`` / ``col_tiles``, the
-    tiles with more ray entries first) and the long cells (on a ray of extent ``> T``), visited last."""
+    tiles with more ray entries first) and the long cells (on a ray that is not confined), visited last."""
 
     rows: int
     cols: int
@@ -156,10 +161,33 @@ def colour_of_tile(t: int | np.ndarray, n_tc: int):
 
 
 @nb.njit(cache=True)
-def _long_mask(K, offsets, cells, ext, T):
+def confined_rays(offsets, cells, cols, T, n_tc):
+    """Whether each ray is confined (``R`` bool): its cells lie in at most one ``T x T`` tile of each colour
+    (tiles ``n_tc`` to a row of tiles)."""
+    R = offsets.shape[0] - 1
+    out = np.ones(R, np.bool_)
+    seen = np.empty(COLOURS, np.int64)
+    for r in range(R):
+        seen[:] = -1
+        for j in range(offsets[r], offsets[r + 1]):
+            y = cells[j] // cols
+            x = cells[j] - y * cols
+            a, b = y // T, x // T
+            t = a * n_tc + b
+            col = 2 * (a % 2) + b % 2
+            if seen[col] < 0:
+                seen[col] = t
+            elif seen[col] != t:
+                out[r] = False
+                break
+    return out
+
+
+@nb.njit(cache=True)
+def _long_mask(K, offsets, cells, confined):
     long = np.zeros(K, np.bool_)
     for r in range(offsets.shape[0] - 1):
-        if ext[r] > T:
+        if not confined[r]:
             for j in range(offsets[r], offsets[r + 1]):
                 long[cells[j]] = True
     return long
@@ -167,13 +195,13 @@ def _long_mask(K, offsets, cells, ext, T):
 
 def tile_layout(visit: np.ndarray, offsets, cells, c_off, rows: int, cols: int, T: int) -> TileLayout:
     """The :class:`TileLayout` of the cells ``visit`` (int64, any order) on ``T x T`` tiles: cells on a
-    ray of extent ``> T`` (:func:`ray_extents`) are long; the rest go to their tile in row-major order."""
+    ray that is not confined (:func:`confined_rays`) are long; the rest go to their tile in row-major order."""
     if T < 1:
         raise ValueError(f"the tile side must be at least 1 cell, got {T}")
     K = rows * cols
     visit = np.sort(np.asarray(visit, np.int64))
-    long = _long_mask(K, offsets, cells, ray_extents(offsets, cells, cols), T)
     n_tr, n_tc = -(-rows // T), -(-cols // T)
+    long = _long_mask(K, offsets, cells, confined_rays(offsets, cells, cols, T, n_tc))
     short = visit[~long[visit]]
     r, c = np.divmod(short, cols)
     tile = (r // T) * n_tc + c // T
@@ -190,7 +218,15 @@ def tile_layout(visit: np.ndarray, offsets, cells, c_off, rows: int, cols: int, 
     col_tiles = np.ascontiguousarray(ids[key].astype(np.int64))
     col_off = np.concatenate([[0], np.cumsum(np.bincount(colour, minlength=COLOURS))]).astype(np.int64)
     return TileLayout(
-        int(rows), int(cols), int(T), int(n_tr), int(n_tc), tile_off, tile_cells, col_off, col_tiles,
+        int(rows),
+        int(cols),
+        int(T),
+        int(n_tr),
+        int(n_tc),
+        tile_off,
+        tile_cells,
+        col_off,
+        col_tiles,
         np.ascontiguousarray(visit[long[visit]]),
     )
 

@@ -4,7 +4,7 @@
 systematic / permutation / random scan, ``region=``) with the sweep reordered so that it runs in threads:
 the grid is cut into ``tile x tile`` tiles coloured as a 2 x 2 checkerboard; the four colour phases run in
 turn, and within a phase every tile of the colour is swept (its own scan over its cells) by numba's threads
-at once; cells on rays longer than the tile (*long* cells) are updated last, one after another. Tiles at
+at once; cells on rays that reach two tiles of one colour (*long* cells) are updated last, one after another. Tiles at
 least as large as every factor (ray, prior window) make the updates of a phase commute exactly, so the
 sweep is a composition of single-cell Gibbs updates and leaves the posterior invariant; the proof, the
 handling of the kept likelihood sums that several threads write, and the random streams are in
@@ -28,7 +28,12 @@ from ogm_ppl.inference._kernels import parallel as par
 from ogm_ppl.inference.mcmc.gibbs import _SCAN_CODES, CellGibbs
 from ogm_ppl.models.occupancy import OccupancyModel
 
-__all__ = ["ChromaticCellGibbs"]
+__all__ = ["ChromaticCellGibbs", "max_threads"]
+
+
+def max_threads() -> int:
+    """The most threads numba can run (``NUMBA_NUM_THREADS``, fixed when numba starts)."""
+    return int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
 
 
 class ChromaticCellGibbs(CellGibbs):
@@ -59,10 +64,8 @@ class ChromaticCellGibbs(CellGibbs):
         super().__init__(model, scan, update, init, delta, region)
         if tile is not None and int(tile) < 1:
             raise ValueError(f"tile must be a positive number of cells, got {tile}")
-        if threads is not None and not 1 <= int(threads) <= numba.config.NUMBA_NUM_THREADS:
-            raise ValueError(f"threads must lie in 1..{numba.config.NUMBA_NUM_THREADS}, got {threads}")
         self.tile = None if tile is None else int(tile)
-        self._threads = None if threads is None else int(threads)
+        self.threads = threads
 
     @property
     def threads(self) -> int:
@@ -71,8 +74,9 @@ class ChromaticCellGibbs(CellGibbs):
 
     @threads.setter
     def threads(self, n: int | None) -> None:
-        if n is not None and not 1 <= int(n) <= numba.config.NUMBA_NUM_THREADS:
-            raise ValueError(f"threads must lie in 1..{numba.config.NUMBA_NUM_THREADS}, got {n}")
+        most = max_threads()
+        if n is not None and not 1 <= int(n) <= most:
+            raise ValueError(f"threads must lie in 1..{most}, got {n}")
         self._threads = None if n is None else int(n)
 
     def _prepare(self) -> None:
