@@ -1,23 +1,25 @@
 """Chromatic tile sweeps in threads (:class:`~ogm_ppl.inference.mcmc.parallel.ChromaticCellGibbs`) on Intel at 2 cm.
 
 The model is Table 6.6's (``bench_table_6_6.py``): the Intel Lab log, 30 m x 30 m at 2 cm (1500 x 1500 =
-2.25 M cells), half the beams, ``--experiment`` 1 (all poses) or 3 (a tenth), ``GaussianRange(3 cells)``,
-and here an independent prior (``lambda = 0.3``) or ``--prior mrf`` (4-connected, ``psi = 0.5``). In one
-process, after warm-up sweeps (numba's compilation):
+2.25 M cells), half the beams, ``--experiment`` 3 (a tenth of the poses; 1: all), ``GaussianRange(3 cells)``,
+and here an independent prior (``lambda = 0.3``) or ``--prior mrf`` (4-connected, ``psi = 0.5``). Each
+``--configs`` entry ``range:tiles`` builds the model with readings cut at ``range`` metres
+(``max_usable_range``; Table 6.6 uses 20 m) and, after a warm-up sweep (numba's compilation):
 
 * the serial single-cell sweep (``CellGibbs``, systematic heat bath), the baseline;
-* for each ``--tiles`` side ``T``: the chromatic sweep with 1 and with 2 threads (``numba.set_num_threads``),
-  the layout (tiles per colour, the fraction of long cells: cells on a ray of extent ``> T``, swept
-  serially after the four colour phases), and each tile's cost (one ``tile_pass`` at a time, single thread)
-  and the long phase's, from which a scaling model predicts a sweep on ``P`` cores: per colour the
-  makespan of the tiles dealt largest first to ``P`` threads, summed, plus the long phase;
-* peak RSS (``ru_maxrss``) after the serial sweeps and after the threaded ones (the serial kernel freed
-  first; the threaded kernel adds its tile index), and the load average (the machine may be shared: the
-  timings are then noisy, the ratios less so).
+* for each tile side ``T`` (``auto``: the longest ray's extent, so that no cell is long): the chromatic
+  sweep with 1 and with 2 threads (``numba.set_num_threads``), the layout (tiles per colour, the fraction
+  of long cells: cells on a ray that reaches two tiles of one colour, swept serially after the four colour
+  phases), and each tile's cost (one ``tile_pass`` at a time, single thread) and the long phase's, from
+  which a scaling model predicts a sweep on ``P`` cores: per colour the makespan of the tiles dealt largest
+  first to ``P`` threads, summed, plus the long phase;
+* peak RSS (``ru_maxrss``, a process-wide peak) after the serial sweeps and after the threaded ones (the
+  serial kernel freed first); comparable for the first configuration only.
 
-Rays at 2 cm reach 1000 cells (``max_usable_range = 20 m``), two thirds of the grid's side, so tiles as large
-as the longest ray leave one tile per colour; smaller tiles trade long cells for tiles. Writes
-``out/bench/bench_parallel.json``; about 3-4 minutes at ``--experiment 3``.
+At 20 m the rays reach 1000 cells, two thirds of the grid's side, so tiles as large as the longest ray
+leave one tile per colour and smaller tiles leave most cells long; at 5 m (250 cells) every cell is short
+with 9 tiles per colour. The machine may be shared (the load average is printed): timings are then noisy,
+the per-tile costs less so. Writes ``out/bench/bench_parallel.json``; about 4 minutes.
 """
 
 from __future__ import annotations
@@ -101,70 +103,64 @@ def tile_costs(kernel: ChromaticCellGibbs) -> tuple[list[np.ndarray], float]:
     return per_colour, time.perf_counter() - t0
 
 
-def main(argv: list[str] | None = None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--experiment", type=int, default=3, choices=sorted(POSE_FRACTION))
-    ap.add_argument("--tiles", default="375,250", help="tile sides in cells (comma separated)")
-    ap.add_argument("--sweeps", type=int, default=4, help="sweeps per configuration (the first reported apart)")
-    ap.add_argument("--prior", default="independent", choices=("independent", "mrf"))
-    ap.add_argument("--resolution", type=float, default=0.02)
-    a = ap.parse_args(argv)
-    load0 = loadavg()
-    n = round(EXTENT_M / a.resolution)
-    grid = Grid((n, n), a.resolution, ORIGIN)
-    t = time.perf_counter()
-    log = read_carmen(intel_log_path(), max_usable_range=20.0)
-    scans = log.scans.subsample(pose_fraction=POSE_FRACTION[a.experiment], beam_step=2)
+def build(experiment: int, max_range: float, prior_name: str, resolution: float):
+    """Table 6.6's Intel model with readings cut at ``max_range`` metres (``max_usable_range``)."""
+    n = round(EXTENT_M / resolution)
+    grid = Grid((n, n), resolution, ORIGIN)
+    log = read_carmen(intel_log_path(), max_usable_range=max_range)
+    scans = log.scans.subsample(pose_fraction=POSE_FRACTION[experiment], beam_step=2)
     rays = raycast(grid, scans)
-    if a.prior == "independent":
+    if prior_name == "independent":
         prior = IndependentPrior(0.3, grid.num_cells)
     else:
         prior = MRFPrior(grid.shape, psi=0.5, cell_prior=0.3)
     model = OccupancyModel(grid, rays, GaussianRange(3.0), prior)
     model.ray_index()
-    build_s = time.perf_counter() - t
-    del log
-    release_memory()
-    print(f"grid {n} x {n}, {rays.num_rays} rays, build {build_s:.1f} s, RSS {rss_mb():.0f} MiB, load {load0}")
+    return model
 
+
+def run_config(model, tiles: list[int | None], sweeps: int) -> dict:
+    """The serial sweep, then the chromatic sweep with 1 and 2 threads for each tile side (``None``: the
+    longest ray's extent), with the tile costs and the scaling model."""
     torch.manual_seed(0)
     serial = CellGibbs(model)
     serial.setup()
     init = serial.initial_params
-    serial_s, serial_times = timed_sweeps(serial, a.sweeps)
+    serial_s, serial_times = timed_sweeps(serial, sweeps)
     rss_serial = peak_rss_mb()
     print(f"serial CellGibbs: {serial_s:.3f} s/sweep {np.round(serial_times, 3)}; peak RSS {rss_serial:.0f} MiB")
     del serial
     gc.collect()
     release_memory()
-
     out: dict = {
-        "experiment": a.experiment,
-        "cells": grid.num_cells,
-        "rays": int(rays.num_rays),
-        "prior": a.prior,
-        "build_s": build_s,
+        "cells": model.num_cells,
+        "rays": int(model.rays.num_rays),
         "serial_s_per_sweep": serial_s,
         "serial_sweeps_s": serial_times,
         "peak_rss_serial_mib": rss_serial,
-        "numba_threads_available": numba.config.NUMBA_NUM_THREADS,
         "tiles": {},
     }
-    for T in [int(x) for x in a.tiles.split(",") if x.strip()]:
+    for T in tiles:
         k = ChromaticCellGibbs(model, tile=T, threads=1)
         k.initial_params = init
         t0 = time.perf_counter()
         k.setup()
         lay = k.layout
+        T = lay.T
         setup_s = time.perf_counter() - t0
         per_colour_tiles = np.diff(lay.col_off).tolist()
         long_frac = len(lay.long_cells) / max(len(k._visit), 1)
-        res: dict = {"setup_s": setup_s, "tiles_per_colour": per_colour_tiles, "long_cell_fraction": long_frac}
+        res: dict = {
+            "setup_s": setup_s,
+            "ray_extent": k.ray_extent,
+            "tiles_per_colour": per_colour_tiles,
+            "long_cell_fraction": long_frac,
+        }
         for threads in (1, 2):
             if threads > numba.config.NUMBA_NUM_THREADS:
                 continue
             k.threads = threads
-            s, times = timed_sweeps(k, a.sweeps)
+            s, times = timed_sweeps(k, sweeps)
             res[f"threads_{threads}_s_per_sweep"] = s
             res[f"threads_{threads}_sweeps_s"] = times
             print(
@@ -193,13 +189,49 @@ def main(argv: list[str] | None = None) -> dict:
         del k
         gc.collect()
     out["peak_rss_threads_mib"] = peak_rss_mb()
-    out["loadavg_start"], out["loadavg_end"] = load0, loadavg()
     print(
         f"peak RSS serial {rss_serial:.0f} MiB, after the threaded sweeps {out['peak_rss_threads_mib']:.0f} MiB "
-        f"(x{out['peak_rss_threads_mib'] / rss_serial:.3f}); load {load0} -> {out['loadavg_end']}"
+        f"(x{out['peak_rss_threads_mib'] / rss_serial:.3f})"
     )
-    print("wrote", write_json("bench_parallel", out))
     return out
+
+
+def main(argv: list[str] | None = None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--experiment", type=int, default=3, choices=sorted(POSE_FRACTION))
+    ap.add_argument(
+        "--configs",
+        default="20:375,5:auto",
+        help="max_usable_range (m) : tile sides (cells, '/'-separated; auto = the longest ray), comma separated",
+    )
+    ap.add_argument("--sweeps", type=int, default=4, help="sweeps per configuration (the first reported apart)")
+    ap.add_argument("--prior", default="independent", choices=("independent", "mrf"))
+    ap.add_argument("--resolution", type=float, default=0.02)
+    a = ap.parse_args(argv)
+    load0 = loadavg()
+    payload: dict = {
+        "experiment": a.experiment,
+        "prior": a.prior,
+        "resolution_m": a.resolution,
+        "numba_threads_available": numba.config.NUMBA_NUM_THREADS,
+        "configs": {},
+    }
+    for cfg in a.configs.split(","):
+        rng, tiles = cfg.split(":")
+        sides = [None if x == "auto" else int(x) for x in tiles.split("/")]
+        t = time.perf_counter()
+        model = build(a.experiment, float(rng), a.prior, a.resolution)
+        build_s = time.perf_counter() - t
+        print(f"max range {rng} m: {model.rays.num_rays} rays, build {build_s:.1f} s, RSS {rss_mb():.0f} MiB")
+        res = run_config(model, sides, a.sweeps)
+        res["build_s"] = build_s
+        payload["configs"][f"range_{rng}m"] = res
+        del model
+        release_memory()
+    payload["loadavg_start"], payload["loadavg_end"] = load0, loadavg()
+    print(f"load {load0} -> {payload['loadavg_end']}")
+    print("wrote", write_json("bench_parallel", payload))
+    return payload
 
 
 if __name__ == "__main__":
