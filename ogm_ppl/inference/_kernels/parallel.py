@@ -1,0 +1,400 @@
+r"""Chromatic tile sweeps: single-cell Gibbs updates of many tiles of the grid at once, exactly (Section 4.1).
+
+**Factors and their extent.** The posterior ``p(m | z) ∝ p~(m) prod_r p(z_r | m)`` is a product of
+factors, each a function of a set ``F`` of cells: a ray's likelihood reads the cells of the ray (its first
+hit), and a prior's factors read a window (a stencil's pair ``{k, k + d}``, a pattern field's ``w x w``
+window, ``2w x 2w`` cells at the pooled scale, a table prior's tile with its border). The *extent* of ``F``
+is the largest coordinate difference of two of its cells along either axis,
+``e(F) = max(max_F row - min_F row, max_F col - min_F col)`` (:func:`ray_extents`, :func:`prior_extent`).
+
+**Tiles and colours.** The grid is cut into ``T x T`` tiles, tile ``(a, b)`` holding rows ``[aT, aT + T)``
+and columns ``[bT, bT + T)`` (a 1D grid: one row of tiles), of colour ``2 (a mod 2) + (b mod 2)``, four
+colours in a 2 x 2 checkerboard. A factor is *confined* when it holds cells of at most one tile of each
+colour; a cell is *short* when every ray through it is confined, else *long*. ``T`` must be at least the
+prior's extent.
+
+**The rule.** *A factor ``F`` with ``e(F) <= T`` is confined.* Proof: let cells ``x in (a, b)`` and
+``y in (a', b')`` of ``F`` lie in distinct tiles of one colour. Then ``a = a' (mod 2)`` and
+``b = b' (mod 2)``, and the tiles differ, so ``|a - a'| >= 2`` or ``|b - b'| >= 2``; say ``a' >= a + 2``.
+Then ``row(y) >= a'T >= (a + 2) T`` and ``row(x) <= aT + T - 1``, so ``row(y) - row(x) >= T + 1 > e(F)``:
+a contradiction. So every prior window is confined, and so is every ray of extent ``<= T`` (a longer ray
+may be too, if it crosses only tiles of distinct colours; :func:`tile_layout` checks each ray).
+
+**Why a phase is exact.** Two short cells ``k, k'`` in distinct tiles of one colour share no factor: a ray
+through both would not be confined (and ``k`` would be long), a prior window through both would have
+extent ``> T``. So ``k'`` lies outside the Markov blanket of ``k``, and the conditional
+``p(m_k | m_-k, z)`` that an update of ``k`` draws from does not depend on any cell that the other tiles
+of the colour update. Updating the short cells of all tiles of one colour at once (each tile by its own
+sequential scan) therefore gives exactly the map that updating the tiles one after another gives, in any
+order of the tiles: a *colour phase* is a composition of single-cell Gibbs updates, each ``pi``-invariant,
+so the sweep (the four colour phases, then the long cells one after another) leaves the posterior
+invariant. Every visited cell is updated once per sweep (systematic / permutation scans) or, for the
+random scan, each tile and the long cells draw as many updates (with replacement) as they hold cells.
+
+**The kept sums under threads.** The single-cell state
+(:mod:`~ogm_ppl.inference._kernels.cell_sweep`) keeps, per cell, the fixed-point sum ``d_k`` of its rays'
+terms, and a flip of ``k`` rewrites it along the rays through ``k`` (their first / second hits move).
+Those rays are confined, so every cell they write lies in ``k``'s tile or in a tile of *another* colour;
+their ``f, s`` records are touched by ``k``'s tile alone, and so is every ``m`` entry and every kept sum
+of the tiles of the phase's colour (the only ones read during the phase). But two tiles of one colour may
+write the sum of one cell of another colour through different rays: a data race. Writes into a cell of
+the updating tile are plain; writes into any other cell are ``lock add`` instructions (:func:`atomic_add`,
+LLVM ``atomicrmw add``). Integer addition is exact, associative and commutative, so after the phase every
+sum equals the sum from scratch, whatever the interleaving (the kept counts of infinite terms likewise,
+as int32 atomics). No buffer is needed: the extra memory of the threaded sweep is the tile index.
+
+**Random numbers.** The sweep seed ``s`` (a uint64) gives tile ``t`` the SplitMix64 stream
+``tile_seed(s, t)`` (its order and uniforms by :func:`~ogm_ppl.inference._kernels.cell_sweep.draws`), and the
+long cells the stream of ``t = n_tiles``. Since a phase's result does not depend on the order or the
+interleaving of its tiles, the chain is a function of its seed alone: the same for 1, 2 or 64 threads.
+"""
+
+from __future__ import annotations
+
+from typing import NamedTuple
+
+import numba as nb
+import numpy as np
+from numba.core import cgutils, types
+from numba.extending import intrinsic
+
+from ogm_ppl.inference._kernels import cell_sweep as cs
+from ogm_ppl.inference._kernels.cells import _next_occupied
+from ogm_ppl.priors.compiled import IndependentCells, PatternField, Stencil, Tiles, cell_log_odds
+
+__all__ = [
+    "COLOURS",
+    "TileLayout",
+    "atomic_add",
+    "chromatic_sweep",
+    "colour_of_tile",
+    "confined_rays",
+    "prior_extent",
+    "ray_extents",
+    "tile_layout",
+    "tile_pass",
+    "tile_seed",
+]
+
+#: colour phases of a sweep (the 2 x 2 checkerboard)
+COLOURS = 4
+
+
+@intrinsic
+def atomic_add(typingctx, arr, i, v):
+    """``arr[i] += v`` as one atomic read-modify-write (LLVM ``atomicrmw add``, monotonic ordering) on a
+    1D C-contiguous integer array: concurrent adds to one entry from several threads are all kept."""
+    if not (isinstance(arr, types.Array) and arr.ndim == 1 and isinstance(arr.dtype, types.Integer)):
+        return None
+    sig = types.void(arr, types.intp, arr.dtype)
+
+    def codegen(context, builder, signature, args):
+        aryty = signature.args[0]
+        ary = context.make_array(aryty)(context, builder, args[0])
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [args[1]])
+        builder.atomic_rmw("add", ptr, args[2], "monotonic")
+        return context.get_dummy_value()
+
+    return sig, codegen
+
+
+class TileLayout(NamedTuple):
+    """The tiles of a chromatic sweep: ``T x T`` tiles on a ``rows x cols`` grid (``n_tr x n_tc`` of them,
+    tile ``t = a n_tc + b``), the short cells to visit grouped by tile (CSR ``tile_off`` / ``tile_cells``,
+    row-major within a tile), the non-empty tiles of each colour (CSR ``col_off`` / ``col_tiles``, the
+    tiles with more ray entries first) and the long cells (on a ray that is not confined), visited last."""
+
+    rows: int
+    cols: int
+    T: int
+    n_tr: int
+    n_tc: int
+    tile_off: np.ndarray  # n_tiles + 1 int64
+    tile_cells: np.ndarray  # short visited cells, int64
+    col_off: np.ndarray  # COLOURS + 1 int64
+    col_tiles: np.ndarray  # non-empty tiles, int64
+    long_cells: np.ndarray  # int64
+
+    @property
+    def n_tiles(self) -> int:
+        return self.n_tr * self.n_tc
+
+
+@nb.njit(cache=True)
+def ray_extents(offsets, cells, cols):
+    """``e(r)`` of every ray (``R`` int64): the larger of its row and column spans (cells ``c``,
+    ``row = c // cols``); 0 for a ray without cells."""
+    R = offsets.shape[0] - 1
+    out = np.zeros(R, np.int64)
+    for r in range(R):
+        a, b = offsets[r], offsets[r + 1]
+        if a == b:
+            continue
+        r0 = r1 = cells[a] // cols
+        c0 = c1 = cells[a] - r0 * cols
+        for j in range(a + 1, b):
+            y = cells[j] // cols
+            x = cells[j] - y * cols
+            r0, r1, c0, c1 = min(r0, y), max(r1, y), min(c0, x), max(c1, x)
+        out[r] = max(r1 - r0, c1 - c0)
+    return out
+
+
+def prior_extent(prior) -> int:
+    """The largest extent of a factor of the compiled prior ``prior`` (module docstring): 0 for
+    independent cells, ``max(|dr|, |dc|)`` over a stencil's offsets, ``w - 1`` for a pattern field
+    (``2w - 1`` with the pooled scale), the window's span for a table prior's tiles."""
+    if isinstance(prior, IndependentCells):
+        return 0
+    if isinstance(prior, Stencil):
+        return int(max(np.abs(prior.dr).max(initial=0), np.abs(prior.dc).max(initial=0)))
+    if isinstance(prior, PatternField):
+        return 2 * prior.w - 1 if prior.n_scales == 2 else prior.w - 1
+    if isinstance(prior, Tiles):
+        return int(max(np.ptp(prior.w_dr), np.ptp(prior.w_dc)))
+    raise TypeError(f"no factor extent known for a compiled prior of type {type(prior).__name__}")
+
+
+def colour_of_tile(t: int | np.ndarray, n_tc: int):
+    """The colour ``2 (a mod 2) + (b mod 2)`` of tile ``t = a n_tc + b``."""
+    return 2 * ((t // n_tc) % 2) + (t % n_tc) % 2
+
+
+@nb.njit(cache=True)
+def confined_rays(offsets, cells, cols, T, n_tc):
+    """Whether each ray is confined (``R`` bool): its cells lie in at most one ``T x T`` tile of each colour
+    (tiles ``n_tc`` to a row of tiles)."""
+    R = offsets.shape[0] - 1
+    out = np.ones(R, np.bool_)
+    seen = np.empty(COLOURS, np.int64)
+    for r in range(R):
+        seen[:] = -1
+        for j in range(offsets[r], offsets[r + 1]):
+            y = cells[j] // cols
+            x = cells[j] - y * cols
+            a, b = y // T, x // T
+            t = a * n_tc + b
+            col = 2 * (a % 2) + b % 2
+            if seen[col] < 0:
+                seen[col] = t
+            elif seen[col] != t:
+                out[r] = False
+                break
+    return out
+
+
+@nb.njit(cache=True)
+def _long_mask(K, offsets, cells, confined):
+    long = np.zeros(K, np.bool_)
+    for r in range(offsets.shape[0] - 1):
+        if not confined[r]:
+            for j in range(offsets[r], offsets[r + 1]):
+                long[cells[j]] = True
+    return long
+
+
+def tile_layout(visit: np.ndarray, offsets, cells, c_off, rows: int, cols: int, T: int) -> TileLayout:
+    """The :class:`TileLayout` of the cells ``visit`` (int64, any order) on ``T x T`` tiles: cells on a
+    ray that is not confined (:func:`confined_rays`) are long; the rest go to their tile in row-major order."""
+    if T < 1:
+        raise ValueError(f"the tile side must be at least 1 cell, got {T}")
+    K = rows * cols
+    visit = np.sort(np.asarray(visit, np.int64))
+    n_tr, n_tc = -(-rows // T), -(-cols // T)
+    long = _long_mask(K, offsets, cells, confined_rays(offsets, cells, cols, T, n_tc))
+    short = visit[~long[visit]]
+    r, c = np.divmod(short, cols)
+    tile = (r // T) * n_tc + c // T
+    order = np.argsort(tile, kind="stable")  # row-major within a tile (visit is sorted)
+    tile_cells = np.ascontiguousarray(short[order])
+    counts = np.bincount(tile, minlength=n_tr * n_tc)
+    tile_off = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
+    # a tile's cost ~ its ray entries: dealt out largest first, so that threads share a phase evenly
+    deg = np.diff(c_off)[tile_cells]
+    cost = np.bincount(tile[order], weights=deg + 1.0, minlength=n_tr * n_tc)
+    ids = np.nonzero(counts)[0]
+    colour = colour_of_tile(ids, n_tc)
+    key = np.lexsort((-cost[ids], colour))
+    col_tiles = np.ascontiguousarray(ids[key].astype(np.int64))
+    col_off = np.concatenate([[0], np.cumsum(np.bincount(colour, minlength=COLOURS))]).astype(np.int64)
+    return TileLayout(
+        int(rows),
+        int(cols),
+        int(T),
+        int(n_tr),
+        int(n_tc),
+        tile_off,
+        tile_cells,
+        col_off,
+        col_tiles,
+        np.ascontiguousarray(visit[long[visit]]),
+    )
+
+
+@nb.njit(cache=True, inline="always")
+def tile_seed(seed, t):
+    """The SplitMix64 seed of tile ``t``'s stream in the sweep of seed ``seed`` (uint64)."""
+    return cs._splitmix64(seed + np.uint64(t + 1) * cs._GOLDEN)
+
+
+# ----------------------------------------------------------------- the threaded single-cell update
+# Copies of cell_sweep's _add_term / _retarget / _set_cell whose writes into cells outside the updating tile
+# (rows [r0, r0 + T), columns [c0, c0 + T)) are atomic adds; bit for bit the same sums.
+
+
+@nb.njit(cache=True, inline="always")
+def _own(c, cols, r0, c0, T, inv_cols):
+    """Whether cell ``c`` lies in the tile at ``(r0, c0)``; its row by a multiplication with ``1 / cols``
+    (corrected to the exact quotient) instead of a 64-bit division, which costs tens of cycles a write."""
+    y = np.int64(c * inv_cols)
+    if y * cols > c:
+        y -= 1
+    x = c - y * cols
+    if x >= cols:
+        y += 1
+        x -= cols
+    return r0 <= y < r0 + T and c0 <= x < c0 + T
+
+
+@nb.njit(cache=True, inline="always")
+def _add_d(st, c, x, own):
+    if own:
+        st.d[c] += x
+    else:
+        atomic_add(st.d, c, x)
+
+
+@nb.njit(cache=True, inline="always")
+def _add_inf(st, inf32, c, which, x, own):
+    """The count of infinite terms of cell ``c`` (``which`` 0: ``pos``, 1: ``neg``) plus ``x``."""
+    if own:
+        if which == 0:
+            st.inf[c].pos += x
+        else:
+            st.inf[c].neg += x
+    else:
+        atomic_add(inf32, 2 * c + which, np.int32(x))
+
+
+@nb.njit(cache=True, inline="always")
+def _add_term(st, inf32, c, r, x, y, sign, geo):
+    a = st.ll[r, x]
+    b = st.ll[r, y]
+    own = _own(c, geo[0], geo[1], geo[2], geo[3], geo[4])
+    if not st.any_inf:
+        _add_d(st, c, sign * (cs._q(a, st.scale) - cs._q(b, st.scale)), own)
+    elif a > -np.inf:
+        if b > -np.inf:
+            _add_d(st, c, sign * (cs._q(a, st.scale) - cs._q(b, st.scale)), own)
+        else:
+            _add_inf(st, inf32, c, 0, sign, own)
+    elif b > -np.inf:
+        _add_inf(st, inf32, c, 1, sign, own)
+
+
+@nb.njit(cache=True, inline="always")
+def _ray_term(st, inf32, r, kap, f, s, sign, geo):
+    c = st.cells[st.offsets[r] + kap]
+    if kap < f:
+        _add_term(st, inf32, c, r, kap, f, sign, geo)
+    elif kap == f:
+        _add_term(st, inf32, c, r, f, s, sign, geo)
+
+
+@nb.njit(cache=True)
+def _retarget(st, inf32, r, f1, s1, geo):
+    f0 = st.rays[r].f
+    s0 = st.rays[r].s
+    st.rays[r].f = f1
+    st.rays[r].s = s1
+    a = st.offsets[r]
+    n = st.offsets[r + 1] - a
+    if f0 == f1:
+        if s0 != s1 and f0 < n:
+            c = st.cells[a + f0]
+            _add_term(st, inf32, c, r, f0, s1, 1, geo)
+            _add_term(st, inf32, c, r, f0, s0, -1, geo)
+        return
+    lo = min(f0, f1)
+    b0 = st.ll[r, f0]
+    b1 = st.ll[r, f1]
+    cols, r0, c0, T, inv_cols = geo[0], geo[1], geo[2], geo[3], geo[4]
+    if not st.any_inf or (b0 > -np.inf and b1 > -np.inf):
+        delta = cs._q(b0, st.scale) - cs._q(b1, st.scale)
+        for kap in range(lo):
+            if st.any_inf and not st.ll[r, kap] > -np.inf:
+                continue
+            c = st.cells[a + kap]
+            _add_d(st, c, delta, _own(c, cols, r0, c0, T, inv_cols))
+    else:
+        for kap in range(lo):
+            c = st.cells[a + kap]
+            _add_term(st, inf32, c, r, kap, f1, 1, geo)
+            _add_term(st, inf32, c, r, kap, f0, -1, geo)
+    for kap in range(lo, min(max(f0, f1), n - 1) + 1):
+        _ray_term(st, inf32, r, kap, f1, s1, 1, geo)
+        _ray_term(st, inf32, r, kap, f0, s0, -1, geo)
+
+
+@nb.njit(cache=True)
+def _set_cell(st, inf32, k, v, geo):
+    st.m[k] = v
+    for p in range(st.c_off[k], st.c_off[k + 1]):
+        r = st.c_ray[p]
+        kap = st.c_kappa[p]
+        f = st.rays[r].f
+        s = st.rays[r].s
+        if v:
+            if kap < f:
+                _retarget(st, inf32, r, kap, f, geo)
+            elif kap < s:
+                _retarget(st, inf32, r, f, kap, geo)
+        elif kap == f:
+            n = st.offsets[r + 1] - st.offsets[r]
+            _retarget(st, inf32, r, s, _next_occupied(st.m, st.offsets, st.cells, r, s + 1) if s < n else n, geo)
+        elif kap == s:
+            _retarget(st, inf32, r, f, _next_occupied(st.m, st.offsets, st.cells, r, kap + 1), geo)
+
+
+@nb.njit(cache=True)
+def tile_pass(st, inf32, prior, lay, t, seed, scan, update):
+    """The updates of tile ``t``'s short cells in one sweep of seed ``seed``: its order and uniforms from
+    the stream :func:`tile_seed` (``scan``: a code of :func:`~ogm_ppl.inference._kernels.cell_sweep.draws`),
+    each cell drawn by ``update`` (heat bath / metropolised). Safe to run beside the other tiles of its
+    colour (module docstring). Returns the flips."""
+    order, u = cs.draws(lay.tile_cells[lay.tile_off[t] : lay.tile_off[t + 1]], scan, tile_seed(seed, t))
+    geo = (lay.cols, (t // lay.n_tc) * lay.T, (t % lay.n_tc) * lay.T, lay.T, 1.0 / lay.cols)
+    m = st.m
+    flips = 0
+    for i in range(order.shape[0]):
+        k = order[i]
+        lo = cell_log_odds(prior, k, m) + cs._lik_ratio(st, k)
+        cur = m[k]
+        v = cs.new_value(lo, u[i], cur, update)
+        if v != cur:
+            _set_cell(st, inf32, k, v, geo)
+            flips += 1
+    return flips
+
+
+@nb.njit(cache=True)
+def long_pass(st, prior, lay, seed, scan, update):
+    """The updates of the long cells, one after another (the stream of ``t = n_tiles``). Returns the flips."""
+    order, u = cs.draws(lay.long_cells, scan, tile_seed(seed, lay.n_tr * lay.n_tc))
+    return cs.sweep(st, order, prior, u, update)
+
+
+@nb.njit(cache=True, parallel=True)
+def chromatic_sweep(st, inf32, prior, lay, seed, scan, update):
+    """One chromatic sweep (module docstring): for each colour, its tiles' :func:`tile_pass` in parallel
+    (``numba.prange`` over the tiles, numba's threads), then :func:`long_pass`. ``inf32`` is ``st.inf``
+    viewed as int32 (``pos``, ``neg`` of cell ``c`` at ``2c``, ``2c + 1``). Returns the flips."""
+    total = 0
+    for colour in range(COLOURS):
+        a = lay.col_off[colour]
+        n = lay.col_off[colour + 1] - a
+        flips = np.zeros(n, np.int64)
+        for j in nb.prange(n):
+            flips[j] = tile_pass(st, inf32, prior, lay, lay.col_tiles[a + j], seed, scan, update)
+        total += flips.sum()
+    return total + long_pass(st, prior, lay, seed, scan, update)

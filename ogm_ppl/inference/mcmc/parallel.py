@@ -1,0 +1,148 @@
+"""Single-cell Gibbs sweeps on every core of one machine, exactly: chromatic tile sweeps (Section 4.1).
+
+:class:`ChromaticCellGibbs` is :class:`~ogm_ppl.inference.mcmc.gibbs.CellGibbs` (heat bath or metropolised,
+systematic / permutation / random scan, ``region=``) with the sweep reordered so that it runs in threads:
+the grid is cut into ``tile x tile`` tiles coloured as a 2 x 2 checkerboard; the four colour phases run in
+turn, and within a phase every tile of the colour is swept (its own scan over its cells) by numba's threads
+at once; cells on rays that reach two tiles of one colour (*long* cells) are updated last, one after another. Tiles at
+least as large as every factor (ray, prior window) make the updates of a phase commute exactly, so the
+sweep is a composition of single-cell Gibbs updates and leaves the posterior invariant; the proof, the
+handling of the kept likelihood sums that several threads write, and the random streams are in
+:mod:`ogm_ppl.inference._kernels.parallel`. The chain is a function of the seed drawn from torch's
+generator each sweep, identical for every thread count.
+
+Choosing ``tile``: the default, the longest ray's extent (and at least the prior's), makes every cell short;
+on maps much larger than the sensor's range that leaves many tiles per colour. Smaller tiles give more
+tiles per phase but move the cells on longer rays into the serial long phase (:attr:`layout` reports how
+many), the trade-off ``benchmarks/bench_parallel.py`` measures.
+"""
+
+from __future__ import annotations
+
+import numba
+import numpy as np
+import torch
+
+from ogm_ppl.inference._kernels import cell_sweep as cs
+from ogm_ppl.inference._kernels import parallel as par
+from ogm_ppl.inference.mcmc.gibbs import _SCAN_CODES, CellGibbs
+from ogm_ppl.models.occupancy import OccupancyModel
+
+__all__ = ["ChromaticCellGibbs", "max_threads"]
+
+
+def max_threads() -> int:
+    """The most threads numba can run (``NUMBA_NUM_THREADS``, fixed when numba starts)."""
+    return int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
+
+
+class ChromaticCellGibbs(CellGibbs):
+    """Single-cell Gibbs in chromatic tile sweeps (module docstring), on ``threads`` of numba's threads.
+
+    Args:
+        model, scan, update, init, delta, region: as :class:`~ogm_ppl.inference.mcmc.gibbs.CellGibbs`
+            (priors with a compiled face only). ``scan`` orders the cells *within* each tile and within the
+            long cells; tiles and phases keep their order.
+        tile: the tile side in cells (``None``: the longest ray's extent, at least the prior's factor
+            extent, at least 1). Must be at least the prior's factor extent
+            (:func:`~ogm_ppl.inference._kernels.parallel.prior_extent`).
+        threads: numba threads for the sweeps (``None``: numba's current number); at most
+            ``numba.config.NUMBA_NUM_THREADS``. The chain does not depend on it.
+    """
+
+    def __init__(
+        self,
+        model: OccupancyModel,
+        scan: str = "systematic",
+        update: str = "gibbs",
+        init="ogm",
+        delta="haehnel",
+        region=None,
+        tile: int | None = None,
+        threads: int | None = None,
+    ) -> None:
+        super().__init__(model, scan, update, init, delta, region)
+        if tile is not None and int(tile) < 1:
+            raise ValueError(f"tile must be a positive number of cells, got {tile}")
+        self.tile = None if tile is None else int(tile)
+        self.threads = threads
+
+    @property
+    def threads(self) -> int:
+        """The numba threads a sweep uses."""
+        return numba.get_num_threads() if self._threads is None else self._threads
+
+    @threads.setter
+    def threads(self, n: int | None) -> None:
+        most = max_threads()
+        if n is not None and not 1 <= int(n) <= most:
+            raise ValueError(f"threads must lie in 1..{most}, got {n}")
+        self._threads = None if n is None else int(n)
+
+    def _prepare(self) -> None:
+        if self._ready:
+            return
+        super()._prepare()
+        if self._compiled is None:
+            raise ValueError("ChromaticCellGibbs needs a prior with a compiled face (prior.compiled())")
+        g = self.model.grid
+        self.prior_extent = par.prior_extent(self._compiled)
+        ext = par.ray_extents(self._offsets, self._cells, g.cols)
+        self.ray_extent = int(ext.max(initial=0))
+        T = max(self.ray_extent, self.prior_extent, 1) if self.tile is None else self.tile
+        if T < self.prior_extent:
+            raise ValueError(f"tile {T} is smaller than the prior's factor extent {self.prior_extent}")
+        self._layout = par.tile_layout(self._visit, self._offsets, self._cells, self._c_off, g.rows, g.cols, T)
+
+    @property
+    def layout(self) -> par.TileLayout:
+        """The tiles, their colours and the long cells (:class:`~ogm_ppl.inference._kernels.parallel.TileLayout`)."""
+        self._prepare()
+        return self._layout
+
+    def visit_order(self) -> np.ndarray:
+        """The cells in the order of a systematic sweep: colour by colour, tile by tile (as
+        :attr:`layout` lists them), row-major within a tile, then the long cells. A threaded sweep ends
+        in the map this serial order gives."""
+        lay = self.layout
+        parts = [lay.tile_cells[lay.tile_off[t] : lay.tile_off[t + 1]] for t in lay.col_tiles]
+        return np.concatenate([*parts, lay.long_cells]).astype(np.int64)
+
+    def tile_cells(self) -> list[np.ndarray]:
+        """The cells of each update group in sweep order: the non-empty tiles (colour by colour), then the
+        long cells."""
+        lay = self.layout
+        return [lay.tile_cells[lay.tile_off[t] : lay.tile_off[t + 1]] for t in lay.col_tiles] + [lay.long_cells]
+
+    def _set_state(self, m) -> None:
+        super()._set_state(m)
+        self._inf32 = self._st.inf.view(np.int32)
+
+    def _sweep(self) -> int:
+        seed = np.uint64(int(torch.randint(0, 2**63 - 1, (), dtype=torch.int64)))
+        self._updates += len(self._visit)
+        before = numba.get_num_threads()
+        numba.set_num_threads(self.threads)
+        try:
+            with numba.parallel_chunksize(1):  # tiles are dealt out one at a time, largest first
+                return int(
+                    par.chromatic_sweep(
+                        self._st, self._inf32, self._compiled, self._layout, seed, _SCAN_CODES[self.scan], self._rule
+                    )
+                )
+        finally:
+            numba.set_num_threads(before)
+
+    def run_marginals(self, num_sweeps: int, seed: int = 0) -> torch.Tensor:
+        """Not offered: a chromatic chain runs one sweep per :meth:`sample`."""
+        raise NotImplementedError("ChromaticCellGibbs runs one sweep per sample(); use CellGibbs.run_marginals")
+
+    def state_equals_scratch(self) -> bool:
+        """Whether the kept first / second hits and likelihood sums equal those computed from scratch
+        for the current map (the check that concurrent writes lost nothing)."""
+        ref = cs.cell_state_of(self._m, self._index, self._bits)
+        return bool(
+            np.array_equal(ref.rays, self._st.rays)
+            and np.array_equal(ref.d, self._st.d)
+            and np.array_equal(ref.inf, self._st.inf)
+        )
