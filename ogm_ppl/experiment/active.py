@@ -360,7 +360,7 @@ def run_active(
     :func:`~ogm_ppl.experiment.run_experiment`); raises :class:`~ogm_ppl.experiment.ExperimentError` (with
     ``.result``) when tasks failed, after writing what the finished ones allow."""
     from ogm_ppl.experiment import tasks as T
-    from ogm_ppl.experiment.runner import ExperimentError, Task, _client, _execute_dask, _execute_serial
+    from ogm_ppl.experiment.runner import ExperimentError, Task, execute_tasks
     from ogm_ppl.experiment.spec import derive_seed
     from ogm_ppl.experiment.tasks import _savez
 
@@ -404,26 +404,7 @@ def run_active(
                         h,
                     )
                 )
-    todo, skipped, recs = [], [], {}
-    for t in tasks:
-        rec = T.read_done(t.done_file, t.hash) if resume else None
-        if rec is not None:
-            recs[t.id] = rec
-            skipped.append(t.id)
-        else:
-            todo.append(t)
-    if scheduler == "serial" or not todo:
-        results, failed = _execute_serial(todo, progress)
-    else:
-        client, owned = _client(scheduler, workers)
-        try:
-            results, failed = _execute_dask(todo, client, progress)
-        finally:
-            if owned:
-                cluster = client.cluster
-                client.close()
-                if cluster is not None:
-                    cluster.close()
+    todo, skipped, recs, results, failed = execute_tasks(tasks, scheduler, workers, resume, progress)
     recs.update(results)
     runs = [{k: v for k, v in recs[t.id].items() if k != "hash"} for t in tasks if t.id in recs]
     result = ActiveResult(spec, out, runs=runs, executed=[t.id for t in todo if t.id in results], skipped=skipped)

@@ -230,6 +230,34 @@ def _execute_dask(todo: list[Task], client, progress: bool):
     return results, failed
 
 
+def execute_tasks(tasks: list[Task], scheduler, workers: int | None, resume: bool, progress: bool):
+    """Run the tasks not already done: ``(todo, skipped, done_records, results, failed)``.
+
+    A task is done when its done-file holds its settings' hash (``resume``) and every task it depends on is
+    done; the others run serially (``scheduler == "serial"``) or on dask (see :func:`run_experiment`)."""
+    todo, skipped, done_recs = [], [], {}
+    for t in tasks:
+        rec = T.read_done(t.done_file, t.hash) if resume else None
+        if rec is not None and all(d in done_recs for d in t.deps):
+            done_recs[t.id] = rec
+            skipped.append(t.id)
+        else:
+            todo.append(t)
+    if scheduler == "serial" or not todo:
+        results, failed = _execute_serial(todo, progress)
+    else:
+        client, owned = _client(scheduler, workers)
+        try:
+            results, failed = _execute_dask(todo, client, progress)
+        finally:
+            if owned:
+                cluster = client.cluster
+                client.close()
+                if cluster is not None:
+                    cluster.close()
+    return todo, skipped, done_recs, results, failed
+
+
 # ------------------------------------------------------------------------------------------ the API
 def run_experiment(
     spec_or_path, out_dir, *, scheduler=None, workers: int | None = None, resume: bool = True, progress: bool = True
@@ -268,26 +296,7 @@ def run_experiment(
         shutil.copyfile(spec.source, out / "spec.toml")
     atomic_write_text(out / "spec.json", json.dumps(spec.to_json(), indent=1, default=str))
     tasks = plan_tasks(spec, out, resume)
-    todo, skipped, done_recs = [], [], {}
-    for t in tasks:
-        rec = T.read_done(t.done_file, t.hash) if resume else None
-        if rec is not None and all(d in done_recs for d in t.deps):
-            done_recs[t.id] = rec
-            skipped.append(t.id)
-        else:
-            todo.append(t)
-    if scheduler == "serial" or not todo:
-        results, failed = _execute_serial(todo, progress)
-    else:
-        client, owned = _client(scheduler, workers)
-        try:
-            results, failed = _execute_dask(todo, client, progress)
-        finally:
-            if owned:
-                cluster = client.cluster
-                client.close()
-                if cluster is not None:
-                    cluster.close()
+    todo, skipped, done_recs, results, failed = execute_tasks(tasks, scheduler, workers, resume, progress)
     recs = {**done_recs, **{k: v for k, v in results.items() if v is not None}}
     result = ExperimentResult(
         spec, out, executed=[t.id for t in todo if t.id in results], skipped=skipped, failed=failed
