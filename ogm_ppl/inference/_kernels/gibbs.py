@@ -120,6 +120,7 @@ class RayScratch(NamedTuple):
     lowbit: np.ndarray  # W int64: index of the lowest set bit of w
     prior: np.ndarray  # W float64: log prior of each configuration (independent cells)
     ew: np.ndarray  # max(W, C) float64: exp weights of a categorical draw over up to C candidates
+    fv: np.ndarray  # max(C, 2) float64: one ray's term of each candidate (:func:`lik_list`)
 
 
 @nb.njit(cache=True)
@@ -145,6 +146,7 @@ def ray_scratch(L, num_slots, dense, num_cands):
         lowbit,
         np.empty(W, np.float64),
         np.empty(max(W, num_cands, 1), np.float64),
+        np.empty(max(num_cands, 2), np.float64),
     )
 
 
@@ -337,22 +339,29 @@ def lik_all(sc, ns, ll, L, out):
 
 @nb.njit(cache=True)
 def lik_list(sc, ns, ll, cands, n, out):
-    """``out[j] += sum_slots ll[r, f_r(cands[j])]`` (entries already ``-inf`` are skipped): the first
-    hit of a candidate is the first entry, in kappa order, whose bit it sets (else ``f_out``)."""
+    """``out[j] += sum_slots ll[r, f_r(cands[j])]`` (entries already ``-inf`` are left alone): the first
+    hit of a candidate is the first entry, in kappa order, whose bit it sets (else ``f_out``).
+
+    Per slot, the value of every candidate is set to ``ll[r, f_out]`` and then overwritten entry by entry
+    in descending kappa where the candidate sets the entry's bit (so the first such entry wins): each pass
+    is a branch-free loop over the candidates, and each candidate still adds the slots' terms one by one
+    in slot order (the same sums, bit for bit, as reading the entries per candidate)."""
+    val = sc.fv
     for s in range(ns):
         r = sc.slot_ray[s]
-        fo = sc.slot_fout[s]
-        ne = sc.slot_n[s]
+        vo = ll[r, sc.slot_fout[s]]
         for j in range(n):
-            if out[j] == -np.inf:
-                continue
-            w = cands[j]
-            fw = fo
-            for e in range(ne):
-                if (w >> sc.ent_bit[s, e]) & 1:
-                    fw = sc.ent_kappa[s, e]
-                    break
-            out[j] += ll[r, fw]
+            val[j] = vo
+        for e in range(sc.slot_n[s] - 1, -1, -1):
+            ve = ll[r, sc.ent_kappa[s, e]]
+            b = sc.ent_bit[s, e]
+            for j in range(n):
+                if (cands[j] >> b) & 1:
+                    val[j] = ve
+        for j in range(n):
+            o = out[j]
+            if o != -np.inf:
+                out[j] = o + val[j]
 
 
 @nb.njit(cache=True)
@@ -495,7 +504,7 @@ def additive_patch_log_weights(ps, patch, prior, logw):
 def candidate_log_weights(ps, patch, prior, cands, n, logw):
     """``logw[j]``: unnormalised log conditional of ``cands[j]`` (prior first; the likelihood only for
     candidates the prior allows)."""
-    sc = ray_scratch(patch.shape[0], patch_slots(patch, ps.c_off, ps.offsets.shape[0] - 1), False, 0)
+    sc = ray_scratch(patch.shape[0], patch_slots(patch, ps.c_off, ps.offsets.shape[0] - 1), False, n)
     ts = tile_scratch(ps.m.shape[0], scratch_capacity(prior, patch.shape[0]))
     candidate_weights(prior, patch, ps.m, cands, n, -1, logw, logw, ts)
     ns = collect_rays(ps, patch, _next_stamp(ps, 1), sc)

@@ -582,13 +582,16 @@ def tiles_patch_weights(lp, patch, m, cands, n, out, ts):
 @nb.njit(cache=True)
 def tile_candidate_weights(lp, patch, m, cands, n, t, cand_lp, out, ts):
     """The weights of the candidates of a patch: for a tile ``t >= 0``, its own factor (read with the
-    candidates, ``cand_lp``) plus those of its neighbours whose windows hold patch cells; else
+    candidates, ``cand_lp``) plus those of its neighbours whose windows hold patch cells (none when the
+    windows have no border, ``pad = 0``: the patch tables of Section 5.2.2); else
     :func:`tiles_patch_weights`."""
     if t < 0:
         tiles_patch_weights(lp, patch, m, cands, n, out, ts)
         return
     for j in range(n):
         out[j] = cand_lp[j]
+    if lp.pad_r == 0 and lp.pad_c == 0:
+        return  # windows without a border: no other tile's window holds a cell of tile t
     nt = tile_patch_setup(lp, patch, m, t, ts)
     tile_patch_factors(lp, nt, ts, cands, n, out)
 
