@@ -356,12 +356,10 @@ def lik_list(sc, ns, ll, cands, n, out):
             ve = ll[r, sc.ent_kappa[s, e]]
             b = sc.ent_bit[s, e]
             for j in range(n):
-                if (cands[j] >> b) & 1:
-                    val[j] = ve
+                val[j] = ve if (cands[j] >> b) & 1 else val[j]
         for j in range(n):
             o = out[j]
-            if o != -np.inf:
-                out[j] = o + val[j]
+            out[j] = o if o == -np.inf else o + val[j]
 
 
 @nb.njit(cache=True)
