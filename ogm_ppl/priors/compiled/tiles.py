@@ -9,7 +9,10 @@ of tiles cut by the grid edge). Keys missing from a segment fall back to segment
 tile's own bits only) when its border is unseen, else have ``phi = 0``. The patch tables of Section 5.2.2
 (``pad = 0``) and the border-conditioned tables of Section 5.2.3 (``pad = 1``) are both of this kind.
 
-For speed, tables over windows of at most 16 cells are also stored dense (one load per factor), and a
+For speed, tables over windows of at most 16 cells are also stored dense (one load per factor); sparse
+tables with at most 16 border cells get a border index (:func:`border_index`: the run of keys of each
+border in two loads, so a factor is a binary search among the few keys of its border and a tile's
+candidates given its border are that run, :func:`border_range`); and a
 patch update reads the keys of the tiles it touches once (:func:`tile_patch_setup`), after which a
 candidate only ORs in its own bits and each touched tile's factor is memoised per the few bits the patch
 sets in it (:func:`tile_patch_factors`). Patch updates whose patch is a tile weigh only the
@@ -167,9 +170,8 @@ def _backoff(lp):
 def sparse_key_log_factor(lp, s, key):
     """``log phi(key)`` in segment ``s`` from the sorted keys (fallback for an unseen border; ``-inf`` if
     absent)."""
-    return _factor(
-        lp.dense, -1, lp.keys, lp.logp, lp.seg_off, _backoff(lp), lp.border_seg, lp.n_inner, lp.b_start, lp.b_bits, s, key
-    )
+    bo, bseg = _backoff(lp), lp.border_seg
+    return _factor(lp.dense, -1, lp.keys, lp.logp, lp.seg_off, bo, bseg, lp.n_inner, lp.b_start, lp.b_bits, s, key)
 
 
 @nb.njit(cache=True, inline="always")
