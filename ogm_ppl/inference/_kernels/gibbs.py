@@ -120,6 +120,7 @@ class RayScratch(NamedTuple):
     lowbit: np.ndarray  # W int64: index of the lowest set bit of w
     prior: np.ndarray  # W float64: log prior of each configuration (independent cells)
     ew: np.ndarray  # max(W, C) float64: exp weights of a categorical draw over up to C candidates
+    fv: np.ndarray  # max(C, 2) float64: one ray's term of each candidate (:func:`lik_list`)
 
 
 @nb.njit(cache=True)
@@ -145,6 +146,7 @@ def ray_scratch(L, num_slots, dense, num_cands):
         lowbit,
         np.empty(W, np.float64),
         np.empty(max(W, num_cands, 1), np.float64),
+        np.empty(max(num_cands, 2), np.float64),
     )
 
 
@@ -229,66 +231,81 @@ def collect_rays(ps, patch, stamp, sc):
     have no such cells and are dropped. Scratch: ``in_patch`` (bool ``K``, left all False) and
     ``ray_stamp`` (int64 ``R x 2``) of the :class:`PatchState` ``ps``; pass a ``stamp`` never used before.
     Returns the number of slots.
+
+    A slot's entries are *all* the patch cells on its ray, so the ray's first hit ``f_r`` lies in the patch
+    exactly when it equals one of their kappas; otherwise ``f_out = f_r`` (also when ``f_r = len(r)``)
+    and the ray is never read. Only a ray whose first hit is a patch cell is walked on to its first
+    outside hit. (Reading the cell at ``f_r`` of every ray through the patch, most of them blocked far
+    before it, cost a cache miss per ray: most of a sweep on dense logs.)
     """
     m, f, in_patch, ray_stamp = ps.m, ps.f, ps.in_patch, ps.ray_stamp
     offsets, cells, c_off, c_ray, c_kappa = ps.offsets, ps.cells, ps.c_off, ps.c_ray, ps.c_kappa
+    slot_ray, slot_n, slot_fout, ent_kappa, ent_bit = sc.slot_ray, sc.slot_n, sc.slot_fout, sc.ent_kappa, sc.ent_bit
     ns = 0
     bit = 0
     for i in range(patch.shape[0]):
         c = patch[i]
         if c < 0:
             continue
-        in_patch[c] = True
         for p in range(c_off[c], c_off[c + 1]):
             r = c_ray[p]
             if ray_stamp[r, 0] != stamp:
                 ray_stamp[r, 0] = stamp
                 ray_stamp[r, 1] = ns
-                sc.slot_ray[ns] = r
-                sc.slot_n[ns] = 0
+                slot_ray[ns] = r
+                slot_n[ns] = 0
                 ns += 1
             s = ray_stamp[r, 1]
-            e = sc.slot_n[s]
-            sc.ent_kappa[s, e] = c_kappa[p]
-            sc.ent_bit[s, e] = bit
-            sc.slot_n[s] = e + 1
+            e = slot_n[s]
+            ent_kappa[s, e] = c_kappa[p]
+            ent_bit[s, e] = bit
+            slot_n[s] = e + 1
         bit += 1
+    marked = False
     kept = 0
     for s in range(ns):
-        r = sc.slot_ray[s]
-        a = offsets[r]
-        n = offsets[r + 1] - a
+        r = slot_ray[s]
         fr = f[r]
-        if fr == n:
-            f_out = n
-        elif in_patch[cells[a + fr]]:
-            f_out = _first_outside(m, in_patch, offsets, cells, r, fr + 1)
-        else:
-            f_out = fr
+        ne = slot_n[s]
+        f_out = fr
+        first = fr  # the smallest entry kappa
+        for e in range(ne):
+            kap = ent_kappa[s, e]
+            if kap < first:
+                first = kap
+            if kap == fr:  # the first hit is a patch cell: walk on to the first hit outside
+                if not marked:
+                    for q in range(patch.shape[0]):
+                        if patch[q] >= 0:
+                            in_patch[patch[q]] = True
+                    marked = True
+                f_out = _first_outside(m, in_patch, offsets, cells, r, fr + 1)
+                break
+        if first >= f_out:
+            continue  # blocked before the patch: every configuration sees the same first hit
         # keep the entries before f_out, insertion-sorted by kappa, in slot `kept` (<= s: in place is safe)
         k = 0
-        for e in range(sc.slot_n[s]):
-            kap = sc.ent_kappa[s, e]
+        for e in range(ne):
+            kap = ent_kappa[s, e]
             if kap >= f_out:
                 continue
-            b = sc.ent_bit[s, e]
+            b = ent_bit[s, e]
             x = k
-            while x > 0 and sc.ent_kappa[kept, x - 1] > kap:
-                sc.ent_kappa[kept, x] = sc.ent_kappa[kept, x - 1]
-                sc.ent_bit[kept, x] = sc.ent_bit[kept, x - 1]
+            while x > 0 and ent_kappa[kept, x - 1] > kap:
+                ent_kappa[kept, x] = ent_kappa[kept, x - 1]
+                ent_bit[kept, x] = ent_bit[kept, x - 1]
                 x -= 1
-            sc.ent_kappa[kept, x] = kap
-            sc.ent_bit[kept, x] = b
+            ent_kappa[kept, x] = kap
+            ent_bit[kept, x] = b
             k += 1
-        if k == 0:
-            continue  # every configuration sees the same first hit
-        sc.slot_ray[kept] = r
-        sc.slot_fout[kept] = f_out
-        sc.slot_n[kept] = k
+        slot_ray[kept] = r
+        slot_fout[kept] = f_out
+        slot_n[kept] = k
         kept += 1
-    for i in range(patch.shape[0]):
-        if patch[i] >= 0:
-            in_patch[patch[i]] = False
+    if marked:
+        for i in range(patch.shape[0]):
+            if patch[i] >= 0:
+                in_patch[patch[i]] = False
     return kept
 
 
@@ -322,22 +339,27 @@ def lik_all(sc, ns, ll, L, out):
 
 @nb.njit(cache=True)
 def lik_list(sc, ns, ll, cands, n, out):
-    """``out[j] += sum_slots ll[r, f_r(cands[j])]`` (entries already ``-inf`` are skipped): the first
-    hit of a candidate is the first entry, in kappa order, whose bit it sets (else ``f_out``)."""
+    """``out[j] += sum_slots ll[r, f_r(cands[j])]`` (entries already ``-inf`` are left alone): the first
+    hit of a candidate is the first entry, in kappa order, whose bit it sets (else ``f_out``).
+
+    Per slot, the value of every candidate is set to ``ll[r, f_out]`` and then overwritten entry by entry
+    in descending kappa where the candidate sets the entry's bit (so the first such entry wins): each pass
+    is a branch-free loop over the candidates, and each candidate still adds the slots' terms one by one
+    in slot order (the same sums, bit for bit, as reading the entries per candidate)."""
+    val = sc.fv
     for s in range(ns):
         r = sc.slot_ray[s]
-        fo = sc.slot_fout[s]
-        ne = sc.slot_n[s]
+        vo = ll[r, sc.slot_fout[s]]
         for j in range(n):
-            if out[j] == -np.inf:
-                continue
-            w = cands[j]
-            fw = fo
-            for e in range(ne):
-                if (w >> sc.ent_bit[s, e]) & 1:
-                    fw = sc.ent_kappa[s, e]
-                    break
-            out[j] += ll[r, fw]
+            val[j] = vo
+        for e in range(sc.slot_n[s] - 1, -1, -1):
+            ve = ll[r, sc.ent_kappa[s, e]]
+            b = sc.ent_bit[s, e]
+            for j in range(n):
+                val[j] = ve if (cands[j] >> b) & 1 else val[j]
+        for j in range(n):
+            o = out[j]
+            out[j] = o if o == -np.inf else o + val[j]
 
 
 @nb.njit(cache=True)
@@ -480,7 +502,7 @@ def additive_patch_log_weights(ps, patch, prior, logw):
 def candidate_log_weights(ps, patch, prior, cands, n, logw):
     """``logw[j]``: unnormalised log conditional of ``cands[j]`` (prior first; the likelihood only for
     candidates the prior allows)."""
-    sc = ray_scratch(patch.shape[0], patch_slots(patch, ps.c_off, ps.offsets.shape[0] - 1), False, 0)
+    sc = ray_scratch(patch.shape[0], patch_slots(patch, ps.c_off, ps.offsets.shape[0] - 1), False, n)
     ts = tile_scratch(ps.m.shape[0], scratch_capacity(prior, patch.shape[0]))
     candidate_weights(prior, patch, ps.m, cands, n, -1, logw, logw, ts)
     ns = collect_rays(ps, patch, _next_stamp(ps, 1), sc)

@@ -128,6 +128,10 @@ class Tiles(NamedTuple):
     # the back-off table's cumulative sums over the 2^n_inner inner codes (the escape move's proposal)
     border_seg: int = -1
     back_cdf: np.ndarray = np.zeros(0, np.float64)
+    # the keys of each border: segment s's keys with border code b (key >> n_inner) are
+    # keys[b_start[s * (2^b_bits + 1) + b] : b_start[s * (2^b_bits + 1) + b + 1]] (empty, b_bits = -1: none)
+    b_start: np.ndarray = np.zeros(0, np.int64)
+    b_bits: int = -1
 
     def sparse_patches(self) -> bool:
         return True

@@ -9,7 +9,10 @@ of tiles cut by the grid edge). Keys missing from a segment fall back to segment
 tile's own bits only) when its border is unseen, else have ``phi = 0``. The patch tables of Section 5.2.2
 (``pad = 0``) and the border-conditioned tables of Section 5.2.3 (``pad = 1``) are both of this kind.
 
-For speed, tables over windows of at most 16 cells are also stored dense (one load per factor), and a
+For speed, tables over windows of at most 16 cells are also stored dense (one load per factor); sparse
+tables with at most 16 border cells get a border index (:func:`border_index`: the run of keys of each
+border in two loads, so a factor is a binary search among the few keys of its border and a tile's
+candidates given its border are that run, :func:`border_range`); and a
 patch update reads the keys of the tiles it touches once (:func:`tile_patch_setup`), after which a
 candidate only ORs in its own bits and each touched tile's factor is memoised per the few bits the patch
 sets in it (:func:`tile_patch_factors`). Patch updates whose patch is a tile weigh only the
@@ -26,8 +29,12 @@ from ogm_ppl.priors.compiled.registry import register
 from ogm_ppl.priors.compiled.scratch import MEMO_BITS
 
 __all__ = [
+    "BORDER_INDEX_MAX_BITS",
+    "BORDER_INDEX_MAX_ENTRIES",
     "DENSE_MAX_BITS",
     "DENSE_MAX_ENTRIES",
+    "border_index",
+    "border_range",
     "tile_candidates",
     "tile_escape",
     "tile_cell_log_odds",
@@ -43,6 +50,21 @@ _I = np.zeros(0, np.int64)
 _F = np.zeros(0, np.float64)
 #: windows of at most this many cells get a dense factor table (at most DENSE_MAX_ENTRIES entries in all)
 DENSE_MAX_BITS, DENSE_MAX_ENTRIES = 16, 1 << 20
+#: borders of at most this many cells get a border index (at most BORDER_INDEX_MAX_ENTRIES entries in all)
+BORDER_INDEX_MAX_BITS, BORDER_INDEX_MAX_ENTRIES = 16, 1 << 22
+
+
+def border_index(keys: np.ndarray, seg_off: np.ndarray, n_inner: int, B: int) -> np.ndarray:
+    """The border index of :func:`border_range`: ``S * (2^B + 1)`` int64, entry ``s (2^B + 1) + b`` the first
+    key of segment ``s`` with border code ``>= b`` (``b = 2^B``: the segment's end), by binary search of the
+    segment's sorted keys (``key = inner + 2^n_inner b``)."""
+    S = len(seg_off) - 1
+    bounds = np.arange((1 << B) + 1, dtype=np.int64) << n_inner
+    out = np.empty(S * ((1 << B) + 1), np.int64)
+    for s in range(S):
+        a, b = int(seg_off[s]), int(seg_off[s + 1])
+        out[s * ((1 << B) + 1) : (s + 1) * ((1 << B) + 1)] = a + np.searchsorted(keys[a:b], bounds, side="left")
+    return out
 
 
 # Speed: the hot helpers are inlined (``inline="always"``; a call that passes the bundle costs about
@@ -77,20 +99,37 @@ def _lower(keys, lo, hi, key):
     return lo
 
 
-@nb.njit(cache=True)
-def _sparse_factor(keys, logp, seg_off, backoff, bseg, n_inner, s, key):
-    """``log phi(key)`` in segment ``s`` by binary search of the sorted keys. A key missing from the
-    segment: with a border-weight segment ``bseg >= 0`` (a backed-off table) it is
-    ``log lambda_b + log back(inner)``, ``lambda_b`` looked up by border in segment ``bseg`` (``1`` for a
-    border never seen) and ``back`` the segment ``bseg + 1``, which holds every inner code in order; else
-    it backs off to segment ``backoff`` (keyed by the inner bits; ``-1``: none) when the key's border was
-    never seen, and is ``-inf`` otherwise. (Not inlined: a large inlined body slows the loops around it.)"""
+@nb.njit(cache=True, inline="always")
+def border_range(seg_off, keys, b_start, b_bits, n_inner, s, border):
+    """``(lo, hi)``: the keys of segment ``s`` whose border code (``key >> n_inner``) is ``border``, from the
+    border index ``b_start`` (two loads) when there is one (``b_bits >= 0``), else by binary search. The keys
+    are sorted by ``key = inner + 2^n_inner border``, so each border's keys are one run."""
+    if b_bits >= 0:
+        q = s * ((np.int64(1) << b_bits) + 1) + border
+        return b_start[q], b_start[q + 1]
     a, b = seg_off[s], seg_off[s + 1]
-    i = _lower(keys, a, b, key)
-    if i < b and keys[i] == key:
+    return _lower(keys, a, b, border << n_inner), _lower(keys, a, b, (border + 1) << n_inner)
+
+
+@nb.njit(cache=True)
+def _sparse_factor(keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, s, key):
+    """``log phi(key)`` in segment ``s`` by binary search of the sorted keys (with a border index, only
+    among the keys of the key's border: :func:`border_range`). A key missing from the segment: with a
+    border-weight segment ``bseg >= 0`` (a backed-off table) it is ``log lambda_b + log back(inner)``,
+    ``lambda_b`` looked up by border in segment ``bseg`` (``1`` for a border never seen) and ``back`` the
+    segment ``bseg + 1``, which holds every inner code in order; else it backs off to segment ``backoff``
+    (keyed by the inner bits; ``-1``: none) when the key's border was never seen, and is ``-inf``
+    otherwise. (Not inlined: a large inlined body slows the loops around it.)"""
+    border = key >> n_inner
+    if b_bits >= 0:
+        q = s * ((np.int64(1) << b_bits) + 1) + border
+        lo, hi = b_start[q], b_start[q + 1]
+    else:
+        lo, hi = seg_off[s], seg_off[s + 1]
+    i = _lower(keys, lo, hi, key)
+    if i < hi and keys[i] == key:
         return logp[i]
     if bseg >= 0:
-        border = key >> n_inner
         v = logp[seg_off[bseg + 1] + (key & ((np.int64(1) << n_inner) - 1))]
         ba, bb = seg_off[bseg], seg_off[bseg + 1]
         j = _lower(keys, ba, bb, border)
@@ -98,9 +137,12 @@ def _sparse_factor(keys, logp, seg_off, backoff, bseg, n_inner, s, key):
             v += logp[j]
         return v
     if backoff >= 0:
-        border = key >> n_inner
-        j = _lower(keys, a, b, border << n_inner)
-        if j == b or (keys[j] >> n_inner) != border:  # border never seen: back off
+        if b_bits >= 0:
+            seen = lo < hi
+        else:
+            j = _lower(keys, lo, hi, border << n_inner)
+            seen = j < hi and (keys[j] >> n_inner) == border
+        if not seen:  # border never seen: back off
             fa, fb = seg_off[backoff], seg_off[backoff + 1]
             inner = key & ((np.int64(1) << n_inner) - 1)
             q = _lower(keys, fa, fb, inner)
@@ -110,12 +152,12 @@ def _sparse_factor(keys, logp, seg_off, backoff, bseg, n_inner, s, key):
 
 
 @nb.njit(cache=True, inline="always")
-def _factor(dense, dense_bits, keys, logp, seg_off, backoff, bseg, n_inner, s, key):
+def _factor(dense, dense_bits, keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, s, key):
     """``log phi(key)`` in segment ``s`` from arrays already bound to locals: one load from the dense table
     if ``dense_bits >= 0``, else :func:`_sparse_factor`."""
     if dense_bits >= 0:
         return dense[(s << dense_bits) | key]
-    return _sparse_factor(keys, logp, seg_off, backoff, bseg, n_inner, s, key)
+    return _sparse_factor(keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, s, key)
 
 
 @nb.njit(cache=True, inline="always")
@@ -128,7 +170,8 @@ def _backoff(lp):
 def sparse_key_log_factor(lp, s, key):
     """``log phi(key)`` in segment ``s`` from the sorted keys (fallback for an unseen border; ``-inf`` if
     absent)."""
-    return _factor(lp.dense, -1, lp.keys, lp.logp, lp.seg_off, _backoff(lp), lp.border_seg, lp.n_inner, s, key)
+    bo, bseg = _backoff(lp), lp.border_seg
+    return _factor(lp.dense, -1, lp.keys, lp.logp, lp.seg_off, bo, bseg, lp.n_inner, lp.b_start, lp.b_bits, s, key)
 
 
 @nb.njit(cache=True, inline="always")
@@ -136,7 +179,18 @@ def key_log_factor(lp, s, key):
     """``log phi(key)`` in segment ``s``: one load from the dense table when there is one, else
     :func:`sparse_key_log_factor`."""
     return _factor(
-        lp.dense, lp.dense_bits, lp.keys, lp.logp, lp.seg_off, _backoff(lp), lp.border_seg, lp.n_inner, s, key
+        lp.dense,
+        lp.dense_bits,
+        lp.keys,
+        lp.logp,
+        lp.seg_off,
+        _backoff(lp),
+        lp.border_seg,
+        lp.n_inner,
+        lp.b_start,
+        lp.b_bits,
+        s,
+        key,
     )
 
 
@@ -272,7 +326,7 @@ def tile_patch_factors(lp, nt, ts, cands, n, out):
     most ``2^shared`` lookups per update, however many candidates there are."""
     _bit_of, _touch, base, seg, pr_off, pr_pb, pr_wb, memo_off, memo = ts
     dense, db, keys, logp, seg_off = lp.dense, lp.dense_bits, lp.keys, lp.logp, lp.seg_off
-    backoff, bseg, n_inner = _backoff(lp), lp.border_seg, lp.n_inner
+    backoff, bseg, n_inner, b_start, b_bits = _backoff(lp), lp.border_seg, lp.n_inner, lp.b_start, lp.b_bits
     for j in range(n):
         s = out[j]
         if s == -np.inf:
@@ -290,10 +344,10 @@ def tile_patch_factors(lp, nt, ts, cands, n, out):
             if mo >= 0:
                 v = memo[mo + sub]
                 if v != v:
-                    v = _factor(dense, db, keys, logp, seg_off, backoff, bseg, n_inner, seg[q], key)
+                    v = _factor(dense, db, keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, seg[q], key)
                     memo[mo + sub] = v
             else:
-                v = _factor(dense, db, keys, logp, seg_off, backoff, bseg, n_inner, seg[q], key)
+                v = _factor(dense, db, keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, seg[q], key)
             s += v
             if s == -np.inf:
                 break
@@ -390,9 +444,7 @@ def tile_candidates(lp, t, patch, pinned, m, cands, cand_lp):
     Li = lp.n_inner
     border = key >> Li
     s = lp.t_seg[t]
-    a, b = seg_off[s], seg_off[s + 1]
-    lo = _lower(keys, a, b, border << Li)
-    hi = _lower(keys, a, b, (border + 1) << Li)
+    lo, hi = border_range(seg_off, keys, lp.b_start, lp.b_bits, Li, s, border)
     if lo == hi and _backoff(lp) >= 0:
         lo, hi = seg_off[lp.fallback], seg_off[lp.fallback + 1]
     fill = lp.t_fill[t]
@@ -511,6 +563,9 @@ def tiles(
         back_cdf=np.ascontiguousarray(back_cdf if border_seg >= 0 else _F, np.float64),
     )
     Lw = len(w_dr)
+    B = Lw - int(n_inner)
+    if B <= BORDER_INDEX_MAX_BITS and (len(seg_keys) << B) <= BORDER_INDEX_MAX_ENTRIES:
+        bundle = bundle._replace(b_start=border_index(bundle.keys, seg_off, int(n_inner), B), b_bits=B)
     if Lw <= DENSE_MAX_BITS and (len(seg_keys) << Lw) <= DENSE_MAX_ENTRIES:
         bundle = bundle._replace(dense=dense_factor_table(bundle), dense_bits=Lw)
     return bundle
@@ -529,13 +584,16 @@ def tiles_patch_weights(lp, patch, m, cands, n, out, ts):
 @nb.njit(cache=True)
 def tile_candidate_weights(lp, patch, m, cands, n, t, cand_lp, out, ts):
     """The weights of the candidates of a patch: for a tile ``t >= 0``, its own factor (read with the
-    candidates, ``cand_lp``) plus those of its neighbours whose windows hold patch cells; else
+    candidates, ``cand_lp``) plus those of its neighbours whose windows hold patch cells (none when the
+    windows have no border, ``pad = 0``: the patch tables of Section 5.2.2); else
     :func:`tiles_patch_weights`."""
     if t < 0:
         tiles_patch_weights(lp, patch, m, cands, n, out, ts)
         return
     for j in range(n):
         out[j] = cand_lp[j]
+    if lp.pad_r == 0 and lp.pad_c == 0:
+        return  # windows without a border: no other tile's window holds a cell of tile t
     nt = tile_patch_setup(lp, patch, m, t, ts)
     tile_patch_factors(lp, nt, ts, cands, n, out)
 
