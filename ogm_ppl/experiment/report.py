@@ -122,6 +122,16 @@ def markdown(result) -> str:
                 f"{_f(m['recall'])} | {_f(m.get('auc'))} | {_f(m.get('max_precision'))} | "
                 f"{_f(t.get('best_f1'))} | {_f(t.get('auc'))} |"
             )
+        ds0 = next(d for d in spec.datasets if d.condition == cond)
+        b = ds0.params.get("benchmark")
+        if ds0.kind in ("log", "bag") and b:
+            unseen = "occupied" if b["prior"] > b["threshold"] else "free"
+            lines += [
+                "",
+                f"Benchmark: traditional OGM ({b['delta']}) from all readings, occupied where p > {b['threshold']:g}. "
+                f"Cells no reading reached keep the prior p = {b['prior']:g} and so count as *{unseen}* in it "
+                "(the thesis's rule); the near-mapped mask holds such cells next to mapped ones.",
+            ]
         lines.append("")
     if sec:
         lines += [

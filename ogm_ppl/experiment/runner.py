@@ -20,8 +20,10 @@ import logging
 import os
 import shutil
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -45,7 +47,7 @@ class ExperimentError(RuntimeError):
 class Task:
     id: str
     kind: str  # base | dataset | run | score
-    fn: object
+    fn: Callable[..., Any]
     args: tuple
     kwargs: dict
     deps: list
