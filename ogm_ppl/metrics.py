@@ -30,6 +30,7 @@ __all__ = [
     "roc_auc",
     "near_mapped_mask",
     "nll_bits",
+    "saturated_cells",
     "brier_score",
     "expected_calibration_error",
     "Reliability",
@@ -186,6 +187,16 @@ def nll_bits(estimate, truth, mask=None, eps: float = 1e-6) -> float:
         return float("nan")
     q = np.clip(est, eps, 1 - eps)
     return float(-np.mean(np.where(tru, np.log2(q), np.log2(1 - q))))
+
+
+def saturated_cells(estimate, mask=None, eps: float = 1e-6) -> int:
+    """How many cells (of ``mask``) have a probability within ``eps`` of 0 or 1: *saturated* marginals, the
+    ones whose mistakes cost the full ``log2(1/eps)`` bits of :func:`nll_bits`. A map whose scored cells are
+    mostly saturated is near-binary: its threshold curves (best F1, AUC) say little about calibration."""
+    q = np.asarray(estimate, dtype=np.float64).ravel()
+    if mask is not None:
+        q = q[np.asarray(mask, dtype=bool).ravel()]
+    return int(((q <= eps) | (q >= 1 - eps)).sum())
 
 
 def brier_score(estimate, truth, mask=None) -> float:

@@ -204,3 +204,12 @@ def test_reliability_refuses_bad_input_and_an_empty_mask_is_nan():
         reliability([0.2], [True], bins=0)
     r = reliability([0.2, 0.7], [False, True], mask=[False, False])
     assert r.count.sum() == 0 and math.isnan(r.ece)
+
+
+def test_saturated_cells_counts_marginals_within_eps_of_0_or_1():
+    from ogm_ppl.metrics import saturated_cells
+
+    q = np.array([0.0, 1e-7, 0.5, 1 - 1e-7, 1.0, 0.3])
+    assert saturated_cells(q) == 4
+    assert saturated_cells(q, mask=np.array([1, 0, 1, 0, 0, 1], bool)) == 1
+    assert saturated_cells(q, eps=1e-8) == 2

@@ -46,6 +46,8 @@ def _pool_block(blocks: list[dict]) -> dict:
             "fn": fn.tolist(),
         },
     }
+    if all("saturated" in b for b in blocks):
+        d["saturated"] = int(sum(b["saturated"] for b in blocks))
     for key in ("auc", "nll_bits", "brier", "ece"):
         if key in blocks[0]:
             vals = [b[key] for b in blocks]
@@ -122,6 +124,18 @@ def markdown(result) -> str:
                 f"{_f(m['recall'])} | {_f(m.get('auc'))} | {_f(m.get('max_precision'))} | "
                 f"{_f(t.get('best_f1'))} | {_f(t.get('auc'))} |"
             )
+        sat = [
+            (p["algorithm"], p["mask"]["saturated"] / p["mask"]["cells"])
+            for p in rows
+            if p["mask"].get("saturated") is not None and p["mask"]["cells"]
+        ]
+        if sat:
+            lines += [
+                "",
+                "Saturated marginals (within 1e-6 of 0 or 1) on the mask: "
+                + ", ".join(f"{a} {100 * v:.1f} %" for a, v in sat)
+                + ". Where most cells are saturated a map is near-binary: its F1 / AUC say little about calibration.",
+            ]
         ds0 = next(d for d in spec.datasets if d.condition == cond)
         b = ds0.params.get("benchmark")
         if ds0.kind in ("log", "bag") and b:

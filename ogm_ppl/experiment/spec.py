@@ -17,7 +17,8 @@ Tables (every key optional unless marked *required*; defaults in brackets)::
       log:              path (*required*; relative to the spec file; ~ and $VARS expanded),
                         reader [{max_usable_range = 20.0}] (read_carmen options), resolution [0.05],
                         extent [x0, y0, width, height] metres (else the log's extent + margin [1.0]),
-                        sigma_cells [3.0] (the models' range noise), pose_fraction [1.0], beam_step [1],
+                        sigma_cells [3.0] (the models' range noise), pose_fraction [1.0], beam_step [1]
+                        or beam_increment_deg (the same as a multiple of the log's increment),
                         benchmark [{delta = "haehnel", threshold = 0.20, prior = 0.5}]
       bag:              a ROS bag (ogm_ppl.datasets.read_bag): path (*required*; a .bag file or a ROS 2 bag
                         folder / .db3 / .mcap), scan_topic (*required*), pose_topic or tf = true (one is
@@ -426,7 +427,12 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
         p["margin"] = t.get("margin", "float", 1.0, lo=0)
         p["sigma_cells"] = t.get("sigma_cells", "float", 3.0, lo=0, lo_open=True)
         p["pose_fraction"] = t.get("pose_fraction", "float", 1.0, sweep=True, lo=0, lo_open=True, hi=1)
-        p["beam_step"] = t.get("beam_step", "int", 1, sweep=True, lo=1)
+        if t.has("beam_increment_deg"):
+            if t.has("beam_step"):
+                t.fail("beam_increment_deg", "give beam_step or beam_increment_deg, not both")
+            p["beam_step"] = _steps_for_increment(t, kind, p)
+        else:
+            p["beam_step"] = t.get("beam_step", "int", 1, sweep=True, lo=1)
         bt = _Table(source, f"{t.where}.benchmark", t.raw("benchmark", {}))
         p["benchmark"] = {
             "delta": _check_delta(bt, "delta", "haehnel"),
@@ -459,6 +465,48 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
             )
         )
     return out
+
+
+def _log_increment_deg(t: _Table, kind: str, p: dict) -> float:
+    """The angular increment (degrees) between neighbouring beams of the log or bag of a dataset entry, read
+    with the entry's reader options; refused (naming ``path``) if the scans have no single increment."""
+    try:
+        if kind == "bag":
+            from ogm_ppl.datasets.rosbag import bag_info
+
+            info = bag_info(p["path"], p["bag"]["scan_topic"])
+            incs = np.abs(np.degrees(np.asarray(info["angle_increment"], dtype=np.float64)))
+        else:
+            from ogm_ppl.datasets import read_carmen
+
+            a = read_carmen(p["path"], **p["reader"]).scans.angles
+            incs = np.abs(np.degrees(np.diff(np.atleast_2d(a), axis=1))).ravel()
+    except (OSError, ValueError) as e:
+        t.fail("path", f"cannot read the beam increment for beam_increment_deg ({type(e).__name__}: {e})")
+    if incs.size == 0:
+        t.fail("beam_increment_deg", "the scans have one beam each: there is no increment to thin")
+    inc = float(np.median(incs))
+    if not (inc > 0 and np.allclose(incs, inc, rtol=1e-3, atol=1e-9)):
+        t.fail("beam_increment_deg", f"the scans' beams are not evenly spaced ({incs.min():g}-{incs.max():g} deg)")
+    return inc
+
+
+def _steps_for_increment(t: _Table, kind: str, p: dict):
+    """``beam_step`` for ``beam_increment_deg`` (a number or a sweep): the multiple of the log's increment,
+    within 1 %; refused naming the nearest increment the log allows otherwise."""
+    wanted = t.get("beam_increment_deg", "float", sweep=True, lo=0, lo_open=True)
+    inc = _log_increment_deg(t, kind, p)
+    steps = []
+    for v in np.atleast_1d(wanted):
+        k = round(float(v) / inc)
+        if k < 1 or abs(k * inc - v) > 0.01 * v:
+            near = max(k, 1) * inc
+            t.fail(
+                "beam_increment_deg",
+                f"{v:g} degrees is not a multiple of the scans' {inc:g}-degree increment (nearest: {near:g})",
+            )
+        steps.append(k)
+    return steps if isinstance(wanted, list) else steps[0]
 
 
 def _bag_keys(t: _Table, path: Path) -> dict:

@@ -399,6 +399,7 @@ def run_score(ds, alg, metrics, output, out: str | Path, h: str, _deps=None) -> 
             "threshold": float(c.thresholds[i]),
             "precision": float(c.precision[i]),
             "recall": float(c.recall[i]),
+            "saturated": M.saturated_cells(q, m),
             "curve": {
                 "thresholds": c.thresholds.tolist(),
                 "precision": c.precision.tolist(),

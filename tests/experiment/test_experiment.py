@@ -381,3 +381,27 @@ def test_unreachable_scheduler_fails_within_seconds(tmp_path):
     with pytest.raises(ConnectionError, match=rf"127\.0\.0\.1:{port}"):
         run_experiment(parse_spec(tiny(), "tiny.toml"), tmp_path, scheduler=f"tcp://127.0.0.1:{port}", progress=False)
     assert time.monotonic() - t0 < SCHEDULER_TIMEOUT_S + 10
+
+
+def test_beam_increment_in_degrees_is_the_multiple_of_the_logs(room_bag):
+    from ogm_ppl.datasets import read_carmen
+
+    log_path, bag_path = room_bag
+    a = read_carmen(log_path, max_usable_range=20.0).scans.angles
+    inc = float(np.degrees(np.diff(np.atleast_2d(a), axis=1)).mean())
+    for kind_entry in ({}, {"pose_topic": "/odom"}):
+        d = _bag_spec(log_path, bag_path, **kind_entry)
+        if not kind_entry:
+            d["datasets"] = d["datasets"][:1]
+        for ds in d["datasets"]:
+            ds["beam_increment_deg"] = [2 * inc, 4 * inc]
+        spec = parse_spec(d, "inc.toml")
+        assert sorted({ds.params["beam_step"] for ds in spec.datasets}) == [2, 4]
+    d = _bag_spec(log_path, bag_path, pose_topic="/odom")
+    d["datasets"] = d["datasets"][:1]
+    d["datasets"][0]["beam_increment_deg"] = 2.5 * inc
+    with pytest.raises(SpecError, match=r"beam_increment_deg: .* not a multiple of the scans' .*-degree increment"):
+        parse_spec(d, "inc.toml")
+    d["datasets"][0]["beam_step"] = 2
+    with pytest.raises(SpecError, match="beam_step or beam_increment_deg, not both"):
+        parse_spec(d, "inc.toml")

@@ -9,8 +9,9 @@ import pytest
 PKG = Path(__file__).resolve().parents[2] / "ogm_ppl"
 
 # rank of each inference part: imports must go to a lower rank (or stay inside the part)
-# (offline patch maps condition on the MAP map; MCMC starts from a log-odds map and may propose from a guide)
-RANK = {"_kernels": 0, "tiling": 1, "log_odds": 2, "exact": 2, "patch_map": 3, "variational": 4, "mcmc": 5}
+# (offline patch maps condition on the MAP map; MCMC starts from a log-odds map and may propose from a guide;
+# online maps run the MCMC sweeps on a growing model)
+RANK = {"_kernels": 0, "tiling": 1, "log_odds": 2, "exact": 2, "patch_map": 3, "variational": 4, "mcmc": 5, "online": 6}
 # below inference: may not import ogm_ppl.inference, datasets, experiment or the CLI
 LOWER = ("models", "priors", "grid", "raycast", "scans", "sensors", "posterior", "metrics", "_raycast_kernels")
 

@@ -100,7 +100,7 @@ def _check_range(delta: DeltaFamily, F_cells: float, where: str) -> None:
     """The shared fitted-setting check (range only), warning from the caller's caller."""
     import warnings
 
-    from ogm_ppl.inference.variational.setting_fit import check_delta_setting
+    from ogm_ppl.models.delta_setting import check_delta_setting
 
     if not (math.isfinite(F_cells) and F_cells > 0):
         return
