@@ -36,15 +36,15 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "experiments"))
 
 import numpy as np  # noqa: E402
-from calibration import choose_window  # noqa: E402
+from calibration import _crop as calibration_crop  # noqa: E402
+from calibration import make_scene  # noqa: E402
 
-from ogm_ppl import GaussianRange, Grid, OccupancyModel, raycast  # noqa: E402
+from ogm_ppl import GaussianRange, OccupancyModel  # noqa: E402
 from ogm_ppl.datasets import floorplans as fp  # noqa: E402
-from ogm_ppl.datasets.stop_and_scan import stop_and_scan  # noqa: E402
 from ogm_ppl.experiment.headline import HEADLINE_PRIOR_FORMAT  # noqa: E402
 from ogm_ppl.inference import PatchGibbs, RunningStats, evidence_grid, run_gibbs  # noqa: E402
 from ogm_ppl.io import atomic_write_text  # noqa: E402
-from ogm_ppl.metrics import near_mapped_mask, prediction_scores  # noqa: E402
+from ogm_ppl.metrics import prediction_scores  # noqa: E402
 from ogm_ppl.models import delta_by_name  # noqa: E402
 from ogm_ppl.priors.learn import count_tables  # noqa: E402
 from ogm_ppl.priors.named import prior_by_name  # noqa: E402
@@ -70,32 +70,18 @@ def split_names(corpus: str) -> tuple[list[str], list[str]]:
 
 def validation_scenes(corpus: str, names: list[str], args) -> list[dict]:
     """The first ``args.plans`` validation plans with at least 200 free cells in their window, each with its
-    simulated sparse dataset, rays and near-mapped mask."""
+    simulated sparse dataset, rays and near-mapped mask (the calibration experiment's scene)."""
     scenes: list[dict] = []
     for name in names:
         if len(scenes) == args.plans:
             break
         p = fp.load_plan(corpus, name)
-        r0, c0 = choose_window(p.occupancy, p.known, args.window)
-        h, w = min(args.window, p.occupancy.shape[0]), min(args.window, p.occupancy.shape[1])
-        truth = p.occupancy[r0 : r0 + h, c0 : c0 + w].copy()
-        known = p.known[r0 : r0 + h, c0 : c0 + w].copy()
-        if (known & ~truth).sum() < 200:
+        t = calibration_crop(corpus, name, p.occupancy, p.known, p.resolution or 0.05, args.window)
+        if (t.known & ~t.truth).sum() < 200:
             continue
-        grid = Grid(truth.shape, resolution=p.resolution or 0.05)
-        data = stop_and_scan(
-            truth,
-            grid,
-            num_poses=args.poses,
-            beams=args.beams,
-            max_range_cells=args.range_cells,
-            sigma_cells=args.sigma,
-            seed=args.seed,
-        )
-        rays = raycast(grid, data.scans)
-        near = near_mapped_mask(rays.reached().reshape(grid.shape), 10.0) & known
-        scene = {"plan": name, "window": [r0, c0, h, w], "truth": truth, "grid": grid, "rays": rays, "near": near}
-        scenes.append(scene)
+        sc = make_scene(t, args)
+        near = sc.masks["near"].reshape(sc.grid.shape)
+        scenes.append({"plan": t.plan, "truth": t.truth, "grid": sc.grid, "rays": sc.rays, "near": near})
     if len(scenes) < args.plans:
         raise SystemExit(f"only {len(scenes)} of the {args.plans} validation plans asked for have a usable window")
     return scenes
