@@ -568,31 +568,8 @@ def _assemble(path, num_lines, bad, skipped, params, geom, parsed, settings) -> 
             mr = float(finite_thr.max())
         else:
             mr = float(np.nextafter(max(float(ranges[present].max()), settings["min_range"]), np.inf))
-    if settings["no_return"] == "drop":
-        valid &= ~no_ret
-    else:
-        ranges = np.where(no_ret, mr, ranges)
-    if u is not None:
-        if settings["usable_range_rule"] == "drop":
-            valid &= ~beyond
-        else:
-            ranges = np.where(beyond, mr, ranges)
-    below = valid & (ranges < settings["min_range"])
-    keep = _kept_scans(len(nos), settings["pose_step"], settings["pose_fraction"])
-    sub = (keep, slice(None, None, settings["beam_step"]))
-    poses, nos, ts = poses[keep], nos[keep], ts[keep]
-    angles, ranges, valid, present, no_ret, beyond, below = (
-        a[sub] for a in (angles, ranges, valid, present, no_ret, beyond, below)
-    )
-    scans = Scans(poses, angles, ranges, mr, over_range="max", valid=valid, min_range=settings["min_range"])
-    counts = {
-        "beams": int(present.sum()),
-        "valid": scans.num_valid,
-        "no_return": int(no_ret.sum()),
-        "beyond_usable": int(beyond.sum()),
-        "below_min": int(below.sum()),
-        "max_range_readings": int(scans.is_max.sum()),
-    }
+    scans, counts, keep = beam_rules(poses, angles, ranges, present, valid, no_ret, beyond, None, mr, settings)
+    nos, ts = nos[keep], ts[keep]
     settings = dict(
         settings,
         **geom,
@@ -606,6 +583,43 @@ def _assemble(path, num_lines, bad, skipped, params, geom, parsed, settings) -> 
 def _sentinel_band(top: float) -> float | None:
     """Lower end of the known FLASER sentinel band holding the log's largest reading, if any."""
     return next((lo for lo, hi in _SENTINEL_BANDS if lo - 1e-9 <= top <= hi + 1e-9), None)
+
+
+def beam_rules(poses, angles, ranges, present, valid, no_ret, beyond, below_msg, mr: float, settings: dict):
+    """The rules every scan reader applies after finding its no-return (``no_ret``) and beyond-usable
+    (``beyond``) beams, in this order: no-return beams dropped or read as max range ``mr``
+    (``settings["no_return"]``), beyond-usable ones likewise (``usable_range_rule``), readings below
+    ``min_range`` counted (with ``below_msg``, the beams a message itself marked too short), then the scans and
+    beams kept (``pose_step`` / ``pose_fraction``, ``beam_step``). Arrays are ``S x B``; returns ``(scans,
+    counts, keep)``: the :class:`~ogm_ppl.scans.Scans`, the beam counts of the kept scans and the kept scan
+    indices."""
+    if settings["no_return"] == "drop":
+        valid = valid & ~no_ret
+    else:
+        ranges = np.where(no_ret, mr, ranges)
+    if settings["max_usable_range"] is not None:
+        if settings["usable_range_rule"] == "drop":
+            valid = valid & ~beyond
+        else:
+            ranges = np.where(beyond, mr, ranges)
+    below = valid & (ranges < settings["min_range"])
+    if below_msg is not None:
+        below = below | below_msg
+    keep = _kept_scans(len(poses), settings["pose_step"], settings["pose_fraction"])
+    sub = (keep, slice(None, None, settings["beam_step"]))
+    angles, ranges, valid, present, no_ret, beyond, below = (
+        a[sub] for a in (angles, ranges, valid, present, no_ret, beyond, below)
+    )
+    scans = Scans(poses[keep], angles, ranges, mr, over_range="max", valid=valid, min_range=settings["min_range"])
+    counts = {
+        "beams": int(present.sum()),
+        "valid": scans.num_valid,
+        "no_return": int(no_ret.sum()),
+        "beyond_usable": int(beyond.sum()),
+        "below_min": int(below.sum()),
+        "max_range_readings": int(scans.is_max.sum()),
+    }
+    return scans, counts, keep
 
 
 def _kept_scans(S: int, pose_step: int, pose_fraction: float | None) -> np.ndarray:

@@ -59,7 +59,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ogm_ppl.datasets.carmen import ScanLog
+from ogm_ppl.datasets.carmen import ScanLog, _kept_scans, beam_rules
 from ogm_ppl.scans import Scans
 
 __all__ = ["BagFormatError", "BagLog", "bag_info", "bag_kind", "bag_topics", "read_bag", "typestore", "write_bag"]
@@ -1033,7 +1033,7 @@ def read_bag(
         frames=sorted({s[2] for s in kept}),
     )
     scans_out, counts = _apply_rules(laser[keep_pose], angles, ranges, present, thr, rmin_msg, settings)
-    keep = _kept(S, pose_step, pose_fraction)
+    keep = _kept_scans(S, pose_step, pose_fraction)
     counts = {"scans_read": len(scans), "no_pose": int(len(scans) - S), "pose_samples": len(pose_stamps), **counts}
     return BagLog(
         scans_out,
@@ -1051,14 +1051,6 @@ def read_bag(
     )
 
 
-def _kept(S: int, pose_step: int, pose_fraction: float | None) -> np.ndarray:
-    """Indices of the scans kept (the rule of :meth:`Scans.subsample` and ``read_carmen``)."""
-    if pose_fraction is None:
-        return np.arange(0, S, pose_step)
-    n = max(1, round(S * pose_fraction))
-    return np.unique(np.floor(np.arange(n) * (S / n)).astype(np.int64))
-
-
 def _apply_rules(poses, angles, ranges, present, thr, rmin_msg, st) -> tuple[Scans, dict[str, int]]:
     """The no-return, usable-range, min-range and subsampling rules, in the order ``read_carmen``
     applies them; returns the scans and the beam counts of the kept scans."""
@@ -1073,31 +1065,7 @@ def _apply_rules(poses, angles, ranges, present, thr, rmin_msg, st) -> tuple[Sca
     mr = st["max_range"]
     if mr is None:
         mr = float(u) if u is not None else float(thr.max())
-    if st["no_return"] == "drop":
-        valid &= ~no_ret
-    else:
-        ranges = np.where(no_ret, mr, ranges)
-    if u is not None:
-        if st["usable_range_rule"] == "drop":
-            valid &= ~beyond
-        else:
-            ranges = np.where(beyond, mr, ranges)
-    below = below_msg | (valid & (ranges < st["min_range"]))
-    keep = _kept(len(poses), st["pose_step"], st["pose_fraction"])
-    sub = (keep, slice(None, None, st["beam_step"]))
-    poses = poses[keep]
-    angles, ranges, valid, present, no_ret, beyond, below = (
-        a[sub] for a in (angles, ranges, valid, present, no_ret, beyond, below)
-    )
-    scans = Scans(poses, angles, ranges, mr, over_range="max", valid=valid, min_range=st["min_range"])
-    counts = {
-        "beams": int(present.sum()),
-        "valid": scans.num_valid,
-        "no_return": int(no_ret.sum()),
-        "beyond_usable": int(beyond.sum()),
-        "below_min": int(below.sum()),
-        "max_range_readings": int(scans.is_max.sum()),
-    }
+    scans, counts, _ = beam_rules(poses, angles, ranges, present, valid, no_ret, beyond, below_msg, mr, st)
     return scans, counts
 
 
