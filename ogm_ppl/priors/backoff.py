@@ -46,7 +46,7 @@ from pathlib import Path
 import numpy as np
 
 from ogm_ppl.priors.compiled import tiles
-from ogm_ppl.priors.local import LocalMapPrior, grid_shape, tiles_log_prob, tiling
+from ogm_ppl.priors.local import LocalMapPrior, grid_shape, table_occupancy, tiles_log_prob, tiling
 from ogm_ppl.priors.patch_table import _patch_hw
 
 __all__ = [
@@ -331,9 +331,7 @@ class BackoffBorderPrior(LocalMapPrior):
         # the counted inner patches' cell occupancy (as BorderPatchPrior's): the threshold of the "ogm"
         # initial map (ogm_ppl.inference.mcmc.kernel.initial_map), which otherwise falls back to 0.5 and
         # starts every unobserved cell (a map's solid outer border, wall interiors) free
-        cnt = np.asarray(counts, dtype=np.float64).ravel()
-        ones = np.array([bin(int(x)).count("1") for x in np.asarray(inner_codes).astype(np.int64).ravel()])
-        self.mean_occupancy = float((cnt * ones).sum() / (cnt.sum() * Li)) if cnt.sum() > 0 else 0.5
+        self.mean_occupancy = table_occupancy(inner_codes, counts, Li)
 
     def __repr__(self) -> str:
         return f"BackoffBorderPrior(inner={self.inner}, borders={len(self.border_codes)}, kappa={self.kappa:.3g})"

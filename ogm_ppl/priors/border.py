@@ -27,7 +27,7 @@ from __future__ import annotations
 import numpy as np
 
 from ogm_ppl.priors.compiled import tiles
-from ogm_ppl.priors.local import LocalMapPrior, grid_shape, tiles_log_prob, tiling
+from ogm_ppl.priors.local import LocalMapPrior, grid_shape, table_occupancy, tiles_log_prob, tiling
 from ogm_ppl.priors.patch_table import _patch_hw
 
 __all__ = ["BorderPatchPrior"]
@@ -126,9 +126,7 @@ class BorderPatchPrior(LocalMapPrior):
         self.border_codes = borders
         self.row_offsets = np.concatenate([[0], np.cumsum(np.bincount(binv))]).astype(np.int64)
         self.inner_codes = keys & ((np.int64(1) << Li) - 1)
-        self.mean_occupancy = float(
-            (cnt * np.array([bin(int(x)).count("1") for x in self.inner_codes])).sum() / (cnt.sum() * Li)
-        )
+        self.mean_occupancy = table_occupancy(self.inner_codes, cnt, Li)
 
     def __repr__(self) -> str:
         return f"BorderPatchPrior(inner={self.inner}, borders={self.num_borders}, cells={self.num_cells})"

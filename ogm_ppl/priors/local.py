@@ -23,7 +23,19 @@ from ogm_ppl.priors.base import MapPrior
 from ogm_ppl.priors.compiled import CompiledPrior, patch_prior_batch, prior_gibbs_sweeps
 from ogm_ppl.priors.compiled.tiles import tiles_log_prob_batch
 
-__all__ = ["LocalMapPrior", "grid_shape", "tiles_log_prob", "tiling"]
+__all__ = ["LocalMapPrior", "grid_shape", "table_occupancy", "tiles_log_prob", "tiling"]
+
+
+def table_occupancy(codes, weights, L: int) -> float:
+    """The cell occupancy of a table of ``L``-cell patches: ``sum_j w_j |c_j| / (L sum_j w_j)`` (``|c|`` the
+    set bits of code ``c``), i.e. the mean over the patch's cells of ``P(cell = 1)`` under the table's
+    weights (counts or probabilities); 0.5 for an empty table."""
+    c = np.asarray(codes, dtype=np.int64).ravel()
+    w = np.asarray(weights, dtype=np.float64).ravel()
+    if w.sum() <= 0:
+        return 0.5
+    ones = ((c[:, None] >> np.arange(L, dtype=np.int64)) & 1).sum(1)
+    return float((w * ones).sum() / (L * w.sum()))
 
 
 def grid_shape(shape) -> tuple[int, int, int]:

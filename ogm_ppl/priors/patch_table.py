@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from ogm_ppl.priors.compiled import tiles
-from ogm_ppl.priors.local import LocalMapPrior, grid_shape, tiles_log_prob, tiling
+from ogm_ppl.priors.local import LocalMapPrior, grid_shape, table_occupancy, tiles_log_prob, tiling
 
 __all__ = ["PatchTablePrior", "truncate_mass"]
 
@@ -120,7 +120,7 @@ class PatchTablePrior(LocalMapPrior):
         self._compiled = tiles(
             self.rows, self.cols, geo, L, self.patch, (0, 0), t_seg, np.zeros(len(t_seg), np.int64), seg_keys, seg_logp
         )
-        self.mean_occupancy = float((p * np.array([bin(int(x)).count("1") for x in c])).sum() / L)
+        self.mean_occupancy = table_occupancy(c, p, L)
 
     def __repr__(self) -> str:
         return f"PatchTablePrior(patch={self.patch}, configurations={len(self.codes)}, cells={self.num_cells})"
