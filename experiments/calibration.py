@@ -13,6 +13,10 @@ more than ``--max-support`` configurations (:func:`support`; the 5 x 5 tables of
 2 x 10^5) is skipped and listed. Traditional OGM with the fitted ``p21`` update is the baseline row (never-observed
 cells keep ``q = 0.5``).
 
+The priors: every registered kind, and ``KIND@cal`` beside each kind with a fitted tempering exponent (the
+prior raised to the power ``beta`` that ``experiments/fit_temper.py`` chose on validation plans of the
+training corpus by this protocol's unseen-cell NLL; :mod:`ogm_ppl.priors.named`).
+
 Scored cells: the near-mapped mask ``N`` (cells within 10 cells of a cell some ray reached, Fig. 6.16b) and its
 *unseen* cells ``U`` (cells of ``N`` no ray reached): NLL in bits per cell
 ``-1/|M| sum_k log2 q_k^{m_k} (1 - q_k)^{1 - m_k}``, ECE and the reliability diagram (10 equal-width bins),
@@ -343,12 +347,13 @@ def support(prior, patch: tuple[int, int] | None) -> int:
     return min(cap, 1 << L)
 
 
-def run_prior(scene: Scene, name: str, args, patch_override=None) -> dict:
-    """``C`` chains (:data:`STARTS`) under the prior ``name``; pooled marginals scored, split R-hat of the
-    unseen cells. Returns ``{"scores": {mask: ...}, "seconds", "patch", "rhat_below", "rhat_max", ...}``, or
-    ``{"skipped": reason}`` when one update would weigh more than ``args.max_support`` configurations."""
-    prior = prior_by_name(name, scene.grid.shape)
-    kind = name.partition(":")[0]
+def run_prior(scene: Scene, name: str, args, patch_override=None, tables=None) -> dict:
+    """``C`` chains (:data:`STARTS`) under the prior ``name`` (built from ``tables`` when given, else from the
+    shipped corpus); pooled marginals scored, split R-hat of the unseen cells. Returns
+    ``{"scores": {mask: ...}, "seconds", "patch", "rhat_below", "rhat_max", ...}``, or ``{"skipped": reason}``
+    when one update would weigh more than ``args.max_support`` configurations."""
+    prior = prior_by_name(name, scene.grid.shape, tables=tables)
+    kind = name.partition(":")[0].partition("@")[0]
     patch = patch_override[kind] if patch_override and kind in patch_override else default_patch(prior)
     n_support = support(prior, patch)
     if n_support > args.max_support:
@@ -386,17 +391,25 @@ def prior_names(kinds: Sequence[str], train: Sequence[str]) -> list[tuple[str, s
     already holds ``:CORPUS`` is kept), and the uniform ``independent`` (trained on nothing) once."""
     out: list[tuple[str, str | None]] = []
     for k in kinds:
-        if ":" in k:
-            out.append((k, k.partition(":")[2]))
+        base, at, mod = k.partition("@")
+        suffix = at + mod  # a tempering suffix (@BETA, @cal) goes after the corpus
+        if ":" in base:
+            out.append((k, base.partition(":")[2]))
             continue
-        if k == "independent":
+        if base == "independent" and not suffix:
             out.append(("independent", None))
-        out += [(f"{k}:{c}", c) for c in train]
+        out += [(f"{base}:{c}{suffix}", c) for c in train]
     return list(dict.fromkeys(out))
 
 
 def _row_key(r: dict) -> tuple:
     return (r["test"], r["plan"], r["prior_name"])
+
+
+def _kind_label(name: str) -> str:
+    """The kind of a prior name with its tempering suffix: ``border_bo:ipa@cal`` -> ``border_bo@cal``."""
+    base, at, mod = name.partition("@")
+    return base.partition(":")[0] + at + mod
 
 
 def _rows_for(test, t: TestMap, name, train, kernel, result) -> list[dict]:
@@ -406,7 +419,7 @@ def _rows_for(test, t: TestMap, name, train, kernel, result) -> list[dict]:
             "test": test,
             "train": train or "none",
             "plan": t.name,
-            "prior": name.partition(":")[0] if name != OGM_LABEL else "ogm",
+            "prior": _kind_label(name) if name != OGM_LABEL else "ogm",
             "prior_name": name,
             "kernel": kernel,
             "mask": mask,
@@ -586,7 +599,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--test", nargs="+", default=list(TEST_CORPORA), choices=TEST_CORPORA, help="test corpora")
     ap.add_argument("--train", nargs="+", default=None, help="training corpora of the tables (default: all shipped)")
-    ap.add_argument("--priors", nargs="+", default=None, help="prior kinds or names (default: every registered kind)")
+    ap.add_argument("--priors", nargs="+", default=None, help="prior kinds or names (default: every registered kind, and KIND@cal where fitted)")
     ap.add_argument("--plans", type=int, default=2, help="held-out maps per test corpus")
     ap.add_argument("--window", type=int, default=96, help="maps are cropped to this many cells a side")
     ap.add_argument("--generated-shape", type=int, default=160, help="side of the held-out generated maps")
@@ -616,8 +629,24 @@ def parse_args(argv=None) -> argparse.Namespace:
         args.priors = args.priors or ["independent", "mrf", "border"]
         args.train = args.train or ["houseexpo"]
     args.train = args.train or available_tables()
-    args.priors = args.priors or list(prior_kinds())
+    args.priors = args.priors or default_priors(args.train)
     return args
+
+
+def default_priors(train: Sequence[str]) -> list[str]:
+    """Every registered kind, then ``KIND@cal`` for each kind with a fitted tempering exponent on every
+    training corpus (:func:`~ogm_ppl.priors.named.load_temper_params`)."""
+    from ogm_ppl.priors.named import load_temper_params
+
+    kinds = list(prior_kinds())
+    fitted = None
+    for c in train:
+        try:
+            have = set(load_temper_params(c).beta)
+        except FileNotFoundError:
+            have = set()
+        fitted = have if fitted is None else fitted & have
+    return kinds + [f"{k}@cal" for k in kinds if k in (fitted or set())]
 
 
 def main(argv=None) -> dict:

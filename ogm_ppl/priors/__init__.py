@@ -22,6 +22,7 @@ from ogm_ppl.priors.named import (
 from ogm_ppl.priors.patch_table import PatchTablePrior
 from ogm_ppl.priors.pattern_field import PatternFieldPrior
 from ogm_ppl.priors.tables import PriorTables, available_tables, load_tables, tables_by_name
+from ogm_ppl.priors.tempered import TemperedPrior
 
 __all__ = [
     "BackoffBorderPrior",
@@ -37,6 +38,7 @@ __all__ = [
     "PatternFieldPrior",
     "PriorTables",
     "StencilPrior",
+    "TemperedPrior",
     "available_tables",
     "load_tables",
     "prior_by_name",

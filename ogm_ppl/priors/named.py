@@ -23,6 +23,13 @@ statistics are closest to the thesis's):
 ``field2:CORPUS``         the same at two scales (3 x 3 windows of the map and of its 2 x 2 OR-pooling)
 ========================  ==========================================================================
 
+**Tempering.** Any name takes a suffix ``@BETA`` (a number ``>= 0``) or ``@cal``: the prior raised to the power
+``beta`` (:class:`~ogm_ppl.priors.TemperedPrior`: every log-potential times ``beta``; ``beta < 1`` weakens the
+coupling, towards the uniform distribution over the prior's support). ``@cal`` reads the exponent fitted for
+the kind and corpus in ``ogm_ppl/fitted/temper_CORPUS.json`` (:func:`load_temper_params`; written by
+``experiments/fit_temper.py``, which chooses it on validation plans of the corpus's training split by the
+NLL of the cells no ray reached). ``border_bo:ipa@cal``, ``mrf:houseexpo@0.5``.
+
 The tables were learned on the corpus's *training* plans only, with the buildings of the real logs
 excluded (:data:`~ogm_ppl.datasets.floorplans.REAL_LOG_BUILDINGS`): evaluate on held-out plans or logs.
 
@@ -42,7 +49,11 @@ command line and dask workers to find it:
 
 from __future__ import annotations
 
+import json
+import math
 from collections.abc import Callable
+from dataclasses import dataclass, field
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -52,7 +63,17 @@ from ogm_ppl.priors.base import MapPrior
 if TYPE_CHECKING:
     from ogm_ppl.priors.tables import PriorTables
 
-__all__ = ["PRIOR_KINDS", "CorpusTables", "prior_by_name", "prior_kinds", "register_prior", "unregister_prior"]
+__all__ = [
+    "PRIOR_KINDS",
+    "TEMPER_FORMAT",
+    "CorpusTables",
+    "TemperParams",
+    "load_temper_params",
+    "prior_by_name",
+    "prior_kinds",
+    "register_prior",
+    "unregister_prior",
+]
 
 #: the kinds the library ships (the module docstring's table)
 PRIOR_KINDS: tuple[str, ...] = (
@@ -112,17 +133,95 @@ def _shape(shape) -> tuple[int, ...]:
 
 
 def prior_by_name(name: str, shape, tables: PriorTables | None = None) -> MapPrior:
-    """The prior called ``name`` (module docstring) over a grid of ``shape`` (a tuple or a ``Grid``).
+    """The prior called ``name`` (``KIND[:CORPUS][@BETA|@cal]``, module docstring) over a grid of ``shape``
+    (a tuple or a ``Grid``).
 
     Args:
-        tables: a :class:`~ogm_ppl.priors.tables.PriorTables` to use instead of the shipped corpus.
+        tables: a :class:`~ogm_ppl.priors.tables.PriorTables` to use instead of the shipped corpus (``@cal``
+            then needs the corpus in the name: the fitted exponent belongs to the shipped corpus's kind).
     """
     if not isinstance(name, str) or not name:
         raise ValueError(f"a prior name is a non-empty string, got {name!r}")
-    kind, _, corpus = name.partition(":")
+    base, at, modifier = name.partition("@")
+    kind, _, corpus = base.partition(":")
     if kind not in _FACTORIES:
         raise ValueError(f"unknown prior kind {kind!r} in {name!r}; kinds: {', '.join(prior_kinds())}")
-    return _FACTORIES[kind](_shape(shape), CorpusTables(corpus, tables))
+    beta = _exponent(name, kind, corpus, modifier, tables) if at else 1.0
+    prior = _FACTORIES[kind](_shape(shape), CorpusTables(corpus, tables))
+    if beta == 1.0:
+        return prior
+    from ogm_ppl.priors.tempered import TemperedPrior
+
+    return TemperedPrior(prior, beta)
+
+
+def _exponent(name: str, kind: str, corpus: str, modifier: str, tables) -> float:
+    """The tempering exponent of ``name``'s ``@`` suffix (a number ``>= 0``, or ``cal``: the fitted one)."""
+    if modifier == "cal":
+        if not corpus and tables is not None:
+            raise ValueError(f"{name!r}: '@cal' with your own tables needs the corpus in the name (KIND:CORPUS@cal)")
+        params = load_temper_params(corpus or DEFAULT_CORPUS)
+        if kind not in params.beta:
+            raise ValueError(
+                f"{name!r}: no fitted tempering exponent for kind {kind!r} on corpus {params.corpus!r} "
+                f"(fitted: {', '.join(sorted(params.beta)) or 'none'}); give one as @BETA"
+            )
+        return params.beta[kind]
+    try:
+        beta = float(modifier)
+    except ValueError:
+        raise ValueError(f"{name!r}: the '@' suffix is a tempering exponent (a number >= 0) or 'cal'") from None
+    if not (math.isfinite(beta) and beta >= 0.0):
+        raise ValueError(f"{name!r}: a tempering exponent must be finite and >= 0, got {modifier!r}")
+    return beta
+
+
+# ------------------------------------------------------------------ fitted tempering exponents
+TEMPER_FORMAT = "ogm_ppl.temper"
+_FITTED = Path(__file__).resolve().parents[1] / "fitted"
+
+
+@dataclass(frozen=True)
+class TemperParams:
+    """The fitted tempering exponent of each kind for one corpus (``beta[kind]``), with the validation scores
+    and provenance of the fit."""
+
+    corpus: str
+    beta: dict[str, float]
+    validation: dict = field(default_factory=dict)
+    provenance: dict = field(default_factory=dict)
+
+
+def load_temper_params(corpus: str, path=None) -> TemperParams:
+    """Read ``ogm_ppl/fitted/temper_<corpus>.json`` (or ``path``), validated; errors name the file.
+
+    The file: ``{"format": "ogm_ppl.temper", "format_version": 1, "corpus": ..., "beta": {kind: beta},
+    "validation": {...}, "provenance": {...}}`` with every ``beta`` finite and in ``[0, 1]``."""
+    p = Path(path) if path is not None else _FITTED / f"temper_{corpus}.json"
+    if not p.is_file():
+        raise FileNotFoundError(f"no fitted tempering exponents for corpus {corpus!r}: {p} does not exist")
+    try:
+        d = json.loads(p.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as e:
+        raise ValueError(f"tempering exponents {p}: not valid JSON ({e})") from e
+    if not isinstance(d, dict) or d.get("format") != TEMPER_FORMAT:
+        raise ValueError(f"tempering exponents {p}: format is not {TEMPER_FORMAT!r}")
+    if d.get("format_version") != 1:
+        raise ValueError(f"tempering exponents {p}: format_version {d.get('format_version')!r} is not 1")
+    if path is None and d.get("corpus") != corpus:
+        raise ValueError(f"tempering exponents {p}: corpus is {d.get('corpus')!r}, expected {corpus!r}")
+    beta = d.get("beta")
+    if not isinstance(beta, dict):
+        raise ValueError(f"tempering exponents {p}: 'beta' must be an object of kind -> exponent")
+    out: dict[str, float] = {}
+    for k, v in beta.items():
+        if not isinstance(v, (int, float)) or isinstance(v, bool) or not (math.isfinite(v) and 0.0 <= v <= 1.0):
+            raise ValueError(f"tempering exponents {p}: beta[{k!r}] must be a number in [0, 1], got {v!r}")
+        out[str(k)] = float(v)
+    for key in ("validation", "provenance"):
+        if not isinstance(d.get(key, {}), dict):
+            raise ValueError(f"tempering exponents {p}: {key!r} must be an object")
+    return TemperParams(str(d["corpus"]), out, d.get("validation", {}), d.get("provenance", {}))
 
 
 class CorpusTables:

@@ -7,7 +7,7 @@ coupled learned priors of Chapter 5).
           L(m) = \prod_n p(z_n \mid f_n(m)),
 
 the posterior at ``beta_p = beta_l = 1``. :func:`tempered_model` builds an
-:class:`~ogm_ppl.OccupancyModel` whose prior is :class:`TemperedPrior` (its compiled face is the bundle's
+:class:`~ogm_ppl.OccupancyModel` whose prior is :class:`~ogm_ppl.priors.TemperedPrior` (its compiled face is the bundle's
 ``tempered(beta_p)``: every log-potential times ``beta_p``) and whose likelihood table is ``beta_l`` times
 the model's (the table ``ll[r, f] = log p(z_r | f)`` is the only place the readings enter the compiled
 kernels, through :meth:`~ogm_ppl.OccupancyModel.ray_index`), so every kernel of
@@ -47,9 +47,9 @@ import torch
 from ogm_ppl.inference.mcmc.gibbs import CellGibbs, PatchGibbs
 from ogm_ppl.inference.mcmc.kernel import KernelStateError, MapKernel
 from ogm_ppl.models.occupancy import OccupancyModel
-from ogm_ppl.priors.base import MapPrior
+from ogm_ppl.priors.tempered import TemperedPrior, _scale_log
 
-__all__ = ["ParallelTempering", "TemperedPrior", "check_ladder", "geometric_ladder", "tempered_model"]
+__all__ = ["ParallelTempering", "check_ladder", "geometric_ladder", "tempered_model"]
 
 TEMPERS = ("prior", "likelihood", "both")
 SWAPS = ("even-odd", "all", "random")
@@ -63,83 +63,9 @@ def _check_exponent(beta, what: str) -> float:
     return b
 
 
-def _scale_log(x: torch.Tensor, beta: float) -> torch.Tensor:
-    """``beta * x`` where ``x`` is finite; ``+-inf`` kept (so ``beta = 0`` keeps the support)."""
-    return torch.where(torch.isfinite(x), x * beta, x)
-
-
-class TemperedPrior(MapPrior):
-    r"""``p~(m)^beta`` of a prior ``base``: ``log_prob``, ``log_prob_patch`` and ``cell_log_odds`` times
-    ``beta`` (``-inf`` kept; ``beta = 0``: uniform over the support), ``compiled()`` the bundle's
-    ``tempered(beta)``. ``outside_occupancy`` is the base prior's (it only enters the likelihood table).
-    ``log_prob`` is unnormalised unless ``beta = 1`` (normalisers never matter to the samplers)."""
-
-    def __init__(self, base: MapPrior, beta: float) -> None:
-        self.base = base
-        self.beta = _check_exponent(beta, "beta")
-        self.num_cells = base.num_cells
-        for attr in ("rows", "cols", "ndim", "shape"):
-            if hasattr(base, attr):
-                setattr(self, attr, getattr(base, attr))
-        self._bundle = None
-        self._bundle_ready = False
-
-    def __repr__(self) -> str:
-        return f"TemperedPrior({self.base!r}, beta={self.beta:g})"
-
-    def log_prob(self, maps: torch.Tensor) -> torch.Tensor:
-        return _scale_log(torch.as_tensor(self.base.log_prob(maps), dtype=torch.float64), self.beta)
-
-    def log_prob_patch(self, maps: torch.Tensor, cells: torch.Tensor, configs: torch.Tensor) -> torch.Tensor:
-        lp = torch.as_tensor(self.base.log_prob_patch(maps, cells, configs), dtype=torch.float64)
-        return _scale_log(lp, self.beta)
-
-    def outside_occupancy(self) -> float:
-        return self.base.outside_occupancy()
-
-    def cell_log_odds(self) -> torch.Tensor | None:
-        lo = self.base.cell_log_odds()
-        return None if lo is None else _scale_log(torch.as_tensor(lo, dtype=torch.float64), self.beta)
-
-    def compiled(self):
-        if not self._bundle_ready:
-            bundle = self.base.compiled()
-            if bundle is not None:
-                if not hasattr(bundle, "tempered"):
-                    raise TypeError(
-                        f"the compiled bundle {type(bundle).__name__} of {type(self.base).__name__} has no "
-                        "tempered(beta) method: it cannot be tempered"
-                    )
-                bundle = bundle.tempered(self.beta)
-            self._bundle, self._bundle_ready = bundle, True
-        return self._bundle
-
-    def sample(self, sample_shape=(), generator: torch.Generator | None = None, num_sweeps: int = 100):
-        """Maps from ``p~^beta``: the base prior's draws at ``beta = 1``; independent cells exactly;
-        otherwise ``num_sweeps`` single-cell Gibbs sweeps of the tempered bundle from uniform noise."""
-        if self.beta == 1.0:
-            return self.base.sample(sample_shape, generator=generator)
-        shape = torch.Size(sample_shape)
-        lo = self.cell_log_odds()
-        if lo is not None:
-            u = torch.rand(shape + (self.num_cells,), generator=generator, dtype=torch.float64)
-            return (u < torch.sigmoid(lo)).to(torch.float64)
-        bundle = self.compiled()
-        if bundle is None:
-            raise TypeError(f"TemperedPrior of {type(self.base).__name__} (no compiled face) cannot sample")
-        from ogm_ppl.priors.compiled import prior_gibbs_sweeps
-
-        B = int(np.prod(shape)) if len(shape) else 1
-        u = torch.rand((B, self.num_cells), generator=generator, dtype=torch.float64)
-        maps = np.ascontiguousarray((u < 0.5).numpy(), dtype=np.uint8)
-        seed = int(torch.randint(0, 2**31 - 1, (1,), generator=generator))
-        prior_gibbs_sweeps(bundle, maps, int(num_sweeps), seed)
-        return torch.from_numpy(maps.astype(np.float64)).reshape(*shape, self.num_cells)
-
-
 def tempered_model(model: OccupancyModel, beta_prior: float = 1.0, beta_lik: float = 1.0) -> OccupancyModel:
     r"""The model of ``pi_beta(m) ∝ p~(m)^beta_prior L(m)^beta_lik`` (module docstring): a shallow copy of
-    ``model`` with prior :class:`TemperedPrior` and likelihood table ``beta_lik * model.loglik_table``
+    ``model`` with prior :class:`~ogm_ppl.priors.TemperedPrior` and likelihood table ``beta_lik * model.loglik_table``
     (``-inf`` kept). ``beta_prior = beta_lik = 1`` returns ``model`` itself. Its ``log_joint`` is
     ``beta_prior log p~(m) + beta_lik log L(m)``; any kernel built on it samples ``pi_beta`` exactly."""
     bp = _check_exponent(beta_prior, "beta_prior")
