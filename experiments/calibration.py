@@ -599,7 +599,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--test", nargs="+", default=list(TEST_CORPORA), choices=TEST_CORPORA, help="test corpora")
     ap.add_argument("--train", nargs="+", default=None, help="training corpora of the tables (default: all shipped)")
-    ap.add_argument("--priors", nargs="+", default=None, help="prior kinds or names (default: every registered kind, and KIND@cal where fitted)")
+    ap.add_argument(
+        "--priors",
+        nargs="+",
+        default=None,
+        help="prior kinds or names (default: every kind, and KIND@cal where fitted)",
+    )
     ap.add_argument("--plans", type=int, default=2, help="held-out maps per test corpus")
     ap.add_argument("--window", type=int, default=96, help="maps are cropped to this many cells a side")
     ap.add_argument("--generated-shape", type=int, default=160, help="side of the held-out generated maps")

@@ -86,7 +86,7 @@ def validation_maps(corpus: str, names: list[str], args) -> list:
         if (t.known & ~t.truth).sum() >= 200:
             out.append(t)
     if len(out) < args.plans:
-        raise SystemExit(f"{corpus}: only {len(out)} of the {args.plans} validation plans asked for have a usable window")
+        raise SystemExit(f"{corpus}: only {len(out)} of the {args.plans} validation plans have a usable window")
     return out
 
 
@@ -115,7 +115,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument("--out", type=Path, default=None, help=f"folder (default {OUT_DEFAULT.relative_to(ROOT)})")
     ap.add_argument("--quick", action="store_true")
     ap.add_argument(
-        "--update", action="store_true", help="keep the other kinds of an existing file; refit only --kinds (same settings)"
+        "--update", action="store_true", help="keep the other kinds of an existing file; refit only --kinds"
     )
     args = ap.parse_args(argv)
     if any(not (0.0 <= b <= 1.0) for b in args.betas):

@@ -6,9 +6,9 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
 
-import fit_temper  # noqa: E402
+import fit_temper
 
-from ogm_ppl.priors.named import load_temper_params  # noqa: E402
+from ogm_ppl.priors.named import load_temper_params
 
 
 def test_quick_fit_round_trips(tmp_path):

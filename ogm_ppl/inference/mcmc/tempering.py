@@ -7,8 +7,8 @@ coupled learned priors of Chapter 5).
           L(m) = \prod_n p(z_n \mid f_n(m)),
 
 the posterior at ``beta_p = beta_l = 1``. :func:`tempered_model` builds an
-:class:`~ogm_ppl.OccupancyModel` whose prior is :class:`~ogm_ppl.priors.TemperedPrior` (its compiled face is the bundle's
-``tempered(beta_p)``: every log-potential times ``beta_p``) and whose likelihood table is ``beta_l`` times
+:class:`~ogm_ppl.OccupancyModel` whose prior is :class:`~ogm_ppl.priors.TemperedPrior` (its compiled face is
+the bundle's ``tempered(beta_p)``: every log-potential times ``beta_p``) and whose likelihood table is ``beta_l`` times
 the model's (the table ``ll[r, f] = log p(z_r | f)`` is the only place the readings enter the compiled
 kernels, through :meth:`~ogm_ppl.OccupancyModel.ray_index`), so every kernel of
 :mod:`~ogm_ppl.inference.mcmc.gibbs` samples ``pi_beta`` exactly, unchanged. ``-inf`` entries (a map the
