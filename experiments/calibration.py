@@ -81,7 +81,7 @@ from ogm_ppl.inference.mcmc.diagnostics import split_rhat
 from ogm_ppl.io import atomic_write_text
 from ogm_ppl.metrics import Reliability, near_mapped_mask, prediction_scores, reliability
 from ogm_ppl.models import delta_by_name
-from ogm_ppl.priors.named import prior_by_name, prior_kinds
+from ogm_ppl.priors.named import prior_by_name, prior_kinds, split_prior_name
 from ogm_ppl.priors.tables import FITTED_DIR, available_tables
 
 TEST_CORPORA: tuple[str, ...] = ("generated", "houseexpo", "ipa", "dungeon")
@@ -166,14 +166,16 @@ def heldout_maps(corpus: str, n: int, window: int, generated_shape: int = 160) -
     """The first ``n`` held-out maps of ``corpus`` (natural order of the held-out plans, real-log buildings
     left out; plans with fewer than 200 free cells in their window skipped), each cropped to ``window``.
     ``generated``: ``generate_map(KINDS[i % 4], (generated_shape,) * 2, seed=generated_seed(i))``."""
-    out: list[TestMap] = []
     if corpus == "generated":
-        for i in range(n):
-            kind = MAP_KINDS[i % len(MAP_KINDS)]
-            m = generate_map(kind, (generated_shape, generated_shape), seed=generated_seed(i), border=20)
-            out.append(_crop(corpus, f"{kind}/seed{generated_seed(i)}", m, np.ones_like(m), 0.05, window))
-        return out
+        return generated_windows(n, generated_shape, window, GENERATED_HELDOUT_SEED)
     names = fp.heldout_plans(corpus, exclude_buildings=tuple(fp.REAL_LOG_BUILDINGS))
+    return usable_windows(corpus, names, n, window)
+
+
+def usable_windows(corpus: str, names: Sequence[str], n: int, window: int) -> list[TestMap]:
+    """The first ``n`` plans of ``names`` (in order) whose chosen ``window`` holds at least 200 known free
+    cells, each cropped to it (:func:`choose_window`); fewer when the names run out."""
+    out: list[TestMap] = []
     for name in names:
         if len(out) == n:
             break
@@ -181,6 +183,17 @@ def heldout_maps(corpus: str, n: int, window: int, generated_shape: int = 160) -
         t = _crop(corpus, name, p.occupancy, p.known, p.resolution or 0.05, window)
         if (t.known & ~t.truth).sum() >= 200:
             out.append(t)
+    return out
+
+
+def generated_windows(n: int, shape: int, window: int, seed0: int) -> list[TestMap]:
+    """``n`` generated maps, map ``i`` = ``generate_map(KINDS[i % 4], (shape, shape), seed=seed0 + i)``,
+    cropped to ``window``."""
+    out: list[TestMap] = []
+    for i in range(n):
+        kind = MAP_KINDS[i % len(MAP_KINDS)]
+        m = generate_map(kind, (shape, shape), seed=seed0 + i, border=20)
+        out.append(_crop("generated", f"{kind}/seed{seed0 + i}", m, np.ones_like(m), 0.05, window))
     return out
 
 
@@ -353,7 +366,7 @@ def run_prior(scene: Scene, name: str, args, patch_override=None, tables=None) -
     ``{"scores": {mask: ...}, "seconds", "patch", "rhat_below", "rhat_max", ...}``, or ``{"skipped": reason}``
     when one update would weigh more than ``args.max_support`` configurations."""
     prior = prior_by_name(name, scene.grid.shape, tables=tables)
-    kind = name.partition(":")[0].partition("@")[0]
+    kind = split_prior_name(name)[0]
     patch = patch_override[kind] if patch_override and kind in patch_override else default_patch(prior)
     n_support = support(prior, patch)
     if n_support > args.max_support:
@@ -391,14 +404,13 @@ def prior_names(kinds: Sequence[str], train: Sequence[str]) -> list[tuple[str, s
     already holds ``:CORPUS`` is kept), and the uniform ``independent`` (trained on nothing) once."""
     out: list[tuple[str, str | None]] = []
     for k in kinds:
-        base, at, mod = k.partition("@")
-        suffix = at + mod  # a tempering suffix (@BETA, @cal) goes after the corpus
-        if ":" in base:
-            out.append((k, base.partition(":")[2]))
+        kind, corpus, at, mod = split_prior_name(k)
+        if corpus:
+            out.append((k, corpus))
             continue
-        if base == "independent" and not suffix:
+        if kind == "independent" and not at:
             out.append(("independent", None))
-        out += [(f"{base}:{c}{suffix}", c) for c in train]
+        out += [(f"{kind}:{c}{at}{mod}", c) for c in train]  # a tempering suffix goes after the corpus
     return list(dict.fromkeys(out))
 
 
@@ -408,8 +420,8 @@ def _row_key(r: dict) -> tuple:
 
 def _kind_label(name: str) -> str:
     """The kind of a prior name with its tempering suffix: ``border_bo:ipa@cal`` -> ``border_bo@cal``."""
-    base, at, mod = name.partition("@")
-    return base.partition(":")[0] + at + mod
+    kind, _, at, mod = split_prior_name(name)
+    return kind + at + mod
 
 
 def _rows_for(test, t: TestMap, name, train, kernel, result) -> list[dict]:

@@ -42,11 +42,10 @@ sys.path.insert(0, str(ROOT / "experiments"))
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
-from calibration import _crop, make_scene, run_prior  # noqa: E402
+from calibration import generated_windows, make_scene, run_prior, usable_windows  # noqa: E402
+from select_headline_prior import split_names  # noqa: E402
 
 from ogm_ppl.datasets import floorplans as fp  # noqa: E402
-from ogm_ppl.datasets.mapgen import KINDS as MAP_KINDS  # noqa: E402
-from ogm_ppl.datasets.mapgen import generate_map  # noqa: E402
 from ogm_ppl.io import atomic_write_text  # noqa: E402
 from ogm_ppl.priors.learn import count_tables  # noqa: E402
 from ogm_ppl.priors.named import TEMPER_FORMAT  # noqa: E402
@@ -61,30 +60,11 @@ VALIDATION_SEED = 70_000
 OUT_DEFAULT = ROOT / "ogm_ppl" / "fitted"
 
 
-def split_names(corpus: str) -> tuple[list[str], list[str]]:
-    """``(fit, validation)`` plan names of a plan corpus (``fit_backoff``'s split)."""
-    limit = 300 if corpus == "dungeon" else None
-    names = fp.training_plans(corpus, limit=limit)
-    return [n for i, n in enumerate(names) if i % 5 != 4], [n for i, n in enumerate(names) if i % 5 == 4]
-
-
 def validation_maps(corpus: str, names: list[str], args) -> list:
     """The first ``args.plans`` usable validation maps (calibration's ``TestMap``), cropped to ``args.window``."""
-    out = []
     if corpus == "generated":
-        for i in range(args.plans):
-            kind = MAP_KINDS[i % len(MAP_KINDS)]
-            seed = VALIDATION_SEED + i
-            m = generate_map(kind, (args.generated_shape,) * 2, seed=seed, border=20)
-            out.append(_crop(corpus, f"{kind}/seed{seed}", m, np.ones_like(m), 0.05, args.window))
-        return out
-    for name in names:
-        if len(out) == args.plans:
-            break
-        p = fp.load_plan(corpus, name)
-        t = _crop(corpus, name, p.occupancy, p.known, p.resolution or 0.05, args.window)
-        if (t.known & ~t.truth).sum() >= 200:
-            out.append(t)
+        return generated_windows(args.plans, args.generated_shape, args.window, VALIDATION_SEED)
+    out = usable_windows(corpus, names, args.plans, args.window)
     if len(out) < args.plans:
         raise SystemExit(f"{corpus}: only {len(out)} of the {args.plans} validation plans have a usable window")
     return out

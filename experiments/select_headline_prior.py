@@ -36,8 +36,7 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "experiments"))
 
 import numpy as np  # noqa: E402
-from calibration import _crop as calibration_crop  # noqa: E402
-from calibration import make_scene  # noqa: E402
+from calibration import make_scene, usable_windows  # noqa: E402
 
 from ogm_ppl import GaussianRange, OccupancyModel  # noqa: E402
 from ogm_ppl.datasets import floorplans as fp  # noqa: E402
@@ -72,13 +71,7 @@ def validation_scenes(corpus: str, names: list[str], args) -> list[dict]:
     """The first ``args.plans`` validation plans with at least 200 free cells in their window, each with its
     simulated sparse dataset, rays and near-mapped mask (the calibration experiment's scene)."""
     scenes: list[dict] = []
-    for name in names:
-        if len(scenes) == args.plans:
-            break
-        p = fp.load_plan(corpus, name)
-        t = calibration_crop(corpus, name, p.occupancy, p.known, p.resolution or 0.05, args.window)
-        if (t.known & ~t.truth).sum() < 200:
-            continue
+    for t in usable_windows(corpus, names, args.plans, args.window):
         sc = make_scene(t, args)
         near = sc.masks["near"].reshape(sc.grid.shape)
         scenes.append({"plan": t.plan, "truth": t.truth, "grid": sc.grid, "rays": sc.rays, "near": near})

@@ -72,6 +72,7 @@ __all__ = [
     "prior_by_name",
     "prior_kinds",
     "register_prior",
+    "split_prior_name",
     "unregister_prior",
 ]
 
@@ -140,10 +141,7 @@ def prior_by_name(name: str, shape, tables: PriorTables | None = None) -> MapPri
         tables: a :class:`~ogm_ppl.priors.tables.PriorTables` to use instead of the shipped corpus (``@cal``
             then needs the corpus in the name: the fitted exponent belongs to the shipped corpus's kind).
     """
-    if not isinstance(name, str) or not name:
-        raise ValueError(f"a prior name is a non-empty string, got {name!r}")
-    base, at, modifier = name.partition("@")
-    kind, _, corpus = base.partition(":")
+    kind, corpus, at, modifier = split_prior_name(name)
     if kind not in _FACTORIES:
         raise ValueError(f"unknown prior kind {kind!r} in {name!r}; kinds: {', '.join(prior_kinds())}")
     beta = _exponent(name, kind, corpus, modifier, tables) if at else 1.0
@@ -153,6 +151,15 @@ def prior_by_name(name: str, shape, tables: PriorTables | None = None) -> MapPri
     from ogm_ppl.priors.tempered import TemperedPrior
 
     return TemperedPrior(prior, beta)
+
+
+def split_prior_name(name: str) -> tuple[str, str, str, str]:
+    """``KIND[:CORPUS][@MOD]`` -> ``(kind, corpus, "@" or "", mod)`` (empty strings for the parts left out)."""
+    if not isinstance(name, str) or not name:
+        raise ValueError(f"a prior name is a non-empty string, got {name!r}")
+    base, at, modifier = name.partition("@")
+    kind, _, corpus = base.partition(":")
+    return kind, corpus, at, modifier
 
 
 def _exponent(name: str, kind: str, corpus: str, modifier: str, tables) -> float:

@@ -10,13 +10,7 @@ import torch
 from ogm_ppl.priors import BackoffBorderPrior, BorderPatchPrior, MRFPrior, TemperedPrior
 from ogm_ppl.testing import PriorContract
 
-
-def _table(nb, ni, seed, density):
-    rng = np.random.default_rng(seed)
-    b, i = np.meshgrid(np.arange(2**nb), np.arange(2**ni), indexing="ij")
-    counts = rng.integers(1, 9, b.shape).astype(float)
-    counts[rng.random(b.shape) > density] = 0
-    return b.ravel(), i.ravel(), counts.ravel()
+from .test_backoff import _table
 
 
 class TestTemperedBackoff1D(PriorContract):

@@ -47,20 +47,13 @@ import torch
 from ogm_ppl.inference.mcmc.gibbs import CellGibbs, PatchGibbs
 from ogm_ppl.inference.mcmc.kernel import KernelStateError, MapKernel
 from ogm_ppl.models.occupancy import OccupancyModel
-from ogm_ppl.priors.tempered import TemperedPrior, _scale_log
+from ogm_ppl.priors.tempered import TemperedPrior, _check_exponent, _scale_log
 
 __all__ = ["ParallelTempering", "check_ladder", "geometric_ladder", "tempered_model"]
 
 TEMPERS = ("prior", "likelihood", "both")
 SWAPS = ("even-odd", "all", "random")
 KERNELS = ("cell", "patch")
-
-
-def _check_exponent(beta, what: str) -> float:
-    b = float(beta)
-    if not (math.isfinite(b) and b >= 0.0):
-        raise ValueError(f"{what} must be finite and >= 0, got {beta!r}")
-    return b
 
 
 def tempered_model(model: OccupancyModel, beta_prior: float = 1.0, beta_lik: float = 1.0) -> OccupancyModel:
