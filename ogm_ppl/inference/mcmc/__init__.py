@@ -1,6 +1,7 @@
 """MCMC over whole maps (Chapter 4): the map-kernel base, Gibbs kernels for ``pyro.infer.MCMC``, guided
 Gibbs, parallel tempering, the streaming runner with checkpoints, and convergence diagnostics."""
 
+from ogm_ppl.inference.mcmc.dask_tiles import DaskTileGibbs
 from ogm_ppl.inference.mcmc.diagnostics import (
     ChainsResult,
     ess,
@@ -14,6 +15,7 @@ from ogm_ppl.inference.mcmc.diagnostics import (
 from ogm_ppl.inference.mcmc.gibbs import CellGibbs, MetropolisCell, PatchGibbs
 from ogm_ppl.inference.mcmc.guided import GuidedGibbs
 from ogm_ppl.inference.mcmc.kernel import KernelStateError, MapKernel, initial_map
+from ogm_ppl.inference.mcmc.parallel import ChromaticCellGibbs
 from ogm_ppl.inference.mcmc.runner import CheckpointError, GibbsRun, RunningStats, run_gibbs
 from ogm_ppl.inference.mcmc.tempering import ParallelTempering, TemperedPrior, geometric_ladder, tempered_model
 
@@ -21,6 +23,8 @@ __all__ = [
     "CellGibbs",
     "ChainsResult",
     "CheckpointError",
+    "ChromaticCellGibbs",
+    "DaskTileGibbs",
     "GibbsRun",
     "GuidedGibbs",
     "KernelStateError",
