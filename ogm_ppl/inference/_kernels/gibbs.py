@@ -37,8 +37,8 @@ from ogm_ppl.priors.compiled import (
     patch_candidates,
     scratch_capacity,
 )
-from ogm_ppl.priors.compiled.registry import escape_proposal, restricted
-from ogm_ppl.priors.compiled.scratch import tile_scratch
+from ogm_ppl.priors.compiled.registry import escape_proposal, is_additive, restricted
+from ogm_ppl.priors.compiled.scratch import tile_scratch, tile_scratch_on
 
 
 class PatchState(NamedTuple):
@@ -510,15 +510,15 @@ def candidate_log_weights(ps, patch, prior, cands, n, logw):
 
 
 @nb.njit(cache=True)
-def _additive_sweep(ps, geo, anchors, prior, u, rule):
+def _additive_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     """Patch updates that weigh all ``W = 2^L`` configurations: the likelihood through the rays of the
-    patch (:func:`collect_rays`, :func:`lik_all`: ``O(W)`` per ray) plus the cells' prior log-odds."""
+    patch (:func:`collect_rays`, :func:`lik_all`: ``O(W)`` per ray) plus the cells' prior log-odds.
+    ``stamp0``: the first of ``len(anchors)`` fresh stamps; ``bit_of`` is not read (see :func:`patch_pass`)."""
     L = geo.dr.shape[0]
     logw = np.empty(1 << L, np.float64)
     patch = np.empty(L, np.int64)
     sc = ray_scratch(L, max_slots(L, ps.c_off, ps.offsets.shape[0] - 1), True, 0)
     p_rand, thesis, metro = rule.p_rand_patch, rule.thesis_random, rule.metropolised
-    stamp0 = _next_stamp(ps, anchors.shape[0])
     changed = 0
     for i in range(anchors.shape[0]):
         if build_patch(geo, anchors[i, 0], anchors[i, 1], patch) == 0:
@@ -607,7 +607,7 @@ def _restricted_update(ps, patch, prior, u, i, rule, stamp, cands, n, t, cand_lp
 
 
 @nb.njit(cache=True)
-def _candidate_sweep(ps, geo, anchors, prior, u, rule):
+def _candidate_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     """Patch updates that weigh only the configurations the prior allows given the rest
     (:func:`~ogm_ppl.priors.compiled.patch_candidates`: a tile's sparse support for table priors whose
     tiles are the patches, else all ``2^L``), so they stay exact. A single allowed configuration is taken
@@ -615,8 +615,9 @@ def _candidate_sweep(ps, geo, anchors, prior, u, rule):
     (:func:`~ogm_ppl.priors.compiled.candidate_weights`) plus the likelihood of the rays through the
     patch. Algorithm 2's random configuration (uniform over all ``2^L``) is accepted by
     Metropolis-Hastings unless ``thesis_random``. Returns ``(changed, skipped)``: patches changed, and
-    patches whose configurations did not fit ``capacity``."""
-    K = ps.m.shape[0]
+    patches whose configurations did not fit ``capacity``. ``stamp0``: the first of ``len(anchors)`` fresh
+    stamps; ``bit_of``: the prior scratch's cell -> patch bit map (``K`` int64, all -1), which only the
+    patch's own cells use (:func:`patch_pass`)."""
     L = geo.dr.shape[0]
     capacity = rule.capacity
     p_rand, thesis, metro = rule.p_rand_patch, rule.thesis_random, rule.metropolised
@@ -627,10 +628,9 @@ def _candidate_sweep(ps, geo, anchors, prior, u, rule):
     pair = np.empty(2, np.int64)
     pw = np.empty(2, np.float64)
     sc = ray_scratch(L, max_slots(L, ps.c_off, ps.offsets.shape[0] - 1), L <= 20, capacity)
-    ts = tile_scratch(K, scratch_capacity(prior, L))
+    ts = tile_scratch_on(bit_of, scratch_capacity(prior, L))
     ll = ps.ll
     m = ps.m
-    stamp0 = _next_stamp(ps, anchors.shape[0])
     changed = 0
     skipped = 0
     for i in range(anchors.shape[0]):
@@ -703,16 +703,29 @@ def _candidate_sweep(ps, geo, anchors, prior, u, rule):
     return changed, skipped
 
 
-def _patch_sweep(ps, geo, anchors, prior, u, rule):
-    """Python stand-in of :func:`patch_sweep` for numba's overload (not called)."""
+def _patch_pass(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
+    """Python stand-in of :func:`patch_pass` for numba's overload (not called)."""
     raise NotImplementedError
 
 
-@overload(_patch_sweep)
-def _patch_sweep_for(ps, geo, anchors, prior, u, rule):
+@overload(_patch_pass)
+def _patch_pass_for(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     if kind_of(prior).additive:
-        return lambda ps, geo, anchors, prior, u, rule: _additive_sweep(ps, geo, anchors, prior, u, rule)
-    return lambda ps, geo, anchors, prior, u, rule: _candidate_sweep(ps, geo, anchors, prior, u, rule)
+        return lambda ps, geo, anchors, prior, u, rule, stamp0, bit_of: _additive_sweep(
+            ps, geo, anchors, prior, u, rule, stamp0, bit_of
+        )
+    return lambda ps, geo, anchors, prior, u, rule, stamp0, bit_of: _candidate_sweep(
+        ps, geo, anchors, prior, u, rule, stamp0, bit_of
+    )
+
+
+@nb.njit(cache=True)
+def patch_pass(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
+    """:func:`patch_sweep` with its stamps (``stamp0 .. stamp0 + len(anchors) - 1``, reserved by the caller)
+    and the prior scratch's ``bit_of`` (``K`` int64, all -1) given: the building block of the chromatic
+    patch sweeps, whose tiles of one colour run it at once (every array it writes is indexed by the patch's
+    cells or its rays, so disjoint between tiles; :mod:`~ogm_ppl.inference._kernels.parallel_patch`)."""
+    return _patch_pass(ps, geo, anchors, prior, u, rule, stamp0, bit_of)
 
 
 @nb.njit(cache=True)
@@ -720,7 +733,8 @@ def patch_sweep(ps, geo, anchors, prior, u, rule):
     """One pass of patch updates at ``anchors`` (``n x 2``; Algorithm 1, Algorithm 2 when
     ``rule.p_rand_patch > 0``) with the uniforms ``u`` (``3 x n``: choice, random-patch, acceptance), the
     loop chosen by the prior bundle's type when it compiles. Returns ``(changed, skipped)``."""
-    return _patch_sweep(ps, geo, anchors, prior, u, rule)
+    bit_of = np.full(0 if is_additive(prior) else ps.m.shape[0], -1, np.int64)
+    return _patch_pass(ps, geo, anchors, prior, u, rule, _next_stamp(ps, anchors.shape[0]), bit_of)
 
 
 def _patch_log_weights(ps, patch, prior, logw):

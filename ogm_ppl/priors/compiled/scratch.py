@@ -7,7 +7,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-__all__ = ["MEMO_BITS", "TileScratch", "tile_scratch"]
+__all__ = ["MEMO_BITS", "TileScratch", "tile_scratch", "tile_scratch_on"]
 
 #: a touched tile's factor is memoised per sub-configuration when it shares at most this many patch cells
 MEMO_BITS = 10
@@ -32,9 +32,17 @@ class TileScratch(NamedTuple):
 @nb.njit(cache=True)
 def tile_scratch(num_cells, C):
     """A :class:`TileScratch` for a ``num_cells``-cell map and up to ``C`` touched tiles (and pairs)."""
+    return tile_scratch_on(np.full(num_cells, -1, np.int64), C)
+
+
+@nb.njit(cache=True)
+def tile_scratch_on(bit_of, C):
+    """A :class:`TileScratch` over the given cell -> patch bit map ``bit_of`` (``K`` int64, all -1; shared by
+    updates of disjoint patches, e.g. the tiles of a chromatic sweep) with scratch of its own for up to ``C``
+    touched tiles (and pairs)."""
     C = max(C, 1)
     return TileScratch(
-        np.full(num_cells, -1, np.int64),
+        bit_of,
         np.empty(C, np.int64),
         np.empty(C, np.int64),
         np.empty(C, np.int64),
