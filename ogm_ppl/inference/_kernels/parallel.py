@@ -161,9 +161,9 @@ def colour_of_tile(t: int | np.ndarray, n_tc: int):
 
 
 @nb.njit(cache=True)
-def confined_rays(offsets, cells, cols, T, n_tc):
+def confined_rays(offsets, cells, cols, T, n_tc, o_r=0, o_c=0):
     """Whether each ray is confined (``R`` bool): its cells lie in at most one ``T x T`` tile of each colour
-    (tiles ``n_tc`` to a row of tiles)."""
+    (tiles ``n_tc`` to a row of tiles, tile ``(0, 0)`` starting at row ``o_r``, column ``o_c``, both ``<= 0``)."""
     R = offsets.shape[0] - 1
     out = np.ones(R, np.bool_)
     seen = np.empty(COLOURS, np.int64)
@@ -172,7 +172,7 @@ def confined_rays(offsets, cells, cols, T, n_tc):
         for j in range(offsets[r], offsets[r + 1]):
             y = cells[j] // cols
             x = cells[j] - y * cols
-            a, b = y // T, x // T
+            a, b = (y - o_r) // T, (x - o_c) // T
             t = a * n_tc + b
             col = 2 * (a % 2) + b % 2
             if seen[col] < 0:

@@ -11,6 +11,12 @@ handling of the kept likelihood sums that several threads write, and the random 
 :mod:`ogm_ppl.inference._kernels.parallel`. The chain is a function of the seed drawn from torch's
 generator each sweep, identical for every thread count.
 
+:class:`ChromaticPatchGibbs` does the same for :class:`~ogm_ppl.inference.mcmc.gibbs.PatchGibbs` (Algorithms 1
+and 2, every prior kind with a compiled face, backed-off tables' escape move included): tiles whose side is a
+multiple of the patch's height and width, aligned with the patch tiling, so that every patch lies in one tile;
+patches on a ray that reaches two tiles of one colour, or straddling tiles (non-rectangular shapes), are
+updated last (:mod:`ogm_ppl.inference._kernels.parallel_patch`).
+
 Choosing ``tile``: the default, the longest ray's extent (and at least the prior's), makes every cell short;
 on maps much larger than the sensor's range that leaves many tiles per colour. Smaller tiles give more
 tiles per phase but move the cells on longer rays into the serial long phase (:attr:`layout` reports how
@@ -25,10 +31,20 @@ import torch
 
 from ogm_ppl.inference._kernels import cell_sweep as cs
 from ogm_ppl.inference._kernels import parallel as par
-from ogm_ppl.inference.mcmc.gibbs import _SCAN_CODES, CellGibbs
+from ogm_ppl.inference._kernels import parallel_patch as pp
+from ogm_ppl.inference.mcmc.gibbs import _SCAN_CODES, CellGibbs, PatchGibbs
+from ogm_ppl.inference.tiling import patch_cells
 from ogm_ppl.models.occupancy import OccupancyModel
+from ogm_ppl.priors.compiled import kind_of
 
-__all__ = ["ChromaticCellGibbs", "max_threads"]
+__all__ = ["ChromaticCellGibbs", "ChromaticPatchGibbs", "max_threads"]
+
+
+def _set_threads(kernel, n: int | None) -> None:
+    most = max_threads()
+    if n is not None and not 1 <= int(n) <= most:
+        raise ValueError(f"threads must lie in 1..{most}, got {n}")
+    kernel._threads = None if n is None else int(n)
 
 
 def max_threads() -> int:
@@ -74,10 +90,7 @@ class ChromaticCellGibbs(CellGibbs):
 
     @threads.setter
     def threads(self, n: int | None) -> None:
-        most = max_threads()
-        if n is not None and not 1 <= int(n) <= most:
-            raise ValueError(f"threads must lie in 1..{most}, got {n}")
-        self._threads = None if n is None else int(n)
+        _set_threads(self, n)
 
     def _prepare(self) -> None:
         if self._ready:
@@ -146,3 +159,110 @@ class ChromaticCellGibbs(CellGibbs):
             and np.array_equal(ref.d, self._st.d)
             and np.array_equal(ref.inf, self._st.inf)
         )
+
+
+class ChromaticPatchGibbs(PatchGibbs):
+    """Patch Gibbs in chromatic tile sweeps (module docstring), on ``threads`` of numba's threads.
+
+    Args:
+        model, patch, scan, offset, p_rand_patch, random_patch, update, init, delta, region, p_escape: as
+            :class:`~ogm_ppl.inference.mcmc.gibbs.PatchGibbs` (priors with a compiled face only; ``scan``
+            ``"systematic"`` or ``"permutation"``, which order the patches *within* each tile and within the
+            long patches).
+        tile: the tile side in cells (``None``: the longest ray's extent, at least the prior's factor extent,
+            rounded up to a multiple of the patch's height and width). For rectangular patches it must be a
+            multiple of both; it must be at least the prior's factor extent.
+        threads: numba threads for the sweeps (``None``: numba's current number). The chain does not depend
+            on it.
+    """
+
+    def __init__(
+        self,
+        model: OccupancyModel,
+        patch=3,
+        scan: str = "systematic",
+        offset=0,
+        p_rand_patch: float = 0.0,
+        random_patch: str = "mh",
+        update: str = "gibbs",
+        init="ogm",
+        delta="haehnel",
+        region=None,
+        p_escape: float = 0.2,
+        tile: int | None = None,
+        threads: int | None = None,
+    ) -> None:
+        if scan == "random":
+            raise ValueError("ChromaticPatchGibbs orders fixed patches: scan must be 'systematic' or 'permutation'")
+        super().__init__(model, patch, scan, offset, p_rand_patch, random_patch, update, init, delta, region, p_escape)
+        if tile is not None and int(tile) < 1:
+            raise ValueError(f"tile must be a positive number of cells, got {tile}")
+        self.tile = None if tile is None else int(tile)
+        _set_threads(self, threads)
+
+    threads = ChromaticCellGibbs.threads
+
+    def _prepare(self) -> None:
+        if self._ready:
+            return
+        super()._prepare()
+        if self._compiled is None:
+            raise ValueError("ChromaticPatchGibbs needs a prior with a compiled face (prior.compiled())")
+        g = self.model.grid
+        h, w = self._hw
+        step = int(np.lcm(h, w)) if h else 1
+        self.prior_extent = par.prior_extent(self._compiled)
+        self.ray_extent = int(par.ray_extents(self._offsets, self._cells, g.cols).max(initial=0))
+        if self.tile is None:
+            T = max(self.ray_extent, self.prior_extent, step)
+            T = -(-T // step) * step
+        else:
+            T = self.tile
+            if h and (T % h or T % w):
+                raise ValueError(f"tile {T} must be a multiple of the patch's height {h} and width {w}")
+        if T < self.prior_extent:
+            raise ValueError(f"tile {T} is smaller than the prior's factor extent {self.prior_extent}")
+        origin = (int(self._anchors[:, 0].min()), int(self._anchors[:, 1].min())) if h else (0, 0)
+        origin = (min(origin[0], 0), min(origin[1], 0))
+        pc = patch_cells(self.model, self._anchors, self.dr, self.dc)
+        self._layout = pp.patch_tile_layout(self._anchors, pc, self._index, g.rows, g.cols, T, origin)
+        self._bit_of = np.full(0 if kind_of(self._compiled).additive else g.num_cells, -1, np.int64)
+
+    @property
+    def layout(self) -> pp.PatchTileLayout:
+        """The tiles, their colours and the long patches
+        (:class:`~ogm_ppl.inference._kernels.parallel_patch.PatchTileLayout`)."""
+        self._prepare()
+        return self._layout
+
+    def groups(self) -> list[np.ndarray]:
+        """The anchors of each update group in sweep order: the non-empty tiles (colour by colour), then the
+        long patches."""
+        lay = self.layout
+        return [lay.anchors[lay.tile_off[t] : lay.tile_off[t + 1]] for t in lay.col_tiles] + [lay.long_anchors]
+
+    def _sweep(self) -> int:
+        seed = np.uint64(int(torch.randint(0, 2**63 - 1, (), dtype=torch.int64)))
+        lay = self._layout
+        self._updates += len(lay.anchors) + len(lay.long_anchors)
+        rows = 5 if self._escapes() else 3
+        before = numba.get_num_threads()
+        numba.set_num_threads(self.threads)
+        try:
+            with numba.parallel_chunksize(1):
+                changed, skipped = pp.chromatic_patch_sweep(
+                    self._ps,
+                    self._geometry(),
+                    lay,
+                    self._compiled,
+                    seed,
+                    _SCAN_CODES[self.scan],
+                    self._patch_rule(),
+                    rows,
+                    self._bit_of,
+                )
+        finally:
+            numba.set_num_threads(before)
+        if skipped:
+            raise RuntimeError(f"{skipped} patch updates had more configurations than fit")
+        return int(changed)

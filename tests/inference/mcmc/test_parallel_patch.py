@@ -1,0 +1,149 @@
+"""Chromatic patch sweeps (:class:`~ogm_ppl.inference.mcmc.parallel.ChromaticPatchGibbs`,
+:mod:`ogm_ppl.inference._kernels.parallel_patch`): the threaded sweep equals the serial composition of its patch
+updates bit for bit, for any thread count (independent, MRF, patch-table, backed-off border priors; heat bath,
+metropolised, Algorithm 2's random patch, the escape move); the first hits stay exact; the layout's rule; long
+runs against brute-force marginals; bad settings refused."""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+import pytest
+import torch
+
+from ogm_ppl.inference._kernels import gibbs as kg
+from ogm_ppl.inference._kernels import parallel as par
+from ogm_ppl.inference._kernels import parallel_patch as pp
+from ogm_ppl.inference._kernels.cells import first_hits
+from ogm_ppl.inference.exact import brute_force
+from ogm_ppl.inference.mcmc.gibbs import _SCAN_CODES
+from ogm_ppl.inference.mcmc.parallel import ChromaticPatchGibbs
+from ogm_ppl.priors import MRFPrior, PatchTablePrior, prior_by_name
+from ogm_ppl.testing.kernels import enumerate_maps
+from tests.inference.mcmc.test_parallel import scene, short_rays, sweep_seed
+
+THREADS = min(2, numba.config.NUMBA_NUM_THREADS)
+N = 30
+
+
+def priors():
+    return {
+        "independent": None,
+        "mrf": MRFPrior((N, N), order=1, psi=0.4, cell_prior=0.3),
+        "patch_table": PatchTablePrior(
+            (N, N), codes=[0, 0b000000111, 0b001001001, 0b111111111], counts=[6, 1, 1, 2], patch=(3, 3)
+        ),
+        "border_bo": prior_by_name("border_bo:generated", (N, N)),
+    }
+
+
+def reference_sweep(k, start: np.ndarray, seed: np.uint64) -> np.ndarray:
+    """The same patch updates one group after another (tiles colour by colour, then the long patches) on a
+    state of its own, through the serial patch kernel."""
+    m = start.copy()
+    f = first_hits(m, k._offsets, k._cells)
+    ps = kg.patch_state(m, f, k._index)
+    lay = k.layout
+    rows = 5 if k._escapes() else 3
+    groups = [(int(t), lay.anchors[lay.tile_off[t] : lay.tile_off[t + 1]]) for t in lay.col_tiles]
+    groups.append((lay.n_tiles, lay.long_anchors))
+    for t, anchors in groups:
+        a, u = pp.patch_draws(anchors, _SCAN_CODES[k.scan], np.uint64(par.tile_seed(seed, t)), rows)
+        kg.patch_sweep(ps, k._geometry(), a, k._compiled, u, k._patch_rule())
+    return m
+
+
+#: (prior, scan, update, p_rand_patch, patch, tile, longest reading in cells): tiles a little shorter than the
+#: longest rays, so that most patches are short and some long
+CASES = [
+    ("independent", "systematic", "gibbs", 0.0, (3, 3), 3, 3.5),
+    ("mrf", "permutation", "metropolised", 0.0, (2, 2), 4, 4.5),
+    ("mrf", "systematic", "gibbs", 0.3, "plus", 4, 4.5),
+    ("patch_table", "systematic", "gibbs", 0.0, (3, 3), 3, 3.5),
+    ("border_bo", "permutation", "gibbs", 0.0, (3, 3), 6, 7.0),
+]
+
+
+@pytest.mark.parametrize("name, scan, update, p_rand, patch, tile, rmax", CASES)
+def test_threaded_patch_sweep_is_the_serial_composition_for_any_thread_count(
+    name, scan, update, p_rand, patch, tile, rmax
+):
+    model = scene(n=N, rmax=rmax, prior=priors()[name])
+    runs = []
+    for threads in sorted({1, THREADS}):
+        kw = {"offset": model.prior.origin} if name in ("patch_table", "border_bo") else {}
+        k = ChromaticPatchGibbs(
+            model, patch, scan=scan, update=update, p_rand_patch=p_rand, tile=tile, threads=threads, **kw
+        )
+        torch.manual_seed(11)
+        k.setup()
+        lay = k.layout
+        assert np.diff(lay.col_off).min() >= 4 and len(lay.long_anchors) > 0, "both phases are exercised"
+        assert len(lay.anchors) >= 16
+        start = k.state.copy()
+        ref = reference_sweep(k, start, sweep_seed(5))
+        torch.manual_seed(5)
+        p = k.sample(k.current_params())
+        assert np.array_equal(k.state, ref), "one threaded sweep differs from its serial composition"
+        assert not np.array_equal(k.state, start)
+        for _ in range(5):
+            p = k.sample(p)
+        assert np.array_equal(k._f, first_hits(k.state, k._offsets, k._cells)), "first hits out of step"
+        runs.append(k.state.copy())
+    assert all(np.array_equal(runs[0], x) for x in runs)
+
+
+def test_every_patch_is_in_one_group_and_short_patches_in_one_tile():
+    model = scene(n=N, rmax=4.0, prior=priors()["border_bo"])
+    k = ChromaticPatchGibbs(model, (3, 3), offset=model.prior.origin, tile=6)
+    lay = k.layout
+    both = np.concatenate([lay.anchors, lay.long_anchors])
+    assert sorted(map(tuple, both)) == sorted(map(tuple, k._anchors))
+    T, (o_r, o_c) = lay.T, (lay.o_r, lay.o_c)
+    for t in lay.col_tiles:
+        for a in lay.anchors[lay.tile_off[t] : lay.tile_off[t + 1]]:
+            r0, c0 = (a[0] - o_r) // T, (a[1] - o_c) // T
+            r1, c1 = (a[0] + 2 - o_r) // T, (a[1] + 2 - o_c) // T
+            assert (r0, c0) == (r1, c1) and r0 * lay.n_tc + c0 == t
+    assert par.colour_of_tile(lay.col_tiles, lay.n_tc).tolist() == sorted(
+        par.colour_of_tile(lay.col_tiles, lay.n_tc).tolist()
+    )
+
+
+def test_long_runs_match_the_exact_marginals():
+    """2 x 5 short-ray problem, 1 x 2 patches on 2 x 2 tiles (two tiles of one colour per phase), MRF prior:
+    every marginal of a 3000-sweep chain within 5 batch-means standard errors (20 batches) of the exact one."""
+    model = short_rays(prior=MRFPrior((2, 5), order=1, psi=0.4, cell_prior=0.4))
+    pi = brute_force(model).log_probs.exp()
+    exact = ((pi[:, None] * enumerate_maps(model)).sum(0)[model.latent]).numpy()
+    k = ChromaticPatchGibbs(model, (1, 2), tile=2, threads=1)
+    torch.manual_seed(0)
+    k.setup()
+    assert np.diff(k.layout.col_off).max() >= 2
+    n, batches = 3000, 20
+    p = k.current_params()
+    trace = np.empty((n, len(model.latent)))
+    for i in range(n):
+        p = k.sample(p)
+        trace[i] = p["m"].numpy()
+    means = trace.reshape(batches, -1, trace.shape[1]).mean(1)
+    se = means.std(0, ddof=1) / math.sqrt(batches)
+    err = np.abs(trace.mean(0) - exact)
+    assert (err <= 5 * se + 1e-3).all(), f"errors {err} vs se {se}"
+
+
+def test_bad_settings_are_refused():
+    model = scene(n=12)
+    with pytest.raises(ValueError, match="systematic' or 'permutation"):
+        ChromaticPatchGibbs(model, (3, 3), scan="random")
+    with pytest.raises(ValueError, match="multiple of the patch"):
+        _ = ChromaticPatchGibbs(model, (3, 3), tile=4).layout
+    with pytest.raises(ValueError, match="positive"):
+        ChromaticPatchGibbs(model, (3, 3), tile=0)
+    with pytest.raises(ValueError, match="threads must lie"):
+        ChromaticPatchGibbs(model, (3, 3), threads=10_000)
+    field = scene(n=12, prior=prior_by_name("border_bo:generated", (12, 12)))
+    with pytest.raises(ValueError, match="factor extent"):
+        _ = ChromaticPatchGibbs(field, (3, 3), offset=field.prior.origin, tile=3).layout
