@@ -16,6 +16,11 @@ and here an independent prior (``lambda = 0.3``) or ``--prior mrf`` (4-connected
 * peak RSS (``ru_maxrss``, a process-wide peak) after the serial sweeps and after the threaded ones (the
   serial kernel freed first); comparable for the first configuration only.
 
+``--patch-range`` (metres; ``0``: skip) adds 3 x 3 patch sweeps on the model of that range under Table 6.6's
+priors (``--patch-priors``: the patch table and the border prior learned on HouseExpo): the serial
+``PatchGibbs`` and the chromatic ``ChromaticPatchGibbs`` (the longest ray's extent rounded up to a multiple of
+3) with 1 and 2 threads, from the same start and seed, the two thread counts checked to give the same map.
+
 At 20 m the rays reach 1000 cells, two thirds of the grid's side, so tiles as large as the longest ray
 leave one tile per colour and smaller tiles leave most cells long; at 5 m (250 cells) every cell is short
 with 9 tiles per colour. The machine may be shared (the load average is printed): timings are then noisy,
@@ -25,6 +30,7 @@ the per-tile costs less so. Writes ``out/bench/bench_parallel.json``; about 4 mi
 from __future__ import annotations
 
 import argparse
+import copy
 import gc
 import os
 import sys
@@ -43,11 +49,11 @@ from bench_table_6_6 import EXTENT_M, ORIGIN, POSE_FRACTION, intel_log_path, loa
 from ogm_ppl.datasets.carmen import read_carmen
 from ogm_ppl.grid import Grid
 from ogm_ppl.inference._kernels import parallel as par
-from ogm_ppl.inference.mcmc import CellGibbs
+from ogm_ppl.inference.mcmc import CellGibbs, PatchGibbs
 from ogm_ppl.inference.mcmc.gibbs import _SCAN_CODES
-from ogm_ppl.inference.mcmc.parallel import ChromaticCellGibbs
+from ogm_ppl.inference.mcmc.parallel import ChromaticCellGibbs, ChromaticPatchGibbs
 from ogm_ppl.models.occupancy import OccupancyModel
-from ogm_ppl.priors import IndependentPrior, MRFPrior
+from ogm_ppl.priors import IndependentPrior, MRFPrior, prior_by_name
 from ogm_ppl.raycast import raycast
 from ogm_ppl.sensors import GaussianRange
 
@@ -196,6 +202,60 @@ def run_config(model, tiles: list[int | None], sweeps: int) -> dict:
     return out
 
 
+def run_patch(model, prior_names: list[str], sweeps: int) -> dict:
+    """3 x 3 patch sweeps under each prior: serial, then chromatic with 1 and 2 threads (module docstring)."""
+    out = {}
+    for name in prior_names:
+        m = copy.copy(model)
+        m.prior = prior_by_name(name, model.grid.shape)
+        if m.prior.outside_occupancy() != model.prior.outside_occupancy():
+            m = OccupancyModel(model.grid, model.rays, model.sensor, m.prior)
+        offset = getattr(m.prior, "origin", 0)
+        torch.manual_seed(0)
+        serial = PatchGibbs(m, (3, 3), offset=offset)
+        serial.setup()
+        init = serial.initial_params
+        serial_s, serial_times = timed_sweeps(serial, sweeps)
+        res = {"serial_s_per_sweep": serial_s, "serial_sweeps_s": serial_times}
+        print(f"{name}: serial PatchGibbs {serial_s:.3f} s/sweep {np.round(serial_times, 3)}", flush=True)
+        del serial
+        gc.collect()
+        maps = []
+        for threads in (1, 2):
+            if threads > numba.config.NUMBA_NUM_THREADS:
+                continue
+            k = ChromaticPatchGibbs(m, (3, 3), offset=offset, threads=threads)
+            k.initial_params = init
+            k.setup()
+            lay = k.layout
+            torch.manual_seed(1)
+            s, times = timed_sweeps(k, sweeps)
+            maps.append(k.state.copy())
+            n_long = len(lay.long_anchors)
+            res.update(
+                {
+                    "tile": lay.T,
+                    "tiles_per_colour": np.diff(lay.col_off).tolist(),
+                    "long_patch_fraction": n_long / max(len(lay.anchors) + n_long, 1),
+                    f"threads_{threads}_s_per_sweep": s,
+                    f"threads_{threads}_sweeps_s": times,
+                }
+            )
+            print(
+                f"{name}: ChromaticPatchGibbs T {lay.T}, {np.diff(lay.col_off).tolist()} tiles per colour, long "
+                f"patches {100 * res['long_patch_fraction']:.1f} %; {threads} thread(s): {s:.3f} s/sweep "
+                f"(x{serial_s / s:.2f} vs serial); load {loadavg()}",
+                flush=True,
+            )
+            del k
+            gc.collect()
+        res["same_chain_1_2_threads"] = bool(len(maps) == 2 and np.array_equal(*maps))
+        if "threads_2_s_per_sweep" in res:
+            res["speedup_2_vs_1_thread"] = res["threads_1_s_per_sweep"] / res["threads_2_s_per_sweep"]
+        out[name] = res
+    return out
+
+
 def main(argv: list[str] | None = None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--experiment", type=int, default=3, choices=sorted(POSE_FRACTION))
@@ -207,6 +267,8 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--sweeps", type=int, default=4, help="sweeps per configuration (the first reported apart)")
     ap.add_argument("--prior", default="independent", choices=("independent", "mrf"))
     ap.add_argument("--resolution", type=float, default=0.02)
+    ap.add_argument("--patch-range", type=float, default=5.0, help="range (m) of the patch-sweep part; 0: skip")
+    ap.add_argument("--patch-priors", nargs="+", default=["patch3:houseexpo", "border:houseexpo"])
     a = ap.parse_args(argv)
     load0 = loadavg()
     payload: dict = {
@@ -225,6 +287,8 @@ def main(argv: list[str] | None = None) -> dict:
         print(f"max range {rng} m: {model.rays.num_rays} rays, build {build_s:.1f} s, RSS {rss_mb():.0f} MiB")
         res = run_config(model, sides, a.sweeps)
         res["build_s"] = build_s
+        if a.patch_range and float(rng) == a.patch_range:
+            res["patch"] = run_patch(model, a.patch_priors, a.sweeps)
         payload["configs"][f"range_{rng}m"] = res
         del model
         release_memory()
