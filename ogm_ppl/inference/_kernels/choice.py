@@ -9,7 +9,7 @@ import math
 import numba as nb
 import numpy as np
 
-__all__ = ["accept_random", "categorical", "choose", "metropolised_pick"]
+__all__ = ["accept_random", "categorical", "categorical_table", "choose", "metropolised_pick", "pick_from_table"]
 
 
 @nb.njit(cache=True, inline="always")
@@ -50,6 +50,41 @@ def categorical(logw, W, u, ew):
         if logw[w] > -np.inf:
             return w
     return -1
+
+
+@nb.njit(cache=True)
+def categorical_table(logw, W, acc):
+    """The inverse-CDF table of :func:`categorical` over ``softmax(logw[:W])``, for draws with many uniforms:
+    ``acc[w]`` the running sums of the exponentials (the same sums, in the same order, as :func:`categorical`
+    accumulates). Returns ``(total, last)``: the sum and the last index with mass (``(-1, -1)`` if none)."""
+    total, _ = _exp_weights(logw, W, acc, -1)
+    if total < 0.0:
+        return -1.0, np.int64(-1)
+    a = 0.0
+    for w in range(W):
+        a += acc[w]
+        acc[w] = a
+    last = np.int64(-1)
+    for w in range(W - 1, -1, -1):
+        if logw[w] > -np.inf:
+            last = np.int64(w)
+            break
+    return total, last
+
+
+@nb.njit(cache=True, inline="always")
+def pick_from_table(acc, total, last, W, u):
+    """:func:`categorical`'s draw with the uniform ``u`` from its table (:func:`categorical_table`), by binary
+    search: the first ``w`` with ``u total < acc[w]`` (else ``last``), the index the linear scan returns."""
+    t = u * total
+    lo, hi = 0, W
+    while lo < hi:
+        mid = (lo + hi) >> 1
+        if t < acc[mid]:
+            hi = mid
+        else:
+            lo = mid + 1
+    return lo if lo < W else last
 
 
 @nb.njit(cache=True)

@@ -29,7 +29,7 @@ import numpy as np
 from numba.extending import overload
 
 from ogm_ppl.inference._kernels.cells import _next_occupied
-from ogm_ppl.inference._kernels.choice import accept_random, categorical, choose
+from ogm_ppl.inference._kernels.choice import accept_random, categorical, categorical_table, choose, pick_from_table
 from ogm_ppl.priors.compiled import (
     candidate_weights,
     cell_log_odds,
@@ -37,7 +37,13 @@ from ogm_ppl.priors.compiled import (
     patch_candidates,
     scratch_capacity,
 )
-from ogm_ppl.priors.compiled.registry import escape_proposal, is_additive, restricted
+from ogm_ppl.priors.compiled.registry import (
+    escape_proposal,
+    is_additive,
+    restricted,
+    shared_weights,
+    shared_weights_key,
+)
 from ogm_ppl.priors.compiled.scratch import tile_scratch, tile_scratch_on
 
 
@@ -631,6 +637,15 @@ def _candidate_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     ts = tile_scratch_on(bit_of, scratch_capacity(prior, L))
     ll = ps.ll
     m = ps.m
+    # heat-bath draws of patches no ray reaches, whose candidates and weights every full tile of a key shares
+    # (shared_weights_key): each key's candidates and inverse-CDF table are built once a sweep, and a draw
+    # is a binary search (the same index as the categorical's scan)
+    n_keys = 0 if metro else shared_weights(prior)
+    key_n = np.full(n_keys, -1, np.int64)
+    key_total = np.empty(n_keys, np.float64)
+    key_last = np.empty(n_keys, np.int64)
+    key_acc = np.empty((n_keys, capacity if n_keys else 0), np.float64)
+    key_cands = np.empty((n_keys, capacity if n_keys else 0), np.int64)
     changed = 0
     skipped = 0
     for i in range(anchors.shape[0]):
@@ -656,6 +671,31 @@ def _candidate_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
                 if accept_random(pw[0], pw[1], u[2, i]):
                     new = prop  # (a state without mass may move anywhere)
         else:
+            ns = -1
+            key = -1 if n_keys == 0 else shared_weights_key(prior, r0, c0, geo.h, geo.w, n_live)
+            if key >= 0:
+                ns = collect_rays(ps, patch, stamp, sc)
+                if ns == 0:  # no ray reaches the patch: its candidates and weights are the key's
+                    if key_n[key] < 0:
+                        n, t = patch_candidates(
+                            prior, r0, c0, geo.h, geo.w, patch, n_live, geo.pinned, m, cands, cand_lp
+                        )
+                        if n > 1:
+                            candidate_weights(prior, patch, m, cands, n, t, cand_lp, logw, ts)
+                            key_total[key], key_last[key] = categorical_table(logw, n, key_acc[key])
+                        if n >= 0:
+                            key_n[key] = n
+                            key_cands[key, :n] = cands[:n]
+                    kn = key_n[key]
+                    if kn == 0:
+                        continue
+                    if kn == 1 or (kn > 1 and key_total[key] > 0.0):
+                        j = 0 if kn == 1 else pick_from_table(key_acc[key], key_total[key], key_last[key], kn, u[0, i])
+                        new = key_cands[key, j]
+                        if new != cur:
+                            set_patch(ps, patch, new)
+                            changed += 1
+                        continue
             n, t = patch_candidates(prior, r0, c0, geo.h, geo.w, patch, n_live, geo.pinned, m, cands, cand_lp)
             if n < 0:
                 skipped += 1
@@ -671,12 +711,13 @@ def _candidate_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
             if n == 1:
                 j = 0  # the only configuration with mass (or, if it has none, the one to move to)
             else:
+                if ns < 0:
+                    ns = collect_rays(ps, patch, stamp, sc)
                 if rule.own_factor and t >= 0:  # the thesis's border update: the tile's own table only
                     for x in range(n):
                         logw[x] = cand_lp[x]
                 else:
                     candidate_weights(prior, patch, m, cands, n, t, cand_lp, logw, ts)
-                ns = collect_rays(ps, patch, stamp, sc)
                 _add_lik(sc, ns, ll, n_live, cands, n, t < 0, logw)
                 jc = -1
                 if metro:

@@ -24,6 +24,12 @@ are compiled for (inlined, so a sweep specialised for one kind runs that kind's 
   uniform ``u``: ``(prop, log q(cur) - log q(prop))`` (``prop = -1``: none), the kind's own weight of the
   current and the proposed configuration in ``pair_lp[0], pair_lp[1]`` (the ``cand_lp`` of
   :func:`candidate_weights` with this ``tag``); only called where :func:`restricted` holds;
+* :func:`shared_weights` ``(prior)`` — how many keys :func:`shared_weights_key` can return (default 0);
+* :func:`shared_weights_key` ``(prior, r0, c0, h, w, n_live)`` — a key ``>= 0`` when the candidates of
+  :func:`patch_candidates` for the patch at ``(r0, c0)`` (``h x w``, ``n_live`` live cells) and their
+  :func:`candidate_weights` depend on the key alone, not on the rest of the map, and are not
+  :func:`restricted` (a patch table without a border: every full tile of one segment weighs the same
+  configurations alike), so a sweep may compute them once per key; ``-1`` otherwise (the default);
 * :func:`is_additive` ``(prior)`` — ``True`` when a configuration's prior weight is the sum of its cells'
   :func:`cell_log_odds`, whatever the rest of the map (independent cells): patch kernels then weigh all
   ``2^L`` configurations in ``O(2^L)``.
@@ -52,6 +58,8 @@ __all__ = [
     "registered",
     "restricted",
     "scratch_capacity",
+    "shared_weights",
+    "shared_weights_key",
 ]
 
 
@@ -66,6 +74,8 @@ class Kind(NamedTuple):
     additive: bool
     restricted: Callable
     escape_proposal: Callable
+    shared_weights: Callable
+    shared_weights_key: Callable
 
 
 _KINDS: dict[type, Kind] = {}
@@ -88,6 +98,14 @@ def _unrestricted(prior, tag):
     return False
 
 
+def _no_shared(prior):
+    return 0
+
+
+def _no_shared_key(prior, r0, c0, h, w, n_live):
+    return -1
+
+
 def _no_escape(prior, tag, patch, m, u, pair_lp):
     return np.int64(-1), 0.0
 
@@ -103,6 +121,8 @@ def register(
     additive: bool = False,
     restricted: Callable | None = None,
     escape_proposal: Callable | None = None,
+    shared_weights: Callable | None = None,
+    shared_weights_key: Callable | None = None,
 ) -> None:
     """Register the compiled conditionals of the bundle class ``bundle`` (see the module docstring for each
     function's signature and meaning; the optional ones default to the dense, scratch-free versions)."""
@@ -115,6 +135,8 @@ def register(
         bool(additive),
         restricted or _unrestricted,
         escape_proposal or _no_escape,
+        shared_weights or _no_shared,
+        shared_weights_key or _no_shared_key,
     )
 
 
@@ -169,6 +191,14 @@ def escape_proposal(prior, tag, patch, m, u, pair_lp):
     return kind_of(prior).escape_proposal(prior, tag, patch, m, u, pair_lp)
 
 
+def shared_weights(prior):
+    return kind_of(prior).shared_weights(prior)
+
+
+def shared_weights_key(prior, r0, c0, h, w, n_live):
+    return kind_of(prior).shared_weights_key(prior, r0, c0, h, w, n_live)
+
+
 # numba checks that an implementation's signature is the overload's, so each typer spells it out
 @overload(cell_log_odds, inline="always")
 def _cell_log_odds(prior, k, m):
@@ -203,6 +233,16 @@ def _restricted(prior, tag):
 @overload(escape_proposal, inline="always")
 def _escape_proposal(prior, tag, patch, m, u, pair_lp):
     return _registered(prior, "escape_proposal")
+
+
+@overload(shared_weights, inline="always")
+def _shared_weights(prior):
+    return _registered(prior, "shared_weights")
+
+
+@overload(shared_weights_key, inline="always")
+def _shared_weights_key(prior, r0, c0, h, w, n_live):
+    return _registered(prior, "shared_weights_key")
 
 
 @overload(is_additive, inline="always")

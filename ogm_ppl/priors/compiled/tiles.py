@@ -680,6 +680,18 @@ def _escape(prior, tag, patch, m, u, pair_lp):
     return tile_escape(prior, tag, patch, m, u, pair_lp)
 
 
+def _shared(prior):
+    # windows without a border (pad = 0): a full tile's candidates and weights are its segment's
+    return prior.seg_off.shape[0] - 1 if prior.pad_r == 0 and prior.pad_c == 0 else 0
+
+
+def _shared_key(prior, r0, c0, h, w, n_live):
+    if n_live != prior.n_inner or prior.pad_r != 0 or prior.pad_c != 0 or prior.border_seg >= 0:
+        return np.int64(-1)
+    t = tile_of_anchor(prior, r0, c0, h, w)
+    return np.int64(-1) if t < 0 else np.int64(prior.t_seg[t])
+
+
 register(
     Tiles,
     cell_log_odds=_cell,
@@ -689,4 +701,6 @@ register(
     scratch_capacity=_capacity,
     restricted=_restricted,
     escape_proposal=_escape,
+    shared_weights=_shared,
+    shared_weights_key=_shared_key,
 )

@@ -18,6 +18,7 @@ from ogm_ppl.inference._kernels import parallel as par
 from ogm_ppl.inference._kernels import parallel_patch as pp
 from ogm_ppl.inference._kernels.cells import first_hits
 from ogm_ppl.inference.exact import brute_force
+from ogm_ppl.inference.mcmc import PatchGibbs
 from ogm_ppl.inference.mcmc.gibbs import _SCAN_CODES
 from ogm_ppl.inference.mcmc.parallel import ChromaticPatchGibbs
 from ogm_ppl.priors import MRFPrior, PatchTablePrior, prior_by_name
@@ -147,3 +148,39 @@ def test_bad_settings_are_refused():
     field = scene(n=12, prior=prior_by_name("border_bo:generated", (12, 12)))
     with pytest.raises(ValueError, match="factor extent"):
         _ = ChromaticPatchGibbs(field, (3, 3), offset=field.prior.origin, tile=3).layout
+
+
+def test_unobserved_tiles_draw_from_the_shared_table_as_the_full_weighing_does():
+    """A patch-table prior (no border) on a map most of whose tiles no ray reaches: the sweep draws those
+    tiles from each segment's table once built (``shared_weights_key``); one sweep equals, bit for bit, heat
+    bath draws from every patch's full weights (``patch_log_weights``: all ``2^9`` configurations, prior and
+    likelihood) with the same uniforms (a table counting every configuration, so no patch is without mass)."""
+    from ogm_ppl.inference._kernels.choice import categorical
+
+    counts = np.random.default_rng(0).integers(1, 50, 512)
+    prior = PatchTablePrior((N, N), codes=np.arange(512), counts=counts, patch=(3, 3))
+    model = scene(n=N, poses=3, beams=6, rmax=3.0, prior=prior)
+    k = PatchGibbs(model, (3, 3), offset=prior.origin)
+    torch.manual_seed(2)
+    k.setup()
+    reached = np.zeros(model.num_cells, bool)
+    reached[model.ray_index().cells] = True
+    pc = [p for p in k.patches()]
+    unobserved = sum(not reached[p[p >= 0]].any() for p in pc)
+    assert unobserved > len(pc) // 2
+    ref = PatchGibbs(model, (3, 3), offset=prior.origin)
+    ref.initial_params = k.initial_params
+    ref.setup()
+    torch.manual_seed(9)
+    u = torch.rand(len(pc), dtype=torch.float64).numpy()
+    torch.manual_seed(9)
+    k.sample(k.current_params())
+    ew = np.empty(512)
+    for i, p in enumerate(pc):
+        logw = ref.patch_log_weights(p)
+        j = categorical(logw, len(logw), u[i], ew)
+        m = ref.state.astype(np.float64)
+        live = p[p >= 0]
+        m[live] = (j >> np.arange(len(live))) & 1
+        ref.set_state(torch.from_numpy(m))
+    assert np.array_equal(k.state, ref.state)
