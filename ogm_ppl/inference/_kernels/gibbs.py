@@ -548,9 +548,19 @@ def _additive_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
 @nb.njit(cache=True, inline="always")
 def _add_lik(sc, ns, ll, n_live, cands, n, dense, logw):
     """Add the likelihood of the rays collected in ``sc`` to ``logw`` of the ``n`` candidates: by
-    :func:`lik_all` when they are the dense set (all ``2^n_live`` codes, in order), else :func:`lik_list`."""
+    :func:`lik_all` when they are the dense set (all ``2^n_live`` codes, in order) or a large share of it
+    (scattered into the dense table and gathered back: each candidate adds the same terms in the same
+    order as :func:`lik_list` would, so the sums are the same bit for bit), else :func:`lik_list`."""
+    W = np.int64(1) << n_live
     if dense and n <= sc.fw.shape[0]:
         lik_all(sc, ns, ll, n_live, logw)
+    elif ns > 0 and W <= sc.prior.shape[0] and 5 * n >= 2 * W:
+        dw = sc.prior
+        for j in range(n):
+            dw[cands[j]] = logw[j]
+        lik_all(sc, ns, ll, n_live, dw)
+        for j in range(n):
+            logw[j] = dw[cands[j]]
     else:
         lik_list(sc, ns, ll, cands, n, logw)
 

@@ -154,7 +154,8 @@ def test_unobserved_tiles_draw_from_the_shared_table_as_the_full_weighing_does()
     """A patch-table prior (no border) on a map most of whose tiles no ray reaches: the sweep draws those
     tiles from each segment's table once built (``shared_weights_key``); one sweep equals, bit for bit, heat
     bath draws from every patch's full weights (``patch_log_weights``: all ``2^9`` configurations, prior and
-    likelihood) with the same uniforms (a table counting every configuration, so no patch is without mass)."""
+    likelihood) with the same uniforms (a table counting every configuration, so no patch is without mass; the
+    observed patches, with all 512 candidates, take the dense likelihood path)."""
     from ogm_ppl.inference._kernels.choice import categorical
 
     counts = np.random.default_rng(0).integers(1, 50, 512)
