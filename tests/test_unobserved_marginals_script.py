@@ -1,0 +1,43 @@
+"""experiments/unobserved_marginals.py: the mean marginal over the cells traditional OGM leaves at 0.5, and
+clear errors for a missing folder or baseline and for a map of another size."""
+
+from __future__ import annotations
+
+import importlib.util
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+spec = importlib.util.spec_from_file_location("unobserved_marginals", ROOT / "experiments" / "unobserved_marginals.py")
+um = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(um)
+
+
+def _write(d: Path, name: str, q) -> None:
+    d.mkdir(parents=True, exist_ok=True)
+    np.savez(d / f"{name}.npz", marginals=np.asarray(q, dtype=np.float64), format_version=1)
+
+
+def test_means_over_never_observed_cells(tmp_path, capsys):
+    _write(tmp_path / "maps" / "a", "ogm", [0.5, 0.9, 0.5, 0.1])
+    _write(tmp_path / "maps" / "a", "gibbs", [0.2, 1.0, 0.6, 0.0])
+    _write(tmp_path / "maps" / "b", "ogm", [0.5, 0.5, 0.7, 0.5])
+    _write(tmp_path / "maps" / "b", "gibbs", [1.0, 0.0, 0.3, 0.5])
+    res = um.unobserved_means(tmp_path)
+    assert res["gibbs"] == {"a": pytest.approx(0.4), "b": pytest.approx(0.5)}
+    assert res["ogm"] == {"a": 0.5, "b": 0.5}
+    assert um.main([str(tmp_path)]) == 0
+    assert "gibbs: mean 0.450" in capsys.readouterr().out
+
+
+def test_bad_folders_are_refused(tmp_path):
+    with pytest.raises(FileNotFoundError, match="no maps folder"):
+        um.unobserved_means(tmp_path)
+    _write(tmp_path / "maps" / "a", "gibbs", [0.2])
+    with pytest.raises(FileNotFoundError, match="baseline map is missing"):
+        um.unobserved_means(tmp_path)
+    _write(tmp_path / "maps" / "a", "ogm", [0.5, 0.5])
+    with pytest.raises(ValueError, match="1 cells, the baseline has 2"):
+        um.unobserved_means(tmp_path)
