@@ -45,8 +45,9 @@ means over maps without the diagrams: what the docs snapshot), ``calibration.md`
 ``bars_<mask>.png`` (NLL and AUC per test corpus) and ``matrix_unseen.png`` (NLL of every prior and training
 corpus on every test corpus). A rerun with the same settings skips the (map, prior) pairs already in the JSON.
 
-Measured run times: the default run (2 maps per corpus, every shipped kind x every shipped corpus, 512 rows,
-16 skipped) took 23.5 min wall on 2 AMD EPYC cores that other jobs shared (load average 4-5 for most of it);
+Measured run times: the default run (2 maps per corpus, every shipped kind and its ``@cal`` beside it x every
+shipped corpus, 673 rows, 16 skipped) took 53.5 min wall on 2 Intel Xeon cores that other jobs shared (load
+average 2-3); without the ``@cal`` rows (512 rows) it took 23.5 min on 2 AMD EPYC cores under a load of 4-5.
 ``--quick`` took 15 s once numba had compiled its kernels. Two runs of the default gave identical numbers.
 
     python experiments/calibration.py --quick        # smoke run, 1 small map per corpus, 3 priors
