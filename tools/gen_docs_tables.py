@@ -312,6 +312,16 @@ def _calibration_cross(doc: dict) -> Table:
             s = next((s for s in summ if s["prior_name"] == n and s["test"] == t), None)
             cells.append("–" if s is None else f"{_f(s['nll_bits'])} / {_f(s['auc'])} / {_f(s['rhat_below'], 2)}")
         rows.append([n, *cells])
+    # pairs (prior with its training corpus, test corpus) whose NLL exceeds the independent prior's (lambda 0.5)
+    ref = {s["test"]: s["nll_bits"] for s in summ if s["prior_name"] == "independent"}
+    counts = {}
+    for s in summ:
+        if s["prior"] == "ogm" or s["prior"].startswith("independent") or s["test"] not in ref:
+            continue
+        key = "tempered (@)" if "@" in s["prior_name"] else "untempered"
+        above, total = counts.get(key, (0, 0))
+        counts[key] = (above + (s["nll_bits"] > ref[s["test"]]), total + 1)
+    note = "; ".join(f"{k}: {a} of {n} pairs above the independent prior's NLL" for k, (a, n) in counts.items())
     return Table(
         caption=(
             "Across corpora, unseen cells: NLL (bits/cell) / ROC AUC / share of cells with split R-hat < 1.05, "
@@ -320,6 +330,7 @@ def _calibration_cross(doc: dict) -> Table:
         header=["prior", *tests],
         rows=rows,
         provenance=doc["provenance"],
+        note=note,
     )
 
 
