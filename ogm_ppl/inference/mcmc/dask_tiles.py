@@ -369,6 +369,8 @@ class DaskTileGibbs(ChromaticCellGibbs):
         seed = int(torch.randint(0, 2**63 - 1, (), dtype=torch.int64))
         self._updates += len(self._visit)
         futures = self._scatter()
+        problems, visits = self.problems, self._visits
+        assert visits is not None  # set with the problems
         lay = self.layout
         grid = self._m.reshape(lay.rows, lay.cols)
         sent = received = flips = 0
@@ -378,7 +380,7 @@ class DaskTileGibbs(ChromaticCellGibbs):
             if not groups:
                 continue
             t0 = time.perf_counter()
-            packed = [[np.packbits(_window(grid, self._problems[j])) for j in g] for g in groups]
+            packed = [[np.packbits(_window(grid, problems[j])) for j in g] for g in groups]
             sent += sum(x.nbytes for p in packed for x in p)
             tasks = self.client.map(run_tiles, futures[f : f + len(groups)], packed, [seed] * len(groups), pure=False)
             f += len(groups)
@@ -386,7 +388,7 @@ class DaskTileGibbs(ChromaticCellGibbs):
                 for j, (values, n) in zip(g, results, strict=True):
                     received += values.nbytes
                     flips += n
-                    cells = self._visits[j]
+                    cells = visits[j]
                     changed = np.nonzero(values != self._m[cells])[0]
                     _apply(self._st, cells[changed], values[changed])
             phases.append(time.perf_counter() - t0)
