@@ -5,19 +5,15 @@ limits are refused with a clear error."""
 
 from __future__ import annotations
 
-import math
-
 import numpy as np
 import pytest
 import torch
 
-from ogm_ppl.inference.exact import brute_force
 from ogm_ppl.inference.mcmc.dask_tiles import DaskTileGibbs, run_tile, tile_problems, window_prior
 from ogm_ppl.inference.mcmc.parallel import ChromaticCellGibbs
 from ogm_ppl.priors import MRFPrior, PatchTablePrior, PatternFieldPrior
 from ogm_ppl.priors.pattern_field import symmetry_orbits
-from ogm_ppl.testing.kernels import enumerate_maps
-from tests.inference.mcmc.test_parallel import scene, short_rays
+from tests.inference.mcmc.test_parallel import assert_long_run_matches_brute_force, scene, short_rays
 
 distributed = pytest.importorskip("distributed")
 
@@ -111,22 +107,9 @@ def test_long_runs_match_the_exact_marginals(client):
     """2 x 5 short-ray problem, tiles of one cell (several cells per phase), MRF prior: every marginal of a
     400-sweep chain within 5 batch-means standard errors (20 batches) of the brute-force one."""
     model = short_rays(prior=MRFPrior((2, 5), order=1, psi=0.4, cell_prior=0.4))
-    pi = brute_force(model).log_probs.exp()
-    exact = ((pi[:, None] * enumerate_maps(model)).sum(0)[model.latent]).numpy()
-    n, batches = 400, 20
     k = DaskTileGibbs(model, tile=1, client=client)
-    torch.manual_seed(0)
-    k.setup()
     assert max(len(p.visit) for p in k.problems) == 1 and len(k.problems) == len(model.latent)
-    p = k.current_params()
-    trace = np.empty((n, len(model.latent)))
-    for i in range(n):
-        p = k.sample(p)
-        trace[i] = p["m"].numpy()
-    means = trace.reshape(batches, -1, trace.shape[1]).mean(1)
-    se = means.std(0, ddof=1) / math.sqrt(batches)
-    err = np.abs(trace.mean(0) - exact)
-    assert (err <= 5 * se + 1e-3).all(), f"errors {err} vs se {se}"
+    assert_long_run_matches_brute_force(k, 400)
 
 
 def test_pyro_mcmc_drives_it(client):

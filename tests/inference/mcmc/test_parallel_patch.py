@@ -6,8 +6,6 @@ runs against brute-force marginals; bad settings refused."""
 
 from __future__ import annotations
 
-import math
-
 import numba
 import numpy as np
 import pytest
@@ -17,13 +15,11 @@ from ogm_ppl.inference._kernels import gibbs as kg
 from ogm_ppl.inference._kernels import parallel as par
 from ogm_ppl.inference._kernels import parallel_patch as pp
 from ogm_ppl.inference._kernels.cells import first_hits
-from ogm_ppl.inference.exact import brute_force
 from ogm_ppl.inference.mcmc import PatchGibbs
 from ogm_ppl.inference.mcmc.gibbs import _SCAN_CODES
 from ogm_ppl.inference.mcmc.parallel import ChromaticPatchGibbs
 from ogm_ppl.priors import MRFPrior, PatchTablePrior, prior_by_name
-from ogm_ppl.testing.kernels import enumerate_maps
-from tests.inference.mcmc.test_parallel import scene, short_rays, sweep_seed
+from tests.inference.mcmc.test_parallel import assert_long_run_matches_brute_force, scene, short_rays, sweep_seed
 
 THREADS = min(2, numba.config.NUMBA_NUM_THREADS)
 N = 30
@@ -117,22 +113,9 @@ def test_long_runs_match_the_exact_marginals():
     """2 x 5 short-ray problem, 1 x 2 patches on 2 x 2 tiles (two tiles of one colour per phase), MRF prior:
     every marginal of a 3000-sweep chain within 5 batch-means standard errors (20 batches) of the exact one."""
     model = short_rays(prior=MRFPrior((2, 5), order=1, psi=0.4, cell_prior=0.4))
-    pi = brute_force(model).log_probs.exp()
-    exact = ((pi[:, None] * enumerate_maps(model)).sum(0)[model.latent]).numpy()
     k = ChromaticPatchGibbs(model, (1, 2), tile=2, threads=1)
-    torch.manual_seed(0)
-    k.setup()
     assert np.diff(k.layout.col_off).max() >= 2
-    n, batches = 3000, 20
-    p = k.current_params()
-    trace = np.empty((n, len(model.latent)))
-    for i in range(n):
-        p = k.sample(p)
-        trace[i] = p["m"].numpy()
-    means = trace.reshape(batches, -1, trace.shape[1]).mean(1)
-    se = means.std(0, ddof=1) / math.sqrt(batches)
-    err = np.abs(trace.mean(0) - exact)
-    assert (err <= 5 * se + 1e-3).all(), f"errors {err} vs se {se}"
+    assert_long_run_matches_brute_force(k, 3000)
 
 
 def test_bad_settings_are_refused():
