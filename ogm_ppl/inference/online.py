@@ -217,6 +217,7 @@ class OnlineMap:
         self._bits = 60
         self.rescales = 0
         self._used = 0
+        self._need = np.zeros(grid.num_cells, np.int64)  # scratch of add_cell_entries, kept all zero
         self._st = ok.OnlineState(
             m,
             np.zeros(16, cs.RAY),
@@ -395,7 +396,7 @@ class OnlineMap:
         self._n_cap, self._b_cap = n_cap, b_cap
         rescale = False
         c_ray, c_kappa, self._used = ok.add_cell_entries(
-            st.c_start, st.c_len, st.c_cap, st.c_ray, st.c_kappa, self._used, offsets, cells, R0, R1
+            st.c_start, st.c_len, st.c_cap, st.c_ray, st.c_kappa, self._used, offsets, cells, R0, R1, self._need
         )
         if bits != self._bits:
             rescale = R0 > 0

@@ -135,17 +135,27 @@ def _retarget(st, r, f1, s1):
 
 
 @nb.njit(cache=True)
-def add_cell_entries(c_start, c_len, c_cap, c_ray, c_kappa, used, offsets, cells, r0, r1):
+def add_cell_entries(c_start, c_len, c_cap, c_ray, c_kappa, used, offsets, cells, r0, r1, need):
     """Append the (ray, kappa) entries of rays ``r0..r1-1`` to the pool (module docstring), growing blocks
     and, when full, compacting the pool. Updates ``c_start``, ``c_len``, ``c_cap`` in place; returns the
-    (possibly new) ``c_ray``, ``c_kappa`` and the pool's used length."""
+    (possibly new) ``c_ray``, ``c_kappa`` and the pool's used length. ``need`` (``K`` int64, all zero) is
+    scratch, left all zero: the work is in the new entries and the blocks they grow (the whole grid only
+    when the pool is compacted), blocks moved in increasing cell order."""
     K = c_start.shape[0]
-    need = np.zeros(K, np.int64)
-    for p in range(offsets[r0], offsets[r1]):
-        need[cells[p]] += 1
+    e0, e1 = offsets[r0], offsets[r1]
+    touched = np.empty(e1 - e0, np.int64)
+    nt = 0
+    for p in range(e0, e1):
+        c = cells[p]
+        if need[c] == 0:
+            touched[nt] = c
+            nt += 1
+        need[c] += 1
+    touched = np.sort(touched[:nt])
     extra = 0
-    for k in range(K):
-        if need[k] > 0 and c_len[k] + need[k] > c_cap[k]:
+    for i in range(nt):
+        k = touched[i]
+        if c_len[k] + need[k] > c_cap[k]:
             extra += _grown(c_cap[k], c_len[k] + need[k])
     if used + extra > c_ray.shape[0]:  # compact into a pool of twice the capacity now needed
         total = 0
@@ -171,13 +181,14 @@ def add_cell_entries(c_start, c_len, c_cap, c_ray, c_kappa, used, offsets, cells
             pos += cap
         c_ray, c_kappa, used = nr, nk, pos
     else:  # move the full blocks to the end of the pool
-        for k in range(K):
-            if need[k] > 0 and c_len[k] + need[k] > c_cap[k]:
+        for i in range(nt):
+            k = touched[i]
+            if c_len[k] + need[k] > c_cap[k]:
                 cap = _grown(c_cap[k], c_len[k] + need[k])
                 a = c_start[k]
-                for i in range(c_len[k]):
-                    c_ray[used + i] = c_ray[a + i]
-                    c_kappa[used + i] = c_kappa[a + i]
+                for j in range(c_len[k]):
+                    c_ray[used + j] = c_ray[a + j]
+                    c_kappa[used + j] = c_kappa[a + j]
                 c_start[k] = used
                 c_cap[k] = cap
                 used += cap
@@ -189,6 +200,8 @@ def add_cell_entries(c_start, c_len, c_cap, c_ray, c_kappa, used, offsets, cells
             c_ray[q] = r
             c_kappa[q] = j
             c_len[c] += 1
+    for i in range(nt):
+        need[touched[i]] = 0
     return c_ray, c_kappa, used
 
 
