@@ -428,7 +428,8 @@ class OnlineMap:
         self._pinned[first] = True
         for k in newly[st.m[newly] != 0].tolist():
             ok.set_cell(st, int(k), 0)
-        self._latent = np.flatnonzero(~self._pinned).astype(np.int64)
+        if len(newly) or R0 == 0:
+            self._latent = np.flatnonzero(~self._pinned).astype(np.int64)
         reached = rays.reached()
         if self.init_new == "hits":  # restart the cells these rays are the first to reach (init_new)
             first_seen = reached & ~self._reached & ~self._pinned
