@@ -50,6 +50,7 @@ import numba as nb
 import numpy as np
 import torch
 
+from ogm_ppl._raycast_kernels import transpose_csr
 from ogm_ppl.inference._kernels import cell_sweep as cs
 from ogm_ppl.inference._kernels import parallel as par
 from ogm_ppl.inference.mcmc.gibbs import _SCAN_CODES
@@ -135,18 +136,6 @@ def _ranges(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:
     return np.repeat(starts - first, lengths) + np.arange(total, dtype=np.int64)
 
 
-def _cell_index(n_cells: int, offsets: np.ndarray, cells: np.ndarray):
-    """The transposed index (``c_off``, ``c_ray``, ``c_kappa``) of rays in CSR form over ``n_cells`` cells,
-    rays in increasing order within a cell."""
-    lengths = np.diff(offsets)
-    ray = np.repeat(np.arange(len(lengths), dtype=np.int64), lengths)
-    kappa = np.arange(len(cells), dtype=np.int64) - np.repeat(offsets[:-1], lengths)
-    order = np.lexsort((ray, cells))
-    c_off = np.zeros(n_cells + 1, np.int64)
-    np.cumsum(np.bincount(cells, minlength=n_cells), out=c_off[1:])
-    return c_off, np.ascontiguousarray(ray[order]), np.ascontiguousarray(kappa[order])
-
-
 def tile_problems(kernel: ChromaticCellGibbs) -> list[TileProblem]:
     """The :class:`TileProblem` of every non-empty tile of ``kernel``'s layout, colour by colour in the layout's
     order (``kernel`` prepared: its tiles, state arrays and compiled prior). Raises ``ValueError`` when the
@@ -183,7 +172,7 @@ def tile_problems(kernel: ChromaticCellGibbs) -> list[TileProblem]:
         r1, c1 = min(rows, (hi_r + 2) // 2 * 2), min(cols, (hi_c + 2) // 2 * 2)
         wr, wc = r1 - r0, c1 - c0
         loc = (rr - r0) * wc + (cc - c0)
-        l_off, l_ray, l_kap = _cell_index(wr * wc, r_off, loc)
+        l_off, l_ray, l_kap = transpose_csr(r_off, np.ascontiguousarray(loc), wr * wc)
         out.append(
             TileProblem(
                 t=int(t),
@@ -398,14 +387,3 @@ class DaskTileGibbs(ChromaticCellGibbs):
     def run_marginals(self, num_sweeps: int, seed: int = 0) -> torch.Tensor:
         """Not offered: a tile chain runs one sweep per :meth:`sample`."""
         raise NotImplementedError("DaskTileGibbs runs one sweep per sample(); use CellGibbs.run_marginals")
-
-
-def problem_sizes(problems: Sequence[TileProblem]) -> dict[str, float]:
-    """Totals over sub-problems: cells visited, window cells, ray entries and bytes."""
-    return {
-        "tiles": len(problems),
-        "visited": int(sum(len(p.visit) for p in problems)),
-        "window_cells": int(sum(p.window_cells for p in problems)),
-        "ray_entries": int(sum(len(p.cells) for p in problems)),
-        "bytes": int(sum(p.nbytes() for p in problems)),
-    }

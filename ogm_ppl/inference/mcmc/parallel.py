@@ -235,12 +235,6 @@ class ChromaticPatchGibbs(PatchGibbs):
         self._prepare()
         return self._layout
 
-    def groups(self) -> list[np.ndarray]:
-        """The anchors of each update group in sweep order: the non-empty tiles (colour by colour), then the
-        long patches."""
-        lay = self.layout
-        return [lay.anchors[lay.tile_off[t] : lay.tile_off[t + 1]] for t in lay.col_tiles] + [lay.long_anchors]
-
     def _sweep(self) -> int:
         seed = np.uint64(int(torch.randint(0, 2**63 - 1, (), dtype=torch.int64)))
         lay = self._layout

@@ -84,7 +84,7 @@ def test_one_and_two_worker_processes_give_one_chain():
     assert all(np.array_equal(x, y) for x, y in zip(*runs, strict=True))
 
 
-def test_a_task_alone_returns_the_tile_pass(client):
+def test_a_task_alone_returns_the_tile_pass():
     """run_tile on one sub-problem (no cluster) equals the tile's updates in the threaded sweep."""
     model = scene(n=24, prior=pattern_field(24))
     k = ChromaticCellGibbs(model, tile=6, threads=1)
