@@ -132,6 +132,24 @@ class Tiles(NamedTuple):
     # keys[b_start[s * (2^b_bits + 1) + b] : b_start[s * (2^b_bits + 1) + b + 1]] (empty, b_bits = -1: none)
     b_start: np.ndarray = np.zeros(0, np.int64)
     b_bits: int = -1
+    # the neighbour layout of a tile update (:func:`~ogm_ppl.priors.compiled.tiles.neighbour_layout`): the
+    # tiles whose windows hold cells of a tile away from the grid edge, in the order the generic update
+    # visits them, as linear anchor offsets ``nb_lin`` (cells) and tile offsets ``nb_dt``; ``nb_pmask[q]``
+    # the window bits of neighbour q that are the tile's cells; sub-configuration e of neighbour q
+    # (``nb_eoff[q] <= e < nb_eoff[q + 1]``) sets the window bits ``nb_expand[e]``, and configuration w
+    # of the tile reads entry ``nb_idx[w * nq + q]``; ``nb_box`` (rmin, rmax, cmin, cmax) the rows and
+    # columns, from the anchor, that the neighbours' windows span (empty arrays: no layout)
+    nb_lin: np.ndarray = np.zeros(0, np.int64)
+    nb_dt: np.ndarray = np.zeros(0, np.int64)
+    nb_pmask: np.ndarray = np.zeros(0, np.int64)
+    nb_eoff: np.ndarray = np.zeros(0, np.int64)
+    nb_expand: np.ndarray = np.zeros(0, np.int64)
+    nb_idx: np.ndarray = np.zeros(0, np.int64)
+    nb_box: np.ndarray = np.zeros(0, np.int64)
+    # the window's linear cell offsets, ``w_dr * cols + w_dc`` (empty: not built)
+    w_lin: np.ndarray = np.zeros(0, np.int64)
+    # the fallback segment as a dense table over the inner codes (-inf where absent; empty: none)
+    fb_dense: np.ndarray = np.zeros(0, np.float64)
 
     def sparse_patches(self) -> bool:
         return True

@@ -80,11 +80,12 @@ def tile_key(lp, t, m):
     ar = lp.t_r0 + ti * lp.t_h
     ac = lp.t_c0 + tj * lp.t_w
     key = lp.t_fill[t]
-    for i in range(w_dr.shape[0]):
+    for i in range(w_dr.shape[0]):  # without branches on the map (they mispredict): 4x faster
         r = ar + w_dr[i]
         c = ac + w_dc[i]
-        if 0 <= r < rows and 0 <= c < cols and m[r * cols + c]:
-            key |= np.int64(1) << i
+        ok = (r >= 0) & (r < rows) & (c >= 0) & (c < cols)
+        k = r * cols + c if ok else 0
+        key |= np.int64(ok & (m[k] != 0)) << i
     return key
 
 
@@ -111,8 +112,7 @@ def border_range(seg_off, keys, b_start, b_bits, n_inner, s, border):
     return _lower(keys, a, b, border << n_inner), _lower(keys, a, b, (border + 1) << n_inner)
 
 
-@nb.njit(cache=True)
-def _sparse_factor(keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, s, key):
+def _sparse_factor_py(keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, s, key):
     """``log phi(key)`` in segment ``s`` by binary search of the sorted keys (with a border index, only
     among the keys of the key's border: :func:`border_range`). A key missing from the segment: with a
     border-weight segment ``bseg >= 0`` (a backed-off table) it is ``log lambda_b + log back(inner)``,
@@ -149,6 +149,12 @@ def _sparse_factor(keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits,
             if q < fb and keys[q] == inner:
                 return logp[q]
     return -np.inf
+
+
+_sparse_factor = nb.njit(cache=True)(_sparse_factor_py)
+#: the same, inlined: for loops that make few other calls (a call passing the arrays costs more than
+#: the search among a border's few keys)
+_sparse_factor_inline = nb.njit(cache=True, inline="always")(_sparse_factor_py)
 
 
 @nb.njit(cache=True, inline="always")
@@ -500,6 +506,83 @@ def tiles_log_prob_batch(lp, maps, out):
         out[b] = s
 
 
+#: a neighbour layout is built for tiles of at most this many cells (its index is ``2^n_inner x nq``)
+LAYOUT_MAX_INNER = 12
+
+
+def neighbour_layout(w_dr, w_dc, n_inner, tile, pad, cols, memo_bits=MEMO_BITS) -> dict:
+    """The neighbour layout of a tile update away from the grid edge (the ``nb_*`` fields of
+    :class:`Tiles`): the tiles other than ``t`` whose windows hold a cell of ``t``, listed in the order of
+    :func:`tile_patch_setup` (by :func:`tiles_touching` of each tile cell in turn), each with the
+    (tile bit, window bit) pairs through which the tile's configuration enters that neighbour's key.
+    For a tile whose every cell is live and whose neighbours' windows lie on the grid, these depend on
+    the tiling alone, so :func:`tile_candidate_weights` reads them instead of building them per update.
+    Empty (no layout) for windows without a border, tiles of more than :data:`LAYOUT_MAX_INNER` cells or
+    a neighbour sharing more than ``memo_bits`` cells."""
+    h, w = int(tile[0]), int(tile[1])
+    pr, pc = int(pad[0]), int(pad[1])
+    empty = {k: np.zeros(0, np.int64) for k in ("nb_lin", "nb_dt", "nb_pmask", "nb_eoff", "nb_expand", "nb_idx")}
+    empty["nb_box"] = np.zeros(0, np.int64)
+    if (pr == 0 and pc == 0) or n_inner > LAYOUT_MAX_INNER:
+        return empty
+    w_dr = np.asarray(w_dr, np.int64)
+    w_dc = np.asarray(w_dc, np.int64)
+    # a virtual tiling with tile (t_i, t_j) far from any edge, anchored at (t_i h, t_j w)
+    t_i, t_j = pr // h + 2, pc // w + 2
+    ar, ac = t_i * h, t_j * w
+    touched: list[tuple[int, int]] = []
+    for i in range(n_inner):
+        r, c = ar + int(w_dr[i]), ac + int(w_dc[i])
+        for ti in range(max((r - pr) // h - 1, 0), (r + pr) // h + 1):
+            a = ti * h
+            if r < a - pr or r > a + h - 1 + pr:
+                continue
+            for tj in range(max((c - pc) // w - 1, 0), (c + pc) // w + 1):
+                b = tj * w
+                if c < b - pc or c > b + w - 1 + pc:
+                    continue
+                if (ti, tj) not in touched:
+                    touched.append((ti, tj))
+    nb = [(ti - t_i, tj - t_j) for ti, tj in touched if (ti, tj) != (t_i, t_j)]
+    lin, dt, pmask, eoff, expand = [], [], [], [0], []
+    sub_pairs = []
+    rmin = cmin = 1 << 30
+    rmax = cmax = -(1 << 30)
+    for di, dj in nb:
+        pairs = []  # (tile bit, window bit) in window-bit order
+        for x in range(len(w_dr)):
+            rr, cc = di * h + int(w_dr[x]), dj * w + int(w_dc[x])
+            rmin, rmax, cmin, cmax = min(rmin, rr), max(rmax, rr), min(cmin, cc), max(cmax, cc)
+            if 0 <= rr < h and 0 <= cc < w:
+                pairs.append((rr * w + cc, x))
+        if len(pairs) > memo_bits:
+            return empty
+        lin.append(di * h * int(cols) + dj * w)
+        dt.append((di, dj))
+        pmask.append(sum(1 << x for _, x in pairs))
+        for sub in range(1 << len(pairs)):
+            expand.append(sum(1 << x for p, (_, x) in enumerate(pairs) if (sub >> p) & 1))
+        eoff.append(len(expand))
+        sub_pairs.append(pairs)
+    nq = len(nb)
+    idx = np.empty((1 << n_inner, nq), np.int64)
+    codes = np.arange(1 << n_inner, dtype=np.int64)
+    for q, pairs in enumerate(sub_pairs):
+        sub_code = np.zeros(1 << n_inner, np.int64)
+        for p, (b, _) in enumerate(pairs):
+            sub_code |= ((codes >> b) & 1) << p
+        idx[:, q] = eoff[q] + sub_code
+    return {
+        "nb_lin": np.asarray(lin, np.int64),
+        "nb_dt": np.asarray(dt, np.int64).reshape(-1),  # (di, dj) of each neighbour, flat
+        "nb_pmask": np.asarray(pmask, np.int64),
+        "nb_eoff": np.asarray(eoff, np.int64),
+        "nb_expand": np.asarray(expand, np.int64),
+        "nb_idx": np.ascontiguousarray(idx.ravel()),
+        "nb_box": np.asarray([rmin, rmax, cmin, cmax], np.int64),
+    }
+
+
 def tiles(
     rows,
     cols,
@@ -562,6 +645,17 @@ def tiles(
         border_seg=int(border_seg),
         back_cdf=np.ascontiguousarray(back_cdf if border_seg >= 0 else _F, np.float64),
     )
+    bundle = bundle._replace(
+        w_lin=np.ascontiguousarray(np.asarray(w_dr, np.int64) * int(cols) + np.asarray(w_dc, np.int64)),
+        **neighbour_layout(w_dr, w_dc, int(n_inner), tile, pad, int(cols)),
+    )
+    if bundle.fallback >= 0 and int(n_inner) <= DENSE_MAX_BITS:
+        a, b = int(seg_off[bundle.fallback]), int(seg_off[bundle.fallback + 1])
+        fb = np.full(1 << int(n_inner), -np.inf)
+        fk = bundle.keys[a:b]
+        ok = (fk >= 0) & (fk < (1 << int(n_inner)))
+        fb[fk[ok]] = bundle.logp[a:b][ok]
+        bundle = bundle._replace(fb_dense=fb)
     Lw = len(w_dr)
     B = Lw - int(n_inner)
     if B <= BORDER_INDEX_MAX_BITS and (len(seg_keys) << B) <= BORDER_INDEX_MAX_ENTRIES:
@@ -581,12 +675,84 @@ def tiles_patch_weights(lp, patch, m, cands, n, out, ts):
     tile_patch_factors(lp, nt, ts, cands, n, out)
 
 
+@nb.njit(cache=True, inline="always")
+def _layout_applies(lp, t, patch):
+    """Whether the update of tile ``t`` (cells ``patch``) can read the neighbour layout: there is one,
+    every tile cell is live, and every neighbour's window lies on the grid."""
+    if lp.nb_lin.shape[0] == 0:
+        return False
+    for i in range(lp.n_inner):
+        if patch[i] < 0:
+            return False
+    ti = t // lp.t_cols
+    ar = lp.t_r0 + ti * lp.t_h
+    ac = lp.t_c0 + (t - ti * lp.t_cols) * lp.t_w
+    box = lp.nb_box
+    return ar + box[0] >= 0 and ar + box[1] < lp.rows and ac + box[2] >= 0 and ac + box[3] < lp.cols
+
+
+@nb.njit(cache=True, inline="always")
+def tile_neighbour_factors(lp, t, m, cands, n, out, E):
+    """:func:`tile_patch_setup` + :func:`tile_patch_factors` for a tile ``t`` where :func:`_layout_applies`:
+    ``out[j] += sum_q log phi_q(key_q(cands[j]))`` over the neighbours ``q`` of the layout, in the same
+    order and with the same factors (so the same sums, bit for bit). Each neighbour's key with the tile's
+    cells free is read from the map through the window's linear offsets, and its factor under every
+    sub-configuration of the cells it shares with the tile goes into ``E`` (``nb_eoff[nq]`` entries: for a
+    3 x 3 border table, 8 per edge neighbour and 2 per corner one); a candidate then adds one entry of
+    ``E`` per neighbour (``nb_idx``), a loop without branches."""
+    nb_lin, nb_dt, nb_pmask = lp.nb_lin, lp.nb_dt, lp.nb_pmask
+    nb_eoff, nb_expand, nb_idx = lp.nb_eoff, lp.nb_expand, lp.nb_idx
+    w_lin, t_fill, t_seg = lp.w_lin, lp.t_fill, lp.t_seg
+    dense, db, keys, logp, seg_off = lp.dense, lp.dense_bits, lp.keys, lp.logp, lp.seg_off
+    backoff, bseg, n_inner, b_start, b_bits = _backoff(lp), lp.border_seg, lp.n_inner, lp.b_start, lp.b_bits
+    fb_dense = lp.fb_dense
+    fast = b_bits >= 0 and bseg < 0 and (backoff < 0 or fb_dense.shape[0] > 0)
+    b_len = (np.int64(1) << b_bits) + 1 if b_bits >= 0 else np.int64(0)
+    inner_mask = (np.int64(1) << n_inner) - 1
+    t_cols = lp.t_cols
+    nq = nb_lin.shape[0]
+    Lw = w_lin.shape[0]
+    ti = t // t_cols
+    anchor = (lp.t_r0 + ti * lp.t_h) * lp.cols + lp.t_c0 + (t - ti * t_cols) * lp.t_w
+    for q in range(nq):
+        tq = t + nb_dt[2 * q] * t_cols + nb_dt[2 * q + 1]
+        a = anchor + nb_lin[q]
+        key = np.int64(0)
+        for x in range(Lw):
+            if m[a + w_lin[x]]:
+                key |= np.int64(1) << x
+        base = t_fill[tq] | (key & ~nb_pmask[q])
+        s = t_seg[tq]
+        for e in range(nb_eoff[q], nb_eoff[q + 1]):
+            key = base | nb_expand[e]
+            if db >= 0:
+                E[e] = dense[(s << db) | key]
+            elif fast:  # _sparse_factor with the border index and the dense fallback
+                bq = s * b_len + (key >> n_inner)
+                lo, hi = b_start[bq], b_start[bq + 1]
+                i = _lower(keys, lo, hi, key)
+                if i < hi and keys[i] == key:
+                    E[e] = logp[i]
+                elif lo == hi and backoff >= 0:  # border never seen: back off
+                    E[e] = fb_dense[key & inner_mask]
+                else:
+                    E[e] = -np.inf
+            else:
+                E[e] = _sparse_factor_inline(keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, s, key)
+    for j in range(n):
+        v = out[j]
+        row = cands[j] * nq
+        for q in range(nq):
+            v += E[nb_idx[row + q]]  # -inf stays -inf (no factor is +inf), as the generic update's early exit
+        out[j] = v
+
+
 @nb.njit(cache=True)
 def tile_candidate_weights(lp, patch, m, cands, n, t, cand_lp, out, ts):
     """The weights of the candidates of a patch: for a tile ``t >= 0``, its own factor (read with the
     candidates, ``cand_lp``) plus those of its neighbours whose windows hold patch cells (none when the
-    windows have no border, ``pad = 0``: the patch tables of Section 5.2.2); else
-    :func:`tiles_patch_weights`."""
+    windows have no border, ``pad = 0``: the patch tables of Section 5.2.2; through the neighbour layout,
+    :func:`tile_neighbour_factors`, where it applies); else :func:`tiles_patch_weights`."""
     if t < 0:
         tiles_patch_weights(lp, patch, m, cands, n, out, ts)
         return
@@ -594,6 +760,9 @@ def tile_candidate_weights(lp, patch, m, cands, n, t, cand_lp, out, ts):
         out[j] = cand_lp[j]
     if lp.pad_r == 0 and lp.pad_c == 0:
         return  # windows without a border: no other tile's window holds a cell of tile t
+    if _layout_applies(lp, t, patch):
+        tile_neighbour_factors(lp, t, m, cands, n, out, ts.memo)
+        return
     nt = tile_patch_setup(lp, patch, m, t, ts)
     tile_patch_factors(lp, nt, ts, cands, n, out)
 
