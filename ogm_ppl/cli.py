@@ -813,6 +813,13 @@ def _online_map(
 
     if method.name != "gibbs" or params.patch != 1 or params.chains != 1 or params.update == "thesis":
         raise CLIError("--online runs one single-cell Gibbs chain: use --method gibbs (patch 1, one chain)")
+    # the offline chain's start, kept as the scans arrive: reached cells restart from thresholded OGM
+    init_new = {"ogm": "ogm", "free": "keep"}.get(params.init)
+    if init_new is None or (params.init == "ogm" and params.init_delta != "haehnel"):
+        raise CLIError(
+            f"--online starts from thresholded traditional OGM (init=ogm, init_delta=haehnel) or all free "
+            f"(init=free), got init={params.init!r}, init_delta={params.init_delta!r}"
+        )
     t0 = time.perf_counter()
     r = replay(
         problem.grid,
@@ -825,6 +832,7 @@ def _online_map(
         progress=_progress(),
         seed=args.seed,
         update=params.update,
+        init_new=init_new,
     )
     times["ray_cast_s"], times["map_s"] = None, time.perf_counter() - t0
     om = r.online
@@ -837,6 +845,7 @@ def _online_map(
             "sweeps_per_scan": om.sweeps_per_scan,
             "full_every": om.full_every,
             "margin": om.margin,
+            "init_new": om.init_new,
             "sweeps_total": om.sweeps_done,
             "full_sweeps": om.full_sweeps,
             "mean_seconds_per_scan": float(r.seconds_per_scan.mean()),

@@ -62,6 +62,7 @@ import torch
 from ogm_ppl.grid import Grid
 from ogm_ppl.inference._kernels import cell_sweep as cs
 from ogm_ppl.inference._kernels import online as ok
+from ogm_ppl.inference.mcmc.kernel import ogm_start_threshold
 from ogm_ppl.models.occupancy import OccupancyModel
 from ogm_ppl.raycast import Rays, raycast
 from ogm_ppl.scans import Scans
@@ -142,7 +143,14 @@ class OnlineMap:
             latent cell that the new rays are the first to reach starts occupied if one of them ends in it and
             free otherwise (the inverse sensor model, like the thresholded-OGM start of the offline chains).
             That is a restart of those cells, not a move of the chain: the chain then converges again from
-            there (the cells had no readings before, so only prior draws are lost).
+            there (the cells had no readings before, so only prior draws are lost). ``"ogm"``: every latent
+            cell the new rays reach restarts from traditional OGM over *all* scans so far, thresholded as the
+            offline chains' start (:func:`~ogm_ppl.inference.mcmc.kernel.initial_map`: Haehnel's Delta,
+            threshold the prior's mean occupancy); the map keeps that evidence grid, ``l_k = sum_r
+            Delta(d_{r,k})``, incrementally (:attr:`evidence`, ``K`` float64). Also a restart, of cells that
+            may have readings: the chain's state there is replaced by the OGM estimate (each ``add_scans``
+            changes the target anyway), so the focused sweeps start every new target where an offline chain
+            would start it.
         initial_rays_per_cell: the first cap ``n_cap`` of the fixed-point scale (module docstring).
 
     Attributes:
@@ -181,8 +189,8 @@ class OnlineMap:
         for name, v in (("sweeps_per_scan", sweeps_per_scan), ("full_every", full_every), ("margin", margin)):
             if int(v) != v or v < 0:
                 raise ValueError(f"{name} must be a non-negative integer, got {v!r}")
-        if init_new not in ("keep", "hits"):
-            raise ValueError(f"init_new must be 'keep' or 'hits', got {init_new!r}")
+        if init_new not in ("keep", "hits", "ogm"):
+            raise ValueError(f"init_new must be 'keep', 'hits' or 'ogm', got {init_new!r}")
         self.init_new = init_new
         if initial_rays_per_cell < 1:
             raise ValueError(f"initial_rays_per_cell must be positive, got {initial_rays_per_cell}")
@@ -212,6 +220,9 @@ class OnlineMap:
         self._meta: list[dict[str, np.ndarray]] = []  # per add: the Rays fields a model needs
         self._pinned = np.zeros(K, bool)
         self._reached = np.zeros(K, bool)
+        self._evidence = np.zeros(K, np.float64)  # traditional OGM log-odds of every scan so far
+        mean = ogm_start_threshold(prior)
+        self._ogm_threshold = math.log(mean / (1.0 - mean)) if 0.0 < mean < 1.0 else 0.0
         self._n_cap = int(initial_rays_per_cell)
         self._b_cap = 0.0
         self._bits = 60
@@ -260,6 +271,11 @@ class OnlineMap:
     def focus(self) -> np.ndarray:
         """The latent cells of the current focus region (sorted indices)."""
         return self._focus
+
+    @property
+    def evidence(self) -> torch.Tensor:
+        """Traditional OGM over every scan so far (``K`` log-odds, Haehnel's Delta, from ``l = 0``; Eq. 2.10)."""
+        return torch.from_numpy(self._evidence.copy())
 
     @property
     def pinned(self) -> torch.Tensor:
@@ -437,6 +453,12 @@ class OnlineMap:
             hit[rays.endpoint_cells()] = True
             for k in np.flatnonzero(first_seen & (hit != st.m.astype(bool))).tolist():
                 ok.set_cell(st, int(k), int(hit[k]))
+        self._evidence += _haehnel_evidence(rays)
+        if self.init_new == "ogm":  # restart the latent cells the new rays reach from thresholded OGM
+            cand = np.flatnonzero(reached & ~self._pinned)
+            want = self._evidence[cand] > self._ogm_threshold
+            for k in cand[want != st.m[cand].astype(bool)].tolist():
+                ok.set_cell(st, int(k), int(self._evidence[k] > self._ogm_threshold))
         self._reached |= reached
         # the focus region: where the new rays end, and their first and second hits, dilated
         touched = np.zeros(self.grid.num_cells, bool)
@@ -583,6 +605,14 @@ class _Outside:
 
     def outside_occupancy(self) -> float:
         return self._lam
+
+
+def _haehnel_evidence(rays: Rays) -> np.ndarray:
+    """The new rays' traditional-OGM log-odds terms (Haehnel's Delta; additive over rays)."""
+    from ogm_ppl.inference.log_odds.maps import evidence_grid
+    from ogm_ppl.models.delta import Moravec
+
+    return evidence_grid(rays, Moravec.haehnel(), check_setting=False).log_odds.numpy()
 
 
 def _ragged_cols(lengths: np.ndarray) -> np.ndarray:

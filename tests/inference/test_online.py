@@ -225,6 +225,7 @@ def test_cli_map_online_with_snapshots(tmp_path):
     m = load_map(out / "map.npz")
     report = __import__("json").loads((out / "report.json").read_text())
     assert report["method"]["kernel"] == "OnlineMap" and report["method"]["online"]["scans"] == len(POSES)
+    assert report["method"]["online"]["init_new"] == "ogm"  # the offline chain's start (init=ogm)
     assert "snapshots.npz" in report["files"]
     with np.load(out / "snapshots.npz", allow_pickle=False) as z:
         assert z["scans"].tolist() == [2, 4] and z["probabilities"].shape == (2, *m["grid"].shape)
@@ -233,6 +234,10 @@ def test_cli_map_online_with_snapshots(tmp_path):
     assert np.all(p[wall[:, 0], wall[:, 1]] > 0.6) and np.all(p[inside[:, 0], inside[:, 1]] < 0.3)
     assert main([*argv[:-2], "--snapshots", "2", "--out", str(tmp_path / "o2")]) == 2  # needs --online
     assert main([*argv[:4], "--method", "p21", "--online", "--out", str(tmp_path / "o3")]) == 2  # not gibbs
+    assert main([*argv[:-2], "--online", "--param", "init=prior", "--out", str(tmp_path / "o4")]) == 2
+    assert main([*argv[:-2], "--online", "--param", "init=free", "--out", str(tmp_path / "o5")]) == 0
+    report = __import__("json").loads((tmp_path / "o5" / "report.json").read_text())
+    assert report["method"]["online"]["init_new"] == "keep"
 
 
 def test_init_new_hits_starts_first_seen_cells_from_the_scan():
@@ -246,4 +251,32 @@ def test_init_new_hits_starts_first_seen_cells_from_the_scan():
     assert np.array_equal(om.state.numpy().astype(bool), expect)
     _assert_same_as_rebuilt(om, grid, _part(scans, 0, 1), GaussianRange(1.0), _prior("independent", (N, N)))
     with pytest.raises(ValueError, match="init_new"):
-        OnlineMap(grid, GaussianRange(1.0), _prior("independent", (N, N)), init_new="ogm")
+        OnlineMap(grid, GaussianRange(1.0), _prior("independent", (N, N)), init_new="thresholded")
+
+
+@pytest.mark.parametrize("prior_name", ["independent", "mrf"])
+def test_init_new_ogm_restarts_reached_cells_from_thresholded_ogm_of_all_scans(prior_name):
+    """After each add, every latent cell the new rays reach holds the offline chains' thresholded-OGM start
+    over all scans so far (initial_map of a rebuilt model); cells no new ray reaches keep their state; the
+    kept evidence equals traditional OGM over all scans; the kept state equals a rebuild's."""
+    from ogm_ppl.inference.log_odds.maps import evidence_grid
+    from ogm_ppl.inference.mcmc.kernel import initial_map
+    from ogm_ppl.models.delta import Moravec
+
+    grid, scans = _scene(num_scans=4)
+    sensor, prior = GaussianRange(1.0), _prior(prior_name, (N, N))
+    om = OnlineMap(grid, sensor, prior, sweeps_per_scan=1, full_every=0, init_new="ogm", seed=2)
+    for n in range(1, 5):
+        before = om.state.numpy().copy()
+        om.add_scans(_part(scans, n - 1, n), sweeps=0)
+        so_far = _part(scans, 0, n)
+        model = OccupancyModel(grid, raycast(grid, so_far), sensor, prior)
+        start = initial_map(model).numpy()
+        reached = raycast(grid, _part(scans, n - 1, n)).reached() & ~om.pinned.numpy()
+        state = om.state.numpy()
+        assert np.array_equal(state[reached], start[reached]), n
+        assert np.array_equal(state[~reached & ~om.pinned.numpy()], before[~reached & ~om.pinned.numpy()])
+        lo = evidence_grid(model.rays, Moravec.haehnel(), check_setting=False).log_odds.numpy()
+        np.testing.assert_allclose(om.evidence.numpy(), lo, rtol=0, atol=1e-12)
+        _assert_same_as_rebuilt(om, grid, so_far, sensor, prior)
+        om.sweep(1)  # the chain moves on before the next scan

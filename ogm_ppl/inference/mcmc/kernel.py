@@ -45,6 +45,13 @@ __all__ = ["KernelStateError", "MapKernel", "initial_map", "region_cells"]
 SCANS = ("random", "permutation", "systematic")
 
 
+def ogm_start_threshold(prior) -> float:
+    """The occupancy at which the thresholded-OGM start cuts (:func:`initial_map`): the prior's mean cell
+    occupancy (``sigmoid`` of its cell log-odds where it has them), else its ``mean_occupancy``, else 0.5."""
+    lo = prior.cell_log_odds()
+    return float(torch.sigmoid(lo).mean()) if lo is not None else float(getattr(prior, "mean_occupancy", 0.5))
+
+
 def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: float | None = None) -> torch.Tensor:
     """A starting map (``K`` float 0/1; pinned cells free).
 
@@ -58,9 +65,7 @@ def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: f
             from ogm_ppl.inference.log_odds.maps import evidence_grid
             from ogm_ppl.models.delta import delta_by_name
 
-            lo = model.prior.cell_log_odds()
-            mean = float(torch.sigmoid(lo).mean()) if lo is not None else getattr(model.prior, "mean_occupancy", 0.5)
-            thr = threshold if threshold is not None else mean
+            thr = threshold if threshold is not None else ogm_start_threshold(model.prior)
             d = delta_by_name(delta) if isinstance(delta, str) else delta
             m = (evidence_grid(model.rays, d, check_setting=False).probabilities > thr).to(torch.float64)
         elif init == "prior":
