@@ -384,17 +384,31 @@ def long_pass(st, prior, lay, seed, scan, update):
     return cs.sweep(st, order, prior, u, update)
 
 
+@nb.njit(cache=True, inline="always")
+def dealt_tile(r, p, P):
+    """The tile (index into a colour's tiles, costliest first) that thread ``p`` of ``P`` takes in round
+    ``r``: dealt in serpentine order (0 .. P-1, then P-1 .. 0), so each thread's share of the costs is
+    even without a scheduler (numba's ``prange`` splits a range into contiguous blocks, which would give
+    one thread all the costliest tiles). Which thread runs a tile does not change the chain: the tiles of a
+    colour touch disjoint state, and each draws from its own stream."""
+    return np.int64(r * P + (p if r % 2 == 0 else P - 1 - p))
+
+
 @nb.njit(cache=True, parallel=True)
 def chromatic_sweep(st, inf32, prior, lay, seed, scan, update):
     """One chromatic sweep (module docstring): for each colour, its tiles' :func:`tile_pass` in parallel
     (``numba.prange`` over the tiles, numba's threads), then :func:`long_pass`. ``inf32`` is ``st.inf``
     viewed as int32 (``pos``, ``neg`` of cell ``c`` at ``2c``, ``2c + 1``). Returns the flips."""
     total = 0
+    P = np.int64(nb.get_num_threads())
     for colour in range(COLOURS):
         a = lay.col_off[colour]
         n = lay.col_off[colour + 1] - a
         flips = np.zeros(n, np.int64)
-        for j in nb.prange(n):
-            flips[j] = tile_pass(st, inf32, prior, lay, lay.col_tiles[a + j], seed, scan, update)
+        for p in nb.prange(P):  # thread p: its share of the tiles, dealt costliest first (dealt_tile)
+            for r in range((n + P - 1) // P):
+                j = dealt_tile(r, p, P)
+                if j < n:
+                    flips[j] = tile_pass(st, inf32, prior, lay, lay.col_tiles[a + j], seed, scan, update)
         total += flips.sum()
     return total + long_pass(st, prior, lay, seed, scan, update)

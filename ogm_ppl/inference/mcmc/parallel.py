@@ -137,12 +137,11 @@ class ChromaticCellGibbs(CellGibbs):
         before = numba.get_num_threads()
         numba.set_num_threads(self.threads)
         try:
-            with numba.parallel_chunksize(1):  # tiles are dealt out one at a time, largest first
-                return int(
-                    par.chromatic_sweep(
-                        self._st, self._inf32, self._compiled, self._layout, seed, _SCAN_CODES[self.scan], self._rule
-                    )
+            return int(  # the tiles of a colour dealt to the threads costliest first (par.dealt_tile)
+                par.chromatic_sweep(
+                    self._st, self._inf32, self._compiled, self._layout, seed, _SCAN_CODES[self.scan], self._rule
                 )
+            )
         finally:
             numba.set_num_threads(before)
 
@@ -243,18 +242,17 @@ class ChromaticPatchGibbs(PatchGibbs):
         before = numba.get_num_threads()
         numba.set_num_threads(self.threads)
         try:
-            with numba.parallel_chunksize(1):
-                changed, skipped = pp.chromatic_patch_sweep(
-                    self._ps,
-                    self._geometry(),
-                    lay,
-                    self._compiled,
-                    seed,
-                    _SCAN_CODES[self.scan],
-                    self._patch_rule(),
-                    rows,
-                    self._bit_of,
-                )
+            changed, skipped = pp.chromatic_patch_sweep(  # tiles dealt costliest first (par.dealt_tile)
+                self._ps,
+                self._geometry(),
+                lay,
+                self._compiled,
+                seed,
+                _SCAN_CODES[self.scan],
+                self._patch_rule(),
+                rows,
+                self._bit_of,
+            )
         finally:
             numba.set_num_threads(before)
         if skipped:
