@@ -11,8 +11,8 @@ and here an independent prior (``lambda = 0.3``) or ``--prior mrf`` (4-connected
   sweep with 1 and with 2 threads (``numba.set_num_threads``), the layout (tiles per colour, the fraction
   of long cells: cells on a ray that reaches two tiles of one colour, swept serially after the four colour
   phases), and each tile's cost (one ``tile_pass`` at a time, single thread) and the long phase's, from
-  which a scaling model predicts a sweep on ``P`` cores: per colour the makespan of the tiles dealt to ``P``
-  threads as the kernel deals them (largest first, in serpentine rounds), summed, plus the long phase;
+  which a scaling model predicts a sweep on ``P`` cores: per colour the makespan of the tiles taken largest
+  first by whichever of ``P`` threads is free (as the kernel takes them), summed, plus the long phase;
 * peak RSS (``ru_maxrss``, a process-wide peak) after the serial sweeps and after the threaded ones (the
   serial kernel freed first); comparable for the first configuration only.
 
@@ -81,13 +81,11 @@ def timed_sweeps(kernel, sweeps: int) -> tuple[float, list[float]]:
     return float(np.mean(times[1:])), times
 
 
-def dealt_makespan(costs: np.ndarray, P: int) -> float:
-    """The makespan of ``costs`` dealt to ``P`` threads as the kernels deal a colour's tiles: largest first,
-    in serpentine rounds (``par.dealt_tile``)."""
+def lpt_makespan(costs: np.ndarray, P: int) -> float:
+    """The makespan of ``costs`` taken largest first by whichever of ``P`` threads is free (``par.take_tile``)."""
     load = np.zeros(P)
-    for j, c in enumerate(np.sort(costs)[::-1]):
-        r, q = divmod(j, P)
-        load[q if r % 2 == 0 else P - 1 - q] += c
+    for c in np.sort(costs)[::-1]:
+        load[np.argmin(load)] += c
     return float(load.max()) if len(costs) else 0.0
 
 
@@ -181,7 +179,7 @@ def run_config(model, tiles: list[int | None], sweeps: int) -> dict:
         res["tile_costs_s"] = [c.tolist() for c in costs]
         res["long_phase_s"] = long_s
         total = sum(float(c.sum()) for c in costs) + long_s
-        model_s = {P: sum(dealt_makespan(c, P) for c in costs) + long_s for P in (1, 2, 16, 64)}
+        model_s = {P: sum(lpt_makespan(c, P) for c in costs) + long_s for P in (1, 2, 16, 64)}
         res["model_s_per_sweep"] = model_s
         res["model_speedup_vs_1_thread"] = {P: total / v for P, v in model_s.items()}
         res["parallel_fraction"] = 1.0 - long_s / total

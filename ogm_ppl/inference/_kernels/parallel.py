@@ -66,6 +66,7 @@ __all__ = [
     "COLOURS",
     "TileLayout",
     "atomic_add",
+    "fetch_add",
     "chromatic_sweep",
     "colour_of_tile",
     "confined_rays",
@@ -94,6 +95,23 @@ def atomic_add(typingctx, arr, i, v):
         ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [args[1]])
         builder.atomic_rmw("add", ptr, args[2], "monotonic")
         return context.get_dummy_value()
+
+    return sig, codegen
+
+
+@intrinsic
+def fetch_add(typingctx, arr, i, v):
+    """``old = arr[i]; arr[i] += v; return old`` as one atomic read-modify-write (LLVM ``atomicrmw add``,
+    monotonic) on a 1D C-contiguous integer array: a shared counter from which threads take work."""
+    if not (isinstance(arr, types.Array) and arr.ndim == 1 and isinstance(arr.dtype, types.Integer)):
+        return None
+    sig = arr.dtype(arr, types.intp, arr.dtype)
+
+    def codegen(context, builder, signature, args):
+        aryty = signature.args[0]
+        ary = context.make_array(aryty)(context, builder, args[0])
+        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [args[1]])
+        return builder.atomic_rmw("add", ptr, args[2], "monotonic")
 
     return sig, codegen
 
@@ -385,13 +403,13 @@ def long_pass(st, prior, lay, seed, scan, update):
 
 
 @nb.njit(cache=True, inline="always")
-def dealt_tile(r, p, P):
-    """The tile (index into a colour's tiles, costliest first) that thread ``p`` of ``P`` takes in round
-    ``r``: dealt in serpentine order (0 .. P-1, then P-1 .. 0), so each thread's share of the costs is
-    even without a scheduler (numba's ``prange`` splits a range into contiguous blocks, which would give
-    one thread all the costliest tiles). Which thread runs a tile does not change the chain: the tiles of a
-    colour touch disjoint state, and each draws from its own stream."""
-    return np.int64(r * P + (p if r % 2 == 0 else P - 1 - p))
+def take_tile(taken, n):
+    """The next of a colour's ``n`` tiles (ordered costliest first) for the thread that asks: one shared
+    counter ``taken[0]`` read and advanced atomically (:func:`fetch_add`), so the threads share a colour
+    phase as list scheduling does, whichever of them runs slower at the moment (numba's ``prange`` would
+    split the tiles into fixed blocks). Which thread runs a tile does not change the chain: the tiles of a
+    colour touch disjoint state, and each draws from its own stream. Returns ``n`` or more when none is left."""
+    return fetch_add(taken, 0, np.int64(1)) if n > 0 else n
 
 
 @nb.njit(cache=True, parallel=True)
@@ -400,15 +418,16 @@ def chromatic_sweep(st, inf32, prior, lay, seed, scan, update):
     (``numba.prange`` over the tiles, numba's threads), then :func:`long_pass`. ``inf32`` is ``st.inf``
     viewed as int32 (``pos``, ``neg`` of cell ``c`` at ``2c``, ``2c + 1``). Returns the flips."""
     total = 0
-    P = np.int64(nb.get_num_threads())
+    P = nb.get_num_threads()
     for colour in range(COLOURS):
         a = lay.col_off[colour]
         n = lay.col_off[colour + 1] - a
         flips = np.zeros(n, np.int64)
-        for p in nb.prange(P):  # thread p: its share of the tiles, dealt costliest first (dealt_tile)
-            for r in range((n + P - 1) // P):
-                j = dealt_tile(r, p, P)
-                if j < n:
-                    flips[j] = tile_pass(st, inf32, prior, lay, lay.col_tiles[a + j], seed, scan, update)
+        taken = np.zeros(1, np.int64)
+        for _ in nb.prange(P):  # each thread takes the costliest tile left until none is (take_tile)
+            j = take_tile(taken, n)
+            while j < n:
+                flips[j] = tile_pass(st, inf32, prior, lay, lay.col_tiles[a + j], seed, scan, update)
+                j = take_tile(taken, n)
         total += flips.sum()
     return total + long_pass(st, prior, lay, seed, scan, update)

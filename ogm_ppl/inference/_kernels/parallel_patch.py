@@ -146,21 +146,20 @@ def chromatic_patch_sweep(ps, geo, lay, prior, seed, scan, rule, rows, bit_of):
     base = _next_stamp(ps, n_short + lay.long_anchors.shape[0])
     changed = 0
     skipped = 0
-    P = np.int64(nb.get_num_threads())
+    P = nb.get_num_threads()
     for colour in range(par.COLOURS):
         a = lay.col_off[colour]
         n = lay.col_off[colour + 1] - a
         ch = np.zeros(n, np.int64)
         sk = np.zeros(n, np.int64)
-        for p in nb.prange(P):  # thread p: its share of the tiles, dealt costliest first (par.dealt_tile)
-            for r in range((n + P - 1) // P):
-                j = par.dealt_tile(r, p, P)
-                if j < n:
-                    c, s = _tile_patches(
-                        ps, geo, lay, prior, seed, scan, rule, rows, bit_of, lay.col_tiles[a + j], base
-                    )
-                    ch[j] = c
-                    sk[j] = s
+        taken = np.zeros(1, np.int64)
+        for _ in nb.prange(P):  # each thread takes the costliest tile left until none is (par.take_tile)
+            j = par.take_tile(taken, n)
+            while j < n:
+                c, s = _tile_patches(ps, geo, lay, prior, seed, scan, rule, rows, bit_of, lay.col_tiles[a + j], base)
+                ch[j] = c
+                sk[j] = s
+                j = par.take_tile(taken, n)
         changed += ch.sum()
         skipped += sk.sum()
     anchors, u = patch_draws(lay.long_anchors, scan, par.tile_seed(seed, lay.n_tr * lay.n_tc), rows)

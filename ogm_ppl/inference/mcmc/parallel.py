@@ -137,7 +137,7 @@ class ChromaticCellGibbs(CellGibbs):
         before = numba.get_num_threads()
         numba.set_num_threads(self.threads)
         try:
-            return int(  # the tiles of a colour dealt to the threads costliest first (par.dealt_tile)
+            return int(  # threads take a colour's tiles costliest first (par.take_tile)
                 par.chromatic_sweep(
                     self._st, self._inf32, self._compiled, self._layout, seed, _SCAN_CODES[self.scan], self._rule
                 )
@@ -242,7 +242,7 @@ class ChromaticPatchGibbs(PatchGibbs):
         before = numba.get_num_threads()
         numba.set_num_threads(self.threads)
         try:
-            changed, skipped = pp.chromatic_patch_sweep(  # tiles dealt costliest first (par.dealt_tile)
+            changed, skipped = pp.chromatic_patch_sweep(  # threads take tiles costliest first (par.take_tile)
                 self._ps,
                 self._geometry(),
                 lay,

@@ -269,18 +269,22 @@ def assert_long_run_matches_brute_force(kernel, n: int, batches: int = 20) -> No
     assert (err <= 5 * se + 1e-3).all(), f"{type(kernel).__name__}: errors {err} vs se {se}"
 
 
-@pytest.mark.parametrize("P", [1, 2, 3, 16])
-def test_dealt_tile_gives_every_tile_to_one_thread_in_serpentine_rounds(P):
-    """par.dealt_tile: over the rounds a prange of P threads runs, each of a colour's n tiles goes to
-    exactly one thread; round r deals P consecutive tiles, forwards in even rounds and backwards in odd."""
-    for n in (0, 1, P, 2 * P + 1, 9, 37):
-        owner = {}
-        for p in range(P):
-            for r in range((n + P - 1) // P):
-                j = int(par.dealt_tile(r, p, P))
-                if j < n:
-                    assert j not in owner
-                    owner[j] = (p, r)
-        assert sorted(owner) == list(range(n))
-        for j, (p, r) in owner.items():
-            assert r == j // P and p == (j % P if r % 2 == 0 else P - 1 - j % P)
+def test_take_tile_hands_out_each_tile_once_to_concurrent_threads():
+    """par.take_tile under numba's threads: every thread takes tiles from one shared counter until none is
+    left; each of the n tiles is taken exactly once (the atomic fetch-and-add loses no increment)."""
+
+    @numba.njit(parallel=True)
+    def take_all(n, P, reps):
+        hits = np.zeros(n, np.int64)
+        for _ in range(reps):
+            taken = np.zeros(1, np.int64)
+            for _p in numba.prange(P):
+                j = par.take_tile(taken, n)
+                while j < n:
+                    par.atomic_add(hits, j, np.int64(1))
+                    j = par.take_tile(taken, n)
+        return hits
+
+    for n in (0, 1, 9, 1000):
+        hits = take_all(n, THREADS, 50)
+        assert hits.shape == (n,) and (hits == 50).all()
