@@ -3,7 +3,8 @@ r"""``gibbs`` and ``metropolis``: MCMC over the full posterior ``p(m | z)`` (Cha
 ``gibbs``: single-cell Gibbs (:class:`~ogm_ppl.inference.mcmc.CellGibbs`, ``patch = 1``) or patch Gibbs
 (:class:`~ogm_ppl.inference.mcmc.PatchGibbs`, Algorithm 1; Algorithm 2 with ``p_rand_patch``), heat-bath or
 metropolised updates, or ``update = "thesis"``: the thesis's border update (Section 5.2.3), which draws
-each tile of a table prior from its own table and ignores its neighbours' factors (not exact).
+each tile of a table prior from its own table and ignores its neighbours' factors (not exact);
+``warm_thesis = N`` starts an exact patch chain where N sweeps of that update end (a starting map only).
 ``metropolis``: single-cell Metropolis-Hastings (:class:`~ogm_ppl.inference.mcmc.MetropolisCell`) with
 uniform or end-point proposals.
 """
@@ -11,6 +12,9 @@ uniform or end-point proposals.
 from __future__ import annotations
 
 from dataclasses import dataclass
+
+import numpy as np
+import torch
 
 from ogm_ppl.methods._model import check_patch_work, patch_arg
 from ogm_ppl.methods._sampling import SamplingParams, run_kernel
@@ -42,11 +46,21 @@ class GibbsParams(SamplingParams):
     p_escape: float = param(
         0.2, Float(0, 1, lo_open=True), "PatchGibbs, backed-off tables: probability of the escape move"
     )
+    warm_thesis: int = param(
+        0,
+        Int(lo=0),
+        "PatchGibbs, table priors: sweeps of the thesis's border update from the starting map; the chain "
+        "starts where they end (a starting map: not counted, not part of the chain)",
+    )
 
     def check(self) -> None:
         super().check()
         if self.update == "thesis" and self.patch == 1:
             raise ParamError("update", "'thesis' is the border update of patch Gibbs: use a patch, e.g. [3, 3]")
+        if self.warm_thesis and (self.patch == 1 or self.update == "thesis"):
+            raise ParamError(
+                "warm_thesis", "starts a patch chain of another update from the thesis's: use a patch and update gibbs"
+            )
 
 
 @register_method("gibbs", GibbsParams, stochastic=True, sampler=True)
@@ -59,22 +73,38 @@ def gibbs(params: GibbsParams, problem: MapProblem, ctx: RunContext) -> MapResul
         kernel = CellGibbs(model, scan=params.scan, update=params.update, init=params.init, delta=params.init_delta)
         details: dict = {"kernel": "CellGibbs"}
     else:
-        passes = (params.burn_in + params.sweeps) * params.chains
+        passes = (params.burn_in + params.sweeps + params.warm_thesis) * params.chains
         check_patch_work(params.patch, problem.grid.ndim, problem.grid.num_cells, passes, False, "PatchGibbs")
-        kernel = PatchGibbs(
-            model,
-            patch=patch_arg(params.patch),
-            scan=params.scan,
-            offset=params.offset,
-            p_rand_patch=params.p_rand_patch,
-            random_patch=params.random_patch,
-            update=params.update,
-            init=params.init,
-            delta=params.init_delta,
-            p_escape=params.p_escape,
-        )
+
+        def patch_kernel(update: str, init) -> PatchGibbs:
+            return PatchGibbs(
+                model,
+                patch=patch_arg(params.patch),
+                scan=params.scan,
+                offset=params.offset,
+                p_rand_patch=params.p_rand_patch,
+                random_patch=params.random_patch,
+                update=update,
+                init=init,
+                delta=params.init_delta,
+                p_escape=params.p_escape,
+            )
+
+        init = params.init
+        if params.warm_thesis:
+            init = _thesis_start(patch_kernel("thesis", params.init), params.warm_thesis, ctx.seed)
+        kernel = patch_kernel(params.update, init)
         details = {"kernel": "PatchGibbs", "patch": params.patch}
     return run_kernel(kernel, params, problem, ctx, details)
+
+
+def _thesis_start(kernel, sweeps: int, seed: int):
+    """The map after ``sweeps`` sweeps of ``kernel`` (the thesis's border update) from its starting map, drawn
+    from a stream of its own (seeded by ``seed``): the ``warm_thesis`` start of a patch chain."""
+    from ogm_ppl.inference.mcmc import run_gibbs
+
+    run_gibbs(kernel, 0, warmup=sweeps, seed=(int(seed) * 0x9E3779B1 + 0x7F4A7C15) % 2**63, progress=False)
+    return torch.from_numpy(kernel.state.astype(np.float64))
 
 
 @dataclass(frozen=True)
