@@ -9,13 +9,15 @@ given its 8 neighbours, 3 x 3 given 16 border cells, and 5 x 5 given 24, which t
 compute). Tables are counted here from the example's own ground truth with its 8 flips/rotations (the
 learned corpus tables arrive separately). Also: a 500 x 500 / 72,000-ray single-cell sweep with the MRF
 prior and the pattern fields (``field`` / ``field2``) next to the independent prior (target: within
-1.5x), and the border prior with 3 x 3 patches at the
+1.5x), the same with 3 x 3 patch sweeps (the fields against the independent prior's), and the border
+prior with 3 x 3 patches at the
 size of the thesis's Intel Lab experiment 1 (a 1500 x 1500 map, about 82,000 rays; 1518 s per sample in
 the thesis) on a simulated walled map. Writes out/bench/bench_priors.json.
 
 ``--quick``: a smaller Table 5.1 map (100 x 160) and a 500 x 500 Intel-like map whose time is extrapolated
 to 1500 x 1500 (labelled as such), for iterating on a busy machine. ``--overhead``: only the 500 x 500
-single-cell sweep comparison (independent / MRF / pattern fields), to out/bench/bench_priors_overhead.json.
+single-cell and 3 x 3 patch sweep comparison (independent / MRF / pattern fields), to
+out/bench/bench_priors_overhead.json.
 """
 
 from __future__ import annotations
@@ -283,6 +285,17 @@ def mrf_overhead() -> dict:
         out[f"{kind}_seconds"] = s
         out[f"{kind}_ratio"] = s / s_ind
         print(f"  pattern {kind}: {s:.4f} s = {s / s_ind:.2f}x the independent sweep (target <= 1.5x)")
+    # 3 x 3 patch sweeps: every patch weighs all 2^9 configurations under the fields (window sums in
+    # Gray-code order), against the independent prior's additive patch sweep
+    s_ind9 = sweep_seconds(PatchGibbs(base, patch=(3, 3)))
+    out["independent_patch3_seconds"] = s_ind9
+    print(f"  3 x 3 patch sweep: independent prior {s_ind9:.4f} s")
+    for kind in ("field", "field2"):
+        model = OccupancyModel(grid, rays, GaussianRange(3.0), prior_by_name(f"{kind}:houseexpo", grid.shape))
+        s = sweep_seconds(PatchGibbs(model, patch=(3, 3)))
+        out[f"{kind}_patch3_seconds"] = s
+        out[f"{kind}_patch3_ratio"] = s / s_ind9
+        print(f"  pattern {kind}, 3 x 3 patches: {s:.4f} s = {s / s_ind9:.2f}x the independent patch sweep")
     return out
 
 

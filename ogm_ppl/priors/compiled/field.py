@@ -232,11 +232,12 @@ def field_cell_log_odds(lp, k, m):
 
 # ------------------------------------------------------------------ patches
 @nb.njit(cache=True)
-def _scale_setup(w, R, C, cells_r, cells_c, n_live, is_live, value, anchors, base, pr_off, pr_pb, pr_wb):
+def _scale_setup(w, R, C, cells_r, cells_c, n_live, is_live, value, o_r, o_c, S, anchors, base, pr_off, pr_pb, pr_wb):
     """The windows of an ``R x C`` grid holding one of the ``n_live`` live cells ``(cells_r, cells_c)``:
-    per window its code with the live cells cleared (``base``; other cells read by ``value(i, j)``, given
-    as the 0/1 array ``value`` over the grid) and the pairs (live index, window bit). ``is_live``: grid
-    array, live index or -1. Returns the number of windows."""
+    per window its code with the live cells cleared (``base``; other cells read from the 0/1 array
+    ``value``) and the pairs (live index, window bit). ``is_live``: live index or -1. Both arrays hold cell
+    ``(i, j)`` at ``(i - o_r) S + j - o_c`` (the whole grid: ``0, 0, C``; or a box around the live cells
+    that holds every window's cells). Returns the number of windows."""
     nw = 0
     npair = 0
     pr_off[0] = 0
@@ -249,7 +250,7 @@ def _scale_setup(w, R, C, cells_r, cells_c, n_live, is_live, value, anchors, bas
                 first = True
                 for a in range(w):
                     for b in range(w):
-                        q = is_live[(r0 + a) * C + c0 + b]
+                        q = is_live[(r0 + a - o_r) * S + c0 + b - o_c]
                         if q >= 0 and q < x:
                             first = False
                 if not first:
@@ -257,7 +258,7 @@ def _scale_setup(w, R, C, cells_r, cells_c, n_live, is_live, value, anchors, bas
                 code = np.int64(0)
                 for a in range(w):
                     for b in range(w):
-                        kk = (r0 + a) * C + c0 + b
+                        kk = (r0 + a - o_r) * S + c0 + b - o_c
                         q = is_live[kk]
                         if q >= 0:
                             pr_pb[npair] = q
@@ -273,9 +274,86 @@ def _scale_setup(w, R, C, cells_r, cells_c, n_live, is_live, value, anchors, bas
 
 
 @nb.njit(cache=True)
+def _window_sums(theta, nw, base, pr_off, pr_pb, pr_wb, cands, n, out):
+    """``out[j] = sum_q theta[code_q(cands[j])]`` over the windows of :func:`_scale_setup`, each
+    candidate's bits placed into every window code."""
+    for jx in range(n):
+        cand = cands[jx]
+        s = 0.0
+        for q in range(nw):
+            code = base[q]
+            for p in range(pr_off[q], pr_off[q + 1]):
+                code |= ((cand >> pr_pb[p]) & 1) << pr_wb[p]
+            s += theta[code]
+        out[jx] = s
+
+
+#: recompute the Gray-code running sum from the window codes every this many steps (bounds the rounding)
+GRAY_RESYNC = 64
+
+
+@nb.njit(cache=True)
+def _window_sums_gray(theta, nw, base, pr_off, pr_pb, pr_wb, nl, out):
+    """:func:`_window_sums` for the ``2^nl`` candidates ``0 .. 2^nl - 1`` in order, visited in Gray-code
+    order: step ``i`` flips live bit ``ctz(i)``, which changes only the windows holding that cell (9 of the 25
+    of a 3 x 3 patch under 3 x 3 windows), so the sum moves by their ``theta`` differences; it is summed afresh
+    every :data:`GRAY_RESYNC` steps. Equal to :func:`_window_sums` to rounding (a few ulp of the sums)."""
+    # per live bit: the (window, window-bit mask) pairs it enters
+    cnt = np.zeros(nl + 1, np.int64)
+    for p in range(pr_off[nw]):
+        cnt[pr_pb[p] + 1] += 1
+    for x in range(nl):
+        cnt[x + 1] += cnt[x]
+    fill = cnt[:nl].copy()
+    xq = np.empty(max(pr_off[nw], 1), np.int64)
+    xm = np.empty(max(pr_off[nw], 1), np.int64)
+    for q in range(nw):
+        for p in range(pr_off[q], pr_off[q + 1]):
+            x = pr_pb[p]
+            xq[fill[x]] = q
+            xm[fill[x]] = np.int64(1) << pr_wb[p]
+            fill[x] += 1
+    code = base[:nw].copy()
+    s = 0.0
+    for q in range(nw):
+        s += theta[code[q]]
+    out[0] = s
+    g = np.int64(0)
+    for i in range(1, np.int64(1) << nl):
+        x = 0
+        while not (i >> x) & 1:
+            x += 1
+        g ^= np.int64(1) << x
+        if i % GRAY_RESYNC == 0:
+            for e in range(cnt[x], cnt[x + 1]):
+                code[xq[e]] ^= xm[e]
+            s = 0.0
+            for q in range(nw):
+                s += theta[code[q]]
+        else:
+            for e in range(cnt[x], cnt[x + 1]):
+                q = xq[e]
+                old = theta[code[q]]
+                code[q] ^= xm[e]
+                s += theta[code[q]] - old
+        out[g] = s
+
+
+@nb.njit(cache=True)
+def _full_range(cands, n, nl):
+    if n != np.int64(1) << nl:
+        return False
+    for j in range(n):
+        if cands[j] != j:
+            return False
+    return True
+
+
+@nb.njit(cache=True)
 def field_patch_weights(lp, patch, m, cands, n, out, ts):
     """``out[j] = log p~(patch = cands[j], rest)`` up to a constant in ``j``: the windows (and, at two
-    scales, the pooled windows) holding a live patch cell, read once, then scored per candidate."""
+    scales, the pooled windows) holding a live patch cell, read once, then scored per candidate (all
+    ``2^L`` candidates in order: in Gray-code order, :func:`_window_sums_gray`)."""
     rows, cols, w = lp.rows, lp.cols, lp.w
     theta, theta2 = lp.theta, lp.theta2
     bit_of = ts.bit_of  # K int64, all -1 between updates
@@ -300,78 +378,82 @@ def field_patch_weights(lp, patch, m, cands, n, out, ts):
     pr_off = np.empty(cap + 1, np.int64)
     pr_pb = np.empty(cap, np.int64)
     pr_wb = np.empty(cap, np.int64)
-    nw = _scale_setup(w, rows, cols, cr, cc, nl, bit_of, m, anchors, base, pr_off, pr_pb, pr_wb)
+    nw = _scale_setup(w, rows, cols, cr, cc, nl, bit_of, m, 0, 0, cols, anchors, base, pr_off, pr_pb, pr_wb)
     for i in range(L):
         if patch[i] >= 0:
             bit_of[patch[i]] = -1
-    two = lp.n_scales == 2
-    npar = 0
+    if nl <= 20 and _full_range(cands, n, nl):
+        _window_sums_gray(theta, nw, base, pr_off, pr_pb, pr_wb, nl, out)
+    else:
+        _window_sums(theta, nw, base, pr_off, pr_pb, pr_wb, cands, n, out)
+    if lp.n_scales != 2:
+        return
     P, Q = lp.prow, lp.pcol
+    # the pooled parents of the live cells: per parent the OR of its fixed cells and the mask of its patch bits
+    npar = 0
     fixed = np.zeros(max(nl, 1), np.int64)
     pmask = np.zeros(max(nl, 1), np.int64)
+    pr_ = np.empty(max(nl, 1), np.int64)
+    pc_ = np.empty(max(nl, 1), np.int64)
+    for x in range(nl):
+        i = cr[x] >> 1
+        j = cc[x] >> 1
+        q = -1
+        for y in range(npar):
+            if pr_[y] == i and pc_[y] == j:
+                q = y
+        if q < 0:
+            q = npar
+            pr_[q] = i
+            pc_[q] = j
+            npar += 1
+        pmask[q] |= np.int64(1) << x
+    # the pooled cells the pooled windows read lie within w - 1 of a parent: a box of them, not the grid
+    i0, i1, j0, j1 = P, -1, Q, -1
+    for y in range(npar):
+        i0, i1 = min(i0, pr_[y] - w + 1), max(i1, pr_[y] + w - 1)
+        j0, j1 = min(j0, pc_[y] - w + 1), max(j1, pc_[y] + w - 1)
+    i0, j0 = max(i0, 0), max(j0, 0)
+    i1, j1 = min(i1, P - 1), min(j1, Q - 1)
+    S = j1 - j0 + 1
+    is_par = np.full((i1 - i0 + 1) * S, -1, np.int64)
+    pooled = np.zeros((i1 - i0 + 1) * S, np.uint8)
+    for y in range(npar):
+        is_par[(pr_[y] - i0) * S + pc_[y] - j0] = y
+        f = 0
+        for a in range(2 * pr_[y], min(2 * pr_[y] + 2, rows)):
+            for bb in range(2 * pc_[y], min(2 * pc_[y] + 2, cols)):
+                kk = a * cols + bb
+                live = False
+                for x in range(nl):
+                    if cr[x] * cols + cc[x] == kk:
+                        live = True
+                if not live and m[kk]:
+                    f = 1
+        fixed[y] = f
+    for y in range(npar):
+        for i in range(max(0, pr_[y] - w + 1), min(P, pr_[y] + w)):
+            for j in range(max(0, pc_[y] - w + 1), min(Q, pc_[y] + w)):
+                if is_par[(i - i0) * S + j - j0] < 0:
+                    pooled[(i - i0) * S + j - j0] = _pooled(m, rows, cols, i, j)
     base2 = np.empty(cap, np.int64)
     p2_off = np.empty(cap + 1, np.int64)
     p2_pb = np.empty(cap, np.int64)
     p2_wb = np.empty(cap, np.int64)
-    nw2 = 0
-    if two:
-        # the pooled parents of the live cells: per parent the OR of its fixed cells and the mask of its patch bits
-        pr_ = np.empty(max(nl, 1), np.int64)
-        pc_ = np.empty(max(nl, 1), np.int64)
-        for x in range(nl):
-            i = cr[x] >> 1
-            j = cc[x] >> 1
-            q = -1
-            for y in range(npar):
-                if pr_[y] == i and pc_[y] == j:
-                    q = y
-            if q < 0:
-                q = npar
-                pr_[q] = i
-                pc_[q] = j
-                npar += 1
-            pmask[q] |= np.int64(1) << x
-        is_par = np.full(P * Q, -1, np.int64)
-        pooled = np.zeros(P * Q, np.uint8)
-        for y in range(npar):
-            is_par[pr_[y] * Q + pc_[y]] = y
-            f = 0
-            for a in range(2 * pr_[y], min(2 * pr_[y] + 2, rows)):
-                for bb in range(2 * pc_[y], min(2 * pc_[y] + 2, cols)):
-                    kk = a * cols + bb
-                    live = False
-                    for x in range(nl):
-                        if cr[x] * cols + cc[x] == kk:
-                            live = True
-                    if not live and m[kk]:
-                        f = 1
-            fixed[y] = f
-        # the pooled values the pooled windows read (only those near a parent are needed)
-        for y in range(npar):
-            for i in range(max(0, pr_[y] - w + 1), min(P, pr_[y] + w)):
-                for j in range(max(0, pc_[y] - w + 1), min(Q, pc_[y] + w)):
-                    if is_par[i * Q + j] < 0:
-                        pooled[i * Q + j] = _pooled(m, rows, cols, i, j)
-        anchors2 = np.empty(cap, np.int64)
-        nw2 = _scale_setup(w, P, Q, pr_, pc_, npar, is_par, pooled, anchors2, base2, p2_off, p2_pb, p2_wb)
+    anchors2 = np.empty(cap, np.int64)
+    nw2 = _scale_setup(w, P, Q, pr_, pc_, npar, is_par, pooled, i0, j0, S, anchors2, base2, p2_off, p2_pb, p2_wb)
     for jx in range(n):
         cand = cands[jx]
-        s = 0.0
-        for q in range(nw):
-            code = base[q]
-            for p in range(pr_off[q], pr_off[q + 1]):
-                code |= ((cand >> pr_pb[p]) & 1) << pr_wb[p]
-            s += theta[code]
-        if two:
-            pbits = np.int64(0)
-            for y in range(npar):
-                if fixed[y] or (cand & pmask[y]) != 0:
-                    pbits |= np.int64(1) << y
-            for q in range(nw2):
-                code = base2[q]
-                for p in range(p2_off[q], p2_off[q + 1]):
-                    code |= ((pbits >> p2_pb[p]) & 1) << p2_wb[p]
-                s += theta2[code]
+        pbits = np.int64(0)
+        for y in range(npar):
+            if fixed[y] or (cand & pmask[y]) != 0:
+                pbits |= np.int64(1) << y
+        s = out[jx]
+        for q in range(nw2):
+            code = base2[q]
+            for p in range(p2_off[q], p2_off[q + 1]):
+                code |= ((pbits >> p2_pb[p]) & 1) << p2_wb[p]
+            s += theta2[code]
         out[jx] = s
 
 
