@@ -377,6 +377,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "table_3_1": ("table_3_1", _table_3_1),
     "table_6_4_small": ("table_6_4_small", _experiment_pooled),
     "table_6_4_tempered": ("table_6_4_tempered", _experiment_pooled),
+    "table_6_4_warm": ("table_6_4_warm", _experiment_pooled),
 }
 
 
