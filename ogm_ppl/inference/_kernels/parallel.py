@@ -81,39 +81,39 @@ __all__ = [
 COLOURS = 4
 
 
+def _int_array(arr) -> bool:
+    return isinstance(arr, types.Array) and arr.ndim == 1 and isinstance(arr.dtype, types.Integer)
+
+
+def _rmw_add(context, builder, signature, args):
+    """``atomicrmw add`` (monotonic) on ``args[0][args[1]]``; returns the old value."""
+    aryty = signature.args[0]
+    ary = context.make_array(aryty)(context, builder, args[0])
+    ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [args[1]])
+    return builder.atomic_rmw("add", ptr, args[2], "monotonic")
+
+
 @intrinsic
 def atomic_add(typingctx, arr, i, v):
     """``arr[i] += v`` as one atomic read-modify-write (LLVM ``atomicrmw add``, monotonic ordering) on a
     1D C-contiguous integer array: concurrent adds to one entry from several threads are all kept."""
-    if not (isinstance(arr, types.Array) and arr.ndim == 1 and isinstance(arr.dtype, types.Integer)):
+    if not _int_array(arr):
         return None
-    sig = types.void(arr, types.intp, arr.dtype)
 
     def codegen(context, builder, signature, args):
-        aryty = signature.args[0]
-        ary = context.make_array(aryty)(context, builder, args[0])
-        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [args[1]])
-        builder.atomic_rmw("add", ptr, args[2], "monotonic")
+        _rmw_add(context, builder, signature, args)
         return context.get_dummy_value()
 
-    return sig, codegen
+    return types.void(arr, types.intp, arr.dtype), codegen
 
 
 @intrinsic
 def fetch_add(typingctx, arr, i, v):
     """``old = arr[i]; arr[i] += v; return old`` as one atomic read-modify-write (LLVM ``atomicrmw add``,
     monotonic) on a 1D C-contiguous integer array: a shared counter from which threads take work."""
-    if not (isinstance(arr, types.Array) and arr.ndim == 1 and isinstance(arr.dtype, types.Integer)):
+    if not _int_array(arr):
         return None
-    sig = arr.dtype(arr, types.intp, arr.dtype)
-
-    def codegen(context, builder, signature, args):
-        aryty = signature.args[0]
-        ary = context.make_array(aryty)(context, builder, args[0])
-        ptr = cgutils.get_item_pointer(context, builder, aryty, ary, [args[1]])
-        return builder.atomic_rmw("add", ptr, args[2], "monotonic")
-
-    return sig, codegen
+    return arr.dtype(arr, types.intp, arr.dtype), _rmw_add
 
 
 class TileLayout(NamedTuple):

@@ -274,12 +274,12 @@ def _scale_setup(w, R, C, cells_r, cells_c, n_live, is_live, value, o_r, o_c, S,
 
 
 @nb.njit(cache=True)
-def _window_sums(theta, nw, base, pr_off, pr_pb, pr_wb, cands, n, out):
+def _window_sums(theta, nw, base, pr_off, pr_pb, pr_wb, cands, n, out, add):
     """``out[j] = sum_q theta[code_q(cands[j])]`` over the windows of :func:`_scale_setup`, each
-    candidate's bits placed into every window code."""
+    candidate's bits placed into every window code (``add``: added to ``out[j]``, term by term)."""
     for jx in range(n):
         cand = cands[jx]
-        s = 0.0
+        s = out[jx] if add else 0.0
         for q in range(nw):
             code = base[q]
             for p in range(pr_off[q], pr_off[q + 1]):
@@ -385,7 +385,7 @@ def field_patch_weights(lp, patch, m, cands, n, out, ts):
     if nl <= 20 and _full_range(cands, n, nl):
         _window_sums_gray(theta, nw, base, pr_off, pr_pb, pr_wb, nl, out)
     else:
-        _window_sums(theta, nw, base, pr_off, pr_pb, pr_wb, cands, n, out)
+        _window_sums(theta, nw, base, pr_off, pr_pb, pr_wb, cands, n, out, False)
     if lp.n_scales != 2:
         return
     P, Q = lp.prow, lp.pcol
@@ -442,19 +442,14 @@ def field_patch_weights(lp, patch, m, cands, n, out, ts):
     p2_wb = np.empty(cap, np.int64)
     anchors2 = np.empty(cap, np.int64)
     nw2 = _scale_setup(w, P, Q, pr_, pc_, npar, is_par, pooled, i0, j0, S, anchors2, base2, p2_off, p2_pb, p2_wb)
+    pcands = np.empty(max(n, 1), np.int64)  # each candidate's parents' pooled values (bit y: parent y)
     for jx in range(n):
-        cand = cands[jx]
         pbits = np.int64(0)
         for y in range(npar):
-            if fixed[y] or (cand & pmask[y]) != 0:
+            if fixed[y] or (cands[jx] & pmask[y]) != 0:
                 pbits |= np.int64(1) << y
-        s = out[jx]
-        for q in range(nw2):
-            code = base2[q]
-            for p in range(p2_off[q], p2_off[q + 1]):
-                code |= ((pbits >> p2_pb[p]) & 1) << p2_wb[p]
-            s += theta2[code]
-        out[jx] = s
+        pcands[jx] = pbits
+    _window_sums(theta2, nw2, base2, p2_off, p2_pb, p2_wb, pcands, n, out, True)
 
 
 # ------------------------------------------------------------------ whole maps
