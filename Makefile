@@ -70,3 +70,10 @@ mutate: $(STAMP)
 
 clean:
 	rm -rf $(VENV) out docs/_build build dist
+
+# numba's on-disk caches (__pycache__/*.nbi, *.nbc) are invalidated per source file only: a compiled caller
+# keeps the code of the callees it was compiled with when those change in another file. Clear them after
+# editing a kernel and before timing it (CI starts from a clean clone, so it never reads a stale cache).
+.PHONY: clean-numba
+clean-numba:
+	find ogm_ppl -name '*.nbi' -delete -o -name '*.nbc' -delete
