@@ -288,6 +288,9 @@ def _window_sums(theta, nw, base, pr_off, pr_pb, pr_wb, cands, n, out, add):
         out[jx] = s
 
 
+#: the pooled scale's sums are tabled over the parents' configurations for patches of at most this many parents
+POOLED_TABLE_BITS = 10
+
 #: recompute the Gray-code running sum from the window codes every this many steps (bounds the rounding)
 GRAY_RESYNC = 64
 
@@ -353,7 +356,8 @@ def _full_range(cands, n, nl):
 def field_patch_weights(lp, patch, m, cands, n, out, ts):
     """``out[j] = log p~(patch = cands[j], rest)`` up to a constant in ``j``: the windows (and, at two
     scales, the pooled windows) holding a live patch cell, read once, then scored per candidate (all
-    ``2^L`` candidates in order: in Gray-code order, :func:`_window_sums_gray`)."""
+    ``2^L`` candidates in order: in Gray-code order, :func:`_window_sums_gray`; the pooled scale once per
+    configuration of the patch's parents, which is all it reads of a candidate)."""
     rows, cols, w = lp.rows, lp.cols, lp.w
     theta, theta2 = lp.theta, lp.theta2
     bit_of = ts.bit_of  # K int64, all -1 between updates
@@ -449,7 +453,15 @@ def field_patch_weights(lp, patch, m, cands, n, out, ts):
             if fixed[y] or (cands[jx] & pmask[y]) != 0:
                 pbits |= np.int64(1) << y
         pcands[jx] = pbits
-    _window_sums(theta2, nw2, base2, p2_off, p2_pb, p2_wb, pcands, n, out, True)
+    if npar <= POOLED_TABLE_BITS and (np.int64(1) << npar) < n:
+        # the pooled scale depends on a candidate through its parents alone: their 2^npar sums, tabled once
+        NP = np.int64(1) << npar
+        t2 = np.empty(NP, np.float64)
+        _window_sums(theta2, nw2, base2, p2_off, p2_pb, p2_wb, np.arange(NP), NP, t2, False)
+        for jx in range(n):
+            out[jx] += t2[pcands[jx]]
+    else:
+        _window_sums(theta2, nw2, base2, p2_off, p2_pb, p2_wb, pcands, n, out, True)
 
 
 # ------------------------------------------------------------------ whole maps

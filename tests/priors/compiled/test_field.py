@@ -36,3 +36,21 @@ def test_gray_pass_equals_the_generic_pass(two, shape):
         field_patch_weights(lp, patch, m, rev, 1 << L, generic, ts)
         np.testing.assert_allclose(gray, generic[::-1], rtol=0, atol=1e-12 * np.abs(generic).max())
         assert (ts.bit_of == -1).all()  # the scratch is left as found
+
+
+def test_a_few_candidates_weigh_as_in_the_full_pass():
+    """Two candidates (Algorithm 2's pair; fewer than the parents' configurations, so the pooled scale is not
+    tabled) get the weights the full pass gives them, to rounding."""
+    R, C = 15, 16
+    rng = np.random.default_rng(8)
+    prior = PatternFieldPrior((R, C), rng.normal(0, 1.0, 512), w=3, theta2=rng.normal(0, 0.5, 512), occupancy=0.3)
+    lp = prior.compiled()
+    m = (rng.random(R * C) < 0.4).astype(np.uint8)
+    ts = tile_scratch(R * C, 64)
+    patch = np.array([(6 + a) * C + 7 + b for a in range(3) for b in range(3)], np.int64)
+    full = np.empty(512)
+    field_patch_weights(lp, patch, m, np.arange(512, dtype=np.int64), 512, full, ts)
+    for pair in ([0, 511], [37, 300], [5, 5]):
+        got = np.empty(2)
+        field_patch_weights(lp, patch, m, np.asarray(pair, np.int64), 2, got, ts)
+        np.testing.assert_allclose(got, full[pair], rtol=0, atol=1e-12 * np.abs(full).max())
