@@ -62,7 +62,9 @@ import torch
 from ogm_ppl.grid import Grid
 from ogm_ppl.inference._kernels import cell_sweep as cs
 from ogm_ppl.inference._kernels import online as ok
+from ogm_ppl.inference.log_odds.maps import add_evidence
 from ogm_ppl.inference.mcmc.kernel import ogm_start_threshold
+from ogm_ppl.models.delta import Moravec
 from ogm_ppl.models.occupancy import OccupancyModel
 from ogm_ppl.raycast import Rays, raycast
 from ogm_ppl.scans import Scans
@@ -72,6 +74,7 @@ __all__ = ["OnlineMap", "OnlineStats", "Replay", "replay"]
 
 _UPDATES = {"gibbs": cs.HEAT_BATH, "metropolised": cs.METROPOLISED}
 _MIX = 0x9E3779B97F4A7C15
+_HAEHNEL = Moravec.haehnel()  # the update term of the thresholded-OGM start (initial_map's default)
 
 
 @dataclass(frozen=True)
@@ -220,9 +223,13 @@ class OnlineMap:
         self._meta: list[dict[str, np.ndarray]] = []  # per add: the Rays fields a model needs
         self._pinned = np.zeros(K, bool)
         self._reached = np.zeros(K, bool)
-        self._evidence = np.zeros(K, np.float64)  # traditional OGM log-odds of every scan so far
+        # init_new="ogm": traditional OGM log-odds of every scan so far, and the threshold in log-odds
+        ogm = init_new == "ogm"
+        self._evidence = np.zeros(K if ogm else 0, np.float64)
+        self._ogm_touched = np.zeros(K if ogm else 0, bool)
         mean = ogm_start_threshold(prior)
-        self._ogm_threshold = math.log(mean / (1.0 - mean)) if 0.0 < mean < 1.0 else 0.0
+        with np.errstate(divide="ignore"):
+            self._ogm_threshold = float(np.log(mean) - np.log1p(-mean))  # -inf / inf at 0 / 1
         self._n_cap = int(initial_rays_per_cell)
         self._b_cap = 0.0
         self._bits = 60
@@ -274,7 +281,10 @@ class OnlineMap:
 
     @property
     def evidence(self) -> torch.Tensor:
-        """Traditional OGM over every scan so far (``K`` log-odds, Haehnel's Delta, from ``l = 0``; Eq. 2.10)."""
+        """Traditional OGM over every scan so far (``K`` log-odds, Haehnel's Delta, from ``l = 0``; Eq. 2.10),
+        kept under ``init_new="ogm"``."""
+        if self.init_new != "ogm":
+            raise AttributeError(f"the evidence grid is kept under init_new='ogm' (this map: {self.init_new!r})")
         return torch.from_numpy(self._evidence.copy())
 
     @property
@@ -442,8 +452,7 @@ class OnlineMap:
         first = np.unique(rays.cells[rays.offsets[:-1]])
         newly = first[~self._pinned[first]]
         self._pinned[first] = True
-        for k in newly[st.m[newly] != 0].tolist():
-            ok.set_cell(st, int(k), 0)
+        ok.set_cells(st, newly, np.zeros(len(newly), np.uint8))
         if len(newly) or R0 == 0:
             self._latent = np.flatnonzero(~self._pinned).astype(np.int64)
         reached = rays.reached()
@@ -451,14 +460,12 @@ class OnlineMap:
             first_seen = reached & ~self._reached & ~self._pinned
             hit = np.zeros(self.grid.num_cells, bool)
             hit[rays.endpoint_cells()] = True
-            for k in np.flatnonzero(first_seen & (hit != st.m.astype(bool))).tolist():
-                ok.set_cell(st, int(k), int(hit[k]))
-        self._evidence += _haehnel_evidence(rays)
-        if self.init_new == "ogm":  # restart the latent cells the new rays reach from thresholded OGM
-            cand = np.flatnonzero(reached & ~self._pinned)
-            want = self._evidence[cand] > self._ogm_threshold
-            for k in cand[want != st.m[cand].astype(bool)].tolist():
-                ok.set_cell(st, int(k), int(self._evidence[k] > self._ogm_threshold))
+            k = np.flatnonzero(first_seen)
+            ok.set_cells(st, k, hit[k].astype(np.uint8))
+        elif self.init_new == "ogm":  # restart the latent cells the new rays reach from thresholded OGM
+            add_evidence(self._evidence, self._ogm_touched, rays, _HAEHNEL)
+            k = np.flatnonzero(reached & ~self._pinned)
+            ok.set_cells(st, k, (self._evidence[k] > self._ogm_threshold).astype(np.uint8))
         self._reached |= reached
         # the focus region: where the new rays end, and their first and second hits, dilated
         touched = np.zeros(self.grid.num_cells, bool)
@@ -605,14 +612,6 @@ class _Outside:
 
     def outside_occupancy(self) -> float:
         return self._lam
-
-
-def _haehnel_evidence(rays: Rays) -> np.ndarray:
-    """The new rays' traditional-OGM log-odds terms (Haehnel's Delta; additive over rays)."""
-    from ogm_ppl.inference.log_odds.maps import evidence_grid
-    from ogm_ppl.models.delta import Moravec
-
-    return evidence_grid(rays, Moravec.haehnel(), check_setting=False).log_odds.numpy()
 
 
 def _ragged_cols(lengths: np.ndarray) -> np.ndarray:

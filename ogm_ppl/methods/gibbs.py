@@ -13,9 +13,6 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-import torch
-
 from ogm_ppl.methods._model import check_patch_work, patch_arg
 from ogm_ppl.methods._sampling import SamplingParams, run_kernel
 from ogm_ppl.methods.params import Choice, Float, Int, ParamError, Patch, param
@@ -101,6 +98,9 @@ def gibbs(params: GibbsParams, problem: MapProblem, ctx: RunContext) -> MapResul
 def _thesis_start(kernel, sweeps: int, seed: int):
     """The map after ``sweeps`` sweeps of ``kernel`` (the thesis's border update) from its starting map, drawn
     from a stream of its own (seeded by ``seed``): the ``warm_thesis`` start of a patch chain."""
+    import numpy as np
+    import torch
+
     from ogm_ppl.inference.mcmc import run_gibbs
 
     run_gibbs(kernel, 0, warmup=sweeps, seed=(int(seed) * 0x9E3779B1 + 0x7F4A7C15) % 2**63, progress=False)

@@ -274,6 +274,13 @@ def set_cell(st, k, v):
 
 
 @nb.njit(cache=True)
+def set_cells(st, cells, values):
+    """:func:`set_cell` of each ``cells[i]`` to ``values[i]``, in order."""
+    for i in range(cells.shape[0]):
+        set_cell(st, cells[i], values[i])
+
+
+@nb.njit(cache=True)
 def log_lik_ratio(st, k):
     """``log p(z | m_k = 1, m_-k) - log p(z | m_k = 0, m_-k)`` from the kept sum (as the offline kernel)."""
     return cs._lik_ratio(st, k)

@@ -26,7 +26,14 @@ from ogm_ppl.models.delta import DeltaFamily
 from ogm_ppl.raycast import Rays, ray_inputs
 from ogm_ppl.scans import Scans
 
-__all__ = ["LogOddsMap", "evidence_grid", "evidence_grid_from_scans", "delta_table_for", "OCTOMAP_CLAMP"]
+__all__ = [
+    "LogOddsMap",
+    "add_evidence",
+    "evidence_grid",
+    "evidence_grid_from_scans",
+    "delta_table_for",
+    "OCTOMAP_CLAMP",
+]
 
 #: OctoMap's default clamping thresholds in log-odds (probabilities 0.1192 and 0.971).
 OCTOMAP_CLAMP = (-2.0, 3.5)
@@ -143,7 +150,7 @@ def evidence_grid(
     """
     l0 = _logit(prior)
     K = rays.grid.num_cells
-    lo, hi = _check_clamp(clamp, l0)
+    _check_clamp(clamp, l0)  # refuses a clamp that is malformed or excludes the prior
     if check_setting and rays.num_rays:
         _check_range(delta, float(np.median(rays.max_range_cells())), "evidence_grid")
     if differentiable:
@@ -158,12 +165,30 @@ def evidence_grid(
         touched = torch.zeros(K, dtype=torch.bool)
         touched[cells[vals != 0]] = True
         return LogOddsMap(rays.grid, ev, touched)
-    with torch.no_grad():
-        table, max_col = delta_table_for(rays, delta)
     ev = np.full(K, l0, dtype=np.float64)
     touched = np.zeros(K, dtype=np.bool_)
+    add_evidence(ev, touched, rays, delta, clamp)
+    return LogOddsMap(rays.grid, torch.from_numpy(ev), torch.from_numpy(touched))
+
+
+def add_evidence(
+    evidence: np.ndarray,
+    touched: np.ndarray,
+    rays: Rays,
+    delta: DeltaFamily,
+    clamp: tuple[float, float] | None = None,
+) -> None:
+    """Eq. 2.10 in place: add every ray's update terms ``Delta(d)`` to ``evidence`` (``K`` float64 log-odds),
+    ray by ray in reading order, and set ``touched`` (``K`` bool) where a term is non-zero; ``clamp`` clips
+    after each update. Adding the rays of a log in batches gives the numbers of one call on all of them
+    (the online maps keep traditional OGM so)."""
+    lo, hi = (-np.inf, np.inf) if clamp is None else (float(clamp[0]), float(clamp[1]))
+    if rays.num_rays == 0:
+        return
+    with torch.no_grad():
+        table, max_col = delta_table_for(rays, delta)
     evidence_update(
-        ev,
+        evidence,
         touched,
         rays.offsets,
         rays.cells,
@@ -171,11 +196,10 @@ def evidence_grid(
         rays.is_max,
         np.ascontiguousarray(table.numpy()),
         max_col,
-        float(lo),
-        float(hi),
+        lo,
+        hi,
         clamp is not None,
     )
-    return LogOddsMap(rays.grid, torch.from_numpy(ev), torch.from_numpy(touched))
 
 
 def evidence_grid_from_scans(
