@@ -48,6 +48,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from ogm_ppl._borrow import borrow
 from ogm_ppl.inference._kernels.cells import _next_occupied
 from ogm_ppl.priors.compiled import cell_log_odds
 
@@ -359,6 +360,8 @@ def sweep(st, order, prior, uniforms, update):
     """One pass of single-cell updates over ``order`` with the prior bundle ``prior``
     (:mod:`ogm_ppl.priors.compiled`; numba compiles one loop per bundle type, inlining its conditional
     ``l(m_k | m_-k)``). Returns the flips."""
+    st = borrow(st)
+    prior = borrow(prior)
     flips = 0
     m = st.m
     for i in range(order.shape[0]):

@@ -198,8 +198,8 @@ class PatternField(NamedTuple):
     pcol: int
     theta: np.ndarray  # 2^(w w) float64: log-potential of each window code at scale 1
     theta2: np.ndarray  # 2^(w w) float64: the same at scale 2 (zeros when n_scales == 1)
-    # w = 3: delta[q << 8 | rest] = theta[code | bit] - theta[code] for the q-th window holding a cell (the
-    # cell is its bit 8 - q; rest = the other 8 bits); one load per window in a cell's log-odds; else empty
+    # w = 3: delta[a << 15 | block] = the log-odds terms of the three windows anchored on row a of a cell's
+    # 5 x 5 neighbourhood, block = its rows a .. a + 2 (field._delta_table); three loads a cell; else empty
     delta: np.ndarray
     delta2: np.ndarray
 

@@ -28,6 +28,9 @@ from __future__ import annotations
 
 import numba as nb
 import numpy as np
+from llvmlite import ir
+from numba.core import cgutils, types
+from numba.extending import intrinsic
 
 from ogm_ppl.priors.compiled.bundles import PatternField
 from ogm_ppl.priors.compiled.registry import register
@@ -75,17 +78,24 @@ def pattern_field(rows: int, cols: int, w: int, theta, theta2=None) -> PatternFi
 
 
 def _delta_table(theta: np.ndarray, w: int) -> np.ndarray:
-    """``w = 3``: ``9 x 256`` float64 flattened, row ``q`` (window ``(a0, b0) = divmod(q, 3)`` of a cell's
-    neighbourhood; the cell is window bit ``p = 8 - q``) indexed by the window's other 8 bits (bit ``p``
-    squeezed out: ``low | high >> 1``) = ``theta[code | bit] - theta[code]``; else empty."""
+    """``w = 3``: the row-block table of a cell's log-odds, ``3 x 2^15`` float64 flattened. A cell's ``5 x 5``
+    neighbourhood (25 bits, row-major, :func:`_nbhd3`) holds three blocks of three rows, ``block_a =
+    (nbhd >> 5 a) & 0x7FFF`` (``a = 0, 1, 2``); block ``a`` holds the three windows anchored on its first row
+    (window ``(a, b)`` reads block bits ``5 i + b + j``, ``i, j < 3``) and the cell at block bit ``12 - 5 a``
+    (cleared in ``nbhd``). Entry ``a << 15 | block`` is ``sum_b theta[code_ab | bit] - theta[code_ab]`` (the
+    cell is bit ``(2 - a) 3 + 2 - b`` of window ``(a, b)``), so a cell's log-odds is three loads. Entries
+    with the cell's bit set are never read. Else (``w != 3``) empty."""
     if w != 3:
         return np.zeros(0)
-    out = np.empty((9, 256))
-    rest = np.arange(256)
-    for q in range(9):
-        p = 8 - q
-        code = (rest & ((1 << p) - 1)) | ((rest >> p) << (p + 1))
-        out[q] = theta[code | (1 << p)] - theta[code]
+    block = np.arange(1 << 15, dtype=np.int64)
+    out = np.zeros((3, 1 << 15))
+    for a in range(3):
+        for b in range(3):
+            code = np.zeros_like(block)
+            for i in range(3):
+                code |= ((block >> (5 * i + b)) & 7) << (3 * i)
+            bit = 1 << ((2 - a) * 3 + 2 - b)
+            out[a] += theta[code | bit] - theta[code & ~bit]
     return np.ascontiguousarray(out.ravel())
 
 
@@ -127,44 +137,80 @@ def _window_delta(theta, w, R, C, r, c, nbhd):
 
 @nb.njit(cache=True, inline="always")
 def _delta3(delta, nbhd):
-    """:func:`_window_delta` of an interior cell and ``w = 3`` from the delta table (one load per window;
-    window ``(a0, b0)`` holds the cell at bit ``(2 - a0) 3 + (2 - b0) = 8 - q``), shifts as constants."""
-    lo = 0.0
-    for a0 in range(3):
-        for b0 in range(3):
-            sh = a0 * 5 + b0
-            code = (nbhd >> sh) & 7
-            code |= ((nbhd >> (sh + 5)) & 7) << 3
-            code |= ((nbhd >> (sh + 10)) & 7) << 6
-            p = 8 - a0 * 3 - b0
-            lo += delta[((a0 * 3 + b0) << 8) | (code & ((1 << p) - 1)) | ((code >> (p + 1)) << p)]
-    return lo
+    """:func:`_window_delta` of an interior cell and ``w = 3`` from the row-block table (three loads, one a
+    block of three neighbourhood rows, :func:`_delta_table`)."""
+    return (
+        delta[nbhd & 0x7FFF]
+        + delta[(np.int64(1) << 15) | ((nbhd >> 5) & 0x7FFF)]
+        + delta[(np.int64(2) << 15) | ((nbhd >> 10) & 0x7FFF)]
+    )
+
+
+@intrinsic
+def _load8(typingctx, m, k):
+    """The 8 bytes ``m[k : k + 8]`` of a C-contiguous uint8 array as one little-endian int64 (an unaligned
+    load; the caller keeps ``k + 8 <= len(m)``)."""
+    if not (isinstance(m, types.Array) and m.dtype == types.uint8 and m.ndim == 1 and m.layout == "C"):
+        return None
+
+    def codegen(context, builder, signature, args):
+        ary = context.make_array(signature.args[0])(context, builder, args[0])
+        ptr = cgutils.get_item_pointer(context, builder, signature.args[0], ary, [args[1]])
+        return builder.load(builder.bitcast(ptr, ir.IntType(64).as_pointer()), align=1)
+
+    return types.int64(m, types.intp), codegen
+
+
+#: gathers the low bits of 0/1 bytes 0..4 of a word to bits 56..60 (the partial products never collide)
+_GATHER5 = np.int64(0x0102040810204080)
+#: gathers the low bits of 0/1 bytes 0, 2, 4, 6 of a word to bits 56..59
+_GATHER_EVEN = np.int64((1 << 56) | (1 << 41) | (1 << 26) | (1 << 11))
 
 
 @nb.njit(cache=True, inline="always")
-def _nbhd3(m, cols, r, c):
-    """The ``5 x 5`` neighbourhood of an interior cell ``(r, c)`` as 25 bits (row-major), centre cleared."""
-    nbhd = np.int64(0)
-    k0 = (r - 2) * cols + c - 2
-    for a in range(5):
-        k = k0 + a * cols
-        for b in range(5):
-            nbhd |= np.int64(m[k + b]) << (a * 5 + b)
-    return nbhd & ~np.int64(1 << 12)
+def _row5(m, k):
+    """Cells ``m[k : k + 5]`` (each 0 or 1) as 5 bits, cell ``k + b`` at bit ``b``."""
+    return (((_load8(m, k) & 0xFFFFFFFFFF) * _GATHER5) >> 56) & 31
 
 
 @nb.njit(cache=True, inline="always")
-def _pooled_nbhd3(m, rows, cols, pr, pc):
+def _nbhd3(m, cols, k):
+    """The ``5 x 5`` neighbourhood of the interior cell ``k`` as 25 bits (row-major: bit ``5 a + b`` = cell
+    ``k + (a - 2) cols + b - 2``), the cell itself cleared: five 8-byte loads (the caller keeps
+    ``k + 2 cols + 6 <= len(m)``)."""
+    k0 = k - 2 * cols - 2
+    return (
+        _row5(m, k0)
+        | (_row5(m, k0 + cols) << 5)
+        | ((_row5(m, k0 + 2 * cols) & 27) << 10)
+        | (_row5(m, k0 + 3 * cols) << 15)
+        | (_row5(m, k0 + 4 * cols) << 20)
+    )
+
+
+@nb.njit(cache=True, inline="always")
+def _pooled_row5(m, cols, k):
+    """Pooled cells ``0 .. 4`` of the pooled row whose blocks start at cell ``k`` (rows ``k``, ``k + cols``,
+    columns ``k .. k + 9``) as 5 bits: four 8-byte loads."""
+    z = _load8(m, k) | _load8(m, k + cols)
+    z = z | (z >> 8)  # byte 2 j: pooled cell j (j < 4)
+    t = _load8(m, k + 2) | _load8(m, k + 2 + cols)
+    t = (t | (t >> 8)) >> 48  # bytes 8, 9 of the row pair: pooled cell 4
+    return ((((z & 0x0001000100010001) * _GATHER_EVEN) >> 56) & 15) | ((t & 1) << 4)
+
+
+@nb.njit(cache=True, inline="always")
+def _pooled_nbhd3(m, cols, pr, pc):
     """The pooled ``5 x 5`` neighbourhood of an interior pooled cell ``(pr, pc)`` (parent cleared); the
     cells of the pooled blocks all lie in the grid (pooled rows / columns ``<= pr + 2`` below the last)."""
-    nbhd = np.int64(0)
-    for a in range(5):
-        k = (2 * (pr - 2 + a)) * cols + 2 * (pc - 2)
-        for b in range(5):
-            v = m[k] | m[k + 1] | m[k + cols] | m[k + cols + 1]
-            nbhd |= np.int64(v) << (a * 5 + b)
-            k += 2
-    return nbhd & ~np.int64(1 << 12)
+    k = 2 * (pr - 2) * cols + 2 * (pc - 2)
+    return (
+        _pooled_row5(m, cols, k)
+        | (_pooled_row5(m, cols, k + 2 * cols) << 5)
+        | ((_pooled_row5(m, cols, k + 4 * cols) & 27) << 10)
+        | (_pooled_row5(m, cols, k + 6 * cols) << 15)
+        | (_pooled_row5(m, cols, k + 8 * cols) << 20)
+    )
 
 
 @nb.njit(cache=True)
@@ -201,30 +247,33 @@ def _edge_scale2(lp, pr, pc, m):
 @nb.njit(cache=True, inline="always")
 def field_cell_log_odds(lp, k, m):
     """``log p~(m_k = 1, m_-k) - log p~(m_k = 0, m_-k)`` of a pattern field (``w = 3`` cells away from
-    the edges take a path with constant shifts and the delta tables; the others :func:`_edge_scale1`)."""
+    the edges read their neighbourhood in five word loads and sum three row-block entries; the others
+    :func:`_edge_scale1`)."""
     rows, cols = lp.rows, lp.cols
     fast = lp.w == 3
     r = k // cols
     c = k - r * cols
-    if fast and 2 <= r < rows - 2 and 2 <= c < cols - 2:
-        lo = _delta3(lp.delta, _nbhd3(m, cols, r, c))
+    if fast and 2 <= r < rows - 2 and 2 <= c < cols - 2 and k + 2 * cols + 6 <= m.shape[0]:
+        lo = _delta3(lp.delta, _nbhd3(m, cols, k))
     else:
         lo = _edge_scale1(lp, r, c, m)
     if lp.n_scales == 2:
         pr = r >> 1
         pc = c >> 1
         # the parent changes with m_k only if the rest of its block is free
-        r2 = 2 * pr
-        c2 = 2 * pc
-        others = 0
-        for i in range(r2, min(r2 + 2, rows)):
-            for j in range(c2, min(c2 + 2, cols)):
-                if (i != r or j != c) and m[i * cols + j]:
-                    others = 1
+        b = 2 * pr * cols + 2 * pc
+        if 2 * pr + 1 < rows and 2 * pc + 1 < cols:
+            others = np.int64(m[b]) + m[b + 1] + m[b + cols] + m[b + cols + 1] - m[k]
+        else:
+            others = np.int64(0)
+            for i in range(2 * pr, min(2 * pr + 2, rows)):
+                for j in range(2 * pc, min(2 * pc + 2, cols)):
+                    if (i != r or j != c) and m[i * cols + j]:
+                        others = 1
         if others == 0:
             # interior: the pooled 5 x 5 inside the pooled grid, and its blocks whole (2 (pr + 2) + 1 < rows)
             if fast and 2 <= pr and 2 * pr + 5 < rows and 2 <= pc and 2 * pc + 5 < cols:
-                lo += _delta3(lp.delta2, _pooled_nbhd3(m, rows, cols, pr, pc))
+                lo += _delta3(lp.delta2, _pooled_nbhd3(m, cols, pr, pc))
             else:
                 lo += _edge_scale2(lp, pr, pc, m)
     return lo
