@@ -48,7 +48,6 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from ogm_ppl._borrow import borrow
 from ogm_ppl.inference._kernels.cells import _next_occupied
 from ogm_ppl.priors.compiled import cell_log_odds
 
@@ -355,13 +354,16 @@ def draws(cells, scan, seed):
     return order, u
 
 
-@nb.njit(cache=True)
+# The pure loops below compile without numba's runtime (``_nrt=False``): with it, every inlined call that
+# takes a bundle (the prior's conditional, the kept sums) counts the references of each of its arrays, an
+# atomic add and subtract per array per cell that numba's pruning leaves in these branching loops, and
+# that cost more than a pattern field's conditional itself. They allocate nothing, so they need no runtime
+# (``benchmarks/bench_priors.py --overhead`` times them).
+@nb.njit(cache=True, _nrt=False)
 def sweep(st, order, prior, uniforms, update):
     """One pass of single-cell updates over ``order`` with the prior bundle ``prior``
     (:mod:`ogm_ppl.priors.compiled`; numba compiles one loop per bundle type, inlining its conditional
     ``l(m_k | m_-k)``). Returns the flips."""
-    st = borrow(st)
-    prior = borrow(prior)
     flips = 0
     m = st.m
     for i in range(order.shape[0]):
@@ -382,7 +384,7 @@ def prior_log_odds(prior, k, m):
     return cell_log_odds(prior, k, m)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def icm_sweeps(st, order, prior, max_sweeps):
     """Iterated conditional modes (the EM hill-climbing of Section 2.2) over ``order``: each cell takes
     the value with the larger conditional posterior (ties, and ``nan``, keep the current value), until a

@@ -286,7 +286,7 @@ def log_lik_ratio(st, k):
     return cs._lik_ratio(st, k)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, _nrt=False)
 def sweep(st, order, prior, uniforms, update):
     """One pass of single-cell updates over ``order`` with the compiled prior bundle ``prior`` (heat bath
     or metropolised, :func:`~ogm_ppl.inference._kernels.cell_sweep.new_value`). Returns the flips."""

@@ -382,6 +382,13 @@ def tile_pass(st, inf32, prior, lay, t, seed, scan, update):
     colour (module docstring). Returns the flips."""
     order, u = cs.draws(lay.tile_cells[lay.tile_off[t] : lay.tile_off[t + 1]], scan, tile_seed(seed, t))
     geo = (lay.cols, (t // lay.n_tc) * lay.T, (t % lay.n_tc) * lay.T, lay.T, 1.0 / lay.cols)
+    return _tile_loop(st, inf32, prior, order, u, geo, update)
+
+
+@nb.njit(cache=True, _nrt=False)
+def _tile_loop(st, inf32, prior, order, u, geo, update):
+    """The loop of :func:`tile_pass` (without numba's runtime, as
+    :func:`~ogm_ppl.inference._kernels.cell_sweep.sweep`: it allocates nothing)."""
     m = st.m
     flips = 0
     for i in range(order.shape[0]):

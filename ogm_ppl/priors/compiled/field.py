@@ -17,7 +17,10 @@ edge read as free, never as occupied.
 
 **Conditionals.** A cell's log-odds is ``sum_windows theta[base | bit] - theta[base]`` over the (at most
 ``w^2``) windows holding it, ``base`` its code with the cell cleared; the cell's ``(2w - 1)^2``
-neighbourhood is read once into one integer and each window's code is cut from it by shifts. At scale 2
+neighbourhood is read once into one integer and each window's code is cut from it by shifts. For ``w = 3``
+away from the edges the neighbourhood is five unaligned 8-byte loads (one a row, its 0/1 bytes gathered
+into bits by one multiplication) and the nine windows' terms are three entries of a row-block table
+(:func:`_delta_table`). At scale 2
 the flip changes the pooled parent only when the other cells of its ``2 x 2`` block are free; then the
 pooled windows holding the parent add their terms the same way. A patch update reads, once, each window
 its live cells touch (base code with the patch cleared, and the (patch bit, window bit) pairs by which
