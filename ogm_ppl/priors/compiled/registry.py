@@ -5,7 +5,8 @@ are ``numba.extending.overload``\\ s that hand the kernels the registered functi
 are compiled for (inlined, so a sweep specialised for one kind runs that kind's conditional in its loop):
 
 * :func:`cell_log_odds` ``(prior, k, m)`` — ``log p(m_k = 1, m_-k) - log p(m_k = 0, m_-k)`` (``nan`` if
-  both are impossible): single-cell Gibbs, ICM;
+  both are impossible): single-cell Gibbs, ICM; it must not allocate (the single-cell sweeps compile
+  without numba's runtime, :func:`~ogm_ppl.inference._kernels.cell_sweep.sweep`);
 * :func:`patch_prior_weights` ``(prior, patch, m, cands, n, out, ts)`` — ``out[j] = log p(patch = cands[j],
   rest)`` up to a constant in ``j`` (bit ``b`` of a candidate = the ``b``-th live cell of ``patch``);
 * :func:`patch_candidates` ``(prior, r0, c0, h, w, patch, n_live, pinned, m, cands, cand_lp)`` — the
