@@ -31,6 +31,7 @@ from numba.extending import overload
 from ogm_ppl.inference._kernels.cells import _next_occupied
 from ogm_ppl.inference._kernels.choice import accept_random, categorical, categorical_table, choose, pick_from_table
 from ogm_ppl.priors.compiled import (
+    Tiles,
     candidate_weights,
     cell_log_odds,
     kind_of,
@@ -636,7 +637,7 @@ def _candidate_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     patch's own cells use (:func:`patch_pass`)."""
     L = geo.dr.shape[0]
     capacity = rule.capacity
-    p_rand, thesis, metro = rule.p_rand_patch, rule.thesis_random, rule.metropolised
+    metro = rule.metropolised
     cands = np.empty(capacity, np.int64)
     cand_lp = np.empty(capacity, np.float64)
     logw = np.empty(capacity, np.float64)
@@ -645,8 +646,6 @@ def _candidate_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     pw = np.empty(2, np.float64)
     sc = ray_scratch(L, max_slots(L, ps.c_off, ps.offsets.shape[0] - 1), L <= 20, capacity)
     ts = tile_scratch_on(bit_of, scratch_capacity(prior, L))
-    ll = ps.ll
-    m = ps.m
     # heat-bath draws of patches no ray reaches, whose candidates and weights every full tile of a key shares
     # (shared_weights_key): each key's candidates and inverse-CDF table are built once a sweep, and a draw
     # is a binary search (the same index as the categorical's scan)
@@ -656,6 +655,165 @@ def _candidate_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     key_last = np.empty(n_keys, np.int64)
     key_acc = np.empty((n_keys, capacity if n_keys else 0), np.float64)
     key_cands = np.empty((n_keys, capacity if n_keys else 0), np.int64)
+    return _candidate_loop(
+        ps,
+        geo,
+        anchors,
+        prior,
+        u,
+        rule,
+        stamp0,
+        cands,
+        cand_lp,
+        logw,
+        patch,
+        pair,
+        pw,
+        sc,
+        ts,
+        n_keys,
+        key_n,
+        key_total,
+        key_last,
+        key_acc,
+        key_cands,
+    )
+
+
+def _candidate_loop(
+    ps,
+    geo,
+    anchors,
+    prior,
+    u,
+    rule,
+    stamp0,
+    cands,
+    cand_lp,
+    logw,
+    patch,
+    pair,
+    pw,
+    sc,
+    ts,
+    n_keys,
+    key_n,
+    key_total,
+    key_last,
+    key_acc,
+    key_cands,
+):
+    """Python stand-in of the loop of :func:`_candidate_sweep` for numba's overload (not called)."""
+    raise NotImplementedError
+
+
+@overload(_candidate_loop)
+def _candidate_loop_for(
+    ps,
+    geo,
+    anchors,
+    prior,
+    u,
+    rule,
+    stamp0,
+    cands,
+    cand_lp,
+    logw,
+    patch,
+    pair,
+    pw,
+    sc,
+    ts,
+    n_keys,
+    key_n,
+    key_total,
+    key_last,
+    key_acc,
+    key_cands,
+):
+    # tile tables allocate nothing in their patch conditionals: their loop runs without numba's runtime
+    # (see _candidate_loop_lean); the other kinds' patch weights allocate scratch, so theirs keeps it
+    run = _candidate_loop_lean if getattr(prior, "instance_class", None) is Tiles else _candidate_loop_rt
+
+    def impl(
+        ps,
+        geo,
+        anchors,
+        prior,
+        u,
+        rule,
+        stamp0,
+        cands,
+        cand_lp,
+        logw,
+        patch,
+        pair,
+        pw,
+        sc,
+        ts,
+        n_keys,
+        key_n,
+        key_total,
+        key_last,
+        key_acc,
+        key_cands,
+    ):
+        return run(
+            ps,
+            geo,
+            anchors,
+            prior,
+            u,
+            rule,
+            stamp0,
+            cands,
+            cand_lp,
+            logw,
+            patch,
+            pair,
+            pw,
+            sc,
+            ts,
+            n_keys,
+            key_n,
+            key_total,
+            key_last,
+            key_acc,
+            key_cands,
+        )
+
+    return impl
+
+
+@nb.njit(cache=True, inline="always")
+def _candidate_loop_body(
+    ps,
+    geo,
+    anchors,
+    prior,
+    u,
+    rule,
+    stamp0,
+    cands,
+    cand_lp,
+    logw,
+    patch,
+    pair,
+    pw,
+    sc,
+    ts,
+    n_keys,
+    key_n,
+    key_total,
+    key_last,
+    key_acc,
+    key_cands,
+):
+    """The loop of :func:`_candidate_sweep` over its scratch (inlined into :func:`_candidate_loop_rt` and
+    :func:`_candidate_loop_lean`)."""
+    p_rand, thesis, metro = rule.p_rand_patch, rule.thesis_random, rule.metropolised
+    ll = ps.ll
+    m = ps.m
     changed = 0
     skipped = 0
     for i in range(anchors.shape[0]):
@@ -695,7 +853,8 @@ def _candidate_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
                             key_total[key], key_last[key] = categorical_table(logw, n, key_acc[key])
                         if n >= 0:
                             key_n[key] = n
-                            key_cands[key, :n] = cands[:n]
+                            for x in range(n):
+                                key_cands[key, x] = cands[x]
                     kn = key_n[key]
                     if kn == 0:
                         continue
@@ -752,6 +911,109 @@ def _candidate_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
             set_patch(ps, patch, new)
             changed += 1
     return changed, skipped
+
+
+@nb.njit(cache=True)
+def _candidate_loop_rt(
+    ps,
+    geo,
+    anchors,
+    prior,
+    u,
+    rule,
+    stamp0,
+    cands,
+    cand_lp,
+    logw,
+    patch,
+    pair,
+    pw,
+    sc,
+    ts,
+    n_keys,
+    key_n,
+    key_total,
+    key_last,
+    key_acc,
+    key_cands,
+):
+    """:func:`_candidate_loop_body` with numba's runtime (for patch conditionals that allocate)."""
+    return _candidate_loop_body(
+        ps,
+        geo,
+        anchors,
+        prior,
+        u,
+        rule,
+        stamp0,
+        cands,
+        cand_lp,
+        logw,
+        patch,
+        pair,
+        pw,
+        sc,
+        ts,
+        n_keys,
+        key_n,
+        key_total,
+        key_last,
+        key_acc,
+        key_cands,
+    )
+
+
+@nb.njit(cache=True, _nrt=False)
+def _candidate_loop_lean(
+    ps,
+    geo,
+    anchors,
+    prior,
+    u,
+    rule,
+    stamp0,
+    cands,
+    cand_lp,
+    logw,
+    patch,
+    pair,
+    pw,
+    sc,
+    ts,
+    n_keys,
+    key_n,
+    key_total,
+    key_last,
+    key_acc,
+    key_cands,
+):
+    """:func:`_candidate_loop_body` without numba's runtime: the runtime counts the references of every
+    bundle array at each inlined call (the prior, the patch state, the scratch), a share of each patch
+    update (as in :func:`~ogm_ppl.inference._kernels.cell_sweep.sweep`); only for priors whose patch
+    conditionals allocate nothing."""
+    return _candidate_loop_body(
+        ps,
+        geo,
+        anchors,
+        prior,
+        u,
+        rule,
+        stamp0,
+        cands,
+        cand_lp,
+        logw,
+        patch,
+        pair,
+        pw,
+        sc,
+        ts,
+        n_keys,
+        key_n,
+        key_total,
+        key_last,
+        key_acc,
+        key_cands,
+    )
 
 
 def _patch_pass(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
