@@ -655,162 +655,30 @@ def _candidate_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     key_last = np.empty(n_keys, np.int64)
     key_acc = np.empty((n_keys, capacity if n_keys else 0), np.float64)
     key_cands = np.empty((n_keys, capacity if n_keys else 0), np.int64)
-    return _candidate_loop(
-        ps,
-        geo,
-        anchors,
-        prior,
-        u,
-        rule,
-        stamp0,
-        cands,
-        cand_lp,
-        logw,
-        patch,
-        pair,
-        pw,
-        sc,
-        ts,
-        n_keys,
-        key_n,
-        key_total,
-        key_last,
-        key_acc,
-        key_cands,
-    )
+    scratch = (cands, cand_lp, logw, patch, pair, pw, sc, ts, n_keys, key_n, key_total, key_last, key_acc, key_cands)
+    return _candidate_loop(ps, geo, anchors, prior, u, rule, stamp0, scratch)
 
 
-def _candidate_loop(
-    ps,
-    geo,
-    anchors,
-    prior,
-    u,
-    rule,
-    stamp0,
-    cands,
-    cand_lp,
-    logw,
-    patch,
-    pair,
-    pw,
-    sc,
-    ts,
-    n_keys,
-    key_n,
-    key_total,
-    key_last,
-    key_acc,
-    key_cands,
-):
+def _candidate_loop(ps, geo, anchors, prior, u, rule, stamp0, scratch):
     """Python stand-in of the loop of :func:`_candidate_sweep` for numba's overload (not called)."""
     raise NotImplementedError
 
 
 @overload(_candidate_loop)
-def _candidate_loop_for(
-    ps,
-    geo,
-    anchors,
-    prior,
-    u,
-    rule,
-    stamp0,
-    cands,
-    cand_lp,
-    logw,
-    patch,
-    pair,
-    pw,
-    sc,
-    ts,
-    n_keys,
-    key_n,
-    key_total,
-    key_last,
-    key_acc,
-    key_cands,
-):
+def _candidate_loop_for(ps, geo, anchors, prior, u, rule, stamp0, scratch):
     # tile tables allocate nothing in their patch conditionals: their loop runs without numba's runtime
     # (see _candidate_loop_lean); the other kinds' patch weights allocate scratch, so theirs keeps it
     run = _candidate_loop_lean if getattr(prior, "instance_class", None) is Tiles else _candidate_loop_rt
-
-    def impl(
-        ps,
-        geo,
-        anchors,
-        prior,
-        u,
-        rule,
-        stamp0,
-        cands,
-        cand_lp,
-        logw,
-        patch,
-        pair,
-        pw,
-        sc,
-        ts,
-        n_keys,
-        key_n,
-        key_total,
-        key_last,
-        key_acc,
-        key_cands,
-    ):
-        return run(
-            ps,
-            geo,
-            anchors,
-            prior,
-            u,
-            rule,
-            stamp0,
-            cands,
-            cand_lp,
-            logw,
-            patch,
-            pair,
-            pw,
-            sc,
-            ts,
-            n_keys,
-            key_n,
-            key_total,
-            key_last,
-            key_acc,
-            key_cands,
-        )
-
-    return impl
+    return lambda ps, geo, anchors, prior, u, rule, stamp0, scratch: run(
+        ps, geo, anchors, prior, u, rule, stamp0, scratch
+    )
 
 
 @nb.njit(cache=True, inline="always")
-def _candidate_loop_body(
-    ps,
-    geo,
-    anchors,
-    prior,
-    u,
-    rule,
-    stamp0,
-    cands,
-    cand_lp,
-    logw,
-    patch,
-    pair,
-    pw,
-    sc,
-    ts,
-    n_keys,
-    key_n,
-    key_total,
-    key_last,
-    key_acc,
-    key_cands,
-):
+def _candidate_loop_body(ps, geo, anchors, prior, u, rule, stamp0, scratch):
     """The loop of :func:`_candidate_sweep` over its scratch (inlined into :func:`_candidate_loop_rt` and
     :func:`_candidate_loop_lean`)."""
+    cands, cand_lp, logw, patch, pair, pw, sc, ts, n_keys, key_n, key_total, key_last, key_acc, key_cands = scratch
     p_rand, thesis, metro = rule.p_rand_patch, rule.thesis_random, rule.metropolised
     ll = ps.ll
     m = ps.m
@@ -914,106 +782,18 @@ def _candidate_loop_body(
 
 
 @nb.njit(cache=True)
-def _candidate_loop_rt(
-    ps,
-    geo,
-    anchors,
-    prior,
-    u,
-    rule,
-    stamp0,
-    cands,
-    cand_lp,
-    logw,
-    patch,
-    pair,
-    pw,
-    sc,
-    ts,
-    n_keys,
-    key_n,
-    key_total,
-    key_last,
-    key_acc,
-    key_cands,
-):
+def _candidate_loop_rt(ps, geo, anchors, prior, u, rule, stamp0, scratch):
     """:func:`_candidate_loop_body` with numba's runtime (for patch conditionals that allocate)."""
-    return _candidate_loop_body(
-        ps,
-        geo,
-        anchors,
-        prior,
-        u,
-        rule,
-        stamp0,
-        cands,
-        cand_lp,
-        logw,
-        patch,
-        pair,
-        pw,
-        sc,
-        ts,
-        n_keys,
-        key_n,
-        key_total,
-        key_last,
-        key_acc,
-        key_cands,
-    )
+    return _candidate_loop_body(ps, geo, anchors, prior, u, rule, stamp0, scratch)
 
 
 @nb.njit(cache=True, _nrt=False)
-def _candidate_loop_lean(
-    ps,
-    geo,
-    anchors,
-    prior,
-    u,
-    rule,
-    stamp0,
-    cands,
-    cand_lp,
-    logw,
-    patch,
-    pair,
-    pw,
-    sc,
-    ts,
-    n_keys,
-    key_n,
-    key_total,
-    key_last,
-    key_acc,
-    key_cands,
-):
-    """:func:`_candidate_loop_body` without numba's runtime: the runtime counts the references of every
-    bundle array at each inlined call (the prior, the patch state, the scratch), a share of each patch
-    update (as in :func:`~ogm_ppl.inference._kernels.cell_sweep.sweep`); only for priors whose patch
-    conditionals allocate nothing."""
-    return _candidate_loop_body(
-        ps,
-        geo,
-        anchors,
-        prior,
-        u,
-        rule,
-        stamp0,
-        cands,
-        cand_lp,
-        logw,
-        patch,
-        pair,
-        pw,
-        sc,
-        ts,
-        n_keys,
-        key_n,
-        key_total,
-        key_last,
-        key_acc,
-        key_cands,
-    )
+def _candidate_loop_lean(ps, geo, anchors, prior, u, rule, stamp0, scratch):
+    """:func:`_candidate_loop_body` without numba's runtime, which counts the references of every bundle
+    array at each inlined call (the prior, the patch state, the scratch), a share of each patch update (as
+    in :func:`~ogm_ppl.inference._kernels.cell_sweep.sweep`); only for priors whose patch conditionals
+    allocate nothing."""
+    return _candidate_loop_body(ps, geo, anchors, prior, u, rule, stamp0, scratch)
 
 
 def _patch_pass(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
