@@ -119,3 +119,19 @@ def test_snapshot_stamps_an_unstamped_result_and_the_readme_follows(tmp_path):
     assert "| brute force, K = 16 | 6 | 123 |" in text and "`python benchmarks/bench_exact.py` at commit" in text
     assert text.startswith("intro\n") and text.endswith("<!-- end generated -->\nend\n")
     assert gen_docs_tables.update_readme(readme, results, check=True) == []
+
+
+def test_snapshot_can_leave_out_the_per_dataset_curves_and_the_tables_stay(tmp_path):
+    results = tmp_path / "results"
+    src = gen_docs_tables.RESULTS / "table_6_4_small.json"
+    doc = gen_docs_tables.load_snapshot("table_6_4_small")
+    kept = [
+        {b: {k: v for k, v in x.items() if k != "curve"} if isinstance(x, dict) else x for b, x in r.items()}
+        for r in doc["scores"]
+    ]
+    gen_docs_tables.snapshot(src, results=results, drop_curves=True)
+    small = gen_docs_tables.load_snapshot("table_6_4_small", results)
+    assert small["scores"] == kept and small["pooled"] == doc["pooled"]
+    assert "per-dataset" in small["provenance"]["dropped"]
+    assert {k: v for k, v in small["provenance"].items() if k != "dropped"} == doc["provenance"]
+    assert (results / "table_6_4_small.json").stat().st_size < src.stat().st_size

@@ -77,12 +77,31 @@ def load_snapshot(name: str, results: Path = RESULTS) -> dict:
     return doc
 
 
-def snapshot(src: Path, name: str | None = None, command: str | None = None, results: Path = RESULTS) -> Path:
+def drop_dataset_curves(doc: dict) -> int:
+    """Remove the per-dataset precision-recall curves (``scores[i][block]["curve"]``) of an experiment's
+    summary in place, keeping each dataset's scores and the pooled curves; returns how many were removed."""
+    n = 0
+    for row in doc.get("scores") or ():
+        for block in row.values() if isinstance(row, dict) else ():
+            if isinstance(block, dict) and block.pop("curve", None) is not None:
+                n += 1
+    return n
+
+
+def snapshot(
+    src: Path,
+    name: str | None = None,
+    command: str | None = None,
+    results: Path = RESULTS,
+    drop_curves: bool = False,
+) -> Path:
     """Copy the JSON ``src`` into ``results/NAME.json`` (``NAME`` defaults to the file's stem).
 
     A JSON without a ``"provenance"`` block (an experiment's own output) gets one: ``command`` (required
     then), the commit of this checkout and this machine, dated by ``src``'s modification time, so take the
-    snapshot right after the run, from the checkout that ran it.
+    snapshot right after the run, from the checkout that ran it. ``drop_curves``: leave out the per-dataset
+    precision-recall curves (:func:`drop_dataset_curves`; no table reads them), and say so in the
+    provenance (``"dropped"``); a stamped snapshot keeps its provenance otherwise.
     """
     from ogm_ppl.io import atomic_write_text
 
@@ -101,6 +120,8 @@ def snapshot(src: Path, name: str | None = None, command: str | None = None, res
         doc = {"provenance": prov, **doc}
     elif command:
         raise ValueError(f"{src} is already stamped (command {doc['provenance'].get('command')!r})")
+    if drop_curves and drop_dataset_curves(doc):
+        doc["provenance"]["dropped"] = "the per-dataset precision-recall curves (scores[*][block].curve)"
     return atomic_write_text(results / f"{name or Path(src).stem}.json", json.dumps(doc, indent=1, allow_nan=True))
 
 
@@ -450,13 +471,14 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("src", type=Path)
     s.add_argument("--name")
     s.add_argument("--command", help="the command that produced SRC (for a JSON without provenance)")
+    s.add_argument("--drop-curves", action="store_true", help="leave out the per-dataset P-R curves")
     r = sub.add_parser("readme", help="rewrite the README's generated blocks")
     r.add_argument("--check", action="store_true", help="only report blocks that differ; exit 1 if any")
     sh = sub.add_parser("show", help="print one table as Markdown")
     sh.add_argument("name", choices=sorted(TABLES))
     args = ap.parse_args(argv)
     if args.cmd == "snapshot":
-        print("wrote", snapshot(args.src, args.name, args.command))
+        print("wrote", snapshot(args.src, args.name, args.command, drop_curves=args.drop_curves))
     elif args.cmd == "readme":
         stale = update_readme(check=args.check)
         print(("stale: " if args.check else "updated: ") + (", ".join(stale) or "none"))

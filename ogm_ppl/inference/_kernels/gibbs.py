@@ -31,7 +31,6 @@ from numba.extending import overload
 from ogm_ppl.inference._kernels.cells import _next_occupied
 from ogm_ppl.inference._kernels.choice import accept_random, categorical, categorical_table, choose, pick_from_table
 from ogm_ppl.priors.compiled import (
-    Tiles,
     candidate_weights,
     cell_log_odds,
     kind_of,
@@ -41,6 +40,7 @@ from ogm_ppl.priors.compiled import (
 from ogm_ppl.priors.compiled.registry import (
     escape_proposal,
     is_additive,
+    patch_allocates,
     restricted,
     shared_weights,
     shared_weights_key,
@@ -666,9 +666,9 @@ def _candidate_loop(ps, geo, anchors, prior, u, rule, stamp0, scratch):
 
 @overload(_candidate_loop)
 def _candidate_loop_for(ps, geo, anchors, prior, u, rule, stamp0, scratch):
-    # tile tables allocate nothing in their patch conditionals: their loop runs without numba's runtime
-    # (see _candidate_loop_lean); the other kinds' patch weights allocate scratch, so theirs keeps it
-    run = _candidate_loop_lean if getattr(prior, "instance_class", None) is Tiles else _candidate_loop_rt
+    # a kind whose patch conditionals allocate nothing runs its loop without numba's runtime (see
+    # _candidate_loop_lean); the others keep it
+    run = _candidate_loop_rt if patch_allocates(prior) else _candidate_loop_lean
     return lambda ps, geo, anchors, prior, u, rule, stamp0, scratch: run(
         ps, geo, anchors, prior, u, rule, stamp0, scratch
     )
@@ -791,8 +791,8 @@ def _candidate_loop_rt(ps, geo, anchors, prior, u, rule, stamp0, scratch):
 def _candidate_loop_lean(ps, geo, anchors, prior, u, rule, stamp0, scratch):
     """:func:`_candidate_loop_body` without numba's runtime, which counts the references of every bundle
     array at each inlined call (the prior, the patch state, the scratch), a share of each patch update (as
-    in :func:`~ogm_ppl.inference._kernels.cell_sweep.sweep`); only for priors whose patch conditionals
-    allocate nothing."""
+    in :func:`~ogm_ppl.inference._kernels.cell_sweep.sweep`); only for kinds registered with
+    ``patch_allocates=False``."""
     return _candidate_loop_body(ps, geo, anchors, prior, u, rule, stamp0, scratch)
 
 

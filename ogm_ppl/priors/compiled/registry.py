@@ -33,7 +33,12 @@ are compiled for (inlined, so a sweep specialised for one kind runs that kind's 
   configurations alike), so a sweep may compute them once per key; ``-1`` otherwise (the default);
 * :func:`is_additive` ``(prior)`` — ``True`` when a configuration's prior weight is the sum of its cells'
   :func:`cell_log_odds`, whatever the rest of the map (independent cells): patch kernels then weigh all
-  ``2^L`` configurations in ``O(2^L)``.
+  ``2^L`` configurations in ``O(2^L)``;
+* :func:`patch_allocates` ``(prior)`` — ``False`` when the kind's patch conditionals (:func:`patch_candidates`,
+  :func:`candidate_weights`, :func:`patch_prior_weights`, :func:`escape_proposal`) allocate nothing: the
+  patch sweep then runs its loop without numba's runtime, which otherwise counts the references of every
+  bundle array at each inlined call (default ``True``, the loop keeps the runtime; a kind that declares
+  ``False`` and allocates fails to compile with "NRT required but not enabled").
 
 Each entry point is also callable from Python (slowly, for tests).
 """
@@ -53,6 +58,7 @@ __all__ = [
     "escape_proposal",
     "is_additive",
     "kind_of",
+    "patch_allocates",
     "patch_candidates",
     "patch_prior_weights",
     "register",
@@ -77,6 +83,7 @@ class Kind(NamedTuple):
     escape_proposal: Callable
     shared_weights: Callable
     shared_weights_key: Callable
+    patch_allocates: bool = True
 
 
 _KINDS: dict[type, Kind] = {}
@@ -124,6 +131,7 @@ def register(
     escape_proposal: Callable | None = None,
     shared_weights: Callable | None = None,
     shared_weights_key: Callable | None = None,
+    patch_allocates: bool = True,
 ) -> None:
     """Register the compiled conditionals of the bundle class ``bundle`` (see the module docstring for each
     function's signature and meaning; the optional ones default to the dense, scratch-free versions)."""
@@ -138,6 +146,7 @@ def register(
         escape_proposal or _no_escape,
         shared_weights or _no_shared,
         shared_weights_key or _no_shared_key,
+        bool(patch_allocates),
     )
 
 
@@ -182,6 +191,10 @@ def scratch_capacity(prior, L):
 
 def is_additive(prior):
     return kind_of(prior).additive
+
+
+def patch_allocates(prior) -> bool:
+    return kind_of(prior).patch_allocates
 
 
 def restricted(prior, tag):

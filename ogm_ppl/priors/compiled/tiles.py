@@ -872,4 +872,5 @@ register(
     escape_proposal=_escape,
     shared_weights=_shared,
     shared_weights_key=_shared_key,
+    patch_allocates=False,
 )
