@@ -120,7 +120,10 @@ class TileLayout(NamedTuple):
     """The tiles of a chromatic sweep: ``T x T`` tiles on a ``rows x cols`` grid (``n_tr x n_tc`` of them,
     tile ``t = a n_tc + b``), the short cells to visit grouped by tile (CSR ``tile_off`` / ``tile_cells``,
     row-major within a tile), the non-empty tiles of each colour (CSR ``col_off`` / ``col_tiles``, the
-    tiles with more ray entries first) and the long cells (on a ray that is not confined), visited last."""
+    tiles with more ray entries first), the long cells (on a ray that is not confined), visited last, and
+    each ray's runs of cells in one tile (CSR ``seg_off`` over the rays / ``seg_start``, the first ray
+    position of each run, ``seg_tile``, its tile), so that a flip's writes along a ray test ownership once
+    a run, not once a cell."""
 
     rows: int
     cols: int
@@ -132,6 +135,9 @@ class TileLayout(NamedTuple):
     col_off: np.ndarray  # COLOURS + 1 int64
     col_tiles: np.ndarray  # non-empty tiles, int64
     long_cells: np.ndarray  # int64
+    seg_off: np.ndarray  # n_rays + 1 int64
+    seg_start: np.ndarray  # int64
+    seg_tile: np.ndarray  # int64
 
     @property
     def n_tiles(self) -> int:
@@ -211,6 +217,38 @@ def _long_mask(K, offsets, cells, confined):
     return long
 
 
+@nb.njit(cache=True)
+def ray_runs(offsets, cells, cols, T, n_tc):
+    """Each ray's maximal runs of consecutive cells in one ``T x T`` tile: CSR ``seg_off`` (per ray) over
+    ``seg_start`` (a run's first position along its ray) and ``seg_tile`` (its tile ``a n_tc + b``)."""
+    R = offsets.shape[0] - 1
+    seg_off = np.zeros(R + 1, np.int64)
+    n = 0
+    for r in range(R):
+        prev = -1
+        for j in range(offsets[r], offsets[r + 1]):
+            c = cells[j]
+            t = (c // cols // T) * n_tc + (c % cols) // T
+            if t != prev:
+                n += 1
+                prev = t
+        seg_off[r + 1] = n
+    seg_start = np.empty(n, np.int64)
+    seg_tile = np.empty(n, np.int64)
+    n = 0
+    for r in range(R):
+        prev = -1
+        for j in range(offsets[r], offsets[r + 1]):
+            c = cells[j]
+            t = (c // cols // T) * n_tc + (c % cols) // T
+            if t != prev:
+                seg_start[n] = j - offsets[r]
+                seg_tile[n] = t
+                n += 1
+                prev = t
+    return seg_off, seg_start, seg_tile
+
+
 def tile_layout(visit: np.ndarray, offsets, cells, c_off, rows: int, cols: int, T: int) -> TileLayout:
     """The :class:`TileLayout` of the cells ``visit`` (int64, any order) on ``T x T`` tiles: cells on a
     ray that is not confined (:func:`confined_rays`) are long; the rest go to their tile in row-major order."""
@@ -246,6 +284,7 @@ def tile_layout(visit: np.ndarray, offsets, cells, c_off, rows: int, cols: int, 
         col_off,
         col_tiles,
         np.ascontiguousarray(visit[long[visit]]),
+        *ray_runs(offsets, cells, cols, T, n_tc),
     )
 
 
@@ -319,7 +358,7 @@ def _ray_term(st, inf32, r, kap, f, s, sign, geo):
         _add_term(st, inf32, c, r, f, s, sign, geo)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _retarget(st, inf32, r, f1, s1, geo):
     f0 = st.rays[r].f
     s0 = st.rays[r].s
@@ -336,11 +375,26 @@ def _retarget(st, inf32, r, f1, s1, geo):
     lo = min(f0, f1)
     b0 = st.ll[r, f0]
     b1 = st.ll[r, f1]
-    cols, r0, c0, T, inv_cols = geo[0], geo[1], geo[2], geo[3], geo[4]
-    if not st.any_inf or (b0 > -np.inf and b1 > -np.inf):
+    if not st.any_inf:  # the ray's runs of cells in one tile: plain adds in the updating tile's, atomic elsewhere
         delta = cs._q(b0, st.scale) - cs._q(b1, st.scale)
+        t, seg_off, seg_start, seg_tile = geo[5], geo[6], geo[7], geo[8]
+        j1 = seg_off[r + 1]
+        for j in range(seg_off[r], j1):
+            x0 = seg_start[j]
+            if x0 >= lo:
+                break
+            x1 = min(seg_start[j + 1] if j + 1 < j1 else n, lo)
+            if seg_tile[j] == t:
+                for kap in range(x0, x1):
+                    st.d[st.cells[a + kap]] += delta
+            else:
+                for kap in range(x0, x1):
+                    atomic_add(st.d, st.cells[a + kap], delta)
+    elif b0 > -np.inf and b1 > -np.inf:
+        delta = cs._q(b0, st.scale) - cs._q(b1, st.scale)
+        cols, r0, c0, T, inv_cols = geo[0], geo[1], geo[2], geo[3], geo[4]
         for kap in range(lo):
-            if st.any_inf and not st.ll[r, kap] > -np.inf:
+            if not st.ll[r, kap] > -np.inf:
                 continue
             c = st.cells[a + kap]
             _add_d(st, c, delta, _own(c, cols, r0, c0, T, inv_cols))
@@ -354,8 +408,9 @@ def _retarget(st, inf32, r, f1, s1, geo):
         _ray_term(st, inf32, r, kap, f0, s0, -1, geo)
 
 
-@nb.njit(cache=True)
+@nb.njit(cache=True, inline="always")
 def _set_cell(st, inf32, k, v, geo):
+    # one call site of the inlined _retarget (four, as in cell_sweep._set_cell, make compilation explode)
     st.m[k] = v
     for p in range(st.c_off[k], st.c_off[k + 1]):
         r = st.c_ray[p]
@@ -364,14 +419,19 @@ def _set_cell(st, inf32, k, v, geo):
         s = st.rays[r].s
         if v:
             if kap < f:
-                _retarget(st, inf32, r, kap, f, geo)
+                f1, s1 = kap, f
             elif kap < s:
-                _retarget(st, inf32, r, f, kap, geo)
+                f1, s1 = f, kap
+            else:
+                continue
         elif kap == f:
             n = st.offsets[r + 1] - st.offsets[r]
-            _retarget(st, inf32, r, s, _next_occupied(st.m, st.offsets, st.cells, r, s + 1) if s < n else n, geo)
+            f1, s1 = s, (_next_occupied(st.m, st.offsets, st.cells, r, s + 1) if s < n else n)
         elif kap == s:
-            _retarget(st, inf32, r, f, _next_occupied(st.m, st.offsets, st.cells, r, kap + 1), geo)
+            f1, s1 = f, _next_occupied(st.m, st.offsets, st.cells, r, kap + 1)
+        else:
+            continue
+        _retarget(st, inf32, r, f1, s1, geo)
 
 
 @nb.njit(cache=True)
@@ -381,7 +441,17 @@ def tile_pass(st, inf32, prior, lay, t, seed, scan, update):
     each cell drawn by ``update`` (heat bath / metropolised). Safe to run beside the other tiles of its
     colour (module docstring). Returns the flips."""
     order, u = cs.draws(lay.tile_cells[lay.tile_off[t] : lay.tile_off[t + 1]], scan, tile_seed(seed, t))
-    geo = (lay.cols, (t // lay.n_tc) * lay.T, (t % lay.n_tc) * lay.T, lay.T, 1.0 / lay.cols)
+    geo = (
+        lay.cols,
+        (t // lay.n_tc) * lay.T,
+        (t % lay.n_tc) * lay.T,
+        lay.T,
+        1.0 / lay.cols,
+        np.int64(t),
+        lay.seg_off,
+        lay.seg_start,
+        lay.seg_tile,
+    )
     return _tile_loop(st, inf32, prior, order, u, geo, update)
 
 

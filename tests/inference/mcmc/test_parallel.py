@@ -94,6 +94,23 @@ def test_no_short_ray_and_no_prior_pair_spans_two_tiles_of_one_colour(T):
             assert (tile[k][same_colour] == tile[j][same_colour]).all()
 
 
+@pytest.mark.parametrize("T", [1, 3, 7])
+def test_ray_runs_give_every_ray_cell_its_tile(T):
+    """The runs of :func:`par.ray_runs` name the tile of each cell of each ray, and consecutive runs differ."""
+    model = scene(n=20, rmax=9.0)
+    idx = model.ray_index()
+    cols = model.grid.shape[1]
+    n_tc = -(-cols // T)
+    seg_off, seg_start, seg_tile = par.ray_runs(idx.offsets, idx.cells, cols, T, n_tc)
+    for r in range(len(idx.offsets) - 1):
+        cells = idx.cells[idx.offsets[r] : idx.offsets[r + 1]]
+        want = (cells // cols // T) * n_tc + (cells % cols) // T
+        starts, tiles = seg_start[seg_off[r] : seg_off[r + 1]], seg_tile[seg_off[r] : seg_off[r + 1]]
+        got = np.repeat(tiles, np.diff(np.r_[starts, len(cells)]))
+        assert np.array_equal(got, want) and (len(cells) == 0 or starts[0] == 0)
+        assert np.all(tiles[1:] != tiles[:-1])
+
+
 def test_prior_extents():
     from ogm_ppl.priors import PatternFieldPrior
     from ogm_ppl.priors.pattern_field import symmetry_orbits
