@@ -416,6 +416,13 @@ def marginals(st, order, prior, num_sweeps, seed, update):
     (e.g. the 10^5-sweep column of Table 3.1), where one Python call per sweep would dominate."""
     np.random.seed(seed)
     acc = np.zeros(st.m.shape[0], np.float64)
+    _marginal_passes(st, order, prior, num_sweeps, update, acc)
+    return acc
+
+
+@nb.njit(cache=True, _nrt=False)
+def _marginal_passes(st, order, prior, num_sweeps, update, acc):
+    """The passes of :func:`marginals`, adding each sampled map into ``acc`` (without numba's runtime)."""
     m = st.m
     for _ in range(num_sweeps):
         for i in range(order.shape[0]):
@@ -428,4 +435,3 @@ def marginals(st, order, prior, num_sweeps, seed, update):
                 _set_cell(st, k, v)
         for k in range(m.shape[0]):
             acc[k] += m[k]
-    return acc
