@@ -664,11 +664,15 @@ def _candidate_loop(ps, geo, anchors, prior, u, rule, stamp0, scratch):
     raise NotImplementedError
 
 
+def candidate_loop_of(prior):
+    """The compiled loop of :func:`_candidate_sweep` for a prior bundle (or its numba type): without numba's
+    runtime (:func:`_candidate_loop_lean`) when its kind registers ``patch_allocates=False``, else with it."""
+    return _candidate_loop_rt if patch_allocates(prior) else _candidate_loop_lean
+
+
 @overload(_candidate_loop)
 def _candidate_loop_for(ps, geo, anchors, prior, u, rule, stamp0, scratch):
-    # a kind whose patch conditionals allocate nothing runs its loop without numba's runtime (see
-    # _candidate_loop_lean); the others keep it
-    run = _candidate_loop_rt if patch_allocates(prior) else _candidate_loop_lean
+    run = candidate_loop_of(prior)
     return lambda ps, geo, anchors, prior, u, rule, stamp0, scratch: run(
         ps, geo, anchors, prior, u, rule, stamp0, scratch
     )

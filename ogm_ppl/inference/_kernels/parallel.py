@@ -218,34 +218,35 @@ def _long_mask(K, offsets, cells, confined):
 
 
 @nb.njit(cache=True)
-def ray_runs(offsets, cells, cols, T, n_tc):
-    """Each ray's maximal runs of consecutive cells in one ``T x T`` tile: CSR ``seg_off`` (per ray) over
-    ``seg_start`` (a run's first position along its ray) and ``seg_tile`` (its tile ``a n_tc + b``)."""
-    R = offsets.shape[0] - 1
-    seg_off = np.zeros(R + 1, np.int64)
+def _ray_runs_pass(offsets, cells, cols, T, n_tc, seg_off, seg_start, seg_tile):
+    """One pass of :func:`ray_runs`: the runs counted into ``seg_off``, and written where ``seg_start`` has
+    room for them (empty: count only)."""
+    write = seg_start.shape[0] > 0
     n = 0
-    for r in range(R):
+    for r in range(offsets.shape[0] - 1):
         prev = -1
         for j in range(offsets[r], offsets[r + 1]):
             c = cells[j]
             t = (c // cols // T) * n_tc + (c % cols) // T
             if t != prev:
+                if write:
+                    seg_start[n] = j - offsets[r]
+                    seg_tile[n] = t
                 n += 1
                 prev = t
         seg_off[r + 1] = n
-    seg_start = np.empty(n, np.int64)
-    seg_tile = np.empty(n, np.int64)
-    n = 0
-    for r in range(R):
-        prev = -1
-        for j in range(offsets[r], offsets[r + 1]):
-            c = cells[j]
-            t = (c // cols // T) * n_tc + (c % cols) // T
-            if t != prev:
-                seg_start[n] = j - offsets[r]
-                seg_tile[n] = t
-                n += 1
-                prev = t
+
+
+def ray_runs(offsets, cells, cols: int, T: int, n_tc: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Each ray's maximal runs of consecutive cells in one ``T x T`` tile: CSR ``seg_off`` (per ray) over
+    ``seg_start`` (a run's first position along its ray) and ``seg_tile`` (its tile ``a n_tc + b``), int64."""
+    seg_off = np.zeros(len(offsets), np.int64)
+    none = np.zeros(0, np.int64)
+    _ray_runs_pass(offsets, cells, cols, T, n_tc, seg_off, none, none)
+    seg_start = np.empty(seg_off[-1], np.int64)
+    seg_tile = np.empty(seg_off[-1], np.int64)
+    if len(seg_start):
+        _ray_runs_pass(offsets, cells, cols, T, n_tc, seg_off, seg_start, seg_tile)
     return seg_off, seg_start, seg_tile
 
 
