@@ -35,7 +35,7 @@ def test_both_specs_parse():
     full = load_spec(SPECS / "active.toml")
     assert full.count >= 10 and len(full.seeds) >= 2 and full.window <= 200
     rules = {m["rule"] for m in full.methods}
-    assert rules == {"frontier", "ogm_info", "sample_info"}
+    assert rules == {"frontier", "ogm_info", "sample_info", "sample_coverage"}
     assert any(m.get("prior", "").partition(":")[2] for m in full.methods)  # a learned prior
 
 
