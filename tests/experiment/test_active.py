@@ -52,6 +52,10 @@ def test_the_small_spec_runs_through_the_cli_and_resumes(tmp_path):
     n = spec.count * len(spec.seeds) * len(spec.methods)
     assert len(doc["runs"]) == n and not doc["failed"]
     assert [r["method"] for r in doc["summary"]] == [m["name"] for m in spec.methods]
+    # the path to best F1 0.8 (and coverage 0.8) is summarised beside the 0.9 levels, from the per-stop records
+    assert all({"path_to_f1_0.8", "reached_f1_0.8", "ratio_coverage_0.8"} <= set(r) for r in doc["summary"])
+    assert all(set(r["path_levels"]) == {"coverage", "f1", "coverage_0.8", "f1_0.8"} for r in doc["runs"])
+    assert all(r["path_levels"]["f1_0.8"] <= r["path_levels"]["f1"] for r in doc["runs"])
     assert (out / "figures" / "active_curves.png").stat().st_size > 1000
     assert "path to 90 % cov." in (out / "metrics.md").read_text()
     task = json.loads(next((out / "tasks").rglob("s0.json")).read_text())
