@@ -36,7 +36,7 @@ import math
 import os
 import sys
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -70,6 +70,17 @@ class ActiveSpec:
     dpi: int = 100
     source: str = "<dict>"
     kind: str = "active"
+
+    def only(self, methods) -> ActiveSpec:
+        """The same spec with only the named methods (in the spec's order; ``--algorithms`` of the command
+        line): run a subset now, the rest later into the same output folder (a rerun resumes every task
+        already done). Raises :class:`SpecError` naming an unknown method."""
+        names = list(dict.fromkeys(methods))
+        known = [m["name"] for m in self.methods]
+        unknown = [n for n in names if n not in known]
+        if unknown:
+            raise SpecError(f"{self.source}: no method {unknown[0]!r} in the spec; it has {', '.join(known)}")
+        return replace(self, methods=tuple(m for m in self.methods if m["name"] in names))
 
     def to_json(self) -> dict:
         return asdict(self)

@@ -103,3 +103,12 @@ def test_a_learned_prior_is_refused_on_a_plan_it_was_trained_on(tmp_path, monkey
         active.run_active(spec, tmp_path, scheduler="serial", progress=False)
     assert not (tmp_path / "tasks").exists()  # refused before anything ran
     shutil.rmtree(tmp_path)
+
+
+def test_only_keeps_the_named_methods_in_the_spec_order():
+    spec = load_spec(SPECS / "active.toml")
+    sub = spec.only(["patch3-cov-per-m", "frontier"])
+    assert [m["name"] for m in sub.methods] == ["frontier", "patch3-cov-per-m"]
+    assert sub.robot == spec.robot and sub.seeds == spec.seeds
+    with pytest.raises(SpecError, match="no method 'nearest' in the spec"):
+        spec.only(["nearest"])
