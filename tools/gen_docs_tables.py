@@ -408,7 +408,7 @@ def _active(doc: dict) -> Table:
         return "never" if isinstance(x, float) and math.isinf(x) else _f(x, 2)
 
     runs = doc["runs"]
-    refs = ("ogm-ig", "ogm-ig-per-m")
+    refs = [x for x in ("ogm-ig", "ogm-ig-per-m") if any(r["method"] == x for r in runs)]  # those that ran
     rows = []
     for r in doc["summary"]:
         n = r["runs"]
@@ -477,6 +477,7 @@ def _active_d0(doc: dict) -> Table:
 #: table name -> (snapshot name, builder)
 TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "active_d0": ("active_d0", _active_d0),
+    "active_full": ("active_full", _active),
     "active_medium": ("active_medium", _active),
     "bench_exact": ("bench_exact", _bench_exact),
     "bench_ogm": ("bench_ogm", _bench_ogm),
