@@ -480,7 +480,8 @@ def build_parser() -> argparse.ArgumentParser:
         nargs="+",
         metavar="NAME",
         default=None,
-        help="run only these algorithms of the spec (a later run into the same --out resumes the rest)",
+        help="run only these algorithms (the methods of an active spec) of the spec (a later run into the same "
+        "--out resumes the rest)",
     )
 
     # --------------------------------------------------------------------------------- run

@@ -428,8 +428,106 @@ def _error_split(doc: dict) -> Table:
     )
 
 
+def _paired_ratio(runs: list[dict], method: str, ref: str, key: str) -> tuple[float, int]:
+    """Median over (plan, seed) pairs of ``method``'s path length to ``key`` over ``ref``'s (pairs where both
+    reach it), and the number of such pairs."""
+    by = {(r["method"], r["plan_id"], r["seed"]): r["path_levels"] for r in runs}
+    ratios = []
+    for r in runs:
+        if r["method"] != method:
+            continue
+        a = r["path_levels"][key]
+        b = by.get((ref, r["plan_id"], r["seed"]), {}).get(key, math.nan)
+        if math.isfinite(a) and math.isfinite(b) and b > 0:
+            ratios.append(a / b)
+    ratios.sort()
+    n = len(ratios)
+    if not n:
+        return math.nan, 0
+    return (ratios[n // 2] if n % 2 else 0.5 * (ratios[n // 2 - 1] + ratios[n // 2])), n
+
+
+def _active(doc: dict) -> Table:
+    """An ``active`` experiment (exploration): per rule, the median path length (m) to 90 % coverage, to best
+    F1 0.8 and 0.9, with how many runs reach each, the paired ratios of the path to 90 % coverage to the
+    first rule's (nearest frontier) and to ``ogm-ig``'s and ``ogm-ig-per-m``'s (the independent-cell
+    information gain), the mean final best F1 and seconds a run."""
+
+    def path(x: float) -> str:
+        return "never" if isinstance(x, float) and math.isinf(x) else _f(x, 2)
+
+    runs = doc["runs"]
+    refs = [x for x in ("ogm-ig", "ogm-ig-per-m") if any(r["method"] == x for r in runs)]  # those that ran
+    rows = []
+    for r in doc["summary"]:
+        n = r["runs"]
+        to_refs = [_paired_ratio(runs, r["method"], ref, "coverage") for ref in refs]
+        rows.append(
+            [
+                r["method"],
+                f"{path(r['path_to_coverage'])} ({r['reached_coverage']}/{n})",
+                f"{_f(r['ratio_coverage'])} ({r['pairs_coverage']})",
+                *[f"{_f(rb)} ({nb})" for rb, nb in to_refs],
+                f"{path(r['path_to_f1_0.8'])} ({r['reached_f1_0.8']}/{n})",
+                f"{_f(r['ratio_f1_0.8'])} ({r['pairs_f1_0.8']})",
+                f"{path(r['path_to_f1'])} ({r['reached_f1']}/{n})",
+                f"{_f(r['ratio_f1'])} ({r['pairs_f1']})",
+                _f(r["final_f1"]),
+                _f(r["seconds"], 1),
+            ]
+        )
+    nplans = len({x["plan_id"] for x in runs})
+    nseeds = len({x["seed"] for x in runs})
+    first = doc["summary"][0]["method"]
+    return Table(
+        caption=f"{doc['experiment']}: {nplans} held-out plans x {nseeds} seed(s); path length (m) to each level, "
+        "median over runs (never: fewer than half reach it), runs reaching it in brackets",
+        header=[
+            "rule",
+            "path to 90 % cov.",
+            f"ratio to {first} (pairs)",
+            *[f"ratio to {ref} (pairs)" for ref in refs],
+            "path to F1 0.8",
+            f"F1 0.8 ratio to {first}",
+            "path to F1 0.9",
+            f"F1 0.9 ratio to {first}",
+            "final F1",
+            "s / run",
+        ],
+        rows=rows,
+        provenance=doc["provenance"],
+        note="ratios: median over (plan, seed) pairs where both rules reach the level",
+    )
+
+
+def _active_d0(doc: dict) -> Table:
+    """The distance offset ``d_0`` of the per-metre exploration rules chosen on validation plans
+    (``experiments/tune_distance_offset.py``): per rule and offset, the median path length to 90 % coverage
+    over the plans and the mean over the runs that reach it."""
+
+    def path(x: float) -> str:
+        return "never" if isinstance(x, float) and math.isinf(x) else _f(x, 2)
+
+    rows = []
+    for name, by in doc["summary"].items():
+        for d0, v in by.items():
+            mark = " (chosen)" if float(d0) == float(doc["chosen"][name]) else ""
+            rows.append([name, d0 + mark, path(v["median_path_to_coverage_0.9"]), path(v["mean_reached"])])
+    return Table(
+        caption=f"d_0 on {len(doc['validation_plans'])} validation {doc['corpus']} plans (window {doc['window']}), "
+        "never on held-out ones",
+        header=["rule", "d_0 (m)", "median path to 90 % cov. (m)", "mean over runs reaching it (m)"],
+        rows=rows,
+        provenance=doc["provenance"],
+        note=f"criterion: {doc['criterion']}",
+    )
+
+
 #: table name -> (snapshot name, builder)
 TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
+    "active_d0": ("active_d0", _active_d0),
+    "active_full": ("active_full", _active),
+    "active_medium": ("active_medium", _active),
     "bench_exact": ("bench_exact", _bench_exact),
     "bench_ogm": ("bench_ogm", _bench_ogm),
     "bench_patch": ("bench_patch", _bench_patch),

@@ -9,9 +9,10 @@ A spec with ``[experiment] kind = "active"`` (read by :func:`ogm_ppl.experiment.
                    each plan cropped to the window holding the most wall-side cells,
                    experiments/calibration.py's heldout_maps), seeds [[0]] (start, range noise and chain)
     [robot]        the fields of ogm_ppl.exploration.active.Robot, and stops [10], stop_coverage [1.0]
-    [[methods]]    name (*required*), rule (*required*: "frontier", "ogm_info", "sample_info"), prior (rule
-                   sample_info: a prior name), per_metre [false], distance_offset [the max range, metres],
-                   estimator ["beam" | "scan"], scan_draws [64], patch [the prior's tile; [r, c] or 1]
+    [[methods]]    name (*required*), rule (*required*: "frontier", "ogm_info", "sample_info",
+                   "sample_coverage"), prior (rules sample_info, sample_coverage: a prior name), per_metre
+                   [false], distance_offset [the max range, metres], estimator ["beam" | "scan"], scan_draws
+                   [64], patch [the prior's tile; [r, c] or 1]
     [output]       figures [true], dpi [100]
 
 Plans are the held-out plans of the corpus (:func:`~ogm_ppl.datasets.floorplans.heldout_plans`, real-log
@@ -35,7 +36,7 @@ import math
 import os
 import sys
 import time
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
@@ -46,6 +47,7 @@ from ogm_ppl.io import atomic_write_text
 __all__ = ["ActiveResult", "ActiveSpec", "parse_active_spec", "run_active", "run_active_task", "summarise"]
 
 LEVELS = {"coverage": 0.9, "f1": 0.9}  # the path length needed to reach these
+MORE_LEVELS = (("coverage", 0.8), ("f1", 0.8))  # also summarised (keys ..._0.8), from the per-stop records
 _TABLES = ("experiment", "plans", "robot", "methods", "output")
 
 
@@ -68,6 +70,17 @@ class ActiveSpec:
     dpi: int = 100
     source: str = "<dict>"
     kind: str = "active"
+
+    def only(self, methods) -> ActiveSpec:
+        """The same spec with only the named methods (in the spec's order; ``--algorithms`` of the command
+        line): run a subset now, the rest later into the same output folder (a rerun resumes every task
+        already done). Raises :class:`SpecError` naming an unknown method."""
+        names = list(dict.fromkeys(methods))
+        known = [m["name"] for m in self.methods]
+        unknown = [n for n in names if n not in known]
+        if unknown:
+            raise SpecError(f"{self.source}: no method {unknown[0]!r} in the spec; it has {', '.join(known)}")
+        return replace(self, methods=tuple(m for m in self.methods if m["name"] in names))
 
     def to_json(self) -> dict:
         return asdict(self)
@@ -255,29 +268,46 @@ class ActiveResult:
         return markdown(self)
 
 
+def path_levels(run: dict) -> dict:
+    """``{"coverage": .., "f1": .., "coverage_0.8": .., "f1_0.8": ..}``: a run's path length to the levels of
+    :data:`LEVELS` (its ``path_to``) and of :data:`MORE_LEVELS` (from its per-stop ``records``; kept when the
+    run already holds them as ``path_levels``)."""
+    if "path_levels" in run:
+        return run["path_levels"]
+    from ogm_ppl.exploration.active import path_to
+
+    out = dict(run["path_to"])
+    for k, v in MORE_LEVELS:
+        out[f"{k}_{v:g}"] = path_to(run["records"], k, v)
+    return out
+
+
 def summarise(runs: list[dict], methods: list[str]) -> list[dict]:
-    """Per method: runs, how many reach 90 % coverage / F1 0.9, the median path length to each over all runs
-    (inf when fewer than half reach it), the median over (plan, seed) pairs of the ratio to the first method's
-    path length (pairs where both reach it), mean wall seconds, mean final coverage / F1 / NLL."""
+    """Per method: runs, how many reach 90 % coverage / F1 0.9 (and the levels of :data:`MORE_LEVELS`, keys
+    suffixed ``_0.8``), the median path length to each over all runs (inf when fewer than half reach it), the
+    median over (plan, seed) pairs of the ratio to the first method's path length (pairs where both reach it),
+    mean wall seconds, mean final coverage / F1 / NLL."""
     rows = []
+    levels = {r["method"] + "/" + str((r["plan_id"], r["seed"])): path_levels(r) for r in runs}
     base = {(r["plan_id"], r["seed"]): r for r in runs if r["method"] == methods[0]}
+    keys = list(LEVELS) + [f"{k}_{v:g}" for k, v in MORE_LEVELS]
     for name in methods:
         rs = [r for r in runs if r["method"] == name]
         if not rs:
             continue
         row: dict = {"method": name, "runs": len(rs), "seconds": float(np.mean([r["seconds"] for r in rs]))}
-        for k in LEVELS:
-            d = np.array([r["path_to"][k] for r in rs], dtype=float)
+        for k in keys:
+            own = [levels[name + "/" + str((r["plan_id"], r["seed"]))][k] for r in rs]
+            ref = [
+                levels[methods[0] + "/" + str((r["plan_id"], r["seed"]))][k]
+                if (r["plan_id"], r["seed"]) in base
+                else float("nan")
+                for r in rs
+            ]
+            d = np.array(own, dtype=float)
             row[f"reached_{k}"] = int(np.isfinite(d).sum())
             row[f"path_to_{k}"] = float(np.median(d))
-            ratios = [
-                r["path_to"][k] / base[(r["plan_id"], r["seed"])]["path_to"][k]
-                for r in rs
-                if (r["plan_id"], r["seed"]) in base
-                and np.isfinite(r["path_to"][k])
-                and np.isfinite(base[(r["plan_id"], r["seed"])]["path_to"][k])
-                and base[(r["plan_id"], r["seed"])]["path_to"][k] > 0
-            ]
+            ratios = [a / b for a, b in zip(own, ref) if np.isfinite(a) and np.isfinite(b) and b > 0]
             row[f"ratio_{k}"] = float(np.median(ratios)) if ratios else float("nan")
             row[f"pairs_{k}"] = len(ratios)
         for k in ("coverage", "f1", "nll_bits", "path_length", "collisions"):
@@ -301,19 +331,21 @@ def markdown(result: ActiveResult) -> str:
     nplans = len({r["plan_id"] for r in result.runs})
     lines += [
         f"{nplans} held-out {spec.corpus} plan(s) (window {spec.window} cells) x {len(spec.seeds)} seed(s); at most "
-        f"{spec.stops} stops. Path length (m) to 90 % coverage of the free space and to best F1 0.9 of the map: the "
-        f'median over runs ("never" when fewer than half reach it), how many reach it, and the median over (plan, '
-        f"seed) pairs of the ratio to {first!r} (pairs where both reach it). Final values: means after the last stop.",
+        f"{spec.stops} stops. Path length (m) to 90 % coverage of the free space and to best F1 0.9 and 0.8 of the "
+        f'map: the median over runs ("never" when fewer than half reach it), how many reach it, and the median over '
+        f"(plan, seed) pairs of the ratio to {first!r} (pairs where both reach it). Final values: means after the last "
+        "stop.",
         "",
-        "| method | path to 90 % cov. | reached | ratio | path to F1 0.9 | reached | ratio | final cov. | final F1 "
-        "| final NLL bits | path m | collisions | wall s / run |",
-        "|---" * 13 + "|",
+        "| method | path to 90 % cov. | reached | ratio | path to F1 0.9 | reached | ratio | path to F1 0.8 | reached "
+        "| ratio | final cov. | final F1 | final NLL bits | path m | collisions | wall s / run |",
+        "|---" * 16 + "|",
     ]
     for r in result.summary:
         lines.append(
             f"| {r['method']} | {_f(r['path_to_coverage'])} | {r['reached_coverage']}/{r['runs']} | "
             f"{_f(r['ratio_coverage'], 3)} | {_f(r['path_to_f1'])} | {r['reached_f1']}/{r['runs']} | "
-            f"{_f(r['ratio_f1'], 3)} | {_f(r['final_coverage'], 3)} | {_f(r['final_f1'], 3)} | "
+            f"{_f(r['ratio_f1'], 3)} | {_f(r['path_to_f1_0.8'])} | {r['reached_f1_0.8']}/{r['runs']} | "
+            f"{_f(r['ratio_f1_0.8'], 3)} | {_f(r['final_coverage'], 3)} | {_f(r['final_f1'], 3)} | "
             f"{_f(r['final_nll_bits'], 3)} | {_f(r['final_path_length'])} | {_f(r['final_collisions'], 1)} | "
             f"{_f(r['seconds'], 1)} |"
         )
@@ -417,7 +449,10 @@ def run_active(
         "seed": spec.seed,
         "plans": [{"id": pid, "plan": pname} for pid, pname, _ in plans],
         "summary": result.summary,
-        "runs": [{k: v for k, v in r.items() if k not in ("records", "route")} for r in runs],
+        "runs": [
+            {**{k: v for k, v in r.items() if k not in ("records", "route")}, "path_levels": path_levels(r)}
+            for r in runs
+        ],
         "failed": failed,
     }
     files = [

@@ -2,7 +2,8 @@
 
 :mod:`ogm_ppl.exploration.information` computes the mutual information between the map and the readings
 of candidate sensor poses (per beam exactly, per scan by nested Monte Carlo) and the independent-cell
-baseline of FSMI / FCMI.
+baseline of FSMI / FCMI, and the expected number of not-yet-observed cells a candidate's scan would
+observe (a coverage score over the samples).
 """
 
 from ogm_ppl.exploration.information import (
@@ -10,6 +11,7 @@ from ogm_ppl.exploration.information import (
     ScanInformation,
     beam_information,
     candidate_rays,
+    expected_new_cells,
     first_hit_distribution,
     independent_first_hits,
     independent_information,
@@ -22,6 +24,7 @@ __all__ = [
     "ScanInformation",
     "beam_information",
     "candidate_rays",
+    "expected_new_cells",
     "first_hit_distribution",
     "independent_first_hits",
     "independent_information",

@@ -31,6 +31,14 @@ Rules (:class:`Method`):
     :math:`\sum_b I(m; z_b \mid z)` exactly per beam over the samples' empirical posterior
     (``information.beam_information``; ``estimator = "scan"``: the whole-scan nested Monte-Carlo estimate
     ``information.scan_information``).
+``sample_coverage``
+    (e) the largest expected number of not-yet-observed free cells the candidate's scan would observe, over the
+    same ``samples`` posterior maps under ``prior`` (``information.expected_new_cells``: each of the scan's
+    ``beams`` beams ray-cast in each sample up to its first occupied cell, the unobserved cells crossed counted
+    once per sample, averaged): the coverage score of MapEx (ICRA 2025), which ray-casts candidates in
+    predicted maps, with posterior samples for the predictions. Information gain rewards making the map
+    certain, which a learned prior has largely done for unobserved space it predicts well; this rule rewards
+    what coverage counts.
 
 Each rule's score may be divided by the metres driven (``per_metre``): :math:`\text{gain} / (d + d_0)` with
 :math:`d_0` = ``distance_offset`` metres (default: the sensor's maximum range), as ``stop_and_scan`` weighs
@@ -76,7 +84,8 @@ __all__ = [
     "stop_metrics",
 ]
 
-RULES = ("frontier", "ogm_info", "sample_info")
+RULES = ("frontier", "ogm_info", "sample_info", "sample_coverage")
+SAMPLE_RULES = ("sample_info", "sample_coverage")  # rules that draw posterior samples under a prior
 
 
 # ------------------------------------------------------------------------------------------ settings
@@ -96,7 +105,8 @@ class Robot:
         min_cluster: frontier clusters (8-connected) of fewer cells are ignored (a gap the robot does not fit).
         max_candidates: information rules score at most this many candidates per stop (a seeded uniform
             subset of the gated ones).
-        samples: posterior maps per stop (rules ``sample_info``; also the P(path free) of their paths).
+        samples: posterior maps per stop (rules ``sample_info``, ``sample_coverage``; also the P(path free) of
+            their paths).
         sweeps: chain sweeps after each new scan before sampling; thin: sweeps between samples.
         delta: the update term of the traditional OGM every run keeps.
         ogm_gate: how rules on traditional OGM gate paths: ``"threshold"`` (default) on the thresholded map
@@ -156,8 +166,9 @@ class Method:
     """How the next stop is chosen (module docstring).
 
     Attributes:
-        name: a label. rule: one of :data:`RULES`. prior: the prior name of rule ``sample_info``
-            (:func:`~ogm_ppl.priors.named.prior_by_name`). per_metre: divide the gain by ``d + d_0``.
+        name: a label. rule: one of :data:`RULES`. prior: the prior name of rules ``sample_info`` and
+            ``sample_coverage`` (:func:`~ogm_ppl.priors.named.prior_by_name`). per_metre: divide the gain by
+            ``d + d_0``.
         distance_offset: ``d_0`` in metres (None: the sensor's maximum range).
         estimator: ``"beam"`` (exact per-beam MI, summed) or ``"scan"`` (whole-scan nested Monte Carlo).
         scan_draws: draws of the ``"scan"`` estimator. patch: the Gibbs patch (None: the prior's tile when its
@@ -176,8 +187,11 @@ class Method:
     def __post_init__(self) -> None:
         if self.rule not in RULES:
             raise ValueError(f"Method.rule must be one of {', '.join(RULES)}, got {self.rule!r}")
-        if (self.rule == "sample_info") != (self.prior is not None):
-            raise ValueError(f"Method {self.name!r}: a prior is given with rule 'sample_info' and only with it")
+        if (self.rule in SAMPLE_RULES) != (self.prior is not None):
+            raise ValueError(
+                f"Method {self.name!r}: a prior is given with rule 'sample_info' or 'sample_coverage' and only "
+                "with them"
+            )
         if self.rule == "frontier" and self.per_metre:
             raise ValueError(f"Method {self.name!r}: the frontier rule is nearest-first; per_metre does not apply")
         if self.estimator not in ("beam", "scan"):
@@ -337,9 +351,9 @@ class OnlineMapper:
 
 
 def default_mapper(grid: Grid, sensor, prior, robot: Robot, seed: int, patch=None) -> Mapper:
-    """The mapper of rule ``sample_info``: the online map (:class:`OnlineMapper`, single-cell Gibbs) where
-    :func:`kernel_for` would pick single cells and :mod:`ogm_ppl.inference.online` is there, else
-    :class:`RebuildMapper` (patch Gibbs: tile-table priors, whose single-cell moves stick)."""
+    """The mapper of rules ``sample_info`` and ``sample_coverage``: the online map (:class:`OnlineMapper`,
+    single-cell Gibbs) where :func:`kernel_for` would pick single cells and :mod:`ogm_ppl.inference.online` is
+    there, else :class:`RebuildMapper` (patch Gibbs: tile-table priors, whose single-cell moves stick)."""
     c = prior.compiled()
     cells = patch is None and not (c is not None and c.sparse_patches())
     if cells:
@@ -440,7 +454,7 @@ def explore(
         stop_coverage: end once this share of the start's free component has been observed.
         mask: cells scored (default all); ``target`` of the coverage: the free cells 4-connected to the start.
         mapper_factory: ``factory(grid, sensor, prior, robot, seed, patch) -> Mapper`` for rule
-            ``sample_info`` (default :func:`default_mapper`).
+            ``sample_info`` and ``sample_coverage`` (default :func:`default_mapper`).
         prior: a :class:`~ogm_ppl.priors.MapPrior` to use instead of ``prior_by_name(method.prior)``.
 
     The run is a function of ``seed``: the start, the range noise of stop ``i`` (its own stream
@@ -479,7 +493,7 @@ def explore(
     with torch.random.fork_rng(devices=[]):
         torch.manual_seed(int(seed))
         mapper: Mapper = ogm
-        if method.rule == "sample_info":
+        if method.rule in SAMPLE_RULES:
             from ogm_ppl.priors.named import prior_by_name
 
             pr = prior if prior is not None else prior_by_name(str(method.prior), grid.shape)
@@ -493,6 +507,8 @@ def explore(
         t0 = time.perf_counter()
         stopped = "stops"
         info = {"candidates": 0, "score": float("nan"), "gain_bits": float("nan"), "p_free": float("nan")}
+        if method.rule == "sample_coverage":
+            info["gain_cells"] = float("nan")
         for i in range(int(stops)):
             pose = route[-1]
             scan = simulate_scans(
@@ -502,7 +518,7 @@ def explore(
             if mapper is not ogm:
                 mapper.add_scans(scan)
             stops_done.append(cell)
-            samples = mapper.samples(robot.samples) if method.rule == "sample_info" else None
+            samples = mapper.samples(robot.samples) if method.rule in SAMPLE_RULES else None
             q = mapper.marginals.numpy()
             q_ogm = ogm.marginals.numpy()
             rec = {"stop": i, "path_length": path_length, "collisions": collisions, **info}
@@ -520,7 +536,7 @@ def explore(
                 break
             goal, cand, info = _choose(
                 method, robot, planner, grid, cell, q, q_ogm, samples, ogm.observed, stops_done, sensor,
-                info_angles, max_range, d0, np.random.default_rng(streams[i].spawn(1)[0]),
+                info_angles, max_range, d0, np.random.default_rng(streams[i].spawn(1)[0]), scan_angles=angles,
             )  # fmt: skip
             if goal is None:
                 stopped = "no candidate"
@@ -541,10 +557,12 @@ def explore(
 
 
 def _choose(
-    method, robot, planner, grid, cell, q, q_ogm, samples, observed, stops_done, sensor, angles, max_range, d0, rng=None
-):
+    method, robot, planner, grid, cell, q, q_ogm, samples, observed, stops_done, sensor, angles, max_range, d0,
+    rng=None, scan_angles=None,
+):  # fmt: skip
     """``(index of the chosen candidate or None, candidates, info)``; ``rng`` draws the subset of candidates
-    scored when more than ``robot.max_candidates`` pass the gate."""
+    scored when more than ``robot.max_candidates`` pass the gate. ``angles``: the beams scored for information
+    gain; ``scan_angles``: the beams of the scan itself (rule ``sample_coverage``; None: ``angles``)."""
     fr = frontier_mask(grid, q_ogm, observed)  # the goals: cells within reach of a frontier cell
     reach = int(np.ceil(robot.clearance_cells)) + 1  # a goal lies this close (Chebyshev) to its frontier cell
     if method.rule == "frontier" and stops_done:  # frontier cells an earlier stop could not resolve are given up
@@ -557,7 +575,7 @@ def _choose(
     sizes[0] = 0
     fr &= (sizes[lab] >= robot.min_cluster).ravel()
     goals = ndimage.maximum_filter(fr.reshape(grid.shape), size=2 * reach + 1, mode="constant").ravel()
-    if method.rule == "sample_info":
+    if method.rule in SAMPLE_RULES:
         route_map = q
     elif robot.ogm_gate == "threshold":
         route_map = np.where(observed & (q_ogm < 0.5), 0.0, 1.0)
@@ -573,6 +591,8 @@ def _choose(
         min_distance_cells=robot.min_step_cells,
     )
     info = {"candidates": len(cand), "score": float("nan"), "gain_bits": float("nan"), "p_free": float("nan")}
+    if method.rule == "sample_coverage":
+        info["gain_cells"] = float("nan")
     if method.rule == "frontier":
         ok = np.flatnonzero(cand.frontier)
         if ok.size == 0:
@@ -586,6 +606,17 @@ def _choose(
         rng = np.random.default_rng(0) if rng is None else rng
         cand = cand.subset(np.sort(rng.choice(len(cand), robot.max_candidates, replace=False)))
     info_mod = _information()
+    if method.rule == "sample_coverage":
+        rays = info_mod.candidate_rays(grid, cand.poses, angles if scan_angles is None else scan_angles, max_range)
+        gain = info_mod.expected_new_cells(grid, samples, rays, observed).numpy()
+        if not np.isfinite(gain).all():
+            raise FloatingPointError(f"expected new cells of {method.name!r} are not finite")
+        score = gain / (cand.distance + d0) if method.per_metre else gain
+        j = int(np.argmax(score))
+        if gain[j] <= 1e-9:
+            return None, cand, info
+        info.update(score=float(score[j]), gain_cells=float(gain[j]), p_free=float(cand.p_free[j]))
+        return j, cand, info
     rays = info_mod.candidate_rays(grid, cand.poses, angles, max_range)
     if method.rule == "ogm_info":
         gain = info_mod.independent_information(grid, sensor, torch.from_numpy(q_ogm), rays).sum(1)

@@ -49,6 +49,18 @@ al., ICRA 2019) and FCMI (Henderson et al., ICRA 2020) compute: per beam, ``I(f_
 distribution of the cell marginals (traditional OGM's or the samples'), whose first-hit distribution is
 Eq. (4.7) (:func:`~ogm_ppl.posterior.first_hit_independent`), with the same reading model as above.
 
+**Expected newly observed cells** (:func:`expected_new_cells`): not an information gain but the quantity a
+coverage explorer wants (MapEx, ICRA 2025, ray-casts each candidate in predicted maps): the expected number of
+cells not yet observed (``observed`` False) that the candidate's beams would cross before their first hit,
+
+.. math::
+    E[N_c \mid z] = \sum_s w_s \,\Big|\bigcup_b V_b(m^{(s)}) \setminus O\Big| \Big/ \sum_s w_s,
+
+with :math:`V_b(m)` the cells of beam ``b`` from the sensor's cell up to (not including; ``include_hit``:
+including) its first occupied cell in map ``m``, :math:`O` the observed cells, and the sums over the samples
+with the candidate's cell free. A cell several beams cross counts once per sample. Exact for the weighted
+maps; it ignores range noise (a reading near max range observes up to the hit either way).
+
 **The candidate's own cell** is known to be free (the robot stands there; :class:`~ogm_ppl.OccupancyModel`
 pins sensor cells the same way): the samples are conditioned on it (those with it occupied are dropped
 for that candidate), and a marginal of 1 there is an error. Rays are cut at the grid edge; cells beyond
@@ -84,6 +96,7 @@ __all__ = [
     "ScanInformation",
     "beam_information",
     "candidate_rays",
+    "expected_new_cells",
     "first_hit_distribution",
     "independent_first_hits",
     "independent_information",
@@ -374,6 +387,58 @@ def _first_hits_kernel(packed, w, valid_mask, offsets, cells, pose_cells, B, Wma
         for j in range(n + 1):
             pf[r, j] /= totals[c]
     return pf, totals
+
+
+@nb.njit(cache=True)
+def _new_cells_kernel(packed, w, valid_mask, offsets, cells, pose_cells, B, unobserved, include_hit):
+    """Per candidate ``c``: ``sum_s w_s |union_b V_b(s) & unobserved|`` over the samples with the
+    candidate's cell free (module docstring), and ``totals[c]`` the weight of those samples. ``seen[k]``
+    holds, per cell, the bit set of the samples in which some beam of the current candidate reaches it."""
+    C = pose_cells.shape[0]
+    W = packed.shape[1]
+    K = packed.shape[0]
+    out = np.zeros(C)
+    totals = np.zeros(C)
+    stamp = np.full(K, -1, np.int64)
+    seen = np.zeros((K, W), np.uint64)
+    touched = np.empty(K, np.int64)
+    alive = np.empty(W, np.uint64)
+    for c in range(C):
+        pc = pose_cells[c]
+        for k in range(W):
+            totals[c] += _weight_of(~packed[pc, k] & valid_mask[k], k, w)
+        if totals[c] <= 0.0:
+            continue
+        nt = 0
+        for b in range(B):
+            r = c * B + b
+            for k in range(W):
+                alive[k] = ~packed[pc, k] & valid_mask[k]
+            for j in range(offsets[r], offsets[r + 1]):
+                cell = cells[j]
+                any_alive = False
+                for k in range(W):
+                    occ = packed[cell, k]
+                    vis = alive[k] if include_hit else alive[k] & ~occ
+                    if unobserved[cell] and vis != 0:
+                        if stamp[cell] != c:
+                            stamp[cell] = c
+                            for k2 in range(W):
+                                seen[cell, k2] = np.uint64(0)
+                            touched[nt] = cell
+                            nt += 1
+                        seen[cell, k] |= vis
+                    alive[k] &= ~occ
+                    if alive[k] != 0:
+                        any_alive = True
+                if not any_alive:
+                    break
+        acc = 0.0
+        for i in range(nt):
+            for k in range(W):
+                acc += _weight_of(seen[touched[i], k], k, w)
+        out[c] = acc / totals[c]
+    return out, totals
 
 
 @nb.njit(cache=True, inline="always")
@@ -791,6 +856,45 @@ def beam_information(
     _sensor_params(sensor, bin_width)
     pf, _ = _first_hits(grid, samples, candidate_rays, weights)
     return _mi_bits(pf, sensor, candidate_rays, bin_width)
+
+
+def expected_new_cells(
+    grid: Grid, samples, candidate_rays: CandidateRays, observed, *, weights=None, include_hit: bool = False
+) -> torch.Tensor:
+    r"""Expected number of not-yet-observed cells each candidate's scan would observe, over the samples
+    (module docstring): ``E[N_c | z] = sum_s w_s |union_b V_b(m_s) \ O| / sum_s w_s``.
+
+    Args:
+        grid: the grid (``K`` cells).
+        samples: ``S x K`` 0/1 maps (posterior samples of a chain, or draws from independent marginals).
+        candidate_rays: from :func:`candidate_rays` on ``grid`` (the candidate's own cell is ``kappa = 0``).
+        observed: ``K`` bool (or grid-shaped): cells already observed; only the others are counted.
+        weights: optional ``S`` non-negative weights of the maps (default equal).
+        include_hit: count the first occupied cell of each beam too (default: the free cells before it,
+            what a coverage of the free space counts).
+
+    Returns:
+        ``C`` float64 cells, each sample set conditioned on the candidate's cell being free.
+
+    Raises:
+        ValueError: bad samples, weights or ``observed``, or a candidate whose cell is occupied in every sample.
+    """
+    _check_rays(grid, candidate_rays)
+    obs = np.asarray(observed.cpu() if isinstance(observed, torch.Tensor) else observed)
+    if obs.size != grid.num_cells:
+        raise ValueError(f"observed must be a mask of the grid's {grid.num_cells} cells, got {obs.size} values")
+    if obs.dtype != np.bool_ and not np.isin(obs, (0, 1)).all():
+        raise ValueError("observed must hold only 0/1 (or bool) values")
+    unobserved = np.ascontiguousarray(obs.reshape(-1) == 0)
+    packed, S = _pack_samples(samples, grid.num_cells)
+    w = _weights(weights, S)
+    rays = candidate_rays
+    out, totals = _new_cells_kernel(
+        packed, w, _valid_mask(S), rays.offsets, rays.cells, rays.pose_cells, rays.num_beams, unobserved,
+        bool(include_hit),
+    )  # fmt: skip
+    _refuse_blocked(rays, totals <= 0, "every sample")
+    return torch.from_numpy(out)
 
 
 def independent_first_hits(grid: Grid, marginals, candidate_rays: CandidateRays) -> torch.Tensor:

@@ -35,7 +35,7 @@ def test_both_specs_parse():
     full = load_spec(SPECS / "active.toml")
     assert full.count >= 10 and len(full.seeds) >= 2 and full.window <= 200
     rules = {m["rule"] for m in full.methods}
-    assert rules == {"frontier", "ogm_info", "sample_info"}
+    assert rules == {"frontier", "ogm_info", "sample_info", "sample_coverage"}
     assert any(m.get("prior", "").partition(":")[2] for m in full.methods)  # a learned prior
 
 
@@ -52,6 +52,10 @@ def test_the_small_spec_runs_through_the_cli_and_resumes(tmp_path):
     n = spec.count * len(spec.seeds) * len(spec.methods)
     assert len(doc["runs"]) == n and not doc["failed"]
     assert [r["method"] for r in doc["summary"]] == [m["name"] for m in spec.methods]
+    # the path to best F1 0.8 (and coverage 0.8) is summarised beside the 0.9 levels, from the per-stop records
+    assert all({"path_to_f1_0.8", "reached_f1_0.8", "ratio_coverage_0.8"} <= set(r) for r in doc["summary"])
+    assert all(set(r["path_levels"]) == {"coverage", "f1", "coverage_0.8", "f1_0.8"} for r in doc["runs"])
+    assert all(r["path_levels"]["f1_0.8"] <= r["path_levels"]["f1"] for r in doc["runs"])
     assert (out / "figures" / "active_curves.png").stat().st_size > 1000
     assert "path to 90 % cov." in (out / "metrics.md").read_text()
     task = json.loads(next((out / "tasks").rglob("s0.json")).read_text())
@@ -99,3 +103,12 @@ def test_a_learned_prior_is_refused_on_a_plan_it_was_trained_on(tmp_path, monkey
         active.run_active(spec, tmp_path, scheduler="serial", progress=False)
     assert not (tmp_path / "tasks").exists()  # refused before anything ran
     shutil.rmtree(tmp_path)
+
+
+def test_only_keeps_the_named_methods_in_the_spec_order():
+    spec = load_spec(SPECS / "active.toml")
+    sub = spec.only(["patch3-cov-per-m", "frontier"])
+    assert [m["name"] for m in sub.methods] == ["frontier", "patch3-cov-per-m"]
+    assert sub.robot == spec.robot and sub.seeds == spec.seeds
+    with pytest.raises(SpecError, match="no method 'nearest' in the spec"):
+        spec.only(["nearest"])

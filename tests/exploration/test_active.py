@@ -37,7 +37,12 @@ def _strip(records):
 
 @pytest.mark.parametrize(
     "method",
-    [Method("frontier", "frontier"), Method("ogm", "ogm_info"), Method("ind", "sample_info", prior="independent")],
+    [
+        Method("frontier", "frontier"),
+        Method("ogm", "ogm_info"),
+        Method("ind", "sample_info", prior="independent"),
+        Method("cov", "sample_coverage", prior="independent", per_metre=True),
+    ],
     ids=lambda m: m.name,
 )
 def test_the_loop_is_reproducible_from_its_seed(office, method):
@@ -124,6 +129,8 @@ def test_bad_starts_and_settings_are_refused(office):
         explore(truth, grid, Method("f", "frontier"), stops=2, start=(0, 0))
     with pytest.raises(ValueError, match="prior is given with rule 'sample_info'"):
         Method("x", "sample_info")
+    with pytest.raises(ValueError, match="prior is given with rule 'sample_info' or 'sample_coverage'"):
+        Method("x", "sample_coverage")
     with pytest.raises(ValueError, match="rule must be one of"):
         Method("x", "nearest")
     with pytest.raises(ValueError, match="threshold"):
@@ -215,3 +222,27 @@ def test_a_path_budget_ends_the_run(office):
     run = explore(truth, grid, Method("ogm", "ogm_info"), robot, stops=30, seed=0)
     d = [r["path_length"] for r in run.records]
     assert run.stopped == "path length" and d[-1] >= 1.0 > d[-2]
+
+
+@pytest.mark.parametrize("per_metre", [False, True])
+def test_the_coverage_rule_picks_the_most_expected_new_cells(per_metre):
+    """Rule sample_coverage on the scene of the frontier test: the chosen
+    stop has the largest expected count of unobserved cells its scan crosses (per metre driven plus d0).
+    Samples: the observed cells thresholded, the unobserved ones occupied with probability 0.3."""
+    from ogm_ppl.exploration.information import candidate_rays, expected_new_cells
+
+    grid, q, observed = _frontier_scene()
+    robot = Robot(clearance_cells=1.0, min_step_cells=2.0, max_candidates=10_000, threshold=0.5)
+    planner = PathPlanner(grid, robot.clearance_cells, robot.risk_weight)
+    u = torch.rand((16, q.size), generator=torch.Generator().manual_seed(0), dtype=torch.float64)
+    samples = torch.where(torch.from_numpy(observed), torch.from_numpy(q) > 0.5, u < 0.3).to(torch.uint8)
+    angles = np.linspace(0, 2 * np.pi, 48, endpoint=False)
+    m = Method("cov", "sample_coverage", prior="independent", per_metre=per_metre)
+    j, cand, info = _choose(
+        m, robot, planner, grid, 15 * 30 + 4, q, q, samples, observed, [], GaussianRange(1.0), angles[::4], 0.6,
+        0.6, scan_angles=angles,
+    )  # fmt: skip
+    assert j is not None and len(cand) > 10
+    gain = expected_new_cells(grid, samples, candidate_rays(grid, cand.poses, angles, 0.6), observed).numpy()
+    score = gain / (cand.distance + 0.6) if per_metre else gain
+    assert score[j] == score.max() and info["gain_cells"] == gain[j] > 0

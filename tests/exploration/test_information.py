@@ -13,6 +13,7 @@ from ogm_ppl import GaussianRange, Grid, PatternMatch
 from ogm_ppl.exploration import (
     beam_information,
     candidate_rays,
+    expected_new_cells,
     first_hit_distribution,
     independent_first_hits,
     independent_information,
@@ -300,6 +301,83 @@ def test_independent_information_of_sample_marginals_differs_from_the_samples(pr
     ind = independent_information(model.grid, sensor, marg, cr)
     cor = beam_information(model.grid, sensor, maps, cr, weights=pi)
     assert ind.shape == cor.shape and (ind - cor).abs().max() > 1e-3
+
+
+# ------------------------------------------------------------------ expected newly observed cells
+def ref_new_cells(cr, maps, pi, observed, c, include_hit=False):
+    """``E[|union_b V_b(m) minus O|]`` by walking every beam of candidate ``c`` in every map (plain Python)."""
+    num = den = 0.0
+    for m, w in zip(maps.tolist(), pi.tolist()):
+        if m[int(cr.pose_cells[c])] == 1:
+            continue
+        seen = set()
+        for b in range(cr.num_beams):
+            for k, cell in enumerate(cr.ray(c, b).tolist()):
+                if k > 0 and m[cell] == 1:
+                    if include_hit and not observed[cell]:
+                        seen.add(cell)
+                    break
+                if not observed[cell]:
+                    seen.add(cell)
+        num += w * len(seen)
+        den += w
+    return num / den
+
+
+@pytest.mark.parametrize("include_hit", [False, True])
+def test_expected_new_cells_equals_walking_every_beam_in_every_map(problem, include_hit):
+    model, maps, pi, cr = problem
+    grid = model.grid
+    rng = np.random.default_rng(4)
+    for observed in (np.zeros(grid.num_cells, bool), rng.random(grid.num_cells) < 0.4):
+        got = expected_new_cells(grid, maps.to(torch.uint8), cr, observed, weights=pi, include_hit=include_hit)
+        assert got.shape == (len(POSES),) and got.dtype == torch.float64
+        for c in range(len(POSES)):
+            exact = ref_new_cells(cr, maps, pi, observed, c, include_hit)
+            assert abs(float(got[c]) - exact) < 1e-12, (c, float(got[c]), exact)
+    # everything observed: nothing new; repeated samples equal their counts as weights (five 64-bit words)
+    assert (expected_new_cells(grid, maps, cr, np.ones(grid.num_cells, bool), weights=pi) == 0).all()
+    idx = torch.multinomial(pi, 300, replacement=True, generator=torch.Generator().manual_seed(1))
+    counts = torch.bincount(idx, minlength=len(pi)).double()
+    torch.testing.assert_close(
+        expected_new_cells(grid, maps[idx], cr, observed, include_hit=include_hit),
+        expected_new_cells(grid, maps, cr, observed, weights=counts, include_hit=include_hit),
+        rtol=0,
+        atol=1e-12,
+    )
+
+
+def test_expected_new_cells_counts_a_cell_two_beams_cross_once():
+    """A free 1 x 6 row, a beam east twice: the 5 cells east of the sensor cell, and the sensor cell itself."""
+    g = Grid((1, 6))
+    cr = candidate_rays(g, [[0.5, 0.5, 0.0]], [0.0, 0.0], max_range=5.0)
+    free = np.zeros((1, 6), np.uint8)
+    assert float(expected_new_cells(g, free, cr, np.zeros(6, bool))[0]) == 6.0
+    wall = free.copy()
+    wall[0, 3] = 1  # the beam stops at cell 3: cells 0..2 seen (3 with the hit)
+    both = np.concatenate([free, wall])
+    assert float(expected_new_cells(g, both, cr, np.zeros(6, bool))[0]) == pytest.approx((6 + 3) / 2)
+    assert float(expected_new_cells(g, both, cr, np.zeros(6, bool), include_hit=True)[0]) == pytest.approx(5.0)
+
+
+def test_expected_new_cells_refuses_bad_input(problem):
+    model, maps, _pi, cr = problem
+    grid = model.grid
+    obs = np.zeros(grid.num_cells, bool)
+    with pytest.raises(ValueError, match="observed must be a mask of the grid's 8 cells"):
+        expected_new_cells(grid, maps, cr, np.zeros(5, bool))
+    with pytest.raises(ValueError, match="observed must hold only 0/1"):
+        expected_new_cells(grid, maps, cr, np.full(grid.num_cells, 0.5))
+    with pytest.raises(ValueError, match="samples is empty"):
+        expected_new_cells(grid, np.zeros((0, grid.num_cells), np.uint8), cr, obs)
+    with pytest.raises(ValueError, match=f"S x {grid.num_cells}"):
+        expected_new_cells(grid, np.zeros((3, 5), np.uint8), cr, obs)
+    with pytest.raises(ValueError, match=r"candidate pose 0 .* inside an obstacle.*every sample"):
+        expected_new_cells(grid, maps[maps[:, int(cr.pose_cells[0])] == 1], cr, obs)
+    with pytest.raises(ValueError, match="another grid"):
+        expected_new_cells(Grid((2, 4), resolution=0.5), maps, cr, obs)
+    with pytest.raises(ValueError, match="weights"):
+        expected_new_cells(grid, maps, cr, obs, weights=torch.ones(3))
 
 
 # ------------------------------------------------------------------ bad input
