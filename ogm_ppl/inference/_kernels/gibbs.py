@@ -63,6 +63,7 @@ class PatchState(NamedTuple):
     c_ray: np.ndarray  # nnz int64
     c_kappa: np.ndarray  # nnz int64
     ll: np.ndarray  # R x (F + 1) float64
+    max_deg: int  # the most rays through one cell (bounds a patch's rays: L max_deg)
 
 
 def patch_state(m: np.ndarray, f: np.ndarray, index) -> PatchState:
@@ -80,6 +81,7 @@ def patch_state(m: np.ndarray, f: np.ndarray, index) -> PatchState:
         index.c_ray,
         index.c_kappa,
         index.ll,
+        int(np.diff(index.c_off).max(initial=0)),
     )
 
 
@@ -157,15 +159,11 @@ def ray_scratch(L, num_slots, dense, num_cands):
     )
 
 
-@nb.njit(cache=True)
-def max_slots(L, c_off, num_rays):
-    """An upper bound on the rays through an ``L``-cell patch: ``L`` times the largest cell degree."""
-    deg = 0
-    for k in range(c_off.shape[0] - 1):
-        d = c_off[k + 1] - c_off[k]
-        if d > deg:
-            deg = d
-    return min(num_rays, L * deg)
+@nb.njit(cache=True, inline="always")
+def max_slots(L, ps):
+    """An upper bound on the rays through an ``L``-cell patch: ``L`` times the largest cell degree (kept in
+    the state, so that a pass over a few patches, e.g. a chromatic tile's, does not scan every cell)."""
+    return min(ps.offsets.shape[0] - 1, L * ps.max_deg)
 
 
 @nb.njit(cache=True)
@@ -524,7 +522,7 @@ def _additive_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     L = geo.dr.shape[0]
     logw = np.empty(1 << L, np.float64)
     patch = np.empty(L, np.int64)
-    sc = ray_scratch(L, max_slots(L, ps.c_off, ps.offsets.shape[0] - 1), True, 0)
+    sc = ray_scratch(L, max_slots(L, ps), True, 0)
     p_rand, thesis, metro = rule.p_rand_patch, rule.thesis_random, rule.metropolised
     changed = 0
     for i in range(anchors.shape[0]):
@@ -644,7 +642,7 @@ def _candidate_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     patch = np.empty(L, np.int64)
     pair = np.empty(2, np.int64)
     pw = np.empty(2, np.float64)
-    sc = ray_scratch(L, max_slots(L, ps.c_off, ps.offsets.shape[0] - 1), L <= 20, capacity)
+    sc = ray_scratch(L, max_slots(L, ps), L <= 20, capacity)
     ts = tile_scratch_on(bit_of, scratch_capacity(prior, L))
     # heat-bath draws of patches no ray reaches, whose candidates and weights every full tile of a key shares
     # (shared_weights_key): each key's candidates and inverse-CDF table are built once a sweep, and a draw
