@@ -55,9 +55,10 @@ def _f1(tp, fp, fn):
         return np.where(tp > 0, 2 * tp / (2 * tp + fp + fn), 0.0)
 
 
-def error_split(out_dir: Path, thresholds=None) -> dict:
+def error_split(out_dir: Path, thresholds=None, algorithms=None) -> dict:
     """``{"algorithms": {name: scores}, "oracles": {name: best F1}, "datasets": n, "cells": ...}`` for the
-    experiment folder ``out_dir`` (module docstring)."""
+    experiment folder ``out_dir`` (module docstring): every algorithm with a map in the first dataset's folder
+    (or those named in ``algorithms``), each of which must have a map in every dataset's folder."""
     out_dir = Path(out_dir)
     maps = out_dir / "maps"
     if not maps.is_dir():
@@ -66,6 +67,11 @@ def error_split(out_dir: Path, thresholds=None) -> dict:
     folders = sorted(p for p in maps.iterdir() if p.is_dir())
     if not folders:
         raise FileNotFoundError(f"{maps}: no dataset folders")
+    names = sorted(f.stem for f in folders[0].glob("*.npz")) if algorithms is None else list(algorithms)
+    for d in folders:
+        missing = [a for a in names if not (d / f"{a}.npz").is_file()]
+        if missing:
+            raise FileNotFoundError(f"{d}: no map of {', '.join(missing)} (pool only complete algorithms)")
     counts: dict[str, np.ndarray] = {}  # algorithm -> (2 masks [touched, untouched], 3, len(thr))
     oracle = np.zeros((2, 3), np.int64)
     cells = np.zeros(2, np.int64)
@@ -83,7 +89,7 @@ def error_split(out_dir: Path, thresholds=None) -> dict:
         tp_in = t_in.sum()
         oracle[0] += [tp_in + t_out.sum(), (~t_out).sum(), 0]  # never-touched cells called occupied
         oracle[1] += [tp_in, 0, t_out.sum()]  # called free
-        for f in sorted(d.glob("*.npz")):
+        for f in (d / f"{a}.npz" for a in names):
             q = _array(f, "marginals", "a map").astype(np.float64)
             if q.shape != truth.shape:
                 raise ValueError(f"{f}: {q.size} cells, the dataset's truth has {truth.size}")
@@ -116,9 +122,10 @@ def error_split(out_dir: Path, thresholds=None) -> dict:
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("out_dir", type=Path, help="an experiment's output folder (holding maps/ and datasets/)")
+    ap.add_argument("--algorithms", nargs="+", help="only these (default: every map of the first dataset)")
     ap.add_argument("--json", type=Path, help="also write the result to this JSON file")
     a = ap.parse_args(argv)
-    res = error_split(a.out_dir)
+    res = error_split(a.out_dir, algorithms=a.algorithms)
     n_u, occ_u = res["cells"]["untouched"], res["occupied"]["untouched"]
     print(f"{res['datasets']} datasets; never-touched cells {n_u:,}, of them free {n_u - occ_u:,}")
     for name, s in res["algorithms"].items():

@@ -83,3 +83,11 @@ def test_bad_folders_are_refused(tmp_path):
     np.savez(tmp_path / "maps" / "d0" / "x.npz", other=np.zeros(4))
     with pytest.raises(ValueError, match="no 'marginals' array"):
         te.error_split(tmp_path)
+
+
+def test_an_algorithm_missing_from_a_dataset_is_refused_unless_left_out(run):
+    out, _ = run
+    (out / "maps" / "d1" / "b.npz").unlink()
+    with pytest.raises(FileNotFoundError, match=r"d1: no map of b"):
+        te.error_split(out)
+    assert list(te.error_split(out, algorithms=["a"])["algorithms"]) == ["a"]
