@@ -41,7 +41,9 @@ write the sum of one cell of another colour through different rays: a data race.
 the updating tile are plain; writes into any other cell are ``lock add`` instructions (:func:`atomic_add`,
 LLVM ``atomicrmw add``). Integer addition is exact, associative and commutative, so after the phase every
 sum equals the sum from scratch, whatever the interleaving (the kept counts of infinite terms likewise,
-as int32 atomics). No buffer is needed: the extra memory of the threaded sweep is the tile index.
+as int32 atomics). No buffer is needed: the extra memory of the threaded sweep is the tile index and each
+ray's runs of cells in one tile (:func:`ray_runs`, which spare the writes along a ray an ownership test a
+cell).
 
 **Random numbers.** The sweep seed ``s`` (a uint64) gives tile ``t`` the SplitMix64 stream
 ``tile_seed(s, t)`` (its order and uniforms by :func:`~ogm_ppl.inference._kernels.cell_sweep.draws`), and the
