@@ -608,28 +608,23 @@ def _choose(
     info_mod = _information()
     if method.rule == "sample_coverage":
         rays = info_mod.candidate_rays(grid, cand.poses, angles if scan_angles is None else scan_angles, max_range)
-        gain = info_mod.expected_new_cells(grid, samples, rays, observed).numpy()
-        if not np.isfinite(gain).all():
-            raise FloatingPointError(f"expected new cells of {method.name!r} are not finite")
-        score = gain / (cand.distance + d0) if method.per_metre else gain
-        j = int(np.argmax(score))
-        if gain[j] <= 1e-9:
-            return None, cand, info
-        info.update(score=float(score[j]), gain_cells=float(gain[j]), p_free=float(cand.p_free[j]))
-        return j, cand, info
-    rays = info_mod.candidate_rays(grid, cand.poses, angles, max_range)
-    if method.rule == "ogm_info":
-        gain = info_mod.independent_information(grid, sensor, torch.from_numpy(q_ogm), rays).sum(1)
-    elif method.estimator == "beam":
-        gain = info_mod.beam_information(grid, sensor, samples, rays).sum(1)
+        gain = info_mod.expected_new_cells(grid, samples, rays, observed)
+        what, key = "expected new cells", "gain_cells"
     else:
-        gain = info_mod.scan_information(grid, sensor, samples, rays, num_draws=method.scan_draws).mean
+        rays = info_mod.candidate_rays(grid, cand.poses, angles, max_range)
+        if method.rule == "ogm_info":
+            gain = info_mod.independent_information(grid, sensor, torch.from_numpy(q_ogm), rays).sum(1)
+        elif method.estimator == "beam":
+            gain = info_mod.beam_information(grid, sensor, samples, rays).sum(1)
+        else:
+            gain = info_mod.scan_information(grid, sensor, samples, rays, num_draws=method.scan_draws).mean
+        what, key = "information gain", "gain_bits"
     gain = np.asarray(gain.detach().numpy() if hasattr(gain, "detach") else gain, dtype=float)
     if not np.isfinite(gain).all():
-        raise FloatingPointError(f"information gain of {method.name!r} is not finite")
+        raise FloatingPointError(f"{what} of {method.name!r} is not finite")
     score = gain / (cand.distance + d0) if method.per_metre else gain
     j = int(np.argmax(score))
     if gain[j] <= 1e-9:
         return None, cand, info
-    info.update(score=float(score[j]), gain_bits=float(gain[j]), p_free=float(cand.p_free[j]))
+    info.update({"score": float(score[j]), key: float(gain[j]), "p_free": float(cand.p_free[j])})
     return j, cand, info
