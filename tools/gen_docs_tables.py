@@ -428,30 +428,12 @@ def _error_split(doc: dict) -> Table:
     )
 
 
-def _paired_ratio(runs: list[dict], method: str, ref: str, key: str) -> tuple[float, int]:
-    """Median over (plan, seed) pairs of ``method``'s path length to ``key`` over ``ref``'s (pairs where both
-    reach it), and the number of such pairs."""
-    by = {(r["method"], r["plan_id"], r["seed"]): r["path_levels"] for r in runs}
-    ratios = []
-    for r in runs:
-        if r["method"] != method:
-            continue
-        a = r["path_levels"][key]
-        b = by.get((ref, r["plan_id"], r["seed"]), {}).get(key, math.nan)
-        if math.isfinite(a) and math.isfinite(b) and b > 0:
-            ratios.append(a / b)
-    ratios.sort()
-    n = len(ratios)
-    if not n:
-        return math.nan, 0
-    return (ratios[n // 2] if n % 2 else 0.5 * (ratios[n // 2 - 1] + ratios[n // 2])), n
-
-
 def _active(doc: dict) -> Table:
     """An ``active`` experiment (exploration): per rule, the median path length (m) to 90 % coverage, to best
     F1 0.8 and 0.9, with how many runs reach each, the paired ratios of the path to 90 % coverage to the
     first rule's (nearest frontier) and to ``ogm-ig``'s and ``ogm-ig-per-m``'s (the independent-cell
     information gain), the mean final best F1 and seconds a run."""
+    from ogm_ppl.experiment.active import paired_ratio
 
     def path(x: float) -> str:
         return "never" if isinstance(x, float) and math.isinf(x) else _f(x, 2)
@@ -461,7 +443,7 @@ def _active(doc: dict) -> Table:
     rows = []
     for r in doc["summary"]:
         n = r["runs"]
-        to_refs = [_paired_ratio(runs, r["method"], ref, "coverage") for ref in refs]
+        to_refs = [paired_ratio(runs, r["method"], ref, "coverage") for ref in refs]
         rows.append(
             [
                 r["method"],

@@ -282,14 +282,24 @@ def path_levels(run: dict) -> dict:
     return out
 
 
+def paired_ratio(runs: list[dict], method: str, ref: str, key: str) -> tuple[float, int]:
+    """The median over (plan, seed) pairs of ``method``'s path length to the level ``key`` (of
+    :func:`path_levels`) over ``ref``'s, pairs where both reach it; and how many pairs there are."""
+    levels = {(r["method"], r["plan_id"], r["seed"]): path_levels(r) for r in runs if r["method"] in (method, ref)}
+    ratios = []
+    for (m, plan, seed), lv in levels.items():
+        b = levels.get((ref, plan, seed), {}).get(key, math.nan) if m == method else math.nan
+        if np.isfinite(lv[key]) and np.isfinite(b) and b > 0:
+            ratios.append(lv[key] / b)
+    return (float(np.median(ratios)) if ratios else math.nan), len(ratios)
+
+
 def summarise(runs: list[dict], methods: list[str]) -> list[dict]:
     """Per method: runs, how many reach 90 % coverage / F1 0.9 (and the levels of :data:`MORE_LEVELS`, keys
     suffixed ``_0.8``), the median path length to each over all runs (inf when fewer than half reach it), the
-    median over (plan, seed) pairs of the ratio to the first method's path length (pairs where both reach it),
+    median over (plan, seed) pairs of the ratio to the first method's path length (:func:`paired_ratio`),
     mean wall seconds, mean final coverage / F1 / NLL."""
     rows = []
-    levels = {r["method"] + "/" + str((r["plan_id"], r["seed"])): path_levels(r) for r in runs}
-    base = {(r["plan_id"], r["seed"]): r for r in runs if r["method"] == methods[0]}
     keys = list(LEVELS) + [f"{k}_{v:g}" for k, v in MORE_LEVELS]
     for name in methods:
         rs = [r for r in runs if r["method"] == name]
@@ -297,19 +307,10 @@ def summarise(runs: list[dict], methods: list[str]) -> list[dict]:
             continue
         row: dict = {"method": name, "runs": len(rs), "seconds": float(np.mean([r["seconds"] for r in rs]))}
         for k in keys:
-            own = [levels[name + "/" + str((r["plan_id"], r["seed"]))][k] for r in rs]
-            ref = [
-                levels[methods[0] + "/" + str((r["plan_id"], r["seed"]))][k]
-                if (r["plan_id"], r["seed"]) in base
-                else float("nan")
-                for r in rs
-            ]
-            d = np.array(own, dtype=float)
+            d = np.array([path_levels(r)[k] for r in rs], dtype=float)
             row[f"reached_{k}"] = int(np.isfinite(d).sum())
             row[f"path_to_{k}"] = float(np.median(d))
-            ratios = [a / b for a, b in zip(own, ref) if np.isfinite(a) and np.isfinite(b) and b > 0]
-            row[f"ratio_{k}"] = float(np.median(ratios)) if ratios else float("nan")
-            row[f"pairs_{k}"] = len(ratios)
+            row[f"ratio_{k}"], row[f"pairs_{k}"] = paired_ratio(runs, name, methods[0], k)
         for k in ("coverage", "f1", "nll_bits", "path_length", "collisions"):
             row[f"final_{k}"] = float(np.mean([r["final"][k] for r in rs]))
         rows.append(row)
