@@ -9,24 +9,28 @@ import math
 import numba as nb
 import numpy as np
 
+from ogm_ppl.inference._kernels.expm import exp_nonpos
+
 __all__ = ["accept_random", "categorical", "categorical_table", "choose", "metropolised_pick", "pick_from_table"]
 
 
 @nb.njit(cache=True, inline="always")
 def _exp_weights(logw, n, ew, skip):
-    """``ew[j] = exp(logw[j] - max logw)`` for ``j < n``; returns ``(sum, sum without entry skip)``, each
-    summed directly (no cancellation), or ``(-1, -1)`` if no entry has mass."""
+    """``ew[j] = exp(logw[j] - max logw)`` for ``j < n`` (:func:`~ogm_ppl.inference._kernels.expm.exp_nonpos`);
+    returns ``(sum, sum without entry skip)``, each summed directly in index order (no cancellation), or
+    ``(-1, -1)`` if no entry has mass."""
     mx = -np.inf
     for j in range(n):
         if logw[j] > mx:
             mx = logw[j]
     if mx == -np.inf:
         return -1.0, -1.0
+    for j in range(n):  # vectorised (exp_nonpos); the sums below stay in index order
+        ew[j] = exp_nonpos(logw[j] - mx)
     total = 0.0
     other = 0.0
     for j in range(n):
-        e = math.exp(logw[j] - mx)
-        ew[j] = e
+        e = ew[j]
         total += e
         if j != skip:
             other += e

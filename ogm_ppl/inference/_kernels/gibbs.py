@@ -15,7 +15,8 @@ Rays blocked before the patch are skipped (Section 4.1.2).
 :func:`patch_sweep` is compiled once per prior bundle type (:mod:`ogm_ppl.priors.compiled`): for priors
 whose weights add over cells (independent cells) every update weighs all ``2^L`` configurations in
 ``O(2^L)`` per ray; for the others it weighs the candidates the prior's kind allows (a tile's sparse
-support, else all ``2^L``). Both end in the one choice step of :mod:`~ogm_ppl.inference._kernels.choice`.
+support, else all ``2^L``), the rays' terms grouped by the patch cells they cross (:func:`lik_grouped`).
+Both end in the one choice step of :mod:`~ogm_ppl.inference._kernels.choice`.
 Sweeps allocate their scratch once (:class:`RayScratch`, :class:`~ogm_ppl.priors.compiled.scratch.TileScratch`).
 """
 
@@ -30,6 +31,7 @@ from numba.extending import overload
 
 from ogm_ppl.inference._kernels.cells import _next_occupied
 from ogm_ppl.inference._kernels.choice import accept_random, categorical, categorical_table, choose, pick_from_table
+from ogm_ppl.inference._kernels.prefetch import prefetch
 from ogm_ppl.priors.compiled import (
     candidate_weights,
     cell_log_odds,
@@ -114,6 +116,11 @@ class PatchRule(NamedTuple):
     own_factor: bool = False
 
 
+GROUP_BITS = 10  # lik_grouped serves patches of at most this many cells (its tables have 2^L entries)
+MAX_GROUPS = 64  # the most distinct cell masks a patch's rays may have for lik_grouped (else lik_list)
+GROUP_MIN_CANDS = 8  # fewer candidates go by lik_list
+
+
 class RayScratch(NamedTuple):
     """Scratch of :func:`collect_rays` and the likelihood of a patch's configurations, allocated once per
     sweep by :func:`ray_scratch` (``S`` slots: at least the rays through any one patch; ``L`` cells;
@@ -124,21 +131,29 @@ class RayScratch(NamedTuple):
     slot_n: np.ndarray  # S int64: entries of the slot
     ent_kappa: np.ndarray  # S x L int64: kappas of the patch cells on the ray before slot_fout, ascending
     ent_bit: np.ndarray  # S x L int64: their bits (bit j = the j-th live cell of the patch)
-    kb: np.ndarray  # L int64: kappa of each bit on the ray at hand
-    fw: np.ndarray  # W int64: the ray's first hit under each configuration
-    lowbit: np.ndarray  # W int64: index of the lowest set bit of w
+    kb: np.ndarray  # L int64: kappa of each bit on the ray at hand (:func:`lik_grouped`: each entry's cell mask)
+    fw: np.ndarray  # max(W, Wg) int64: the ray's first hit under each configuration (lik_grouped: sub-masks)
+    lowbit: np.ndarray  # max(W, Wg) int64: index of the lowest set bit of w
     prior: np.ndarray  # W float64: log prior of each configuration (independent cells)
     ew: np.ndarray  # max(W, C) float64: exp weights of a categorical draw over up to C candidates
     fv: np.ndarray  # max(C, 2) float64: one ray's term of each candidate (:func:`lik_list`)
+    g_of: np.ndarray  # 2^L int64 (empty if L > GROUP_BITS): group of each cell mask, all -1 between calls
+    g_mask: np.ndarray  # G int64: the cell mask of each group (:func:`lik_grouped`)
+    g_tab: np.ndarray  # G x 2^L float64 (0 x 0 if L > GROUP_BITS): each group's term of each sub-mask
+    slot_g: np.ndarray  # S int64: the group of each slot
+    slot_v: np.ndarray  # S x (L + 1) float64: each slot's terms at its entries, then at f_out
+    ve: np.ndarray  # L + 1 float64: one ray's term with its first hit at each entry, then at f_out
 
 
 @nb.njit(cache=True)
 def ray_scratch(L, num_slots, dense, num_cands):
     """A :class:`RayScratch` for ``L``-cell patches through which at most ``num_slots`` rays pass;
     ``dense``: room for all ``2^L`` configurations."""
+    Wg = (1 << L) if 0 < L <= GROUP_BITS else 0
     W = (1 << L) if dense else 1
-    lowbit = np.zeros(W, np.int64)
-    for w in range(1, W):
+    Wl = max(W, Wg)
+    lowbit = np.zeros(Wl, np.int64)
+    for w in range(1, Wl):
         b = 0
         while not (w >> b) & 1:
             b += 1
@@ -151,11 +166,17 @@ def ray_scratch(L, num_slots, dense, num_cands):
         np.empty((S, max(L, 1)), np.int64),
         np.empty((S, max(L, 1)), np.int64),
         np.empty(max(L, 1), np.int64),
-        np.empty(W, np.int64),
+        np.empty(Wl, np.int64),
         lowbit,
         np.empty(W, np.float64),
         np.empty(max(W, num_cands, 1), np.float64),
         np.empty(max(num_cands, 2), np.float64),
+        np.full(Wg, -1, np.int64),
+        np.empty(MAX_GROUPS if Wg else 0, np.int64),
+        np.empty((MAX_GROUPS if Wg else 0, Wg), np.float64),
+        np.empty(S, np.int64),
+        np.empty((S if Wg else 0, L + 1), np.float64),
+        np.empty(L + 1, np.float64),
     )
 
 
@@ -242,10 +263,17 @@ def collect_rays(ps, patch, stamp, sc):
     and the ray is never read. Only a ray whose first hit is a patch cell is walked on to its first
     outside hit. (Reading the cell at ``f_r`` of every ray through the patch, most of them blocked far
     before it, cost a cache miss per ray: most of a sweep on dense logs.)
+
+    A ray is kept exactly when one of its patch cells has ``kappa <= f_r`` (if one equals ``f_r``,
+    ``f_out > f_r``; else ``f_out = f_r``), so slots are opened only for those entries (first pass) and
+    the kept rays' other entries added in a second pass over the same (cached) cell lists: the rays
+    blocked before the patch cost one read of ``f_r`` per entry, no slot.
     """
-    m, f, in_patch, ray_stamp = ps.m, ps.f, ps.in_patch, ps.ray_stamp
+    m, f, in_patch, ray_stamp, ll = ps.m, ps.f, ps.in_patch, ps.ray_stamp, ps.ll
     offsets, cells, c_off, c_ray, c_kappa = ps.offsets, ps.cells, ps.c_off, ps.c_ray, ps.c_kappa
     slot_ray, slot_n, slot_fout, ent_kappa, ent_bit = sc.slot_ray, sc.slot_n, sc.slot_fout, sc.ent_kappa, sc.ent_bit
+    # pass 1: a slot for each ray with a patch cell at or before its first hit (the others are blocked
+    # before the patch: most rays through a patch on dense logs), with those entries
     ns = 0
     bit = 0
     for i in range(patch.shape[0]):
@@ -254,17 +282,39 @@ def collect_rays(ps, patch, stamp, sc):
             continue
         for p in range(c_off[c], c_off[c + 1]):
             r = c_ray[p]
+            kap = c_kappa[p]
+            if kap > f[r]:
+                continue
             if ray_stamp[r, 0] != stamp:
                 ray_stamp[r, 0] = stamp
                 ray_stamp[r, 1] = ns
                 slot_ray[ns] = r
                 slot_n[ns] = 0
                 ns += 1
+                prefetch(ll, r, kap)  # the ray's terms, read once the slots are complete
             s = ray_stamp[r, 1]
             e = slot_n[s]
-            ent_kappa[s, e] = c_kappa[p]
+            ent_kappa[s, e] = kap
             ent_bit[s, e] = bit
             slot_n[s] = e + 1
+        bit += 1
+    if ns == 0:
+        return 0
+    # pass 2: the slots' entries after their first hit (read when that hit is a patch cell)
+    bit = 0
+    for i in range(patch.shape[0]):
+        c = patch[i]
+        if c < 0:
+            continue
+        for p in range(c_off[c], c_off[c + 1]):
+            r = c_ray[p]
+            kap = c_kappa[p]
+            if kap > f[r] and ray_stamp[r, 0] == stamp:
+                s = ray_stamp[r, 1]
+                e = slot_n[s]
+                ent_kappa[s, e] = kap
+                ent_bit[s, e] = bit
+                slot_n[s] = e + 1
         bit += 1
     marked = False
     kept = 0
@@ -365,6 +415,81 @@ def lik_list(sc, ns, ll, cands, n, out):
         for j in range(n):
             o = out[j]
             out[j] = o if o == -np.inf else o + val[j]
+
+
+@nb.njit(cache=True)
+def lik_grouped(sc, ns, ll, cands, n, out):
+    """``out[j] += sum_slots ll[r, f_r(cands[j])]``, as :func:`lik_list`, by grouping the slots by the set
+    of patch cells on their ray (the *mask* ``M``: a ray's term depends on a candidate ``w`` only through
+    ``w & M``). Per group a table over the sub-masks, ``T[sub] = sum_{slots} ll[r, first kappa whose bit is
+    in sub, else f_out]`` (``2^|M|`` entries per slot, filled once), then per candidate one lookup a group,
+    ``out[j] += sum_groups T[cands[j] & M]``: ``O(slots 2^|M| + groups n)`` against :func:`lik_list`'s
+    ``O(slots n |M|)``. Each candidate gets the same terms as from :func:`lik_list`, summed in another
+    order (equal up to rounding). Returns False, having changed nothing, when the scratch has no tables
+    (patches of more than ``GROUP_BITS`` cells) or the rays have more than ``MAX_GROUPS`` masks. Entries
+    already ``-inf`` stay ``-inf`` (terms are never ``+inf``)."""
+    g_of, g_mask, g_tab, slot_g, ve = sc.g_of, sc.g_mask, sc.g_tab, sc.slot_g, sc.ve
+    G = g_mask.shape[0]
+    if g_of.shape[0] == 0:
+        return False
+    # the terms first, in a loop of independent loads (rows of ll far apart: cache misses that overlap)
+    tv = sc.slot_v
+    for s in range(ns):
+        r = sc.slot_ray[s]
+        for e in range(sc.slot_n[s]):
+            tv[s, e] = ll[r, sc.ent_kappa[s, e]]
+        tv[s, -1] = ll[r, sc.slot_fout[s]]
+    ng = 0
+    for s in range(ns):
+        M = 0
+        for e in range(sc.slot_n[s]):
+            M |= np.int64(1) << sc.ent_bit[s, e]
+        g = g_of[M]
+        if g < 0:
+            if ng == G:  # too many masks: undo
+                for x in range(ng):
+                    g_of[g_mask[x]] = -1
+                return False
+            g = ng
+            ng += 1
+            g_of[M] = g
+            g_mask[g] = M
+            sub = M
+            while True:  # zero the group's sub-masks (the only entries read)
+                g_tab[g, sub] = 0.0
+                if sub == 0:
+                    break
+                sub = (sub - 1) & M
+        slot_g[s] = g
+    lowbit, sub_of, cell_bit = sc.lowbit, sc.fw, sc.kb
+    for s in range(ns):
+        g = slot_g[s]
+        r = sc.slot_ray[s]
+        # the slot's distinct cells in kappa order (a cell met twice counts at its first kappa), their
+        # bits and terms: code c (bit e: the e-th of them is occupied) has first hit at entry lowbit(c)
+        k = 0
+        seen = 0
+        for e in range(sc.slot_n[s]):
+            b = np.int64(1) << sc.ent_bit[s, e]
+            if seen & b:
+                continue
+            seen |= b
+            ve[k] = tv[s, e]
+            cell_bit[k] = b
+            k += 1
+        g_tab[g, 0] += tv[s, -1]
+        sub_of[0] = 0
+        for c in range(1, np.int64(1) << k):
+            lb = lowbit[c]
+            sub = sub_of[c & (c - 1)] | cell_bit[lb]
+            sub_of[c] = sub
+            g_tab[g, sub] += ve[lb]
+    for g in range(ng):
+        M = g_mask[g]
+        for j in range(n):
+            out[j] += g_tab[g, cands[j] & M]
+        g_of[M] = -1
+    return True
 
 
 @nb.njit(cache=True)
@@ -547,9 +672,12 @@ def _additive_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
 @nb.njit(cache=True, inline="always")
 def _add_lik(sc, ns, ll, n_live, cands, n, dense, logw):
     """Add the likelihood of the rays collected in ``sc`` to ``logw`` of the ``n`` candidates: by
-    :func:`lik_all` when they are the dense set (all ``2^n_live`` codes, in order) or a large share of it
-    (scattered into the dense table and gathered back: each candidate adds the same terms in the same
-    order as :func:`lik_list` would, so the sums are the same bit for bit), else :func:`lik_list`."""
+    :func:`lik_grouped` for ``GROUP_MIN_CANDS`` candidates or more where it applies; else by :func:`lik_all`
+    when they are the dense set (all ``2^n_live`` codes, in order) or a large share of it (scattered into
+    the dense table and gathered back: each candidate adds the same terms in the same order as
+    :func:`lik_list` would, so the sums are the same bit for bit), else :func:`lik_list`."""
+    if n >= GROUP_MIN_CANDS and lik_grouped(sc, ns, ll, cands, n, logw):
+        return
     W = np.int64(1) << n_live
     if dense and n <= sc.fw.shape[0]:
         lik_all(sc, ns, ll, n_live, logw)

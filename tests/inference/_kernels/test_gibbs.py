@@ -1,5 +1,6 @@
-"""The ray terms of a patch update (:func:`collect_rays`, :func:`lik_list`) against a from-scratch sum over
-every ray, and :func:`lik_list` bit for bit against the per-candidate reading of the entries."""
+"""The ray terms of a patch update (:func:`collect_rays`, :func:`lik_list`, :func:`lik_grouped`) against a
+from-scratch sum over every ray, :func:`lik_list` bit for bit against the per-candidate reading of the
+entries, and :func:`lik_grouped` against it to rounding."""
 
 from __future__ import annotations
 
@@ -9,7 +10,14 @@ import numpy as np
 import pytest
 
 from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
-from ogm_ppl.inference._kernels.gibbs import build_patch_at, collect_rays, lik_list, ray_scratch, set_patch
+from ogm_ppl.inference._kernels.gibbs import (
+    build_patch_at,
+    collect_rays,
+    lik_grouped,
+    lik_list,
+    ray_scratch,
+    set_patch,
+)
 from ogm_ppl.inference.mcmc.gibbs import PatchGibbs
 from ogm_ppl.priors import IndependentPrior
 
@@ -79,6 +87,12 @@ def test_ray_terms_of_every_configuration_match_the_sum_over_all_rays(seed):
             ref = np.zeros(W)
             reference_lik_list(sc, ns, ps.ll, cands, W, ref)
             np.testing.assert_array_equal(got, ref)  # the same sums, bit for bit
+            grouped = np.zeros(W)
+            assert lik_grouped(sc, ns, ps.ll, cands, W, grouped)
+            assert (sc.g_of == -1).all()  # left clean for the next patch
+            np.testing.assert_array_equal(np.isneginf(grouped), np.isneginf(ref))
+            fin = np.isfinite(ref)
+            np.testing.assert_allclose(grouped[fin], ref[fin], rtol=1e-13, atol=1e-12)  # other order, same terms
             m0, f0 = ps.m.copy(), ps.f.copy()
             F = np.empty((W, R), np.int64)
             for w in range(W):
@@ -115,9 +129,41 @@ def test_candidates_already_impossible_stay_impossible():
         out = np.zeros(1 << L)
         out[::2] = -np.inf
         ref = out.copy()
+        grouped = out.copy()
         lik_list(sc, ns, ps.ll, cands, 1 << L, out)
         reference_lik_list(sc, ns, ps.ll, cands, 1 << L, ref)
         assert np.isneginf(out[::2]).all() and not np.isneginf(out[1::2]).all()
         np.testing.assert_array_equal(out, ref)
+        assert lik_grouped(sc, ns, ps.ll, cands, 1 << L, grouped)
+        np.testing.assert_array_equal(np.isneginf(grouped), np.isneginf(ref))
         return
     pytest.fail("no patch with rays")
+
+
+def test_grouped_terms_decline_without_tables_or_beyond_their_groups():
+    """Patches of more than GROUP_BITS cells have no tables, and rays with more cell masks than the
+    scratch holds are declined: False, nothing added, the mask map left clean (the caller reads the slots
+    one by one instead)."""
+    model = scene(4)
+    k = PatchGibbs(model, (3, 3))
+    k.setup(0)
+    ps, geo = k._ps, k._geometry()
+    patch = np.empty(9, np.int64)
+    for a in k._anchors:
+        L = build_patch_at(geo, int(a[0]), int(a[1]), patch)
+        sc = ray_scratch(9, len(ps.f), False, 1 << L)
+        stamp = ps.stamp[0]
+        ps.stamp[0] += 1
+        ns = collect_rays(ps, patch, stamp, sc)
+        masks = {int(np.bitwise_or.reduce(1 << sc.ent_bit[s, : sc.slot_n[s]])) for s in range(ns)}
+        if len(masks) < 2:
+            continue
+        cands = np.arange(1 << L, dtype=np.int64)
+        out = np.zeros(1 << L)
+        one_group = sc._replace(g_mask=np.empty(1, np.int64), g_tab=np.empty((1, sc.g_tab.shape[1])))
+        assert not lik_grouped(one_group, ns, ps.ll, cands, 1 << L, out)
+        assert (out == 0).all() and (sc.g_of == -1).all()
+        assert not lik_grouped(ray_scratch(11, len(ps.f), False, 1 << L), 0, ps.ll, cands, 1 << L, out)
+        assert lik_grouped(sc, ns, ps.ll, cands, 1 << L, out)
+        return
+    pytest.fail("no patch whose rays have two masks")

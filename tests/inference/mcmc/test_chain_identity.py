@@ -6,8 +6,9 @@ tiles of table priors up to 5 x 5 and Algorithm 2's random patch in both modes),
 rules, every prior route (independent cells, MRF and user stencils, patch tables, border-conditioned
 tables, a prior with only ``log_prob``), with and without ``region=``; and ICM (:func:`map_estimate`) and
 the patch maps. Each case's states (and cell / patch conditionals read at the end) are hashed (sha256)
-and compared with ``chain_identity.json``, recorded from the kernels as they were before their arrays
-were bundled. Regenerate (only for an intended change of the chains)::
+and compared with ``chain_identity.json``. The probes hash float64 conditionals bit for bit, so a change in
+the order in which a kernel sums the same terms changes their digests (not the states'). Regenerate only
+for an intended change of the chains or of that rounding, having checked that the states are the same::
 
     PYTHONPATH=$PWD python tests/inference/mcmc/test_chain_identity.py --regen
 """
