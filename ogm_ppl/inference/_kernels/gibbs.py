@@ -357,6 +357,7 @@ def collect_rays(ps, patch, stamp, sc):
         slot_fout[kept] = f_out
         slot_n[kept] = k
         kept += 1
+        prefetch(ll, r, f_out)
     if marked:
         for i in range(patch.shape[0]):
             if patch[i] >= 0:
@@ -772,16 +773,34 @@ def _candidate_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     pw = np.empty(2, np.float64)
     sc = ray_scratch(L, max_slots(L, ps), L <= 20, capacity)
     ts = tile_scratch_on(bit_of, scratch_capacity(prior, L))
-    # heat-bath draws of patches no ray reaches, whose candidates and weights every full tile of a key shares
-    # (shared_weights_key): each key's candidates and inverse-CDF table are built once a sweep, and a draw
-    # is a binary search (the same index as the categorical's scan)
+    # heat-bath updates of full tiles whose candidates and prior weights every tile of a key shares
+    # (shared_weights_key): each key's candidates, weights and inverse-CDF table are built once a sweep; a
+    # patch no ray reaches is a binary search (the same index as the categorical's scan), one with rays
+    # starts from the key's weights instead of asking the prior again
     n_keys = 0 if metro else shared_weights(prior)
     key_n = np.full(n_keys, -1, np.int64)
     key_total = np.empty(n_keys, np.float64)
     key_last = np.empty(n_keys, np.int64)
     key_acc = np.empty((n_keys, capacity if n_keys else 0), np.float64)
     key_cands = np.empty((n_keys, capacity if n_keys else 0), np.int64)
-    scratch = (cands, cand_lp, logw, patch, pair, pw, sc, ts, n_keys, key_n, key_total, key_last, key_acc, key_cands)
+    key_lw = np.empty((n_keys, capacity if n_keys else 0), np.float64)
+    scratch = (
+        cands,
+        cand_lp,
+        logw,
+        patch,
+        pair,
+        pw,
+        sc,
+        ts,
+        n_keys,
+        key_n,
+        key_total,
+        key_last,
+        key_acc,
+        key_cands,
+        key_lw,
+    )
     return _candidate_loop(ps, geo, anchors, prior, u, rule, stamp0, scratch)
 
 
@@ -808,7 +827,9 @@ def _candidate_loop_for(ps, geo, anchors, prior, u, rule, stamp0, scratch):
 def _candidate_loop_body(ps, geo, anchors, prior, u, rule, stamp0, scratch):
     """The loop of :func:`_candidate_sweep` over its scratch (inlined into :func:`_candidate_loop_rt` and
     :func:`_candidate_loop_lean`)."""
-    cands, cand_lp, logw, patch, pair, pw, sc, ts, n_keys, key_n, key_total, key_last, key_acc, key_cands = scratch
+    cands, cand_lp, logw, patch, pair, pw, sc, ts, n_keys, key_n, key_total, key_last, key_acc, key_cands, key_lw = (
+        scratch
+    )
     p_rand, thesis, metro = rule.p_rand_patch, rule.thesis_random, rule.metropolised
     ll = ps.ll
     m = ps.m
@@ -838,24 +859,27 @@ def _candidate_loop_body(ps, geo, anchors, prior, u, rule, stamp0, scratch):
                     new = prop  # (a state without mass may move anywhere)
         else:
             ns = -1
+            n = -1
+            dense = False
             key = -1 if n_keys == 0 else shared_weights_key(prior, r0, c0, geo.h, geo.w, n_live)
-            if key >= 0:
+            if key >= 0:  # a full tile whose candidates and prior weights are its key's (built once a sweep)
                 ns = collect_rays(ps, patch, stamp, sc)
-                if ns == 0:  # no ray reaches the patch: its candidates and weights are the key's
-                    if key_n[key] < 0:
-                        n, t = patch_candidates(
-                            prior, r0, c0, geo.h, geo.w, patch, n_live, geo.pinned, m, cands, cand_lp
-                        )
-                        if n > 1:
-                            candidate_weights(prior, patch, m, cands, n, t, cand_lp, logw, ts)
-                            key_total[key], key_last[key] = categorical_table(logw, n, key_acc[key])
-                        if n >= 0:
-                            key_n[key] = n
-                            for x in range(n):
-                                key_cands[key, x] = cands[x]
-                    kn = key_n[key]
-                    if kn == 0:
-                        continue
+                if key_n[key] < 0:
+                    n, t = patch_candidates(prior, r0, c0, geo.h, geo.w, patch, n_live, geo.pinned, m, cands, cand_lp)
+                    if n > 1:
+                        candidate_weights(prior, patch, m, cands, n, t, cand_lp, logw, ts)
+                        for x in range(n):
+                            key_lw[key, x] = logw[x]
+                        key_total[key], key_last[key] = categorical_table(logw, n, key_acc[key])
+                    if n >= 0:
+                        key_n[key] = n
+                        for x in range(n):
+                            key_cands[key, x] = cands[x]
+                    n = -1
+                kn = key_n[key]
+                if kn == 0:
+                    continue
+                if ns == 0:  # no ray reaches the patch: a draw from the key's table
                     if kn == 1 or (kn > 1 and key_total[key] > 0.0):
                         j = 0 if kn == 1 else pick_from_table(key_acc[key], key_total[key], key_last[key], kn, u[0, i])
                         new = key_cands[key, j]
@@ -863,29 +887,37 @@ def _candidate_loop_body(ps, geo, anchors, prior, u, rule, stamp0, scratch):
                             set_patch(ps, patch, new)
                             changed += 1
                         continue
-            n, t = patch_candidates(prior, r0, c0, geo.h, geo.w, patch, n_live, geo.pinned, m, cands, cand_lp)
+                elif kn > 0:  # rays: the key's candidates and prior weights, then the likelihood below
+                    n = kn
+                    for x in range(n):
+                        cands[x] = key_cands[key, x]
+                        logw[x] = key_lw[key, x]
             if n < 0:
-                skipped += 1
-                continue
-            if restricted(prior, t) and not rule.own_factor:
-                if _restricted_update(
-                    ps, patch, prior, u, i, rule, stamp, cands, n, t, cand_lp, logw, pair, pw, sc, ts
-                ):
-                    changed += 1
-                continue
-            if n == 0:
-                continue
+                n, t = patch_candidates(prior, r0, c0, geo.h, geo.w, patch, n_live, geo.pinned, m, cands, cand_lp)
+                if n < 0:
+                    skipped += 1
+                    continue
+                if restricted(prior, t) and not rule.own_factor:
+                    if _restricted_update(
+                        ps, patch, prior, u, i, rule, stamp, cands, n, t, cand_lp, logw, pair, pw, sc, ts
+                    ):
+                        changed += 1
+                    continue
+                if n == 0:
+                    continue
+                dense = t < 0
+                if n > 1:
+                    if rule.own_factor and t >= 0:  # the thesis's border update: the tile's own table only
+                        for x in range(n):
+                            logw[x] = cand_lp[x]
+                    else:
+                        candidate_weights(prior, patch, m, cands, n, t, cand_lp, logw, ts)
             if n == 1:
                 j = 0  # the only configuration with mass (or, if it has none, the one to move to)
             else:
                 if ns < 0:
                     ns = collect_rays(ps, patch, stamp, sc)
-                if rule.own_factor and t >= 0:  # the thesis's border update: the tile's own table only
-                    for x in range(n):
-                        logw[x] = cand_lp[x]
-                else:
-                    candidate_weights(prior, patch, m, cands, n, t, cand_lp, logw, ts)
-                _add_lik(sc, ns, ll, n_live, cands, n, t < 0, logw)
+                _add_lik(sc, ns, ll, n_live, cands, n, dense, logw)
                 jc = -1
                 if metro:
                     for x in range(n):
@@ -900,7 +932,7 @@ def _candidate_loop_body(ps, geo, anchors, prior, u, rule, stamp0, scratch):
                     # gets there. (A uniform pick among the candidates filled 500 x 500 maps with noise.)
                     for x in range(n):
                         logw[x] = 0.0
-                    _add_lik(sc, ns, ll, n_live, cands, n, t < 0, logw)
+                    _add_lik(sc, ns, ll, n_live, cands, n, dense, logw)
                     j = categorical(logw, n, u[0, i], sc.ew)
                     if j < 0:  # the data rule out every candidate too
                         j = min(np.int64(u[0, i] * n), n - 1)
