@@ -266,6 +266,33 @@ def _bench_patch(doc: dict) -> Table:
     )
 
 
+def _bench_table_6_6(doc: dict) -> Table:
+    names = {"dd": "patch table (data-driven)", "border": "border"}
+    rows = []
+    for exp, r in doc["experiments"].items():
+        for key, v in r["priors"].items():
+            full, reg = v["full"], v["region"]
+            rows.append(
+                [
+                    f"{exp} ({r['poses']} poses, {r['rays']:,} rays)",
+                    names.get(key, key),
+                    _g(v["thesis_s"], 4),
+                    f"{full['s_per_sample']:.3f} ({v['speedup_full']:.0f}x)",
+                    f"{reg['s_per_sample']:.3f} ({v['speedup_region']:.0f}x)",
+                ]
+            )
+    return Table(
+        caption=(
+            f"Table 6.6: seconds per map sample (one sweep of 3 x 3 patches, one thread), Intel Lab at "
+            f"{doc['resolution_m'] * 100:g} cm, K = {doc['cells']:,} cells; in brackets the thesis's time over ours"
+        ),
+        header=["experiment", "prior", "thesis (s)", "ours, full map (s)", f"ours, within {doc['near_cells']:g} cells of a mapped cell (s)"],
+        rows=rows,
+        provenance=doc["provenance"],
+        note=f"peak RSS {doc['peak_rss_mib']:.0f} MiB; load average {doc['loadavg_start']} -> {doc['loadavg_end']}",
+    )
+
+
 def _table_3_1(doc: dict) -> Table:
     rows = [
         [k, _g(v["mean"], 4), "" if v.get("thesis") is None else _g(v["thesis"], 4)] for k, v in doc["rows"].items()
@@ -513,6 +540,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "bench_exact": ("bench_exact", _bench_exact),
     "bench_ogm": ("bench_ogm", _bench_ogm),
     "bench_patch": ("bench_patch", _bench_patch),
+    "bench_table_6_6": ("bench_table_6_6", _bench_table_6_6),
     "calibration": ("calibration", _calibration),
     "calibration_cross": ("calibration", _calibration_cross),
     "headline": ("headline", _headline),
