@@ -117,8 +117,8 @@ class PatchRule(NamedTuple):
 
 
 GROUP_BITS = 10  # lik_grouped serves patches of at most this many cells (its tables have 2^L entries)
-MAX_GROUPS = 64  # the most distinct cell masks a patch's rays may have for lik_grouped (else lik_list)
-GROUP_MIN_CANDS = 8  # fewer candidates go by lik_list
+MAX_GROUPS = 64  # the most distinct cell masks of a patch's rays lik_grouped takes (else the per-ray paths)
+GROUP_MIN_CANDS = 8  # fewer candidates go by lik_list (one pass per ray is cheaper than tables)
 
 
 class RayScratch(NamedTuple):
