@@ -286,7 +286,13 @@ def _bench_table_6_6(doc: dict) -> Table:
             f"Table 6.6: seconds per map sample (one sweep of 3 x 3 patches, one thread), Intel Lab at "
             f"{doc['resolution_m'] * 100:g} cm, K = {doc['cells']:,} cells; in brackets the thesis's time over ours"
         ),
-        header=["experiment", "prior", "thesis (s)", "ours, full map (s)", f"ours, within {doc['near_cells']:g} cells of a mapped cell (s)"],
+        header=[
+            "experiment",
+            "prior",
+            "thesis (s)",
+            "ours, full map (s)",
+            f"ours, within {doc['near_cells']:g} cells of a mapped cell (s)",
+        ],
         rows=rows,
         provenance=doc["provenance"],
         note=f"peak RSS {doc['peak_rss_mib']:.0f} MiB; load average {doc['loadavg_start']} -> {doc['loadavg_end']}",
