@@ -247,6 +247,15 @@ def collect_patch_rays(ps, patch, stamp):
     return L, n_slots, slot_ray, slot_n, ent_kappa, ent_bit
 
 
+@nb.njit(cache=True, inline="always")
+def _add_entry(sc, s, kap, bit):
+    """Append the patch cell ``(kappa, bit)`` to slot ``s``."""
+    e = sc.slot_n[s]
+    sc.ent_kappa[s, e] = kap
+    sc.ent_bit[s, e] = bit
+    sc.slot_n[s] = e + 1
+
+
 @nb.njit(cache=True)
 def collect_rays(ps, patch, stamp, sc):
     """The rays whose first hit depends on the configuration of ``patch``, into ``sc`` (Section 4.1.2).
@@ -292,11 +301,7 @@ def collect_rays(ps, patch, stamp, sc):
                 slot_n[ns] = 0
                 ns += 1
                 prefetch(ll, r, kap)  # the ray's terms, read once the slots are complete
-            s = ray_stamp[r, 1]
-            e = slot_n[s]
-            ent_kappa[s, e] = kap
-            ent_bit[s, e] = bit
-            slot_n[s] = e + 1
+            _add_entry(sc, ray_stamp[r, 1], kap, bit)
         bit += 1
     if ns == 0:
         return 0
@@ -310,11 +315,7 @@ def collect_rays(ps, patch, stamp, sc):
             r = c_ray[p]
             kap = c_kappa[p]
             if kap > f[r] and ray_stamp[r, 0] == stamp:
-                s = ray_stamp[r, 1]
-                e = slot_n[s]
-                ent_kappa[s, e] = kap
-                ent_bit[s, e] = bit
-                slot_n[s] = e + 1
+                _add_entry(sc, ray_stamp[r, 1], kap, bit)
         bit += 1
     marked = False
     kept = 0

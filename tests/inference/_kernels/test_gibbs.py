@@ -118,9 +118,9 @@ def test_ray_terms_of_every_configuration_match_the_sum_over_all_rays(seed):
     assert checked > 10
 
 
-def test_candidates_already_impossible_stay_impossible():
-    model = scene(3)
-    k = PatchGibbs(model, (3, 3))
+def collected_patches(seed):
+    """``(ps, L, sc, ns)`` for each 3 x 3 tile of ``scene(seed)``, its rays collected into ``sc``."""
+    k = PatchGibbs(scene(seed), (3, 3))
     k.setup(0)
     ps, geo = k._ps, k._geometry()
     patch = np.empty(9, np.int64)
@@ -129,7 +129,11 @@ def test_candidates_already_impossible_stay_impossible():
         sc = ray_scratch(9, len(ps.f), False, 1 << L)
         stamp = ps.stamp[0]
         ps.stamp[0] += 1
-        ns = collect_rays(ps, patch, stamp, sc)
+        yield ps, L, sc, collect_rays(ps, patch, stamp, sc)
+
+
+def test_candidates_already_impossible_stay_impossible():
+    for ps, L, sc, ns in collected_patches(3):
         if ns == 0:
             continue
         cands = np.arange(1 << L, dtype=np.int64)
@@ -151,17 +155,7 @@ def test_grouped_terms_decline_without_tables_or_beyond_their_groups():
     """Patches of more than GROUP_BITS cells have no tables, and rays with more cell masks than the
     scratch holds are declined: False, nothing added, the mask map left clean (the caller reads the slots
     one by one instead)."""
-    model = scene(4)
-    k = PatchGibbs(model, (3, 3))
-    k.setup(0)
-    ps, geo = k._ps, k._geometry()
-    patch = np.empty(9, np.int64)
-    for a in k._anchors:
-        L = build_patch_at(geo, int(a[0]), int(a[1]), patch)
-        sc = ray_scratch(9, len(ps.f), False, 1 << L)
-        stamp = ps.stamp[0]
-        ps.stamp[0] += 1
-        ns = collect_rays(ps, patch, stamp, sc)
+    for ps, L, sc, ns in collected_patches(4):
         masks = {int(np.bitwise_or.reduce(1 << sc.ent_bit[s, : sc.slot_n[s]])) for s in range(ns)}
         if len(masks) < 2:
             continue
