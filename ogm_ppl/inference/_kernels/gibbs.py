@@ -143,6 +143,7 @@ class RayScratch(NamedTuple):
     slot_g: np.ndarray  # S int64: the group of each slot
     slot_v: np.ndarray  # S x (L + 1) float64: each slot's terms at its entries, then at f_out
     ve: np.ndarray  # L + 1 float64: one ray's term with its first hit at each entry, then at f_out
+    g_into: np.ndarray  # G int64: the group a group's table is folded into (-1: none; :func:`lik_grouped`)
 
 
 @nb.njit(cache=True)
@@ -177,6 +178,7 @@ def ray_scratch(L, num_slots, dense, num_cands):
         np.empty(S, np.int64),
         np.empty((S if Wg else 0, L + 1), np.float64),
         np.empty(L + 1, np.float64),
+        np.empty(MAX_GROUPS if Wg else 0, np.int64),
     )
 
 
@@ -426,8 +428,10 @@ def lik_grouped(sc, ns, ll, cands, n, out):
     ``w & M``). Per group a table over the sub-masks, ``T[sub] = sum_{slots} ll[r, first kappa whose bit is
     in sub, else f_out]`` (``2^|M|`` entries per slot, filled once), then per candidate one lookup a group,
     ``out[j] += sum_groups T[cands[j] & M]``: ``O(slots 2^|M| + groups n)`` against :func:`lik_list`'s
-    ``O(slots n |M|)``. Each candidate gets the same terms as from :func:`lik_list`, summed in another
-    order (equal up to rounding). Returns False, having changed nothing, when the scratch has no tables
+    ``O(slots n |M|)``. A group whose mask is a proper subset of another's, ``M'``, is first added into
+    that table, ``T'[sub] += T[sub & M]`` (``2^|M'|`` reads), where that is cheaper than its pass over the
+    candidates (``2^(|M'| + 1) <= n``). Each candidate gets the same terms as from :func:`lik_list`, summed
+    in another order (equal up to rounding). Returns False, having changed nothing, when the scratch has no tables
     (patches of more than ``GROUP_BITS`` cells) or the rays have more than ``MAX_GROUPS`` masks. Entries
     already ``-inf`` stay ``-inf`` (terms are never ``+inf``)."""
     g_of, g_mask, g_tab, slot_g, ve = sc.g_of, sc.g_mask, sc.g_tab, sc.slot_g, sc.ve
@@ -486,10 +490,43 @@ def lik_grouped(sc, ns, ll, cands, n, out):
             sub = sub_of[c & (c - 1)] | cell_bit[lb]
             sub_of[c] = sub
             g_tab[g, sub] += ve[lb]
+    # a group whose mask lies in another's costs a pass over the candidates; folded into the table of the
+    # smallest such group (when the candidates outnumber twice its sub-masks) it costs a read per sub-mask
+    # instead. Smaller masks first, so that a table carries on what was folded into it.
+    g_into, pop = sc.g_into, slot_g  # slot_g is spent: ng <= ns groups' popcounts
+    top = 0
+    for g in range(ng):
+        g_into[g] = -1
+        c = 0
+        x = g_mask[g]
+        while x:
+            x &= x - 1
+            c += 1
+        pop[g] = c
+        top = max(top, c)
+    for p in range(top):
+        for g in range(ng):
+            if pop[g] != p:
+                continue
+            M = g_mask[g]
+            best, best_c = -1, top + 1
+            for h in range(ng):
+                if pop[h] > p and pop[h] < best_c and (M & ~g_mask[h]) == 0:
+                    best, best_c = h, pop[h]
+            if best >= 0 and (np.int64(2) << best_c) <= n:
+                H = g_mask[best]
+                sub = H
+                while True:
+                    g_tab[best, sub] += g_tab[g, sub & M]
+                    if sub == 0:
+                        break
+                    sub = (sub - 1) & H
+                g_into[g] = best
     for g in range(ng):
         M = g_mask[g]
-        for j in range(n):
-            out[j] += g_tab[g, cands[j] & M]
+        if g_into[g] < 0:
+            for j in range(n):
+                out[j] += g_tab[g, cands[j] & M]
         g_of[M] = -1
     return True
 

@@ -394,6 +394,102 @@ def _window_sums_gray(theta, nw, base, pr_off, pr_pb, pr_wb, nl, out):
         out[g] = s
 
 
+@nb.njit(cache=True, inline="always")
+def _rect_shape(patch, cols):
+    """``(ph, pw)`` when the cells of ``patch`` are every cell of an ``ph x pw`` rectangle of the grid, in
+    row-major order (none cut off or pinned); else ``(0, 0)``."""
+    L = patch.shape[0]
+    k0 = patch[0]
+    if k0 < 0:
+        return 0, 0
+    c0 = k0 % cols
+    pw = 1
+    while pw < L and c0 + pw < cols and patch[pw] == k0 + pw:
+        pw += 1
+    ph = L // pw
+    if ph * pw != L:
+        return 0, 0
+    for i in range(L):
+        a = i // pw
+        if patch[i] != k0 + a * cols + (i - a * pw):
+            return 0, 0
+    return ph, pw
+
+
+@nb.njit(cache=True, inline="always")
+def _rect_fits(w, ph, pw, room):
+    """Whether a row group's table of :func:`_rect_window_sums` (at most ``min(w, ph)`` patch rows) fits
+    ``room``."""
+    k = min(w, ph) * pw
+    return ph > 0 and k <= 20 and (np.int64(1) << k) <= room
+
+
+@nb.njit(cache=True, inline="always")
+def _rect_window_sums(theta, w, m, rows, cols, r0, c0, ph, pw, out, T, P):
+    r"""``out[c] = sum_q theta[code_q(c)]`` for every configuration ``c < 2^(ph pw)`` of the full
+    ``ph x pw`` patch at ``(r0, c0)`` (bit ``a pw + b``: patch cell ``(a, b)``), over the ``w x w`` windows
+    inside the grid that hold a patch cell. A window whose top row is ``a`` rows below the patch's holds the
+    patch rows ``max(a, 0) .. min(a + w - 1, ph - 1)``, a contiguous run of ``k`` bits of ``c``: the windows
+    of one ``a`` (a row group) are summed into one table ``T`` over the run's ``2^k`` configurations ``s``,
+    and ``c`` adds one entry of each group's table. A window's code of ``s`` is its code with the patch
+    cleared, OR the placement of the run's first patch row (``2^pw`` entries) and of its other rows
+    (``2^(k - pw)``), two small tables built per window (in ``P``). A ``3 x 3`` patch under ``3 x 3`` windows:
+    five groups of five windows, tables of 8, 64, 512, 64 and 8 entries, then five reads per configuration.
+    ``T``: room for ``2^k`` of the largest group (float64); ``P``: for ``2^pw + 2^(k - pw)`` codes (int64)."""
+    n = np.int64(1) << (ph * pw)
+    for c in range(n):
+        out[c] = 0.0
+    wmask = (np.int64(1) << w) - 1
+    pmask = (np.int64(1) << pw) - 1
+    for a in range(1 - w, ph):
+        R = r0 + a
+        if R < 0 or R + w > rows:
+            continue
+        ra = max(a, 0)
+        nr = min(a + w - 1, ph - 1) - ra + 1
+        nk = np.int64(1) << (nr * pw)
+        n_lo = np.int64(1) << pw
+        n_hi = nk >> pw
+        into = ra == 0 and nk == n  # the group spans every patch bit: sum straight into out
+        if not into:
+            for s in range(nk):
+                T[s] = 0.0
+        for b in range(1 - w, pw):
+            C = c0 + b
+            if C < 0 or C + w > cols:
+                continue
+            base = np.int64(0)  # the window's code with the patch cells cleared
+            for i in range(w):
+                for j in range(w):
+                    if 0 <= a + i < ph and 0 <= b + j < pw:
+                        continue
+                    if m[(R + i) * cols + C + j]:
+                        base |= np.int64(1) << (i * w + j)
+            # placements: of the run's first row (lo) and of its other rows (hi), as window bits
+            for v in range(n_lo + n_hi):
+                lo = v < n_lo
+                x = v if lo else v - n_lo
+                code = base if lo else np.int64(0)
+                for i in range(1 if lo else nr - 1):
+                    row = (x >> (i * pw)) & pmask
+                    wr = ((row >> b) if b >= 0 else (row << -b)) & wmask
+                    code |= wr << ((ra + i + (0 if lo else 1) - a) * w)
+                P[v] = code
+            for hi in range(n_hi):
+                ch = P[n_lo + hi]
+                o = hi << pw
+                if into:
+                    for lo in range(n_lo):
+                        out[o + lo] += theta[ch | P[lo]]
+                else:
+                    for lo in range(n_lo):
+                        T[o + lo] += theta[ch | P[lo]]
+        if not into:
+            sh = ra * pw
+            for c in range(n):
+                out[c] += T[(c >> sh) & (nk - 1)]
+
+
 @nb.njit(cache=True)
 def _full_range(cands, n, nl):
     if n != np.int64(1) << nl:
@@ -407,13 +503,28 @@ def _full_range(cands, n, nl):
 @nb.njit(cache=True)
 def field_patch_weights(lp, patch, m, cands, n, out, ts):
     """``out[j] = log p~(patch = cands[j], rest)`` up to a constant in ``j``: the windows (and, at two
-    scales, the pooled windows) holding a live patch cell, read once, then scored per candidate (all
-    ``2^L`` candidates in order: in Gray-code order, :func:`_window_sums_gray`; the pooled scale once per
-    configuration of the patch's parents, which is all it reads of a candidate)."""
+    scales, the pooled windows) holding a live patch cell, read once, then scored per candidate. All
+    ``2^L`` candidates in order of a full rectangular patch: by row groups, :func:`_rect_window_sums`;
+    of another patch: in Gray-code order, :func:`_window_sums_gray`; a few candidates: each scattered into
+    the windows' codes (:func:`_window_sums`). The pooled scale once per configuration of the patch's
+    parents, which is all it reads of a candidate."""
     rows, cols, w = lp.rows, lp.cols, lp.w
     theta, theta2 = lp.theta, lp.theta2
-    bit_of = ts.bit_of  # K int64, all -1 between updates
     L = patch.shape[0]
+    rect = False
+    if L <= 20 and n == np.int64(1) << L and _full_range(cands, n, L):
+        ph, pw = _rect_shape(patch, cols)
+        if _rect_fits(w, ph, pw, ts.memo.shape[0]):
+            r0, c0 = patch[0] // cols, patch[0] % cols
+            P = np.empty((1 << pw) + (1 << (min(w, ph) * pw - pw)), np.int64)
+            if w == 3 and ph == 3 and pw == 3:  # the common case, with its loop bounds known when compiled
+                _rect_window_sums(theta, 3, m, rows, cols, r0, c0, 3, 3, out, ts.memo, P)
+            else:
+                _rect_window_sums(theta, w, m, rows, cols, r0, c0, ph, pw, out, ts.memo, P)
+            rect = True
+            if lp.n_scales != 2:
+                return
+    bit_of = ts.bit_of  # K int64, all -1 between updates
     nl = 0
     for i in range(L):
         if patch[i] >= 0:
@@ -429,19 +540,20 @@ def field_patch_weights(lp, patch, m, cands, n, out, ts):
             cc[b] = k - cr[b] * cols
             b += 1
     cap = max(nl, 1) * w * w
-    anchors = np.empty(cap, np.int64)
-    base = np.empty(cap, np.int64)
-    pr_off = np.empty(cap + 1, np.int64)
-    pr_pb = np.empty(cap, np.int64)
-    pr_wb = np.empty(cap, np.int64)
-    nw = _scale_setup(w, rows, cols, cr, cc, nl, bit_of, m, 0, 0, cols, anchors, base, pr_off, pr_pb, pr_wb)
+    if not rect:  # scale 1 by the windows' (patch bit, window bit) pairs
+        anchors = np.empty(cap, np.int64)
+        base = np.empty(cap, np.int64)
+        pr_off = np.empty(cap + 1, np.int64)
+        pr_pb = np.empty(cap, np.int64)
+        pr_wb = np.empty(cap, np.int64)
+        nw = _scale_setup(w, rows, cols, cr, cc, nl, bit_of, m, 0, 0, cols, anchors, base, pr_off, pr_pb, pr_wb)
+        if nl <= 20 and _full_range(cands, n, nl):
+            _window_sums_gray(theta, nw, base, pr_off, pr_pb, pr_wb, nl, out)
+        else:
+            _window_sums(theta, nw, base, pr_off, pr_pb, pr_wb, cands, n, out, False)
     for i in range(L):
         if patch[i] >= 0:
             bit_of[patch[i]] = -1
-    if nl <= 20 and _full_range(cands, n, nl):
-        _window_sums_gray(theta, nw, base, pr_off, pr_pb, pr_wb, nl, out)
-    else:
-        _window_sums(theta, nw, base, pr_off, pr_pb, pr_wb, cands, n, out, False)
     if lp.n_scales != 2:
         return
     P, Q = lp.prow, lp.pcol
