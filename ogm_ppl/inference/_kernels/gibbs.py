@@ -681,18 +681,26 @@ def candidate_log_weights(ps, patch, prior, cands, n, logw):
 @nb.njit(cache=True)
 def _additive_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     """Patch updates that weigh all ``W = 2^L`` configurations: the likelihood through the rays of the
-    patch (:func:`collect_rays`, :func:`lik_all`: ``O(W)`` per ray) plus the cells' prior log-odds.
+    patch (:func:`collect_rays`; :func:`lik_grouped` over all ``W`` codes, else :func:`lik_all`: ``O(W)``
+    per ray) plus the cells' prior log-odds.
     ``stamp0``: the first of ``len(anchors)`` fresh stamps; ``bit_of`` is not read (see :func:`patch_pass`)."""
     L = geo.dr.shape[0]
     logw = np.empty(1 << L, np.float64)
+    codes = np.arange(1 << L)  # every configuration, in order: the candidates of lik_grouped
     patch = np.empty(L, np.int64)
     sc = ray_scratch(L, max_slots(L, ps), True, 0)
     p_rand, thesis, metro = rule.p_rand_patch, rule.thesis_random, rule.metropolised
     changed = 0
     for i in range(anchors.shape[0]):
-        if build_patch(geo, anchors[i, 0], anchors[i, 1], patch) == 0:
+        n_live = build_patch(geo, anchors[i, 0], anchors[i, 1], patch)
+        if n_live == 0:
             continue
-        W = _patch_log_lik_ws(ps, patch, stamp0 + i, logw, sc)
+        W = np.int64(1) << n_live
+        for w in range(W):
+            logw[w] = 0.0
+        ns = collect_rays(ps, patch, stamp0 + i, sc)
+        if W < GROUP_MIN_CANDS or not lik_grouped(sc, ns, ps.ll, codes, W, logw):
+            lik_all(sc, ns, ps.ll, n_live, logw)
         _add_patch_prior_ws(patch, prior, ps.m, logw, W, sc)
         cur = patch_config(patch, ps.m)
         if p_rand > 0.0 and u[1, i] < p_rand:
