@@ -24,7 +24,11 @@ into bits by one multiplication) and the nine windows' terms are three entries o
 the flip changes the pooled parent only when the other cells of its ``2 x 2`` block are free; then the
 pooled windows holding the parent add their terms the same way. A patch update reads, once, each window
 its live cells touch (base code with the patch cleared, and the (patch bit, window bit) pairs by which
-a candidate sets bits in it); a candidate then scatters its bits into those codes only.
+a candidate sets bits in it); a candidate then scatters its bits into those codes only. When all ``2^L``
+configurations of a full rectangular patch are weighed (a patch Gibbs update), the windows are summed by
+row groups instead (:func:`_rect_window_sums`): the windows whose rows meet the same patch rows depend on
+a configuration only through those rows' bits, so each group is one small table and a configuration
+adds one entry per group.
 """
 
 from __future__ import annotations
@@ -516,11 +520,11 @@ def field_patch_weights(lp, patch, m, cands, n, out, ts):
         ph, pw = _rect_shape(patch, cols)
         if _rect_fits(w, ph, pw, ts.memo.shape[0]):
             r0, c0 = patch[0] // cols, patch[0] % cols
-            P = np.empty((1 << pw) + (1 << (min(w, ph) * pw - pw)), np.int64)
+            place = np.empty((1 << pw) + (1 << (min(w, ph) * pw - pw)), np.int64)
             if w == 3 and ph == 3 and pw == 3:  # the common case, with its loop bounds known when compiled
-                _rect_window_sums(theta, 3, m, rows, cols, r0, c0, 3, 3, out, ts.memo, P)
+                _rect_window_sums(theta, 3, m, rows, cols, r0, c0, 3, 3, out, ts.memo, place)
             else:
-                _rect_window_sums(theta, w, m, rows, cols, r0, c0, ph, pw, out, ts.memo, P)
+                _rect_window_sums(theta, w, m, rows, cols, r0, c0, ph, pw, out, ts.memo, place)
             rect = True
             if lp.n_scales != 2:
                 return
