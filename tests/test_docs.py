@@ -135,3 +135,48 @@ def test_snapshot_can_leave_out_the_per_dataset_curves_and_the_tables_stay(tmp_p
     assert "per-dataset" in small["provenance"]["dropped"]
     assert {k: v for k, v in small["provenance"].items() if k != "dropped"} == doc["provenance"]
     assert (results / "table_6_4_small.json").stat().st_size < src.stat().st_size
+
+
+def _split_by_algorithm(doc: dict, algorithms: set[str]) -> tuple[dict, dict]:
+    """``doc`` cut in two experiment summaries: the rows of ``algorithms``, and the rest."""
+
+    def part(keep) -> dict:
+        out = {k: v for k, v in doc.items() if k not in ("scores", "pooled", "runs")}
+        for key in ("scores", "pooled", "runs"):
+            out[key] = [r for r in doc[key] if keep(r["algorithm"])]
+        return out
+
+    return part(lambda a: a not in algorithms), part(lambda a: a in algorithms)
+
+
+def test_merge_adds_a_later_runs_algorithms_and_refuses_other_data(tmp_path):
+    results = tmp_path / "results"
+    results.mkdir()
+    doc = gen_docs_tables.load_snapshot("table_6_4_small")
+    later = {doc["pooled"][-1]["algorithm"]}
+    first, second = _split_by_algorithm(doc, later)
+    (results / "t.json").write_text(json.dumps(first))
+    src = tmp_path / "metrics.json"
+    unstamped = {k: v for k, v in second.items() if k != "provenance"}
+    unstamped["datasets"] = [{**d, "seconds": 1.0} for d in unstamped["datasets"]]  # times may differ
+    src.write_text(json.dumps(unstamped))
+    before = (results / "t.json").read_text()
+
+    def refused(change, match: str) -> None:
+        bad = tmp_path / "bad.json"
+        bad.write_text(json.dumps(change(json.loads(src.read_text()))))
+        with pytest.raises(ValueError, match=match):
+            gen_docs_tables.merge(bad, "t", "cmd", results)
+        assert (results / "t.json").read_text() == before  # nothing written
+
+    refused(lambda d: {**d, "seed": d["seed"] + 1}, "seed differs")
+    refused(lambda d: {**d, "datasets": [{**d["datasets"][0], "scans": -1}, *d["datasets"][1:]]}, "datasets differ")
+    refused(lambda d: {**d, "runs": d["runs"] + [doc["runs"][0]]}, "both hold")
+    gen_docs_tables.merge(src, "t", "ogm-ppl experiment spec --algorithms x", results)
+    merged = gen_docs_tables.load_snapshot("t", results)
+    for key in ("scores", "pooled", "runs"):
+        assert sorted(map(json.dumps, merged[key])) == sorted(map(json.dumps, doc[key]))
+    prov = merged["provenance"]
+    assert prov["command"] == f"{doc['provenance']['command']}; then ogm-ppl experiment spec --algorithms x"
+    assert prov["parts"][0] == doc["provenance"] and prov["parts"][1]["command"].endswith("--algorithms x")
+    assert [r[0] for r in gen_docs_tables._experiment_pooled(merged).rows] == [p["algorithm"] for p in doc["pooled"]]

@@ -11,6 +11,7 @@ Commands (from the repository root)::
 
     python tools/gen_docs_tables.py snapshot out/bench/bench_ogm.json          # copy a stamped JSON
     python tools/gen_docs_tables.py snapshot out/report.json --name headline --command "make run"
+    python tools/gen_docs_tables.py merge out/experiments/x/metrics.json --into NAME --command "..."
     python tools/gen_docs_tables.py readme           # rewrite the README's generated blocks
     python tools/gen_docs_tables.py readme --check   # exit 1 if they differ from the snapshots
     python tools/gen_docs_tables.py show NAME        # one table as Markdown
@@ -40,6 +41,7 @@ __all__ = [
     "TABLES",
     "Table",
     "load_snapshot",
+    "merge",
     "provenance_line",
     "readme_block",
     "snapshot",
@@ -123,6 +125,57 @@ def snapshot(
     if drop_curves and drop_dataset_curves(doc):
         doc["provenance"]["dropped"] = "the per-dataset precision-recall curves (scores[*][block].curve)"
     return atomic_write_text(results / f"{name or Path(src).stem}.json", json.dumps(doc, indent=1, allow_nan=True))
+
+
+def _algorithms(doc: dict) -> set[str]:
+    return {row["algorithm"] for key in ("scores", "pooled", "runs") for row in doc.get(key) or ()}
+
+
+def _datasets_without_times(doc: dict) -> list[dict]:
+    return [{k: v for k, v in d.items() if k != "seconds"} for d in doc.get("datasets") or ()]
+
+
+def merge(src: Path, into: str, command: str, results: Path = RESULTS, drop_curves: bool = False) -> Path:
+    """Add the algorithms of an experiment's summary ``src`` (run later, into another folder) to the snapshot
+    ``results/INTO.json`` of the same experiment.
+
+    Refused unless both summaries are of the same experiment, seed and datasets (every dataset's figures
+    equal but its seconds: the same simulated data) and share no algorithm, so every row of the result is
+    one run's, scored on the same datasets; pooled rows are per algorithm, so they carry over unchanged.
+    The result's provenance joins the two commands (the snapshot's first) and keeps both stamps under
+    ``"parts"``; its commit, machine and date are the new run's. ``src`` is stamped as :func:`snapshot`
+    stamps it (``command`` required)."""
+    import tempfile
+
+    from ogm_ppl.io import atomic_write_text
+
+    base = load_snapshot(into, results)
+    with tempfile.TemporaryDirectory() as tmp:
+        new = load_snapshot("part", snapshot(src, "part", command, Path(tmp), drop_curves).parent)
+    where = f"{src} into {results / (into + '.json')}"
+    for key in ("format", "format_version", "experiment", "seed"):
+        if base.get(key) != new.get(key):
+            raise ValueError(f"{where}: {key} differs ({new.get(key)!r} against {base.get(key)!r})")
+    if _datasets_without_times(base) != _datasets_without_times(new):
+        raise ValueError(f"{where}: the datasets differ (another spec, seed or simulator)")
+    both = sorted(_algorithms(base) & _algorithms(new))
+    if both:
+        raise ValueError(f"{where}: both hold {', '.join(both)}")
+    if not _algorithms(new):
+        raise ValueError(f"{where}: no algorithm to add")
+    out = dict(base)
+    for key in ("scores", "pooled", "runs", "executed"):
+        out[key] = list(base.get(key) or []) + list(new.get(key) or [])
+    out["skipped"] = int(base.get("skipped") or 0) + int(new.get("skipped") or 0)  # tasks a resumed run skipped
+    out["failed"] = {**(base.get("failed") or {}), **(new.get("failed") or {})}
+    old_p, new_p = base["provenance"], new["provenance"]
+    prov = {k: new_p[k] for k in _PROVENANCE_KEYS}
+    prov["command"] = f"{old_p['command']}; then {new_p['command']}"
+    prov["parts"] = [*(old_p["parts"] if "parts" in old_p else [old_p]), new_p]
+    if "dropped" in old_p or "dropped" in new_p:
+        prov["dropped"] = old_p.get("dropped") or new_p.get("dropped")
+    out["provenance"] = prov
+    return atomic_write_text(results / f"{into}.json", json.dumps(out, indent=1, allow_nan=True))
 
 
 def provenance_line(prov: dict) -> str:
@@ -615,6 +668,11 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("--name")
     s.add_argument("--command", help="the command that produced SRC (for a JSON without provenance)")
     s.add_argument("--drop-curves", action="store_true", help="leave out the per-dataset P-R curves")
+    mg = sub.add_parser("merge", help="add the algorithms of a later run of the same experiment to a snapshot")
+    mg.add_argument("src", type=Path)
+    mg.add_argument("--into", required=True, help="the snapshot (docs/results/INTO.json) to add them to")
+    mg.add_argument("--command", required=True, help="the command that produced SRC")
+    mg.add_argument("--drop-curves", action="store_true", help="leave out the per-dataset P-R curves")
     r = sub.add_parser("readme", help="rewrite the README's generated blocks")
     r.add_argument("--check", action="store_true", help="only report blocks that differ; exit 1 if any")
     sh = sub.add_parser("show", help="print one table as Markdown")
@@ -622,6 +680,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.cmd == "snapshot":
         print("wrote", snapshot(args.src, args.name, args.command, drop_curves=args.drop_curves))
+    elif args.cmd == "merge":
+        print("wrote", merge(args.src, args.into, args.command, drop_curves=args.drop_curves))
     elif args.cmd == "readme":
         stale = update_readme(check=args.check)
         print(("stale: " if args.check else "updated: ") + (", ".join(stale) or "none"))

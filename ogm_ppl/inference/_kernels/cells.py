@@ -53,3 +53,13 @@ def cell_log_lik_ratio(k, m, f, offsets, cells, c_off, c_ray, c_kappa, ll):
         if t == t:  # both impossible (-inf - -inf): no preference
             d += t
     return d
+
+
+@nb.njit(cache=True)
+def gather_as_float(m, idx):
+    """``m[idx]`` as float64 (a chain's state at its latent cells, the sample a kernel returns): one pass,
+    against numpy's fancy index and cast, which make two."""
+    out = np.empty(idx.shape[0], np.float64)
+    for i in range(idx.shape[0]):
+        out[i] = m[idx[i]]
+    return out

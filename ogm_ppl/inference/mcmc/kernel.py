@@ -36,7 +36,7 @@ import numpy as np
 import torch
 from pyro.infer.mcmc.mcmc_kernel import MCMCKernel
 
-from ogm_ppl.inference._kernels.cells import first_hits
+from ogm_ppl.inference._kernels.cells import first_hits, gather_as_float
 from ogm_ppl.inference.mcmc.fingerprint import digest
 from ogm_ppl.models.occupancy import OccupancyModel
 
@@ -220,7 +220,7 @@ class MapKernel(MCMCKernel):
         """``{"m": (L,) float64}`` of the current state, recognised by the next :meth:`sample` as the
         kernel's own (no re-read): how a runner starts a chain from a set-up or restored kernel."""
         self._prepare()
-        out = torch.from_numpy(self.state[self._latent].astype(np.float64))
+        out = torch.from_numpy(gather_as_float(self.state, self._latent))
         self._last = out
         return {self.site: out}
 

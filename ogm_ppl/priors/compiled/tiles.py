@@ -739,6 +739,21 @@ def tile_neighbour_factors(lp, t, m, cands, n, out, E):
                     E[e] = -np.inf
             else:
                 E[e] = _sparse_factor_inline(keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, s, key)
+    if nq == 8:  # a 3 x 3 tile under a one-cell border: the same sums, in the same order, unrolled
+        for j in range(n):
+            r = cands[j] * 8
+            out[j] = (
+                out[j]
+                + E[nb_idx[r]]
+                + E[nb_idx[r + 1]]
+                + E[nb_idx[r + 2]]
+                + E[nb_idx[r + 3]]
+                + E[nb_idx[r + 4]]
+                + E[nb_idx[r + 5]]
+                + E[nb_idx[r + 6]]
+                + E[nb_idx[r + 7]]
+            )
+        return
     for j in range(n):
         v = out[j]
         row = cands[j] * nq
