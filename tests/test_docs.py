@@ -170,7 +170,7 @@ def test_merge_adds_a_later_runs_algorithms_and_refuses_other_data(tmp_path):
         assert (results / "t.json").read_text() == before  # nothing written
 
     refused(lambda d: {**d, "seed": d["seed"] + 1}, "seed differs")
-    refused(lambda d: {**d, "datasets": [{**d["datasets"][0], "scans": -1}, *d["datasets"][1:]]}, "datasets differ")
+    refused(lambda d: {**d, "datasets": [{**d["datasets"][0], "scans": -1}, *d["datasets"][1:]]}, "datasets differs")
     refused(lambda d: {**d, "runs": d["runs"] + [doc["runs"][0]]}, "both hold")
     gen_docs_tables.merge(src, "t", "ogm-ppl experiment spec --algorithms x", results)
     merged = gen_docs_tables.load_snapshot("t", results)
@@ -180,3 +180,25 @@ def test_merge_adds_a_later_runs_algorithms_and_refuses_other_data(tmp_path):
     assert prov["command"] == f"{doc['provenance']['command']}; then ogm-ppl experiment spec --algorithms x"
     assert prov["parts"][0] == doc["provenance"] and prov["parts"][1]["command"].endswith("--algorithms x")
     assert [r[0] for r in gen_docs_tables._experiment_pooled(merged).rows] == [p["algorithm"] for p in doc["pooled"]]
+    line = gen_docs_tables.provenance_line(prov)
+    assert line.count(" on ") == 2 and doc["provenance"]["commit"][:12] in line
+
+
+def test_merge_adds_an_error_splits_algorithms(tmp_path):
+    results = tmp_path / "results"
+    results.mkdir()
+    doc = gen_docs_tables.load_snapshot("table_6_4_errors")
+    name = sorted(doc["algorithms"])[-1]
+    first = {**doc, "algorithms": {k: v for k, v in doc["algorithms"].items() if k != name}}
+    (results / "e.json").write_text(json.dumps(first))
+    src = tmp_path / "errors.json"
+    later = {k: v for k, v in doc.items() if k not in ("provenance", "algorithms")}
+    src.write_text(json.dumps({**later, "algorithms": {name: doc["algorithms"][name]}}))
+    other = tmp_path / "other.json"
+    other.write_text(json.dumps({**later, "cells": {"touched": 1, "untouched": 2}, "algorithms": {"x": {}}}))
+    with pytest.raises(ValueError, match="cells differs"):
+        gen_docs_tables.merge(other, "e", "cmd", results)
+    gen_docs_tables.merge(src, "e", "python experiments/table_6_4_errors.py x", results)
+    merged = gen_docs_tables.load_snapshot("e", results)
+    assert merged["algorithms"] == doc["algorithms"]
+    assert sorted(gen_docs_tables._error_split(merged).rows) == sorted(gen_docs_tables._error_split(doc).rows)

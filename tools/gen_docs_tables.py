@@ -127,24 +127,43 @@ def snapshot(
     return atomic_write_text(results / f"{name or Path(src).stem}.json", json.dumps(doc, indent=1, allow_nan=True))
 
 
+def _is_error_split(doc: dict) -> bool:
+    """Whether ``doc`` is ``experiments/table_6_4_errors.py``'s output (algorithms keyed by name)."""
+    return isinstance(doc.get("algorithms"), dict) and "oracles" in doc
+
+
 def _algorithms(doc: dict) -> set[str]:
+    if _is_error_split(doc):
+        return set(doc["algorithms"])
     return {row["algorithm"] for key in ("scores", "pooled", "runs") for row in doc.get(key) or ()}
 
 
-def _datasets_without_times(doc: dict) -> list[dict]:
-    return [{k: v for k, v in d.items() if k != "seconds"} for d in doc.get("datasets") or ()]
+def _same_data(doc: dict) -> dict:
+    """What two parts of one merged snapshot must share: the experiment, its seed and datasets (each
+    dataset's figures but its seconds), or for an error split the cell counts and the oracles' scores."""
+    if _is_error_split(doc):
+        return {k: doc.get(k) for k in ("datasets", "cells", "occupied", "oracles")}
+    same = {k: doc.get(k) for k in ("format", "format_version", "experiment", "seed")}
+    same["datasets"] = [{k: v for k, v in d.items() if k != "seconds"} for d in doc.get("datasets") or ()]
+    return same
+
+
+def _count(x: list | int) -> int:
+    return len(x) if isinstance(x, list) else int(x)
 
 
 def merge(src: Path, into: str, command: str, results: Path = RESULTS, drop_curves: bool = False) -> Path:
-    """Add the algorithms of an experiment's summary ``src`` (run later, into another folder) to the snapshot
-    ``results/INTO.json`` of the same experiment.
+    """Add the algorithms of a later run's result ``src`` (an experiment's summary run into another folder,
+    or ``experiments/table_6_4_errors.py``'s split of it) to the snapshot ``results/INTO.json`` of the same
+    experiment.
 
-    Refused unless both summaries are of the same experiment, seed and datasets (every dataset's figures
-    equal but its seconds: the same simulated data) and share no algorithm, so every row of the result is
-    one run's, scored on the same datasets; pooled rows are per algorithm, so they carry over unchanged.
-    The result's provenance joins the two commands (the snapshot's first) and keeps both stamps under
-    ``"parts"``; its commit, machine and date are the new run's. ``src`` is stamped as :func:`snapshot`
-    stamps it (``command`` required)."""
+    Refused unless both are of the same kind, experiment, seed and datasets (every dataset's figures equal
+    but its seconds: the same simulated data; for an error split, the same cell counts and oracle scores)
+    and share no algorithm, so every row of the result is one run's, scored on the same datasets; pooled rows
+    are per algorithm, so they carry over unchanged. The result's provenance joins the two commands (the
+    snapshot's first) and keeps each part's stamp under ``"parts"`` (:func:`provenance_line` prints them);
+    its own commit, machine and date are the new run's. ``src`` is stamped as :func:`snapshot` stamps it
+    (``command`` required). Nothing is written when refused."""
     import tempfile
 
     from ogm_ppl.io import atomic_write_text
@@ -153,21 +172,26 @@ def merge(src: Path, into: str, command: str, results: Path = RESULTS, drop_curv
     with tempfile.TemporaryDirectory() as tmp:
         new = load_snapshot("part", snapshot(src, "part", command, Path(tmp), drop_curves).parent)
     where = f"{src} into {results / (into + '.json')}"
-    for key in ("format", "format_version", "experiment", "seed"):
-        if base.get(key) != new.get(key):
-            raise ValueError(f"{where}: {key} differs ({new.get(key)!r} against {base.get(key)!r})")
-    if _datasets_without_times(base) != _datasets_without_times(new):
-        raise ValueError(f"{where}: the datasets differ (another spec, seed or simulator)")
+    if _is_error_split(base) != _is_error_split(new):
+        raise ValueError(f"{where}: not the same kind of result")
+    a, b = _same_data(base), _same_data(new)
+    for key in a:
+        if a[key] != b[key]:
+            raise ValueError(f"{where}: {key} differs (another spec, seed or simulator)")
     both = sorted(_algorithms(base) & _algorithms(new))
     if both:
         raise ValueError(f"{where}: both hold {', '.join(both)}")
     if not _algorithms(new):
         raise ValueError(f"{where}: no algorithm to add")
     out = dict(base)
-    for key in ("scores", "pooled", "runs", "executed"):
-        out[key] = list(base.get(key) or []) + list(new.get(key) or [])
-    out["skipped"] = int(base.get("skipped") or 0) + int(new.get("skipped") or 0)  # tasks a resumed run skipped
-    out["failed"] = {**(base.get("failed") or {}), **(new.get("failed") or {})}
+    if _is_error_split(base):
+        out["algorithms"] = {**base["algorithms"], **new["algorithms"]}
+    else:
+        for key in ("scores", "pooled", "runs", "executed", "skipped"):
+            x, y = base.get(key) or [], new.get(key) or []
+            # task lists are joined (a task both ran is listed by each); a count (older summaries) is added
+            out[key] = x + y if isinstance(x, list) and isinstance(y, list) else _count(x) + _count(y)
+        out["failed"] = {**(base.get("failed") or {}), **(new.get("failed") or {})}
     old_p, new_p = base["provenance"], new["provenance"]
     prov = {k: new_p[k] for k in _PROVENANCE_KEYS}
     prov["command"] = f"{old_p['command']}; then {new_p['command']}"
@@ -178,15 +202,22 @@ def merge(src: Path, into: str, command: str, results: Path = RESULTS, drop_curv
     return atomic_write_text(results / f"{into}.json", json.dumps(out, indent=1, allow_nan=True))
 
 
-def provenance_line(prov: dict) -> str:
-    """One line under a table: ``command`` at ``commit`` on the machine, date."""
+def _stamp(prov: dict) -> str:
     m = prov["machine"]
     machine = (
         f"{m.get('cpu', '?')}, {m.get('cores', '?')} cores, Python {m.get('python', '?')}, "
         f"torch {m.get('torch', '?')}, numba {m.get('numba', '?')}"
     )
     commit = prov["commit"][:12] + ("-dirty" if prov["commit"].endswith("-dirty") else "")
-    return f"`{prov['command']}` at commit {commit} on {machine}; {prov['date'][:10]}"
+    return f"commit {commit} on {machine}; {prov['date'][:10]}"
+
+
+def provenance_line(prov: dict) -> str:
+    """One line under a table: ``command`` at ``commit`` on the machine, date (for a merged snapshot,
+    :func:`merge`, the stamp of each part in turn)."""
+    if "parts" in prov:
+        return f"`{prov['command']}`, in turn at " + "; then at ".join(_stamp(p) for p in prov["parts"])
+    return f"`{prov['command']}` at {_stamp(prov)}"
 
 
 # ------------------------------------------------------------------------------------------ formatting
@@ -668,7 +699,7 @@ def main(argv: list[str] | None = None) -> int:
     s.add_argument("--name")
     s.add_argument("--command", help="the command that produced SRC (for a JSON without provenance)")
     s.add_argument("--drop-curves", action="store_true", help="leave out the per-dataset P-R curves")
-    mg = sub.add_parser("merge", help="add the algorithms of a later run of the same experiment to a snapshot")
+    mg = sub.add_parser("merge", help="add the algorithms of a later run of the same experiment (or its error split)")
     mg.add_argument("src", type=Path)
     mg.add_argument("--into", required=True, help="the snapshot (docs/results/INTO.json) to add them to")
     mg.add_argument("--command", required=True, help="the command that produced SRC")
