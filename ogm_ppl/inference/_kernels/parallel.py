@@ -252,26 +252,54 @@ def ray_runs(offsets, cells, cols: int, T: int, n_tc: int) -> tuple[np.ndarray, 
     return seg_off, seg_start, seg_tile
 
 
+@nb.njit(cache=True)
+def _is_sorted(a):
+    for i in range(1, a.shape[0]):
+        if a[i - 1] > a[i]:
+            return False
+    return True
+
+
+@nb.njit(cache=True)
+def _fill_tiles(visit, long, c_off, cols, T, n_tc, n_tiles):
+    """The short cells of the sorted ``visit`` grouped by tile (row-major within a tile, as ``visit``):
+    CSR ``tile_off`` / ``tile_cells``, and each tile's cost (its cells' ray entries plus one each), in two
+    passes and without a temporary per cell."""
+    count = np.zeros(n_tiles, np.int64)
+    cost = np.zeros(n_tiles, np.float64)
+    for k in visit:
+        if not long[k]:
+            t = (k // cols // T) * n_tc + (k % cols) // T
+            count[t] += 1
+            cost[t] += c_off[k + 1] - c_off[k] + 1.0
+    tile_off = np.zeros(n_tiles + 1, np.int64)
+    for t in range(n_tiles):
+        tile_off[t + 1] = tile_off[t] + count[t]
+    tile_cells = np.empty(tile_off[n_tiles], np.int64)
+    for t in range(n_tiles):
+        count[t] = tile_off[t]  # the next free slot of tile t
+    for k in visit:
+        if not long[k]:
+            t = (k // cols // T) * n_tc + (k % cols) // T
+            tile_cells[count[t]] = k
+            count[t] += 1
+    return tile_off, tile_cells, cost
+
+
 def tile_layout(visit: np.ndarray, offsets, cells, c_off, rows: int, cols: int, T: int) -> TileLayout:
     """The :class:`TileLayout` of the cells ``visit`` (int64, any order) on ``T x T`` tiles: cells on a
     ray that is not confined (:func:`confined_rays`) are long; the rest go to their tile in row-major order."""
     if T < 1:
         raise ValueError(f"the tile side must be at least 1 cell, got {T}")
     K = rows * cols
-    visit = np.sort(np.asarray(visit, np.int64))
+    visit = np.ascontiguousarray(visit, np.int64)
+    if not _is_sorted(visit):
+        visit = np.sort(visit)
     n_tr, n_tc = -(-rows // T), -(-cols // T)
     long = _long_mask(K, offsets, cells, confined_rays(offsets, cells, cols, T, n_tc))
-    short = visit[~long[visit]]
-    r, c = np.divmod(short, cols)
-    tile = (r // T) * n_tc + c // T
-    order = np.argsort(tile, kind="stable")  # row-major within a tile (visit is sorted)
-    tile_cells = np.ascontiguousarray(short[order])
-    counts = np.bincount(tile, minlength=n_tr * n_tc)
-    tile_off = np.concatenate([[0], np.cumsum(counts)]).astype(np.int64)
     # a tile's cost ~ its ray entries: dealt out largest first, so that threads share a phase evenly
-    deg = np.diff(c_off)[tile_cells]
-    cost = np.bincount(tile[order], weights=deg + 1.0, minlength=n_tr * n_tc)
-    ids = np.nonzero(counts)[0]
+    tile_off, tile_cells, cost = _fill_tiles(visit, long, np.asarray(c_off, np.int64), cols, T, n_tc, n_tr * n_tc)
+    ids = np.nonzero(np.diff(tile_off))[0]
     colour = colour_of_tile(ids, n_tc)
     key = np.lexsort((-cost[ids], colour))
     col_tiles = np.ascontiguousarray(ids[key].astype(np.int64))

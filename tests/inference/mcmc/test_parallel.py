@@ -59,6 +59,31 @@ def sweep_seed(torch_seed: int) -> np.uint64:
     return np.uint64(int(torch.randint(0, 2**63 - 1, (), dtype=torch.int64)))
 
 
+# ---------------------------------------------------------------------------- the tile layout
+@pytest.mark.parametrize("T", [2, 5])
+def test_tile_layout_groups_the_short_cells_by_tile_in_row_major_order(T):
+    """The compiled grouping against the same layout built from numpy sorts, on an unsorted visit list."""
+    model = scene(prior=MRFPrior((24, 24), order=2, psi=0.4, cell_prior=0.3))
+    index = model.ray_index()
+    cols = model.grid.cols
+    visit = np.random.default_rng(T).permutation(model.latent.numpy())
+    lay = par.tile_layout(visit, index.offsets, index.cells, index.c_off, 24, cols, T)
+    sv = np.sort(visit)
+    long = np.zeros(model.num_cells, bool)
+    long[lay.long_cells] = True
+    short = sv[~long[sv]]
+    tile = (short // cols // T) * lay.n_tc + (short % cols) // T
+    order = np.argsort(tile, kind="stable")
+    counts = np.bincount(tile, minlength=lay.n_tr * lay.n_tc)
+    assert np.array_equal(lay.tile_cells, short[order])
+    assert np.array_equal(lay.tile_off, np.concatenate([[0], np.cumsum(counts)]))
+    cost = np.bincount(tile, weights=np.diff(index.c_off)[short] + 1.0, minlength=len(counts))
+    ids = np.nonzero(counts)[0]
+    colour = par.colour_of_tile(ids, lay.n_tc)
+    assert np.array_equal(lay.col_tiles, ids[np.lexsort((-cost[ids], colour))])  # largest first per colour
+    assert np.array_equal(lay.long_cells, sv[long[sv]]) and (len(lay.long_cells) > 0) == (T == 2)
+
+
 # ---------------------------------------------------------------------------- the colouring rule
 @pytest.mark.parametrize("T", [2, 3, 4])
 def test_no_short_ray_and_no_prior_pair_spans_two_tiles_of_one_colour(T):
