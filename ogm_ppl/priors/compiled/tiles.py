@@ -461,31 +461,36 @@ def tile_candidates(lp, t, patch, pinned, m, cands, cand_lp):
     for i in range(Li):
         if patch[i] >= 0:
             live += 1
+    if live == Li:  # every tile cell is live: the codes are the inner keys themselves (a loop LLVM vectorises)
+        if hi - lo > cands.shape[0]:
+            return -1
+        inner_mask = (np.int64(1) << Li) - 1
+        for q in range(lo, hi):
+            cands[q - lo] = keys[q] & inner_mask
+            cand_lp[q - lo] = logp[q]
+        return hi - lo
     n = 0
     for q in range(lo, hi):
         inner = keys[q] & ((np.int64(1) << Li) - 1)
         ok = True
         code = 0
         bit = 0
-        if live == Li:  # every tile cell is live: the code is the inner key itself
-            code = inner
-        else:
-            for i in range(Li):
-                v = (inner >> i) & 1
-                if patch[i] >= 0:
-                    if v:
-                        code |= np.int64(1) << bit
-                    bit += 1
-                else:
-                    r = ar + w_dr[i]
-                    c = ac + w_dc[i]
-                    if 0 <= r < lp.rows and 0 <= c < lp.cols:
-                        if v:  # a pinned cell is free
-                            ok = False
-                            break
-                    elif v != ((fill >> i) & 1):
+        for i in range(Li):
+            v = (inner >> i) & 1
+            if patch[i] >= 0:
+                if v:
+                    code |= np.int64(1) << bit
+                bit += 1
+            else:
+                r = ar + w_dr[i]
+                c = ac + w_dc[i]
+                if 0 <= r < lp.rows and 0 <= c < lp.cols:
+                    if v:  # a pinned cell is free
                         ok = False
                         break
+                elif v != ((fill >> i) & 1):
+                    ok = False
+                    break
         if ok:
             if n >= cands.shape[0]:
                 return -1
