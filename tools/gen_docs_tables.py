@@ -383,6 +383,65 @@ def _bench_table_6_6(doc: dict) -> Table:
     )
 
 
+def _bench_parallel(doc: dict) -> Table:
+    """Chromatic sweeps in threads: per configuration and sweep the serial time, 1 and 2 threads, the speed-ups
+    against one thread and against the serial kernel, and the scaling model's prediction for 16 cores."""
+    rows = []
+    for i, (name, c) in enumerate(doc["configs"].items()):
+        rng = name.removeprefix("range_").removesuffix("m") + " m"
+        serial = c["serial_s_per_sweep"]
+        # ru_maxrss is a process-wide peak: comparable for the first configuration only
+        rss = f"x{c['peak_rss_threads_mib'] / c['peak_rss_serial_mib']:.3f}" if i == 0 else "–"
+        for T, t in c["tiles"].items():
+            one, two = t["threads_1_s_per_sweep"], t["threads_2_s_per_sweep"]
+            rows.append(
+                [
+                    f"cell sweep, {rng} rays, T {T} ({100 * t['long_cell_fraction']:.0f} % long cells)",
+                    f"{serial:.3f}",
+                    f"{one:.3f}",
+                    f"{two:.3f}",
+                    f"x{one / two:.2f}",
+                    f"x{serial / two:.2f}",
+                    f"x{t['model_speedup_vs_1_thread']['16']:.2f}",
+                    rss,
+                ]
+            )
+        for prior, t in (c.get("patch") or {}).items():
+            one, two = t["threads_1_s_per_sweep"], t["threads_2_s_per_sweep"]
+            rows.append(
+                [
+                    f"3 x 3 patch sweep, `{prior}`, {rng} rays, T {t['tile']}",
+                    f"{t['serial_s_per_sweep']:.3f}",
+                    f"{one:.3f}",
+                    f"{two:.3f}",
+                    f"x{one / two:.2f}",
+                    f"x{t['serial_s_per_sweep'] / two:.2f}",
+                    "–",
+                    "–",
+                ]
+            )
+    return Table(
+        caption=(
+            f"Chromatic tile sweeps, Intel Lab at {doc['resolution_m'] * 100:g} cm, Experiment {doc['experiment']}: "
+            "seconds a sweep (serial kernel, 1 and 2 threads), speed-ups, the scaling model's 16 cores, and the "
+            "peak RSS with threads over the serial one (first configuration)"
+        ),
+        header=[
+            "sweep",
+            "serial (s)",
+            "1 thread (s)",
+            "2 threads (s)",
+            "2 / 1 thread",
+            "2 threads / serial",
+            "model, 16 cores",
+            "peak RSS",
+        ],
+        rows=rows,
+        provenance=doc["provenance"],
+        note=f"load average {doc['loadavg_start']} -> {doc['loadavg_end']}",
+    )
+
+
 def _table_3_1(doc: dict) -> Table:
     rows = [
         [k, _g(v["mean"], 4), "" if v.get("thesis") is None else _g(v["thesis"], 4)] for k, v in doc["rows"].items()
@@ -629,6 +688,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "active_medium": ("active_medium", _active),
     "bench_exact": ("bench_exact", _bench_exact),
     "bench_ogm": ("bench_ogm", _bench_ogm),
+    "bench_parallel": ("bench_parallel", _bench_parallel),
     "bench_patch": ("bench_patch", _bench_patch),
     "bench_table_6_6": ("bench_table_6_6", _bench_table_6_6),
     "calibration": ("calibration", _calibration),
