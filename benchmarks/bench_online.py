@@ -186,7 +186,7 @@ def main(argv: list[str] | None = None) -> int:
     # the other start, against each reference
     disjoint = {
         "ogm_reference_offline_from_free": float(f1_online - f1_free),
-        "free_reference_offline_from_ogm": vs_free["online"] - vs_free["offline_same_updates"],
+        "free_reference_offline_from_ogm": float(vs_free["online"] - vs_free["offline_same_updates"]),
     }
     print(
         f"offline: model {build_s:.1f} s; same updates = {same} full sweeps ({off_s:.1f} s); reference "

@@ -90,23 +90,8 @@ def drop_dataset_curves(doc: dict) -> int:
     return n
 
 
-def snapshot(
-    src: Path,
-    name: str | None = None,
-    command: str | None = None,
-    results: Path = RESULTS,
-    drop_curves: bool = False,
-) -> Path:
-    """Copy the JSON ``src`` into ``results/NAME.json`` (``NAME`` defaults to the file's stem).
-
-    A JSON without a ``"provenance"`` block (an experiment's own output) gets one: ``command`` (required
-    then), the commit of this checkout and this machine, dated by ``src``'s modification time, so take the
-    snapshot right after the run, from the checkout that ran it. ``drop_curves``: leave out the per-dataset
-    precision-recall curves (:func:`drop_dataset_curves`; no table reads them), and say so in the
-    provenance (``"dropped"``); a stamped snapshot keeps its provenance otherwise.
-    """
-    from ogm_ppl.io import atomic_write_text
-
+def _stamped(src: Path, command: str | None, drop_curves: bool) -> dict:
+    """The JSON ``src`` with its provenance (:func:`snapshot`'s rules), the curves left out if asked."""
     doc = json.loads(Path(src).read_text())
     if not isinstance(doc, dict):
         raise ValueError(f"{src}: expected a JSON object")
@@ -124,6 +109,27 @@ def snapshot(
         raise ValueError(f"{src} is already stamped (command {doc['provenance'].get('command')!r})")
     if drop_curves and drop_dataset_curves(doc):
         doc["provenance"]["dropped"] = "the per-dataset precision-recall curves (scores[*][block].curve)"
+    return doc
+
+
+def snapshot(
+    src: Path,
+    name: str | None = None,
+    command: str | None = None,
+    results: Path = RESULTS,
+    drop_curves: bool = False,
+) -> Path:
+    """Copy the JSON ``src`` into ``results/NAME.json`` (``NAME`` defaults to the file's stem).
+
+    A JSON without a ``"provenance"`` block (an experiment's own output) gets one: ``command`` (required
+    then), the commit of this checkout and this machine, dated by ``src``'s modification time, so take the
+    snapshot right after the run, from the checkout that ran it. ``drop_curves``: leave out the per-dataset
+    precision-recall curves (:func:`drop_dataset_curves`; no table reads them), and say so in the
+    provenance (``"dropped"``); a stamped snapshot keeps its provenance otherwise.
+    """
+    from ogm_ppl.io import atomic_write_text
+
+    doc = _stamped(src, command, drop_curves)
     return atomic_write_text(results / f"{name or Path(src).stem}.json", json.dumps(doc, indent=1, allow_nan=True))
 
 
@@ -164,13 +170,10 @@ def merge(src: Path, into: str, command: str, results: Path = RESULTS, drop_curv
     snapshot's first) and keeps each part's stamp under ``"parts"`` (:func:`provenance_line` prints them);
     its own commit, machine and date are the new run's. ``src`` is stamped as :func:`snapshot` stamps it
     (``command`` required). Nothing is written when refused."""
-    import tempfile
-
     from ogm_ppl.io import atomic_write_text
 
     base = load_snapshot(into, results)
-    with tempfile.TemporaryDirectory() as tmp:
-        new = load_snapshot("part", snapshot(src, "part", command, Path(tmp), drop_curves).parent)
+    new = _stamped(src, command, drop_curves)
     where = f"{src} into {results / (into + '.json')}"
     if _is_error_split(base) != _is_error_split(new):
         raise ValueError(f"{where}: not the same kind of result")
