@@ -202,3 +202,35 @@ def test_merge_adds_an_error_splits_algorithms(tmp_path):
     merged = gen_docs_tables.load_snapshot("e", results)
     assert merged["algorithms"] == doc["algorithms"]
     assert sorted(gen_docs_tables._error_split(merged).rows) == sorted(gen_docs_tables._error_split(doc).rows)
+
+
+def test_merge_adds_an_explorations_rules_and_recomputes_its_summary(tmp_path):
+    from ogm_ppl.experiment.active import summarise
+
+    results = tmp_path / "results"
+    results.mkdir()
+    doc = gen_docs_tables.load_snapshot("active_full")
+    methods = [r["method"] for r in doc["summary"]]
+    late = set(methods[-2:])
+    first = {**doc, "runs": [r for r in doc["runs"] if r["method"] not in late]}
+    first["summary"] = summarise(first["runs"], methods[:-2])
+    (results / "a.json").write_text(json.dumps(first))
+    later = {k: v for k, v in doc.items() if k != "provenance"}
+    later["runs"] = [r for r in doc["runs"] if r["method"] in late]
+    later["summary"] = summarise(later["runs"], methods[-2:])  # its ratios are against its own first rule
+    src = tmp_path / "metrics.json"
+    src.write_text(json.dumps(later))
+    before = (results / "a.json").read_text()
+    bad = tmp_path / "bad.json"
+    moved = [{**r, "start": [0, 0]} if i == 0 else r for i, r in enumerate(later["runs"])]
+    bad.write_text(json.dumps({**later, "runs": moved}))
+    with pytest.raises(ValueError, match="starts differs"):
+        gen_docs_tables.merge(bad, "a", "cmd", results)
+    bad.write_text(json.dumps({**later, "plans": later["plans"][:-1]}))
+    with pytest.raises(ValueError, match="plans differs"):
+        gen_docs_tables.merge(bad, "a", "cmd", results)
+    assert (results / "a.json").read_text() == before
+    gen_docs_tables.merge(src, "a", "ogm-ppl experiment active.toml --algorithms x", results)
+    merged = gen_docs_tables.load_snapshot("a", results)
+    assert json.dumps(merged["summary"]) == json.dumps(doc["summary"])  # ratios against the snapshot's first rule
+    assert gen_docs_tables._active(merged).rows == gen_docs_tables._active(doc).rows

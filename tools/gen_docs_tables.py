@@ -138,9 +138,16 @@ def _is_error_split(doc: dict) -> bool:
     return isinstance(doc.get("algorithms"), dict) and "oracles" in doc
 
 
+def _is_active(doc: dict) -> bool:
+    """Whether ``doc`` is an ``active`` (exploration) experiment's ``metrics.json`` (runs keyed by rule)."""
+    return doc.get("format") == "ogm_ppl.experiment.active"
+
+
 def _algorithms(doc: dict) -> set[str]:
     if _is_error_split(doc):
         return set(doc["algorithms"])
+    if _is_active(doc):
+        return {r["method"] for r in doc.get("runs") or ()}
     return {row["algorithm"] for key in ("scores", "pooled", "runs") for row in doc.get(key) or ()}
 
 
@@ -150,6 +157,13 @@ def _same_data(doc: dict) -> dict:
     if _is_error_split(doc):
         return {k: doc.get(k) for k in ("datasets", "cells", "occupied", "oracles")}
     same = {k: doc.get(k) for k in ("format", "format_version", "experiment", "seed")}
+    if _is_active(doc):  # the same plans, and every (plan, seed) started from the same cell
+        same["plans"] = doc.get("plans")
+        starts: dict = {}
+        for r in doc.get("runs") or ():
+            starts.setdefault((r["plan_id"], r["seed"]), set()).add(str(r["start"]))
+        same["starts"] = starts
+        return same
     same["datasets"] = [{k: v for k, v in d.items() if k != "seconds"} for d in doc.get("datasets") or ()]
     return same
 
@@ -160,13 +174,16 @@ def _count(x: list | int) -> int:
 
 def merge(src: Path, into: str, command: str, results: Path = RESULTS, drop_curves: bool = False) -> Path:
     """Add the algorithms of a later run's result ``src`` (an experiment's summary run into another folder,
-    or ``experiments/table_6_4_errors.py``'s split of it) to the snapshot ``results/INTO.json`` of the same
-    experiment.
+    ``experiments/table_6_4_errors.py``'s split of it, or an ``active`` experiment's ``metrics.json``) to the
+    snapshot ``results/INTO.json`` of the same experiment.
 
     Refused unless both are of the same kind, experiment, seed and datasets (every dataset's figures equal
-    but its seconds: the same simulated data; for an error split, the same cell counts and oracle scores)
-    and share no algorithm, so every row of the result is one run's, scored on the same datasets; pooled rows
-    are per algorithm, so they carry over unchanged. The result's provenance joins the two commands (the
+    but its seconds: the same simulated data; for an error split, the same cell counts and oracle scores;
+    for an exploration, the same plans and the same start of every (plan, seed) both ran) and share no
+    algorithm, so every row of the result is one run's, scored on the same datasets; pooled rows are per
+    algorithm, so they carry over unchanged. An exploration's summary is recomputed from the joined runs
+    (:func:`ogm_ppl.experiment.active.summarise`; rules in the snapshot's order, then the new run's, so its
+    ratios stay against the snapshot's first rule). The result's provenance joins the two commands (the
     snapshot's first) and keeps each part's stamp under ``"parts"`` (:func:`provenance_line` prints them);
     its own commit, machine and date are the new run's. ``src`` is stamped as :func:`snapshot` stamps it
     (``command`` required). Nothing is written when refused."""
@@ -179,6 +196,11 @@ def merge(src: Path, into: str, command: str, results: Path = RESULTS, drop_curv
         raise ValueError(f"{where}: not the same kind of result")
     a, b = _same_data(base), _same_data(new)
     for key in a:
+        if key == "starts":  # each (plan, seed) both ran started from one and the same cell
+            sa, sb = a[key], b[key]
+            if any(len(sa[k] | sb[k]) != 1 for k in sa.keys() & sb.keys()):
+                raise ValueError(f"{where}: starts differs (another spec, seed or simulator)")
+            continue
         if a[key] != b[key]:
             raise ValueError(f"{where}: {key} differs (another spec, seed or simulator)")
     both = sorted(_algorithms(base) & _algorithms(new))
@@ -189,6 +211,14 @@ def merge(src: Path, into: str, command: str, results: Path = RESULTS, drop_curv
     out = dict(base)
     if _is_error_split(base):
         out["algorithms"] = {**base["algorithms"], **new["algorithms"]}
+    elif _is_active(base):
+        from ogm_ppl.experiment.active import summarise
+
+        # the rules in the order of the snapshot, then the new run's: ratios stay against the snapshot's first
+        methods = [r["method"] for r in base["summary"]] + [r["method"] for r in new["summary"]]
+        out["runs"] = base["runs"] + new["runs"]
+        out["summary"] = summarise(out["runs"], methods)
+        out["failed"] = {**(base.get("failed") or {}), **(new.get("failed") or {})}
     else:
         for key in ("scores", "pooled", "runs", "executed", "skipped"):
             x, y = base.get(key) or [], new.get(key) or []
