@@ -15,7 +15,14 @@ cells keep ``q = 0.5``).
 
 The priors: every registered kind, and ``KIND@cal`` beside each kind with a fitted tempering exponent (the
 prior raised to the power ``beta`` that ``experiments/fit_temper.py`` chose on validation plans of the
-training corpus by this protocol's unseen-cell NLL; :mod:`ogm_ppl.priors.named`).
+training corpus by this protocol's unseen-cell NLL; :mod:`ogm_ppl.priors.named`). ``--diagonal`` scores each
+test corpus with the priors learned on it only.
+
+Guides. ``--guides C ...`` adds a ``guide:C`` row per test map: the one-pass marginals of the amortised guide
+learned on corpus ``C``'s training plans (:func:`~ogm_ppl.inference.variational.corpus_guide`,
+``experiments/train_corpus_guide.py``), the posterior predictive with the corpus itself as the prior. It runs on
+every test corpus (with ``--diagonal`` too); :func:`load_corpus_guide` refuses a guide whose record is not the
+training set of corpus ``C``'s tables, so the leakage check below covers it.
 
 Scored cells: the near-mapped mask ``N`` (cells within 10 cells of a cell some ray reached, Fig. 6.16b) and its
 *unseen* cells ``U`` (cells of ``N`` no ray reached): NLL in bits per cell
@@ -270,6 +277,46 @@ def check_heldout(test_corpus: str, plans: Sequence[str], train_corpus: str | No
 
 
 # ---------------------------------------------------------------------------------------------- kernels
+GUIDE_PREFIX = "guide:"
+
+
+def guide_path(corpus: str) -> Path:
+    """The amortised guide learned on ``corpus``'s training plans (``experiments/train_corpus_guide.py``)."""
+    return FITTED_DIR / f"guide_{corpus}.npz"
+
+
+def load_corpus_guide(corpus: str, train: set[str] | None = None):
+    """The guide of :func:`guide_path`, refused (:class:`LeakageError`) unless its record names ``corpus`` and
+    the SHA-256 of the very plans the corpus's tables were learned from (``train``, default
+    :func:`training_set`), so that :func:`check_heldout` covers it as it covers the tables."""
+    from ogm_ppl.inference.variational.amortised import AmortisedGuide
+
+    path = guide_path(corpus)
+    guide = AmortisedGuide.load(path)
+    meta = guide.trained_for
+    names = sorted(training_set(corpus) if train is None else train)
+    want = hashlib.sha256("\n".join(names).encode()).hexdigest()
+    if meta.get("corpus") != corpus or meta.get("plan_names_sha256") != want:
+        raise LeakageError(
+            f"{path}: its record (corpus {meta.get('corpus')!r}, plans {str(meta.get('plan_names_sha256'))[:12]}...) "
+            f"is not the training set of the {corpus} tables ({want[:12]}...)"
+        )
+    return guide
+
+
+def run_guide(scene: Scene, guide, args) -> dict:
+    """The guide's one-pass marginals ``q(m_k = 1 | z)`` scored like a prior's pooled marginals (no chains, so
+    no R-hat)."""
+    from ogm_ppl.priors import IndependentPrior
+
+    t0 = time.perf_counter()
+    model = OccupancyModel(
+        scene.grid, scene.rays, GaussianRange(args.sigma), IndependentPrior(0.5, scene.grid.num_cells)
+    )
+    q = guide.marginals(model).numpy()
+    return {"scores": _scores(scene, q), "seconds": time.perf_counter() - t0}
+
+
 def default_patch(prior) -> tuple[int, int] | None:
     """The patch a prior is sampled with: its tile (``t_h x t_w``, else 3 x 3) when its compiled bundle
     weighs a sparse support (``sparse_patches()``), ``None`` (single-cell Gibbs) otherwise or for a 1 x 1 tile."""
@@ -432,7 +479,7 @@ def _rows_for(test, t: TestMap, name, train, kernel, result) -> list[dict]:
             "test": test,
             "train": train or "none",
             "plan": t.name,
-            "prior": _kind_label(name) if name != OGM_LABEL else "ogm",
+            "prior": "ogm" if name == OGM_LABEL else "guide" if name.startswith(GUIDE_PREFIX) else _kind_label(name),
             "prior_name": name,
             "kernel": kernel,
             "mask": mask,
@@ -618,6 +665,18 @@ def parse_args(argv=None) -> argparse.Namespace:
         default=None,
         help="prior kinds or names (default: every kind, and KIND@cal where fitted)",
     )
+    ap.add_argument(
+        "--guides",
+        nargs="*",
+        default=[],
+        help="also score the amortised guide learned on each of these corpora (guide:CORPUS rows; "
+        "experiments/train_corpus_guide.py)",
+    )
+    ap.add_argument(
+        "--diagonal",
+        action="store_true",
+        help="score each test corpus only with the priors learned on it (every guide still runs on every corpus)",
+    )
     ap.add_argument("--plans", type=int, default=2, help="held-out maps per test corpus")
     ap.add_argument("--window", type=int, default=96, help="maps are cropped to this many cells a side")
     ap.add_argument("--generated-shape", type=int, default=160, help="side of the held-out generated maps")
@@ -681,6 +740,8 @@ def main(argv=None) -> dict:
     skipped_keys: set[tuple] = set()
     overrides = _patch_overrides(args.patch)
     pairs = prior_names(args.priors, args.train)
+    guides = {c: load_corpus_guide(c) for c in args.guides}
+    pairs += [(GUIDE_PREFIX + c, c) for c in args.guides]
     prov = provenance()
     t_all = time.perf_counter()
 
@@ -697,14 +758,15 @@ def main(argv=None) -> dict:
 
     for test in args.test:
         maps = heldout_maps(test, args.plans, args.window, args.generated_shape)
-        for _, train in pairs:  # refuse leakage before anything runs
+        pairs_here = [(n, c) for n, c in pairs if not args.diagonal or n.startswith(GUIDE_PREFIX) or c in (None, test)]
+        for _, train in pairs_here:  # refuse leakage before anything runs
             check_heldout(test, [t.plan for t in maps], train)
         print(
             f"[{test}] {len(maps)} held-out maps: " + ", ".join(f"{t.name} {t.truth.shape}" for t in maps), flush=True
         )
         for t in maps:
             scene = None
-            todo = [(OGM_LABEL, None)] + pairs
+            todo = [(OGM_LABEL, None)] + pairs_here
             for name, train in todo:
                 if (test, t.name, name) in done:
                     continue
@@ -712,6 +774,8 @@ def main(argv=None) -> dict:
                 if name == OGM_LABEL:
                     scores, secs = run_ogm(scene)
                     result: dict = {"scores": scores, "seconds": secs}
+                elif name.startswith(GUIDE_PREFIX):
+                    result = run_guide(scene, guides[train], args)
                 else:
                     result = run_prior(scene, name, args, overrides)
                     if "skipped" in result:

@@ -141,3 +141,20 @@ def test_a_prior_over_the_support_limit_is_skipped(cal):
     res = cal.run_prior(scene, "mrf:houseexpo", args)
     assert res["patch"] is None and len(res["seconds_per_chain"]) == 3
     assert res["scores"]["unseen"]["cells"] == res["rhat_cells"] == int(scene.masks["unseen"].sum())
+
+
+def test_diagonal_scores_each_corpus_with_its_own_priors_only(cal, tmp_path):
+    argv = (
+        "--test houseexpo ipa --train houseexpo ipa --priors independent --diagonal --plans 1 --window 36 "
+        "--poses 2 --beams 45 --range-cells 30 --sweeps 4 --burn 2 --no-figures"
+    ).split()
+    rows = cal.main([*argv, "--out", str(tmp_path)])["rows"]
+    got = sorted({(r["test"], r["prior_name"]) for r in rows})
+    assert got == [
+        ("houseexpo", "independent"),
+        ("houseexpo", "independent:houseexpo"),
+        ("houseexpo", "traditional OGM (p21)"),
+        ("ipa", "independent"),
+        ("ipa", "independent:ipa"),
+        ("ipa", "traditional OGM (p21)"),
+    ]

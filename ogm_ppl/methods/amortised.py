@@ -17,14 +17,22 @@ __all__ = ["AmortisedParams", "amortised", "load_guide"]
 
 @dataclass(frozen=True)
 class AmortisedParams:
-    guide: str = param("shipped", GuideFile(), "the trained guide: 'shipped' or a saved guide (.npz)")
+    guide: str = param(
+        "shipped",
+        GuideFile(),
+        "the trained guide: 'shipped', 'corpus:CORPUS' (learned on a corpus's plans) or a saved guide (.npz)",
+    )
 
 
 def load_guide(name: str, model):
-    """The guide ``name`` (``"shipped"`` or a path) for ``model``."""
-    from ogm_ppl.inference.variational.amortised import AmortisedGuide, shipped_guide
+    """The guide ``name`` (``"shipped"``, ``"corpus:CORPUS"`` or a path) for ``model``."""
+    from ogm_ppl.inference.variational.amortised import AmortisedGuide, corpus_guide, shipped_guide
 
-    return shipped_guide(model) if name == "shipped" else AmortisedGuide.load(name, model)
+    if name == "shipped":
+        return shipped_guide(model)
+    if name.startswith("corpus:"):
+        return corpus_guide(name.removeprefix("corpus:"), model)
+    return AmortisedGuide.load(name, model)
 
 
 @register_method("amortised", AmortisedParams)

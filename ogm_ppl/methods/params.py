@@ -331,12 +331,20 @@ class DeltaName(Kind):
 
 
 class GuideFile(Kind):
-    """An amortised guide: ``"shipped"`` (``ogm_ppl/fitted/guide_amortised.npz``) or the path of a guide
-    saved by :meth:`~ogm_ppl.inference.variational.AmortisedGuide.save` (``~`` and ``$VARS`` expanded)."""
+    """An amortised guide: ``"shipped"`` (``ogm_ppl/fitted/guide_amortised.npz``), ``"corpus:CORPUS"`` (the
+    guide learned on a corpus's training plans, :func:`~ogm_ppl.inference.variational.corpus_guide`) or the
+    path of a guide saved by :meth:`~ogm_ppl.inference.variational.AmortisedGuide.save` (``~`` and ``$VARS``
+    expanded)."""
 
     def value(self, v):
         name = Text().value(v)
         if name == "shipped":
+            return name
+        if name.startswith("corpus:"):
+            from ogm_ppl.inference.variational.amortised import corpus_guides
+
+            if name.removeprefix("corpus:") not in corpus_guides():
+                raise _Bad(f"no guide learned on corpus {name.removeprefix('corpus:')!r}; shipped: {corpus_guides()}")
             return name
         path = Path(os.path.expandvars(os.path.expanduser(name)))
         if not path.is_file():
@@ -344,7 +352,7 @@ class GuideFile(Kind):
         return str(path)
 
     def describe(self):
-        return "'shipped' or a guide .npz"
+        return "'shipped', 'corpus:CORPUS' or a guide .npz"
 
 
 def param(default: Any, kind: Kind, doc: str) -> Any:

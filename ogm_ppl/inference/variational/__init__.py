@@ -6,6 +6,8 @@ used outside the setting it was fitted for."""
 from ogm_ppl.inference.variational.amortised import (
     AmortisedGuide,
     GuideFileError,
+    corpus_guide,
+    corpus_guides,
     evidence_features,
     guide_initial_map,
     random_scene,
@@ -46,6 +48,8 @@ __all__ = [
     "MeanFieldGuide",
     "PatchGuide",
     "check_delta_setting",
+    "corpus_guide",
+    "corpus_guides",
     "cross_entropy_loss",
     "cross_validate",
     "evidence_features",

@@ -74,6 +74,9 @@ __all__ = [
     "feature_names",
     "guide_initial_map",
     "shipped_guide",
+    "corpus_guide",
+    "corpus_guide_path",
+    "corpus_guides",
     "SHIPPED_GUIDE",
     "Scene",
     "random_scene",
@@ -555,6 +558,35 @@ def shipped_guide(model: OccupancyModel | None = None) -> AmortisedGuide:
     """The trained guide shipped in ``ogm_ppl/fitted/guide_amortised.npz`` (trained for the prior and
     sensor in its ``trained_for``; see the JSON sidecar)."""
     return AmortisedGuide.load(SHIPPED_GUIDE, model)
+
+
+def corpus_guide_path(corpus: str) -> Path:
+    """Where the guide learned on ``corpus``'s training plans ships: ``ogm_ppl/fitted/guide_<corpus>.npz``."""
+    return SHIPPED_GUIDE.parent / f"guide_{corpus}.npz"
+
+
+def corpus_guides() -> list[str]:
+    """The corpora with a shipped corpus guide (:func:`corpus_guide`)."""
+    return sorted(p.stem.removeprefix("guide_") for p in SHIPPED_GUIDE.parent.glob("guide_*.npz") if p != SHIPPED_GUIDE)
+
+
+def corpus_guide(corpus: str, model: OccupancyModel | None = None) -> AmortisedGuide:
+    r"""The guide trained on the training plans of a floor-plan corpus (``experiments/train_corpus_guide.py``):
+    windows of the plans the corpus's prior tables were learned from, scanned by the stop-and-scan simulator,
+    so that ``q(m_k = 1 | z)`` approximates the posterior marginal with the corpus itself as the prior,
+
+    .. math:: q_\phi(m_k = 1 \mid z) \approx p_\text{corpus}(m_k = 1 \mid z)
+        = \sum_m m_k\, p_\text{corpus}(m)\, p(z \mid m) / p_\text{corpus}(z),
+
+    with a receptive field of ``1 + 2 * sum(dilations)`` cells (Chapter 5's question, what a map predicts of the
+    cells no ray reached, answered by a network instead of a table). Its ``trained_for`` names the corpus, the
+    SHA-256 of its training plans' names and the sensor it was trained for (3 stops x 90 beams, 75-cell range
+    by default); evaluate it on held-out plans only. Unknown corpus: :class:`GuideFileError` listing those shipped.
+    """
+    path = corpus_guide_path(corpus)
+    if not path.is_file():
+        raise GuideFileError(f"{path}: no guide learned on corpus {corpus!r}; shipped: {', '.join(corpus_guides())}")
+    return AmortisedGuide.load(path, model)
 
 
 # --------------------------------------------------------------------------------------- use (b)

@@ -1,0 +1,120 @@
+"""experiments/train_corpus_guide.py on tiny settings: it trains on the tables' training plans only, records
+them, keeps the validation-best step, and calibration.py scores the artefact (``--guides``) or refuses one whose
+record is not the tables' training set."""
+
+import importlib.util
+import json
+import math
+import sys
+from pathlib import Path
+
+import pytest
+import torch
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _load(name: str, file: str):
+    spec = importlib.util.spec_from_file_location(name, ROOT / "experiments" / file)
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[name] = mod  # dataclasses look their module up
+    spec.loader.exec_module(mod)
+    return mod
+
+
+@pytest.fixture(scope="module")
+def mods():
+    threads = torch.get_num_threads()
+    tg = _load("train_corpus_guide_script", "train_corpus_guide.py")
+    cal = _load("calibration_for_guides", "calibration.py")
+    yield tg, cal
+    torch.set_num_threads(threads)
+    for k in ("train_corpus_guide_script", "calibration_for_guides"):
+        sys.modules.pop(k, None)
+
+
+SMALL = "--examples 6 --val 2 --window 40 --poses 2 --beams 45 --range-cells 30 --channels 4 --dilations 1 2 1".split()
+
+
+@pytest.fixture(scope="module")
+def artefact(mods, tmp_path_factory):
+    tg, _ = mods
+    out = tmp_path_factory.mktemp("guide") / "g.npz"
+    meta = tg.main(["--corpus", "ipa", *SMALL, "--steps", "6", "--eval-every", "3", "--out", str(out)])
+    return out, meta
+
+
+def test_training_uses_the_tables_plans_and_records_them(mods, artefact):
+    tg, cal = mods
+    out, meta = artefact
+    train, val = tg.split_plans("ipa")
+    names = cal.training_set("ipa")
+    assert set(train) | set(val) == names and not set(train) & set(val) and val == sorted(names)[::5]
+    assert meta["plan_names_sha256"] == tg.names_digest(names) and meta["corpus"] == "ipa"
+    side = json.loads(out.with_suffix(".json").read_text())
+    steps = [h["step"] for h in side["history"]]
+    assert steps == [3, 6]
+    best = min(side["history"], key=lambda h: h["bits_per_unseen_cell"])
+    assert side["training"]["kept_step"] == best["step"]
+    v = side["validation"]
+    assert math.isclose(v["before_temperature"], best["bits_per_unseen_cell"])
+    assert v["bits_per_unseen_cell"] <= v["before_temperature"] + 1e-9  # T = 1 is one of the temperatures tried
+    assert 0.25 <= side["training"]["temperature"] <= 4
+    assert 0 < best["bits_per_cell"] < 10 and best["unseen_cells"] > 0
+
+
+def test_the_kept_weights_reproduce_the_recorded_validation_loss(mods, artefact):
+    """Rebuilding the validation set from the same seed and scoring the saved guide gives the recorded loss."""
+    tg, _ = mods
+    from ogm_ppl.inference.variational.amortised import AmortisedGuide
+
+    out, meta = artefact
+    args = tg.argparse.Namespace(poses=2, beams=45, range_cells=30.0, sigma=1.0)
+    _, val = tg.split_plans("ipa")
+    exs = tg.build_set("ipa", val, 2, 40, args, 0 + 1, "validation")
+    got = tg.losses(AmortisedGuide.load(out), exs)
+    assert got["bits_per_unseen_cell"] == pytest.approx(meta["validation"]["bits_per_unseen_cell"], rel=1e-5)
+
+
+def test_the_temperature_is_folded_into_the_logits(mods):
+    tg, _ = mods
+    from ogm_ppl.inference.variational.amortised import AmortisedGuide
+
+    g = AmortisedGuide(channels=3, dilations=(1,), phase=(0, 0), seed=1)
+    x = torch.randn(1, 7, 9, 9, dtype=torch.float32)
+    before = g.net(x)[0].detach().clone()
+    # the truth is sharper than the logits, so the temperature is below 1
+    y = (torch.rand(9, 9, dtype=torch.float32) < torch.sigmoid(3 * before)).float()
+    e = tg.Example(x=x[0], y=y, scored=torch.ones(9, 9, dtype=torch.bool), unseen=torch.ones(9, 9, dtype=torch.bool))
+    t = tg.fit_temperature(g, [e])
+    assert 0.25 <= t < 1
+    torch.testing.assert_close(g.net(x)[0].detach(), before / t)
+
+
+def test_a_symmetry_turns_features_and_truth_together(mods):
+    tg, _ = mods
+    x = torch.arange(2 * 3 * 4, dtype=torch.float32).reshape(2, 3, 4)
+    y = x[0].clone()
+    e = tg.Example(x=x, y=y, scored=y > 3, unseen=y > 7)
+    for sym in range(8):
+        bx, by, bs, bu = tg._batch([e], sym)
+        assert torch.equal(bx[0, 0], by[0]) and torch.equal(bs[0], by[0] > 3) and torch.equal(bu[0], by[0] > 7)
+    assert tg._batch([e], 1)[1].shape == (1, 4, 3) and torch.equal(tg._batch([e], 4)[1][0], y.flip(-1))
+
+
+def test_calibration_scores_the_guide_and_refuses_another_record(mods, artefact, tmp_path, monkeypatch):
+    _, cal = mods
+    out, _ = artefact
+    monkeypatch.setattr(cal, "guide_path", lambda corpus: out)
+    argv = (
+        "--test ipa --train ipa --priors independent --guides ipa --plans 1 --window 36 --poses 2 --beams 45 "
+        "--range-cells 30 --sweeps 4 --burn 2 --no-figures"
+    ).split()
+    res = cal.main([*argv, "--out", str(tmp_path)])
+    rows = [r for r in res["rows"] if r["prior_name"] == "guide:ipa"]
+    assert {r["mask"] for r in rows} == {"unseen", "near"} and all(r["prior"] == "guide" for r in rows)
+    assert all(r["train"] == "ipa" and 0 < r["nll_bits"] < 10 and "rhat_below" not in r for r in rows)
+    with pytest.raises(cal.LeakageError, match="not the training set of the houseexpo tables"):
+        cal.load_corpus_guide("houseexpo")
+    with pytest.raises(cal.LeakageError, match="not the training set"):
+        cal.load_corpus_guide("ipa", train={"some_other_plan"})
