@@ -280,6 +280,11 @@ def check_heldout(test_corpus: str, plans: Sequence[str], train_corpus: str | No
 GUIDE_PREFIX = "guide:"
 
 
+def names_digest(names) -> str:
+    """SHA-256 of the sorted map names joined by newlines: what a corpus guide records of its training set."""
+    return hashlib.sha256("\n".join(sorted(names)).encode()).hexdigest()
+
+
 def guide_path(corpus: str) -> Path:
     """The amortised guide learned on ``corpus``'s training plans (``experiments/train_corpus_guide.py``)."""
     return FITTED_DIR / f"guide_{corpus}.npz"
@@ -294,8 +299,7 @@ def load_corpus_guide(corpus: str, train: set[str] | None = None):
     path = guide_path(corpus)
     guide = AmortisedGuide.load(path)
     meta = guide.trained_for
-    names = sorted(training_set(corpus) if train is None else train)
-    want = hashlib.sha256("\n".join(names).encode()).hexdigest()
+    want = names_digest(training_set(corpus) if train is None else train)
     if meta.get("corpus") != corpus or meta.get("plan_names_sha256") != want:
         raise LeakageError(
             f"{path}: its record (corpus {meta.get('corpus')!r}, plans {str(meta.get('plan_names_sha256'))[:12]}...) "

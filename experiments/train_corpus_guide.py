@@ -17,6 +17,11 @@ with a receptive field of ``1 + 2 * sum(dilations)`` cells instead of a 3 x 3 or
 are drawn at random (half at the window with the most wall-side cells, as the calibration experiment crops,
 half anywhere with at least 200 known free cells) and turned by a random one of the 8 symmetries each step.
 
+``--scan-whole-map`` scans each whole map along a planned route instead and crops ``--crops`` windows of its
+features (the Table 6.4 simulator: ``--corpus generated --poses 0 --beams 720 --sigma 3``), so the guide learns
+the evidence of a route through the whole building; the generated corpus's maps are those its tables counted
+(``iter_corpus`` with the recorded seed, rebuilt by name).
+
 Only the plans the corpus's shipped tables were learned from are used (``training_set`` of
 ``calibration.py``, rebuilt from their provenance; every fifth one held out as validation plans that pick the
 step kept, then a temperature on the logits fitted to their unseen near-mapped cells, folded into the weights),
@@ -24,8 +29,10 @@ so the calibration experiment's leakage check covers the guide as it covers the 
 artefact records the corpus and the SHA-256 of its training plans' names; ``calibration.py --guides`` refuses
 a guide whose record does not match the tables' training set.
 
-    python experiments/train_corpus_guide.py --corpus houseexpo        # about 10 min on 2 cores
+    python experiments/train_corpus_guide.py --corpus houseexpo        # 7-15 min on 2 cores
     python experiments/train_corpus_guide.py --corpus ipa --steps 20 --examples 16 --out /tmp/g.npz   # smoke
+    python experiments/train_corpus_guide.py --corpus generated --scan-whole-map --poses 0 --beams 720 --sigma 3 \
+        --window 128 --examples 640 --val 64 --crops 10 --dilations 1 2 4 8 16 16 1 --steps 1500   # Table 6.4
 
 Writes ``ogm_ppl/fitted/guide_<corpus>.npz`` (the weights, :meth:`AmortisedGuide.save`) and its JSON sidecar
 (settings, training and validation losses, the time).
@@ -59,7 +66,7 @@ from ogm_ppl.metrics import near_mapped_mask
 from ogm_ppl.priors import IndependentPrior
 from ogm_ppl.priors.tables import FITTED_DIR
 
-CORPORA: tuple[str, ...] = ("houseexpo", "ipa", "dungeon")
+CORPORA: tuple[str, ...] = ("houseexpo", "ipa", "dungeon", "generated")
 GUIDE_KIND = "ogm_ppl.corpus_guide"
 
 
@@ -72,11 +79,6 @@ class Example:
     y: torch.Tensor
     scored: torch.Tensor
     unseen: torch.Tensor
-
-
-def names_digest(names) -> str:
-    """SHA-256 of the sorted plan names joined by newlines (the record a guide and the tables share)."""
-    return hashlib.sha256("\n".join(sorted(names)).encode()).hexdigest()
 
 
 def split_plans(corpus: str) -> tuple[list[str], list[str]]:
@@ -98,7 +100,7 @@ def _random_window(occ, known, window, rng) -> tuple[int, int] | None:
 
 
 def make_example(plan, window: int, args, rng: np.random.Generator) -> Example | None:
-    """One window of ``plan`` (a :class:`~ogm_ppl.datasets.floorplans.FloorPlan`), scanned as the calibration
+    """One window of ``plan`` (a :class:`Plan`), scanned as the calibration
     experiment scans its test maps but with a fresh seed; ``None`` when the window holds fewer than 200 known
     free cells or no stop with the simulator's clearance."""
     occ, known = plan.occupancy, plan.known
@@ -140,9 +142,82 @@ def make_example(plan, window: int, args, rng: np.random.Generator) -> Example |
     )
 
 
+@dataclass
+class Plan:
+    """A map to draw windows from: ``occupancy`` / ``known`` ``H x W`` bool, metres per cell."""
+
+    occupancy: np.ndarray
+    known: np.ndarray
+    resolution: float | None
+
+
+def generated_maps() -> dict[str, tuple]:
+    """``training-set name -> (index, child seed)`` of the maps the ``generated`` tables counted
+    (:func:`~ogm_ppl.datasets.mapgen.iter_corpus` with the tables' recorded seed, ``n``, shape, kinds, border)."""
+    prov = json.loads((FITTED_DIR / "prior_generated.json").read_text())["provenance"]
+    children = np.random.SeedSequence(int(prov["seed"])).spawn(int(prov["n"]))
+    return {f"seedstream:{c.entropy}/{tuple(c.spawn_key)}": (i, c, prov) for i, c in enumerate(children)}
+
+
+def load_map(corpus: str, name: str) -> Plan:
+    """The training map ``name`` of ``corpus`` (a plan, or a generated map by its seed-stream name)."""
+    if corpus == "generated":
+        from ogm_ppl.datasets.mapgen import generate_map
+
+        i, child, prov = generated_maps()[name]
+        kinds = prov["kinds"]
+        occ = generate_map(
+            kinds[i % len(kinds)], tuple(prov["shape"]), np.random.default_rng(child), border=int(prov["border"])
+        )
+        return Plan(occ, np.ones_like(occ), 0.05)
+    p = fp.load_plan(corpus, name)
+    return Plan(p.occupancy, p.known, p.resolution)
+
+
+def scene_examples(plan: Plan, window: int, crops: int, args, rng: np.random.Generator) -> list[Example]:
+    """The whole map scanned along a planned route (the Table 6.4 simulator: ``--poses 0`` lets the route
+    planner choose the stops), then ``crops`` random windows of its features with 200 known free cells."""
+    from ogm_ppl.datasets.stop_and_scan import plan_route
+
+    occ, known = plan.occupancy, plan.known
+    grid = Grid(occ.shape, resolution=plan.resolution or 0.05)
+    seed = int(rng.integers(2**31))
+    route = plan_route(occ, grid, num_poses=args.poses or None, max_range_cells=args.range_cells, seed=seed)
+    data = stop_and_scan(
+        occ, grid, route=route, beams=args.beams, max_range_cells=args.range_cells, sigma_cells=args.sigma, seed=seed
+    )
+    rays = raycast(grid, data.scans)
+    model = OccupancyModel(grid, rays, GaussianRange(args.sigma), IndependentPrior(0.5, grid.num_cells))
+    x = evidence_features(model, phase=(0, 0))
+    reached = rays.reached().reshape(grid.shape)
+    pinned = model.known_free.numpy().reshape(grid.shape)
+    unseen = near_mapped_mask(reached, 10.0) & known & ~reached
+    H, W = occ.shape
+    h, w = min(window, H), min(window, W)
+    out = []
+    for _ in range(4 * crops):
+        if len(out) == crops:
+            break
+        r, c = int(rng.integers(0, H - h + 1)), int(rng.integers(0, W - w + 1))
+        sl = (slice(r, r + h), slice(c, c + w))
+        if (known[sl] & ~occ[sl]).sum() < 200:
+            continue
+        out.append(
+            Example(
+                x=x[:, sl[0], sl[1]].clone(),
+                y=torch.from_numpy(occ[sl].astype(np.float32)),
+                scored=torch.from_numpy(known[sl] & ~pinned[sl]),
+                unseen=torch.from_numpy(unseen[sl]),
+            )
+        )
+    return out
+
+
 def build_set(corpus: str, names: list[str], n: int, window: int, args, seed: int, label: str) -> list[Example]:
+    """``n`` windows of maps drawn from ``names``: each scanned on its own (:func:`make_example`), or with
+    ``--scan-whole-map`` ``--crops`` windows a scene of the whole map (:func:`scene_examples`)."""
     rng = np.random.default_rng(seed)
-    plans = {}
+    plans: dict[str, Plan] = {}
     out: list[Example] = []
     tries = 0
     t0 = time.perf_counter()
@@ -150,11 +225,16 @@ def build_set(corpus: str, names: list[str], n: int, window: int, args, seed: in
         tries += 1
         name = names[int(rng.integers(len(names)))]
         if name not in plans:
-            plans[name] = fp.load_plan(corpus, name)
-        ex = make_example(plans[name], window, args, rng)
-        if ex is not None:
-            out.append(ex)
-        if len(out) and len(out) % 100 == 0 and ex is not None:
+            plans[name] = load_map(corpus, name)
+        if args.scan_whole_map:
+            new = scene_examples(plans[name], window, min(args.crops, n - len(out)), args, rng)
+            plans.pop(name)  # whole maps are large and each is scanned afresh
+        else:
+            ex = make_example(plans[name], window, args, rng)
+            new = [] if ex is None else [ex]
+        before = len(out)
+        out += new
+        if len(out) // 100 > before // 100:
             print(f"  {label}: {len(out)}/{n} windows, {time.perf_counter() - t0:.0f} s", flush=True)
     if len(out) < n:
         raise SystemExit(f"{corpus}: only {len(out)} usable {label} windows of {n} after {tries} tries")
@@ -280,9 +360,10 @@ def train(args) -> dict:
         "corpus": args.corpus,
         "training_plans": len(tr_names),
         "validation_plans": len(val_names),
-        "plan_names_sha256": names_digest(tr_names + val_names),
+        "plan_names_sha256": calibration.names_digest(tr_names + val_names),
         "tables_provenance": f"{FITTED_DIR.name}/prior_{args.corpus}.json",
         "scans": {
+            "whole_map": bool(args.scan_whole_map),
             "poses": args.poses,
             "beams": args.beams,
             "range_cells": args.range_cells,
@@ -325,13 +406,19 @@ def main(argv=None) -> dict:
     ap.add_argument("--examples", type=int, default=600, help="training windows (default 600)")
     ap.add_argument("--val", type=int, default=60, help="validation windows (default 60)")
     ap.add_argument("--window", type=int, default=96)
-    ap.add_argument("--poses", type=int, default=3)
+    ap.add_argument("--poses", type=int, default=3, help="stops of a scan (0: the route planner's own number)")
+    ap.add_argument(
+        "--scan-whole-map",
+        action="store_true",
+        help="scan the whole map along a planned route, then crop --crops windows of it (Table 6.4's simulator)",
+    )
+    ap.add_argument("--crops", type=int, default=8, help="windows a whole-map scene gives (--scan-whole-map)")
     ap.add_argument("--beams", type=int, default=90)
     ap.add_argument("--range-cells", type=float, default=75.0)
     ap.add_argument("--sigma", type=float, default=1.0)
     ap.add_argument("--channels", type=int, default=24)
     ap.add_argument("--dilations", type=int, nargs="+", default=[1, 2, 4, 8, 16, 1])
-    ap.add_argument("--steps", type=int, default=1500)
+    ap.add_argument("--steps", type=int, default=2500)
     ap.add_argument("--batch", type=int, default=8)
     ap.add_argument("--lr", type=float, default=3e-3)
     ap.add_argument("--eval-every", type=int, default=100)
@@ -344,7 +431,9 @@ def main(argv=None) -> dict:
     )
     ap.add_argument("--out", default=None, help="artefact path (.npz; default ogm_ppl/fitted/guide_CORPUS.npz)")
     args = ap.parse_args(argv)
-    for k in ("examples", "val", "window", "poses", "beams", "channels", "steps", "batch", "eval_every"):
+    if args.poses < 0 or (args.poses == 0 and not args.scan_whole_map):
+        raise SystemExit("--poses must be at least 1 (0, the planner's own number, only with --scan-whole-map)")
+    for k in ("examples", "val", "window", "beams", "channels", "steps", "batch", "eval_every", "crops"):
         if getattr(args, k) < 1:
             raise SystemExit(f"--{k.replace('_', '-')} must be at least 1")
     return train(args)

@@ -50,7 +50,7 @@ def test_training_uses_the_tables_plans_and_records_them(mods, artefact):
     train, val = tg.split_plans("ipa")
     names = cal.training_set("ipa")
     assert set(train) | set(val) == names and not set(train) & set(val) and val == sorted(names)[::5]
-    assert meta["plan_names_sha256"] == tg.names_digest(names) and meta["corpus"] == "ipa"
+    assert meta["plan_names_sha256"] == cal.names_digest(names) and meta["corpus"] == "ipa"
     side = json.loads(out.with_suffix(".json").read_text())
     steps = [h["step"] for h in side["history"]]
     assert steps == [3, 6]
@@ -69,7 +69,7 @@ def test_the_kept_weights_reproduce_the_recorded_validation_loss(mods, artefact)
     from ogm_ppl.inference.variational.amortised import AmortisedGuide
 
     out, meta = artefact
-    args = tg.argparse.Namespace(poses=2, beams=45, range_cells=30.0, sigma=1.0)
+    args = tg.argparse.Namespace(poses=2, beams=45, range_cells=30.0, sigma=1.0, scan_whole_map=False, crops=8)
     _, val = tg.split_plans("ipa")
     exs = tg.build_set("ipa", val, 2, 40, args, 0 + 1, "validation")
     got = tg.losses(AmortisedGuide.load(out), exs)
@@ -118,3 +118,31 @@ def test_calibration_scores_the_guide_and_refuses_another_record(mods, artefact,
         cal.load_corpus_guide("houseexpo")
     with pytest.raises(cal.LeakageError, match="not the training set"):
         cal.load_corpus_guide("ipa", train={"some_other_plan"})
+
+
+def test_a_whole_map_scene_gives_crops_of_one_scan(mods):
+    """``--scan-whole-map``: one route through the whole map, its features cropped: each crop is the whole-map
+    scene's own window (features, truth, unseen cells), not a scene of its own."""
+    import numpy as np
+
+    from ogm_ppl.datasets.mapgen import generate_map
+
+    tg, _ = mods
+    occ = generate_map("office", (90, 90), seed=5, border=4)
+    plan = tg.Plan(occ, np.ones_like(occ), 0.05)
+    args = tg.argparse.Namespace(poses=0, beams=90, range_cells=30.0, sigma=1.0)
+    exs = tg.scene_examples(plan, 40, 3, args, np.random.default_rng(0))
+    assert len(exs) == 3
+    for e in exs:
+        assert e.x.shape == (7, 40, 40) and e.y.shape == (40, 40)
+        assert (e.y.numpy() < 0.5).sum() >= 200 and not (e.unseen & ~e.scored).any()
+        # the crop sits in the map: its truth is a window of occ
+        hits = [
+            (r, c)
+            for r in range(90 - 40 + 1)
+            for c in range(90 - 40 + 1)
+            if np.array_equal(occ[r : r + 40, c : c + 40], e.y.numpy() > 0.5)
+        ]
+        assert hits
+    names = list(tg.generated_maps())
+    assert len(names) == 100 and names[0].startswith("seedstream:")

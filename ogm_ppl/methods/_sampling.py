@@ -17,7 +17,7 @@ from typing import Any
 
 from ogm_ppl.io import atomic_write_text
 from ogm_ppl.methods._model import ModelParams
-from ogm_ppl.methods.params import Choice, DeltaName, Int, param
+from ogm_ppl.methods.params import DeltaName, Int, StartMap, param
 from ogm_ppl.methods.problem import MapProblem, MapResult, RunContext
 
 __all__ = ["INITS", "SamplingParams", "run_kernel"]
@@ -32,7 +32,9 @@ class SamplingParams(ModelParams):
     sweeps: int = param(100, Int(lo=1), "sweeps counted in the marginals")
     burn_in: int = param(0, Int(lo=0), "sweeps run before counting")
     chains: int = param(1, Int(lo=1), "independent chains, their marginals averaged")
-    init: str = param("ogm", Choice(*INITS), "starting map (initial_map: thresholded OGM, a prior draw, ...)")
+    init: str = param(
+        "ogm", StartMap(*INITS), "starting map (initial_map: thresholded OGM, a prior draw, a corpus guide's mode, ...)"
+    )
     init_delta: str = param("haehnel", DeltaName(), "update term of the 'ogm' starting map")
     checkpoint_every: int = param(10, Int(lo=1), "sweeps between checkpoints (with a checkpoint folder)")
     record: int = param(5, Int(lo=0), "scores of the running marginals recorded after burn-in")

@@ -169,6 +169,28 @@ class Choice(Kind):
         return " | ".join(self.options)
 
 
+class StartMap(Kind):
+    """A starting map's name: one of ``options``, or ``"guide:CORPUS"`` (the mode of the guide learned on a
+    corpus, :func:`~ogm_ppl.inference.variational.corpus_guide`)."""
+
+    def __init__(self, *options: str) -> None:
+        self.options = tuple(options)
+
+    def value(self, v):
+        if isinstance(v, str) and v.startswith("guide:"):
+            from ogm_ppl.inference.variational.amortised import corpus_guides
+
+            if v.removeprefix("guide:") not in corpus_guides():
+                raise _Bad(f"no guide learned on corpus {v.removeprefix('guide:')!r}; shipped: {corpus_guides()}")
+            return v
+        if v not in self.options:
+            raise _Bad(f"must be one of {', '.join(map(repr, self.options))} or 'guide:CORPUS', got {v!r}")
+        return v
+
+    def describe(self):
+        return " | ".join(self.options) + " | guide:CORPUS"
+
+
 class Text(Kind):
     """A non-empty string."""
 

@@ -57,7 +57,8 @@ def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: f
 
     ``init``: ``"ogm"`` — traditional OGM thresholded at the cell prior (Section 4.1.2; ``delta`` names the
     update term, ``threshold`` defaults to the mean prior occupancy or 0.5); ``"prior"`` — a draw from the
-    prior; ``"occupied"``; ``"free"``; or a ``K`` map.
+    prior; ``"occupied"``; ``"free"``; ``"guide:CORPUS"`` — the mode ``q_k > 1/2`` of the amortised guide
+    learned on a corpus (:func:`~ogm_ppl.inference.variational.corpus_guide`); or a ``K`` map.
     """
     K = model.num_cells
     if isinstance(init, str):
@@ -74,8 +75,12 @@ def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: f
             m = torch.ones(K, dtype=torch.float64)
         elif init == "free":
             m = torch.zeros(K, dtype=torch.float64)
+        elif init.startswith("guide:"):
+            from ogm_ppl.inference.variational.amortised import corpus_guide
+
+            m = (corpus_guide(init.removeprefix("guide:")).marginals(model) > 0.5).to(torch.float64)
         else:
-            raise ValueError(f"init must be 'ogm', 'prior', 'occupied', 'free' or a map, got {init!r}")
+            raise ValueError(f"init must be 'ogm', 'prior', 'occupied', 'free', 'guide:CORPUS' or a map, got {init!r}")
     else:
         m = torch.as_tensor(init).flatten().clone()
         m = model.check_maps(model.full_map(m) if m.shape != (K,) else m, what="init map").clone()
