@@ -34,12 +34,14 @@ Tables (every key optional unless marked *required*; defaults in brackets)::
                         outside its setting warns, and the warning is kept in the run's result],
                         sigma_cells [the dataset's]
       gibbs:            prior ["independent"; see ogm_ppl.priors.named], patch [1; L = 9 is [3, 3]],
-                        sweeps [100], burn_in [0], chains [1], init ["ogm"], init_delta ["haehnel"],
+                        sweeps [100], burn_in [0], chains [1], init ["ogm"; "prior", "free", "occupied",
+                        "guide:CORPUS": the mode of a corpus guide], init_delta ["haehnel"],
                         scan ["systematic"], update ["gibbs"], p_rand_patch [0.0], sigma_cells [the
                         dataset's], checkpoint_every [10], record [5] (F1 records of the running marginals)
       patch_map:        patch [[3, 3]], mode ["offline" | "online"], overlap [false],
                         prior ["independent"], sigma_cells [the dataset's]
-      also:             metropolis, vi, amortised, guided_gibbs, and the aliases p21, elfes, patch
+      amortised:        guide ["shipped"; "corpus:CORPUS": the guide learned on a corpus's plans; or a .npz]
+      also:             metropolis, vi, guided_gibbs, and the aliases p21, elfes, patch
     [metrics]           mask ["auto": "all" for simulated, "near_mapped" for logs], near_mapped_distance
                         [10.0] (cells), touched_only [true], thresholds [99: 0.01..0.99, or a list],
                         scores [["f1", "auc", "max_precision"]; also "nll_bits", "brier", "ece"]
