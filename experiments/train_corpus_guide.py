@@ -99,6 +99,17 @@ def _random_window(occ, known, window, rng) -> tuple[int, int] | None:
     return None
 
 
+def scanned(grid: Grid, scans, sigma: float, known: np.ndarray) -> tuple[torch.Tensor, np.ndarray, np.ndarray]:
+    """The guide's input for ``scans`` of ``grid`` (:func:`evidence_features`, no tile phase, ``C x H x W``),
+    the pinned cells and the unseen near-mapped cells (``H x W`` bool: known, within 10 cells of a reached
+    cell, not reached)."""
+    rays = raycast(grid, scans)
+    model = OccupancyModel(grid, rays, GaussianRange(sigma), IndependentPrior(0.5, grid.num_cells))
+    reached = rays.reached().reshape(grid.shape)
+    pinned = model.known_free.numpy().reshape(grid.shape)
+    return evidence_features(model, phase=(0, 0)), pinned, near_mapped_mask(reached, 10.0) & known & ~reached
+
+
 def make_example(plan, window: int, args, rng: np.random.Generator) -> Example | None:
     """One window of ``plan`` (a :class:`Plan`), scanned as the calibration
     experiment scans its test maps but with a fresh seed; ``None`` when the window holds fewer than 200 known
@@ -128,12 +139,7 @@ def make_example(plan, window: int, args, rng: np.random.Generator) -> Example |
         )
     except ValueError:  # no stop keeps the robot's clearance in this window: draw another
         return None
-    rays = raycast(grid, data.scans)
-    model = OccupancyModel(grid, rays, GaussianRange(args.sigma), IndependentPrior(0.5, grid.num_cells))
-    x = evidence_features(model, phase=(0, 0))
-    reached = rays.reached().reshape(grid.shape)
-    pinned = model.known_free.numpy().reshape(grid.shape)
-    unseen = near_mapped_mask(reached, 10.0) & kn & ~reached
+    x, pinned, unseen = scanned(grid, data.scans, args.sigma, kn)
     return Example(
         x=x,
         y=torch.from_numpy(truth.astype(np.float32)),
@@ -186,12 +192,7 @@ def scene_examples(plan: Plan, window: int, crops: int, args, rng: np.random.Gen
     data = stop_and_scan(
         occ, grid, route=route, beams=args.beams, max_range_cells=args.range_cells, sigma_cells=args.sigma, seed=seed
     )
-    rays = raycast(grid, data.scans)
-    model = OccupancyModel(grid, rays, GaussianRange(args.sigma), IndependentPrior(0.5, grid.num_cells))
-    x = evidence_features(model, phase=(0, 0))
-    reached = rays.reached().reshape(grid.shape)
-    pinned = model.known_free.numpy().reshape(grid.shape)
-    unseen = near_mapped_mask(reached, 10.0) & known & ~reached
+    x, pinned, unseen = scanned(grid, data.scans, args.sigma, known)
     H, W = occ.shape
     h, w = min(window, H), min(window, W)
     out = []
