@@ -41,9 +41,11 @@ table's training set from its recorded provenance (plan names checked against th
 corpus's seed streams), and refuses a test map that is in it (or shares a building with it), and any plan of a
 real-log building, before anything runs.
 
-Kernels. ``--kernel`` names an entry of :data:`KERNELS`: ``factory(model, patch, init) -> kernel`` (a
-:class:`~ogm_ppl.inference.mcmc.kernel.MapKernel` that :func:`~ogm_ppl.inference.run_gibbs` drives); another
-sampler (e.g. parallel tempering) plugs in by adding an entry.
+Kernels. ``--kernel`` names an entry of :data:`KERNELS`: ``factory(model, patch, init, args) -> kernel`` (a
+:class:`~ogm_ppl.inference.mcmc.kernel.MapKernel` that :func:`~ogm_ppl.inference.run_gibbs` drives): ``gibbs``
+(the default) or ``tempering``, parallel tempering whose every rung is that Gibbs sampler (``--rungs``, ``--beta-min``,
+``--temper``; the cold rung is scored, so the pooled marginals and R-hat are the posterior's). Another sampler plugs
+in by adding an entry.
 
 Outputs under ``--out`` (default ``out/calibration/``): ``calibration.json`` (settings, provenance, one row per
 test corpus, train corpus, map, prior and mask, with its reliability diagram), ``calibration_summary.json`` (the
@@ -86,10 +88,11 @@ from ogm_ppl.datasets.mapgen import generate_map
 from ogm_ppl.datasets.stop_and_scan import stop_and_scan
 from ogm_ppl.inference import CellGibbs, PatchGibbs, RunningStats, evidence_grid, run_gibbs
 from ogm_ppl.inference.mcmc.diagnostics import split_rhat
+from ogm_ppl.inference.mcmc.tempering import TEMPERS, ParallelTempering, geometric_ladder
 from ogm_ppl.io import atomic_write_text
 from ogm_ppl.metrics import Reliability, near_mapped_mask, prediction_scores, reliability
 from ogm_ppl.models import delta_by_name
-from ogm_ppl.priors.named import prior_by_name, prior_kinds, split_prior_name
+from ogm_ppl.priors.named import load_temper_params, prior_by_name, prior_kinds, split_prior_name
 from ogm_ppl.priors.tables import FITTED_DIR, available_tables
 
 TEST_CORPORA: tuple[str, ...] = ("generated", "houseexpo", "ipa", "dungeon")
@@ -113,6 +116,9 @@ RUN_KEYS = (
     "burn",
     "seed",
     "kernel",
+    "rungs",
+    "beta_min",
+    "temper",
     "patch",
 )
 
@@ -331,12 +337,28 @@ def default_patch(prior) -> tuple[int, int] | None:
     return None if hw == (1, 1) else hw
 
 
-def _gibbs(model, patch, init):
+def _gibbs(model, patch, init, args=None):
     return CellGibbs(model, init=init) if patch is None else PatchGibbs(model, patch, init=init)
 
 
-#: ``name -> factory(model, patch, init)``; ``patch`` ``None`` means single cells, ``init`` one of :data:`STARTS`
-KERNELS: dict[str, Callable] = {"gibbs": _gibbs}
+def _tempering(model, patch, init, args):
+    """Parallel tempering (:class:`~ogm_ppl.inference.mcmc.tempering.ParallelTempering`): ``args.rungs`` rungs of
+    a geometric ladder down to ``args.beta_min`` on the factor ``args.temper`` names, each rung the sampler
+    ``gibbs`` would use (cells, or patches of ``patch``), even-odd swaps; the cold rung's maps are scored."""
+    ladder = geometric_ladder(args.rungs, args.beta_min)
+    return ParallelTempering(
+        model,
+        ladder,
+        kernel="cell" if patch is None else "patch",
+        patch=patch or (3, 3),
+        temper=args.temper,
+        init=init,
+    )
+
+
+#: ``name -> factory(model, patch, init, args)``; ``patch`` ``None`` means single cells, ``init`` one of
+#: :data:`STARTS`, ``args`` the parsed command line (the sampler's own settings)
+KERNELS: dict[str, Callable] = {"gibbs": _gibbs, "tempering": _tempering}
 
 
 def _patch_overrides(items: Sequence[str]) -> dict[str, tuple[int, int] | None]:
@@ -417,8 +439,10 @@ def run_prior(scene: Scene, name: str, args, patch_override=None, tables=None) -
     shipped corpus); pooled marginals scored, split R-hat of the unseen cells. Returns
     ``{"scores": {mask: ...}, "seconds", "patch", "rhat_below", "rhat_max", ...}``, or ``{"skipped": reason}``
     when one update would weigh more than ``args.max_support`` configurations."""
+    kind, corpus, _, mod = split_prior_name(name)
+    if mod == "cal" and tables is None and kind not in load_temper_params(corpus).beta:
+        return {"skipped": f"no tempering exponent fitted for {kind} on {corpus} (experiments/fit_temper.py)"}
     prior = prior_by_name(name, scene.grid.shape, tables=tables)
-    kind = split_prior_name(name)[0]
     patch = patch_override[kind] if patch_override and kind in patch_override else default_patch(prior)
     n_support = support(prior, patch)
     if n_support > args.max_support:
@@ -429,7 +453,7 @@ def run_prior(scene: Scene, name: str, args, patch_override=None, tables=None) -
     marg, traces, secs = [], [], []
     for j, init in enumerate(STARTS):
         t0 = time.perf_counter()
-        kernel = make(model, patch, init)
+        kernel = make(model, patch, init, args)
         stats = RunningStats(model, trace_cells=unseen)
         run_gibbs(kernel, args.sweeps, stats, warmup=args.burn, seed=args.seed + 1000 * j, progress=False)
         marg.append(stats.marginals.numpy())
@@ -692,6 +716,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument("--burn", type=int, default=50, help="warm-up sweeps per chain")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--kernel", default="gibbs", choices=sorted(KERNELS), help="sampler (an entry of KERNELS)")
+    ap.add_argument("--rungs", type=int, default=6, help="tempering: rungs of the geometric ladder (cold one included)")
+    ap.add_argument("--beta-min", type=float, default=0.1, help="tempering: the hottest rung's exponent, in (0, 1)")
+    ap.add_argument("--temper", default="prior", choices=TEMPERS, help="tempering: the factor the ladder raises")
     ap.add_argument("--patch", nargs="*", default=[], help="per-kind patch override: KIND=RxC or KIND=1")
     ap.add_argument(
         "--max-support",
@@ -704,6 +731,11 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument("--no-figures", action="store_true")
     ap.add_argument("--quick", action="store_true", help="smoke run: 1 map of 48 cells per corpus, 3 priors")
     args = ap.parse_args(argv)
+    if args.kernel == "tempering":
+        try:
+            geometric_ladder(args.rungs, args.beta_min)
+        except ValueError as e:
+            ap.error(f"--rungs / --beta-min: {e}")
     if args.quick:
         args.plans, args.window, args.sweeps, args.burn = 1, 48, 40, 10
         args.generated_shape = 96
@@ -717,8 +749,6 @@ def parse_args(argv=None) -> argparse.Namespace:
 def default_priors(train: Sequence[str]) -> list[str]:
     """Every registered kind, then ``KIND@cal`` for each kind with a fitted tempering exponent on every
     training corpus (:func:`~ogm_ppl.priors.named.load_temper_params`)."""
-    from ogm_ppl.priors.named import load_temper_params
-
     kinds = list(prior_kinds())
     fitted = None
     for c in train:
@@ -737,7 +767,8 @@ def main(argv=None) -> dict:
     torch.set_num_threads(1)
     out = Path(args.out)
     path = out / "calibration.json"
-    settings = {k: v for k, v in vars(args).items() if k not in ("out", "fresh", "no_figures")}
+    own = () if args.kernel == "tempering" else ("rungs", "beta_min", "temper")  # only the sampler's own settings
+    settings = {k: v for k, v in vars(args).items() if k not in ("out", "fresh", "no_figures", *own)}
     rows, runs = _load_previous(path, settings, args.fresh)
     done = {_row_key(r) for r in rows}
     skipped: list[dict] = []

@@ -158,3 +158,60 @@ def test_diagonal_scores_each_corpus_with_its_own_priors_only(cal, tmp_path):
         ("ipa", "independent:ipa"),
         ("ipa", "traditional OGM (p21)"),
     ]
+
+
+def _box_scene(cal, args):
+    import numpy as np
+
+    truth = np.zeros((24, 24), dtype=bool)
+    truth[[0, -1], :] = truth[:, [0, -1]] = True
+    truth[12, :14] = True
+    return cal.make_scene(cal.TestMap("generated", "box", "box", truth, np.ones_like(truth), 0.05), args)
+
+
+def test_tempering_kernel_scores_the_cold_rung_of_its_ladder(cal, monkeypatch):
+    from ogm_ppl.inference.mcmc.tempering import ParallelTempering
+
+    args = cal.parse_args([*TINY, "--kernel", "tempering", "--rungs", "3", "--beta-min", "0.25", "--temper", "both"])
+    built = []
+
+    def spy(model, patch, init, a):
+        kernel = cal._tempering(model, patch, init, a)
+        built.append((patch, kernel))
+        return kernel
+
+    monkeypatch.setitem(cal.KERNELS, "tempering", spy)
+    scene = _box_scene(cal, args)
+    for name, patch in (("mrf:houseexpo", None), ("patch3:houseexpo", (3, 3))):
+        built.clear()
+        res = cal.run_prior(scene, name, args)
+        assert len(built) == len(cal.STARTS) == len(res["seconds_per_chain"])
+        for p, kernel in built:
+            assert p == patch and isinstance(kernel, ParallelTempering)
+            assert list(kernel.betas) == pytest.approx([1.0, 0.5, 0.25]) and kernel.temper == "both"
+        unseen = res["scores"]["unseen"]
+        assert unseen["cells"] == res["rhat_cells"] == int(scene.masks["unseen"].sum()) and unseen["nll_bits"] > 0
+    with pytest.raises(SystemExit):
+        cal.parse_args([*TINY, "--kernel", "tempering", "--beta-min", "1.5"])
+    with pytest.raises(SystemExit):
+        cal.parse_args([*TINY, "--kernel", "tempering", "--rungs", "0"])
+
+
+def test_tempering_settings_are_recorded_only_with_its_kernel(cal, tmp_path):
+    argv = [*TINY[:2], "--train", "houseexpo", "--priors", "independent", *TINY[9:], "--no-figures"]
+    def settings(name, *extra):
+        cal.main([*argv, *extra, "--out", str(tmp_path / name)])
+        return json.loads((tmp_path / name / "calibration.json").read_text())["settings"]
+
+    assert not {"rungs", "beta_min", "temper"} & set(settings("gibbs"))
+    got = settings("tempering", "--kernel", "tempering", "--rungs", "2")
+    assert got["kernel"] == "tempering" and got["rungs"] == 2 and got["temper"] == "prior"
+
+
+def test_a_tempered_kind_without_a_fitted_exponent_is_skipped(cal):
+    from ogm_ppl.priors.named import load_temper_params
+
+    assert "patch5" not in load_temper_params("ipa").beta
+    args = cal.parse_args(TINY)
+    res = cal.run_prior(_box_scene(cal, args), "patch5:ipa@cal", args)
+    assert "no tempering exponent fitted for patch5 on ipa" in res["skipped"]
