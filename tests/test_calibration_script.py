@@ -199,6 +199,7 @@ def test_tempering_kernel_scores_the_cold_rung_of_its_ladder(cal, monkeypatch):
 
 def test_tempering_settings_are_recorded_only_with_its_kernel(cal, tmp_path):
     argv = [*TINY[:2], "--train", "houseexpo", "--priors", "independent", *TINY[9:], "--no-figures"]
+
     def settings(name, *extra):
         cal.main([*argv, *extra, "--out", str(tmp_path / name)])
         return json.loads((tmp_path / name / "calibration.json").read_text())["settings"]
