@@ -24,21 +24,26 @@ class AmortisedParams:
     )
 
 
-def load_guide(name: str, model):
-    """The guide ``name`` (``"shipped"``, ``"corpus:CORPUS"`` or a path) for ``model``."""
+def load_guide(name: str, model, noise_known: bool = True):
+    """The guide ``name`` (``"shipped"``, ``"corpus:CORPUS"`` or a path) for ``model``, its sensor setting
+    checked (:meth:`~ogm_ppl.inference.variational.AmortisedGuide.check_setting`; ``noise_known=False``: the
+    model's range noise is a default, not the data's, and only the range is compared)."""
     from ogm_ppl.inference.variational.amortised import AmortisedGuide, corpus_guide, shipped_guide
 
     if name == "shipped":
-        return shipped_guide(model)
-    if name.startswith("corpus:"):
-        return corpus_guide(name.removeprefix("corpus:"), model)
-    return AmortisedGuide.load(name, model)
+        guide = shipped_guide(model)
+    elif name.startswith("corpus:"):
+        guide = corpus_guide(name.removeprefix("corpus:"), model)
+    else:
+        guide = AmortisedGuide.load(name, model)
+    guide.check_setting(model, noise_known=noise_known)
+    return guide
 
 
 @register_method("amortised", AmortisedParams)
 def amortised(params: AmortisedParams, problem: MapProblem, ctx: RunContext) -> MapResult:
     """The amortised guide's one-pass map q(m_k = 1 | z) (a network of the evidence features)."""
     model = problem.model()
-    guide = load_guide(params.guide, model)
+    guide = load_guide(params.guide, model, noise_known=problem.sigma_cells is not None)
     q = guide.marginals(model).numpy()
     return MapResult(q, problem.rays.reached(), {"ray_cells": int(problem.rays.nnz), "trained_for": guide.trained_for})

@@ -23,7 +23,11 @@ __all__ = ["GuidedGibbsParams", "guided_gibbs"]
 
 @dataclass(frozen=True)
 class GuidedGibbsParams(SamplingParams):
-    guide: str = param("shipped", GuideFile(), "the proposing guide: 'shipped' or a saved guide (.npz)")
+    guide: str = param(
+        "shipped",
+        GuideFile(),
+        "the proposing guide: 'shipped', 'corpus:CORPUS' (learned on a corpus's plans) or a saved guide (.npz)",
+    )
     block: object = param([6, 6], Block(), "proposal block: [h, w] windows of a tiling, or 'all'")
     p_guide: float = param(0.5, Float(0, 1), "probability that a sweep is a pass of guide moves")
     start: str = param(
@@ -57,7 +61,7 @@ def guided_gibbs(params: GuidedGibbsParams, problem: MapProblem, ctx: RunContext
     block = patch_arg(params.block)
     kernel = GuidedGibbs(
         base,
-        load_guide(params.guide, model),
+        load_guide(params.guide, model, noise_known=params.sigma_cells is not None or problem.sigma_cells is not None),
         block=block,
         p_guide=params.p_guide,
         init=params.start,

@@ -178,10 +178,10 @@ class StartMap(Kind):
 
     def value(self, v):
         if isinstance(v, str) and v.startswith("guide:"):
-            from ogm_ppl.inference.variational.amortised import corpus_guides
+            from ogm_ppl.inference.variational.amortised import corpus_guides, unknown_corpus_message
 
             if v.removeprefix("guide:") not in corpus_guides():
-                raise _Bad(f"no guide learned on corpus {v.removeprefix('guide:')!r}; shipped: {corpus_guides()}")
+                raise _Bad(unknown_corpus_message(v.removeprefix("guide:")))
             return v
         if v not in self.options:
             raise _Bad(f"must be one of {', '.join(map(repr, self.options))} or 'guide:CORPUS', got {v!r}")
@@ -356,25 +356,27 @@ class GuideFile(Kind):
     """An amortised guide: ``"shipped"`` (``ogm_ppl/fitted/guide_amortised.npz``), ``"corpus:CORPUS"`` (the
     guide learned on a corpus's training plans, :func:`~ogm_ppl.inference.variational.corpus_guide`) or the
     path of a guide saved by :meth:`~ogm_ppl.inference.variational.AmortisedGuide.save` (``~`` and ``$VARS``
-    expanded)."""
+    expanded). A bare corpus name that is no file is refused with a hint at ``"corpus:CORPUS"``."""
 
     def value(self, v):
         name = Text().value(v)
         if name == "shipped":
             return name
-        if name.startswith("corpus:"):
-            from ogm_ppl.inference.variational.amortised import corpus_guides
+        from ogm_ppl.inference.variational.amortised import corpus_guides, unknown_corpus_message
 
+        if name.startswith("corpus:"):
             if name.removeprefix("corpus:") not in corpus_guides():
-                raise _Bad(f"no guide learned on corpus {name.removeprefix('corpus:')!r}; shipped: {corpus_guides()}")
+                raise _Bad(unknown_corpus_message(name.removeprefix("corpus:")))
             return name
         path = Path(os.path.expandvars(os.path.expanduser(name)))
         if not path.is_file():
-            raise _Bad(f"no such guide file: {path}")
+            corpus = next((c for c in (name, name.lower()) if c in corpus_guides()), None)
+            hint = f"did you mean 'corpus:{corpus}'?" if corpus else f"a guide is {self.describe()}"
+            raise _Bad(f"no such guide file: {path}; {hint}")
         return str(path)
 
     def describe(self):
-        return "'shipped', 'corpus:CORPUS' or a guide .npz"
+        return "'shipped', 'corpus:CORPUS' or the path of a guide .npz"
 
 
 def param(default: Any, kind: Kind, doc: str) -> Any:

@@ -147,6 +147,44 @@ def test_bad_values_name_the_key(name, values, key, message):
     assert e.value.key == key and str(e.value).startswith(f"{key}: ") and message in str(e.value), str(e.value)
 
 
+@pytest.mark.parametrize("name", ["amortised", "guided_gibbs"])
+def test_a_guide_option_names_its_three_forms_and_hints_at_a_corpus(name):
+    """``guide`` takes 'shipped', the path of an .npz or 'corpus:CORPUS' (its help says so); a bare corpus name
+    that is no file is refused with the hint 'corpus:CORPUS'."""
+    method = get_method(name)
+    (line,) = [x for x in method.describe() if x.strip().startswith("guide = ")]
+    assert "'shipped'" in line and ".npz" in line and "'corpus:CORPUS'" in line, line
+    with pytest.raises(ParamError, match=r"^guide: no such guide file: houseexpo; did you mean 'corpus:houseexpo'\?$"):
+        method.parse({"guide": "houseexpo"})
+    with pytest.raises(ParamError, match="did you mean 'corpus:ipa'"):
+        method.parse({"guide": "IPA"})
+    with pytest.raises(ParamError, match=r"no such guide file: nothing\.npz; a guide is 'shipped', 'corpus:CORPUS'"):
+        method.parse({"guide": "nothing.npz"})
+    with pytest.raises(ParamError, match=r"no guide learned on corpus 'Dungeon' \(did you mean 'dungeon'\?\)"):
+        method.parse({"guide": "corpus:Dungeon"})
+    assert method.parse({"guide": "corpus:houseexpo"}).guide == "corpus:houseexpo"
+
+
+def test_the_amortised_method_checks_the_guides_range_alone_when_the_noise_is_unknown():
+    """A corpus guide's sensor setting is checked when a method loads it: the model's range noise only when
+    the data or the method gives it (a default stands in otherwise)."""
+    import warnings
+
+    from ogm_ppl.inference.variational import FittedSettingWarning
+
+    truth = np.zeros((40, 40), bool)
+    truth[[0, -1], :] = truth[:, [0, -1]] = True
+    grid = Grid(truth.shape, resolution=0.05)
+    data = stop_and_scan(truth, grid, num_poses=2, beams=90, max_range_cells=75, sigma_cells=1.0, seed=0)
+    method = get_method("amortised")
+    params = method.parse({"guide": "corpus:generated"})  # trained for F = 75 cells, sigma = 3 cells
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FittedSettingWarning)
+        method.run(params, MapProblem(grid, data.scans), RunContext(seed=0))
+    with pytest.warns(FittedSettingWarning, match=r"sigma 1 cells is not within 25% of 3"):
+        method.run(params, MapProblem(grid, data.scans, sigma_cells=1.0), RunContext(seed=0))
+
+
 def test_command_line_strings_are_parsed_by_kind():
     m = get_method("guided_gibbs")
     p = m.parse(

@@ -40,9 +40,11 @@ from ogm_ppl.inference._kernels.cells import first_hits, gather_as_float
 from ogm_ppl.inference.mcmc.fingerprint import digest
 from ogm_ppl.models.occupancy import OccupancyModel
 
-__all__ = ["KernelStateError", "MapKernel", "initial_map", "region_cells"]
+__all__ = ["KernelStateError", "MapKernel", "check_start", "initial_map", "region_cells"]
 
 SCANS = ("random", "permutation", "systematic")
+#: the starting maps :func:`initial_map` knows by name (besides ``"guide:CORPUS"``)
+START_MAPS = ("ogm", "prior", "occupied", "free")
 
 
 def ogm_start_threshold(prior) -> float:
@@ -50,6 +52,22 @@ def ogm_start_threshold(prior) -> float:
     occupancy (``sigmoid`` of its cell log-odds where it has them), else its ``mean_occupancy``, else 0.5."""
     lo = prior.cell_log_odds()
     return float(torch.sigmoid(lo).mean()) if lo is not None else float(getattr(prior, "mean_occupancy", 0.5))
+
+
+def check_start(init) -> None:
+    """Refuse (:class:`ValueError`) a starting map :func:`initial_map` would refuse by its name: a string
+    other than :data:`START_MAPS`, or ``"guide:CORPUS"`` for a corpus with no shipped guide (checked by name,
+    the guide is not loaded). Maps are checked against the model when used."""
+    if not isinstance(init, str):
+        return
+    if init.startswith("guide:"):
+        from ogm_ppl.inference.variational.amortised import corpus_guides, unknown_corpus_message
+
+        corpus = init.removeprefix("guide:")
+        if corpus not in corpus_guides():
+            raise ValueError(f"init {init!r}: {unknown_corpus_message(corpus)}")
+    elif init not in START_MAPS:
+        raise ValueError(f"init must be 'ogm', 'prior', 'occupied', 'free', 'guide:CORPUS' or a map, got {init!r}")
 
 
 def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: float | None = None) -> torch.Tensor:
@@ -61,6 +79,7 @@ def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: f
     learned on a corpus (:func:`~ogm_ppl.inference.variational.corpus_guide`); or a ``K`` map.
     """
     K = model.num_cells
+    check_start(init)
     if isinstance(init, str):
         if init == "ogm":
             from ogm_ppl.inference.log_odds.maps import evidence_grid
@@ -73,14 +92,12 @@ def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: f
             m = model.prior.sample().to(torch.float64)
         elif init == "occupied":
             m = torch.ones(K, dtype=torch.float64)
-        elif init == "free":
-            m = torch.zeros(K, dtype=torch.float64)
         elif init.startswith("guide:"):
             from ogm_ppl.inference.variational.amortised import corpus_guide
 
             m = (corpus_guide(init.removeprefix("guide:")).marginals(model) > 0.5).to(torch.float64)
-        else:
-            raise ValueError(f"init must be 'ogm', 'prior', 'occupied', 'free', 'guide:CORPUS' or a map, got {init!r}")
+        else:  # "free": check_start refused any other name
+            m = torch.zeros(K, dtype=torch.float64)
     else:
         m = torch.as_tensor(init).flatten().clone()
         m = model.check_maps(model.full_map(m) if m.shape != (K,) else m, what="init map").clone()
@@ -130,7 +147,7 @@ class MapKernel(MCMCKernel):
     Args:
         model: an :class:`~ogm_ppl.OccupancyModel`.
         scan: ``"systematic"``, ``"permutation"`` or ``"random"`` (the order of the updates in a sweep).
-        init: the starting map, see :func:`initial_map`.
+        init: the starting map, see :func:`initial_map`; a name is checked here (:func:`check_start`).
         delta: the OGM update term for ``init="ogm"``.
         region: ``None`` or the cells to sample (:func:`region_cells`); the others keep their values, so
             the chain samples ``p(m_R' | m_rest, z)`` with ``R'`` = :meth:`sampled_cells`.
@@ -144,6 +161,7 @@ class MapKernel(MCMCKernel):
     ) -> None:
         if scan not in SCANS:
             raise ValueError(f"scan must be one of {SCANS}, got {scan!r}")
+        check_start(init)
         self.model = model
         self.region = region_cells(model, region)  # sorted cell indices, or None: every cell
         latent = model.latent.numpy().astype(np.int64)

@@ -47,6 +47,7 @@ from __future__ import annotations
 import json
 import math
 import os
+import warnings
 from dataclasses import asdict, dataclass
 from functools import lru_cache
 from pathlib import Path
@@ -77,6 +78,7 @@ __all__ = [
     "corpus_guide",
     "corpus_guide_path",
     "corpus_guides",
+    "unknown_corpus_message",
     "SHIPPED_GUIDE",
     "Scene",
     "random_scene",
@@ -274,7 +276,8 @@ class GuideNet(nn.Module):
 
 # --------------------------------------------------------------------------------------- the guide
 class GuideFileError(ValueError):
-    """A guide artefact that cannot be loaded: the message names the path and what is wrong."""
+    """A guide artefact that cannot be loaded (the message names the path and what is wrong), or a corpus
+    with no shipped guide (:func:`corpus_guide`)."""
 
 
 class AmortisedGuide(PyroModule):
@@ -315,6 +318,7 @@ class AmortisedGuide(PyroModule):
         to_pyro_module_(net)
         self.net = net
         self._cache: tuple | None = None
+        self._checked: OccupancyModel | None = None
         self.trained_for: dict = {}
 
     @property
@@ -343,10 +347,59 @@ class AmortisedGuide(PyroModule):
         """Logits of every cell, ``K`` float64 (``... x K`` for a batch of readings); differentiable in
         the weights. Pinned cells hold their (unused) network output."""
         model = self._model(model)
+        if self._checked is not model:
+            self.check_setting(model)
         x = self.features(model, readings)
         batch = x.shape[:-3]
         out = self.net(x.reshape(-1, *x.shape[-3:]))
         return out.reshape(*batch, model.num_cells).to(torch.float64)
+
+    def check_setting(self, model: OccupancyModel, *, noise_known: bool = True) -> bool:
+        """Whether ``model``'s sensor lies inside the setting the guide was trained for, as its
+        ``trained_for["scans"]`` records it (a corpus guide's ``range_cells`` and ``sigma_cells``); warns
+        (:class:`~ogm_ppl.inference.variational.FittedSettingWarning`) if not. The rules of the update terms'
+        check: the rays' median maximum range in cells within a factor :data:`F_FACTOR` of ``range_cells``,
+        a sensor's scalar ``sigma`` (cells) within :data:`SIGMA_TOLERANCE` of ``sigma_cells``
+        (``noise_known=False``: the range alone). Only what both record is compared: a guide without that
+        record passes. :meth:`cell_logits` checks each model once."""
+        from ogm_ppl.models.delta_setting import F_FACTOR, SIGMA_TOLERANCE, FittedSettingWarning
+
+        self._checked = model
+        scans = self.trained_for.get("scans")
+        if not isinstance(scans, dict):
+            return True
+        F_fit, sigma_fit = _positive(scans.get("range_cells")), _positive(scans.get("sigma_cells"))
+        bad, fit, used, flags = [], [], [], []
+        r = model.rays
+        if F_fit is not None and r.num_rays:
+            F = float(np.median(r.max_range_cells()))
+            fit.append(f"F = {F_fit:g} cells")
+            used.append(f"F = {F:g} cells")
+            flags.append(f"--range-cells {F:g}")
+            if F > 0 and max(F / F_fit, F_fit / F) > F_FACTOR:
+                bad.append(f"range F {F:g} cells is not within a factor {F_FACTOR:g} of {F_fit:g}")
+        sigma = getattr(model.sensor, "sigma", None)
+        if noise_known and sigma_fit is not None and sigma is not None and torch.as_tensor(sigma).numel() == 1:
+            s = float(torch.as_tensor(sigma))
+            fit.append(f"sigma = {sigma_fit:g} cells")
+            used.append(f"sigma = {s:g} cells")
+            flags.append(f"--sigma {s:g}")
+            if abs(s - sigma_fit) > SIGMA_TOLERANCE * sigma_fit:
+                bad.append(f"sigma {s:g} cells is not within {SIGMA_TOLERANCE:.0%} of {sigma_fit:g}")
+        if not bad:
+            return True
+        corpus = self.trained_for.get("corpus")
+        name = f"the guide learned on corpus {corpus!r}" if isinstance(corpus, str) else "this guide"
+        warnings.warn(
+            FittedSettingWarning(
+                f"{name} was trained for {', '.join(fit)} but is used at {', '.join(used)} ({'; '.join(bad)}); "
+                f"outside its setting its marginals can be far off. Train one for this sensor: python "
+                f"experiments/train_corpus_guide.py --corpus {corpus if isinstance(corpus, str) else 'C'} "
+                f"{' '.join(flags)}"
+            ),
+            stacklevel=2,
+        )
+        return False
 
     def latent_logits(self, model: OccupancyModel | None = None, readings: torch.Tensor | None = None) -> torch.Tensor:
         """Logits of the latent cells, ``L`` (``... x L``), in ``model.latent`` order."""
@@ -459,12 +512,19 @@ class AmortisedGuide(PyroModule):
             raise GuideFileError(f"{path}: a guide of another architecture ({'; '.join(diff)})")
         self._set_weights(state)
         self.trained_for = meta
+        self._checked = None
 
     def _set_weights(self, state: dict[str, torch.Tensor]) -> None:
         with torch.no_grad():
             for k, v in self.net.state_dict().items():
                 v.copy_(state[k])  # in place: the Pyro param store keeps pointing at the same tensors
         self._cache = None
+
+
+def _positive(v) -> float | None:
+    """A recorded positive number as a float, else ``None``."""
+    ok = isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) and v > 0
+    return float(v) if ok else None
 
 
 def _read_artefact(path: Path) -> tuple[GuideArchitecture, dict[str, torch.Tensor], dict]:
@@ -570,6 +630,23 @@ def corpus_guides() -> list[str]:
     return sorted(p.stem.removeprefix("guide_") for p in SHIPPED_GUIDE.parent.glob("guide_*.npz") if p != SHIPPED_GUIDE)
 
 
+def unknown_corpus_message(corpus: str) -> str:
+    """Why ``corpus`` names no shipped corpus guide: the corpora that have one (names are case-sensitive: a
+    hint when the lower-case name is one) and how to train one. :func:`corpus_guide`, ``init="guide:CORPUS"``
+    and the methods' options say it alike.
+
+    >>> unknown_corpus_message("HouseExpo")  # doctest: +ELLIPSIS
+    "no guide learned on corpus 'HouseExpo' (did you mean 'houseexpo'?); shipped: ..., houseexpo, ..."
+    """
+    shipped = corpus_guides()
+    low = corpus.lower() if isinstance(corpus, str) else None
+    hint = f" (did you mean {low!r}?)" if low != corpus and low in shipped else ""
+    return (
+        f"no guide learned on corpus {corpus!r}{hint}; shipped: {', '.join(shipped)} "
+        "(experiments/train_corpus_guide.py --corpus C trains one)"
+    )
+
+
 def corpus_guide(corpus: str, model: OccupancyModel | None = None) -> AmortisedGuide:
     r"""The guide trained on the training plans of a floor-plan corpus (``experiments/train_corpus_guide.py``):
     windows of the plans the corpus's prior tables were learned from, scanned by the stop-and-scan simulator,
@@ -581,12 +658,12 @@ def corpus_guide(corpus: str, model: OccupancyModel | None = None) -> AmortisedG
     with a receptive field of ``1 + 2 * sum(dilations)`` cells (Chapter 5's question, what a map predicts of the
     cells no ray reached, answered by a network instead of a table). Its ``trained_for`` names the corpus, the
     SHA-256 of its training plans' names and the sensor it was trained for (3 stops x 90 beams, 75-cell range
-    by default); evaluate it on held-out plans only. Unknown corpus: :class:`GuideFileError` listing those shipped.
+    by default); evaluate it on held-out plans only, with that sensor (:meth:`AmortisedGuide.check_setting` warns
+    otherwise). Unknown corpus: :class:`GuideFileError` (:func:`unknown_corpus_message`).
     """
-    path = corpus_guide_path(corpus)
-    if not path.is_file():
-        raise GuideFileError(f"{path}: no guide learned on corpus {corpus!r}; shipped: {', '.join(corpus_guides())}")
-    return AmortisedGuide.load(path, model)
+    if corpus not in corpus_guides():
+        raise GuideFileError(unknown_corpus_message(corpus))
+    return AmortisedGuide.load(corpus_guide_path(corpus), model)
 
 
 # --------------------------------------------------------------------------------------- use (b)

@@ -248,6 +248,37 @@ def test_bad_arguments():
         MetropolisCell(model, proposal="endpoint", scan="systematic")
 
 
+@pytest.mark.parametrize("kernel", ["cell", "patch", "tempering"])
+def test_a_start_name_is_checked_when_the_kernel_is_built(kernel, monkeypatch):
+    """A named start that initial_map would refuse, or 'guide:CORPUS' of a corpus with no shipped guide, is
+    refused by the constructor (the message of corpus_guide), without loading a guide."""
+    from ogm_ppl.inference.mcmc.tempering import ParallelTempering
+    from ogm_ppl.inference.variational.amortised import AmortisedGuide, unknown_corpus_message
+
+    def make(init):
+        if kernel == "cell":
+            return CellGibbs(model, init=init)
+        if kernel == "patch":
+            return PatchGibbs(model, 2, init=init)
+        return ParallelTempering(model, [1.0, 0.5], init=init)
+
+    model = model_1d()
+    with pytest.raises(ValueError, match="init must be 'ogm', 'prior', 'occupied', 'free', 'guide:CORPUS'"):
+        make("zeros")
+    with pytest.raises(ValueError) as e:
+        make("guide:nope")
+    assert str(e.value) == f"init 'guide:nope': {unknown_corpus_message('nope')}"
+    with pytest.raises(ValueError, match="did you mean 'houseexpo'"):
+        make("guide:HouseExpo")
+
+    def no_load(*a, **k):
+        raise AssertionError("a guide was loaded at construction")
+
+    monkeypatch.setattr(AmortisedGuide, "load", classmethod(no_load))
+    assert make("guide:houseexpo").init == "guide:houseexpo"
+    make(torch.zeros(model.num_cells))  # a map is checked when used
+
+
 def test_chains_diagnostics():
     from ogm_ppl.inference.mcmc.diagnostics import kl_trace, run_chains
 

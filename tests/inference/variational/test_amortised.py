@@ -29,9 +29,11 @@ from ogm_ppl.priors import IndependentPrior
 from ogm_ppl.priors.named import prior_by_name
 
 
-def small_model(seed=0, shape=(12, 10), poses=2, prior=None):
+def small_model(seed=0, shape=(12, 10), poses=2, prior=None, max_range=6.0, sensor=None):
     prior = prior if prior is not None else prior_by_name("patch3:generated", shape)
-    scene = random_scene(prior, shape, poses, beams=36, max_range_cells=6.0, rng=np.random.default_rng(seed))
+    scene = random_scene(
+        prior, shape, poses, beams=36, max_range_cells=max_range, sensor=sensor, rng=np.random.default_rng(seed)
+    )
     m0 = scene.model()
     gen = torch.Generator().manual_seed(seed)
     truth = m0.prior.sample_given_free(m0.known_free, (), generator=gen)
@@ -287,12 +289,75 @@ def test_an_unknown_corpus_guide_is_refused_with_the_list():
         GuideFile().value("corpus:nowhere")
 
 
+def test_one_message_names_the_shipped_corpora_and_the_case_sensitive_name():
+    """corpus_guide, the start map option and the guide option refuse an unknown corpus with one message: the
+    name (no file path), the shipped corpora, a hint for a name in other case, and how to train one."""
+    from ogm_ppl.inference.variational.amortised import corpus_guide, corpus_guides, unknown_corpus_message
+    from ogm_ppl.methods.params import GuideFile, StartMap, _Bad
+
+    assert {"dungeon", "generated", "houseexpo", "ipa"} <= set(corpus_guides())
+    msg = unknown_corpus_message("nope")
+    assert msg == (
+        f"no guide learned on corpus 'nope'; shipped: {', '.join(corpus_guides())} "
+        "(experiments/train_corpus_guide.py --corpus C trains one)"
+    )
+    with pytest.raises(GuideFileError) as e:
+        corpus_guide("nope")
+    assert str(e.value) == msg and isinstance(e.value, ValueError)
+    with pytest.raises(_Bad) as b:
+        StartMap("ogm").value("guide:nope")
+    assert str(b.value) == msg
+    with pytest.raises(_Bad) as b:
+        GuideFile().value("corpus:nope")
+    assert str(b.value) == msg
+    with pytest.raises(GuideFileError, match=r"^no guide learned on corpus 'HouseExpo' \(did you mean 'houseexpo'\?\)"):
+        corpus_guide("HouseExpo")
+    assert "did you mean" not in unknown_corpus_message("nope") + unknown_corpus_message("dungeon2")
+    with pytest.raises(GuideFileError, match="'amortised'"):  # the shipped guide of Section 2.6 is no corpus's
+        corpus_guide("amortised")
+
+
+def test_a_corpus_guide_warns_once_outside_the_sensor_it_was_trained_for():
+    """A corpus guide records its sensor (F = 75 cells, sigma = 1 cell for houseexpo): a model far from it
+    (range beyond a factor 2, sigma beyond 25 %) warns once, naming both values and how to train one; inside,
+    or with a guide that records no sensor, it is silent."""
+    import warnings
+
+    from ogm_ppl.inference.variational import FittedSettingWarning
+    from ogm_ppl.inference.variational.amortised import corpus_guide
+
+    guide = corpus_guide("houseexpo")
+    prior = IndependentPrior(0.5, 16 * 14)
+    _, near, _, _ = small_model(1, shape=(16, 14), prior=prior, max_range=50.0, sensor=GaussianRange(1.2))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FittedSettingWarning)
+        guide.marginals(near)
+        assert guide.check_setting(near)
+        shipped_guide().marginals(near)  # records no corpus sensor
+    _, short, _, _ = small_model(1, shape=(16, 14), prior=prior, max_range=6.0)
+    with pytest.warns(FittedSettingWarning) as rec:
+        guide.marginals(short)
+        guide.marginals(short)
+        guide_initial_map(guide, short)
+    assert len(rec) == 1
+    text = str(rec[0].message)
+    assert "'houseexpo' was trained for F = 75 cells, sigma = 1 cells but is used at F = 6 cells" in text
+    assert "factor 2" in text and "python experiments/train_corpus_guide.py --corpus houseexpo --range-cells 6" in text
+    _, noisy, _, _ = small_model(1, shape=(16, 14), prior=prior, max_range=75.0, sensor=GaussianRange(3.0))
+    with pytest.warns(FittedSettingWarning, match=r"sigma 3 cells is not within 25% of 1.*--sigma 3"):
+        assert not guide.check_setting(noisy)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", FittedSettingWarning)
+        assert guide.check_setting(noisy, noise_known=False)  # the range alone
+
+
 def test_a_chain_starts_from_a_corpus_guides_mode():
     from ogm_ppl.inference.mcmc.kernel import initial_map
     from ogm_ppl.inference.variational.amortised import corpus_guide
     from ogm_ppl.methods.params import StartMap, _Bad
 
-    _, model, _, _ = small_model(3, shape=(16, 14), poses=2, prior=IndependentPrior(0.5, 16 * 14))
+    # the houseexpo guide's sensor: F = 75 cells, sigma = 1 cell
+    _, model, _, _ = small_model(3, shape=(16, 14), poses=2, prior=IndependentPrior(0.5, 16 * 14), max_range=75.0)
     m = initial_map(model, "guide:houseexpo")
     want = (corpus_guide("houseexpo").marginals(model) > 0.5).to(torch.float64)
     assert torch.equal(m, want) and not m[model.known_free].any()
