@@ -768,6 +768,37 @@ def _active_d0(doc: dict) -> Table:
     )
 
 
+def _experiment_conditions(doc: dict) -> Table:
+    """An experiment's scores per condition (e.g. each pose fraction of one log), one row per algorithm: best
+    F1 / ROC AUC / touched-cell best F1 on the mask, one column per condition (its share of the readings),
+    and the mean seconds of one run."""
+    pooled = doc["pooled"]
+    conds = list(dict.fromkeys(p["condition"] for p in pooled))
+    frac = {p["condition"]: p["measurement_fraction"] for p in pooled}
+    secs: dict[str, list[float]] = {}
+    for r in doc.get("runs", []):
+        secs.setdefault(r["algorithm"], []).append(float(r["seconds"]))
+    rows = []
+    for a in dict.fromkeys(p["algorithm"] for p in pooled):
+        cells = []
+        for c in conds:
+            p = next((p for p in pooled if p["condition"] == c and p["algorithm"] == a), None)
+            t = (p or {}).get("touched") or {}
+            cells.append(
+                "–"
+                if p is None
+                else f"{_f(p['mask'].get('best_f1'))} / {_f(p['mask'].get('auc'))} / {_f(t.get('best_f1'))}"
+            )
+        s = secs.get(a)
+        rows.append([a, *cells, _f(sum(s) / len(s), 1) if s else "–"])
+    return Table(
+        caption=f"{doc['experiment']}: best F1 / ROC AUC / best F1 on the touched cells, per condition",
+        header=["algorithm", *(f"{100 * frac[c]:.3g} % of the readings" for c in conds), "s / run"],
+        rows=rows,
+        provenance=doc["provenance"],
+    )
+
+
 #: table name -> (snapshot name, builder)
 TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "active_d0": ("active_d0", _active_d0),
@@ -783,6 +814,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "calibration_guides": ("calibration_guides", _calibration_targets),
     "calibration_guides_cross": ("calibration_guides", _calibration_cross),
     "headline": ("headline", _headline),
+    "intel_guide": ("intel_guide", _experiment_conditions),
     "simulated": ("headline", _simulated),
     "table_3_1": ("table_3_1", _table_3_1),
     "table_6_4_errors": ("table_6_4_errors", _error_split),
