@@ -33,6 +33,9 @@ class MapPrior:
     """Base class of priors over binary maps of ``num_cells`` cells."""
 
     num_cells: int
+    #: whether some map has zero mass (``log_prob`` ``-inf``): the unsmoothed count tables; a kernel warns
+    #: (:class:`~ogm_ppl.inference.mcmc.kernel.MasslessStartWarning`) when it starts from such a map
+    can_be_zero: bool = False
 
     def log_prob(self, maps: torch.Tensor) -> torch.Tensor:  # pragma: no cover - interface
         """``log p(m)`` for maps of shape ``... x K`` (0/1 values) -> ``...``."""

@@ -51,6 +51,7 @@ class BorderPatchPrior(LocalMapPrior):
     """
 
     normalised = False
+    can_be_zero = True  # a (border, inner) pair never counted has mass 0
 
     def __init__(
         self,

@@ -105,6 +105,7 @@ class PatchTablePrior(LocalMapPrior):
         if mass is not None:
             c, p = truncate_mass(c, p, float(mass))
         self.codes, self.probs = c, p
+        self.can_be_zero = len(c) < 2**L  # a configuration the table never counted has mass 0
         origin = (0, int(origin)) if np.isscalar(origin) else tuple(int(o) for o in origin)  # type: ignore[arg-type]  # numpy's isscalar TypeGuard narrows to generic | complex | bytes
         self.origin = origin
         geo = tiling(self.rows, self.cols, self.patch, (0, 0), origin)

@@ -46,6 +46,7 @@ class TemperedPrior(MapPrior):
         self.num_cells = base.num_cells
         #: ``log_prob`` is normalised only at ``beta = 1`` (and when the base's is)
         self.normalised = bool(self.beta == 1.0 and getattr(base, "normalised", True))
+        self.can_be_zero = bool(getattr(base, "can_be_zero", False))  # -inf stays -inf under any beta
         for attr in ("rows", "cols", "ndim", "shape"):
             if hasattr(base, attr):
                 setattr(self, attr, getattr(base, attr))

@@ -14,7 +14,7 @@ from ogm_ppl.inference.mcmc.diagnostics import (
 )
 from ogm_ppl.inference.mcmc.gibbs import CellGibbs, MetropolisCell, PatchGibbs
 from ogm_ppl.inference.mcmc.guided import GuidedGibbs
-from ogm_ppl.inference.mcmc.kernel import KernelStateError, MapKernel, initial_map
+from ogm_ppl.inference.mcmc.kernel import KernelStateError, MapKernel, MasslessStartWarning, initial_map
 from ogm_ppl.inference.mcmc.parallel import ChromaticCellGibbs, ChromaticPatchGibbs
 from ogm_ppl.inference.mcmc.runner import CheckpointError, GibbsRun, RunningStats, run_gibbs
 from ogm_ppl.inference.mcmc.tempering import ParallelTempering, TemperedPrior, geometric_ladder, tempered_model
@@ -30,6 +30,7 @@ __all__ = [
     "GuidedGibbs",
     "KernelStateError",
     "MapKernel",
+    "MasslessStartWarning",
     "MetropolisCell",
     "ParallelTempering",
     "PatchGibbs",

@@ -29,6 +29,7 @@ this protocol and the exact posterior.
 
 from __future__ import annotations
 
+import warnings
 from collections import OrderedDict
 from collections.abc import Mapping
 
@@ -40,11 +41,17 @@ from ogm_ppl.inference._kernels.cells import first_hits, gather_as_float
 from ogm_ppl.inference.mcmc.fingerprint import digest
 from ogm_ppl.models.occupancy import OccupancyModel
 
-__all__ = ["KernelStateError", "MapKernel", "check_start", "initial_map", "region_cells"]
+__all__ = ["KernelStateError", "MapKernel", "MasslessStartWarning", "check_start", "initial_map", "region_cells"]
 
 SCANS = ("random", "permutation", "systematic")
 #: the starting maps :func:`initial_map` knows by name (besides ``"guide:CORPUS"``)
 START_MAPS = ("ogm", "prior", "occupied", "free")
+
+
+class MasslessStartWarning(UserWarning):
+    """A chain starts from a map the prior gives zero mass (an unsmoothed table's never-counted
+    configuration): its first sweeps move through massless states, and where they settle depends on that
+    start. A backed-off prior (``KIND_bo``) or another start avoids it."""
 
 
 def ogm_start_threshold(prior) -> float:
@@ -172,6 +179,7 @@ class MapKernel(MCMCKernel):
         self.transforms: dict = {}
         self._initial_params: dict[str, torch.Tensor] | None = None
         self._ready = False
+        self._start_checked = False
         self._last = None
         self.sweeps = 0
         self._changes = 0
@@ -201,9 +209,24 @@ class MapKernel(MCMCKernel):
         return initial_map(self.model, self.init, self.delta)
 
     def setup(self, warmup_steps=0, *args, **kwargs) -> None:
-        """Set up (once) and load the initial params as the state."""
+        """Set up (once) and load the initial params as the state; warns (:class:`MasslessStartWarning`,
+        once per kernel) when the prior can give a map zero mass and gives the starting map zero mass."""
         self._prepare()
-        self._set_state(self.initial_params[self.site])
+        m = self.initial_params[self.site]
+        self._set_state(m)
+        if getattr(self.model.prior, "can_be_zero", False) and not self._start_checked:
+            self._start_checked = True
+            full = self.model.full_map(torch.as_tensor(m, dtype=torch.float64))
+            if float(self.model.prior.log_prob(full)) == -float("inf"):
+                warnings.warn(
+                    MasslessStartWarning(
+                        f"{type(self).__name__}: the starting map has zero mass under the prior "
+                        f"{type(self.model.prior).__name__} (a configuration its table never counted); the chain "
+                        "moves through massless states until it reaches the prior's support, and where it settles "
+                        "depends on this start. A backed-off prior (KIND_bo) or another init avoids it."
+                    ),
+                    stacklevel=2,
+                )
 
     @property
     def initial_params(self) -> dict[str, torch.Tensor]:

@@ -324,3 +324,27 @@ def _lik(kernel, k):
     """The likelihood part of ``l(m_k | z, m_-k)`` at the kernel's state (Eq. 4.2): log-odds less the
     prior's, for an independent prior."""
     return kernel.cell_log_odds(int(k)) - float(kernel.model.prior.cell_log_odds()[int(k)])
+
+
+def test_a_start_the_prior_gives_zero_mass_warns_once():
+    """An unsmoothed table (``can_be_zero``) that gives the starting map zero mass: setup warns, once per
+    kernel; a start inside the support, or a prior without zeros, is silent."""
+    import warnings
+
+    from ogm_ppl.inference.mcmc import MasslessStartWarning
+    from ogm_ppl.priors import PatchTablePrior
+    from ogm_ppl.priors.tempered import TemperedPrior
+
+    table = PatchTablePrior((6,), codes=[0, 3], counts=[3, 1], patch=2)  # tiles 00 and 11 only
+    full = PatchTablePrior((6,), codes=[0, 1, 2, 3], counts=[3, 1, 1, 1], patch=2)
+    assert table.can_be_zero and TemperedPrior(table, 0.5).can_be_zero
+    assert not full.can_be_zero and not IndependentPrior(0.3, 6).can_be_zero
+    model = model_1d(K=5, prior=table)  # cell 0 (the robot's) pinned free: cell 1 occupied leaves tile 01
+    kernel = PatchGibbs(model, 2, init="occupied")
+    with pytest.warns(MasslessStartWarning, match="zero mass under the prior PatchTablePrior"):
+        kernel.setup()
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", MasslessStartWarning)
+        kernel.setup()  # once per kernel
+        CellGibbs(model, init="free").setup()
+        PatchGibbs(model_1d(K=5, prior=full), 2, init="occupied").setup()
