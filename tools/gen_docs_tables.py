@@ -285,26 +285,34 @@ def _headline_label(name: str, prior: dict | None) -> str:
     return HEADLINE_LABELS.get(name, name)
 
 
-def _headline(doc: dict) -> Table:
-    pooled = doc["intel"]["pooled"]
+def _by_condition(pooled: list[dict]) -> tuple[dict[str, list[str]], list[str]]:
+    """An experiment's pooled rows as ``best F1 / AUC / touched best F1`` per algorithm (in order of first
+    appearance), one entry per condition (``"–"`` where the algorithm did not run), and the column headers
+    (each condition's share of the readings)."""
     conds = list(dict.fromkeys(p["condition"] for p in pooled))
     frac = {p["condition"]: p["measurement_fraction"] for p in pooled}
-    algs = list(dict.fromkeys(p["algorithm"] for p in pooled))
-    rows = []
-    for a in algs:
-        cells = []
+    got = {(p["algorithm"], p["condition"]): p for p in pooled}
+    cells = {}
+    for a in dict.fromkeys(p["algorithm"] for p in pooled):
+        row = []
         for c in conds:
-            p = next((p for p in pooled if p["condition"] == c and p["algorithm"] == a), None)
-            cells.append(
+            p = got.get((a, c))
+            t = (p or {}).get("touched") or {}
+            row.append(
                 "–"
                 if p is None
-                else f"{_f(p['mask'].get('best_f1'))} / {_f(p['mask'].get('auc'))} / {_f(p['touched'].get('best_f1'))}"
+                else f"{_f(p['mask'].get('best_f1'))} / {_f(p['mask'].get('auc'))} / {_f(t.get('best_f1'))}"
             )
-        rows.append([_headline_label(a, doc["intel"].get("prior")), *cells])
+        cells[a] = row
+    return cells, [f"{100 * frac[c]:.3g} % of the readings" for c in conds]
+
+
+def _headline(doc: dict) -> Table:
+    cells, header = _by_condition(doc["intel"]["pooled"])
     return Table(
         caption="Intel Lab log at 5 cm, half the beams: best F1 / ROC AUC / best F1 on the touched cells",
-        header=["map", *(f"{100 * frac[c]:.3g} % of the readings" for c in conds)],
-        rows=rows,
+        header=["map", *header],
+        rows=[[_headline_label(a, doc["intel"].get("prior")), *row] for a, row in cells.items()],
         provenance=doc["provenance"],
         note=f"run time {doc['intel']['seconds']:.0f} s",
     )
@@ -627,9 +635,7 @@ def _experiment_pooled(doc: dict) -> Table:
     with its precision and recall, ROC AUC, touched-cell best F1, the thesis's Table 6.4 figure, and the
     mean seconds of one run (one dataset, one chain)."""
     rows = []
-    secs: dict[str, list[float]] = {}
-    for r in doc.get("runs", []):
-        secs.setdefault(r["algorithm"], []).append(float(r["seconds"]))
+    secs = _run_seconds(doc)
     for p in doc["pooled"]:
         m, t = p["mask"], p.get("touched") or {}
         thesis = _THESIS_6_4.get(p["algorithm"])
@@ -642,7 +648,7 @@ def _experiment_pooled(doc: dict) -> Table:
                 _f(m["auc"]),
                 _f(t.get("best_f1", float("nan"))),
                 "–" if thesis is None else _f(thesis, 4),
-                _f(sum(secs[p["algorithm"]]) / len(secs[p["algorithm"]]), 1) if secs.get(p["algorithm"]) else "–",
+                _f(secs.get(p["algorithm"]), 1),
             ]
         )
     n = len(doc["pooled"][0]["datasets"]) if doc["pooled"] else 0
@@ -768,33 +774,24 @@ def _active_d0(doc: dict) -> Table:
     )
 
 
+def _run_seconds(doc: dict) -> dict[str, float]:
+    """Mean seconds of one run (one dataset, one chain) per algorithm of an experiment's ``runs``."""
+    secs: dict[str, list[float]] = {}
+    for r in doc.get("runs", []):
+        secs.setdefault(r["algorithm"], []).append(float(r["seconds"]))
+    return {a: sum(s) / len(s) for a, s in secs.items()}
+
+
 def _experiment_conditions(doc: dict) -> Table:
     """An experiment's scores per condition (e.g. each pose fraction of one log), one row per algorithm: best
     F1 / ROC AUC / touched-cell best F1 on the mask, one column per condition (its share of the readings),
     and the mean seconds of one run."""
-    pooled = doc["pooled"]
-    conds = list(dict.fromkeys(p["condition"] for p in pooled))
-    frac = {p["condition"]: p["measurement_fraction"] for p in pooled}
-    secs: dict[str, list[float]] = {}
-    for r in doc.get("runs", []):
-        secs.setdefault(r["algorithm"], []).append(float(r["seconds"]))
-    rows = []
-    for a in dict.fromkeys(p["algorithm"] for p in pooled):
-        cells = []
-        for c in conds:
-            p = next((p for p in pooled if p["condition"] == c and p["algorithm"] == a), None)
-            t = (p or {}).get("touched") or {}
-            cells.append(
-                "–"
-                if p is None
-                else f"{_f(p['mask'].get('best_f1'))} / {_f(p['mask'].get('auc'))} / {_f(t.get('best_f1'))}"
-            )
-        s = secs.get(a)
-        rows.append([a, *cells, _f(sum(s) / len(s), 1) if s else "–"])
+    cells, header = _by_condition(doc["pooled"])
+    secs = _run_seconds(doc)
     return Table(
         caption=f"{doc['experiment']}: best F1 / ROC AUC / best F1 on the touched cells, per condition",
-        header=["algorithm", *(f"{100 * frac[c]:.3g} % of the readings" for c in conds), "s / run"],
-        rows=rows,
+        header=["algorithm", *header, "s / run"],
+        rows=[[a, *row, _f(secs.get(a), 1)] for a, row in cells.items()],
         provenance=doc["provenance"],
     )
 

@@ -22,6 +22,7 @@ __all__ = [
     "check_delta_setting",
     "fit_family_for",
     "setting_family_names",
+    "setting_mismatches",
 ]
 
 
@@ -85,6 +86,28 @@ def _fit_hint(name: str, sigma: float, F: float | None) -> str:
     return f"fit_delta_for_setting({base!r}, sigma={sigma:g}{f}{extra})"
 
 
+def setting_mismatches(
+    sigma_fit: float | None, F_fit: float | None, sigma_cells: float | None, F_cells: float | None
+) -> list[str]:
+    """Why a sensor setting lies outside the one something was fitted or trained for (empty: inside): the
+    noise ``|sigma_cells - sigma_fit| > SIGMA_TOLERANCE * sigma_fit`` (:data:`SIGMA_TOLERANCE`), the range
+    ``F_cells`` and ``F_fit`` more than a factor :data:`F_FACTOR` apart; a pair with a ``None`` (or a
+    non-positive fitted value) is not compared. All in cells.
+
+    >>> setting_mismatches(3.0, 75.0, 3.5, 120.0)
+    []
+    >>> setting_mismatches(3.0, 75.0, 1.0, 400.0)
+    ['sigma 1 cells is not within 25% of 3', 'range F 400 cells is not within a factor 2 of 75']
+    """
+    bad = []
+    if sigma_cells is not None and sigma_fit is not None and abs(sigma_cells - sigma_fit) > SIGMA_TOLERANCE * sigma_fit:
+        bad.append(f"sigma {sigma_cells:g} cells is not within {SIGMA_TOLERANCE:.0%} of {sigma_fit:g}")
+    if F_cells is not None and F_fit is not None and F_fit > 0 and F_cells > 0:
+        if max(F_cells / F_fit, F_fit / F_cells) > F_FACTOR:
+            bad.append(f"range F {F_cells:g} cells is not within a factor {F_FACTOR:g} of {F_fit:g}")
+    return bad
+
+
 def check_delta_setting(
     delta_or_name: DeltaFamily | str, sigma_cells: float | None, F_cells: float | None = None, *, where: str = ""
 ) -> bool:
@@ -119,12 +142,7 @@ def check_delta_setting(
         return True
     sigma_fit = float(setting["sigma"])
     F_fit = setting.get("F")
-    bad = []
-    if sigma_cells is not None and abs(sigma_cells - sigma_fit) > SIGMA_TOLERANCE * sigma_fit:
-        bad.append(f"sigma {sigma_cells:g} cells is not within {SIGMA_TOLERANCE:.0%} of {sigma_fit:g}")
-    if F_cells is not None and isinstance(F_fit, (int, float)) and F_fit > 0:
-        if max(F_cells / F_fit, F_fit / F_cells) > F_FACTOR:
-            bad.append(f"range F {F_cells:g} cells is not within a factor {F_FACTOR:g} of {F_fit:g}")
+    bad = setting_mismatches(sigma_fit, F_fit if isinstance(F_fit, (int, float)) else None, sigma_cells, F_cells)
     if not bad:
         return True
     name = setting.get("name") or (delta_or_name if isinstance(delta_or_name, str) else type(delta_or_name).__name__)

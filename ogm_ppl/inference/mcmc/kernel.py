@@ -74,7 +74,8 @@ def check_start(init) -> None:
         if corpus not in corpus_guides():
             raise ValueError(f"init {init!r}: {unknown_corpus_message(corpus)}")
     elif init not in START_MAPS:
-        raise ValueError(f"init must be 'ogm', 'prior', 'occupied', 'free', 'guide:CORPUS' or a map, got {init!r}")
+        names = ", ".join(map(repr, (*START_MAPS, "guide:CORPUS")))
+        raise ValueError(f"init must be {names} or a map, got {init!r}")
 
 
 def initial_map(model: OccupancyModel, init="ogm", delta="haehnel", threshold: float | None = None) -> torch.Tensor:

@@ -362,30 +362,27 @@ class AmortisedGuide(PyroModule):
         a sensor's scalar ``sigma`` (cells) within :data:`SIGMA_TOLERANCE` of ``sigma_cells``
         (``noise_known=False``: the range alone). Only what both record is compared: a guide without that
         record passes. :meth:`cell_logits` checks each model once."""
-        from ogm_ppl.models.delta_setting import F_FACTOR, SIGMA_TOLERANCE, FittedSettingWarning
+        from ogm_ppl.models.delta_setting import FittedSettingWarning, setting_mismatches
 
         self._checked = model
         scans = self.trained_for.get("scans")
         if not isinstance(scans, dict):
             return True
         F_fit, sigma_fit = _positive(scans.get("range_cells")), _positive(scans.get("sigma_cells"))
-        bad, fit, used, flags = [], [], [], []
-        r = model.rays
-        if F_fit is not None and r.num_rays:
-            F = float(np.median(r.max_range_cells()))
+        F = float(np.median(model.rays.max_range_cells())) if F_fit is not None and model.rays.num_rays else None
+        sigma = getattr(model.sensor, "sigma", None)
+        known = noise_known and sigma_fit is not None and sigma is not None and torch.as_tensor(sigma).numel() == 1
+        s = float(torch.as_tensor(sigma)) if known else None
+        fit, used, flags = [], [], []
+        if F is not None:
             fit.append(f"F = {F_fit:g} cells")
             used.append(f"F = {F:g} cells")
             flags.append(f"--range-cells {F:g}")
-            if F > 0 and max(F / F_fit, F_fit / F) > F_FACTOR:
-                bad.append(f"range F {F:g} cells is not within a factor {F_FACTOR:g} of {F_fit:g}")
-        sigma = getattr(model.sensor, "sigma", None)
-        if noise_known and sigma_fit is not None and sigma is not None and torch.as_tensor(sigma).numel() == 1:
-            s = float(torch.as_tensor(sigma))
+        if s is not None:
             fit.append(f"sigma = {sigma_fit:g} cells")
             used.append(f"sigma = {s:g} cells")
             flags.append(f"--sigma {s:g}")
-            if abs(s - sigma_fit) > SIGMA_TOLERANCE * sigma_fit:
-                bad.append(f"sigma {s:g} cells is not within {SIGMA_TOLERANCE:.0%} of {sigma_fit:g}")
+        bad = setting_mismatches(sigma_fit, F_fit, s, F)
         if not bad:
             return True
         corpus = self.trained_for.get("corpus")
