@@ -284,6 +284,12 @@ def check_heldout(test_corpus: str, plans: Sequence[str], train_corpus: str | No
 
 # ---------------------------------------------------------------------------------------------- kernels
 GUIDE_PREFIX = "guide:"
+GUIDE_JOIN = "+"  # a guide learned on several corpora: guide:houseexpo+ipa
+
+
+def guide_corpora(name: str) -> list[str]:
+    """The corpora a guide named ``C`` or ``C1+C2`` was learned on."""
+    return name.split(GUIDE_JOIN)
 
 
 def names_digest(names) -> str:
@@ -305,12 +311,20 @@ def load_corpus_guide(corpus: str, train: set[str] | None = None):
     path = guide_path(corpus)
     guide = AmortisedGuide.load(path)
     meta = guide.trained_for
-    want = names_digest(training_set(corpus) if train is None else train)
-    if meta.get("corpus") != corpus or meta.get("plan_names_sha256") != want:
-        raise LeakageError(
-            f"{path}: its record (corpus {meta.get('corpus')!r}, plans {str(meta.get('plan_names_sha256'))[:12]}...) "
-            f"is not the training set of the {corpus} tables ({want[:12]}...)"
-        )
+    parts = guide_corpora(corpus)
+    if meta.get("corpus") != corpus:
+        raise LeakageError(f"{path}: its record names corpus {meta.get('corpus')!r}, not {corpus!r}")
+    records = {corpus: meta} if len(parts) == 1 else meta.get("corpora")
+    if not isinstance(records, dict) or sorted(records) != sorted(parts):
+        raise LeakageError(f"{path}: its record does not list the training sets of {', '.join(parts)}")
+    for c in parts:
+        got = records[c].get("plan_names_sha256") if isinstance(records[c], dict) else None
+        want = names_digest(training_set(c) if train is None or len(parts) > 1 else train)
+        if got != want:
+            raise LeakageError(
+                f"{path}: its record of {c} (plans {str(got)[:12]}...) is not the training set of the {c} tables "
+                f"({want[:12]}...)"
+            )
     return guide
 
 
@@ -794,8 +808,9 @@ def main(argv=None) -> dict:
     for test in args.test:
         maps = heldout_maps(test, args.plans, args.window, args.generated_shape)
         pairs_here = [(n, c) for n, c in pairs if not args.diagonal or n.startswith(GUIDE_PREFIX) or c in (None, test)]
-        for _, train in pairs_here:  # refuse leakage before anything runs
-            check_heldout(test, [t.plan for t in maps], train)
+        for name, train in pairs_here:  # refuse leakage before anything runs
+            for c in guide_corpora(train) if name.startswith(GUIDE_PREFIX) else [train]:
+                check_heldout(test, [t.plan for t in maps], c)
         print(
             f"[{test}] {len(maps)} held-out maps: " + ", ".join(f"{t.name} {t.truth.shape}" for t in maps), flush=True
         )

@@ -29,13 +29,18 @@ so the calibration experiment's leakage check covers the guide as it covers the 
 artefact records the corpus and the SHA-256 of its training plans' names; ``calibration.py --guides`` refuses
 a guide whose record does not match the tables' training set.
 
+Several corpora (``--corpus houseexpo ipa``) give one guide learned on all their training plans, the
+``--examples`` and ``--val`` windows shared evenly between them: ``guide_houseexpo+ipa.npz``, whose record
+holds each corpus's training set, so a test plan of either corpus is checked against its own.
+
     python experiments/train_corpus_guide.py --corpus houseexpo        # 7-15 min on 2 cores
+    python experiments/train_corpus_guide.py --corpus houseexpo ipa --examples 1200 --val 120 --steps 3000
     python experiments/train_corpus_guide.py --corpus ipa --steps 20 --examples 16 --out /tmp/g.npz   # smoke
     python experiments/train_corpus_guide.py --corpus generated --scan-whole-map --poses 0 --beams 720 --sigma 3 \
         --window 128 --examples 640 --val 64 --crops 10 --dilations 1 2 4 8 16 16 1 --steps 1500   # Table 6.4
 
-Writes ``ogm_ppl/fitted/guide_<corpus>.npz`` (the weights, :meth:`AmortisedGuide.save`) and its JSON sidecar
-(settings, training and validation losses, the time).
+Writes ``ogm_ppl/fitted/guide_<corpus>.npz`` (``guide_<c1>+<c2>.npz`` for several: the weights,
+:meth:`AmortisedGuide.save`) and its JSON sidecar (settings, training and validation losses, the time).
 """
 
 from __future__ import annotations
@@ -68,6 +73,7 @@ from ogm_ppl.priors.tables import FITTED_DIR
 
 CORPORA: tuple[str, ...] = ("houseexpo", "ipa", "dungeon", "generated")
 GUIDE_KIND = "ogm_ppl.corpus_guide"
+GUIDE_JOIN = calibration.GUIDE_JOIN
 
 
 @dataclass
@@ -294,13 +300,33 @@ def fit_temperature(guide: AmortisedGuide, exs: list[Example]) -> float:
     return t
 
 
+def _share(n: int, k: int, i: int) -> int:
+    """The ``i``-th of ``k`` near-equal parts of ``n``."""
+    return n // k + (1 if i < n % k else 0)
+
+
 def train(args) -> dict:
     torch.manual_seed(args.seed)
-    tr_names, val_names = split_plans(args.corpus)
-    print(f"{args.corpus}: {len(tr_names)} training plans, {len(val_names)} validation plans", flush=True)
+    corpora = list(args.corpus)
+    name = GUIDE_JOIN.join(corpora)
     t0 = time.perf_counter()
-    tr = build_set(args.corpus, tr_names, args.examples, args.window, args, args.seed, "training")
-    val = build_set(args.corpus, val_names, args.val, args.window, args, args.seed + 1, "validation")
+    tr: list[Example] = []
+    val: list[Example] = []
+    records: dict[str, dict] = {}
+    for i, corpus in enumerate(corpora):
+        tr_names, val_names = split_plans(corpus)
+        print(f"{corpus}: {len(tr_names)} training plans, {len(val_names)} validation plans", flush=True)
+        seed = args.seed + 10 * i
+        tr += build_set(corpus, tr_names, _share(args.examples, len(corpora), i), args.window, args, seed, "training")
+        val += build_set(
+            corpus, val_names, _share(args.val, len(corpora), i), args.window, args, seed + 1, "validation"
+        )
+        records[corpus] = {
+            "training_plans": len(tr_names),
+            "validation_plans": len(val_names),
+            "plan_names_sha256": calibration.names_digest(tr_names + val_names),
+            "tables_provenance": f"{FITTED_DIR.name}/prior_{corpus}.json",
+        }
     t_data = time.perf_counter() - t0
     by_shape: dict[tuple, list[Example]] = {}
     for e in tr:
@@ -358,11 +384,8 @@ def train(args) -> dict:
         best = {**best, **after, "before_temperature": best["bits_per_unseen_cell"]}
     meta = {
         "kind": GUIDE_KIND,
-        "corpus": args.corpus,
-        "training_plans": len(tr_names),
-        "validation_plans": len(val_names),
-        "plan_names_sha256": calibration.names_digest(tr_names + val_names),
-        "tables_provenance": f"{FITTED_DIR.name}/prior_{args.corpus}.json",
+        "corpus": name,
+        **(records[name] if len(corpora) == 1 else {"corpora": records}),
         "scans": {
             "whole_map": bool(args.scan_whole_map),
             "poses": args.poses,
@@ -392,7 +415,7 @@ def train(args) -> dict:
         "seconds": {"data": round(t_data, 1), "training": round(time.perf_counter() - t1, 1)},
         "torch": torch.__version__,
     }
-    out = Path(args.out or FITTED_DIR / f"guide_{args.corpus}.npz")
+    out = Path(args.out or FITTED_DIR / f"guide_{name}.npz")
     guide.save(out, meta)
     side = out.with_suffix(".json")
     digest = hashlib.sha256(out.read_bytes()).hexdigest()
@@ -403,7 +426,14 @@ def train(args) -> dict:
 
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--corpus", required=True, choices=CORPORA)
+    ap.add_argument(
+        "--corpus",
+        required=True,
+        nargs="+",
+        choices=CORPORA,
+        help="corpus, or several: one guide learned on all their training plans (windows shared evenly; named "
+        "C1+C2, e.g. guide:houseexpo+ipa)",
+    )
     ap.add_argument("--examples", type=int, default=600, help="training windows (default 600)")
     ap.add_argument("--val", type=int, default=60, help="validation windows (default 60)")
     ap.add_argument("--window", type=int, default=96)
@@ -432,6 +462,10 @@ def main(argv=None) -> dict:
     )
     ap.add_argument("--out", default=None, help="artefact path (.npz; default ogm_ppl/fitted/guide_CORPUS.npz)")
     args = ap.parse_args(argv)
+    if len(set(args.corpus)) != len(args.corpus):
+        raise SystemExit(f"--corpus names a corpus twice: {' '.join(args.corpus)}")
+    if len(args.corpus) > max(args.examples, args.val):
+        raise SystemExit("--examples and --val must give each corpus at least one window")
     if args.poses < 0 or (args.poses == 0 and not args.scan_whole_map):
         raise SystemExit("--poses must be at least 1 (0, the planner's own number, only with --scan-whole-map)")
     for k in ("examples", "val", "window", "beams", "channels", "steps", "batch", "eval_every", "crops"):

@@ -114,7 +114,7 @@ def test_calibration_scores_the_guide_and_refuses_another_record(mods, artefact,
     rows = [r for r in res["rows"] if r["prior_name"] == "guide:ipa"]
     assert {r["mask"] for r in rows} == {"unseen", "near"} and all(r["prior"] == "guide" for r in rows)
     assert all(r["train"] == "ipa" and 0 < r["nll_bits"] < 10 and "rhat_below" not in r for r in rows)
-    with pytest.raises(cal.LeakageError, match="not the training set of the houseexpo tables"):
+    with pytest.raises(cal.LeakageError, match="names corpus 'ipa', not 'houseexpo'"):
         cal.load_corpus_guide("houseexpo")
     with pytest.raises(cal.LeakageError, match="not the training set"):
         cal.load_corpus_guide("ipa", train={"some_other_plan"})
@@ -146,3 +146,49 @@ def test_a_whole_map_scene_gives_crops_of_one_scan(mods):
         assert hits
     names = list(tg.generated_maps())
     assert len(names) == 100 and names[0].startswith("seedstream:")
+
+
+def test_a_guide_of_two_corpora_records_each_training_set(mods, tmp_path, monkeypatch):
+    """``--corpus ipa dungeon``: one guide named ``ipa+dungeon``, windows from both corpora's training plans,
+    each corpus's training set recorded; :func:`load_corpus_guide` checks every one and refuses a record that
+    lacks one or names other plans; the calibration run checks the test plans against each corpus."""
+    tg, cal = mods
+    out = tmp_path / "g2.npz"
+    meta = tg.main(["--corpus", "ipa", "dungeon", *SMALL, "--steps", "2", "--eval-every", "2", "--out", str(out)])
+    assert meta["corpus"] == "ipa+dungeon" and "plan_names_sha256" not in meta
+    for c in ("ipa", "dungeon"):
+        assert meta["corpora"][c]["plan_names_sha256"] == cal.names_digest(cal.training_set(c))
+        train, val = tg.split_plans(c)
+        assert meta["corpora"][c]["training_plans"] == len(train) and meta["corpora"][c]["validation_plans"] == len(val)
+    assert [tg._share(7, 2, i) for i in range(2)] == [4, 3]
+    monkeypatch.setattr(cal, "guide_path", lambda corpus: out)
+    assert cal.load_corpus_guide("ipa+dungeon").trained_for["corpus"] == "ipa+dungeon"
+    with pytest.raises(cal.LeakageError, match="names corpus 'ipa\\+dungeon', not 'ipa'"):
+        cal.load_corpus_guide("ipa")
+    from ogm_ppl.inference.variational.amortised import AmortisedGuide
+
+    g = AmortisedGuide.load(out)
+    bad = {**g.trained_for, "corpora": {"ipa": meta["corpora"]["ipa"], "dungeon": {"plan_names_sha256": "0" * 64}}}
+    g.save(tmp_path / "bad.npz", bad)
+    monkeypatch.setattr(cal, "guide_path", lambda corpus: tmp_path / "bad.npz")
+    with pytest.raises(cal.LeakageError, match=r"record of dungeon .* is not the training set of the dungeon tables"):
+        cal.load_corpus_guide("ipa+dungeon")
+    g.save(tmp_path / "bad.npz", {**bad, "corpora": {"ipa": meta["corpora"]["ipa"]}})
+    with pytest.raises(cal.LeakageError, match="does not list the training sets of ipa, dungeon"):
+        cal.load_corpus_guide("ipa+dungeon")
+
+
+def test_calibration_checks_a_two_corpus_guide_against_each_corpus(mods, monkeypatch, tmp_path):
+    """The leakage check runs for every corpus a guide was learned on: a test plan that is a training plan of
+    either corpus is refused."""
+    _, cal = mods
+    seen: list[tuple] = []
+    monkeypatch.setattr(cal, "check_heldout", lambda test, plans, train: seen.append((test, train)))
+    monkeypatch.setattr(cal, "load_corpus_guide", lambda c: None)
+    monkeypatch.setattr(cal, "make_scene", lambda t, args: (_ for _ in ()).throw(SystemExit("stop")))
+    with pytest.raises(SystemExit, match="stop"):
+        cal.main(
+            "--test ipa --priors independent --guides ipa+dungeon --plans 1 --window 36 --no-figures --out".split()
+            + [str(tmp_path)]
+        )
+    assert ("ipa", "ipa") in seen and ("ipa", "dungeon") in seen
