@@ -521,12 +521,14 @@ def take_tile(taken, n):
 
 
 @nb.njit(cache=True, parallel=True)
-def chromatic_sweep(st, inf32, prior, lay, seed, scan, update):
+def chromatic_sweep(st, inf32, prior, lay, seed, scan, update, threads):
     """One chromatic sweep (module docstring): for each colour, its tiles' :func:`tile_pass` in parallel
-    (``numba.prange`` over the tiles, numba's threads), then :func:`long_pass`. ``inf32`` is ``st.inf``
-    viewed as int32 (``pos``, ``neg`` of cell ``c`` at ``2c``, ``2c + 1``). Returns the flips."""
+    (``numba.prange`` over ``threads`` workers, numba's threads: pass ``numba.get_num_threads()``), then
+    :func:`long_pass`. ``inf32`` is ``st.inf`` viewed as int32 (``pos``, ``neg`` of cell ``c`` at ``2c``,
+    ``2c + 1``). Returns the flips. (``threads`` is an argument, not ``numba.get_num_threads()`` read inside:
+    that call compiles to a process address, which would keep the kernel out of numba's on-disk cache.)"""
     total = 0
-    P = nb.get_num_threads()
+    P = max(threads, 1)
     for colour in range(COLOURS):
         a = lay.col_off[colour]
         n = lay.col_off[colour + 1] - a

@@ -137,16 +137,16 @@ def _tile_patches(ps, geo, lay, prior, seed, scan, rule, rows, bit_of, t, base):
 
 
 @nb.njit(cache=True, parallel=True)
-def chromatic_patch_sweep(ps, geo, lay, prior, seed, scan, rule, rows, bit_of):
+def chromatic_patch_sweep(ps, geo, lay, prior, seed, scan, rule, rows, bit_of, threads):
     """One chromatic patch sweep (module docstring): for each colour its tiles' patches (``numba.prange``
-    over the tiles), then the long patches. ``rows``: uniforms per patch (3, or 5 with the escape move);
-    ``bit_of``: the prior scratch's cell map (``K`` int64, all -1; empty for additive priors). Returns
-    ``(changed, skipped)``."""
+    over ``threads`` workers: pass ``numba.get_num_threads()``; see :func:`.parallel.chromatic_sweep`), then
+    the long patches. ``rows``: uniforms per patch (3, or 5 with the escape move); ``bit_of``: the prior
+    scratch's cell map (``K`` int64, all -1; empty for additive priors). Returns ``(changed, skipped)``."""
     n_short = lay.anchors.shape[0]
     base = _next_stamp(ps, n_short + lay.long_anchors.shape[0])
     changed = 0
     skipped = 0
-    P = nb.get_num_threads()
+    P = max(threads, 1)
     for colour in range(par.COLOURS):
         a = lay.col_off[colour]
         n = lay.col_off[colour + 1] - a

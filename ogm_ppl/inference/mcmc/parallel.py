@@ -139,7 +139,14 @@ class ChromaticCellGibbs(CellGibbs):
         try:
             return int(  # threads take a colour's tiles costliest first (par.take_tile)
                 par.chromatic_sweep(
-                    self._st, self._inf32, self._compiled, self._layout, seed, _SCAN_CODES[self.scan], self._rule
+                    self._st,
+                    self._inf32,
+                    self._compiled,
+                    self._layout,
+                    seed,
+                    _SCAN_CODES[self.scan],
+                    self._rule,
+                    self.threads,
                 )
             )
         finally:
@@ -252,6 +259,7 @@ class ChromaticPatchGibbs(PatchGibbs):
                 self._patch_rule(),
                 rows,
                 self._bit_of,
+                self.threads,
             )
         finally:
             numba.set_num_threads(before)

@@ -216,7 +216,9 @@ def test_infinite_terms_are_counted_exactly_under_threads():
     flips = 0
     for sweep in range(4):
         seed = np.uint64(1000 + sweep)
-        flips += par.chromatic_sweep(st, st.inf.view(np.int32), prior, lay, seed, cs.PERMUTATION, cs.METROPOLISED)
+        flips += par.chromatic_sweep(
+            st, st.inf.view(np.int32), prior, lay, seed, cs.PERMUTATION, cs.METROPOLISED, numba.get_num_threads()
+        )
         for t, cells in groups(lay):
             order, u = cs.draws(cells, cs.PERMUTATION, np.uint64(par.tile_seed(seed, t)))
             cs.sweep(ref, order, prior, u, cs.METROPOLISED)
