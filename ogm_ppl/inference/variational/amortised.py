@@ -387,11 +387,12 @@ class AmortisedGuide(PyroModule):
             return True
         corpus = self.trained_for.get("corpus")
         name = f"the guide learned on corpus {corpus!r}" if isinstance(corpus, str) else "this guide"
+        corpora = corpus.replace("+", " ") if isinstance(corpus, str) else "C"  # C1+C2: --corpus C1 C2
         warnings.warn(
             FittedSettingWarning(
                 f"{name} was trained for {', '.join(fit)} but is used at {', '.join(used)} ({'; '.join(bad)}); "
                 f"outside its setting its marginals can be far off. Train one for this sensor: python "
-                f"experiments/train_corpus_guide.py --corpus {corpus if isinstance(corpus, str) else 'C'} "
+                f"experiments/train_corpus_guide.py --corpus {corpora} "
                 f"{' '.join(flags)}"
             ),
             stacklevel=2,

@@ -346,6 +346,8 @@ def test_a_corpus_guide_warns_once_outside_the_sensor_it_was_trained_for():
     text = str(rec[0].message)
     assert "'houseexpo' was trained for F = 75 cells, sigma = 1 cells but is used at F = 6 cells" in text
     assert "factor 2" in text and "python experiments/train_corpus_guide.py --corpus houseexpo --range-cells 6" in text
+    with pytest.warns(FittedSettingWarning, match=r"train_corpus_guide.py --corpus houseexpo ipa --range-cells 6"):
+        corpus_guide("houseexpo+ipa").check_setting(short)  # the command line names each corpus
     _, noisy, _, _ = small_model(1, shape=(16, 14), prior=prior, max_range=75.0, sensor=GaussianRange(3.0))
     with pytest.warns(FittedSettingWarning, match=r"sigma 3 cells is not within 25% of 1.*--sigma 3"):
         assert not guide.check_setting(noisy)
