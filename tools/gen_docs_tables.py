@@ -843,6 +843,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "calibration_mix": ("calibration_mix", _calibration_guides),
     "headline": ("headline", _headline),
     "intel_guide": ("intel_guide", _experiment_conditions),
+    "intel_guide_2cm": ("intel_guide_2cm", _experiment_conditions),
     "simulated": ("headline", _simulated),
     "table_3_1": ("table_3_1", _table_3_1),
     "table_6_4_errors": ("table_6_4_errors", _error_split),
