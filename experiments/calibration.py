@@ -22,7 +22,9 @@ Guides. ``--guides C ...`` adds a ``guide:C`` row per test map: the one-pass mar
 learned on corpus ``C``'s training plans (:func:`~ogm_ppl.inference.variational.corpus_guide`,
 ``experiments/train_corpus_guide.py``), the posterior predictive with the corpus itself as the prior. It runs on
 every test corpus (with ``--diagonal`` too); :func:`load_corpus_guide` refuses a guide whose record is not the
-training set of corpus ``C``'s tables, so the leakage check below covers it.
+training set of corpus ``C``'s tables, so the leakage check below covers it. ``--guides houseexpo+ipa``
+scores the guide learned on both corpora (``train_corpus_guide.py --corpus houseexpo ipa``), checked against
+each.
 
 Scored cells: the near-mapped mask ``N`` (cells within 10 cells of a cell some ray reached, Fig. 6.16b) and its
 *unseen* cells ``U`` (cells of ``N`` no ray reached): NLL in bits per cell
@@ -305,7 +307,9 @@ def guide_path(corpus: str) -> Path:
 def load_corpus_guide(corpus: str, train: set[str] | None = None):
     """The guide of :func:`guide_path`, refused (:class:`LeakageError`) unless its record names ``corpus`` and
     the SHA-256 of the very plans the corpus's tables were learned from (``train``, default
-    :func:`training_set`), so that :func:`check_heldout` covers it as it covers the tables."""
+    :func:`training_set`), so that :func:`check_heldout` covers it as it covers the tables. A guide of several
+    corpora (``C1+C2``, :func:`guide_corpora`) records each one's plans under ``"corpora"``; each is checked
+    against that corpus's :func:`training_set` (``train`` applies to a one-corpus guide only)."""
     from ogm_ppl.inference.variational.amortised import AmortisedGuide
 
     path = guide_path(corpus)
