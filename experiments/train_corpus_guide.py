@@ -464,7 +464,7 @@ def main(argv=None) -> dict:
     args = ap.parse_args(argv)
     if len(set(args.corpus)) != len(args.corpus):
         raise SystemExit(f"--corpus names a corpus twice: {' '.join(args.corpus)}")
-    if len(args.corpus) > max(args.examples, args.val):
+    if len(args.corpus) > min(args.examples, args.val):
         raise SystemExit("--examples and --val must give each corpus at least one window")
     if args.poses < 0 or (args.poses == 0 and not args.scan_whole_map):
         raise SystemExit("--poses must be at least 1 (0, the planner's own number, only with --scan-whole-map)")

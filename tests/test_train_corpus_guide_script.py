@@ -192,3 +192,13 @@ def test_calibration_checks_a_two_corpus_guide_against_each_corpus(mods, monkeyp
             + [str(tmp_path)]
         )
     assert ("ipa", "ipa") in seen and ("ipa", "dungeon") in seen
+
+
+def test_several_corpora_refuse_too_few_windows_to_share(mods):
+    """Each corpus needs a training and a validation window: ``--val 1`` for two corpora is refused before any
+    data are read, as is a corpus named twice."""
+    tg, _ = mods
+    with pytest.raises(SystemExit, match="at least one window"):
+        tg.main(["--corpus", "ipa", "dungeon", "--examples", "6", "--val", "1"])
+    with pytest.raises(SystemExit, match="names a corpus twice"):
+        tg.main(["--corpus", "ipa", "ipa"])

@@ -594,16 +594,22 @@ def _calibration_targets(doc: dict) -> Table:
     )
 
 
+def _method_by_test(summ: list[dict], tests: list[str], keep, cell) -> list[list[str]]:
+    """One row per method (``prior_name``, in order of first appearance) of the summary rows ``keep`` admits,
+    one column per test corpus: ``cell(row)``, or ``"–"`` where the method did not run on it."""
+    got = {(s["prior_name"], s["test"]): s for s in summ if keep(s)}
+    names = dict.fromkeys(n for n, _ in got)
+    return [[n, *("–" if (n, t) not in got else cell(got[n, t]) for t in tests)] for n in names]
+
+
 def _calibration_cross(doc: dict) -> Table:
     tests, summ = _calibration_rows(doc, "unseen")
-    names = list(dict.fromkeys(s["prior_name"] for s in summ if s["prior"] != "ogm"))
-    rows = []
-    for n in names:
-        cells = []
-        for t in tests:
-            s = next((s for s in summ if s["prior_name"] == n and s["test"] == t), None)
-            cells.append("–" if s is None else f"{_f(s['nll_bits'])} / {_f(s['auc'])} / {_f(s['rhat_below'], 2)}")
-        rows.append([n, *cells])
+    rows = _method_by_test(
+        summ,
+        tests,
+        lambda s: s["prior"] != "ogm",
+        lambda s: f"{_f(s['nll_bits'])} / {_f(s['auc'])} / {_f(s['rhat_below'], 2)}",
+    )
     # pairs (prior with its training corpus, test corpus) whose NLL exceeds the independent prior's (lambda 0.5)
     ref = {s["test"]: s["nll_bits"] for s in summ if s["prior_name"] == "independent"}
     counts = {}
@@ -630,15 +636,10 @@ def _calibration_guides(doc: dict) -> Table:
     """Each amortised guide (by the corpora it was learned on) on each test corpus, unseen cells: NLL, pooled
     ECE, ROC AUC and best F1."""
     tests, summ = _calibration_rows(doc, "unseen")
-    names = list(dict.fromkeys(s["prior_name"] for s in summ if s["prior"] == "guide"))
-    rows = []
-    for n in names:
-        cells = []
-        for t in tests:
-            s = next((s for s in summ if s["prior_name"] == n and s["test"] == t), None)
-            keys = ("nll_bits", "ece_pooled", "auc", "best_f1")
-            cells.append("–" if s is None else " / ".join(_f(s.get(k)) for k in keys))
-        rows.append([n, *cells])
+    keys = ("nll_bits", "ece_pooled", "auc", "best_f1")
+    rows = _method_by_test(
+        summ, tests, lambda s: s["prior"] == "guide", lambda s: " / ".join(_f(s.get(k)) for k in keys)
+    )
     settings = doc["settings"]
     return Table(
         caption=(
@@ -650,7 +651,7 @@ def _calibration_guides(doc: dict) -> Table:
         rows=rows,
         provenance=doc["provenance"],
         note="guide:C1+C2: one guide learned on the training plans of both corpora"
-        if any("+" in n for n in names)
+        if any("+" in r[0] for r in rows)
         else "",
     )
 

@@ -387,7 +387,8 @@ class AmortisedGuide(PyroModule):
             return True
         corpus = self.trained_for.get("corpus")
         name = f"the guide learned on corpus {corpus!r}" if isinstance(corpus, str) else "this guide"
-        corpora = corpus.replace("+", " ") if isinstance(corpus, str) else "C"  # C1+C2: --corpus C1 C2
+        several = self.trained_for.get("corpora")  # a guide of several corpora records each one's plans
+        corpora = " ".join(several) if isinstance(several, dict) else corpus if isinstance(corpus, str) else "C"
         warnings.warn(
             FittedSettingWarning(
                 f"{name} was trained for {', '.join(fit)} but is used at {', '.join(used)} ({'; '.join(bad)}); "
