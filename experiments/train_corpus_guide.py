@@ -19,7 +19,9 @@ half anywhere with at least 200 known free cells) and turned by a random one of 
 
 ``--scan-whole-map`` scans each whole map along a planned route instead and crops ``--crops`` windows of its
 features (the Table 6.4 simulator: ``--corpus generated --poses 0 --beams 720 --sigma 3``), so the guide learns
-the evidence of a route through the whole building; the generated corpus's maps are those its tables counted
+the evidence of a route through the whole building; with ``--drive S1 S2 ...`` it scans while driving the
+route, a pose every ``S`` cells of path (``S`` drawn per map) scanning ``--fov`` degrees ahead: a real log's
+evidence, at several densities; the generated corpus's maps are those its tables counted
 (``iter_corpus`` with the recorded seed, rebuilt by name).
 
 Only the plans the corpus's shipped tables were learned from are used (``training_set`` of
@@ -195,10 +197,19 @@ def scene_examples(plan: Plan, window: int, crops: int, args, rng: np.random.Gen
     grid = Grid(occ.shape, resolution=plan.resolution or 0.05)
     seed = int(rng.integers(2**31))
     route = plan_route(occ, grid, num_poses=args.poses or None, max_range_cells=args.range_cells, seed=seed)
-    data = stop_and_scan(
-        occ, grid, route=route, beams=args.beams, max_range_cells=args.range_cells, sigma_cells=args.sigma, seed=seed
-    )
-    x, pinned, unseen = scanned(grid, data.scans, args.sigma, known)
+    if args.drive:
+        scans = driven_scans(occ, grid, route, args, rng)
+    else:
+        scans = stop_and_scan(
+            occ,
+            grid,
+            route=route,
+            beams=args.beams,
+            max_range_cells=args.range_cells,
+            sigma_cells=args.sigma,
+            seed=seed,
+        ).scans
+    x, pinned, unseen = scanned(grid, scans, args.sigma, known)
     H, W = occ.shape
     h, w = min(window, H), min(window, W)
     out = []
@@ -218,6 +229,19 @@ def scene_examples(plan: Plan, window: int, crops: int, args, rng: np.random.Gen
             )
         )
     return out
+
+
+def driven_scans(occ: np.ndarray, grid: Grid, route: np.ndarray, args, rng: np.random.Generator):
+    """Scans taken while driving ``route`` (:func:`~ogm_ppl.datasets.drive_route`): a pose every ``s`` cells
+    of path, ``s`` drawn from ``--drive`` for each map, each scanning ``--fov`` degrees ahead with beams
+    ``360 / --beams`` degrees apart and the simulator's range noise."""
+    from ogm_ppl.datasets import drive_route, simulate_scans
+
+    step = float(args.drive[int(rng.integers(len(args.drive)))])
+    poses = drive_route(occ, grid, route, step_cells=step)
+    n = max(1, round(args.beams * args.fov / 360))
+    angles = np.arange(n) * (2 * np.pi / args.beams) - (n - 1) * np.pi / args.beams
+    return simulate_scans(grid, occ, poses, angles, args.range_cells * grid.resolution, args.sigma, rng)
 
 
 def build_set(corpus: str, names: list[str], n: int, window: int, args, seed: int, label: str) -> list[Example]:
@@ -393,6 +417,7 @@ def train(args) -> dict:
             "range_cells": args.range_cells,
             "sigma_cells": args.sigma,
             "window": args.window,
+            **({"drive_step_cells": list(args.drive), "fov_degrees": args.fov} if args.drive else {}),
         },
         "training": {
             "objective": "E_{m ~ corpus, z ~ p(z|m)}[-mean_k log q(m_k|z)] over known unpinned cells",
@@ -443,6 +468,16 @@ def main(argv=None) -> dict:
         action="store_true",
         help="scan the whole map along a planned route, then crop --crops windows of it (Table 6.4's simulator)",
     )
+    ap.add_argument(
+        "--drive",
+        type=float,
+        nargs="+",
+        default=None,
+        metavar="CELLS",
+        help="with --scan-whole-map: scan while driving the route, a pose every CELLS of path (one of the "
+        "values drawn per map) instead of at the stops",
+    )
+    ap.add_argument("--fov", type=float, default=360.0, help="field of view of a driven scan, degrees ahead")
     ap.add_argument("--crops", type=int, default=8, help="windows a whole-map scene gives (--scan-whole-map)")
     ap.add_argument("--beams", type=int, default=90)
     ap.add_argument("--range-cells", type=float, default=75.0)
@@ -468,6 +503,10 @@ def main(argv=None) -> dict:
         raise SystemExit("--examples and --val must give each corpus at least one window")
     if args.poses < 0 or (args.poses == 0 and not args.scan_whole_map):
         raise SystemExit("--poses must be at least 1 (0, the planner's own number, only with --scan-whole-map)")
+    if args.drive is not None and (not args.scan_whole_map or min(args.drive) <= 0):
+        raise SystemExit("--drive needs --scan-whole-map and path steps above 0 cells")
+    if not 0 < args.fov <= 360:
+        raise SystemExit(f"--fov must lie in (0, 360] degrees, got {args.fov}")
     for k in ("examples", "val", "window", "beams", "channels", "steps", "batch", "eval_every", "crops"):
         if getattr(args, k) < 1:
             raise SystemExit(f"--{k.replace('_', '-')} must be at least 1")

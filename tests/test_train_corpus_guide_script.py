@@ -130,7 +130,7 @@ def test_a_whole_map_scene_gives_crops_of_one_scan(mods):
     tg, _ = mods
     occ = generate_map("office", (90, 90), seed=5, border=4)
     plan = tg.Plan(occ, np.ones_like(occ), 0.05)
-    args = tg.argparse.Namespace(poses=0, beams=90, range_cells=30.0, sigma=1.0)
+    args = tg.argparse.Namespace(poses=0, beams=90, range_cells=30.0, sigma=1.0, drive=None)
     exs = tg.scene_examples(plan, 40, 3, args, np.random.default_rng(0))
     assert len(exs) == 3
     for e in exs:
@@ -192,6 +192,35 @@ def test_calibration_checks_a_two_corpus_guide_against_each_corpus(mods, monkeyp
             + [str(tmp_path)]
         )
     assert ("ipa", "ipa") in seen and ("ipa", "dungeon") in seen
+
+
+def test_driven_scans_face_ahead_at_the_drawn_path_step(mods):
+    """``--drive``: poses every ``S`` cells of the route's path (``S`` one of the listed steps), each scan
+    ``--fov`` degrees ahead with beams ``360 / --beams`` apart; a denser drive reaches more cells."""
+    import numpy as np
+
+    from ogm_ppl import Grid, raycast
+    from ogm_ppl.datasets import drive_route, plan_route
+    from ogm_ppl.datasets.mapgen import generate_map
+
+    tg, _ = mods
+    occ = generate_map("office", (90, 90), seed=5, border=4)
+    grid = Grid(occ.shape, 0.05)
+    route = plan_route(occ, grid, max_range_cells=30, seed=1)
+    args = tg.argparse.Namespace(beams=180, fov=180.0, range_cells=30.0, sigma=0.5, drive=[4.0])
+    s = tg.driven_scans(occ, grid, route, args, np.random.default_rng(0))
+    np.testing.assert_allclose(s.poses, drive_route(occ, grid, route, step_cells=4.0))
+    assert s.beams_per_scan == 90
+    np.testing.assert_allclose(np.degrees(np.asarray(s.angles).reshape(-1, 90)[0, [0, -1]]), [-89.0, 89.0])
+    far = tg.argparse.Namespace(**{**vars(args), "drive": [40.0]})
+    sparse = tg.driven_scans(occ, grid, route, far, np.random.default_rng(0))
+    assert len(sparse.poses) < len(s.poses) / 5
+    reached = [int(raycast(grid, x).reached().sum()) for x in (s, sparse)]
+    assert reached[0] > reached[1]
+    with pytest.raises(SystemExit, match="--drive needs --scan-whole-map"):
+        tg.main(["--corpus", "ipa", "--drive", "10"])
+    with pytest.raises(SystemExit, match="--fov"):
+        tg.main(["--corpus", "ipa", "--scan-whole-map", "--poses", "0", "--drive", "10", "--fov", "0"])
 
 
 def test_several_corpora_refuse_too_few_windows_to_share(mods):

@@ -16,7 +16,7 @@ from ogm_ppl.datasets.mapgen import generate_corpus, generate_map
 from ogm_ppl.datasets.rosbag import BagFormatError, BagLog, read_bag
 from ogm_ppl.datasets.simple2d import SimpleExample2D, simple_2d_example
 from ogm_ppl.datasets.simulate import first_hit, simulate_scans
-from ogm_ppl.datasets.stop_and_scan import StopAndScan, plan_route, route_coverage, stop_and_scan
+from ogm_ppl.datasets.stop_and_scan import StopAndScan, drive_route, plan_route, route_coverage, stop_and_scan
 from ogm_ppl.datasets.toy1d import THESIS_TOY_READINGS, Toy1D, toy_1d
 from ogm_ppl.datasets.walls1d import WallDatasets, wall_datasets
 
@@ -34,6 +34,7 @@ __all__ = [
     "StopAndScan",
     "Toy1D",
     "WallDatasets",
+    "drive_route",
     "first_hit",
     "generate_corpus",
     "generate_map",

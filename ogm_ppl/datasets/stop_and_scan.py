@@ -16,6 +16,11 @@ this module supplies one:
     from the ground truth, as the simulator can) and must be at least 2% of the disc :math:`\pi F^2`.
     It scans there and repeats until the share of observed free cells reaches ``coverage``, ``num_poses``
     stops are placed, or no frontier is left that is reachable and worth a stop.
+:func:`drive_route`
+    the poses of a robot that scans while it drives: the geodesically shortest paths between consecutive
+    stops (through cells that keep ``clearance_cells`` from the walls), a pose every ``step_cells`` of path
+    length, facing the direction of travel (real logs such as the Intel Lab's: a front-facing scanner
+    read every half metre or so).
 :func:`stop_and_scan`
     the route plus simulated scans (:func:`~ogm_ppl.datasets.simulate.simulate_scans`): 720 beams over
     360 degrees, ``F = 75`` cells, ``sigma = 3`` cells by default; sparser variants keep an evenly spaced
@@ -48,7 +53,7 @@ from ogm_ppl.grid import Grid
 from ogm_ppl.raycast import raycast
 from ogm_ppl.scans import Scans
 
-__all__ = ["StopAndScan", "plan_route", "route_coverage", "stop_and_scan"]
+__all__ = ["StopAndScan", "drive_route", "plan_route", "route_coverage", "stop_and_scan"]
 
 _BIG = 1e9  # weight of an edge through a cell the robot has not seen free yet
 _EIGHT = np.ones((3, 3), dtype=bool)
@@ -444,6 +449,105 @@ def plan_route(
         _kill_near(dead, seen, free, grid, cell, reach)
         current = goal
     return np.array(route)
+
+
+def _nearest(sorted_values: np.ndarray, x: np.ndarray) -> np.ndarray:
+    """Index of the entry of ``sorted_values`` nearest each ``x`` (the lower one on a tie)."""
+    hi = np.clip(np.searchsorted(sorted_values, x), 1, len(sorted_values) - 1) if len(sorted_values) > 1 else 0
+    if len(sorted_values) == 1:
+        return np.zeros(len(x), dtype=np.int64)
+    lo = hi - 1
+    return np.where(x - sorted_values[lo] <= sorted_values[hi] - x, lo, hi)
+
+
+def drive_route(
+    truth,
+    grid: Grid,
+    stops,
+    *,
+    step_cells: float,
+    clearance_cells: float = 2,
+) -> np.ndarray:
+    r"""Poses along the shortest paths between consecutive ``stops``, ``step_cells`` of path length apart:
+    a robot that scans while it drives the route :func:`plan_route` plans.
+
+    The path between two stops is the geodesically shortest 8-connected path (a diagonal step costs
+    :math:`\sqrt 2`, no corner cutting) through the cells whose centres lie more than ``clearance_cells``
+    from every occupied cell and from the grid edge; poses are placed at the path cells nearest the arc
+    lengths ``0, s, 2 s, ...`` of the whole polyline through the stops' cell centres (and at its end), each
+    facing the direction of travel there (the chord to the path ``s / 2`` ahead; where nothing lies ahead,
+    the pose keeps its predecessor's yaw).
+
+    Args:
+        truth: ground-truth map, ``rows x cols`` bool (True = occupied), of ``grid.shape``.
+        grid: a 2D :class:`~ogm_ppl.grid.Grid`.
+        stops: ``P x 2`` or ``P x 3`` poses in metres (a yaw is ignored), each in a cell with clearance.
+        step_cells: path length between poses, in cells (> 0).
+        clearance_cells: as :func:`plan_route`'s (the default is the same).
+
+    Returns:
+        ``Q x 3`` poses ``(x, y, yaw)`` in metres and radians, at cell centres; ``Q >= 1``.
+
+    Raises:
+        ValueError: a stop outside the grid, without clearance, or unreachable from the one before it; a
+            bad argument.
+
+    >>> from ogm_ppl import Grid
+    >>> t = np.zeros((20, 20), bool); t[[0, -1], :] = t[:, [0, -1]] = True
+    >>> g = Grid((20, 20), 1.0)
+    >>> p = drive_route(t, g, [[4.5, 4.5], [14.5, 4.5]], step_cells=2.5)
+    >>> p[:, 0].tolist(), bool(np.allclose(p[:, 2], 0.0))
+    ([4.5, 6.5, 9.5, 11.5, 14.5], True)
+    """
+    truth = _check_truth(truth, grid)
+    step_cells = _check_positive("step_cells", step_cells)
+    clearance_cells = float(clearance_cells)
+    if not np.isfinite(clearance_cells) or clearance_cells < 0:
+        raise ValueError(f"clearance_cells must be a finite number >= 0, got {clearance_cells!r}")
+    stops = np.atleast_2d(np.asarray(stops, dtype=float))
+    if stops.ndim != 2 or stops.shape[1] not in (2, 3) or stops.shape[0] < 1:
+        raise ValueError(f"stops must have shape P x 2 or P x 3, got {np.shape(stops)}")
+    if not np.all(np.isfinite(stops)):
+        raise ValueError("stops hold a non-finite value")
+    if not grid.contains(stops[:, :2]).all():
+        raise ValueError(f"stop {int(np.flatnonzero(~grid.contains(stops[:, :2]))[0])} lies outside the grid")
+    clear = ndimage.distance_transform_edt(np.pad(~truth, 1))[1:-1, 1:-1]
+    valid = clear > clearance_cells
+    cells = grid.world_to_cell(stops[:, :2])
+    bad = ~valid[cells[:, 0], cells[:, 1]]
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise ValueError(f"stop {i} lies within clearance_cells = {clearance_cells} of a wall")
+    graph = _KnownFreeGraph(valid)
+    graph.update(valid.ravel())
+    nodes = graph.node[cells[:, 0] * grid.cols + cells[:, 1]]
+    path = [int(nodes[0])]
+    for i in range(1, len(nodes)):
+        a, b = int(nodes[i - 1]), int(nodes[i])
+        if a == b:
+            continue
+        d, pred = csgraph.dijkstra(graph.graph, indices=a, return_predecessors=True)
+        if not d[b] < _BIG / 2:
+            raise ValueError(f"stop {i} cannot be reached from stop {i - 1} through cells with clearance")
+        seg = [b]
+        while seg[-1] != a:
+            seg.append(int(pred[seg[-1]]))
+        path += seg[-2::-1]
+    flat = graph.cell[np.asarray(path)]
+    xy = grid.cell_to_world(np.stack([flat // grid.cols, flat % grid.cols], axis=1))
+    seg_len = np.hypot(*np.diff(xy, axis=0).T) / grid.resolution
+    arc = np.concatenate([[0.0], np.cumsum(seg_len)])
+    at = np.arange(0.0, arc[-1] + 1e-9, step_cells)
+    if arc[-1] - at[-1] > 1e-9:
+        at = np.append(at, arc[-1])
+    idx = _nearest(arc, at)
+    ahead = _nearest(arc, np.minimum(at + step_cells / 2, arc[-1]))
+    d = xy[ahead] - xy[idx]
+    yaw = np.arctan2(d[:, 1], d[:, 0])
+    for j in range(1, len(yaw)):  # at the end of the path there is nothing ahead
+        if ahead[j] == idx[j]:
+            yaw[j] = yaw[j - 1]
+    return np.column_stack([xy[idx], yaw])
 
 
 # --------------------------------------------------------------------------- dataset

@@ -5,7 +5,7 @@ import pytest
 from scipy import ndimage
 
 from ogm_ppl import Grid
-from ogm_ppl.datasets.stop_and_scan import StopAndScan, plan_route, route_coverage, stop_and_scan
+from ogm_ppl.datasets.stop_and_scan import StopAndScan, drive_route, plan_route, route_coverage, stop_and_scan
 
 F = 30  # a smaller range than the thesis's 75 cells, so that a 120 x 120 map needs several stops
 
@@ -152,3 +152,60 @@ def test_bad_input_raises(world):
     tiny = np.zeros((4, 4), bool)
     with pytest.raises(ValueError, match="clearance"):
         plan_route(tiny, Grid((4, 4)))
+
+
+# --------------------------------------------------------------------------- drive_route
+def test_drive_route_follows_clear_paths_through_every_stop(world, route):
+    truth, grid = world
+    step = 7.0
+    poses = drive_route(truth, grid, route, step_cells=step)
+    cells = grid.world_to_cell(poses[:, :2])
+    clear = ndimage.distance_transform_edt(np.pad(~truth, 1))[1:-1, 1:-1]
+    assert (clear[cells[:, 0], cells[:, 1]] > 2).all()  # every pose keeps the planner's clearance
+    # consecutive poses are step_cells of path apart: never further apart in a straight line
+    gaps = np.hypot(*np.diff(poses[:, :2], axis=0).T) / grid.resolution
+    assert gaps.max() <= step + 1.0 and gaps.min() > 0
+    # the route's first and last stops are driven through, at their cell centres
+    ends = grid.cell_to_world(grid.world_to_cell(route[[0, -1], :2]))
+    np.testing.assert_allclose(poses[[0, -1], :2], ends)
+    # every stop lies on the path: within half a step (plus a diagonal cell) of a pose
+    d = np.hypot(*(poses[None, :, :2] - route[:, None, :2]).transpose(2, 0, 1)).min(axis=1) / grid.resolution
+    assert d.max() <= step / 2 + np.sqrt(2)
+    # the yaw faces the next pose wherever the path runs straight between them
+    nxt = np.arctan2(*np.diff(poses[:, :2], axis=0)[:, ::-1].T)
+    err = np.abs(np.angle(np.exp(1j * (poses[:-1, 2] - nxt))))
+    assert np.median(err) < 0.2
+    # a denser drive has more poses, and a step longer than the path leaves the two ends
+    assert len(drive_route(truth, grid, route, step_cells=2.0)) > 3 * len(poses)
+    two = drive_route(truth, grid, route[:2], step_cells=1e6)
+    assert two.shape == (2, 3)
+
+
+def test_drive_route_scans_like_the_stops(world, route):
+    """Scans simulated at the driven poses see what the stops see (and more), with the stops' simulator."""
+    from ogm_ppl.datasets.simulate import simulate_scans
+
+    truth, grid = world
+    poses = drive_route(truth, grid, route, step_cells=10)
+    front = np.linspace(-np.pi / 2, np.pi / 2, 91)
+    s = simulate_scans(grid, truth, poses, front, F * grid.resolution, 0.5, seed=0)
+    assert s.ranges.shape == (len(poses), 91)
+    assert (
+        route_coverage(truth, grid, poses, max_range_cells=F)
+        >= route_coverage(truth, grid, route, max_range_cells=F) - 1e-12
+    )
+
+
+def test_drive_route_bad_input(world, route):
+    truth, grid = world
+    with pytest.raises(ValueError, match="step_cells"):
+        drive_route(truth, grid, route, step_cells=0)
+    with pytest.raises(ValueError, match="shape"):
+        drive_route(truth, grid, np.zeros((2, 4)), step_cells=3)
+    with pytest.raises(ValueError, match="outside the grid"):
+        drive_route(truth, grid, [[-1.0, 1.0]], step_cells=3)
+    with pytest.raises(ValueError, match="clearance"):
+        drive_route(truth, grid, [[0.1, 0.1]], step_cells=3)  # the outer wall's corner
+    closet = grid.cell_to_world(np.array([[105, 110]]))[0]  # free, clear, walled off
+    with pytest.raises(ValueError, match="cannot be reached"):
+        drive_route(truth, grid, [route[0, :2], closet], step_cells=3)
