@@ -727,6 +727,43 @@ def _error_split(doc: dict) -> Table:
     )
 
 
+def _touched_errors(doc: dict) -> Table:
+    """``experiments/touched_errors.py``: per dataset and map, the touched best F1, the walls missed and the
+    false positives by distance to the nearest benchmark wall, the wall cells called occupied by depth."""
+    rows = []
+    for ds, algs in doc["datasets"].items():
+        for name, r in algs.items():
+            depth = r["walls_by_depth"]
+            rows.append(
+                [
+                    ds,
+                    name,
+                    _f(r["touched_best_f1"]),
+                    _f(r["threshold"], 2),
+                    f"{r['false_negatives']:,}",
+                    *(f"{r['fp_binned'][b]:,}" for b in ("1", "2-3", "4+")),
+                    " / ".join(_f(depth[d]["called_occupied"], 2) if d in depth else "–" for d in ("1", "2")),
+                ]
+            )
+    return Table(
+        caption="touched cells at each map's best touched threshold: walls missed, false positives by chessboard "
+        "distance to the nearest benchmark wall, and the share of the wall cells 1 / 2 deep called occupied",
+        header=[
+            "dataset",
+            "map",
+            "touched F1",
+            "threshold",
+            "walls missed",
+            "FP at 1",
+            "FP at 2-3",
+            "FP at 4+",
+            "wall depth 1 / 2",
+        ],
+        rows=rows,
+        provenance=doc["provenance"],
+    )
+
+
 def _active(doc: dict) -> Table:
     """An ``active`` experiment (exploration): per rule, the median path length (m) to 90 % coverage, to best
     F1 0.8 and 0.9, with how many runs reach each, the paired ratios of the path to 90 % coverage to the
@@ -845,6 +882,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "headline": ("headline", _headline),
     "intel_guide": ("intel_guide", _experiment_conditions),
     "intel_guide_2cm": ("intel_guide_2cm", _experiment_conditions),
+    "intel_touched_errors": ("intel_touched_errors", _touched_errors),
     "simulated": ("headline", _simulated),
     "table_3_1": ("table_3_1", _table_3_1),
     "table_6_4_errors": ("table_6_4_errors", _error_split),
