@@ -8,7 +8,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ogm_ppl.methods.params import GuideFile, param
+from ogm_ppl.methods.params import Bool, GuideFile, param
 from ogm_ppl.methods.problem import MapProblem, MapResult, RunContext
 from ogm_ppl.methods.registry import register_method
 
@@ -21,6 +21,12 @@ class AmortisedParams:
         "shipped",
         GuideFile(),
         "the trained guide: 'shipped', 'corpus:CORPUS' (learned on a corpus's plans) or a saved guide (.npz)",
+    )
+    symmetrize: bool = param(
+        False,
+        Bool(),
+        "average the guide's logits over the 8 turns and flips of the grid (8x the time; guides without "
+        "tile-phase channels, e.g. the corpus guides)",
     )
 
 
@@ -45,5 +51,6 @@ def amortised(params: AmortisedParams, problem: MapProblem, ctx: RunContext) -> 
     """The amortised guide's one-pass map q(m_k = 1 | z) (a network of the evidence features)."""
     model = problem.model()
     guide = load_guide(params.guide, model, noise_known=problem.sigma_cells is not None)
+    guide.symmetrize = params.symmetrize
     q = guide.marginals(model).numpy()
     return MapResult(q, problem.rays.reached(), {"ray_cells": int(problem.rays.nnz), "trained_for": guide.trained_for})

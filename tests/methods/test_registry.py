@@ -337,3 +337,22 @@ def test_unregister_removes_a_method_and_its_aliases():
     assert {"tmp_method", "tmp_alias"} <= set(method_names())
     unregister_method("tmp_method")
     assert not {"tmp_method", "tmp_alias"} & set(method_names())
+
+
+def test_the_amortised_method_symmetrises_on_request():
+    """``symmetrize = true`` averages the corpus guide over the 8 turns and flips: a different map, still
+    probabilities, and the same map again on a rerun."""
+    truth = np.zeros((40, 40), bool)
+    truth[[0, -1], :] = truth[:, [0, -1]] = True
+    truth[20, 5:30] = True
+    grid = Grid(truth.shape, resolution=0.05)
+    data = stop_and_scan(truth, grid, num_poses=2, beams=90, max_range_cells=75, sigma_cells=1.0, seed=0)
+    method = get_method("amortised")
+    problem = MapProblem(grid, data.scans, sigma_cells=1.0)
+    plain = method.run(method.parse({"guide": "corpus:houseexpo"}), problem, RunContext(seed=0)).probabilities
+    params = method.parse({"guide": "corpus:houseexpo", "symmetrize": True})
+    sym = method.run(params, problem, RunContext(seed=0)).probabilities
+    assert sym.shape == plain.shape and ((sym >= 0) & (sym <= 1)).all()
+    assert np.abs(sym - plain).max() > 1e-4
+    np.testing.assert_array_equal(sym, method.run(params, problem, RunContext(seed=0)).probabilities)
+    assert method.parse({"symmetrize": "yes"}, text=True).symmetrize is True

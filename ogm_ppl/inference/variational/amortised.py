@@ -274,6 +274,18 @@ class GuideNet(nn.Module):
         return (self.head(h) + self.skip(x))[:, 0]
 
 
+def _symmetrised(net: nn.Module, x: torch.Tensor) -> torch.Tensor:
+    """``mean_s T_s^{-1} net(T_s x)`` over the 4 quarter turns, each with and without a flip of the columns:
+    ``B x C x H x W -> B x H x W``."""
+    out = torch.zeros(x.shape[0], *x.shape[-2:], dtype=x.dtype)
+    for flip in (False, True):
+        xf = torch.flip(x, dims=(-1,)) if flip else x
+        for k in range(4):
+            y = torch.rot90(net(torch.rot90(xf, k, dims=(-2, -1))), -k, dims=(-2, -1))
+            out += torch.flip(y, dims=(-1,)) if flip else y
+    return out / 8
+
+
 # --------------------------------------------------------------------------------------- the guide
 class GuideFileError(ValueError):
     """A guide artefact that cannot be loaded (the message names the path and what is wrong), or a corpus
@@ -320,6 +332,26 @@ class AmortisedGuide(PyroModule):
         self._cache: tuple | None = None
         self._checked: OccupancyModel | None = None
         self.trained_for: dict = {}
+        self._symmetrize = False
+
+    @property
+    def symmetrize(self) -> bool:
+        r"""Average the logits over the 8 symmetries of the square (test-time symmetrisation, 8x the work):
+        with :math:`T_s` the ``s``-th turn or flip of the grid,
+        :math:`\bar g(x) = \tfrac18 \sum_s T_s^{-1} g(T_s x)`, which commutes with every turn and flip of the
+        scene (the guide's training turns its windows at random, so each term estimates the same logits).
+        Only for a guide without tile-phase channels (``phase == (0, 0)``), whose features turn with the grid.
+        Default ``False``."""
+        return self._symmetrize
+
+    @symmetrize.setter
+    def symmetrize(self, on: bool) -> None:
+        if on and self.arch.phase != (0, 0):
+            raise ValueError(
+                f"a guide with tile-phase channels (phase {self.arch.phase}) cannot be symmetrised: the tiling "
+                "does not turn with the grid"
+            )
+        self._symmetrize = bool(on)
 
     @property
     def name(self) -> str:
@@ -351,7 +383,8 @@ class AmortisedGuide(PyroModule):
             self.check_setting(model)
         x = self.features(model, readings)
         batch = x.shape[:-3]
-        out = self.net(x.reshape(-1, *x.shape[-3:]))
+        x = x.reshape(-1, *x.shape[-3:])
+        out = _symmetrised(self.net, x) if self._symmetrize else self.net(x)
         return out.reshape(*batch, model.num_cells).to(torch.float64)
 
     def check_setting(self, model: OccupancyModel, *, noise_known: bool = True) -> bool:

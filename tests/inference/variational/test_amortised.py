@@ -392,3 +392,30 @@ def test_the_generated_corpus_guide_records_the_tables_maps_and_the_table_6_4_se
     assert meta["plan_names_sha256"] == hashlib.sha256("\n".join(sorted(names)).encode()).hexdigest()
     sc = meta["scans"]
     assert sc["whole_map"] and (sc["beams"], sc["range_cells"], sc["sigma_cells"]) == (720, 75.0, 3.0)
+
+
+def test_symmetrised_logits_turn_with_the_scene_and_refuse_a_tiled_guide():
+    """``symmetrize``: the mean over the 8 turns and flips commutes with every one of them (a plain guide's
+    logits do not), and equals ``cell_logits`` of the guide; a guide with tile-phase channels refuses it."""
+    from ogm_ppl.inference.variational.amortised import _symmetrised
+
+    _, model, _, _ = small_model(3, shape=(9, 13), poses=2)
+    g = AmortisedGuide(model, phase=(0, 0), channels=6, dilations=(1, 2), seed=4)
+    x = g.features(model)[None]
+    sym = _symmetrised(g.net, x)
+    with torch.no_grad():
+        for k in range(4):
+            for flip in (False, True):
+
+                def t(a, k=k, flip=flip):
+                    a = torch.rot90(a, k, dims=(-2, -1))
+                    return torch.flip(a, dims=(-1,)) if flip else a
+
+                torch.testing.assert_close(_symmetrised(g.net, t(x)), t(sym), rtol=0, atol=1e-5)
+        plain = g.net(x)
+        assert (g.net(torch.rot90(x, 1, dims=(-2, -1))) - torch.rot90(plain, 1, dims=(-2, -1))).abs().max() > 1e-3
+        g.symmetrize = True
+        torch.testing.assert_close(g.cell_logits(model), sym.reshape(-1).double())
+        assert not torch.allclose(g.cell_logits(model), plain.reshape(-1).double())
+    with pytest.raises(ValueError, match="tile-phase channels"):
+        AmortisedGuide(model).symmetrize = True
