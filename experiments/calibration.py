@@ -24,7 +24,8 @@ learned on corpus ``C``'s training plans (:func:`~ogm_ppl.inference.variational.
 every test corpus (with ``--diagonal`` too); :func:`load_corpus_guide` refuses a guide whose record is not the
 training set of corpus ``C``'s tables, so the leakage check below covers it. ``--guides houseexpo+ipa``
 scores the guide learned on both corpora (``train_corpus_guide.py --corpus houseexpo ipa``), checked against
-each.
+each; ``--guides houseexpo+ipa@sym`` the same guide with its logits averaged over the 8 turns and flips of the
+window (:attr:`~ogm_ppl.inference.variational.AmortisedGuide.symmetrize`).
 
 Scored cells: the near-mapped mask ``N`` (cells within 10 cells of a cell some ray reached, Fig. 6.16b) and its
 *unseen* cells ``U`` (cells of ``N`` no ray reached): NLL in bits per cell
@@ -287,11 +288,21 @@ def check_heldout(test_corpus: str, plans: Sequence[str], train_corpus: str | No
 # ---------------------------------------------------------------------------------------------- kernels
 GUIDE_PREFIX = "guide:"
 GUIDE_JOIN = "+"  # a guide learned on several corpora: guide:houseexpo+ipa
+GUIDE_SYM = "@sym"  # the guide symmetrised: guide:houseexpo+ipa@sym
 
 
 def guide_corpora(name: str) -> list[str]:
-    """The corpora a guide named ``C`` or ``C1+C2`` was learned on."""
-    return name.split(GUIDE_JOIN)
+    """The corpora a guide named ``C``, ``C1+C2`` (either with ``@sym``) was learned on."""
+    return name.removesuffix(GUIDE_SYM).split(GUIDE_JOIN)
+
+
+def guide_for(name: str):
+    """The guide a ``--guides`` name ``C``, ``C1+C2`` or either with ``@sym`` scores
+    (:func:`load_corpus_guide`, symmetrised for ``@sym``)."""
+    guide = load_corpus_guide(name.removesuffix(GUIDE_SYM))
+    if name.endswith(GUIDE_SYM):
+        guide.symmetrize = True
+    return guide
 
 
 def names_digest(names) -> str:
@@ -716,7 +727,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         nargs="*",
         default=[],
         help="also score the amortised guide learned on each of these corpora (guide:CORPUS rows; "
-        "experiments/train_corpus_guide.py)",
+        "experiments/train_corpus_guide.py); CORPUS@sym: the guide symmetrised",
     )
     ap.add_argument(
         "--diagonal",
@@ -793,7 +804,7 @@ def main(argv=None) -> dict:
     skipped_keys: set[tuple] = set()
     overrides = _patch_overrides(args.patch)
     pairs = prior_names(args.priors, args.train)
-    guides = {c: load_corpus_guide(c) for c in args.guides}
+    guides = {c: guide_for(c) for c in args.guides}
     pairs += [(GUIDE_PREFIX + c, c) for c in args.guides]
     prov = provenance()
     t_all = time.perf_counter()

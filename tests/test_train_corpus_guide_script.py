@@ -194,6 +194,32 @@ def test_calibration_checks_a_two_corpus_guide_against_each_corpus(mods, monkeyp
     assert ("ipa", "ipa") in seen and ("ipa", "dungeon") in seen
 
 
+def test_a_symmetrised_guide_row_loads_the_guide_symmetrised_and_checks_its_corpora(mods, monkeypatch, tmp_path):
+    """``--guides C1+C2@sym``: the guide of C1+C2 with ``symmetrize`` on, its leakage checked per corpus."""
+    _, cal = mods
+    seen: list[tuple] = []
+    loaded: list = []
+
+    class Fake:
+        symmetrize = False
+
+    def load(c):
+        loaded.append((c, Fake()))
+        return loaded[-1][1]
+
+    monkeypatch.setattr(cal, "check_heldout", lambda test, plans, train: seen.append((test, train)))
+    monkeypatch.setattr(cal, "load_corpus_guide", load)
+    monkeypatch.setattr(cal, "make_scene", lambda t, args: (_ for _ in ()).throw(SystemExit("stop")))
+    assert cal.guide_corpora("ipa+dungeon@sym") == ["ipa", "dungeon"]
+    with pytest.raises(SystemExit, match="stop"):
+        cal.main(
+            "--test ipa --priors independent --guides ipa+dungeon@sym ipa --plans 1 --window 36 --no-figures".split()
+            + ["--out", str(tmp_path)]
+        )
+    assert [(c, g.symmetrize) for c, g in loaded] == [("ipa+dungeon", True), ("ipa", False)]
+    assert ("ipa", "ipa") in seen and ("ipa", "dungeon") in seen
+
+
 def test_driven_scans_face_ahead_at_the_drawn_path_step(mods):
     """``--drive``: poses every ``S`` cells of the route's path (``S`` one of the listed steps), each scan
     ``--fov`` degrees ahead with beams ``360 / --beams`` apart; a denser drive reaches more cells."""
