@@ -650,9 +650,20 @@ def _calibration_guides(doc: dict) -> Table:
         header=["guide", *tests],
         rows=rows,
         provenance=doc["provenance"],
-        note="guide:C1+C2: one guide learned on the training plans of both corpora"
-        if any("+" in r[0] for r in rows)
-        else "",
+        note="; ".join(
+            n
+            for n, on in (
+                (
+                    "guide:C1+C2: one guide learned on the training plans of both corpora",
+                    any("+" in r[0] for r in rows),
+                ),
+                (
+                    "@sym: its logits averaged over the 8 turns and flips of the window",
+                    any("@sym" in r[0] for r in rows),
+                ),
+            )
+            if on
+        ),
     )
 
 
