@@ -106,7 +106,7 @@ def test_run_writes_figures_and_report(tmp_path, capsys):
     assert not list(tmp_path.glob("*.tmp*"))  # atomic writes leave nothing behind
     report = json.loads((tmp_path / "report.json").read_text())
     intel = {r["algorithm"]: r for r in report["intel"]["pooled"]}
-    assert set(intel) == {"ogm", "p21", "learned-L9"}
+    assert set(intel) == {"ogm", "p21", "learned-L9", "guide"}
     for r in intel.values():  # the real-data part: scores that mean something, on both masks
         assert 0.5 < r["mask"]["best_f1"] <= 1 and 0.7 < r["mask"]["auc"] <= 1
         assert 0.3 < r["touched"]["best_f1"] <= 1

@@ -275,6 +275,7 @@ HEADLINE_LABELS = {
     "ogm": "traditional OGM (Hähnel)",
     "p21": "log-odds OGM, p21 fitted for this sensor",
     "border-L9": "Gibbs, border prior learned from HouseExpo, L = 9",
+    "guide": "amortised guide learned on HouseExpo + IPA plans, one pass, symmetrised",
 }
 
 
