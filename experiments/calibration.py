@@ -78,6 +78,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 import torch
@@ -97,6 +98,9 @@ from ogm_ppl.metrics import Reliability, near_mapped_mask, prediction_scores, re
 from ogm_ppl.models import delta_by_name
 from ogm_ppl.priors.named import load_temper_params, prior_by_name, prior_kinds, split_prior_name
 from ogm_ppl.priors.tables import FITTED_DIR, available_tables
+
+if TYPE_CHECKING:
+    from ogm_ppl.inference.variational.amortised import AmortisedGuide
 
 TEST_CORPORA: tuple[str, ...] = ("generated", "houseexpo", "ipa", "dungeon")
 #: held-out generated map ``i`` is ``generate_map(KINDS[i % 4], seed=GENERATED_HELDOUT_SEED + i)``: a root seed
@@ -296,10 +300,13 @@ def guide_corpora(name: str) -> list[str]:
     return name.removesuffix(GUIDE_SYM).split(GUIDE_JOIN)
 
 
-def guide_for(name: str):
+def guide_for(name: str) -> AmortisedGuide:
     """The guide a ``--guides`` name ``C``, ``C1+C2`` or either with ``@sym`` scores
     (:func:`load_corpus_guide`, symmetrised for ``@sym``)."""
-    guide = load_corpus_guide(name.removesuffix(GUIDE_SYM))
+    base = name.removesuffix(GUIDE_SYM)
+    if not base or "@" in base:
+        raise SystemExit(f"--guides takes CORPUS, C1+C2 or either with {GUIDE_SYM}, got {name!r}")
+    guide = load_corpus_guide(base)
     if name.endswith(GUIDE_SYM):
         guide.symmetrize = True
     return guide

@@ -114,6 +114,8 @@ def main(argv: list[str] | None = None) -> dict:
     datasets = args.datasets or sorted(
         p.name[: -len(".eval.npz")] for p in (args.folder / "datasets").glob("*.eval.npz")
     )
+    if not datasets:
+        raise SystemExit(f"{args.folder}: no scored dataset (datasets/*.eval.npz)")
     for d in datasets:
         for a in args.algorithm:
             if not (args.folder / "maps" / d / f"{a}.npz").is_file():

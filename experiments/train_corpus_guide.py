@@ -64,7 +64,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import calibration  # experiments/calibration.py: the protocol, windows and training sets
 
-from ogm_ppl import GaussianRange, Grid, OccupancyModel, raycast
+from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
 from ogm_ppl.datasets import floorplans as fp
 from ogm_ppl.datasets.stop_and_scan import stop_and_scan
 from ogm_ppl.inference.variational.amortised import AmortisedGuide, evidence_features
@@ -231,7 +231,7 @@ def scene_examples(plan: Plan, window: int, crops: int, args, rng: np.random.Gen
     return out
 
 
-def driven_scans(occ: np.ndarray, grid: Grid, route: np.ndarray, args, rng: np.random.Generator):
+def driven_scans(occ: np.ndarray, grid: Grid, route: np.ndarray, args, rng: np.random.Generator) -> Scans:
     """Scans taken while driving ``route`` (:func:`~ogm_ppl.datasets.drive_route`): a pose every ``s`` cells
     of path, ``s`` drawn from ``--drive`` for each map, each scanning ``--fov`` degrees ahead with beams
     ``360 / --beams`` degrees apart and the simulator's range noise."""
@@ -503,10 +503,12 @@ def main(argv=None) -> dict:
         raise SystemExit("--examples and --val must give each corpus at least one window")
     if args.poses < 0 or (args.poses == 0 and not args.scan_whole_map):
         raise SystemExit("--poses must be at least 1 (0, the planner's own number, only with --scan-whole-map)")
-    if args.drive is not None and (not args.scan_whole_map or min(args.drive) <= 0):
-        raise SystemExit("--drive needs --scan-whole-map and path steps above 0 cells")
+    if args.drive is not None and (not args.scan_whole_map or not all(math.isfinite(s) and s > 0 for s in args.drive)):
+        raise SystemExit("--drive needs --scan-whole-map and finite path steps above 0 cells")
     if not 0 < args.fov <= 360:
         raise SystemExit(f"--fov must lie in (0, 360] degrees, got {args.fov}")
+    if args.fov != 360 and args.drive is None:
+        raise SystemExit("--fov applies to driven scans only (--drive); the stops scan 360 degrees")
     for k in ("examples", "val", "window", "beams", "channels", "steps", "batch", "eval_every", "crops"):
         if getattr(args, k) < 1:
             raise SystemExit(f"--{k.replace('_', '-')} must be at least 1")

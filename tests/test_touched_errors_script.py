@@ -63,5 +63,8 @@ def test_main_writes_json_and_figure_and_refuses_missing_maps(folder, tmp_path):
     assert (out / "touched_errors.png").read_bytes()[:4] == b"\x89PNG"
     with pytest.raises(SystemExit, match="no map of algorithm 'other'"):
         te.main([str(folder), "other"])
+    (tmp_path / "empty" / "datasets").mkdir(parents=True)
+    with pytest.raises(SystemExit, match="no scored dataset"):
+        te.main([str(tmp_path / "empty"), "thick"])
     with pytest.raises(SystemExit, match="not an experiment folder"):
         te.main([str(tmp_path / "nowhere"), "thick"])

@@ -217,6 +217,9 @@ def test_a_symmetrised_guide_row_loads_the_guide_symmetrised_and_checks_its_corp
             + ["--out", str(tmp_path)]
         )
     assert [(c, g.symmetrize) for c, g in loaded] == [("ipa+dungeon", True), ("ipa", False)]
+    for bad in ("ipa@sym@sym", "@sym", "ipa@cal"):
+        with pytest.raises(SystemExit, match="--guides takes CORPUS"):
+            cal.guide_for(bad)
     assert ("ipa", "ipa") in seen and ("ipa", "dungeon") in seen
 
 
@@ -245,6 +248,10 @@ def test_driven_scans_face_ahead_at_the_drawn_path_step(mods):
     assert reached[0] > reached[1]
     with pytest.raises(SystemExit, match="--drive needs --scan-whole-map"):
         tg.main(["--corpus", "ipa", "--drive", "10"])
+    with pytest.raises(SystemExit, match="finite path steps"):
+        tg.main(["--corpus", "ipa", "--scan-whole-map", "--poses", "0", "--drive", "10", "nan"])
+    with pytest.raises(SystemExit, match="--fov applies to driven scans only"):
+        tg.main(["--corpus", "ipa", "--fov", "180"])
     with pytest.raises(SystemExit, match="--fov"):
         tg.main(["--corpus", "ipa", "--scan-whole-map", "--poses", "0", "--drive", "10", "--fov", "0"])
 

@@ -453,9 +453,9 @@ def plan_route(
 
 def _nearest(sorted_values: np.ndarray, x: np.ndarray) -> np.ndarray:
     """Index of the entry of ``sorted_values`` nearest each ``x`` (the lower one on a tie)."""
-    hi = np.clip(np.searchsorted(sorted_values, x), 1, len(sorted_values) - 1) if len(sorted_values) > 1 else 0
     if len(sorted_values) == 1:
         return np.zeros(len(x), dtype=np.int64)
+    hi = np.clip(np.searchsorted(sorted_values, x), 1, len(sorted_values) - 1)
     lo = hi - 1
     return np.where(x - sorted_values[lo] <= sorted_values[hi] - x, lo, hi)
 
@@ -474,9 +474,9 @@ def drive_route(
     The path between two stops is the geodesically shortest 8-connected path (a diagonal step costs
     :math:`\sqrt 2`, no corner cutting) through the cells whose centres lie more than ``clearance_cells``
     from every occupied cell and from the grid edge; poses are placed at the path cells nearest the arc
-    lengths ``0, s, 2 s, ...`` of the whole polyline through the stops' cell centres (and at its end), each
-    facing the direction of travel there (the chord to the path ``s / 2`` ahead; where nothing lies ahead,
-    the pose keeps its predecessor's yaw).
+    lengths ``0, s, 2 s, ...`` of the whole path (the polyline through its cells' centres; each cell once, and
+    its last cell), each facing the direction of travel there (the chord to the path cell nearest ``s / 2``
+    ahead, at least the next cell; the last pose keeps its predecessor's yaw, a path of one cell faces yaw 0).
 
     Args:
         truth: ground-truth map, ``rows x cols`` bool (True = occupied), of ``grid.shape``.
@@ -541,7 +541,9 @@ def drive_route(
     if arc[-1] - at[-1] > 1e-9:
         at = np.append(at, arc[-1])
     idx = _nearest(arc, at)
-    ahead = _nearest(arc, np.minimum(at + step_cells / 2, arc[-1]))
+    idx = idx[np.concatenate([[True], np.diff(idx) > 0])]  # a path cell once, however short the step
+    last = len(arc) - 1
+    ahead = np.maximum(_nearest(arc, np.minimum(arc[idx] + step_cells / 2, arc[-1])), np.minimum(idx + 1, last))
     d = xy[ahead] - xy[idx]
     yaw = np.arctan2(d[:, 1], d[:, 0])
     for j in range(1, len(yaw)):  # at the end of the path there is nothing ahead

@@ -181,8 +181,27 @@ def test_drive_route_follows_clear_paths_through_every_stop(world, route):
     assert two.shape == (2, 3)
 
 
-def test_drive_route_scans_like_the_stops(world, route):
-    """Scans simulated at the driven poses see what the stops see (and more), with the stops' simulator."""
+def test_drive_route_faces_the_way_it_drives_at_any_step():
+    """Every pose faces the next cell of the path, whatever the step: driving west at one cell a pose faces
+    yaw pi (the last pose keeps its predecessor's), a diagonal drive at one cell a pose faces pi / 4 and visits
+    each path cell once."""
+    t = np.zeros((20, 20), bool)
+    t[[0, -1], :] = t[:, [0, -1]] = True
+    g = Grid((20, 20), 1.0)
+    for step in (0.5, 1.0, 2.0):
+        west = drive_route(t, g, [[14.5, 4.5], [4.5, 4.5]], step_cells=step)
+        np.testing.assert_allclose(np.abs(west[:, 2]), np.pi)
+        assert (np.diff(west[:, 0]) < 0).all()  # one pose per cell at most, in the order driven
+    diag = drive_route(t, g, [[4.5, 4.5], [12.5, 12.5]], step_cells=1.0)
+    np.testing.assert_allclose(diag[:, 2], np.pi / 4)
+    assert len(np.unique(diag[:, :2], axis=0)) == len(diag)
+    one = drive_route(t, g, [[4.5, 4.5], [4.5, 4.5]], step_cells=3)
+    np.testing.assert_allclose(one, [[4.5, 4.5, 0.0]])
+
+
+def test_drive_route_poses_scan_with_the_stops_simulator(world, route):
+    """Front-facing scans simulate at the driven poses, and the driven poses' 360-degree coverage is at least
+    the stops' (the path passes through every stop)."""
     from ogm_ppl.datasets.simulate import simulate_scans
 
     truth, grid = world

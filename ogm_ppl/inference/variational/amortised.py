@@ -277,7 +277,7 @@ class GuideNet(nn.Module):
 def _symmetrised(net: nn.Module, x: torch.Tensor) -> torch.Tensor:
     """``mean_s T_s^{-1} net(T_s x)`` over the 4 quarter turns, each with and without a flip of the columns:
     ``B x C x H x W -> B x H x W``."""
-    out = torch.zeros(x.shape[0], *x.shape[-2:], dtype=x.dtype)
+    out = torch.zeros(x.shape[0], *x.shape[-2:], dtype=x.dtype, device=x.device)
     for flip in (False, True):
         xf = torch.flip(x, dims=(-1,)) if flip else x
         for k in range(4):
@@ -346,12 +346,14 @@ class AmortisedGuide(PyroModule):
 
     @symmetrize.setter
     def symmetrize(self, on: bool) -> None:
+        if not isinstance(on, bool):
+            raise TypeError(f"symmetrize must be True or False, got {on!r}")
         if on and self.arch.phase != (0, 0):
             raise ValueError(
                 f"a guide with tile-phase channels (phase {self.arch.phase}) cannot be symmetrised: the tiling "
                 "does not turn with the grid"
             )
-        self._symmetrize = bool(on)
+        self._symmetrize = on
 
     @property
     def name(self) -> str:

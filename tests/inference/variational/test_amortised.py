@@ -419,3 +419,5 @@ def test_symmetrised_logits_turn_with_the_scene_and_refuse_a_tiled_guide():
         assert not torch.allclose(g.cell_logits(model), plain.reshape(-1).double())
     with pytest.raises(ValueError, match="tile-phase channels"):
         AmortisedGuide(model).symmetrize = True
+    with pytest.raises(TypeError, match="True or False"):
+        g.symmetrize = "false"
