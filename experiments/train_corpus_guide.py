@@ -21,8 +21,9 @@ half anywhere with at least 200 known free cells) and turned by a random one of 
 features (the Table 6.4 simulator: ``--corpus generated --poses 0 --beams 720 --sigma 3``), so the guide learns
 the evidence of a route through the whole building; with ``--drive S1 S2 ...`` it scans while driving the
 route, a pose every ``S`` cells of path (``S`` drawn per map) scanning ``--fov`` degrees ahead: a real log's
-evidence, at several densities; the generated corpus's maps are those its tables counted
-(``iter_corpus`` with the recorded seed, rebuilt by name).
+evidence, at several densities (``--plan-range-cells``: the range the planner places its stops for; a stop must
+show 2 % of the sensor's disc, so planned for a 400-cell range most house plans get one stop); the generated
+corpus's maps are those its tables counted (``iter_corpus`` with the recorded seed, rebuilt by name).
 
 Only the plans the corpus's shipped tables were learned from are used (``training_set`` of
 ``calibration.py``, rebuilt from their provenance; every fifth one held out as validation plans that pick the
@@ -196,7 +197,8 @@ def scene_examples(plan: Plan, window: int, crops: int, args, rng: np.random.Gen
     occ, known = plan.occupancy, plan.known
     grid = Grid(occ.shape, resolution=plan.resolution or 0.05)
     seed = int(rng.integers(2**31))
-    route = plan_route(occ, grid, num_poses=args.poses or None, max_range_cells=args.range_cells, seed=seed)
+    plan_range = args.plan_range_cells or args.range_cells
+    route = plan_route(occ, grid, num_poses=args.poses or None, max_range_cells=plan_range, seed=seed)
     if args.drive:
         scans = driven_scans(occ, grid, route, args, rng)
     else:
@@ -418,6 +420,7 @@ def train(args) -> dict:
             "sigma_cells": args.sigma,
             "window": args.window,
             **({"drive_step_cells": list(args.drive), "fov_degrees": args.fov} if args.drive else {}),
+            **({"plan_range_cells": args.plan_range_cells} if args.plan_range_cells else {}),
         },
         "training": {
             "objective": "E_{m ~ corpus, z ~ p(z|m)}[-mean_k log q(m_k|z)] over known unpinned cells",
@@ -478,6 +481,13 @@ def main(argv=None) -> dict:
         "values drawn per map) instead of at the stops",
     )
     ap.add_argument("--fov", type=float, default=360.0, help="field of view of a driven scan, degrees ahead")
+    ap.add_argument(
+        "--plan-range-cells",
+        type=float,
+        default=None,
+        help="with --scan-whole-map: the range the route planner assumes (default --range-cells); a stop must "
+        "show 2 %% of its disc, so at a long range most house plans get a single stop",
+    )
     ap.add_argument("--crops", type=int, default=8, help="windows a whole-map scene gives (--scan-whole-map)")
     ap.add_argument("--beams", type=int, default=90)
     ap.add_argument("--range-cells", type=float, default=75.0)
@@ -507,6 +517,10 @@ def main(argv=None) -> dict:
         raise SystemExit("--drive needs --scan-whole-map and finite path steps above 0 cells")
     if not 0 < args.fov <= 360:
         raise SystemExit(f"--fov must lie in (0, 360] degrees, got {args.fov}")
+    if args.plan_range_cells is not None and (
+        not args.scan_whole_map or not (math.isfinite(args.plan_range_cells) and args.plan_range_cells > 0)
+    ):
+        raise SystemExit("--plan-range-cells needs --scan-whole-map and a finite range above 0 cells")
     if args.fov != 360 and args.drive is None:
         raise SystemExit("--fov applies to driven scans only (--drive); the stops scan 360 degrees")
     for k in ("examples", "val", "window", "beams", "channels", "steps", "batch", "eval_every", "crops"):

@@ -130,7 +130,7 @@ def test_a_whole_map_scene_gives_crops_of_one_scan(mods):
     tg, _ = mods
     occ = generate_map("office", (90, 90), seed=5, border=4)
     plan = tg.Plan(occ, np.ones_like(occ), 0.05)
-    args = tg.argparse.Namespace(poses=0, beams=90, range_cells=30.0, sigma=1.0, drive=None)
+    args = tg.argparse.Namespace(poses=0, beams=90, range_cells=30.0, sigma=1.0, drive=None, plan_range_cells=None)
     exs = tg.scene_examples(plan, 40, 3, args, np.random.default_rng(0))
     assert len(exs) == 3
     for e in exs:
@@ -252,8 +252,37 @@ def test_driven_scans_face_ahead_at_the_drawn_path_step(mods):
         tg.main(["--corpus", "ipa", "--scan-whole-map", "--poses", "0", "--drive", "10", "nan"])
     with pytest.raises(SystemExit, match="--fov applies to driven scans only"):
         tg.main(["--corpus", "ipa", "--fov", "180"])
-    with pytest.raises(SystemExit, match="--fov"):
-        tg.main(["--corpus", "ipa", "--scan-whole-map", "--poses", "0", "--drive", "10", "--fov", "0"])
+    with pytest.raises(SystemExit, match="--plan-range-cells needs --scan-whole-map"):
+        tg.main(["--corpus", "ipa", "--plan-range-cells", "75"])
+
+
+def test_the_planner_range_sets_the_stops_not_the_scans(mods, monkeypatch):
+    """``--plan-range-cells``: the route is planned for that range, the scans keep ``--range-cells``."""
+    import importlib
+
+    import numpy as np
+
+    from ogm_ppl.datasets.mapgen import generate_map
+
+    sas = importlib.import_module("ogm_ppl.datasets.stop_and_scan")  # the module, not the function of that name
+
+    tg, _ = mods
+    occ = generate_map("office", (120, 120), seed=5, border=4)
+    plan = tg.Plan(occ, np.ones_like(occ), 0.05)
+    seen = []
+    real = sas.plan_route
+
+    def spy(*a, **k):
+        seen.append(k["max_range_cells"])
+        return real(*a, **k)
+
+    monkeypatch.setattr(sas, "plan_route", spy)
+    for plan_range in (None, 20.0):
+        args = tg.argparse.Namespace(
+            poses=0, beams=90, range_cells=60.0, sigma=1.0, drive=None, plan_range_cells=plan_range
+        )
+        tg.scene_examples(plan, 40, 1, args, np.random.default_rng(0))
+    assert seen == [60.0, 20.0]
 
 
 def test_several_corpora_refuse_too_few_windows_to_share(mods):
