@@ -34,7 +34,8 @@ def folder(tmp_path):
     thick[5, 1] = 0.9
     thin = np.zeros((12, 12))
     thin[:, 8] = 0.9
-    for name, q, f1 in (("thick", thick, 0.8), ("thin", thin, 0.67)):
+    # the touched best F1 the experiment would record: thick 24 TP, 13 FP; thin 12 TP, 12 FN
+    for name, q, f1 in (("thick", thick, 48 / 61), ("thin", thin, 24 / 36)):
         np.savez(maps / f"{name}.npz", marginals=q)
         (maps / f"{name}.json").write_text(json.dumps({"touched": {"threshold": 0.5, "best_f1": f1}}))
     return tmp_path
@@ -52,7 +53,14 @@ def test_errors_are_counted_by_distance_and_depth(folder):
     thin = te.touched_errors(folder, "d", "thin")
     assert thin["walls_by_depth"][2]["called_occupied"] == 0.0 and thin["walls_by_depth"][1]["called_occupied"] == 1.0
     assert (thin["true_positives"], thin["false_negatives"], thin["false_positives"]) == (12, 12, 0)
-    assert thin["f1_check"] == pytest.approx(2 * 12 / (2 * 12 + 12))
+
+
+def test_counts_that_disagree_with_the_experiments_f1_are_refused(folder):
+    """A map file whose recorded touched F1 is not what its cells give (another truth, another threshold)."""
+    path = folder / "maps" / "d" / "thin.json"
+    path.write_text(json.dumps({"touched": {"threshold": 0.5, "best_f1": 0.7}}))
+    with pytest.raises(SystemExit, match=r"give F1 0\.666667 at threshold 0\.5, the experiment recorded 0\.700000"):
+        te.touched_errors(folder, "d", "thin")
 
 
 def test_main_writes_json_and_figure_and_refuses_missing_maps(folder, tmp_path):

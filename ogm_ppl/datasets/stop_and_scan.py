@@ -101,6 +101,19 @@ def _check_positive(name: str, value: float) -> float:
 
 
 # --------------------------------------------------------------------------- geometry
+def _check_clearance(clearance_cells: float) -> float:
+    clearance_cells = float(clearance_cells)
+    if not np.isfinite(clearance_cells) or clearance_cells < 0:
+        raise ValueError(f"clearance_cells must be a finite number >= 0, got {clearance_cells!r}")
+    return clearance_cells
+
+
+def _clear_cells(truth: np.ndarray, clearance_cells: float) -> np.ndarray:
+    """``rows x cols`` bool: cells whose centre lies more than ``clearance_cells`` (Euclidean, centre to centre)
+    from every occupied cell and from the outside of the grid."""
+    return ndimage.distance_transform_edt(np.pad(~truth, 1))[1:-1, 1:-1] > clearance_cells
+
+
 def _num_probe_beams(max_range_cells: float) -> int:
     # 720 beams (the thesis) leave no gap at F = 75; keep the arc between beams <= 2/3 cell for larger F.
     return max(720, int(np.ceil(1.5 * 2 * np.pi * max_range_cells)))
@@ -361,17 +374,14 @@ def plan_route(
     coverage = float(coverage)
     if not 0 < coverage <= 1:
         raise ValueError(f"coverage must lie in (0, 1], got {coverage!r}")
-    clearance_cells = float(clearance_cells)
-    if not np.isfinite(clearance_cells) or clearance_cells < 0:
-        raise ValueError(f"clearance_cells must be a finite number >= 0, got {clearance_cells!r}")
+    clearance_cells = _check_clearance(clearance_cells)
     if num_poses is not None:
         if int(num_poses) != num_poses or num_poses < 1:
             raise ValueError(f"num_poses must be a positive integer or None, got {num_poses!r}")
         num_poses = int(num_poses)
     rng = np.random.default_rng(seed)
     free = ~truth
-    clear = ndimage.distance_transform_edt(np.pad(free, 1))[1:-1, 1:-1]
-    valid = clear > clearance_cells
+    valid = _clear_cells(truth, clearance_cells)
     if not valid.any():
         raise ValueError(f"no free cell keeps clearance_cells = {clearance_cells} from the walls and the grid edge")
     lab, _ = ndimage.label(valid, structure=_EIGHT)
@@ -501,9 +511,7 @@ def drive_route(
     """
     truth = _check_truth(truth, grid)
     step_cells = _check_positive("step_cells", step_cells)
-    clearance_cells = float(clearance_cells)
-    if not np.isfinite(clearance_cells) or clearance_cells < 0:
-        raise ValueError(f"clearance_cells must be a finite number >= 0, got {clearance_cells!r}")
+    clearance_cells = _check_clearance(clearance_cells)
     stops = np.atleast_2d(np.asarray(stops, dtype=float))
     if stops.ndim != 2 or stops.shape[1] not in (2, 3) or stops.shape[0] < 1:
         raise ValueError(f"stops must have shape P x 2 or P x 3, got {np.shape(stops)}")
@@ -511,8 +519,7 @@ def drive_route(
         raise ValueError("stops hold a non-finite value")
     if not grid.contains(stops[:, :2]).all():
         raise ValueError(f"stop {int(np.flatnonzero(~grid.contains(stops[:, :2]))[0])} lies outside the grid")
-    clear = ndimage.distance_transform_edt(np.pad(~truth, 1))[1:-1, 1:-1]
-    valid = clear > clearance_cells
+    valid = _clear_cells(truth, clearance_cells)
     cells = grid.world_to_cell(stops[:, :2])
     bad = ~valid[cells[:, 0], cells[:, 1]]
     if bad.any():
@@ -546,9 +553,8 @@ def drive_route(
     ahead = np.maximum(_nearest(arc, np.minimum(arc[idx] + step_cells / 2, arc[-1])), np.minimum(idx + 1, last))
     d = xy[ahead] - xy[idx]
     yaw = np.arctan2(d[:, 1], d[:, 0])
-    for j in range(1, len(yaw)):  # at the end of the path there is nothing ahead
-        if ahead[j] == idx[j]:
-            yaw[j] = yaw[j - 1]
+    if len(yaw) > 1 and idx[-1] == last:  # nothing lies ahead of the path's last cell
+        yaw[-1] = yaw[-2]
     return np.column_stack([xy[idx], yaw])
 
 

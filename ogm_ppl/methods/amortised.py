@@ -25,7 +25,7 @@ class AmortisedParams:
     symmetrize: bool = param(
         False,
         Bool(),
-        "average the guide's logits over the 8 turns and flips of the grid (8x the time; guides without "
+        "average the guide's logits over the 8 turns and flips of the grid (8 network passes; guides without "
         "tile-phase channels, e.g. the corpus guides)",
     )
 

@@ -336,7 +336,7 @@ class AmortisedGuide(PyroModule):
 
     @property
     def symmetrize(self) -> bool:
-        r"""Average the logits over the 8 symmetries of the square (test-time symmetrisation, 8x the work):
+        r"""Average the logits over the 8 symmetries of the square (test-time symmetrisation, 8 network passes):
         with :math:`T_s` the ``s``-th turn or flip of the grid,
         :math:`\bar g(x) = \tfrac18 \sum_s T_s^{-1} g(T_s x)`, which commutes with every turn and flip of the
         scene (the guide's training turns its windows at random, so each term estimates the same logits).
