@@ -533,7 +533,11 @@ def drive_route(
         a, b = int(nodes[i - 1]), int(nodes[i])
         if a == b:
             continue
-        d, pred = csgraph.dijkstra(graph.graph, indices=a, return_predecessors=True)
+        # Dijkstra settles every cell within ``limit`` exactly; search the whole graph only when b lies further
+        limit = 2.0 * float(np.hypot(*(cells[i] - cells[i - 1]))) + 50.0
+        d, pred = csgraph.dijkstra(graph.graph, indices=a, return_predecessors=True, limit=limit)
+        if not d[b] < np.inf:
+            d, pred = csgraph.dijkstra(graph.graph, indices=a, return_predecessors=True)
         if not d[b] < _BIG / 2:
             raise ValueError(f"stop {i} cannot be reached from stop {i - 1} through cells with clearance")
         seg = [b]

@@ -199,6 +199,22 @@ def test_drive_route_faces_the_way_it_drives_at_any_step():
     np.testing.assert_allclose(one, [[4.5, 4.5, 0.0]])
 
 
+def test_drive_route_takes_detours_longer_than_its_first_search():
+    """Two stops 4 cells apart either side of a long wall: the path runs round the wall's end (over 2 x 4 + 50
+    cells of path, beyond the bounded first search) and is the shortest one."""
+    t = np.zeros((40, 160), bool)
+    t[[0, -1], :] = t[:, [0, -1]] = True
+    t[20, :150] = True  # a wall open only at its east end
+    g = Grid(t.shape, 1.0)
+    poses = drive_route(t, g, [[5.5, 17.5], [5.5, 23.5]], step_cells=1.0)
+    cells = g.world_to_cell(poses[:, :2])
+    assert cells[:, 1].max() >= 150  # round the wall's end
+    assert not t[cells[:, 0], cells[:, 1]].any()
+    path = np.hypot(*np.diff(poses[:, :2], axis=0).T).sum()
+    # the shortest clear path: east along row 17, round the end at clearance 3, back west along row 23
+    assert path < 2 * (150 + 3 - 5) + 6 + 4 * (np.sqrt(2) - 1) * 3 + 1e-9
+
+
 def test_drive_route_poses_scan_with_the_stops_simulator(world, route):
     """Front-facing scans simulate at the driven poses, and the driven poses' 360-degree coverage is at least
     the stops' (the path passes through every stop)."""
