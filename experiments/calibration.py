@@ -300,13 +300,13 @@ def guide_corpora(name: str) -> list[str]:
     return name.removesuffix(GUIDE_SYM).split(GUIDE_JOIN)
 
 
-def guide_for(name: str) -> AmortisedGuide:
+def guide_for(name: str, directory: Path | None = None) -> AmortisedGuide:
     """The guide a ``--guides`` name ``C``, ``C1+C2`` or either with ``@sym`` scores
-    (:func:`load_corpus_guide`, symmetrised for ``@sym``)."""
+    (:func:`load_corpus_guide` from ``directory``, default the shipped ones; symmetrised for ``@sym``)."""
     base = name.removesuffix(GUIDE_SYM)
     if not base or "@" in base:
         raise SystemExit(f"--guides takes CORPUS, C1+C2 or either with {GUIDE_SYM}, got {name!r}")
-    guide = load_corpus_guide(base)
+    guide = load_corpus_guide(base, directory=directory)
     if name.endswith(GUIDE_SYM):
         guide.symmetrize = True
     return guide
@@ -317,12 +317,13 @@ def names_digest(names) -> str:
     return hashlib.sha256("\n".join(sorted(names)).encode()).hexdigest()
 
 
-def guide_path(corpus: str) -> Path:
-    """The amortised guide learned on ``corpus``'s training plans (``experiments/train_corpus_guide.py``)."""
-    return FITTED_DIR / f"guide_{corpus}.npz"
+def guide_path(corpus: str, directory: Path | None = None) -> Path:
+    """The amortised guide learned on ``corpus``'s training plans (``experiments/train_corpus_guide.py``):
+    ``guide_<corpus>.npz`` in ``directory`` (default the shipped guides, ``ogm_ppl/fitted``)."""
+    return Path(directory or FITTED_DIR) / f"guide_{corpus}.npz"
 
 
-def load_corpus_guide(corpus: str, train: set[str] | None = None):
+def load_corpus_guide(corpus: str, train: set[str] | None = None, directory: Path | None = None):
     """The guide of :func:`guide_path`, refused (:class:`LeakageError`) unless its record names ``corpus`` and
     the SHA-256 of the very plans the corpus's tables were learned from (``train``, default
     :func:`training_set`), so that :func:`check_heldout` covers it as it covers the tables. A guide of several
@@ -330,7 +331,7 @@ def load_corpus_guide(corpus: str, train: set[str] | None = None):
     against that corpus's :func:`training_set` (``train`` applies to a one-corpus guide only)."""
     from ogm_ppl.inference.variational.amortised import AmortisedGuide
 
-    path = guide_path(corpus)
+    path = guide_path(corpus, directory)
     guide = AmortisedGuide.load(path)
     meta = guide.trained_for
     parts = guide_corpora(corpus)
@@ -737,6 +738,12 @@ def parse_args(argv=None) -> argparse.Namespace:
         "experiments/train_corpus_guide.py); CORPUS@sym: the guide symmetrised",
     )
     ap.add_argument(
+        "--guide-dir",
+        default=None,
+        help="read the --guides as DIR/guide_CORPUS.npz (default: the shipped ones in ogm_ppl/fitted); their "
+        "records are checked against the tables' training sets all the same",
+    )
+    ap.add_argument(
         "--diagonal",
         action="store_true",
         help="score each test corpus only with the priors learned on it (every guide still runs on every corpus)",
@@ -811,7 +818,7 @@ def main(argv=None) -> dict:
     skipped_keys: set[tuple] = set()
     overrides = _patch_overrides(args.patch)
     pairs = prior_names(args.priors, args.train)
-    guides = {c: guide_for(c) for c in args.guides}
+    guides = {c: guide_for(c, args.guide_dir) for c in args.guides}
     pairs += [(GUIDE_PREFIX + c, c) for c in args.guides]
     prov = provenance()
     t_all = time.perf_counter()
