@@ -327,15 +327,16 @@ def occupied_iou(estimate, truth, mask=None, threshold: float = 0.5, unknown=Non
 
 
 def prediction_scores(estimate, truth, mask=None, unknown=None) -> dict[str, float]:
-    """All prediction scores of one map on one mask: NLL (bits/cell), ECE, Brier, best F1, ROC AUC
-    (NaN where the mask holds only one class) and occupied IoU at 0.5 with ``unknown`` counted free."""
+    """All prediction scores of one map on one mask: NLL (bits/cell), ECE, Brier, best F1 (of the occupied
+    class: NaN where the mask holds no occupied cell, as recall is then undefined), ROC AUC (NaN where the mask
+    holds only one class) and occupied IoU at 0.5 with ``unknown`` counted free. Means over maps skip the NaNs."""
     est, tru = _flat(estimate, truth, mask)
     out = {
         "cells": int(est.size),
         "nll_bits": nll_bits(estimate, truth, mask),
         "ece": expected_calibration_error(estimate, truth, mask),
         "brier": brier_score(estimate, truth, mask),
-        "best_f1": best_f1(estimate, truth, mask=mask)[0] if est.size else float("nan"),
+        "best_f1": best_f1(estimate, truth, mask=mask)[0] if tru.any() else float("nan"),
         "iou": occupied_iou(estimate, truth, mask, unknown=unknown),
     }
     out["auc"] = roc_auc(estimate, truth, mask) if 0 < tru.sum() < tru.size else float("nan")

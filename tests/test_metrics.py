@@ -145,6 +145,16 @@ def test_empty_mask_gives_nan_scores_quietly():
     assert all(np.isnan(v) for k, v in out.items() if k != "cells")
 
 
+def test_best_f1_of_a_mask_without_occupied_cells_is_undefined():
+    """No occupied cell under the mask: recall is undefined, so best F1 is NaN (as AUC is), not the 0 that a
+    mean over maps would count against every method alike; one occupied cell makes both defined again."""
+    est, tru = np.array([0.2, 0.7, 0.9]), np.array([False, False, False])
+    out = prediction_scores(est, tru)
+    assert np.isnan(out["best_f1"]) and np.isnan(out["auc"]) and out["nll_bits"] > 0
+    out = prediction_scores(est, np.array([False, False, True]))
+    assert out["best_f1"] == 1.0 and out["auc"] == 1.0
+
+
 # ----------------------- reliability diagrams
 
 
