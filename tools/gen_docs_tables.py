@@ -662,6 +662,10 @@ def _calibration_guides(doc: dict) -> Table:
                     "@sym: its logits averaged over the 8 turns and flips of the window",
                     any("@sym" in r[0] for r in rows),
                 ),
+                (
+                    f"guides read from {settings.get('guide_dir')}/guide_C.npz (trained by the command above)",
+                    bool(settings.get("guide_dir")),
+                ),
             )
             if on
         ),
@@ -891,6 +895,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "calibration_guides_cross": ("calibration_guides", _calibration_cross),
     "calibration_guides_matrix": ("calibration_guides", _calibration_guides),
     "calibration_mix": ("calibration_mix", _calibration_guides),
+    "calibration_generated": ("calibration_generated", _calibration_guides),
     "headline": ("headline", _headline),
     "intel_guide": ("intel_guide", _experiment_conditions),
     "intel_guide_2cm": ("intel_guide_2cm", _experiment_conditions),
