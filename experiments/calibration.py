@@ -619,7 +619,11 @@ def tables_md(summ: list[dict], settings: dict) -> str:
     ]
     for mask in MASKS:
         for test in tests:
-            sel = [s for s in summ if s["test"] == test and s["mask"] == mask and s["train"].removesuffix(GUIDE_SYM) in (test, "none")]
+            sel = [
+                s
+                for s in summ
+                if s["test"] == test and s["mask"] == mask and s["train"].removesuffix(GUIDE_SYM) in (test, "none")
+            ]
             if not sel:
                 continue
             lines += [

@@ -879,6 +879,34 @@ def _experiment_conditions(doc: dict) -> Table:
     )
 
 
+def _experiment_by_log(doc: dict) -> Table:
+    """An experiment over several logs, each at several pose fractions (conditions named ``ENTRY-pfF``): one
+    row per log and algorithm, best F1 / ROC AUC / touched-cell best F1 on the mask, one column per pose
+    fraction."""
+    pooled = doc["pooled"]
+    fracs = list(dict.fromkeys(p["condition"].removeprefix(p["entry"] + "-pf") for p in pooled))
+    got = {(p["entry"], p["algorithm"], p["condition"].removeprefix(p["entry"] + "-pf")): p for p in pooled}
+    rows = []
+    for e in dict.fromkeys(p["entry"] for p in pooled):
+        for a in dict.fromkeys(p["algorithm"] for p in pooled if p["entry"] == e):
+            row = []
+            for f in fracs:
+                p = got.get((e, a, f))
+                t = (p or {}).get("touched") or {}
+                row.append(
+                    "–"
+                    if p is None
+                    else f"{_f(p['mask'].get('best_f1'))} / {_f(p['mask'].get('auc'))} / {_f(t.get('best_f1'))}"
+                )
+            rows.append([e, a, *row])
+    return Table(
+        caption=f"{doc['experiment']}: best F1 / ROC AUC / best F1 on the touched cells, per log and pose share",
+        header=["log", "algorithm", *(f"{100 * float(f):.3g} % of the poses" for f in fracs)],
+        rows=rows,
+        provenance=doc["provenance"],
+    )
+
+
 #: table name -> (snapshot name, builder)
 TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "active_d0": ("active_d0", _active_d0),
@@ -896,6 +924,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "calibration_guides_matrix": ("calibration_guides", _calibration_guides),
     "calibration_mix": ("calibration_mix", _calibration_guides),
     "calibration_generated": ("calibration_generated", _calibration_guides),
+    "carmen_guide": ("carmen_guide", _experiment_by_log),
     "headline": ("headline", _headline),
     "intel_guide": ("intel_guide", _experiment_conditions),
     "intel_guide_2cm": ("intel_guide_2cm", _experiment_conditions),
