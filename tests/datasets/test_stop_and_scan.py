@@ -200,7 +200,7 @@ def test_drive_route_faces_the_way_it_drives_at_any_step():
 
 
 def test_drive_route_takes_detours_longer_than_its_first_search():
-    """Two stops 4 cells apart either side of a long wall: the path runs round the wall's end (over 2 x 4 + 50
+    """Two stops 6 cells apart either side of a long wall: the path runs round the wall's end (over 2 x 6 + 50
     cells of path, beyond the bounded first search) and is the shortest one."""
     t = np.zeros((40, 160), bool)
     t[[0, -1], :] = t[:, [0, -1]] = True
