@@ -293,19 +293,18 @@ def _by_condition(pooled: list[dict]) -> tuple[dict[str, list[str]], list[str]]:
     conds = list(dict.fromkeys(p["condition"] for p in pooled))
     frac = {p["condition"]: p["measurement_fraction"] for p in pooled}
     got = {(p["algorithm"], p["condition"]): p for p in pooled}
-    cells = {}
-    for a in dict.fromkeys(p["algorithm"] for p in pooled):
-        row = []
-        for c in conds:
-            p = got.get((a, c))
-            t = (p or {}).get("touched") or {}
-            row.append(
-                "–"
-                if p is None
-                else f"{_f(p['mask'].get('best_f1'))} / {_f(p['mask'].get('auc'))} / {_f(t.get('best_f1'))}"
-            )
-        cells[a] = row
+    cells = {
+        a: [_f1_auc_touched(got.get((a, c))) for c in conds] for a in dict.fromkeys(p["algorithm"] for p in pooled)
+    }
     return cells, [f"{100 * frac[c]:.3g} % of the readings" for c in conds]
+
+
+def _f1_auc_touched(p: dict | None) -> str:
+    """One pooled row as ``best F1 / AUC / touched best F1`` on the mask; ``"–"`` for a run that did not happen."""
+    if p is None:
+        return "–"
+    t = p.get("touched") or {}
+    return f"{_f(p['mask'].get('best_f1'))} / {_f(p['mask'].get('auc'))} / {_f(t.get('best_f1'))}"
 
 
 def _headline(doc: dict) -> Table:
@@ -886,19 +885,11 @@ def _experiment_by_log(doc: dict) -> Table:
     pooled = doc["pooled"]
     fracs = list(dict.fromkeys(p["condition"].removeprefix(p["entry"] + "-pf") for p in pooled))
     got = {(p["entry"], p["algorithm"], p["condition"].removeprefix(p["entry"] + "-pf")): p for p in pooled}
-    rows = []
-    for e in dict.fromkeys(p["entry"] for p in pooled):
-        for a in dict.fromkeys(p["algorithm"] for p in pooled if p["entry"] == e):
-            row = []
-            for f in fracs:
-                p = got.get((e, a, f))
-                t = (p or {}).get("touched") or {}
-                row.append(
-                    "–"
-                    if p is None
-                    else f"{_f(p['mask'].get('best_f1'))} / {_f(p['mask'].get('auc'))} / {_f(t.get('best_f1'))}"
-                )
-            rows.append([e, a, *row])
+    rows = [
+        [e, a, *(_f1_auc_touched(got.get((e, a, f))) for f in fracs)]
+        for e in dict.fromkeys(p["entry"] for p in pooled)
+        for a in dict.fromkeys(p["algorithm"] for p in pooled if p["entry"] == e)
+    ]
     return Table(
         caption=f"{doc['experiment']}: best F1 / ROC AUC / best F1 on the touched cells, per log and pose share",
         header=["log", "algorithm", *(f"{100 * float(f):.3g} % of the poses" for f in fracs)],
