@@ -46,7 +46,9 @@ real-log building, before anything runs.
 
 Kernels. ``--kernel`` names an entry of :data:`KERNELS`: ``factory(model, patch, init, args) -> kernel`` (a
 :class:`~ogm_ppl.inference.mcmc.kernel.MapKernel` that :func:`~ogm_ppl.inference.run_gibbs` drives): ``gibbs``
-(the default) or ``tempering``, parallel tempering whose every rung is that Gibbs sampler (``--rungs``, ``--beta-min``,
+(the default), ``cycle`` (:class:`~ogm_ppl.inference.mcmc.KernelCycle`: each sweep is that Gibbs sweep followed
+by the moves it lacks, single cells after tile patches, 2 x 2 patches on two offset tilings after single cells) or
+``tempering``, parallel tempering whose every rung is that Gibbs sampler (``--rungs``, ``--beta-min``,
 ``--temper``; the cold rung is scored, so the pooled marginals and R-hat are the posterior's). Another sampler plugs
 in by adding an entry.
 
@@ -91,6 +93,7 @@ from ogm_ppl.datasets.mapgen import KINDS as MAP_KINDS
 from ogm_ppl.datasets.mapgen import generate_map
 from ogm_ppl.datasets.stop_and_scan import stop_and_scan
 from ogm_ppl.inference import CellGibbs, PatchGibbs, RunningStats, evidence_grid, run_gibbs
+from ogm_ppl.inference.mcmc import KernelCycle
 from ogm_ppl.inference.mcmc.diagnostics import split_rhat
 from ogm_ppl.inference.mcmc.tempering import TEMPERS, ParallelTempering, geometric_ladder
 from ogm_ppl.io import atomic_write_text
@@ -393,9 +396,21 @@ def _tempering(model, patch, init, args):
     )
 
 
+def _cycle(model, patch, init, args=None):
+    """:class:`~ogm_ppl.inference.mcmc.KernelCycle`: the ``gibbs`` kernel, then in the same sweep the moves
+    it lacks. After patch Gibbs over a prior's tiles, a single-cell Gibbs sweep; after single-cell Gibbs, two
+    sweeps of 2 x 2 patches on tilings offset by one cell. Each part leaves the posterior invariant, so the
+    cycle does."""
+    if patch is None:
+        parts = [CellGibbs(model, init=init), PatchGibbs(model, (2, 2)), PatchGibbs(model, (2, 2), offset=(1, 1))]
+    else:
+        parts = [PatchGibbs(model, patch, init=init), CellGibbs(model)]
+    return KernelCycle(parts)
+
+
 #: ``name -> factory(model, patch, init, args)``; ``patch`` ``None`` means single cells, ``init`` one of
 #: :data:`STARTS`, ``args`` the parsed command line (the sampler's own settings)
-KERNELS: dict[str, Callable] = {"gibbs": _gibbs, "tempering": _tempering}
+KERNELS: dict[str, Callable] = {"gibbs": _gibbs, "tempering": _tempering, "cycle": _cycle}
 
 
 def _patch_overrides(items: Sequence[str]) -> dict[str, tuple[int, int] | None]:

@@ -1,6 +1,7 @@
 """MCMC over whole maps (Chapter 4): the map-kernel base, Gibbs kernels for ``pyro.infer.MCMC``, guided
-Gibbs, parallel tempering, the streaming runner with checkpoints, and convergence diagnostics."""
+Gibbs, parallel tempering, cycles of kernels, the streaming runner with checkpoints, and convergence diagnostics."""
 
+from ogm_ppl.inference.mcmc.cycle import KernelCycle
 from ogm_ppl.inference.mcmc.dask_tiles import DaskTileGibbs
 from ogm_ppl.inference.mcmc.diagnostics import (
     ChainsResult,
@@ -28,6 +29,7 @@ __all__ = [
     "DaskTileGibbs",
     "GibbsRun",
     "GuidedGibbs",
+    "KernelCycle",
     "KernelStateError",
     "MapKernel",
     "MasslessStartWarning",

@@ -3,7 +3,7 @@ and 2D problems, the checkpoint round trip and ``region=``, for each scan and up
 
 import numpy as np
 
-from ogm_ppl.inference.mcmc import CellGibbs, GuidedGibbs, MetropolisCell, PatchGibbs
+from ogm_ppl.inference.mcmc import CellGibbs, GuidedGibbs, KernelCycle, MetropolisCell, PatchGibbs
 from ogm_ppl.testing import KernelContract
 
 
@@ -73,3 +73,22 @@ class TestGuidedGibbs(KernelContract):
     def make_kernel(self, model, region=None):
         block = (1, 3) if model.grid.ndim == 1 else (2, 2)
         return GuidedGibbs(CellGibbs(model), _SharpGuide(), block=block, p_guide=0.5)
+
+
+class TestKernelCycle(KernelContract):
+    def make_kernel(self, model, region=None):
+        patch = 3 if model.grid.ndim == 1 else (1, 2)
+        return KernelCycle(
+            [PatchGibbs(model, patch, region=region), CellGibbs(model, scan="permutation", region=region)]
+        )
+
+
+class TestKernelCycleOwnStart(KernelContract):
+    def make_kernel(self, model, region=None):
+        return KernelCycle(
+            [
+                MetropolisCell(model, region=region),
+                PatchGibbs(model, 2 if model.grid.ndim == 1 else (2, 2), region=region),
+            ],
+            init="free",
+        )
