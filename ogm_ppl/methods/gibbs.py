@@ -4,7 +4,9 @@ r"""``gibbs`` and ``metropolis``: MCMC over the full posterior ``p(m | z)`` (Cha
 (:class:`~ogm_ppl.inference.mcmc.PatchGibbs`, Algorithm 1; Algorithm 2 with ``p_rand_patch``), heat-bath or
 metropolised updates, or ``update = "thesis"``: the thesis's border update (Section 5.2.3), which draws
 each tile of a table prior from its own table and ignores its neighbours' factors (not exact);
-``warm_thesis = N`` starts an exact patch chain where N sweeps of that update end (a starting map only).
+``warm_thesis = N`` starts an exact patch chain where N sweeps of that update end (a starting map only);
+``cell_sweeps = true`` follows every patch sweep by a single-cell Gibbs sweep
+(:class:`~ogm_ppl.inference.mcmc.KernelCycle`), which moves the cells that straddle a table prior's tiles.
 ``metropolis``: single-cell Metropolis-Hastings (:class:`~ogm_ppl.inference.mcmc.MetropolisCell`) with
 uniform or end-point proposals.
 """
@@ -15,7 +17,7 @@ from dataclasses import dataclass
 
 from ogm_ppl.methods._model import check_patch_work, patch_arg
 from ogm_ppl.methods._sampling import SamplingParams, run_kernel
-from ogm_ppl.methods.params import Choice, Float, Int, ParamError, Patch, param
+from ogm_ppl.methods.params import Bool, Choice, Float, Int, ParamError, Patch, param
 from ogm_ppl.methods.problem import MapProblem, MapResult, RunContext
 from ogm_ppl.methods.registry import register_method
 
@@ -50,8 +52,19 @@ class GibbsParams(SamplingParams):
         "starts where they end (a starting map: not counted, not part of the chain)",
     )
 
+    cell_sweeps: bool = param(
+        False,
+        Bool(),
+        "PatchGibbs: a single-cell Gibbs sweep after every patch sweep (KernelCycle), exact; frees the cells a "
+        "tile update of a table prior leaves frozen",
+    )
+
     def check(self) -> None:
         super().check()
+        if self.cell_sweeps and (self.patch == 1 or self.update == "thesis"):
+            raise ParamError(
+                "cell_sweeps", "adds single-cell sweeps to an exact patch chain: use a patch and update gibbs"
+            )
         if self.update == "thesis" and self.patch == 1:
             raise ParamError("update", "'thesis' is the border update of patch Gibbs: use a patch, e.g. [3, 3]")
         if self.warm_thesis and (self.patch == 1 or self.update == "thesis"):
@@ -63,7 +76,7 @@ class GibbsParams(SamplingParams):
 @register_method("gibbs", GibbsParams, stochastic=True, sampler=True)
 def gibbs(params: GibbsParams, problem: MapProblem, ctx: RunContext) -> MapResult:
     """Gibbs sampling of the full posterior (Chapter 4): CellGibbs, or PatchGibbs for patches."""
-    from ogm_ppl.inference.mcmc import CellGibbs, PatchGibbs
+    from ogm_ppl.inference.mcmc import CellGibbs, KernelCycle, PatchGibbs
 
     model = params.model(problem)
     if params.patch == 1:
@@ -92,6 +105,9 @@ def gibbs(params: GibbsParams, problem: MapProblem, ctx: RunContext) -> MapResul
             init = _thesis_start(patch_kernel("thesis", params.init), params.warm_thesis, ctx.seed)
         kernel = patch_kernel(params.update, init)
         details = {"kernel": "PatchGibbs", "patch": params.patch}
+        if params.cell_sweeps:
+            kernel = KernelCycle([kernel, CellGibbs(model, scan=params.scan, update=params.update)])
+            details["kernel"] = "KernelCycle(PatchGibbs, CellGibbs)"
     return run_kernel(kernel, params, problem, ctx, details)
 
 

@@ -1,5 +1,5 @@
-"""The gibbs method's ``warm_thesis`` start: an exact patch chain started where sweeps of the thesis's border
-update end (reproducible from the seed, refused where it means nothing)."""
+"""The gibbs method's ``warm_thesis`` start (an exact patch chain started where sweeps of the thesis's border
+update end: reproducible from the seed, refused where it means nothing) and its ``cell_sweeps`` cycle."""
 
 from __future__ import annotations
 
@@ -38,8 +38,32 @@ def test_warm_thesis_starts_the_exact_chain_from_the_thesis_update(box, monkeypa
 
 
 @pytest.mark.parametrize(
-    "values", [{"warm_thesis": 2, "patch": 1}, {"warm_thesis": 2, "patch": [3, 3], "update": "thesis"}]
+    "values",
+    [
+        {"warm_thesis": 2, "patch": 1},
+        {"warm_thesis": 2, "patch": [3, 3], "update": "thesis"},
+        {"cell_sweeps": True, "patch": 1},
+        {"cell_sweeps": True, "patch": [3, 3], "update": "thesis"},
+    ],
 )
-def test_warm_thesis_is_refused_where_it_means_nothing(values):
-    with pytest.raises(ParamError, match="warm_thesis"):
+def test_warm_thesis_and_cell_sweeps_are_refused_where_they_mean_nothing(values):
+    name = "warm_thesis" if "warm_thesis" in values else "cell_sweeps"
+    with pytest.raises(ParamError, match=name):
         get_method("gibbs").parse(values)
+
+
+def test_cell_sweeps_cycle_patch_and_cell_gibbs_and_resume_from_a_checkpoint(box, tmp_path):  # noqa: F811
+    """``cell_sweeps``: each sweep is a patch sweep and a cell sweep (both parts sweep as often as the chain);
+    a run stopped half way resumes from its checkpoint to the very marginals of an uninterrupted run."""
+    _, problem = box
+    method = get_method("gibbs")
+    p = method.parse({**BORDER, "cell_sweeps": True, "sweeps": 6, "burn_in": 2})
+    full = method.run(p, problem, RunContext(seed=3))
+    assert full.details["kernel"] == "KernelCycle(PatchGibbs, CellGibbs)"
+    plain = method.run(method.parse({**BORDER, "sweeps": 6, "burn_in": 2}), problem, RunContext(seed=3))
+    assert not np.array_equal(full.probabilities, plain.probabilities)
+    ctx = dict(seed=3, checkpoint_dir=tmp_path / "ck")
+    half = method.run(p, problem, RunContext(**ctx, stop_after=4))
+    assert half.probabilities is None
+    resumed = method.run(p, problem, RunContext(**ctx, resume=True))
+    np.testing.assert_array_equal(resumed.probabilities, full.probabilities)
