@@ -675,6 +675,48 @@ def _calibration_guides(doc: dict) -> Table:
 _THESIS_6_4 = {"ogm": 0.9328, "dd-L1": 0.9460, "dd-L9": 0.9458, "border-L9": 0.9820, "border-thesis-L9": 0.9820}
 
 
+def _calibration_kernels(doc: dict, against: str = "calibration_cycle_gibbs") -> Table:
+    """Two kernels on the same maps: the snapshot ``doc`` (a calibration run with ``--kernel cycle``) against
+    the snapshot ``against`` (the same settings with ``--kernel gibbs``). Per prior and test corpus (priors
+    learned on it), the share of unseen cells whose split R-hat is below 1.05 and the unseen cells' NLL."""
+    base = load_snapshot(against)
+    a, b = base["settings"], doc["settings"]
+    differ = sorted(k for k in a.keys() | b.keys() if k != "kernel" and a.get(k) != b.get(k))
+    if differ:
+        raise ValueError(f"{against} and the {b.get('kernel')} snapshot differ in {differ}")
+    kernels = (a.get("kernel", "gibbs"), b.get("kernel", "gibbs"))
+
+    def own(d: dict) -> dict:
+        return {(s["prior"], s["test"]): s for s in d["summary"] if s["mask"] == "unseen" and s["train"] == s["test"]}
+
+    x, y = own(base), own(doc)
+    tests = list(dict.fromkeys(t for _, t in y))
+    order = b["priors"]
+    rows = []
+    for prior in sorted({p for p, _ in y}, key=lambda p: order.index(p) if p in order else len(order)):
+        cells = []
+        for t in tests:
+            sa, sb = x.get((prior, t)), y.get((prior, t))
+            for k, d in (("rhat_below", 2), ("nll_bits", 3)):
+                cells.append("–" if sa is None or sb is None else f"{_f(sa[k], d)} → {_f(sb[k], d)}")
+        rows.append([prior, *cells])
+    prov = {
+        **doc["provenance"],
+        "command": f"{base['provenance']['command']}; then {doc['provenance']['command']}",
+        "parts": [base["provenance"], doc["provenance"]],
+    }
+    return Table(
+        caption=(
+            f"Unseen cells of held-out maps ({b['plans']} per corpus), each prior learned on the test corpus, 3 chains "
+            f"of {b['sweeps']} sweeps from different starts: share of cells with split R-hat < 1.05 and NLL "
+            f"(bits/cell), kernel {kernels[0]} → {kernels[1]}"
+        ),
+        header=["prior", *(f"{t} {m}" for t in tests for m in ("R-hat < 1.05", "NLL"))],
+        rows=rows,
+        provenance=prov,
+    )
+
+
 def _experiment_pooled(doc: dict) -> Table:
     """An experiment's pooled scores (every dataset's cells in one P-R curve), one row per algorithm: best F1
     with its precision and recall, ROC AUC, touched-cell best F1, the thesis's Table 6.4 figure, and the
@@ -915,6 +957,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "calibration_guides_matrix": ("calibration_guides", _calibration_guides),
     "calibration_mix": ("calibration_mix", _calibration_guides),
     "calibration_generated": ("calibration_generated", _calibration_guides),
+    "calibration_cycle": ("calibration_cycle", _calibration_kernels),
     "carmen_guide": ("carmen_guide", _experiment_by_log),
     "headline": ("headline", _headline),
     "intel_guide": ("intel_guide", _experiment_conditions),
