@@ -1,0 +1,93 @@
+"""KernelCycle beyond the kernel contract (``test_kernel_contract.py``, ``test_backoff_escape.py``): Pyro's
+``MCMC`` drives it, bad parts are refused, its checkpoints name their parts, and a run's fingerprint tells
+cycles of different parts apart."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+from pyro.infer import MCMC
+
+from ogm_ppl.inference.mcmc import CellGibbs, KernelCycle, KernelStateError, MetropolisCell, PatchGibbs
+from ogm_ppl.inference.mcmc.fingerprint import fingerprint
+from ogm_ppl.inference.mcmc.runner import CheckpointError, RunningStats, run_gibbs
+from ogm_ppl.testing.kernels import enumerable_1d, enumerable_2d
+
+
+def cycle(model, init=None):
+    return KernelCycle([PatchGibbs(model, (1, 2)), CellGibbs(model)], init=init)
+
+
+def test_pyro_mcmc_drives_the_cycle_and_each_part_sweeps_once_per_sweep():
+    model = enumerable_2d()
+    k = cycle(model)
+    torch.manual_seed(0)
+    mcmc = MCMC(k, num_samples=40, warmup_steps=5, disable_progbar=True)
+    mcmc.run()
+    assert mcmc.get_samples()["m"].shape == (40, len(model.latent))
+    mcmc.summary()  # runs
+    assert k.sweeps == 45 and [p.sweeps for p in k.kernels] == [45, 45]
+    d = k.diagnostics()
+    assert [p["kind"] for p in d["parts"]] == ["PatchGibbs", "CellGibbs"]
+    assert k.updates == sum(p.updates for p in k.kernels) and k.changes <= k.updates
+
+
+def test_the_start_is_the_first_part_s_unless_given():
+    model = enumerable_2d()
+    a = cycle(model)
+    assert a.init == "ogm"
+    assert torch.equal(a.initial_params["m"], a.kernels[0].initial_params["m"])
+    b = cycle(model, init="free")
+    assert b.init == "free" and not b.initial_params["m"].any()
+
+
+@pytest.mark.parametrize(
+    "parts, error, match",
+    [
+        ([], ValueError, "at least one"),
+        (["CellGibbs"], TypeError, "MapKernel"),
+        ("other model", ValueError, "same model|another model"),
+        ("twice", ValueError, "twice"),
+    ],
+)
+def test_bad_parts_are_refused(parts, error, match):
+    model = enumerable_2d()
+    if parts == "other model":
+        parts = [CellGibbs(model), CellGibbs(enumerable_2d())]
+    elif parts == "twice":
+        k = CellGibbs(model)
+        parts = [k, k]
+    with pytest.raises(error, match=match):
+        KernelCycle(parts)
+
+
+def test_a_state_of_another_cycle_is_refused_naming_the_part():
+    model = enumerable_2d()
+    a = cycle(model)
+    a.setup()
+    a.sample(a.current_params())
+    state = a.state_dict()
+    assert int(state["parts"]) == 2 and str(state["k0.kind"]) == "PatchGibbs" and str(state["k1.kind"]) == "CellGibbs"
+    with pytest.raises(KernelStateError, match="'parts' must be 3"):
+        KernelCycle([PatchGibbs(model, (1, 2)), CellGibbs(model), MetropolisCell(model)]).load_state_dict(state)
+    swapped = KernelCycle([CellGibbs(model), PatchGibbs(model, (1, 2))])
+    with pytest.raises(KernelStateError, match="part 0: a state of a PatchGibbs kernel"):
+        swapped.load_state_dict(state)
+
+
+def test_a_checkpoint_of_one_cycle_is_refused_by_another(tmp_path):
+    model = enumerable_1d()
+    a = KernelCycle([PatchGibbs(model, 2), CellGibbs(model)])
+    b = KernelCycle([PatchGibbs(model, 3), CellGibbs(model)])
+    assert fingerprint(a, RunningStats(model))["kernel"] != fingerprint(b, RunningStats(model))["kernel"]
+    ck = tmp_path / "c.npz"
+    run_gibbs(a, 5, RunningStats(model), seed=1, checkpoint=ck, progress=False)
+    with pytest.raises(CheckpointError, match="kernel"):
+        run_gibbs(b, 5, RunningStats(model), seed=1, checkpoint=ck, progress=False)
+    # the same cycle resumes to the uninterrupted run's marginals
+    full = RunningStats(model)
+    run_gibbs(KernelCycle([PatchGibbs(model, 2), CellGibbs(model)]), 9, full, seed=1, progress=False)
+    again = RunningStats(model)
+    run_gibbs(KernelCycle([PatchGibbs(model, 2), CellGibbs(model)]), 9, again, seed=1, checkpoint=ck, progress=False)
+    np.testing.assert_array_equal(again.marginals.numpy(), full.marginals.numpy())
