@@ -85,6 +85,19 @@ def test_every_snapshot_is_stamped_and_every_table_builds():
             assert t.rows and all(len(r) == len(t.header) for r in t.rows), name
 
 
+def test_every_public_module_is_in_the_api_reference():
+    """Each module (not a package) whose dotted name has no private part has an ``automodule`` in docs/api."""
+    text = "".join(p.read_text() for p in (ROOT / "docs" / "api").glob("*.rst"))
+    documented = set(re.findall(r"automodule:: (\S+)", text))
+    public = [
+        m.name
+        for m in pkgutil.walk_packages(ogm_ppl.__path__, "ogm_ppl.")
+        if not m.ispkg and not any(part.startswith("_") for part in m.name.split(".")[1:])
+    ]
+    assert len(public) > 50
+    assert sorted(set(public) - documented) == []
+
+
 def test_every_table_a_page_shows_has_a_snapshot():
     shown = set()
     for page in (ROOT / "docs").rglob("*.md"):

@@ -17,6 +17,7 @@ from ogm_ppl.inference.log_odds import LogOddsMap, evidence_grid, evidence_grid_
 from ogm_ppl.inference.mcmc import (
     CellGibbs,
     GibbsRun,
+    KernelCycle,
     MetropolisCell,
     ParallelTempering,
     PatchGibbs,
@@ -38,6 +39,7 @@ __all__ = [
     "ExactELBO",
     "FirstHitGuide",
     "GibbsRun",
+    "KernelCycle",
     "LogOddsMap",
     "MapEstimate",
     "MeanFieldGuide",
