@@ -284,6 +284,7 @@ def _next_goal(
     min_gain,
     max_range_cells,
     k_eval=8,
+    whole_grid=False,
 ):
     """The next stop (a graph node), -1 after giving up frontiers, or None when nothing is left.
 
@@ -292,10 +293,28 @@ def _next_goal(
     of it. Of the ``k_eval`` nearest goals, the one with the most new free cells per distance travelled,
     ``gain / (distance + F)``, wins among those whose scan would show at least ``min_gain`` new free cells;
     when none would, the frontier cells near them are given up and the next ``k_eval`` goals are tried.
+    ``whole_grid`` searches the whole grid instead of the known-free cells' window (the same goal; a reference
+    for tests and benchmarks).
     """
     shape = grid.shape
-    known_free = seen & free.ravel()
-    frontier = _frontier(known_free.reshape(shape), (~seen).reshape(shape)) & ~dead.reshape(shape)
+    known_free = (seen & free.ravel()).reshape(shape)
+    # Every frontier cell is known free, so the frontier, its clusters and the cells within reach of them lie
+    # in the known-free cells' bounding box grown by reach + 1: the work is done on that window. Its edge
+    # makes no false frontier (no known-free cell lies on it but at the grid's edge), cluster ids keep the
+    # whole grid's (row-major) order, and the maximum filter is exact inside it (zeros beyond, as outside).
+    rows, cols = np.flatnonzero(known_free.any(1)), np.flatnonzero(known_free.any(0))
+    if rows.size == 0:
+        return None
+    m = int(reach) + 1
+    win = (
+        (slice(None), slice(None))
+        if whole_grid
+        else (
+            slice(max(0, rows[0] - m), min(shape[0], rows[-1] + m + 1)),
+            slice(max(0, cols[0] - m), min(shape[1], cols[-1] + m + 1)),
+        )
+    )
+    frontier = _frontier(known_free[win], ~seen.reshape(shape)[win]) & ~dead.reshape(shape)[win]
     if not frontier.any():
         return None
     fl, nf = ndimage.label(frontier, structure=_EIGHT)
@@ -303,8 +322,9 @@ def _next_goal(
     sizes[0] = 0
     # large clusters get the larger ids, so the maximum filter prefers them where clusters meet
     ranked = np.where(sizes[fl] >= min_cluster, fl + nf, fl)
-    near = ndimage.maximum_filter(ranked, size=2 * int(reach) + 1, mode="constant").ravel()
-    cluster = near[graph.cell]  # per node: a frontier cluster within reach (0: none)
+    near = np.zeros(shape, dtype=ranked.dtype)
+    near[win] = ndimage.maximum_filter(ranked, size=2 * int(reach) + 1, mode="constant")
+    cluster = near.ravel()[graph.cell]  # per node: a frontier cluster within reach (0: none)
     cand = graph.known & (cluster > 0)
     cand[current] = False
     if not cand.any():

@@ -62,6 +62,26 @@ def test_coverage_is_reached(world, route):
     assert route_coverage(truth, grid, route[:-1], max_range_cells=F) < 0.95
 
 
+@pytest.mark.parametrize("pad", [0, 90])
+def test_the_windowed_frontier_search_plans_the_whole_grid_route(world, monkeypatch, pad):
+    """Goals are searched in the known-free cells' window grown by the reach; the route equals the one the
+    whole-grid search plans, with the window at the grid's edge (pad 0) and well inside it (the rooms in a
+    larger grid of occupied cells)."""
+    import functools
+    import importlib
+
+    sas = importlib.import_module("ogm_ppl.datasets.stop_and_scan")  # the module, not its function
+
+    truth, _ = world
+    big = np.pad(truth, pad, constant_values=True)
+    grid = Grid(big.shape, resolution=0.05)
+    windowed = plan_route(big, grid, max_range_cells=F, seed=5)
+    monkeypatch.setattr(sas, "_next_goal", functools.partial(sas._next_goal, whole_grid=True))
+    whole = plan_route(big, grid, max_range_cells=F, seed=5)
+    assert len(windowed) >= 4
+    np.testing.assert_array_equal(windowed, whole)
+
+
 def test_num_poses_and_start(world):
     truth, grid = world
     short = plan_route(truth, grid, max_range_cells=F, num_poses=3, seed=3)
