@@ -4,9 +4,10 @@
 the known-free cells. It labels the clusters and runs a maximum filter over the known-free cells' window
 (grown by the reach), not over the whole grid; the goals are the same (tested). Measured here: the route of
 ``--poses`` stops (default 40) on the largest IPA plan (office_g, 2258 x 1893 cells) and on two mid-size
-plans (IPA NLB, 830 x 991; a HouseExpo plan), at the calibration range (75 cells) and, on the mid-size plans,
-a long range (400 cells, where the ray casting of the scans takes most of the time). The baseline is the whole-grid search (``_next_goal(..., whole_grid=True)``) in the same run. Each
-route is planned once per search (a few seconds to a minute each); the two routes must be identical.
+plans (IPA NLB, 830 x 991; a HouseExpo plan), at the calibration range (75 cells) and, on the mid-size
+plans, a long range (400 cells, where the ray casting of the scans takes most of the time). The baseline is
+the whole-grid search (``_next_goal(..., whole_grid=True)``) in the same run. Each route is planned once per
+search (seconds to a minute each); the two routes must be identical.
 Writes ``out/bench/bench_routes.json``.
 """
 
