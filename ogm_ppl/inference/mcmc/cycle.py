@@ -2,7 +2,9 @@ r"""A cycle of map kernels: one sweep is a sweep of each kernel in turn (Chapter
 
 If every kernel ``P_1, ..., P_n`` leaves the posterior ``pi = p(m | z)`` invariant, so does their
 composition ``P = P_1 P_2 ... P_n`` (Tierney 1994, "cycles"): ``pi P_1 = pi`` and so on down the product.
-The cycle is irreducible as soon as one of them is, and it can mix far faster than any of its parts.
+When every part can also leave a map as it is (a heat-bath update can: ``P_i(m, m) > 0`` on the support), the
+cycle goes wherever one part goes, ``P(m, m') >= P_1(m, m') P_2(m', m') ... P_n(m', m') > 0``, so it is
+irreducible as soon as one part is, and it can mix far faster than any of its parts.
 
 Where it matters: a tile prior sampled by patch Gibbs over its tiles (the border prior of Section 5.2.3, a
 patch table) moves only whole tiles, each drawn from a handful of configurations its table counted for
