@@ -77,6 +77,21 @@ class TestBackoffCycle(TestBackoffEscape):
         return tile_sweep_matrix(tiles) @ sweep_matrix(cells)
 
 
+def test_cycle_leaves_the_posterior_invariant_to_1e_12():
+    """The exact one-sweep matrix of tile sweeps (heat bath + escape) then single cells, under a backed-off
+    border table: rows sum to 1, ``pi P = pi`` to 1e-12, and the cycle moves where the tile sweep stays."""
+    model = with_prior(enumerable_2d(), backoff_prior((2, 4)))
+    tiles, cells = PatchGibbs(model, (2, 2), p_escape=0.5), CellGibbs(model)
+    k = KernelCycle([tiles, cells])
+    k.setup()
+    T = tile_sweep_matrix(tiles)
+    P = T @ sweep_matrix(cells)
+    pi = _exact(model)
+    torch.testing.assert_close(P.sum(1), torch.ones(len(pi), dtype=torch.float64), rtol=0, atol=1e-12)
+    torch.testing.assert_close(pi @ P, pi, rtol=0, atol=1e-12)
+    assert torch.diagonal(P).max() < torch.diagonal(T).max()
+
+
 def test_cycle_long_run_matches_the_exact_marginals():
     """The cycle of tile and cell sweeps, 10000 sweeps from a fixed seed: each cell's marginal within 5
     batch-means standard errors of the brute-force marginal."""
