@@ -51,11 +51,11 @@ from ogm_ppl.datasets import THESIS_TOY_READINGS, toy_1d
 from ogm_ppl.inference.exact import brute_force, pose_constrained_1d
 from ogm_ppl.inference.mcmc import (
     CellGibbs,
-    KernelCycle,
     MetropolisCell,
     ParallelTempering,
     PatchGibbs,
     geometric_ladder,
+    mixing_cycle,
     rhat_agreement,
     run_chains,
     run_from_starts,
@@ -300,18 +300,6 @@ CELL_COUPLED = ("border1_bo:houseexpo", "mrf8:houseexpo@cal")
 CELL_SAME_TIME = 10
 
 
-def _cell_block_cycle(model, init="ogm") -> KernelCycle:
-    """A sweep of single-cell Gibbs, then sweeps of 2 x 2 patches on tilings offset by 0 and 1 cell."""
-    return KernelCycle(
-        [CellGibbs(model, init=init), PatchGibbs(model, (2, 2)), PatchGibbs(model, (2, 2), offset=(1, 1))]
-    )
-
-
-def _patch_cell_cycle(model, init="ogm") -> KernelCycle:
-    """A sweep of 3 x 3 patch Gibbs, then a sweep of single-cell Gibbs (:class:`KernelCycle`)."""
-    return KernelCycle([PatchGibbs(model, (3, 3), init=init), CellGibbs(model)])
-
-
 def coupled_priors(
     num_sweeps: int = 200, warmup: int = 50, rungs: int = 4, beta_min: float = 0.3, seed: int = 0
 ) -> dict:
@@ -339,7 +327,7 @@ def coupled_priors(
         starts = start_maps(model, res["starts"], seed=seed)
         PatchGibbs(model, (3, 3)).sample(PatchGibbs(model, (3, 3)).initial_params)  # compile outside the timing
         if name in CELL_COUPLED:
-            _cell_block_cycle(model).sample(_cell_block_cycle(model).initial_params)
+            mixing_cycle(model).sample(mixing_cycle(model).initial_params)
             makers = {
                 "cell Gibbs": (partial(CellGibbs, model), num_sweeps, warmup),
                 "cell Gibbs, 10x sweeps": (
@@ -347,7 +335,7 @@ def coupled_priors(
                     CELL_SAME_TIME * num_sweeps,
                     CELL_SAME_TIME * warmup,
                 ),
-                "cells + 2 x 2 blocks (KernelCycle)": (partial(_cell_block_cycle, model), num_sweeps, warmup),
+                "cells + 2 x 2 blocks (KernelCycle)": (partial(mixing_cycle, model), num_sweeps, warmup),
             }
         else:
             makers = {
@@ -358,7 +346,7 @@ def coupled_priors(
                     warmup,
                 ),
                 "patch Gibbs, same time": (partial(PatchGibbs, model, (3, 3)), rungs * num_sweeps, rungs * warmup),
-                "patch + cell Gibbs (KernelCycle)": (partial(_patch_cell_cycle, model), num_sweeps, warmup),
+                "patch + cell Gibbs (KernelCycle)": (partial(mixing_cycle, model, (3, 3)), num_sweeps, warmup),
             }
         rows = {}
         for label, (make, n, w) in makers.items():

@@ -93,7 +93,7 @@ from ogm_ppl.datasets.mapgen import KINDS as MAP_KINDS
 from ogm_ppl.datasets.mapgen import generate_map
 from ogm_ppl.datasets.stop_and_scan import stop_and_scan
 from ogm_ppl.inference import CellGibbs, PatchGibbs, RunningStats, evidence_grid, run_gibbs
-from ogm_ppl.inference.mcmc import KernelCycle
+from ogm_ppl.inference.mcmc import mixing_cycle
 from ogm_ppl.inference.mcmc.diagnostics import split_rhat
 from ogm_ppl.inference.mcmc.tempering import TEMPERS, ParallelTempering, geometric_ladder
 from ogm_ppl.io import atomic_write_text
@@ -397,15 +397,9 @@ def _tempering(model, patch, init, args):
 
 
 def _cycle(model, patch, init, args=None):
-    """:class:`~ogm_ppl.inference.mcmc.KernelCycle`: the ``gibbs`` kernel, then in the same sweep the moves
-    it lacks. After patch Gibbs over a prior's tiles, a single-cell Gibbs sweep; after single-cell Gibbs, two
-    sweeps of 2 x 2 patches on tilings offset by one cell. Each part leaves the posterior invariant, so the
-    cycle does."""
-    if patch is None:
-        parts = [CellGibbs(model, init=init), PatchGibbs(model, (2, 2)), PatchGibbs(model, (2, 2), offset=(1, 1))]
-    else:
-        parts = [PatchGibbs(model, patch, init=init), CellGibbs(model)]
-    return KernelCycle(parts)
+    """:func:`~ogm_ppl.inference.mcmc.mixing_cycle`: the ``gibbs`` kernel, then in the same sweep the moves it
+    lacks (single cells after tile patches, 2 x 2 patches on two offset tilings after single cells)."""
+    return mixing_cycle(model, patch, init=init)
 
 
 #: ``name -> factory(model, patch, init, args)``; ``patch`` ``None`` means single cells, ``init`` one of

@@ -225,14 +225,19 @@ def merge(src: Path, into: str, command: str, results: Path = RESULTS, drop_curv
             # task lists are joined (a task both ran is listed by each); a count (older summaries) is added
             out[key] = x + y if isinstance(x, list) and isinstance(y, list) else _count(x) + _count(y)
         out["failed"] = {**(base.get("failed") or {}), **(new.get("failed") or {})}
-    old_p, new_p = base["provenance"], new["provenance"]
+    out["provenance"] = _join_provenance(base["provenance"], new["provenance"])
+    return atomic_write_text(results / f"{into}.json", json.dumps(out, indent=1, allow_nan=True))
+
+
+def _join_provenance(old_p: dict, new_p: dict) -> dict:
+    """The provenance of numbers from two runs: the later run's stamp, both commands (the earlier first) and
+    each part's stamp under ``"parts"`` (:func:`provenance_line` prints them)."""
     prov = {k: new_p[k] for k in _PROVENANCE_KEYS}
     prov["command"] = f"{old_p['command']}; then {new_p['command']}"
     prov["parts"] = [*(old_p["parts"] if "parts" in old_p else [old_p]), new_p]
     if "dropped" in old_p or "dropped" in new_p:
         prov["dropped"] = old_p.get("dropped") or new_p.get("dropped")
-    out["provenance"] = prov
-    return atomic_write_text(results / f"{into}.json", json.dumps(out, indent=1, allow_nan=True))
+    return prov
 
 
 def _stamp(prov: dict) -> str:
@@ -700,11 +705,6 @@ def _calibration_kernels(doc: dict, against: str = "calibration_cycle_gibbs") ->
             for k, d in (("rhat_below", 2), ("nll_bits", 3)):
                 cells.append("–" if sa is None or sb is None else f"{_f(sa[k], d)} → {_f(sb[k], d)}")
         rows.append([prior, *cells])
-    prov = {
-        **doc["provenance"],
-        "command": f"{base['provenance']['command']}; then {doc['provenance']['command']}",
-        "parts": [base["provenance"], doc["provenance"]],
-    }
     return Table(
         caption=(
             f"Unseen cells of held-out maps ({b['plans']} per corpus), each prior learned on the test corpus, 3 chains "
@@ -713,7 +713,7 @@ def _calibration_kernels(doc: dict, against: str = "calibration_cycle_gibbs") ->
         ),
         header=["prior", *(f"{t} {m}" for t in tests for m in ("R-hat < 1.05", "NLL"))],
         rows=rows,
-        provenance=prov,
+        provenance=_join_provenance(base["provenance"], doc["provenance"]),
     )
 
 

@@ -78,14 +78,13 @@ class TestBackoffCycle(TestBackoffEscape):
 
 
 def test_cycle_leaves_the_posterior_invariant_to_1e_12():
-    """The exact one-sweep matrix of tile sweeps (heat bath + escape) then single cells, under a backed-off
-    border table: rows sum to 1, ``pi P = pi`` to 1e-12, and the cycle moves where the tile sweep stays."""
+    """The exact one-sweep matrix of the cycle of tile sweeps (heat bath + escape) and single cells, under a
+    backed-off border table (the matrix its sweeps follow, ``TestBackoffCycle``): rows sum to 1, ``pi P = pi``
+    to 1e-12, and the cycle moves where the tile sweep stays."""
     model = with_prior(enumerable_2d(), backoff_prior((2, 4)))
-    tiles, cells = PatchGibbs(model, (2, 2), p_escape=0.5), CellGibbs(model)
-    k = KernelCycle([tiles, cells])
-    k.setup()
-    T = tile_sweep_matrix(tiles)
-    P = T @ sweep_matrix(cells)
+    k = KernelCycle([PatchGibbs(model, (2, 2), p_escape=0.5), CellGibbs(model)])
+    P = TestBackoffCycle().transition_matrix(k)
+    T = tile_sweep_matrix(k.kernels[0])
     pi = _exact(model)
     torch.testing.assert_close(P.sum(1), torch.ones(len(pi), dtype=torch.float64), rtol=0, atol=1e-12)
     torch.testing.assert_close(pi @ P, pi, rtol=0, atol=1e-12)

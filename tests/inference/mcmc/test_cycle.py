@@ -9,7 +9,7 @@ import pytest
 import torch
 from pyro.infer import MCMC
 
-from ogm_ppl.inference.mcmc import CellGibbs, KernelCycle, KernelStateError, MetropolisCell, PatchGibbs
+from ogm_ppl.inference.mcmc import CellGibbs, KernelCycle, KernelStateError, MetropolisCell, PatchGibbs, mixing_cycle
 from ogm_ppl.inference.mcmc.fingerprint import fingerprint
 from ogm_ppl.inference.mcmc.runner import CheckpointError, RunningStats, run_gibbs
 from ogm_ppl.testing.kernels import enumerable_1d, enumerable_2d
@@ -91,3 +91,13 @@ def test_a_checkpoint_of_one_cycle_is_refused_by_another(tmp_path):
     again = RunningStats(model)
     run_gibbs(KernelCycle([PatchGibbs(model, 2), CellGibbs(model)]), 9, again, seed=1, checkpoint=ck, progress=False)
     np.testing.assert_array_equal(again.marginals.numpy(), full.marginals.numpy())
+
+
+def test_mixing_cycle_adds_the_moves_a_prior_s_sampler_lacks():
+    model = enumerable_2d()
+    tiles = mixing_cycle(model, (1, 2), init="free")
+    assert [type(k).__name__ for k in tiles.kernels] == ["PatchGibbs", "CellGibbs"]
+    assert (tiles.kernels[0].dr.size, tiles.init) == (2, "free")
+    cells = mixing_cycle(model)
+    assert [type(k).__name__ for k in cells.kernels] == ["CellGibbs", "PatchGibbs", "PatchGibbs"]
+    assert [k.offset for k in cells.kernels[1:]] == [0, (1, 1)] and cells.kernels[1].L == 4
