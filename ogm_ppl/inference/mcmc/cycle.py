@@ -104,7 +104,7 @@ class KernelCycle(MapKernel):
             if not self._stale[i]:
                 return self.kernels[i].first_hit_state
         k = self.kernels[0]
-        k.set_state(torch.from_numpy(self._m.astype(np.float64)))
+        k._adopt_map(self._m)
         self._stale[0] = False
         return k.first_hit_state
 
@@ -121,7 +121,7 @@ class KernelCycle(MapKernel):
         changed = 0
         for i, k in enumerate(self.kernels):
             if self._stale[i]:
-                k.set_state(torch.from_numpy(self._m.astype(np.float64)))
+                k._adopt_map(self._m)
             changes, updates = k.changes, k.updates
             k.sample(k.current_params())
             self._updates += k.updates - updates

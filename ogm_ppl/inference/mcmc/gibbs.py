@@ -122,8 +122,8 @@ class CellGibbs(MapKernel):
         super()._prepare()
         self._bits = cs.fixed_point_bits(self._ll, self._c_off)
 
-    def _set_state(self, m) -> None:
-        super()._set_state(m)
+    def _load_map(self, m: np.ndarray) -> None:
+        super()._load_map(m)
         self._st = cs.cell_state_of(self._m, self._index, self._bits)
         self._f = self._st.rays["f"]  # a view: the compiled sweeps keep it in step with the map
 
@@ -396,8 +396,8 @@ class PatchGibbs(MapKernel):
             raise RuntimeError(f"{skipped} patch updates had more configurations than fit")
         return changed
 
-    def _set_state(self, m) -> None:
-        super()._set_state(m)
+    def _load_map(self, m: np.ndarray) -> None:
+        super()._load_map(m)
         self._ps = patch_state(self._m, self._f, self._index)  # views: the sweeps keep them in step
 
     def _geometry(self) -> PatchGeometry:

@@ -392,7 +392,7 @@ class GuidedGibbs(MapKernel):
             return moved
         base = self.base
         if self._base_stale:
-            base.set_state(self._m)
+            base._adopt_map(self._m)
             self._base_stale = False
         changes, updates = base.changes, base.updates
         base.sample(base.current_params())

@@ -21,9 +21,10 @@ r"""The map-kernel base: the protocol every MCMC kernel over whole maps follows 
 
 A subclass implements ``_sweep()`` (one sweep from the current state, drawing from torch's generator;
 adds its number of updates to ``self._updates`` and returns the number that changed the map) and may
-extend ``_prepare()`` (one-time set-up), ``_set_state(m)`` (rebuild state derived from the map; call
-``super()``), ``_extra_state()`` / ``_load_extra_state(state)`` (more checkpoint entries) and
-``_initial_map()`` (a ``K`` starting map). ``ogm_ppl.testing.KernelContract`` checks a kernel against
+extend ``_prepare()`` (one-time set-up), ``_load_map(m)`` (rebuild state derived from the map, a checked
+``(K,)`` uint8 array; call ``super()``: composite kernels hand maps over through it without re-checking
+them), ``_extra_state()`` / ``_load_extra_state(state)`` (more checkpoint entries) and ``_initial_map()`` (a
+``K`` starting map). ``ogm_ppl.testing.KernelContract`` checks a kernel against
 this protocol and the exact posterior.
 """
 
@@ -242,12 +243,28 @@ class MapKernel(MCMCKernel):
         self._initial_params = params
 
     def _set_state(self, m) -> None:
-        """Hook: load map ``m`` (``K`` or ``L`` values, 0/1) as the state; extend to rebuild derived state."""
+        """Hook: check map ``m`` (``K`` or ``L`` values, 0/1) and load it as the state (:meth:`_load_map`)."""
         m = self.model.check_maps(self.model.full_map(torch.as_tensor(m).detach().cpu()), what="kernel state")
-        self._m = np.ascontiguousarray((m.numpy() != 0).astype(np.uint8))
-        self._m[self._pinned.astype(bool)] = 0
+        arr = np.ascontiguousarray((m.numpy() != 0).astype(np.uint8))
+        arr[self._pinned.astype(bool)] = 0
+        self._load_map(arr)
+
+    def _load_map(self, m: np.ndarray) -> None:
+        """Hook: make the checked map ``m`` (``(K,)`` uint8 0/1, pinned cells 0; owned by the kernel from now on)
+        the state; extend to rebuild derived state."""
+        self._m = m
         self._f = first_hits(self._m, self._offsets, self._cells)
         self._last = None
+
+    def _adopt_map(self, m: np.ndarray) -> None:
+        """Load the state another kernel of the same model holds (``(K,)`` uint8 0/1, pinned cells 0; copied),
+        skipping the checks of :meth:`set_state`: the hand-over of composite kernels (a cycle's parts, a
+        tempering swap). A kernel that extends ``_set_state`` itself gets the checked path."""
+        self._prepare()
+        if type(self)._set_state is MapKernel._set_state:
+            self._load_map(np.array(m, dtype=np.uint8, copy=True))
+        else:
+            self._set_state(torch.from_numpy(np.asarray(m).astype(np.float64)))
 
     def set_state(self, m) -> None:
         """Make map ``m`` (``K`` cells or site ``"m"``'s ``L``; 0/1) the current state."""

@@ -127,8 +127,8 @@ class ChromaticCellGibbs(CellGibbs):
         lay = self.layout
         return [lay.tile_cells[lay.tile_off[t] : lay.tile_off[t + 1]] for t in lay.col_tiles] + [lay.long_cells]
 
-    def _set_state(self, m) -> None:
-        super()._set_state(m)
+    def _load_map(self, m: np.ndarray) -> None:
+        super()._load_map(m)
         self._inf32 = self._st.inf.view(np.int32)
 
     def _sweep(self) -> int:

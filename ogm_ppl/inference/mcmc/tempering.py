@@ -301,8 +301,8 @@ class ParallelTempering(MapKernel):
                 self._accepts[i] += 1
                 a, b = self.rungs[i], self.rungs[i + 1]
                 xa = a.state.copy()
-                a._set_state(b.state.copy())
-                b._set_state(xa)
+                a._adopt_map(b.state)
+                b._adopt_map(xa)
                 self._terms[[i, i + 1]] = self._terms[[i + 1, i]]
                 if i == 0:
                     changes += 1

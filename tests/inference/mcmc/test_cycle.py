@@ -101,3 +101,42 @@ def test_mixing_cycle_adds_the_moves_a_prior_s_sampler_lacks():
     cells = mixing_cycle(model)
     assert [type(k).__name__ for k in cells.kernels] == ["CellGibbs", "PatchGibbs", "PatchGibbs"]
     assert [k.offset for k in cells.kernels[1:]] == [0, (1, 1)] and cells.kernels[1].L == 4
+
+
+@pytest.mark.parametrize("make", [CellGibbs, lambda m: PatchGibbs(m, (1, 2)), MetropolisCell])
+def test_a_handed_over_map_continues_as_a_set_one(make):
+    """The unchecked hand-over of composite kernels (``_adopt_map``) builds the state ``set_state`` builds:
+    the same first hits, and the same chain from the same seed."""
+    model = enumerable_2d()
+    m = torch.zeros(model.num_cells, dtype=torch.float64)
+    m[model.latent[::2]] = 1.0
+    a, b = make(model), make(model)
+    a.setup(), b.setup()
+    a.set_state(m)
+    b._adopt_map(m.numpy().astype(np.uint8))
+    np.testing.assert_array_equal(a.first_hit_state, b.first_hit_state)
+    for k in (a, b):
+        torch.manual_seed(3)
+        for _ in range(5):
+            k.sample(k.current_params())
+    np.testing.assert_array_equal(a.state, b.state)
+
+
+def test_a_kernel_that_extends_set_state_gets_the_checked_hand_over():
+    class Counting(CellGibbs):
+        loads = 0
+
+        def _set_state(self, m) -> None:
+            type(self).loads += 1
+            super()._set_state(m)
+
+    model = enumerable_2d()
+    k = KernelCycle([PatchGibbs(model, (1, 2)), Counting(model)])
+    k.setup()
+    before = Counting.loads
+    torch.manual_seed(0)
+    for _ in range(3):
+        k.sample(k.current_params())
+    assert Counting.loads > before  # each stale hand-over went through its _set_state
+    with pytest.raises(ValueError):
+        Counting(model)._adopt_map(np.full(model.num_cells, 2, np.uint8))
