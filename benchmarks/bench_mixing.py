@@ -25,7 +25,9 @@ backed-off 1-given-8 prior ``border1_bo:houseexpo`` and the tempered ``mrf8:hous
 (with the same sweeps and with 10 times as many) and the cycle of single cells and 2 x 2 blocks. Each sampler
 runs one chain from each of 3 starts (thresholded OGM, all free, a prior draw); reported: the fraction of the
 unseen near-mapped cells (no ray reached them) whose split R-hat over the 3 chains is below 1.05, the
-seconds, the swap rates, and the ratios against the plain sampler (the first row of each prior).
+seconds, the swap rates, and the ratios against the plain sampler (the first row of each prior); and per prior
+the cycle's milliseconds per sweep with its parts taking the map over unchecked against re-checking it, with the
+share of a sweep spent outside the parts' own sweeps.
 """
 
 from __future__ import annotations
@@ -380,7 +382,48 @@ def coupled_priors(
                 f"{swaps}"
             )
         res[name] = rows
+        res[name]["cycle hand-over"] = hand_over(model, None if name in CELL_COUPLED else (3, 3))
     return res
+
+
+def hand_over(model, patch, num_sweeps: int = 40, seed: int = 0) -> dict:
+    """Milliseconds per sweep of :func:`mixing_cycle` whose parts take the map over unchecked (``_adopt_map``)
+    against the same cycle whose parts re-check it (:meth:`set_state`'s path), same seed, and the share of each
+    sweep spent outside the parts' own sweeps (the hand-over)."""
+    out = {}
+    for label, checked in (("checked", True), ("unchecked", False)):
+        k = mixing_cycle(model, patch)
+        inside = [0.0]
+        for part in k.kernels:
+            if checked:  # a kernel that extends _set_state gets the checked hand-over
+                cls = type(part)
+                part.__class__ = type(f"Checked{cls.__name__}", (cls,), {"_set_state": cls._set_state})
+            sweep = part._sweep
+
+            def timed(sweep=sweep, inside=inside):
+                t = time.perf_counter()
+                n = sweep()
+                inside[0] += time.perf_counter() - t
+                return n
+
+            part._sweep = timed
+        torch.manual_seed(seed)
+        k.setup()
+        k.sample(k.current_params())
+        inside[0] = 0.0
+        t = time.perf_counter()
+        for _ in range(num_sweeps):
+            k.sample(k.current_params())
+        sec = time.perf_counter() - t
+        out[f"{label}_ms_per_sweep"] = 1e3 * sec / num_sweeps
+        out[f"{label}_hand_over_share"] = 1.0 - inside[0] / sec
+    out["checked_vs_unchecked"] = out["checked_ms_per_sweep"] / out["unchecked_ms_per_sweep"]
+    print(
+        f"  {'':23s} {'cycle hand-over':34s} {out['unchecked_ms_per_sweep']:.2f} ms/sweep unchecked "
+        f"({out['unchecked_hand_over_share']:.0%} outside the parts), {out['checked_ms_per_sweep']:.2f} checked "
+        f"({out['checked_hand_over_share']:.0%}): x{out['checked_vs_unchecked']:.2f}"
+    )
+    return out
 
 
 def main(quick: bool = False) -> dict:
