@@ -659,7 +659,7 @@ def _calibration_guides(doc: dict) -> Table:
             n
             for n, on in (
                 (
-                    "guide:C1+C2: one guide learned on the training plans of both corpora",
+                    "guide:C1+C2: one guide learned on the training plans of those corpora",
                     any("+" in r[0] for r in rows),
                 ),
                 (
@@ -957,6 +957,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "calibration_guides_matrix": ("calibration_guides", _calibration_guides),
     "calibration_mix": ("calibration_mix", _calibration_guides),
     "calibration_generated": ("calibration_generated", _calibration_guides),
+    "calibration_all": ("calibration_all", _calibration_guides),
     "calibration_cycle": ("calibration_cycle", _calibration_kernels),
     "carmen_guide": ("carmen_guide", _experiment_by_log),
     "headline": ("headline", _headline),
