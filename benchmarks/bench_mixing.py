@@ -386,7 +386,7 @@ def coupled_priors(
     return res
 
 
-def hand_over(model, patch, num_sweeps: int = 40, seed: int = 0) -> dict:
+def hand_over(model, patch, num_sweeps: int = 100, seed: int = 0) -> dict:
     """Milliseconds per sweep of :func:`mixing_cycle` whose parts take the map over unchecked (``_adopt_map``)
     against the same cycle whose parts re-check it (:meth:`set_state`'s path), same seed, and the share of each
     sweep spent outside the parts' own sweeps (the hand-over)."""
@@ -396,8 +396,12 @@ def hand_over(model, patch, num_sweeps: int = 40, seed: int = 0) -> dict:
         inside = [0.0]
         for part in k.kernels:
             if checked:  # a kernel that extends _set_state gets the checked hand-over
+
+                def checked_set_state(self, m, base=type(part)._set_state):
+                    base(self, m)
+
                 cls = type(part)
-                part.__class__ = type(f"Checked{cls.__name__}", (cls,), {"_set_state": cls._set_state})
+                part.__class__ = type(f"Checked{cls.__name__}", (cls,), {"_set_state": checked_set_state})
             sweep = part._sweep
 
             def timed(sweep=sweep, inside=inside):
