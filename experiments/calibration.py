@@ -402,9 +402,21 @@ def _cycle(model, patch, init, args=None):
     return mixing_cycle(model, patch, init=init)
 
 
+def _shifted_cycle(model, patch, init, args=None):
+    """:func:`~ogm_ppl.inference.mcmc.mixing_cycle` with ``shifted=True`` for tile priors (then patches of the
+    tile shape on the tilings shifted by 1 .. h - 1 cells, which straddle the tiles); the plain cycle for the
+    others."""
+    return mixing_cycle(model, patch, init=init, shifted=patch is not None)
+
+
 #: ``name -> factory(model, patch, init, args)``; ``patch`` ``None`` means single cells, ``init`` one of
 #: :data:`STARTS`, ``args`` the parsed command line (the sampler's own settings)
-KERNELS: dict[str, Callable] = {"gibbs": _gibbs, "tempering": _tempering, "cycle": _cycle}
+KERNELS: dict[str, Callable] = {
+    "gibbs": _gibbs,
+    "tempering": _tempering,
+    "cycle": _cycle,
+    "shifted-cycle": _shifted_cycle,
+}
 
 
 def _patch_overrides(items: Sequence[str]) -> dict[str, tuple[int, int] | None]:

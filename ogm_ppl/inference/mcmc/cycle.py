@@ -164,15 +164,29 @@ class KernelCycle(MapKernel):
                 raise KernelStateError(f"KernelCycle part {i}: {e}") from None
 
 
-def mixing_cycle(model, patch: tuple[int, int] | None = None, init="ogm") -> KernelCycle:
+def mixing_cycle(model, patch: tuple[int, int] | None = None, init="ogm", shifted: bool = False) -> KernelCycle:
     """The cycle that adds to a prior's Gibbs sampler the moves it lacks (module docstring).
 
     ``patch`` given (a tile prior sampled by patch Gibbs over its ``h x w`` tiles): a sweep of those patches,
     then a single-cell Gibbs sweep. ``patch=None`` (single-cell Gibbs): a single-cell sweep, then 2 x 2 patches
     on the tiling at offset 0 and on the one offset by a cell. ``init`` is the first part's start.
+
+    ``shifted=True`` (with ``patch``) also sweeps ``h x w`` patches on the tilings shifted by ``d`` cells down
+    and right from the prior's (``d = 1 .. min(h, w) - 1``): each such patch straddles four tiles, so it can
+    turn a pattern that no tile update or single cell undoes. Such a patch is drawn from its full conditional
+    over all ``2^(h w)`` configurations (a 3 x 3 patch: 512), so these sweeps cost far more than the tile
+    sweeps they follow.
     """
     if patch is None:
+        if shifted:
+            raise ValueError("shifted=True needs the tile shape (patch=(h, w))")
         parts = [CellGibbs(model, init=init), PatchGibbs(model, (2, 2)), PatchGibbs(model, (2, 2), offset=(1, 1))]
     else:
         parts = [PatchGibbs(model, patch, init=init), CellGibbs(model)]
+        if shifted:
+            h, w = (1, int(patch)) if np.isscalar(patch) else (int(patch[0]), int(patch[1]))
+            c = model.prior.compiled()  # where the prior's tiling starts (a tempered prior's too)
+            o = (int(getattr(c, "t_r0", 0)), int(getattr(c, "t_c0", 0)))
+            shifts = range(1, (w if h == 1 else min(h, w)))
+            parts += [PatchGibbs(model, patch, offset=(o[0] + (d if h > 1 else 0), o[1] + d)) for d in shifts]
     return KernelCycle(parts)
