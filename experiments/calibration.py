@@ -47,10 +47,11 @@ real-log building, before anything runs.
 Kernels. ``--kernel`` names an entry of :data:`KERNELS`: ``factory(model, patch, init, args) -> kernel`` (a
 :class:`~ogm_ppl.inference.mcmc.kernel.MapKernel` that :func:`~ogm_ppl.inference.run_gibbs` drives): ``gibbs``
 (the default), ``cycle`` (:class:`~ogm_ppl.inference.mcmc.KernelCycle`: each sweep is that Gibbs sweep followed
-by the moves it lacks, single cells after tile patches, 2 x 2 patches on two offset tilings after single cells) or
-``tempering``, parallel tempering whose every rung is that Gibbs sampler (``--rungs``, ``--beta-min``,
-``--temper``; the cold rung is scored, so the pooled marginals and R-hat are the posterior's). Another sampler plugs
-in by adding an entry.
+by the moves it lacks, single cells after tile patches, 2 x 2 patches on two offset tilings after single cells),
+``shifted-cycle`` (the same, and for tile priors patches of the tile shape on the tilings shifted across the
+prior's: ``mixing_cycle(..., shifted=True)``) or ``tempering``, parallel tempering whose every rung is that
+Gibbs sampler (``--rungs``, ``--beta-min``, ``--temper``; the cold rung is scored, so the pooled marginals and
+R-hat are the posterior's). Another sampler plugs in by adding an entry.
 
 Outputs under ``--out`` (default ``out/calibration/``): ``calibration.json`` (settings, provenance, one row per
 test corpus, train corpus, map, prior and mask, with its reliability diagram), ``calibration_summary.json`` (the
