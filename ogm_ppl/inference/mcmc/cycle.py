@@ -164,7 +164,7 @@ class KernelCycle(MapKernel):
                 raise KernelStateError(f"KernelCycle part {i}: {e}") from None
 
 
-def mixing_cycle(model, patch: tuple[int, int] | None = None, init="ogm", shifted: bool = False) -> KernelCycle:
+def mixing_cycle(model, patch: tuple[int, int] | int | None = None, init="ogm", shifted: bool = False) -> KernelCycle:
     """The cycle that adds to a prior's Gibbs sampler the moves it lacks (module docstring).
 
     ``patch`` given (a tile prior sampled by patch Gibbs over its ``h x w`` tiles): a sweep of those patches,
@@ -184,7 +184,7 @@ def mixing_cycle(model, patch: tuple[int, int] | None = None, init="ogm", shifte
     else:
         parts = [PatchGibbs(model, patch, init=init), CellGibbs(model)]
         if shifted:
-            h, w = (1, int(patch)) if np.isscalar(patch) else (int(patch[0]), int(patch[1]))
+            h, w = (1, int(patch)) if isinstance(patch, (int, np.integer)) else (int(patch[0]), int(patch[1]))
             c = model.prior.compiled()  # where the prior's tiling starts (a tempered prior's too)
             o = (int(getattr(c, "t_r0", 0)), int(getattr(c, "t_c0", 0)))
             shifts = range(1, (w if h == 1 else min(h, w)))
