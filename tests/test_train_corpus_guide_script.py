@@ -2,31 +2,21 @@
 them, keeps the validation-best step, and calibration.py scores the artefact (``--guides``) or refuses one whose
 record is not the tables' training set."""
 
-import importlib.util
 import json
 import math
 import sys
-from pathlib import Path
 
 import pytest
 import torch
 
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def _load(name: str, file: str):
-    spec = importlib.util.spec_from_file_location(name, ROOT / "experiments" / file)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[name] = mod  # dataclasses look their module up
-    spec.loader.exec_module(mod)
-    return mod
+from tests._scripts import load_experiment
 
 
 @pytest.fixture(scope="module")
 def mods():
     threads = torch.get_num_threads()
-    tg = _load("train_corpus_guide_script", "train_corpus_guide.py")
-    cal = _load("calibration_for_guides", "calibration.py")
+    tg = load_experiment("train_corpus_guide_script", "train_corpus_guide.py")
+    cal = load_experiment("calibration_for_guides", "calibration.py")
     yield tg, cal
     torch.set_num_threads(threads)
     for k in ("train_corpus_guide_script", "calibration_for_guides"):

@@ -1,31 +1,21 @@
 """experiments/unseen_by_distance.py: the bins split the unseen cells, and their NLLs weighted by their shares
 give the NLL calibration.py scores for the same guide on the same map."""
 
-import importlib.util
 import json
 import sys
-from pathlib import Path
 
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-
-
-def _load(name: str, path: Path):
-    spec = importlib.util.spec_from_file_location(name, path)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[name] = mod  # dataclasses look their module up
-    spec.loader.exec_module(mod)
-    return mod
+from tests._scripts import EXPERIMENTS, load_experiment
 
 
 @pytest.fixture(scope="module")
 def ubd():
-    sys.path.insert(0, str(ROOT / "experiments"))
+    sys.path.insert(0, str(EXPERIMENTS))  # the script imports calibration.py beside it
     try:
-        yield _load("unseen_by_distance_experiment", ROOT / "experiments" / "unseen_by_distance.py")
+        yield load_experiment("unseen_by_distance_experiment", "unseen_by_distance.py")
     finally:
-        sys.path.remove(str(ROOT / "experiments"))
+        sys.path.remove(str(EXPERIMENTS))
         sys.modules.pop("unseen_by_distance_experiment", None)
 
 
