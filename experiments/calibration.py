@@ -405,7 +405,7 @@ def _cycle(model, patch, init, args=None):
 
 def _shifted_cycle(model, patch, init, args=None):
     """:func:`~ogm_ppl.inference.mcmc.mixing_cycle` with ``shifted=True`` for tile priors (then patches of the
-    tile shape on the tilings shifted by 1 .. h - 1 cells, which straddle the tiles); the plain cycle for the
+    tile shape on the tilings shifted by 1 .. min(h, w) - 1 cells, which straddle the tiles); the plain cycle for the
     others."""
     return mixing_cycle(model, patch, init=init, shifted=patch is not None)
 
