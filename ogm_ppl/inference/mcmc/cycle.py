@@ -90,10 +90,8 @@ class KernelCycle(MapKernel):
             return super()._initial_map()
         return self.model.full_map(self.kernels[0].initial_params[self.site]).to(torch.float64)
 
-    def _set_state(self, m) -> None:
-        m = self.model.check_maps(self.model.full_map(torch.as_tensor(m).detach().cpu()), what="kernel state")
-        self._m = np.ascontiguousarray((m.numpy() != 0).astype(np.uint8))
-        self._m[self._pinned] = 0
+    def _load_map(self, m: np.ndarray) -> None:
+        self._m = m  # each part loads it before its next sweep
         self._last = None
         self._stale = [True] * len(self.kernels)
 

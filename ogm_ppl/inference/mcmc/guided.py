@@ -365,10 +365,8 @@ class GuidedGibbs(MapKernel):
         m[self.model.known_free] = 0.0
         return m
 
-    def _set_state(self, m) -> None:
-        m = self.model.check_maps(self.model.full_map(torch.as_tensor(m).detach().cpu()), what="kernel state")
-        self._m = np.ascontiguousarray((m.numpy() != 0).astype(np.uint8))
-        self._m[self._pinned] = 0
+    def _load_map(self, m: np.ndarray) -> None:
+        self._m = m  # the base kernel loads it when it next sweeps
         self._last = None
         self._base_stale = True
 
