@@ -49,7 +49,8 @@ Kernels. ``--kernel`` names an entry of :data:`KERNELS`: ``factory(model, patch,
 (the default), ``cycle`` (:class:`~ogm_ppl.inference.mcmc.KernelCycle`: each sweep is that Gibbs sweep followed
 by the moves it lacks, single cells after tile patches, 2 x 2 patches on two offset tilings after single cells),
 ``shifted-cycle`` (the same, and for tile priors patches of the tile shape on the tilings shifted across the
-prior's: ``mixing_cycle(..., shifted=True)``) or ``tempering``, parallel tempering whose every rung is that
+prior's: ``mixing_cycle(..., shifted=True)``), ``shifted-cycle-random`` (one of those shifted tilings per sweep,
+drawn at random: ``shifted="random"``) or ``tempering``, parallel tempering whose every rung is that
 Gibbs sampler (``--rungs``, ``--beta-min``, ``--temper``; the cold rung is scored, so the pooled marginals and
 R-hat are the posterior's). Another sampler plugs in by adding an entry.
 
@@ -410,6 +411,12 @@ def _shifted_cycle(model, patch, init, args=None):
     return mixing_cycle(model, patch, init=init, shifted=patch is not None)
 
 
+def _shifted_cycle_random(model, patch, init, args=None):
+    """As ``shifted-cycle``, with one of the shifted tilings per sweep, drawn at random
+    (``mixing_cycle(..., shifted="random")``)."""
+    return mixing_cycle(model, patch, init=init, shifted="random" if patch is not None else False)
+
+
 #: ``name -> factory(model, patch, init, args)``; ``patch`` ``None`` means single cells, ``init`` one of
 #: :data:`STARTS`, ``args`` the parsed command line (the sampler's own settings)
 KERNELS: dict[str, Callable] = {
@@ -417,6 +424,7 @@ KERNELS: dict[str, Callable] = {
     "tempering": _tempering,
     "cycle": _cycle,
     "shifted-cycle": _shifted_cycle,
+    "shifted-cycle-random": _shifted_cycle_random,
 }
 
 
@@ -493,11 +501,11 @@ def support(prior, patch: tuple[int, int] | None) -> int:
     return min(cap, 1 << L)
 
 
-def run_prior(scene: Scene, name: str, args, patch_override=None, tables=None) -> dict:
+def run_chains(scene: Scene, name: str, args, patch_override=None, tables=None) -> dict:
     """``C`` chains (:data:`STARTS`) under the prior ``name`` (built from ``tables`` when given, else from the
-    shipped corpus); pooled marginals scored, split R-hat of the unseen cells. Returns
-    ``{"scores": {mask: ...}, "seconds", "patch", "rhat_below", "rhat_max", ...}``, or ``{"skipped": reason}``
-    when one update would weigh more than ``args.max_support`` configurations."""
+    shipped corpus), each ``args.sweeps`` sweeps of the ``args.kernel`` sampler after ``args.burn``. Returns
+    ``{"marginals": (C, K) array, "rhat": (U,) split R-hat of the unseen cells, "seconds_per_chain", "patch"}``,
+    or ``{"skipped": reason}`` when one update would weigh more than ``args.max_support`` configurations."""
     kind, corpus, _, mod = split_prior_name(name)
     if mod == "cal" and tables is None and kind not in load_temper_params(corpus).beta:
         return {"skipped": f"no tempering exponent fitted for {kind} on {corpus} (experiments/fit_temper.py)"}
@@ -518,18 +526,41 @@ def run_prior(scene: Scene, name: str, args, patch_override=None, tables=None) -
         marg.append(stats.marginals.numpy())
         traces.append(stats.trace())
         secs.append(time.perf_counter() - t0)
-    q = np.clip(np.mean(marg, axis=0), 0.0, 1.0)
     rh = split_rhat(np.stack(traces)).numpy() if len(unseen) else np.zeros(0)
-    agree = np.where(np.isnan(rh), 0.0, rh) < RHAT_THRESHOLD
     return {
-        "scores": _scores(scene, q),
-        "seconds": float(sum(secs)),
+        "marginals": np.stack(marg),
+        "rhat": rh,
         "seconds_per_chain": [float(s) for s in secs],
         "patch": None if patch is None else list(patch),
-        "rhat_below": float(agree.mean()) if len(unseen) else float("nan"),
+    }
+
+
+def agreeing(rhat: np.ndarray) -> np.ndarray:
+    """Which cells' chains agree: split R-hat below :data:`RHAT_THRESHOLD`; a cell no chain ever changed (R-hat
+    NaN: every draw of every chain the same value) agrees."""
+    return np.where(np.isnan(rhat), 0.0, rhat) < RHAT_THRESHOLD
+
+
+def run_prior(scene: Scene, name: str, args, patch_override=None, tables=None) -> dict:
+    """:func:`run_chains`, scored: the chains' pooled marginals on every mask, and the split R-hat of the unseen
+    cells. Returns ``{"scores": {mask: ...}, "seconds", "patch", "rhat_below", "rhat_max", ...}``, or
+    ``{"skipped": reason}``."""
+    run = run_chains(scene, name, args, patch_override, tables)
+    if "skipped" in run:
+        return run
+    q = np.clip(run["marginals"].mean(axis=0), 0.0, 1.0)
+    rh = run["rhat"]
+    agree = agreeing(rh)
+    n = len(rh)
+    return {
+        "scores": _scores(scene, q),
+        "seconds": float(sum(run["seconds_per_chain"])),
+        "seconds_per_chain": run["seconds_per_chain"],
+        "patch": run["patch"],
+        "rhat_below": float(agree.mean()) if n else float("nan"),
         "rhat_below_varying": float((rh[~np.isnan(rh)] < RHAT_THRESHOLD).mean()) if (~np.isnan(rh)).any() else math.nan,
         "rhat_max": float(np.nanmax(rh)) if np.isfinite(rh).any() else float("nan"),
-        "rhat_cells": len(unseen),
+        "rhat_cells": n,
     }
 
 

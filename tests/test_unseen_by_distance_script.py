@@ -36,3 +36,40 @@ def test_bins_add_up_to_the_calibration_score(ubd, tmp_path):
 def test_no_maps_is_refused(ubd, tmp_path):
     with pytest.raises(SystemExit, match="--plans must be at least 1"):
         ubd.main(["--plans", "0", "--out", str(tmp_path)])
+
+
+def test_chain_bins_add_up_to_the_calibration_score_and_agreement(ubd, tmp_path):
+    """A prior's chains, two lengths from the same seeds: per length, the bins' NLLs and agreement shares
+    weighted by their cell shares equal calibration.py's NLL and R-hat share for the same prior, sampler,
+    sweeps and map."""
+    argv = ["--prior", "border_bo", "--kernel", "gibbs", "--sweeps", "8", "12", "--test", "houseexpo"]
+    doc = ubd.main([*argv, "--plans", "1", "--out", str(tmp_path)])
+    cal = ubd.calibration
+    args = cal.parse_args(["--plans", "1", "--kernel", "gibbs"])
+    scene = cal.make_scene(cal.heldout_maps("houseexpo", 1, args.window)[0], args)
+    for S in (8, 12):
+        rows = [r for r in doc["rows"] if r["sweeps"] == S]
+        assert len(rows) == 4 and {r["prior"] for r in rows} == {"border_bo:houseexpo"}
+        assert sum(r["share"] for r in rows) == pytest.approx(1.0, abs=1e-12)
+        args.sweeps, args.burn = S, S // 4
+        got = cal.run_prior(scene, "border_bo:houseexpo", args)
+        assert sum(r["share"] * r["nll_bits"] for r in rows) == pytest.approx(
+            got["scores"]["unseen"]["nll_bits"], rel=1e-6
+        )
+        assert sum(r["share"] * r["agree"] for r in rows) == pytest.approx(got["rhat_below"], abs=1e-12)
+        assert all(len(r["chain_occupied"]) == 3 and all(0 <= v <= 1 for v in r["chain_occupied"]) for r in rows)
+    assert doc["settings"]["prior"] == "border_bo" and doc["settings"]["sweeps"] == [8, 12]
+
+
+@pytest.mark.parametrize(
+    "argv, match",
+    [
+        (["--sweeps", "2"], "--sweeps must be at least 4"),
+        (["--prior", "border_bo", "--guide", "houseexpo"], "not allowed with argument"),
+    ],
+)
+def test_bad_chain_settings_are_refused(ubd, tmp_path, argv, match, capsys):
+    with pytest.raises(SystemExit):
+        ubd.main([*argv, "--out", str(tmp_path)])
+    if "not allowed" in match:
+        assert match in capsys.readouterr().err

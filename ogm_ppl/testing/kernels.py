@@ -168,7 +168,7 @@ def sweep_matrix(kernel, rows: torch.Tensor | None = None) -> torch.Tensor | Non
     """The exact one-sweep transition matrix of one of the library's kernels (``2^L x 2^L`` over
     :func:`enumerate_maps`), or ``None`` for a kernel it does not know. Only the ``rows`` (map indices;
     default: all) are filled, so a product leaving them loses mass (and fails a row-sum check)."""
-    from ogm_ppl.inference.mcmc.cycle import KernelCycle
+    from ogm_ppl.inference.mcmc.cycle import KernelCycle, KernelMixture
     from ogm_ppl.inference.mcmc.gibbs import CellGibbs, MetropolisCell, PatchGibbs
     from ogm_ppl.inference.mcmc.guided import GuidedGibbs
 
@@ -191,6 +191,11 @@ def sweep_matrix(kernel, rows: torch.Tensor | None = None) -> torch.Tensor | Non
         anchors = np.stack(np.divmod(pool, g.cols), 1).astype(np.int64)
         mats = [_patch_matrix(kernel, p, rows) for p in patch_cells(model, anchors, kernel.dr, kernel.dc)]
         return _scan(mats, "random", None, math.ceil(len(pool) / kernel.L))
+    if isinstance(kernel, KernelMixture):  # P = sum_i w_i P_i
+        parts = [sweep_matrix(k, rows) for k in kernel.kernels]
+        if any(P is None for P in parts):
+            return None
+        return sum(float(w) * P for w, P in zip(kernel.weights, parts))  # type: ignore[operator,misc]
     if isinstance(kernel, KernelCycle):  # P = P_1 P_2 ... P_n
         parts = [sweep_matrix(k, rows) for k in kernel.kernels]
         return None if any(P is None for P in parts) else _scan(parts, "systematic")  # type: ignore[arg-type]

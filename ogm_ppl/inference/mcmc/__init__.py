@@ -1,7 +1,7 @@
 """MCMC over whole maps (Chapter 4): the map-kernel base, Gibbs kernels for ``pyro.infer.MCMC``, guided
 Gibbs, parallel tempering, cycles of kernels, the streaming runner with checkpoints, and convergence diagnostics."""
 
-from ogm_ppl.inference.mcmc.cycle import KernelCycle, mixing_cycle
+from ogm_ppl.inference.mcmc.cycle import KernelCycle, KernelMixture, mixing_cycle
 from ogm_ppl.inference.mcmc.dask_tiles import DaskTileGibbs
 from ogm_ppl.inference.mcmc.diagnostics import (
     ChainsResult,
@@ -30,6 +30,7 @@ __all__ = [
     "GibbsRun",
     "GuidedGibbs",
     "KernelCycle",
+    "KernelMixture",
     "KernelStateError",
     "MapKernel",
     "MasslessStartWarning",

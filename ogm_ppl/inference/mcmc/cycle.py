@@ -36,7 +36,7 @@ import torch
 from ogm_ppl.inference.mcmc.gibbs import CellGibbs, PatchGibbs
 from ogm_ppl.inference.mcmc.kernel import KernelStateError, MapKernel
 
-__all__ = ["KernelCycle", "mixing_cycle"]
+__all__ = ["KernelCycle", "KernelMixture", "mixing_cycle"]
 
 
 class KernelCycle(MapKernel):
@@ -147,6 +147,9 @@ class KernelCycle(MapKernel):
     def _extra_state(self) -> dict[str, np.ndarray]:
         d: dict[str, np.ndarray] = {"parts": np.asarray(len(self.kernels), np.int64)}
         for i, k in enumerate(self.kernels):
+            if self._stale[i]:  # a part that has not swept since the map changed (or at all) takes it now
+                k._adopt_map(self._m)
+                self._stale[i] = False
             d.update({f"k{i}.{key}": v for key, v in k.state_dict().items()})
         return d
 
@@ -162,7 +165,75 @@ class KernelCycle(MapKernel):
                 raise KernelStateError(f"KernelCycle part {i}: {e}") from None
 
 
-def mixing_cycle(model, patch: tuple[int, int] | int | None = None, init="ogm", shifted: bool = False) -> KernelCycle:
+class KernelMixture(KernelCycle):
+    r"""A random choice of one map kernel per sweep (a mixture, Tierney 1994): ``P = sum_i w_i P_i``.
+
+    Each sweep draws part ``i`` with probability ``w_i`` from torch's global generator and runs one sweep of
+    it; if every part leaves ``pi`` invariant, so does the mixture (``pi P = sum_i w_i pi P_i = pi``). It costs
+    one part's sweep where a :class:`KernelCycle` of the same parts costs all of them, and it can sit inside a
+    cycle as one of its parts (e.g. one of several shifted tilings per sweep: ``mixing_cycle(...,
+    shifted="random")``).
+
+    Args:
+        kernels: the parts (map kernels of the *same* model), as for :class:`KernelCycle`.
+        weights: ``w`` (``n``, positive, normalised here); ``None`` (default): ``1 / n`` each.
+        init: the starting map, as for :class:`KernelCycle`.
+
+    ``sweeps`` counts the mixture's sweeps; each part's own ``sweeps`` counts the times it was drawn.
+
+    >>> from ogm_ppl.inference.mcmc import CellGibbs, PatchGibbs
+    >>> from ogm_ppl.testing.kernels import enumerable_2d
+    >>> model = enumerable_2d()
+    >>> k = KernelMixture([PatchGibbs(model, (1, 2)), CellGibbs(model)], weights=[0.25, 0.75])
+    >>> k.setup(); params = k.sample(k.current_params())
+    >>> k.sweeps, sum(p.sweeps for p in k.kernels)
+    (1, 1)
+    """
+
+    def __init__(self, kernels: Sequence[MapKernel], weights: Sequence[float] | None = None, init=None) -> None:
+        super().__init__(kernels, init=init)
+        n = len(self.kernels)
+        w = np.full(n, 1.0 / n) if weights is None else np.asarray(weights, dtype=np.float64)
+        if w.shape != (n,) or not np.all(np.isfinite(w)) or np.any(w <= 0):
+            raise ValueError(f"weights must be {n} positive finite numbers, one per kernel, got {weights!r}")
+        self.weights = w / w.sum()
+        self._cum = torch.from_numpy(np.cumsum(self.weights))
+
+    def settings(self) -> dict:
+        out = super().settings()
+        out["weights"] = [float(v) for v in self.weights]
+        return out
+
+    def _extra_state(self) -> dict[str, np.ndarray]:
+        return {**super()._extra_state(), "weights": self.weights.copy()}
+
+    def _load_extra_state(self, state) -> None:
+        w = np.asarray(state.get("weights", np.zeros(0)))
+        if w.shape != self.weights.shape or w.dtype.kind != "f" or not np.allclose(w, self.weights, rtol=0, atol=1e-15):
+            raise KernelStateError(f"KernelMixture state 'weights' must be {self.weights.tolist()}, got {w!r}")
+        super()._load_extra_state(state)
+
+    def _sweep(self) -> int:
+        u = torch.rand((), dtype=torch.float64)
+        i = min(int(torch.searchsorted(self._cum, u, right=True)), len(self.kernels) - 1)
+        k = self.kernels[i]
+        if self._stale[i]:
+            k._adopt_map(self._m)
+        changes, updates = k.changes, k.updates
+        k.sample(k.current_params())
+        self._updates += k.updates - updates
+        moved = k.changes - changes
+        if moved:
+            self._m[:] = k.state
+            self._stale = [j != i for j in range(len(self.kernels))]
+        else:
+            self._stale[i] = False
+        return moved
+
+
+def mixing_cycle(
+    model, patch: tuple[int, int] | int | None = None, init="ogm", shifted: bool | str = False
+) -> KernelCycle:
     """The cycle that adds to a prior's Gibbs sampler the moves it lacks (module docstring).
 
     ``patch`` given (a tile prior sampled by patch Gibbs over its ``h x w`` tiles): a sweep of those patches,
@@ -173,8 +244,12 @@ def mixing_cycle(model, patch: tuple[int, int] | int | None = None, init="ogm", 
     and right from the prior's (``d = 1 .. min(h, w) - 1``): each such patch straddles four tiles, so it can
     turn a pattern that no tile update or single cell undoes. Such a patch is drawn from its full conditional
     over all ``2^(h w)`` configurations (a 3 x 3 patch: 512), so these sweeps cost far more than the tile
-    sweeps they follow.
+    sweeps they follow. ``shifted="random"`` sweeps one of those shifted tilings per sweep instead, drawn
+    uniformly (a :class:`KernelMixture` as the cycle's last part): the same moves at ``1 / (min(h, w) - 1)`` of
+    their cost per sweep.
     """
+    if shifted not in (False, True, "random"):
+        raise ValueError(f"shifted must be False, True or 'random', got {shifted!r}")
     if patch is None:
         if shifted:
             raise ValueError("shifted=True needs the tile shape (patch=(h, w))")
@@ -186,5 +261,6 @@ def mixing_cycle(model, patch: tuple[int, int] | int | None = None, init="ogm", 
             c = model.prior.compiled()  # where the prior's tiling starts (a tempered prior's too)
             o = (int(getattr(c, "t_r0", 0)), int(getattr(c, "t_c0", 0)))
             shifts = range(1, (w if h == 1 else min(h, w)))
-            parts += [PatchGibbs(model, patch, offset=(o[0] + (d if h > 1 else 0), o[1] + d)) for d in shifts]
+            moves = [PatchGibbs(model, patch, offset=(o[0] + (d if h > 1 else 0), o[1] + d)) for d in shifts]
+            parts += [KernelMixture(moves)] if shifted == "random" and len(moves) > 1 else moves
     return KernelCycle(parts)

@@ -9,7 +9,15 @@ import pytest
 import torch
 from pyro.infer import MCMC
 
-from ogm_ppl.inference.mcmc import CellGibbs, KernelCycle, KernelStateError, MetropolisCell, PatchGibbs, mixing_cycle
+from ogm_ppl.inference.mcmc import (
+    CellGibbs,
+    KernelCycle,
+    KernelMixture,
+    KernelStateError,
+    MetropolisCell,
+    PatchGibbs,
+    mixing_cycle,
+)
 from ogm_ppl.inference.mcmc.fingerprint import fingerprint
 from ogm_ppl.inference.mcmc.runner import CheckpointError, RunningStats, run_gibbs
 from ogm_ppl.testing.kernels import enumerable_1d, enumerable_2d
@@ -140,3 +148,69 @@ def test_a_kernel_that_extends_set_state_gets_the_checked_hand_over():
     assert Counting.loads > before  # each stale hand-over went through its _set_state
     with pytest.raises(ValueError):
         Counting(model)._adopt_map(np.full(model.num_cells, 2, np.uint8))
+
+
+# ------------------------------------------------------------------------------------------ KernelMixture
+def mixture(model, weights=(0.25, 0.75)):
+    return KernelMixture([PatchGibbs(model, (1, 2)), CellGibbs(model)], weights=list(weights))
+
+
+def test_pyro_mcmc_drives_the_mixture_and_one_part_sweeps_per_sweep():
+    """Each sweep runs exactly one part; over 2000 sweeps the parts are drawn at their weights (within 4
+    binomial standard deviations: 4 * sqrt(2000 * 0.25 * 0.75) = 77 draws)."""
+    model = enumerable_2d()
+    k = mixture(model)
+    torch.manual_seed(0)
+    mcmc = MCMC(k, num_samples=1900, warmup_steps=100, disable_progbar=True)
+    mcmc.run()
+    mcmc.summary()  # runs
+    counts = [p.sweeps for p in k.kernels]
+    assert k.sweeps == 2000 and sum(counts) == 2000
+    assert abs(counts[0] - 500) < 4 * np.sqrt(2000 * 0.25 * 0.75)
+    assert k.updates == sum(p.updates for p in k.kernels)
+    assert k.settings()["weights"] == [0.25, 0.75]
+
+
+@pytest.mark.parametrize("weights", [[1.0], [1.0, 0.0], [1.0, -1.0], [1.0, float("nan")], [[0.5, 0.5]]])
+def test_bad_mixture_weights_are_refused(weights):
+    model = enumerable_2d()
+    with pytest.raises(ValueError, match="weights must be 2 positive finite numbers"):
+        KernelMixture([PatchGibbs(model, (1, 2)), CellGibbs(model)], weights=weights)
+
+
+def test_a_mixture_checkpoint_resumes_and_refuses_other_weights(tmp_path):
+    model = enumerable_1d()
+    ck = tmp_path / "c.npz"
+    full = RunningStats(model)
+    run_gibbs(mixture(model), 9, full, seed=1, progress=False)
+    run_gibbs(mixture(model), 5, RunningStats(model), seed=1, checkpoint=ck, progress=False)
+    again = RunningStats(model)
+    run_gibbs(mixture(model), 9, again, seed=1, checkpoint=ck, progress=False)
+    np.testing.assert_array_equal(again.marginals.numpy(), full.marginals.numpy())
+    a, b = mixture(model), mixture(model, (0.5, 0.5))
+    a.setup()
+    b.setup()
+    with pytest.raises(KernelStateError, match="weights"):
+        b.load_state_dict(a.state_dict())
+    with pytest.raises(KernelStateError, match="cannot be loaded into a KernelCycle"):
+        KernelCycle([PatchGibbs(model, (1, 2)), CellGibbs(model)]).load_state_dict(a.state_dict())
+
+
+def test_mixing_cycle_draws_one_shifted_tiling_per_sweep_on_request():
+    """``shifted="random"``: the tile and cell sweeps, then a mixture of the shifted tilings (3 x 3 tiles: by one
+    and by two cells), one of them per sweep; ``shifted=True`` sweeps both."""
+    model = enumerable_2d()
+    both = mixing_cycle(model, (3, 3), shifted=True)
+    assert [type(k).__name__ for k in both.kernels] == ["PatchGibbs", "CellGibbs", "PatchGibbs", "PatchGibbs"]
+    one = mixing_cycle(model, (3, 3), shifted="random")
+    assert [type(k).__name__ for k in one.kernels] == ["PatchGibbs", "CellGibbs", "KernelMixture"]
+    mix = one.kernels[2]
+    assert [k.offset for k in mix.kernels] == [k.offset for k in both.kernels[2:]] == [(1, 1), (2, 2)]
+    np.testing.assert_array_equal(mix.weights, [0.5, 0.5])
+    one.setup()
+    params = one.current_params()
+    for _ in range(10):
+        params = one.sample(params)
+    assert sum(k.sweeps for k in mix.kernels) == 10 == mix.sweeps
+    with pytest.raises(ValueError, match="shifted must be False, True or 'random'"):
+        mixing_cycle(model, (3, 3), shifted="both")

@@ -3,7 +3,7 @@ and 2D problems, the checkpoint round trip and ``region=``, for each scan and up
 
 import numpy as np
 
-from ogm_ppl.inference.mcmc import CellGibbs, GuidedGibbs, KernelCycle, MetropolisCell, PatchGibbs
+from ogm_ppl.inference.mcmc import CellGibbs, GuidedGibbs, KernelCycle, KernelMixture, MetropolisCell, PatchGibbs
 from ogm_ppl.testing import KernelContract
 
 
@@ -82,6 +82,19 @@ class TestKernelCycle(KernelContract):
         patch = 3 if model.grid.ndim == 1 else (1, 2)
         return KernelCycle(
             [PatchGibbs(model, patch, region=region), CellGibbs(model, scan="permutation", region=region)]
+        )
+
+
+class TestKernelMixture(KernelContract):
+    """One part per sweep, drawn with unequal weights: ``P = sum_i w_i P_i``."""
+
+    num_draws = 500
+
+    def make_kernel(self, model, region=None):
+        patch = 3 if model.grid.ndim == 1 else (1, 2)
+        return KernelMixture(
+            [PatchGibbs(model, patch, region=region), CellGibbs(model, scan="permutation", region=region)],
+            weights=[0.3, 0.7],
         )
 
 
