@@ -1,24 +1,19 @@
 """experiments/calibration.py on tiny settings: the matrix runs and writes what it promises, a rerun resumes,
 the patch rule follows the compiled bundle, and a test map in a prior's training set is refused."""
 
-import importlib.util
 import json
 import math
 import sys
-from pathlib import Path
 
 import pytest
 import torch
 
-PATH = Path(__file__).resolve().parents[1] / "experiments" / "calibration.py"
+from tests._scripts import load_experiment
 
 
 @pytest.fixture(scope="module")
 def cal():
-    spec = importlib.util.spec_from_file_location("calibration_experiment", PATH)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["calibration_experiment"] = mod  # dataclasses look their module up
-    spec.loader.exec_module(mod)
+    mod = load_experiment("calibration_experiment", "calibration.py")
     threads = torch.get_num_threads()
     yield mod
     torch.set_num_threads(threads)

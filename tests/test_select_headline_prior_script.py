@@ -1,26 +1,22 @@
 """experiments/select_headline_prior.py on tiny settings, and the headline's reading of its output: the
 shipped selection names a known prior, the spec uses it, and a damaged selection file is refused by name."""
 
-import importlib.util
 import json
 import sys
-from pathlib import Path
 
 import pytest
 
 from ogm_ppl.experiment.headline import HEADLINE_PRIOR_FORMAT, HeadlinePrior, headline_prior, headline_spec
 from ogm_ppl.priors.named import prior_by_name
-
-PATH = Path(__file__).resolve().parents[1] / "experiments" / "select_headline_prior.py"
+from tests._scripts import load_experiment
 
 
 @pytest.fixture(scope="module")
 def sel():
-    spec = importlib.util.spec_from_file_location("select_headline_prior", PATH)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    mod = load_experiment("select_headline_prior", "select_headline_prior.py")
     yield mod
-    sys.modules.pop("calibration", None)
+    for name in ("select_headline_prior", "calibration"):
+        sys.modules.pop(name, None)
 
 
 def test_quick_selection_writes_a_file_the_headline_reads(sel, tmp_path):

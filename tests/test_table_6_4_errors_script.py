@@ -3,18 +3,15 @@ cells, the two oracle maps, and clear errors for missing or mismatched files."""
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from ogm_ppl.metrics import precision_recall
+from tests._scripts import load_experiment
 
-ROOT = Path(__file__).resolve().parents[1]
-spec = importlib.util.spec_from_file_location("table_6_4_errors", ROOT / "experiments" / "table_6_4_errors.py")
-te = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(te)
+te = load_experiment("table_6_4_errors", "table_6_4_errors.py")
 
 
 def _dataset(out: Path, name: str, truth, touched, maps: dict) -> None:

@@ -3,17 +3,14 @@ whose errors are placed by hand, and its JSON and figure."""
 
 from __future__ import annotations
 
-import importlib.util
 import json
-from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-spec = importlib.util.spec_from_file_location("touched_errors", ROOT / "experiments" / "touched_errors.py")
-te = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(te)
+from tests._scripts import load_experiment
+
+te = load_experiment("touched_errors", "touched_errors.py")
 
 
 @pytest.fixture

@@ -3,16 +3,14 @@ clear errors for a missing folder or baseline and for a map of another size."""
 
 from __future__ import annotations
 
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 import pytest
 
-ROOT = Path(__file__).resolve().parents[1]
-spec = importlib.util.spec_from_file_location("unobserved_marginals", ROOT / "experiments" / "unobserved_marginals.py")
-um = importlib.util.module_from_spec(spec)
-spec.loader.exec_module(um)
+from tests._scripts import load_experiment
+
+um = load_experiment("unobserved_marginals", "unobserved_marginals.py")
 
 
 def _write(d: Path, name: str, q) -> None:

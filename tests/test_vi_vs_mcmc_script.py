@@ -2,25 +2,20 @@
 numbers make sense (the exact-ELBO first-hit guide reaches the exact posterior on the 1D toy, Gibbs
 converges with its budget, traditional OGM is finitely wrong, out-of-fold fits are scored held out)."""
 
-import importlib.util
 import json
 import math
 import sys
 from dataclasses import replace
-from pathlib import Path
 
 import pytest
 import torch
 
-PATH = Path(__file__).resolve().parents[1] / "experiments" / "vi_vs_mcmc.py"
+from tests._scripts import load_experiment
 
 
 @pytest.fixture(scope="module")
 def harness():
-    spec = importlib.util.spec_from_file_location("vi_vs_mcmc", PATH)
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules["vi_vs_mcmc"] = mod  # dataclasses look their module up
-    spec.loader.exec_module(mod)
+    mod = load_experiment("vi_vs_mcmc", "vi_vs_mcmc.py")
     torch.set_num_threads(1)
     yield mod
     sys.modules.pop("vi_vs_mcmc", None)
