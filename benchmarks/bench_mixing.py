@@ -14,13 +14,15 @@ same problems when ``numpyro`` is installed (``pip install "ogm_ppl[peers]"``); 
 reported apart. Ratios are ours / NumPyro's modified sampler. Writes ``out/bench/bench_mixing.json``.
 ``--quick``: fewer sweeps and no reference scene (a smoke run); ``--reference-only``: the reference scene alone.
 
-Mixing under the strongly coupled learned priors (``--tempering-only``, about 2-3 min; also part of the full
+Mixing under the strongly coupled learned priors (``--tempering-only``, about 3-4 min; also part of the full
 run): a 48 x 48 window of a held-out HouseExpo plan (never used to learn a table) with sparse stop-and-scan
 data as in ``experiments/heldout_priors.py`` (3 stops, 90 beams, 75-cell range, sigma 1 cell); under
 ``mrf:houseexpo``, ``border:houseexpo`` and the backed-off ``border_bo:houseexpo`` (untempered and ``@cal``),
 3 x 3 patch Gibbs and parallel tempering over it
 (``ogm_ppl.inference.mcmc.tempering``; 4 rungs, geometric to beta = 0.3, prior and likelihood tempered) and
-the cycle of 3 x 3 patch Gibbs with single-cell Gibbs (``ogm_ppl.inference.mcmc.KernelCycle``); under the
+the cycle of 3 x 3 patch Gibbs with single-cell Gibbs (``ogm_ppl.inference.mcmc.KernelCycle``), and that cycle
+with 3 x 3 patches on the tilings shifted by one and two cells, both every sweep (``mixing_cycle(...,
+shifted=True)``) or one drawn at random per sweep (``shifted="random"``, a ``KernelMixture``); under the
 backed-off 1-given-8 prior ``border1_bo:houseexpo`` and the tempered ``mrf8:houseexpo@cal``, single-cell Gibbs
 (with the same sweeps and with 10 times as many) and the cycle of single cells and 2 x 2 blocks. Each sampler
 runs one chain from each of 3 starts (thresholded OGM, all free, a prior draw); reported: the fraction of the
@@ -349,6 +351,16 @@ def coupled_priors(
                 ),
                 "patch Gibbs, same time": (partial(PatchGibbs, model, (3, 3)), rungs * num_sweeps, rungs * warmup),
                 "patch + cell Gibbs (KernelCycle)": (partial(mixing_cycle, model, (3, 3)), num_sweeps, warmup),
+                "+ shifted tilings, both a sweep": (
+                    partial(mixing_cycle, model, (3, 3), shifted=True),
+                    num_sweeps,
+                    warmup,
+                ),
+                "+ shifted tilings, one a sweep": (
+                    partial(mixing_cycle, model, (3, 3), shifted="random"),
+                    num_sweeps,
+                    warmup,
+                ),
             }
         rows = {}
         for label, (make, n, w) in makers.items():

@@ -678,19 +678,37 @@ def _calibration_guides(doc: dict) -> Table:
 
 def _unseen_by_distance(doc: dict) -> Table:
     """``experiments/unseen_by_distance.py``: per test corpus and distance bin (cells to the nearest reached
-    cell), the unseen cells' share, occupied share and the guide's NLL."""
+    cell), the unseen cells' share, occupied share and the method's NLL; for a prior's chains also the chain
+    length, the share of the bin's cells whose chains agree (split R-hat < 1.05) and each chain's mean
+    occupancy there."""
+    st = doc["settings"]
+    chains = "prior" in st
     rows = []
     for r in doc["rows"]:
         lo, hi = r["distance"]
         span = f"({lo:g}, {'∞' if hi is None else f'{hi:g}'}]"
-        rows.append([r["test"], span, _f(r["share"], 2), _f(r["occupied_share"], 2), _f(r["nll_bits"])])
-    st = doc["settings"]
+        row = [r["test"], span, _f(r["share"], 2), _f(r["occupied_share"], 2), _f(r["nll_bits"])]
+        if chains:
+            row[1:1] = [str(r["sweeps"])]
+            row += [_f(r["agree"], 2), " / ".join(_f(v, 2) for v in r["chain_occupied"])]
+        rows.append(row)
+    header = ["test", "distance (cells)", "share", "occupied", "NLL"]
+    if chains:
+        header[1:1] = ["sweeps"]
+        header += ["R-hat < 1.05", "chain occupancy (OGM / free / prior start)"]
+        burn = "a quarter as many" if st.get("burn") is None else str(st["burn"])
+        what = (
+            f"{st['prior']} ({st['kernel']}, 3 chains from different starts, kept sweeps after {burn} warm-up sweeps)"
+        )
+    else:
+        what = f"guide:{st['guide']}"
     return Table(
         caption=(
-            f"guide:{st['guide']} on the unseen cells of {st['plans']} held-out maps per corpus, by distance to the "
+            f"{what} on the unseen cells of {st['plans']} held-out maps per corpus, by distance to the "
             "nearest cell a ray reached: share of the unseen cells, occupied share, NLL (bits/cell)"
+            + (", chain agreement and occupancy" if chains else "")
         ),
-        header=["test", "distance (cells)", "share", "occupied", "NLL"],
+        header=header,
         rows=rows,
         provenance=doc["provenance"],
     )
@@ -983,6 +1001,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "calibration_all": ("calibration_all", _calibration_guides),
     "calibration_cycle": ("calibration_cycle", _calibration_kernels),
     "unseen_by_distance": ("unseen_by_distance", _unseen_by_distance),
+    "unseen_by_distance_chains": ("unseen_by_distance_chains", _unseen_by_distance),
     "calibration_shifted": ("calibration_shifted", lambda doc: _calibration_kernels(doc, "calibration_cycle")),
     "carmen_guide": ("carmen_guide", _experiment_by_log),
     "headline": ("headline", _headline),

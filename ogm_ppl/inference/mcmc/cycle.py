@@ -19,6 +19,9 @@ from three different starts then agree on 99-100 % of the unseen cells (single-c
 those of the tempered backed-off border prior on 90 % of a HouseExpo map pair's, where patch Gibbs alone
 leaves a quarter of them apart even after 10,000 sweeps.
 
+:class:`KernelMixture` runs one part per sweep instead, drawn with fixed probabilities ``w_i``: the mixture
+``P = sum_i w_i P_i`` keeps ``pi`` invariant as well (Tierney 1994, "mixtures"), at the cost of one part's sweep.
+
 Every part keeps its own state; the cycle loads the current map into a part before its sweep (when the
 map changed since that part last saw it) and reads the map back after it. The parts draw their random
 numbers from torch's global generator in turn, so the state, the counters and
