@@ -1,0 +1,140 @@
+r"""How much of a region with no readings does a prior fill? Each prior's own occupied share against its corpus's.
+
+A prior learned from a corpus predicts a cell no ray reached from the cells around it; far from any reading its
+prediction is what the prior itself holds: ``E_p[mean_k m_k]``, the occupied share of maps drawn from it. For a
+model fitted by maximum likelihood with the occupied share among its sufficient statistics (a pattern field:
+every window's code; an independent prior: ``lambda``) that share matches the training corpus's. The tables of
+Chapter 5 are products of tile conditionals, not normalised fits of a joint, so nothing makes theirs match.
+
+For each prior (``--priors``, learned on each ``--train`` corpus; ``@cal`` names tempered as in
+``experiments/calibration.py``) this runs three chains of the prior's mixing cycle
+(:func:`~ogm_ppl.inference.mcmc.mixing_cycle`: the calibration protocol's sampler, ``--kernel cycle``) on a
+``--window`` square with no readings (one short ray at the centre, which the model needs; its cells are not
+counted), from the all-free map, the all-occupied map and a prior draw, and records the occupied share of the
+window every ``--every`` sweeps. The prior's share is the mean over the second half of the three chains; the
+corpus's is ``lambda`` of its tables (the learned independent prior: the occupied share of the training plans).
+
+    python experiments/prior_occupancy.py --train dungeon houseexpo       # a few minutes
+
+Writes ``OUT/prior_occupancy.json`` (settings, provenance, one row per prior with each chain's trace) and prints
+a table.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
+import calibration  # experiments/calibration.py: prior names, the sampler's patch
+
+from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
+from ogm_ppl.inference.mcmc import mixing_cycle
+from ogm_ppl.io import atomic_write_text
+from ogm_ppl.priors.named import split_prior_name
+from ogm_ppl.priors.tables import tables_by_name
+
+TRAIN = ("generated", "houseexpo", "ipa", "dungeon")
+PRIORS = ("border_bo", "border_bo@cal", "border1_bo", "border1_bo@cal", "patch3")
+STARTS = ("free", "occupied", "prior")
+
+
+def empty_model(prior, window: int) -> tuple[OccupancyModel, np.ndarray]:
+    """A ``window x window`` model whose only reading is one short ray at the centre, and the cells it does not
+    touch (the ones counted)."""
+    grid = Grid((window, window), resolution=1.0)
+    c = window / 2 + 0.5
+    scans = Scans(np.array([[c, c, 0.0]]), np.array([0.0]), np.array([[0.5]]), max_range=float(window))
+    rays = raycast(grid, scans)
+    counted = ~rays.reached()
+    return OccupancyModel(grid, rays, GaussianRange(1.0), prior), counted
+
+
+def occupancy_trace(name: str, args: argparse.Namespace) -> dict:
+    """Three chains under the prior ``name`` on an empty window: the occupied share every ``args.every`` sweeps."""
+    prior = calibration.prior_by_name(name, (args.window, args.window))
+    model, counted = empty_model(prior, args.window)
+    patch = calibration.default_patch(prior)
+    traces, secs = [], []
+    for j, start in enumerate(STARTS):
+        init = torch.ones(model.num_cells, dtype=torch.float64) if start == "occupied" else start
+        kernel = mixing_cycle(model, patch, init=init)
+        torch.manual_seed(args.seed + 1000 * j)
+        kernel.setup()
+        params = kernel.current_params()
+        t0 = time.perf_counter()
+        tr = []
+        for i in range(args.sweeps):
+            params = kernel.sample(params)
+            if (i + 1) % args.every == 0:
+                tr.append(float(kernel.state[counted].mean()))
+        traces.append(tr)
+        secs.append(time.perf_counter() - t0)
+    half = np.array([t[len(t) // 2 :] for t in traces])
+    return {
+        "traces": traces,
+        "share": float(half.mean()),
+        "chain_shares": [float(v) for v in half.mean(1)],
+        "seconds": float(sum(secs)),
+        "patch": None if patch is None else list(patch),
+    }
+
+
+def main(argv=None) -> dict:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--priors", nargs="+", default=list(PRIORS), help="prior kinds (KIND[@cal])")
+    ap.add_argument("--train", nargs="+", default=list(TRAIN), choices=TRAIN, help="corpora the priors learned on")
+    ap.add_argument("--window", type=int, default=96, help="cells a side (default 96, the calibration window)")
+    ap.add_argument("--sweeps", type=int, default=1000, help="sweeps per chain (default 1000)")
+    ap.add_argument("--every", type=int, default=50, help="record the occupied share every this many sweeps")
+    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--out", type=Path, default=Path("out/prior_occupancy"))
+    args = ap.parse_args(argv)
+    if args.window < 4 or args.every < 1 or args.sweeps < 2 * args.every:
+        raise SystemExit("--window must be at least 4, --every at least 1 and --sweeps at least 2 x --every")
+    for k in args.priors:
+        kind, corpus, _, _ = split_prior_name(k)
+        if corpus:
+            raise SystemExit(f"--priors takes kinds (the corpora are --train), got {k!r}")
+    from benchmarks._common import provenance
+
+    t0 = time.perf_counter()
+    rows = []
+    print(f"occupied share of an empty {args.window} x {args.window} window, second half of 3 chains")
+    print(f"{'prior':28s} {'corpus':>7s} {'prior':>6s}  chains (free, occupied, prior start)")
+    for corpus in args.train:
+        lam = float(tables_by_name(corpus).lam)
+        for kind in args.priors:
+            base, _, at, mod = split_prior_name(kind)
+            name = f"{base}:{corpus}{at}{mod}"
+            if mod == "cal" and base not in calibration.load_temper_params(corpus).beta:
+                print(f"{name:28s} skipped: no tempering exponent fitted")
+                continue
+            r = occupancy_trace(name, args)
+            rows.append({"prior": name, "kind": kind, "train": corpus, "corpus_share": lam, **r})
+            chains = " ".join(f"{v:.3f}" for v in r["chain_shares"])
+            print(f"{name:28s} {lam:7.3f} {r['share']:6.3f}  {chains}  ({r['seconds']:.0f} s)", flush=True)
+    doc = {
+        "provenance": provenance(),
+        "settings": {k: getattr(args, k) for k in ("priors", "train", "window", "sweeps", "every", "seed")},
+        "starts": list(STARTS),
+        "rows": rows,
+        "seconds": time.perf_counter() - t0,
+    }
+    args.out.mkdir(parents=True, exist_ok=True)
+    path = args.out / "prior_occupancy.json"
+    atomic_write_text(path, json.dumps(doc, indent=1, allow_nan=False))
+    print(f"wrote {path} ({doc['seconds']:.0f} s)")
+    return doc
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,54 @@
+"""experiments/prior_occupancy.py: a prior's own occupied share on a window with no readings. Under the learned
+independent prior every recorded state is an exact draw (each sweep redraws every cell from ``lambda``), so the
+mean share must lie within 4 standard errors of the corpus's ``lambda``."""
+
+import json
+import math
+import sys
+
+import pytest
+
+from tests._scripts import EXPERIMENTS, load_experiment
+
+
+@pytest.fixture(scope="module")
+def po():
+    sys.path.insert(0, str(EXPERIMENTS))  # the script imports calibration.py beside it
+    try:
+        yield load_experiment("prior_occupancy_experiment", "prior_occupancy.py")
+    finally:
+        sys.path.remove(str(EXPERIMENTS))
+        sys.modules.pop("prior_occupancy_experiment", None)
+
+
+def test_the_independent_prior_fills_its_lambda(po, tmp_path):
+    argv = ["--priors", "independent", "--train", "dungeon", "--window", "20", "--sweeps", "40", "--every", "2"]
+    doc = po.main([*argv, "--out", str(tmp_path)])
+    (row,) = doc["rows"]
+    assert row["prior"] == "independent:dungeon" and [len(t) for t in row["traces"]] == [20, 20, 20]
+    lam = row["corpus_share"]
+    _, counted = po.empty_model(po.calibration.prior_by_name("independent:dungeon", (20, 20)), 20)
+    K, n = int(counted.sum()), 3 * 10  # counted cells; recorded states in the chains' second halves
+    assert 0 < K < 400
+    assert abs(row["share"] - lam) < 4 * math.sqrt(lam * (1 - lam) / (K * n))
+    assert json.loads((tmp_path / "prior_occupancy.json").read_text())["rows"][0]["share"] == row["share"]
+
+
+def test_a_tile_prior_runs_from_every_start(po, tmp_path):
+    argv = ["--priors", "border_bo", "--train", "houseexpo", "--window", "12", "--sweeps", "4", "--every", "2"]
+    (row,) = po.main([*argv, "--out", str(tmp_path)])["rows"]
+    assert row["patch"] == [3, 3] and len(row["chain_shares"]) == 3
+    assert row["traces"][1][0] > row["traces"][0][0]  # the all-occupied start is still fuller after 2 sweeps
+
+
+@pytest.mark.parametrize(
+    "argv, match",
+    [
+        (["--window", "2"], "--window must be at least 4"),
+        (["--sweeps", "10", "--every", "6"], "--sweeps at least 2 x --every"),
+        (["--priors", "border_bo:dungeon"], "--priors takes kinds"),
+    ],
+)
+def test_bad_settings_are_refused(po, tmp_path, argv, match):
+    with pytest.raises(SystemExit, match=match):
+        po.main([*argv, "--out", str(tmp_path)])
