@@ -714,6 +714,34 @@ def _unseen_by_distance(doc: dict) -> Table:
     )
 
 
+def _prior_occupancy(doc: dict) -> Table:
+    """``experiments/prior_occupancy.py``: each prior's occupied share on a window with no readings (the second
+    half of three chains, and each chain's) against its training corpus's ``lambda``."""
+    st = doc["settings"]
+    rows = [
+        [
+            r["prior"],
+            _f(r["corpus_share"]),
+            _f(r["share"]),
+            _f(r["share"] - r["corpus_share"], 3),
+            " / ".join(_f(v) for v in r["chain_shares"]),
+            _f(r["seconds"], 0),
+        ]
+        for r in doc["rows"]
+    ]
+    return Table(
+        caption=(
+            f"Occupied share of a {st['window']} x {st['window']} window with no readings under each prior (its "
+            f"mixing cycle, 3 chains of {st['sweeps']} sweeps from the all-free map, the all-occupied map and a prior "
+            "draw; the mean over each chain's second half) against the occupied share of its training corpus "
+            "(lambda of its tables)"
+        ),
+        header=["prior", "corpus", "prior's share", "difference", "chains (free / occupied / draw start)", "seconds"],
+        rows=rows,
+        provenance=doc["provenance"],
+    )
+
+
 #: Table 6.4's pooled best F1 in the thesis, by the algorithm names of the specs
 _THESIS_6_4 = {"ogm": 0.9328, "dd-L1": 0.9460, "dd-L9": 0.9458, "border-L9": 0.9820, "border-thesis-L9": 0.9820}
 
@@ -1002,6 +1030,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "calibration_cycle": ("calibration_cycle", _calibration_kernels),
     "unseen_by_distance": ("unseen_by_distance", _unseen_by_distance),
     "unseen_by_distance_chains": ("unseen_by_distance_chains", _unseen_by_distance),
+    "prior_occupancy": ("prior_occupancy", _prior_occupancy),
     "calibration_shifted": ("calibration_shifted", lambda doc: _calibration_kernels(doc, "calibration_cycle")),
     "carmen_guide": ("carmen_guide", _experiment_by_log),
     "headline": ("headline", _headline),

@@ -42,32 +42,15 @@ from ogm_ppl.inference.mcmc.kernel import KernelStateError, MapKernel
 __all__ = ["KernelCycle", "KernelMixture", "mixing_cycle"]
 
 
-class KernelCycle(MapKernel):
-    """Sweeps of several map kernels in turn on one map (module docstring).
-
-    Args:
-        kernels: the parts (:class:`~ogm_ppl.inference.mcmc.kernel.MapKernel` s of the *same* model, e.g.
-            ``[PatchGibbs(model, (3, 3)), CellGibbs(model)]``); one sweep of the cycle is one sweep of each,
-            in this order. Their checkpoint entries are the cycle's ``k{i}.*`` entries.
-        init: the starting map: ``None`` (default) uses the first part's (its ``init``), otherwise any start
-            :func:`~ogm_ppl.inference.mcmc.kernel.initial_map` knows (``"ogm"``, ``"free"``, ``"prior"``, a map).
-
-    The cycle samples the cells its parts sample (:meth:`sampled_cells`: their union); with parts given a
-    ``region``, the others keep their values.
-
-    >>> from ogm_ppl.inference.mcmc import CellGibbs, PatchGibbs
-    >>> from ogm_ppl.testing.kernels import enumerable_2d
-    >>> model = enumerable_2d()
-    >>> k = KernelCycle([PatchGibbs(model, (1, 2)), CellGibbs(model)])
-    >>> k.setup(); params = k.sample(k.current_params())
-    >>> k.sweeps, [p.sweeps for p in k.kernels]
-    (1, [1, 1])
-    """
+class _Parts(MapKernel):
+    """Several map kernels of one model on one map: the parts' hand-over, sampled cells, settings, diagnostics
+    and checkpoints (``k{i}.*`` entries) that :class:`KernelCycle` and :class:`KernelMixture` share. A subclass
+    writes :meth:`_sweep` from :meth:`_sweep_part`."""
 
     def __init__(self, kernels: Sequence[MapKernel], init=None) -> None:
         kernels = list(kernels)
         if not kernels:
-            raise ValueError("a KernelCycle needs at least one kernel")
+            raise ValueError(f"a {type(self).__name__} needs at least one kernel")
         for i, k in enumerate(kernels):
             if not isinstance(k, MapKernel):
                 raise TypeError(f"kernel {i} must be a MapKernel (CellGibbs, PatchGibbs, ...), got {type(k).__name__}")
@@ -118,22 +101,22 @@ class KernelCycle(MapKernel):
         out["kernels"] = [(type(k).__qualname__, k.settings()) for k in self.kernels]
         return out
 
-    def _sweep(self) -> int:
-        changed = 0
-        for i, k in enumerate(self.kernels):
-            if self._stale[i]:
-                k._adopt_map(self._m)
-            changes, updates = k.changes, k.updates
-            k.sample(k.current_params())
-            self._updates += k.updates - updates
-            moved = k.changes - changes
-            if moved:
-                self._m[:] = k.state
-                self._stale = [j != i for j in range(len(self.kernels))]
-            else:
-                self._stale[i] = False
-            changed += moved
-        return changed
+    def _sweep_part(self, i: int) -> int:
+        """One sweep of part ``i`` on the current map (handed over first if it changed since the part last saw
+        it); the cells it changed."""
+        k = self.kernels[i]
+        if self._stale[i]:
+            k._adopt_map(self._m)
+        changes, updates = k.changes, k.updates
+        k.sample(k.current_params())
+        self._updates += k.updates - updates
+        moved = k.changes - changes
+        if moved:
+            self._m[:] = k.state
+            self._stale = [j != i for j in range(len(self.kernels))]
+        else:
+            self._stale[i] = False
+        return moved
 
     def logging(self):
         rates = [k.changes / max(k.updates, 1) for k in self.kernels]
@@ -159,16 +142,42 @@ class KernelCycle(MapKernel):
     def _load_extra_state(self, state) -> None:
         n = np.asarray(state.get("parts", -1))
         if n.shape != () or n.dtype.kind not in "iu" or int(n) != len(self.kernels):
-            raise KernelStateError(f"KernelCycle state 'parts' must be {len(self.kernels)}, got {n!r}")
+            raise KernelStateError(f"{type(self).__name__} state 'parts' must be {len(self.kernels)}, got {n!r}")
         for i, k in enumerate(self.kernels):
             part = {key[len(f"k{i}.") :]: v for key, v in state.items() if key.startswith(f"k{i}.")}
             try:
                 k.load_state_dict(part)
             except KernelStateError as e:
-                raise KernelStateError(f"KernelCycle part {i}: {e}") from None
+                raise KernelStateError(f"{type(self).__name__} part {i}: {e}") from None
 
 
-class KernelMixture(KernelCycle):
+class KernelCycle(_Parts):
+    """Sweeps of several map kernels in turn on one map (module docstring).
+
+    Args:
+        kernels: the parts (:class:`~ogm_ppl.inference.mcmc.kernel.MapKernel` s of the *same* model, e.g.
+            ``[PatchGibbs(model, (3, 3)), CellGibbs(model)]``); one sweep of the cycle is one sweep of each,
+            in this order. Their checkpoint entries are the cycle's ``k{i}.*`` entries.
+        init: the starting map: ``None`` (default) uses the first part's (its ``init``), otherwise any start
+            :func:`~ogm_ppl.inference.mcmc.kernel.initial_map` knows (``"ogm"``, ``"free"``, ``"prior"``, a map).
+
+    The cycle samples the cells its parts sample (:meth:`sampled_cells`: their union); with parts given a
+    ``region``, the others keep their values.
+
+    >>> from ogm_ppl.inference.mcmc import CellGibbs, PatchGibbs
+    >>> from ogm_ppl.testing.kernels import enumerable_2d
+    >>> model = enumerable_2d()
+    >>> k = KernelCycle([PatchGibbs(model, (1, 2)), CellGibbs(model)])
+    >>> k.setup(); params = k.sample(k.current_params())
+    >>> k.sweeps, [p.sweeps for p in k.kernels]
+    (1, [1, 1])
+    """
+
+    def _sweep(self) -> int:
+        return sum(self._sweep_part(i) for i in range(len(self.kernels)))
+
+
+class KernelMixture(_Parts):
     r"""A random choice of one map kernel per sweep (a mixture, Tierney 1994): ``P = sum_i w_i P_i``.
 
     Each sweep draws part ``i`` with probability ``w_i`` from torch's global generator and runs one sweep of
@@ -181,6 +190,9 @@ class KernelMixture(KernelCycle):
         kernels: the parts (map kernels of the *same* model), as for :class:`KernelCycle`.
         weights: ``w`` (``n``, positive, normalised here); ``None`` (default): ``1 / n`` each.
         init: the starting map, as for :class:`KernelCycle`.
+
+    Its parts' checkpoint entries are ``k{i}.*``, as a cycle's, with the weights beside them (a checkpoint of
+    other weights is refused).
 
     ``sweeps`` counts the mixture's sweeps; each part's own ``sweeps`` counts the times it was drawn.
 
@@ -218,20 +230,7 @@ class KernelMixture(KernelCycle):
 
     def _sweep(self) -> int:
         u = torch.rand((), dtype=torch.float64)
-        i = min(int(torch.searchsorted(self._cum, u, right=True)), len(self.kernels) - 1)
-        k = self.kernels[i]
-        if self._stale[i]:
-            k._adopt_map(self._m)
-        changes, updates = k.changes, k.updates
-        k.sample(k.current_params())
-        self._updates += k.updates - updates
-        moved = k.changes - changes
-        if moved:
-            self._m[:] = k.state
-            self._stale = [j != i for j in range(len(self.kernels))]
-        else:
-            self._stale[i] = False
-        return moved
+        return self._sweep_part(min(int(torch.searchsorted(self._cum, u, right=True)), len(self.kernels) - 1))
 
 
 def mixing_cycle(
@@ -248,8 +247,8 @@ def mixing_cycle(
     turn a pattern that no tile update or single cell undoes. Such a patch is drawn from its full conditional
     over all ``2^(h w)`` configurations (a 3 x 3 patch: 512), so these sweeps cost far more than the tile
     sweeps they follow. ``shifted="random"`` sweeps one of those shifted tilings per sweep instead, drawn
-    uniformly (a :class:`KernelMixture` as the cycle's last part): the same moves at ``1 / (min(h, w) - 1)`` of
-    their cost per sweep.
+    uniformly (a :class:`KernelMixture` as the cycle's last part): the same moves at a fraction of their
+    cost per sweep (one over the number of shifted tilings).
     """
     if shifted not in (False, True, "random"):
         raise ValueError(f"shifted must be False, True or 'random', got {shifted!r}")
