@@ -746,16 +746,20 @@ def _prior_occupancy(doc: dict) -> Table:
 _THESIS_6_4 = {"ogm": 0.9328, "dd-L1": 0.9460, "dd-L9": 0.9458, "border-L9": 0.9820, "border-thesis-L9": 0.9820}
 
 
-def _calibration_kernels(doc: dict, against: str = "calibration_cycle_gibbs") -> Table:
+def _calibration_kernels(
+    doc: dict, against: str = "calibration_cycle_gibbs", seconds: bool = False, lengths: bool = False
+) -> Table:
     """Two kernels on the same maps: the snapshot ``doc`` (a calibration run with one ``--kernel``) against
     the snapshot ``against`` (the same settings with another kernel; its priors may be more). Per prior of
     ``doc`` and test corpus (priors learned on it), the share of unseen cells whose split R-hat is below 1.05
-    and the unseen cells' NLL."""
+    and the unseen cells' NLL, with ``seconds`` the seconds a map (three chains). ``lengths``: the chains may
+    differ in length (``sweeps``, ``burn``) and ``doc`` may run on fewer test corpora."""
     base = load_snapshot(against)
     a, b = base["settings"], doc["settings"]
-    differ = sorted(k for k in a.keys() | b.keys() if k not in ("kernel", "priors") and a.get(k) != b.get(k))
-    if not set(b["priors"]) <= set(a["priors"]):
-        differ.append("priors")
+    free = ("kernel", "priors") + (("sweeps", "burn", "test") if lengths else ())
+    differ = sorted(k for k in a.keys() | b.keys() if k not in free and a.get(k) != b.get(k))
+    if not set(b["priors"]) <= set(a["priors"]) or not set(b["test"]) <= set(a["test"]):
+        differ.append("priors or test corpora")
     if differ:
         raise ValueError(f"{against} and the {b.get('kernel')} snapshot differ in {differ}")
     kernels = (a.get("kernel", "gibbs"), b.get("kernel", "gibbs"))
@@ -771,16 +775,18 @@ def _calibration_kernels(doc: dict, against: str = "calibration_cycle_gibbs") ->
         cells = []
         for t in tests:
             sa, sb = x.get((prior, t)), y.get((prior, t))
-            for k, d in (("rhat_below", 2), ("nll_bits", 3)):
+            for k, d in (("rhat_below", 2), ("nll_bits", 3), ("seconds", 0))[: 3 if seconds else 2]:
                 cells.append("–" if sa is None or sb is None else f"{_f(sa[k], d)} → {_f(sb[k], d)}")
         rows.append([prior, *cells])
+    chains = f"{b['sweeps']}" if a["sweeps"] == b["sweeps"] else f"{a['sweeps']} → {b['sweeps']}"
+    measures = ("R-hat < 1.05", "NLL", "s / map")[: 3 if seconds else 2]
     return Table(
         caption=(
             f"Unseen cells of held-out maps ({b['plans']} per corpus), each prior learned on the test corpus, 3 chains "
-            f"of {b['sweeps']} sweeps from different starts: share of cells with split R-hat < 1.05 and NLL "
-            f"(bits/cell), kernel {kernels[0]} → {kernels[1]}"
+            f"of {chains} sweeps from different starts: share of cells with split R-hat < 1.05 and NLL "
+            f"(bits/cell){', seconds a map (three chains)' if seconds else ''}, kernel {kernels[0]} → {kernels[1]}"
         ),
-        header=["prior", *(f"{t} {m}" for t in tests for m in ("R-hat < 1.05", "NLL"))],
+        header=["prior", *(f"{t} {m}" for t in tests for m in measures)],
         rows=rows,
         provenance=_join_provenance(base["provenance"], doc["provenance"]),
     )
@@ -1032,6 +1038,14 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "unseen_by_distance_chains": ("unseen_by_distance_chains", _unseen_by_distance),
     "prior_occupancy": ("prior_occupancy", _prior_occupancy),
     "calibration_shifted": ("calibration_shifted", lambda doc: _calibration_kernels(doc, "calibration_cycle")),
+    "calibration_shifted_random": (
+        "calibration_shifted_random",
+        lambda doc: _calibration_kernels(doc, "calibration_shifted", seconds=True),
+    ),
+    "calibration_shifted_random400": (
+        "calibration_shifted_random400",
+        lambda doc: _calibration_kernels(doc, "calibration_shifted", seconds=True, lengths=True),
+    ),
     "carmen_guide": ("carmen_guide", _experiment_by_log),
     "headline": ("headline", _headline),
     "intel_guide": ("intel_guide", _experiment_conditions),
