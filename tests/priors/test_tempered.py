@@ -53,3 +53,25 @@ def test_forbidden_maps_stay_forbidden():
 def test_impossible_exponent_refused(beta):
     with pytest.raises(ValueError, match="finite and >= 0"):
         TemperedPrior(MRFPrior((3,), order=1, psi=0.5, cell_prior=0.5), beta)
+
+
+#: float tables of a Tiles bundle that are not log-factors (the escape move's proposal, a probability)
+_NOT_LOG_FACTORS = {"back_cdf"}
+
+
+@pytest.mark.parametrize("name", ["border:houseexpo", "border1:houseexpo", "border_bo:houseexpo", "patch3:houseexpo"])
+def test_a_tempered_tile_bundle_scales_every_table_of_log_factors(name):
+    """Every float table of log-factors of a tile bundle (the sparse values, the window's dense table and the
+    fallback's dense table ``fb_dense``, which the neighbour-layout tile update reads) is ``beta`` times the
+    base's, ``-inf`` kept; and ``fb_dense`` still equals the fallback segment's values it tables."""
+    from ogm_ppl.priors.named import prior_by_name
+
+    base = prior_by_name(name, (12, 12)).compiled()
+    t = base.tempered(0.35)
+    for field, v in base._asdict().items():
+        if isinstance(v, np.ndarray) and v.dtype.kind == "f" and field not in _NOT_LOG_FACTORS:
+            want = np.where(np.isfinite(v), 0.35 * v, v)
+            np.testing.assert_array_equal(getattr(t, field), want, err_msg=field)
+    if t.fb_dense.size:
+        a, b = t.seg_off[t.fallback], t.seg_off[t.fallback + 1]
+        np.testing.assert_array_equal(t.fb_dense[t.keys[a:b]], t.logp[a:b])

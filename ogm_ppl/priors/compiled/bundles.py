@@ -164,8 +164,9 @@ class Tiles(NamedTuple):
         return max(1 << L if L <= 20 else 0, seg, 2)
 
     def tempered(self, beta: float) -> Tiles:
-        """``beta log phi`` in every segment (the sparse values and the dense table alike); missing keys
-        (``phi = 0``) stay impossible, and the fallback reads the scaled values.
+        """``beta log phi`` in every segment (the sparse values and the dense tables alike: the window table
+        ``dense`` and the fallback's ``fb_dense``); missing keys (``phi = 0``) stay impossible, and the
+        fallback reads the scaled values.
 
         Tempering (for parallel tempering, Geyer 1991): the bundle of ``p~(m)^beta``, every log-potential
         times ``beta``; ``-inf`` (a configuration the prior forbids) stays ``-inf``. ``beta = 1`` returns
@@ -175,7 +176,9 @@ class Tiles(NamedTuple):
         b = _check_beta(beta)
         if b == 1.0:
             return self
-        return self._replace(logp=_scaled(self.logp, b), dense=_scaled(self.dense, b))
+        return self._replace(
+            logp=_scaled(self.logp, b), dense=_scaled(self.dense, b), fb_dense=_scaled(self.fb_dense, b)
+        )
 
     def tiles_patches(self, hw, anchors) -> bool:
         """Whether every patch (``h x w`` rectangles at ``anchors``, ``n x 2``) is a tile of this tiling."""
