@@ -6,6 +6,7 @@ the compiled kernels one bundle of arrays (:meth:`MapPrior.compiled`, :mod:`ogm_
 
 from ogm_ppl.priors.backoff import BackoffBorderPrior
 from ogm_ppl.priors.base import MapPrior
+from ogm_ppl.priors.biased import BiasedPrior
 from ogm_ppl.priors.border import BorderPatchPrior
 from ogm_ppl.priors.compiled import CompiledPrior
 from ogm_ppl.priors.data_driven_1d import DataDriven1DPrior
@@ -25,6 +26,7 @@ from ogm_ppl.priors.tables import PriorTables, available_tables, load_tables, ta
 from ogm_ppl.priors.tempered import TemperedPrior
 
 __all__ = [
+    "BiasedPrior",
     "BackoffBorderPrior",
     "BorderPatchPrior",
     "CompiledPrior",

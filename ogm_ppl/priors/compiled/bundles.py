@@ -24,6 +24,19 @@ def _check_beta(beta) -> float:
     return b
 
 
+def _check_bias(bias) -> float:
+    """``bias`` as a float, checked: finite."""
+    h = float(bias)
+    if not np.isfinite(h):
+        raise ValueError(f"a bias must be finite, got {bias!r}")
+    return h
+
+
+def _shifted(x: np.ndarray, add) -> np.ndarray:
+    """``x + add`` for the finite entries of ``x``; infinite entries stay as they are."""
+    return np.where(np.isfinite(x), x + add, x)
+
+
 def _scaled(x: np.ndarray, beta: float) -> np.ndarray:
     """``beta * x`` for the finite entries of ``x``; infinite entries (``log 0 = -inf``, hard constraints)
     stay as they are, so ``beta = 0`` gives ``0`` on the support and keeps ``-inf`` off it."""
@@ -55,6 +68,11 @@ class IndependentCells(NamedTuple):
         """
         b = _check_beta(beta)
         return self if b == 1.0 else self._replace(log_odds=_scaled(self.log_odds, b))
+
+    def biased(self, bias: float) -> IndependentCells:
+        """``log p~(m) + h sum_k m_k``: log-odds ``l_k + h`` (``+-inf`` kept; :mod:`~ogm_ppl.priors.biased`)."""
+        h = _check_bias(bias)
+        return self if h == 0.0 else self._replace(log_odds=_shifted(self.log_odds, h))
 
     def tiles_patches(self, hw, anchors) -> bool:
         return False
@@ -92,6 +110,11 @@ class Stencil(NamedTuple):
         return self._replace(
             unary=_scaled(self.unary, b), bias=_scaled(self.bias, b), coupling=_scaled(self.coupling, b)
         )
+
+    def biased(self, bias: float) -> Stencil:
+        """``log p~(m) + h sum_k m_k``: unary terms ``h_k + h`` (:mod:`~ogm_ppl.priors.biased`)."""
+        h = _check_bias(bias)
+        return self if h == 0.0 else self._replace(unary=_shifted(self.unary, h))
 
     def tiles_patches(self, hw, anchors) -> bool:
         return False
@@ -179,6 +202,28 @@ class Tiles(NamedTuple):
         return self._replace(
             logp=_scaled(self.logp, b), dense=_scaled(self.dense, b), fb_dense=_scaled(self.fb_dense, b)
         )
+
+    def biased(self, bias: float) -> Tiles:
+        """``log phi(key) + h * (occupied tile cells of key)`` in every segment but the border weights
+        ``log lambda_b`` (keyed by border alone), and in the dense tables; the escape move's proposal
+        ``back_cdf`` is kept (its Metropolis-Hastings ratio reads the biased factors). The tiles partition the
+        grid, so the factors sum to ``h sum_k m_k`` plus a constant (:mod:`~ogm_ppl.priors.biased`)."""
+        h = _check_bias(bias)
+        if h == 0.0:
+            return self
+        mask = (np.int64(1) << self.n_inner) - 1
+        add = h * np.bitwise_count(self.keys & mask).astype(np.float64)
+        if self.border_seg >= 0:
+            add[self.seg_off[self.border_seg] : self.seg_off[self.border_seg + 1]] = 0.0
+        out = self._replace(logp=_shifted(self.logp, add))
+        if self.fb_dense.size:
+            codes = np.arange(self.fb_dense.size, dtype=np.int64)
+            out = out._replace(fb_dense=_shifted(self.fb_dense, h * np.bitwise_count(codes).astype(np.float64)))
+        if self.dense_bits >= 0:  # rebuilt from the biased segments, as the bundle's constructor builds it
+            from ogm_ppl.priors.compiled.tiles import dense_factor_table
+
+            out = out._replace(dense=dense_factor_table(out._replace(dense=np.zeros(0), dense_bits=-1)))
+        return out
 
     def tiles_patches(self, hw, anchors) -> bool:
         """Whether every patch (``h x w`` rectangles at ``anchors``, ``n x 2``) is a tile of this tiling."""
