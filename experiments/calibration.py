@@ -54,6 +54,11 @@ drawn at random: ``shifted="random"``) or ``tempering``, parallel tempering whos
 Gibbs sampler (``--rungs``, ``--beta-min``, ``--temper``; the cold rung is scored, so the pooled marginals and
 R-hat are the posterior's). Another sampler plugs in by adding an entry.
 
+Biased priors. ``--bias-file bias.json`` (written by ``experiments/prior_occupancy.py --fit-bias``: a bias ``h`` per
+prior name, fitted so that the prior fills an empty window as its training corpus is filled, from the training
+tables alone) also runs every prior it names as ``NAME+bias``, the prior times ``exp(h sum_k m_k)``
+(:class:`~ogm_ppl.priors.BiasedPrior`), beside the prior itself.
+
 Outputs under ``--out`` (default ``out/calibration/``): ``calibration.json`` (settings, provenance, one row per
 test corpus, train corpus, map, prior and mask, with its reliability diagram), ``calibration_summary.json`` (the
 means over maps without the diagrams: what the docs snapshot), ``calibration.md`` (tables),
@@ -101,6 +106,7 @@ from ogm_ppl.inference.mcmc.tempering import TEMPERS, ParallelTempering, geometr
 from ogm_ppl.io import atomic_write_text
 from ogm_ppl.metrics import Reliability, near_mapped_mask, prediction_scores, reliability
 from ogm_ppl.models import delta_by_name
+from ogm_ppl.priors import BiasedPrior
 from ogm_ppl.priors.named import load_temper_params, prior_by_name, prior_kinds, split_prior_name
 from ogm_ppl.priors.tables import FITTED_DIR, available_tables
 
@@ -132,6 +138,7 @@ RUN_KEYS = (
     "beta_min",
     "temper",
     "patch",
+    "bias",
 )
 
 
@@ -506,11 +513,14 @@ def run_chains(scene: Scene, name: str, args, patch_override=None, tables=None) 
     shipped corpus), each ``args.sweeps`` sweeps of the ``args.kernel`` sampler after ``args.burn``. Returns
     ``{"marginals": (C, K) array, "rhat": (U,) split R-hat of the unseen cells, "seconds_per_chain", "patch"}``,
     or ``{"skipped": reason}`` when one update would weigh more than ``args.max_support`` configurations."""
+    name, biased = unbiased_name(name)
     kind, corpus, _, mod = split_prior_name(name)
     if mod == "cal" and tables is None and kind not in load_temper_params(corpus).beta:
         return {"skipped": f"no tempering exponent fitted for {kind} on {corpus} (experiments/fit_temper.py)"}
     prior = prior_by_name(name, scene.grid.shape, tables=tables)
     patch = patch_override[kind] if patch_override and kind in patch_override else default_patch(prior)
+    if biased:
+        prior = BiasedPrior(prior, args.bias[name])
     n_support = support(prior, patch)
     if n_support > args.max_support:
         return {"skipped": f"a {patch} patch update weighs up to {n_support} configurations (> --max-support)"}
@@ -585,9 +595,39 @@ def _row_key(r: dict) -> tuple:
 
 
 def _kind_label(name: str) -> str:
-    """The kind of a prior name with its tempering suffix: ``border_bo:ipa@cal`` -> ``border_bo@cal``."""
+    """The kind of a prior name with its tempering and bias suffixes: ``border_bo:ipa@cal`` -> ``border_bo@cal``,
+    ``border1_bo:ipa+bias`` -> ``border1_bo+bias``."""
+    name, biased = unbiased_name(name)
     kind, _, at, mod = split_prior_name(name)
-    return kind + at + mod
+    return kind + at + mod + (BIAS_SUFFIX if biased else "")
+
+
+#: a prior name ending so is the prior times ``exp(h sum_k m_k)``, ``h`` from ``--bias-file``
+#: (:class:`~ogm_ppl.priors.BiasedPrior`)
+BIAS_SUFFIX = "+bias"
+
+
+def unbiased_name(name: str) -> tuple[str, bool]:
+    """``(name without BIAS_SUFFIX, whether it had it)``."""
+    return (name[: -len(BIAS_SUFFIX)], True) if name.endswith(BIAS_SUFFIX) else (name, False)
+
+
+def load_bias_file(path: Path | None) -> dict[str, float]:
+    """The biases ``{prior name: h}`` of ``experiments/prior_occupancy.py --fit-bias``'s ``bias.json`` (``{}`` for
+    no file), validated; errors name the file."""
+    if path is None:
+        return {}
+    try:
+        d = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as e:
+        raise SystemExit(f"{path}: not a bias file ({type(e).__name__}: {e})") from None
+    bias = d.get("bias") if isinstance(d, dict) and d.get("format") == "ogm_ppl.prior_bias" else None
+    if not isinstance(bias, dict) or not all(
+        isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
+        for k, v in bias.items()
+    ):
+        raise SystemExit(f"{path}: not a bias file of format 'ogm_ppl.prior_bias' with finite biases by prior name")
+    return {k: float(v) for k, v in bias.items()}
 
 
 def _rows_for(test, t: TestMap, name, train, kernel, result) -> list[dict]:
@@ -821,6 +861,12 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument("--temper", default="prior", choices=TEMPERS, help="tempering: the factor the ladder raises")
     ap.add_argument("--patch", nargs="*", default=[], help="per-kind patch override: KIND=RxC or KIND=1")
     ap.add_argument(
+        "--bias-file",
+        type=Path,
+        default=None,
+        help="bias.json of prior_occupancy.py --fit-bias: each prior it names also runs biased (NAME+bias)",
+    )
+    ap.add_argument(
         "--max-support",
         type=int,
         default=4096,
@@ -868,13 +914,15 @@ def main(argv=None) -> dict:
     out = Path(args.out)
     path = out / "calibration.json"
     own = () if args.kernel == "tempering" else ("rungs", "beta_min", "temper")  # only the sampler's own settings
-    settings = {k: v for k, v in vars(args).items() if k not in ("out", "fresh", "no_figures", *own)}
+    args.bias = load_bias_file(args.bias_file)
+    settings = {k: v for k, v in vars(args).items() if k not in ("out", "fresh", "no_figures", "bias_file", *own)}
     rows, runs = _load_previous(path, settings, args.fresh)
     done = {_row_key(r) for r in rows}
     skipped: list[dict] = []
     skipped_keys: set[tuple] = set()
     overrides = _patch_overrides(args.patch)
     pairs = prior_names(args.priors, args.train)
+    pairs += [(n + BIAS_SUFFIX, c) for n, c in pairs if n in args.bias]  # each biased prior beside its base
     guides = {c: guide_for(c, args.guide_dir) for c in args.guides}
     pairs += [(GUIDE_PREFIX + c, c) for c in args.guides]
     prov = provenance()

@@ -39,12 +39,16 @@ import calibration  # experiments/calibration.py: prior names, the sampler's pat
 from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
 from ogm_ppl.inference.mcmc import mixing_cycle
 from ogm_ppl.io import atomic_write_text
+from ogm_ppl.priors import BiasedPrior
 from ogm_ppl.priors.named import split_prior_name
 from ogm_ppl.priors.tables import tables_by_name
 
 TRAIN = ("generated", "houseexpo", "ipa", "dungeon")
 PRIORS = ("border_bo", "border_bo@cal", "border1_bo", "border1_bo@cal", "patch3")
 STARTS = ("free", "occupied", "prior")
+#: the format tag of ``bias.json`` (``{"format", "provenance", "settings", "bias": {prior name: h}}``), which
+#: ``experiments/calibration.py --bias-file`` reads
+BIAS_FORMAT = "ogm_ppl.prior_bias"
 
 
 def empty_model(prior, window: int) -> tuple[OccupancyModel, np.ndarray]:
@@ -58,13 +62,16 @@ def empty_model(prior, window: int) -> tuple[OccupancyModel, np.ndarray]:
     return OccupancyModel(grid, rays, GaussianRange(1.0), prior), counted
 
 
-def occupancy_trace(name: str, args: argparse.Namespace) -> dict:
-    """Three chains under the prior ``name`` on an empty window: the occupied share every ``args.every`` sweeps."""
+def occupancy_trace(name: str, args: argparse.Namespace, bias: float = 0.0, starts=STARTS) -> dict:
+    """Chains under the prior ``name`` (times ``exp(bias sum_k m_k)``: :class:`~ogm_ppl.priors.BiasedPrior`) on an
+    empty window, one from each of ``starts``: the occupied share every ``args.every`` sweeps."""
     prior = calibration.prior_by_name(name, (args.window, args.window))
-    model, counted = empty_model(prior, args.window)
     patch = calibration.default_patch(prior)
+    if bias:
+        prior = BiasedPrior(prior, bias)
+    model, counted = empty_model(prior, args.window)
     traces, secs = [], []
-    for j, start in enumerate(STARTS):
+    for j, start in enumerate(starts):
         init = torch.ones(model.num_cells, dtype=torch.float64) if start == "occupied" else start
         kernel = mixing_cycle(model, patch, init=init)
         torch.manual_seed(args.seed + 1000 * j)
@@ -88,6 +95,21 @@ def occupancy_trace(name: str, args: argparse.Namespace) -> dict:
     }
 
 
+def fit_bias(name: str, target: float, args: argparse.Namespace) -> dict:
+    """The bias ``h`` whose prior fills ``target`` of an empty window: ``args.bias_steps`` bisection steps on
+    ``[-args.bias_range, args.bias_range]`` of the occupied share of two chains (from the all-free and the
+    all-occupied map; the share rises with ``h``), then the three-chain trace at the chosen ``h``."""
+    lo, hi = -args.bias_range, args.bias_range
+    steps = []
+    for _ in range(args.bias_steps):
+        h = 0.5 * (lo + hi)
+        share = occupancy_trace(name, args, h, starts=("free", "occupied"))["share"]
+        steps.append([h, share])
+        lo, hi = (h, hi) if share < target else (lo, h)
+    h = 0.5 * (lo + hi)
+    return {"bias": h, "steps": steps, **occupancy_trace(name, args, h)}
+
+
 def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--priors", nargs="+", default=list(PRIORS), help="prior kinds (KIND[@cal])")
@@ -96,10 +118,19 @@ def main(argv=None) -> dict:
     ap.add_argument("--sweeps", type=int, default=1000, help="sweeps per chain (default 1000)")
     ap.add_argument("--every", type=int, default=50, help="record the occupied share every this many sweeps")
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument(
+        "--fit-bias",
+        action="store_true",
+        help="also fit each prior's bias h (BiasedPrior) to its corpus's share; writes OUT/bias.json",
+    )
+    ap.add_argument("--bias-range", type=float, default=2.0, help="bisection interval [-R, R] of h (default 2)")
+    ap.add_argument("--bias-steps", type=int, default=7, help="bisection steps (default 7)")
     ap.add_argument("--out", type=Path, default=Path("out/prior_occupancy"))
     args = ap.parse_args(argv)
     if args.window < 4 or args.every < 1 or args.sweeps < 2 * args.every:
         raise SystemExit("--window must be at least 4, --every at least 1 and --sweeps at least 2 x --every")
+    if not (args.bias_range > 0 and args.bias_steps >= 1):
+        raise SystemExit("--bias-range must be positive and --bias-steps at least 1")
     for k in args.priors:
         kind, corpus, _, _ = split_prior_name(k)
         if corpus:
@@ -107,7 +138,8 @@ def main(argv=None) -> dict:
     from benchmarks._common import provenance
 
     t0 = time.perf_counter()
-    rows = []
+    rows: list[dict] = []
+    biases: dict[str, float] = {}
     print(f"occupied share of an empty {args.window} x {args.window} window, second half of 3 chains")
     print(f"{'prior':28s} {'corpus':>7s} {'prior':>6s}  chains (free, occupied, prior start)")
     for corpus in args.train:
@@ -122,9 +154,21 @@ def main(argv=None) -> dict:
             rows.append({"prior": name, "kind": kind, "train": corpus, "corpus_share": lam, **r})
             chains = " ".join(f"{v:.3f}" for v in r["chain_shares"])
             print(f"{name:28s} {lam:7.3f} {r['share']:6.3f}  {chains}  ({r['seconds']:.0f} s)", flush=True)
+            if args.fit_bias:
+                f = fit_bias(name, lam, args)
+                rows[-1]["fit"] = f
+                biases[name] = f["bias"]
+                chains = " ".join(f"{v:.3f}" for v in f["chain_shares"])
+                print(
+                    f"{'  biased, h = ' + format(f['bias'], '+.3f'):28s} {lam:7.3f} {f['share']:6.3f}  {chains}",
+                    flush=True,
+                )
     doc = {
         "provenance": provenance(),
-        "settings": {k: getattr(args, k) for k in ("priors", "train", "window", "sweeps", "every", "seed")},
+        "settings": {
+            k: getattr(args, k)
+            for k in ("priors", "train", "window", "sweeps", "every", "seed", "fit_bias", "bias_range", "bias_steps")
+        },
         "starts": list(STARTS),
         "rows": rows,
         "seconds": time.perf_counter() - t0,
@@ -132,6 +176,9 @@ def main(argv=None) -> dict:
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "prior_occupancy.json"
     atomic_write_text(path, json.dumps(doc, indent=1, allow_nan=False))
+    if args.fit_bias:
+        bias_doc = {"format": BIAS_FORMAT, "provenance": doc["provenance"], "settings": doc["settings"], "bias": biases}
+        atomic_write_text(args.out / "bias.json", json.dumps(bias_doc, indent=1, allow_nan=False))
     print(f"wrote {path} ({doc['seconds']:.0f} s)")
     return doc
 

@@ -211,3 +211,27 @@ def test_a_tempered_kind_without_a_fitted_exponent_is_skipped(cal):
     args = cal.parse_args(TINY)
     res = cal.run_prior(_box_scene(cal, args), "patch5:ipa@cal", args)
     assert "no tempering exponent fitted for patch5 on ipa" in res["skipped"]
+
+
+def test_a_bias_file_runs_each_named_prior_biased_beside_it(cal, tmp_path):
+    """``--bias-file``: the priors it names run again as ``NAME+bias``. A zero bias is the prior itself (the same
+    chain from the same seed, so the same scores); a bias of +3 changes them; the biases are settings a resume must
+    share; a malformed file is refused naming it."""
+    argv = ["--test", "houseexpo", "--train", "houseexpo", "--priors", "patch3", *TINY[9:], "--no-figures"]
+    bias = tmp_path / "bias.json"
+    bias.write_text(json.dumps({"format": "ogm_ppl.prior_bias", "bias": {"patch3:houseexpo": 0.0}}))
+    rows = cal.main([*argv, "--bias-file", str(bias), "--out", str(tmp_path / "zero")])["rows"]
+    by = {(r["prior_name"], r["mask"]): r for r in rows}
+    assert by["patch3:houseexpo+bias", "unseen"]["prior"] == "patch3+bias"
+    for mask in ("unseen", "near"):
+        a, b = by["patch3:houseexpo", mask], by["patch3:houseexpo+bias", mask]
+        assert (a["nll_bits"], a["auc"], a["rhat_below"]) == (b["nll_bits"], b["auc"], b["rhat_below"])
+    bias.write_text(json.dumps({"format": "ogm_ppl.prior_bias", "bias": {"patch3:houseexpo": 3.0}}))
+    with pytest.raises(SystemExit, match="settings differ in \\['bias'\\]"):
+        cal.main([*argv, "--bias-file", str(bias), "--out", str(tmp_path / "zero")])
+    rows = cal.main([*argv, "--bias-file", str(bias), "--out", str(tmp_path / "three")])["rows"]
+    occ = {r["prior_name"]: r for r in rows if r["mask"] == "unseen"}
+    assert occ["patch3:houseexpo+bias"]["brier"] != occ["patch3:houseexpo"]["brier"]
+    bias.write_text('{"format": "ogm_ppl.prior_bias", "bias": {"patch3:houseexpo": "high"}}')
+    with pytest.raises(SystemExit, match=f"{bias}: not a bias file"):
+        cal.main([*argv, "--bias-file", str(bias), "--out", str(tmp_path / "bad")])

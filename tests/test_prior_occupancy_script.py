@@ -52,3 +52,17 @@ def test_a_tile_prior_runs_from_every_start(po, tmp_path):
 def test_bad_settings_are_refused(po, tmp_path, argv, match):
     with pytest.raises(SystemExit, match=match):
         po.main([*argv, "--out", str(tmp_path)])
+
+
+def test_the_fitted_bias_of_the_independent_prior_is_near_zero(po, tmp_path):
+    """The learned independent prior already fills its corpus's share, so the fitted bias is 0 up to the bisection's
+    resolution (4 / 2^8 = 0.016) and the noise of 20 recorded states of ~390 cells (a share's standard error of
+    0.0055, 0.023 in ``h`` at a slope ``lambda (1 - lambda) = 0.235``): within 0.1. ``bias.json`` holds it by name."""
+    argv = ["--priors", "independent", "--train", "dungeon", "--window", "20", "--sweeps", "40", "--every", "4"]
+    doc = po.main([*argv, "--fit-bias", "--out", str(tmp_path)])
+    fit = doc["rows"][0]["fit"]
+    assert abs(fit["bias"]) < 0.1 and len(fit["steps"]) == 7
+    lam = doc["rows"][0]["corpus_share"]
+    assert [h for h, _ in fit["steps"]][:2] == [0.0, 1.0 if fit["steps"][0][1] < lam else -1.0]
+    saved = json.loads((tmp_path / "bias.json").read_text())
+    assert saved["format"] == "ogm_ppl.prior_bias" and saved["bias"] == {"independent:dungeon": fit["bias"]}
