@@ -718,25 +718,71 @@ def _prior_occupancy(doc: dict) -> Table:
     """``experiments/prior_occupancy.py``: each prior's occupied share on a window with no readings (the second
     half of three chains, and each chain's) against its training corpus's ``lambda``."""
     st = doc["settings"]
-    rows = [
-        [
+    fitted = bool(st.get("fit_bias"))
+    rows = []
+    for r in doc["rows"]:
+        row = [
             r["prior"],
             _f(r["corpus_share"]),
             _f(r["share"]),
             _f(r["share"] - r["corpus_share"], 3),
             " / ".join(_f(v) for v in r["chain_shares"]),
-            _f(r["seconds"], 0),
         ]
-        for r in doc["rows"]
-    ]
+        if fitted:
+            f = r["fit"]
+            row += [f"{f['bias']:+.3f}", _f(f["share"]), " / ".join(_f(v) for v in f["chain_shares"])]
+        rows.append(row + [_f(r["seconds"], 0)])
+    header = ["prior", "corpus", "prior's share", "difference", "chains (free / occupied / draw start)"]
+    if fitted:
+        header += ["bias h", "biased share", "biased chains"]
     return Table(
         caption=(
             f"Occupied share of a {st['window']} x {st['window']} window with no readings under each prior (its "
             f"mixing cycle, 3 chains of {st['sweeps']} sweeps from the all-free map, the all-occupied map and a prior "
             "draw; the mean over each chain's second half) against the occupied share of its training corpus "
             "(lambda of its tables)"
+            + (
+                f"; with the bias h fitted to it ({st['bias_steps']} bisection steps on [-{st['bias_range']:g}, "
+                f"{st['bias_range']:g}], two chains each) and the biased prior's share"
+                if fitted
+                else ""
+            )
         ),
-        header=["prior", "corpus", "prior's share", "difference", "chains (free / occupied / draw start)", "seconds"],
+        header=[*header, "seconds"],
+        rows=rows,
+        provenance=doc["provenance"],
+    )
+
+
+def _calibration_bias(doc: dict) -> Table:
+    """A calibration run with ``--bias-file``: per prior it biased and test corpus (the prior learned there), the
+    bias ``h``, and the unseen cells' NLL, ECE, AUC and share of cells with split R-hat < 1.05, the prior ->
+    the prior times ``exp(h sum_k m_k)``."""
+    st = doc["settings"]
+    own = {(s["prior"], s["test"]): s for s in doc["summary"] if s["mask"] == "unseen" and s["train"] == s["test"]}
+    tests = list(dict.fromkeys(t for _, t in own))
+    rows = []
+    for kind in st["priors"]:
+        cells = []
+        for t in tests:
+            a, b = own.get((kind, t)), own.get((kind + "+bias", t))
+            base, at, mod = kind.partition("@")
+            h = st["bias"].get(f"{base}:{t}{at}{mod}")
+            if a is None or b is None or h is None:
+                cells += ["–"] * 4
+                continue
+            cells.append(f"{h:+.3f}")
+            for key, d in (("nll_bits", 3), ("ece", 3), ("rhat_below", 2)):
+                cells.append(f"{_f(a[key], d)} → {_f(b[key], d)}")
+        rows.append([kind, *cells])
+    return Table(
+        caption=(
+            f"Unseen cells of held-out maps ({st['plans']} per corpus), each prior learned on the test corpus and "
+            f"biased by the h that fills an empty window as its corpus is filled ({st['kernel']}, 3 chains of "
+            f"{st['sweeps']} sweeps): h, NLL (bits/cell), ECE and the share of cells with split R-hat < 1.05, the "
+            "prior → the biased prior"
+        ),
+        header=["prior", *(f"{t} {m}" for t in tests for m in ("h", "NLL", "ECE", "R-hat < 1.05"))],
         rows=rows,
         provenance=doc["provenance"],
     )
@@ -1037,6 +1083,8 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "unseen_by_distance": ("unseen_by_distance", _unseen_by_distance),
     "unseen_by_distance_chains": ("unseen_by_distance_chains", _unseen_by_distance),
     "prior_occupancy": ("prior_occupancy", _prior_occupancy),
+    "calibration_bias": ("calibration_bias", _calibration_bias),
+    "prior_bias": ("prior_bias", _prior_occupancy),
     "calibration_shifted": ("calibration_shifted", lambda doc: _calibration_kernels(doc, "calibration_cycle")),
     "calibration_shifted_random": (
         "calibration_shifted_random",
