@@ -4,21 +4,15 @@ mean share must lie within 4 standard errors of the corpus's ``lambda``."""
 
 import json
 import math
-import sys
 
 import pytest
 
-from tests._scripts import EXPERIMENTS, load_experiment
+from tests._scripts import experiment_beside_calibration
 
 
 @pytest.fixture(scope="module")
 def po():
-    sys.path.insert(0, str(EXPERIMENTS))  # the script imports calibration.py beside it
-    try:
-        yield load_experiment("prior_occupancy_experiment", "prior_occupancy.py")
-    finally:
-        sys.path.remove(str(EXPERIMENTS))
-        sys.modules.pop("prior_occupancy_experiment", None)
+    yield from experiment_beside_calibration("prior_occupancy_experiment", "prior_occupancy.py")
 
 
 def test_the_independent_prior_fills_its_lambda(po, tmp_path):

@@ -2,21 +2,15 @@
 give the NLL calibration.py scores for the same guide on the same map."""
 
 import json
-import sys
 
 import pytest
 
-from tests._scripts import EXPERIMENTS, load_experiment
+from tests._scripts import experiment_beside_calibration
 
 
 @pytest.fixture(scope="module")
 def ubd():
-    sys.path.insert(0, str(EXPERIMENTS))  # the script imports calibration.py beside it
-    try:
-        yield load_experiment("unseen_by_distance_experiment", "unseen_by_distance.py")
-    finally:
-        sys.path.remove(str(EXPERIMENTS))
-        sys.modules.pop("unseen_by_distance_experiment", None)
+    yield from experiment_beside_calibration("unseen_by_distance_experiment", "unseen_by_distance.py")
 
 
 def test_bins_add_up_to_the_calibration_score(ubd, tmp_path):

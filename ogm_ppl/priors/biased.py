@@ -18,10 +18,10 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import torch
 
 from ogm_ppl.priors.base import MapPrior
+from ogm_ppl.priors.transformed import TransformedPrior
 
 __all__ = ["BiasedPrior"]
 
@@ -31,7 +31,7 @@ def _shift(x: torch.Tensor, add: torch.Tensor) -> torch.Tensor:
     return torch.where(torch.isfinite(x), x + add, x)
 
 
-class BiasedPrior(MapPrior):
+class BiasedPrior(TransformedPrior):
     r"""``p~(m) exp(h sum_k m_k)`` of a prior ``base`` (module docstring): ``log_prob`` plus ``h sum_k m_k``,
     ``log_prob_patch`` plus ``h`` times each configuration's occupied cells, ``cell_log_odds`` plus ``h``,
     ``compiled()`` the bundle's ``biased(h)``. ``outside_occupancy`` is the base prior's. ``log_prob`` is
@@ -47,19 +47,15 @@ class BiasedPrior(MapPrior):
     0.75
     """
 
+    BUNDLE_METHOD = "biased"
+    WHAT = "biased"
+
     def __init__(self, base: MapPrior, bias: float) -> None:
         h = float(bias)
         if not math.isfinite(h):
             raise ValueError(f"bias must be finite, got {bias!r}")
-        self.base, self.bias = base, h
-        self.num_cells = base.num_cells
-        self.normalised = bool(h == 0.0 and getattr(base, "normalised", True))
-        self.can_be_zero = bool(getattr(base, "can_be_zero", False))
-        for attr in ("rows", "cols", "ndim", "shape"):
-            if hasattr(base, attr):
-                setattr(self, attr, getattr(base, attr))
-        self._bundle = None
-        self._bundle_ready = False
+        super().__init__(base, h, normalised=h == 0.0)
+        self.bias = h
 
     def __repr__(self) -> str:
         return f"BiasedPrior({self.base!r}, bias={self.bias:g})"
@@ -72,44 +68,13 @@ class BiasedPrior(MapPrior):
         lp = torch.as_tensor(self.base.log_prob_patch(maps, cells, configs), dtype=torch.float64)
         return _shift(lp, self.bias * torch.as_tensor(configs, dtype=torch.float64).sum(-1))
 
-    def outside_occupancy(self) -> float:
-        return self.base.outside_occupancy()
-
     def cell_log_odds(self) -> torch.Tensor | None:
         lo = self.base.cell_log_odds()
         return None if lo is None else _shift(torch.as_tensor(lo, dtype=torch.float64), torch.tensor(self.bias))
 
-    def compiled(self):
-        if not self._bundle_ready:
-            bundle = self.base.compiled()
-            if bundle is not None:
-                if not hasattr(bundle, "biased"):
-                    raise TypeError(
-                        f"the compiled bundle {type(bundle).__name__} of {type(self.base).__name__} has no "
-                        "biased(h) method: it cannot take a bias"
-                    )
-                bundle = bundle.biased(self.bias)
-            self._bundle, self._bundle_ready = bundle, True
-        return self._bundle
-
     def sample(self, sample_shape=(), generator: torch.Generator | None = None, num_sweeps: int = 100):
-        """Maps from the biased prior: independent cells exactly; otherwise ``num_sweeps`` single-cell Gibbs
-        sweeps of the biased bundle from uniform noise."""
+        """Maps from the biased prior: the base prior's draws at ``h = 0``; independent cells exactly; otherwise
+        ``num_sweeps`` single-cell Gibbs sweeps of the biased bundle from uniform noise."""
         if self.bias == 0.0:
             return self.base.sample(sample_shape, generator=generator)
-        shape = torch.Size(sample_shape)
-        lo = self.cell_log_odds()
-        if lo is not None:
-            u = torch.rand(shape + (self.num_cells,), generator=generator, dtype=torch.float64)
-            return (u < torch.sigmoid(lo)).to(torch.float64)
-        bundle = self.compiled()
-        if bundle is None:
-            raise TypeError(f"BiasedPrior of {type(self.base).__name__} (no compiled face) cannot sample")
-        from ogm_ppl.priors.compiled import prior_gibbs_sweeps
-
-        B = int(np.prod(shape)) if len(shape) else 1
-        u = torch.rand((B, self.num_cells), generator=generator, dtype=torch.float64)
-        maps = np.ascontiguousarray((u < 0.5).numpy(), dtype=np.uint8)
-        seed = int(torch.randint(0, 2**31 - 1, (1,), generator=generator))
-        prior_gibbs_sweeps(bundle, maps, int(num_sweeps), seed)
-        return torch.from_numpy(maps.astype(np.float64)).reshape(*shape, self.num_cells)
+        return self._draws(sample_shape, generator, num_sweeps)

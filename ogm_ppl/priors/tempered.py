@@ -14,10 +14,10 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
 import torch
 
 from ogm_ppl.priors.base import MapPrior
+from ogm_ppl.priors.transformed import TransformedPrior
 
 __all__ = ["TemperedPrior"]
 
@@ -34,24 +34,19 @@ def _scale_log(x: torch.Tensor, beta: float) -> torch.Tensor:
     return torch.where(torch.isfinite(x), x * beta, x)
 
 
-class TemperedPrior(MapPrior):
+class TemperedPrior(TransformedPrior):
     r"""``p~(m)^beta`` of a prior ``base``: ``log_prob``, ``log_prob_patch`` and ``cell_log_odds`` times
     ``beta`` (``-inf`` kept; ``beta = 0``: uniform over the support), ``compiled()`` the bundle's
     ``tempered(beta)``. ``outside_occupancy`` is the base prior's (it only enters the likelihood table).
     ``log_prob`` is unnormalised unless ``beta = 1`` (normalisers never matter to the samplers)."""
 
+    BUNDLE_METHOD = "tempered"
+    WHAT = "tempered"
+
     def __init__(self, base: MapPrior, beta: float) -> None:
-        self.base = base
-        self.beta = _check_exponent(beta, "beta")
-        self.num_cells = base.num_cells
-        #: ``log_prob`` is normalised only at ``beta = 1`` (and when the base's is)
-        self.normalised = bool(self.beta == 1.0 and getattr(base, "normalised", True))
-        self.can_be_zero = bool(getattr(base, "can_be_zero", False))  # -inf stays -inf under any beta
-        for attr in ("rows", "cols", "ndim", "shape"):
-            if hasattr(base, attr):
-                setattr(self, attr, getattr(base, attr))
-        self._bundle = None
-        self._bundle_ready = False
+        b = _check_exponent(beta, "beta")
+        super().__init__(base, b, normalised=b == 1.0)  # normalised only at beta = 1 (and when the base is)
+        self.beta = b
 
     def __repr__(self) -> str:
         return f"TemperedPrior({self.base!r}, beta={self.beta:g})"
@@ -63,44 +58,13 @@ class TemperedPrior(MapPrior):
         lp = torch.as_tensor(self.base.log_prob_patch(maps, cells, configs), dtype=torch.float64)
         return _scale_log(lp, self.beta)
 
-    def outside_occupancy(self) -> float:
-        return self.base.outside_occupancy()
-
     def cell_log_odds(self) -> torch.Tensor | None:
         lo = self.base.cell_log_odds()
         return None if lo is None else _scale_log(torch.as_tensor(lo, dtype=torch.float64), self.beta)
-
-    def compiled(self):
-        if not self._bundle_ready:
-            bundle = self.base.compiled()
-            if bundle is not None:
-                if not hasattr(bundle, "tempered"):
-                    raise TypeError(
-                        f"the compiled bundle {type(bundle).__name__} of {type(self.base).__name__} has no "
-                        "tempered(beta) method: it cannot be tempered"
-                    )
-                bundle = bundle.tempered(self.beta)
-            self._bundle, self._bundle_ready = bundle, True
-        return self._bundle
 
     def sample(self, sample_shape=(), generator: torch.Generator | None = None, num_sweeps: int = 100):
         """Maps from ``p~^beta``: the base prior's draws at ``beta = 1``; independent cells exactly;
         otherwise ``num_sweeps`` single-cell Gibbs sweeps of the tempered bundle from uniform noise."""
         if self.beta == 1.0:
             return self.base.sample(sample_shape, generator=generator)
-        shape = torch.Size(sample_shape)
-        lo = self.cell_log_odds()
-        if lo is not None:
-            u = torch.rand(shape + (self.num_cells,), generator=generator, dtype=torch.float64)
-            return (u < torch.sigmoid(lo)).to(torch.float64)
-        bundle = self.compiled()
-        if bundle is None:
-            raise TypeError(f"TemperedPrior of {type(self.base).__name__} (no compiled face) cannot sample")
-        from ogm_ppl.priors.compiled import prior_gibbs_sweeps
-
-        B = int(np.prod(shape)) if len(shape) else 1
-        u = torch.rand((B, self.num_cells), generator=generator, dtype=torch.float64)
-        maps = np.ascontiguousarray((u < 0.5).numpy(), dtype=np.uint8)
-        seed = int(torch.randint(0, 2**31 - 1, (1,), generator=generator))
-        prior_gibbs_sweeps(bundle, maps, int(num_sweeps), seed)
-        return torch.from_numpy(maps.astype(np.float64)).reshape(*shape, self.num_cells)
+        return self._draws(sample_shape, generator, num_sweeps)
