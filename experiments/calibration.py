@@ -916,6 +916,8 @@ def main(argv=None) -> dict:
     own = () if args.kernel == "tempering" else ("rungs", "beta_min", "temper")  # only the sampler's own settings
     args.bias = load_bias_file(args.bias_file)
     settings = {k: v for k, v in vars(args).items() if k not in ("out", "fresh", "no_figures", "bias_file", *own)}
+    if not args.bias:  # settings without biases read as those of runs made before --bias-file existed
+        del settings["bias"]
     rows, runs = _load_previous(path, settings, args.fresh)
     done = {_row_key(r) for r in rows}
     skipped: list[dict] = []

@@ -1,10 +1,10 @@
 r"""How much of a region with no readings does a prior fill? Each prior's own occupied share against its corpus's.
 
 A prior learned from a corpus predicts a cell no ray reached from the cells around it; far from any reading its
-prediction is what the prior itself holds: ``E_p[mean_k m_k]``, the occupied share of maps drawn from it. For a
-model fitted by maximum likelihood with the occupied share among its sufficient statistics (a pattern field:
-every window's code; an independent prior: ``lambda``) that share matches the training corpus's. The tables of
-Chapter 5 are products of tile conditionals, not normalised fits of a joint, so nothing makes theirs match.
+prediction is what the prior itself holds: ``E_p[mean_k m_k]``, the occupied share of maps drawn from it. At the
+maximum-likelihood fit of a joint whose sufficient statistics include the occupied share (an independent prior's
+``lambda``; a pattern field's window codes) that share equals the training corpus's (moment matching). The tables
+of Chapter 5 are products of tile conditionals, not normalised fits of a joint, so nothing makes theirs match.
 
 For each prior (``--priors``, learned on each ``--train`` corpus; ``@cal`` names tempered as in
 ``experiments/calibration.py``) this runs three chains of the prior's mixing cycle
@@ -15,6 +15,12 @@ window every ``--every`` sweeps. The prior's share is the mean over the second h
 corpus's is ``lambda`` of its tables (the learned independent prior: the occupied share of the training plans).
 
     python experiments/prior_occupancy.py --train dungeon houseexpo       # a few minutes
+
+``--fit-bias`` also fits, per prior, the bias ``h`` of :class:`~ogm_ppl.priors.BiasedPrior` (the prior times
+``exp(h sum_k m_k)``) whose share is the corpus's: ``--bias-steps`` bisection steps on ``[-R, R]``
+(``--bias-range``) of the share of two chains (all-free and all-occupied starts), then the three-chain trace at
+the chosen ``h``. Only the training tables enter (the target is their ``lambda``). It writes ``OUT/bias.json``,
+which ``experiments/calibration.py --bias-file`` reads.
 
 Writes ``OUT/prior_occupancy.json`` (settings, provenance, one row per prior with each chain's trace) and prints
 a table.
