@@ -1084,6 +1084,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "unseen_by_distance_chains": ("unseen_by_distance_chains", _unseen_by_distance),
     "prior_occupancy": ("prior_occupancy", _prior_occupancy),
     "calibration_bias": ("calibration_bias", _calibration_bias),
+    "calibration_bias10": ("calibration_bias10", _calibration_bias),
     "prior_bias": ("prior_bias", _prior_occupancy),
     "calibration_shifted": ("calibration_shifted", lambda doc: _calibration_kernels(doc, "calibration_cycle")),
     "calibration_shifted_random": (
