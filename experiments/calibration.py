@@ -605,6 +605,9 @@ def _kind_label(name: str) -> str:
 #: a prior name ending so is the prior times ``exp(h sum_k m_k)``, ``h`` from ``--bias-file``
 #: (:class:`~ogm_ppl.priors.BiasedPrior`)
 BIAS_SUFFIX = "+bias"
+#: the format tag of a bias file (``{"format", "provenance", "settings", "bias": {prior name: h}}``), which
+#: ``experiments/prior_occupancy.py --fit-bias`` writes
+BIAS_FORMAT = "ogm_ppl.prior_bias"
 
 
 def unbiased_name(name: str) -> tuple[str, bool]:
@@ -621,12 +624,12 @@ def load_bias_file(path: Path | None) -> dict[str, float]:
         d = json.loads(Path(path).read_text())
     except (OSError, ValueError) as e:
         raise SystemExit(f"{path}: not a bias file ({type(e).__name__}: {e})") from None
-    bias = d.get("bias") if isinstance(d, dict) and d.get("format") == "ogm_ppl.prior_bias" else None
+    bias = d.get("bias") if isinstance(d, dict) and d.get("format") == BIAS_FORMAT else None
     if not isinstance(bias, dict) or not all(
         isinstance(k, str) and isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v)
         for k, v in bias.items()
     ):
-        raise SystemExit(f"{path}: not a bias file of format 'ogm_ppl.prior_bias' with finite biases by prior name")
+        raise SystemExit(f"{path}: not a bias file of format {BIAS_FORMAT!r} with finite biases by prior name")
     return {k: float(v) for k, v in bias.items()}
 
 

@@ -52,9 +52,6 @@ from ogm_ppl.priors.tables import tables_by_name
 TRAIN = ("generated", "houseexpo", "ipa", "dungeon")
 PRIORS = ("border_bo", "border_bo@cal", "border1_bo", "border1_bo@cal", "patch3")
 STARTS = ("free", "occupied", "prior")
-#: the format tag of ``bias.json`` (``{"format", "provenance", "settings", "bias": {prior name: h}}``), which
-#: ``experiments/calibration.py --bias-file`` reads
-BIAS_FORMAT = "ogm_ppl.prior_bias"
 
 
 def empty_model(prior, window: int) -> tuple[OccupancyModel, np.ndarray]:
@@ -151,8 +148,8 @@ def main(argv=None) -> dict:
     for corpus in args.train:
         lam = float(tables_by_name(corpus).lam)
         for kind in args.priors:
-            base, _, at, mod = split_prior_name(kind)
-            name = f"{base}:{corpus}{at}{mod}"
+            base, _, _, mod = split_prior_name(kind)
+            name = calibration.prior_names([kind], [corpus])[-1][0]  # KIND:CORPUS[@MOD]
             if mod == "cal" and base not in calibration.load_temper_params(corpus).beta:
                 print(f"{name:28s} skipped: no tempering exponent fitted")
                 continue
@@ -183,7 +180,12 @@ def main(argv=None) -> dict:
     path = args.out / "prior_occupancy.json"
     atomic_write_text(path, json.dumps(doc, indent=1, allow_nan=False))
     if args.fit_bias:
-        bias_doc = {"format": BIAS_FORMAT, "provenance": doc["provenance"], "settings": doc["settings"], "bias": biases}
+        bias_doc = {
+            "format": calibration.BIAS_FORMAT,
+            "provenance": doc["provenance"],
+            "settings": doc["settings"],
+            "bias": biases,
+        }
         atomic_write_text(args.out / "bias.json", json.dumps(bias_doc, indent=1, allow_nan=False))
     print(f"wrote {path} ({doc['seconds']:.0f} s)")
     return doc

@@ -70,6 +70,19 @@ def _bits(q: np.ndarray, truth: np.ndarray, m: np.ndarray) -> float:
     return nll_bits(q, truth, m) * int(m.sum()) if m.any() else 0.0
 
 
+def _add(acc: dict, bins: list[np.ndarray], q: np.ndarray, truth: np.ndarray) -> None:
+    """Add one map's bins to the sums ``acc["n"]``, ``acc["bits"]`` and ``acc["occ"]`` (cells, NLL bits,
+    occupied cells per bin) under the marginals ``q``."""
+    for i, m in enumerate(bins):
+        acc["n"][i] += m.sum()
+        acc["bits"][i] += _bits(q, truth, m)
+        acc["occ"][i] += truth[m].sum()
+
+
+def _sums(nb: int) -> dict:
+    return {"n": np.zeros(nb), "bits": np.zeros(nb), "occ": np.zeros(nb)}
+
+
 def _rows(test: str, maps: int, n, bits, occ, extra: dict | None = None) -> list[dict]:
     total = max(n.sum(), 1)
     rows = []
@@ -92,8 +105,7 @@ def _rows(test: str, maps: int, n, bits, occ, extra: dict | None = None) -> list
 def by_distance(test: str, guide, args: argparse.Namespace) -> list[dict]:
     """The rows of one test corpus under a guide: per distance bin, the unseen cells' share, occupied share and
     NLL."""
-    nb = len(EDGES) - 1
-    n, bits, occ = np.zeros(nb), np.zeros(nb), np.zeros(nb)
+    acc = _sums(len(EDGES) - 1)
     maps = _maps(test, args, calibration.guide_corpora(args.guide))
     for t in maps:
         scene = calibration.make_scene(t, args)
@@ -101,60 +113,46 @@ def by_distance(test: str, guide, args: argparse.Namespace) -> list[dict]:
             scene.grid, scene.rays, GaussianRange(args.sigma), IndependentPrior(0.5, scene.grid.num_cells)
         )
         q = guide.marginals(model).numpy().reshape(t.truth.shape)
-        truth = t.truth.astype(bool)
-        for i, m in enumerate(_bins(_distance(scene), scene.masks["unseen"].reshape(t.truth.shape))):
-            n[i] += m.sum()
-            bits[i] += _bits(q, truth, m)
-            occ[i] += truth[m].sum()
-    return _rows(test, len(maps), n, bits, occ)
-
-
-def prior_name_for(prior: str, test: str) -> str:
-    """``KIND[@MOD]`` -> ``KIND:TEST[@MOD]`` (learned on the test corpus's training plans); a name that holds
-    its corpus is kept."""
-    kind, corpus, at, mod = calibration.split_prior_name(prior)
-    return prior if corpus else f"{kind}:{test}{at}{mod}"
+        _add(acc, _bins(_distance(scene), scene.masks["unseen"].reshape(t.truth.shape)), q, t.truth.astype(bool))
+    return _rows(test, len(maps), acc["n"], acc["bits"], acc["occ"])
 
 
 def chains_by_distance(test: str, args: argparse.Namespace) -> list[dict]:
     """The rows of one test corpus under a prior's chains, one set per ``args.sweeps`` value: per distance bin
     the guide rows' fields, plus ``agree`` (share of the bin's cells whose split R-hat is below 1.05) and
     ``chain_occupied`` (each chain's mean marginal over the bin's cells, in :data:`calibration.STARTS` order)."""
-    name = prior_name_for(args.prior, test)
-    train = calibration.split_prior_name(name)[1]
+    name, train = calibration.prior_names([args.prior], [test])[-1]  # KIND:TEST[@MOD] unless it names a corpus
     maps = _maps(test, args, [train])
     nb, C = len(EDGES) - 1, len(calibration.STARTS)
-    acc = {S: (np.zeros(nb), np.zeros(nb), np.zeros(nb), np.zeros(nb), np.zeros((nb, C))) for S in args.sweep_list}
+    acc = {S: {**_sums(nb), "ok": np.zeros(nb), "chain": np.zeros((nb, C))} for S in args.sweeps}
     for t in maps:
         scene = calibration.make_scene(t, args)
         truth = t.truth.astype(bool)
         unseen_2d = scene.masks["unseen"].reshape(t.truth.shape)
         bins = _bins(_distance(scene), unseen_2d)
         idx = np.flatnonzero(unseen_2d.ravel())  # the order of run["rhat"]
-        for S in args.sweep_list:
-            args.sweeps, args.burn = S, S // 4 if args.burn_given is None else args.burn_given
-            run = calibration.run_chains(scene, name, args)
+        for S in args.sweeps:
+            burn = S // 4 if args.burn is None else args.burn
+            run = calibration.run_chains(scene, name, argparse.Namespace(**{**vars(args), "sweeps": S, "burn": burn}))
             if "skipped" in run:
                 raise SystemExit(f"{name} on {t.name}: {run['skipped']}")
             marg = run["marginals"].reshape(C, *t.truth.shape)
             agree = np.zeros(t.truth.shape, bool)
             agree.ravel()[idx] = calibration.agreeing(run["rhat"])
-            q = np.clip(marg.mean(0), 0.0, 1.0)
-            n, bits, occ, ok, chain = acc[S]
+            a = acc[S]
+            _add(a, bins, np.clip(marg.mean(0), 0.0, 1.0), truth)
             for i, m in enumerate(bins):
-                n[i] += m.sum()
-                bits[i] += _bits(q, truth, m)
-                occ[i] += truth[m].sum()
-                ok[i] += agree[m].sum()
-                chain[i] += marg[:, m].sum(1)
-            print(f"  {t.name} {name} {S} sweeps: agree {calibration.agreeing(run['rhat']).mean():.3f}", flush=True)
+                a["ok"][i] += agree[m].sum()
+                a["chain"][i] += marg[:, m].sum(1)
+            print(f"  {t.name} {name} {S} sweeps: agree {agree.ravel()[idx].mean():.3f}", flush=True)
     rows = []
-    for S, (n, bits, occ, ok, chain) in acc.items():
+    for S, a in acc.items():
+        n = np.maximum(a["n"], 1)
         extra = {
-            "agree": [float(ok[i] / max(n[i], 1)) for i in range(nb)],
-            "chain_occupied": [[float(v / max(n[i], 1)) for v in chain[i]] for i in range(nb)],
+            "agree": [float(a["ok"][i] / n[i]) for i in range(nb)],
+            "chain_occupied": [[float(v / n[i]) for v in a["chain"][i]] for i in range(nb)],
         }
-        for r in _rows(test, len(maps), n, bits, occ, extra):
+        for r in _rows(test, len(maps), a["n"], a["bits"], a["occ"], extra):
             rows.append({"prior": name, "sweeps": S, **r})
     return rows
 
@@ -199,14 +197,14 @@ def main(argv=None) -> dict:
     proto = calibration.parse_args(["--plans", str(args.plans)])  # the calibration protocol's sensor and window
     for k in ("window", "poses", "beams", "range_cells", "sigma", "seed", "max_support"):
         setattr(args, k, getattr(proto, k))
-    args.sweep_list, args.burn_given = list(dict.fromkeys(args.sweeps)), args.burn
+    args.sweeps = list(dict.fromkeys(args.sweeps))  # one run per distinct length
     from benchmarks._common import provenance
 
     t0 = time.perf_counter()
     if args.prior is not None:
         rows = [r for test in args.test for r in chains_by_distance(test, args)]
         _print(rows, f"{args.prior} ({args.kernel}, 3 chains)")
-        settings = {"prior": args.prior, "kernel": args.kernel, "sweeps": args.sweep_list, "burn": args.burn_given}
+        settings = {"prior": args.prior, "kernel": args.kernel, "sweeps": args.sweeps, "burn": args.burn}
     else:
         guide = calibration.guide_for(args.guide, args.guide_dir)
         rows = [r for test in args.test for r in by_distance(test, guide, args)]

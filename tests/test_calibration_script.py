@@ -215,8 +215,8 @@ def test_a_tempered_kind_without_a_fitted_exponent_is_skipped(cal):
 
 def test_a_bias_file_runs_each_named_prior_biased_beside_it(cal, tmp_path):
     """``--bias-file``: the priors it names run again as ``NAME+bias``. A zero bias is the prior itself (the same
-    chain from the same seed, so the same scores); a bias of +3 changes them; the biases are settings a resume must
-    share; a malformed file is refused naming it."""
+    chain from the same seed, so the same scores); a bias of +3 raises the mean marginal of the unseen cells; the
+    biases are settings a resume must share; a malformed file is refused naming it."""
     argv = ["--test", "houseexpo", "--train", "houseexpo", "--priors", "patch3", *TINY[9:], "--no-figures"]
     bias = tmp_path / "bias.json"
     bias.write_text(json.dumps({"format": "ogm_ppl.prior_bias", "bias": {"patch3:houseexpo": 0.0}}))
@@ -231,7 +231,8 @@ def test_a_bias_file_runs_each_named_prior_biased_beside_it(cal, tmp_path):
         cal.main([*argv, "--bias-file", str(bias), "--out", str(tmp_path / "zero")])
     rows = cal.main([*argv, "--bias-file", str(bias), "--out", str(tmp_path / "three")])["rows"]
     occ = {r["prior_name"]: r for r in rows if r["mask"] == "unseen"}
-    assert occ["patch3:houseexpo+bias"]["brier"] != occ["patch3:houseexpo"]["brier"]
+    mean_q = {k: sum(r["reliability"]["sum_q"]) / sum(r["reliability"]["count"]) for k, r in occ.items()}
+    assert mean_q["patch3:houseexpo+bias"] > mean_q["patch3:houseexpo"] + 0.2  # +3 log-odds fills the unseen cells
     bias.write_text('{"format": "ogm_ppl.prior_bias", "bias": {"patch3:houseexpo": "high"}}')
     with pytest.raises(SystemExit, match=f"{bias}: not a bias file"):
         cal.main([*argv, "--bias-file", str(bias), "--out", str(tmp_path / "bad")])

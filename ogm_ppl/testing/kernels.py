@@ -191,11 +191,10 @@ def sweep_matrix(kernel, rows: torch.Tensor | None = None) -> torch.Tensor | Non
         anchors = np.stack(np.divmod(pool, g.cols), 1).astype(np.int64)
         mats = [_patch_matrix(kernel, p, rows) for p in patch_cells(model, anchors, kernel.dr, kernel.dc)]
         return _scan(mats, "random", None, math.ceil(len(pool) / kernel.L))
-    if isinstance(kernel, KernelMixture):  # P = sum_i w_i P_i
+    if isinstance(kernel, KernelMixture):  # P = sum_i w_i P_i: one part drawn by weight
         parts = [sweep_matrix(k, rows) for k in kernel.kernels]
-        if any(P is None for P in parts):
-            return None
-        return sum(float(w) * P for w, P in zip(kernel.weights, parts))  # type: ignore[operator,misc]
+        w = torch.from_numpy(kernel.weights)
+        return None if any(P is None for P in parts) else _scan(parts, "random", w, 1)  # type: ignore[arg-type]
     if isinstance(kernel, KernelCycle):  # P = P_1 P_2 ... P_n
         parts = [sweep_matrix(k, rows) for k in kernel.kernels]
         return None if any(P is None for P in parts) else _scan(parts, "systematic")  # type: ignore[arg-type]

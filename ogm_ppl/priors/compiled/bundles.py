@@ -216,12 +216,12 @@ class Tiles(NamedTuple):
         if self.border_seg >= 0:
             add[self.seg_off[self.border_seg] : self.seg_off[self.border_seg + 1]] = 0.0
         out = self._replace(logp=_shifted(self.logp, add))
-        if self.fb_dense.size:
-            codes = np.arange(self.fb_dense.size, dtype=np.int64)
-            out = out._replace(fb_dense=_shifted(self.fb_dense, h * np.bitwise_count(codes).astype(np.float64)))
-        if self.dense_bits >= 0:  # rebuilt from the biased segments, as the bundle's constructor builds it
-            from ogm_ppl.priors.compiled.tiles import dense_factor_table
+        # the dense tables, rebuilt from the biased segments as the bundle's constructor builds them
+        from ogm_ppl.priors.compiled.tiles import dense_factor_table, fallback_dense_table
 
+        if self.fb_dense.size:
+            out = out._replace(fb_dense=fallback_dense_table(out))
+        if self.dense_bits >= 0:
             out = out._replace(dense=dense_factor_table(out._replace(dense=np.zeros(0), dense_bits=-1)))
         return out
 

@@ -212,6 +212,17 @@ def dense_factor_table(lp):
     return out
 
 
+def fallback_dense_table(lp) -> np.ndarray:
+    """``2^n_inner`` float64: the fallback segment's ``log phi`` by inner code (``-inf`` where absent), the
+    bundle's ``fb_dense``."""
+    a, b = int(lp.seg_off[lp.fallback]), int(lp.seg_off[lp.fallback + 1])
+    fb = np.full(1 << int(lp.n_inner), -np.inf)
+    fk = lp.keys[a:b]
+    ok = (fk >= 0) & (fk < (1 << int(lp.n_inner)))
+    fb[fk[ok]] = lp.logp[a:b][ok]
+    return fb
+
+
 @nb.njit(cache=True, inline="always")
 def tile_log_factor(lp, t, m):
     return key_log_factor(lp, lp.t_seg[t], tile_key(lp, t, m))
@@ -655,12 +666,7 @@ def tiles(
         **neighbour_layout(w_dr, w_dc, int(n_inner), tile, pad, int(cols)),
     )
     if bundle.fallback >= 0 and int(n_inner) <= DENSE_MAX_BITS:
-        a, b = int(seg_off[bundle.fallback]), int(seg_off[bundle.fallback + 1])
-        fb = np.full(1 << int(n_inner), -np.inf)
-        fk = bundle.keys[a:b]
-        ok = (fk >= 0) & (fk < (1 << int(n_inner)))
-        fb[fk[ok]] = bundle.logp[a:b][ok]
-        bundle = bundle._replace(fb_dense=fb)
+        bundle = bundle._replace(fb_dense=fallback_dense_table(bundle))
     Lw = len(w_dr)
     B = Lw - int(n_inner)
     if B <= BORDER_INDEX_MAX_BITS and (len(seg_keys) << B) <= BORDER_INDEX_MAX_ENTRIES:
