@@ -59,6 +59,14 @@ prior name, fitted so that the prior fills an empty window as its training corpu
 tables alone) also runs every prior it names as ``NAME+bias``, the prior times ``exp(h sum_k m_k)``
 (:class:`~ogm_ppl.priors.BiasedPrior`), beside the prior itself.
 
+Plans of other buildings. ``--plan-files PATH ...`` (ROS map YAMLs, images with ``--pixel-size``, or folders of
+them; :mod:`ogm_ppl.datasets.plan_files`, read at 0.05 m a cell) adds one more test set, labelled ``--plan-set``
+(default ``files``), whose first ``--plans`` usable plans are cropped and scored as the corpora's held-out maps
+are, with every prior of every ``--train`` corpus (no prior was learned on them, so ``--diagonal`` does not
+thin them) and every guide; without ``--test`` only the plan set runs. A file under the floor-plan corpora's
+folder, or with the bytes of a corpus plan, is refused (:func:`check_plan_files`).
+``experiments/log_plans.py`` makes such plans of the real logs' buildings.
+
 Outputs under ``--out`` (default ``out/calibration/``): ``calibration.json`` (settings, provenance, one row per
 test corpus, train corpus, map, prior and mask, with its reliability diagram), ``calibration_summary.json`` (the
 means over maps without the diagrams: what the docs snapshot), ``calibration.md`` (tables),
@@ -74,6 +82,7 @@ average 2-3); without the ``@cal`` rows (512 rows) it took 23.5 min on 2 AMD EPY
     python experiments/calibration.py --quick        # smoke run, 1 small map per corpus, 3 priors
     python experiments/calibration.py                # the default matrix (see --help for the sizes)
     python experiments/calibration.py --priors patch3 border --train houseexpo --test ipa dungeon
+    python experiments/calibration.py --plan-files my_plans/ --pixel-size 0.05 --guides houseexpo+ipa@sym
 """
 
 from __future__ import annotations
@@ -216,6 +225,63 @@ def usable_windows(corpus: str, names: Sequence[str], n: int, window: int) -> li
         t = _crop(corpus, name, p.occupancy, p.known, p.resolution or 0.05, window)
         if (t.known & ~t.truth).sum() >= 200:
             out.append(t)
+    return out
+
+
+def corpus_file_digests() -> dict[str, str]:
+    """SHA-256 of every plan file of the floor-plan corpora stored as files (HouseExpo, IPA) -> its path."""
+    from ogm_ppl.datasets.plan_files import PLAN_SUFFIXES
+
+    root = fp.floorplan_root()
+    out = {}
+    for p in sorted(root.rglob("*")):
+        if p.is_file() and p.suffix.lower() in PLAN_SUFFIXES:
+            out[hashlib.sha256(p.read_bytes()).hexdigest()] = str(p)
+    return out
+
+
+def check_plan_files(files: Sequence[Path]) -> None:
+    """Refuse (:class:`LeakageError`) plan files that are plans of the corpora: a file under the floor-plan
+    root, or one whose bytes are those of a corpus plan file (for a YAML, the image it names too)."""
+    from ogm_ppl.datasets.plan_files import YAML_SUFFIXES, _images_named_by_yaml
+
+    root = fp.floorplan_root().resolve()
+    digests: dict[str, str] | None = None
+    for f in files:
+        pieces = [f.resolve()]
+        if f.suffix.lower() in YAML_SUFFIXES:
+            img = _images_named_by_yaml(f)
+            pieces += [img] if img is not None and img.is_file() else []
+        for piece in pieces:
+            if piece.is_relative_to(root):
+                raise LeakageError(f"{f}: a plan of the floor-plan corpora ({root}); score it as its corpus instead")
+            digests = corpus_file_digests() if digests is None else digests
+            same = digests.get(hashlib.sha256(piece.read_bytes()).hexdigest())
+            if same is not None:
+                raise LeakageError(f"{f}: the same bytes as the corpus plan {same}; score it as its corpus instead")
+
+
+def plan_file_maps(
+    paths: Sequence[Path], n: int, window: int, pixel_size: float | None, label: str = "files"
+) -> list[TestMap]:
+    """The first ``n`` plans of ``paths`` (:func:`~ogm_ppl.datasets.plan_files.plan_files`: ROS map YAMLs,
+    images or folders of them, read at 0.05 m a cell by :func:`~ogm_ppl.datasets.plan_files.load_plan_file`)
+    whose chosen window holds at least 200 known free cells, each cropped to it; corpus plans refused
+    (:func:`check_plan_files`)."""
+    from ogm_ppl.datasets.plan_files import load_plan_file, plan_files, plan_names
+
+    files = plan_files(paths)
+    check_plan_files(files)
+    out: list[TestMap] = []
+    for f, name in zip(files, plan_names(files)):
+        if len(out) == n:
+            break
+        p = load_plan_file(f, pixel_size=pixel_size, name=name, corpus=label)
+        t = _crop(label, name, p.occupancy, p.known, p.resolution or 0.05, window)
+        if (t.known & ~t.truth).sum() >= 200:
+            out.append(t)
+    if not out:
+        raise SystemExit(f"no plan of {[str(p) for p in paths]} has a {window}-cell window with 200 known free cells")
     return out
 
 
@@ -715,11 +781,7 @@ def tables_md(summ: list[dict], settings: dict) -> str:
     ]
     for mask in MASKS:
         for test in tests:
-            sel = [
-                s
-                for s in summ
-                if s["test"] == test and s["mask"] == mask and s["train"].removesuffix(GUIDE_SYM) in (test, "none")
-            ]
+            sel = [s for s in summ if s["test"] == test and s["mask"] == mask and _shown(s, test)]
             if not sel:
                 continue
             lines += [
@@ -747,6 +809,12 @@ def tables_md(summ: list[dict], settings: dict) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _shown(s: dict, test: str) -> bool:
+    """Whether a summary row goes into ``test``'s own table and figures: the methods learned on that corpus and
+    those learned on nothing; every method on a plan set (``--plan-files``), which no prior was learned on."""
+    return test not in TEST_CORPORA or s["train"].removesuffix(GUIDE_SYM) in (test, "none")
+
+
 def _label(name: str, test: str) -> str:
     return "independent (0.5)" if name == "independent" else name.replace(f":{test}", "")
 
@@ -760,7 +828,7 @@ def figures(summ: list[dict], out: Path) -> list[Path]:
     paths = []
     tests = list(dict.fromkeys(s["test"] for s in summ))
     for test in tests:
-        sel = [s for s in summ if s["test"] == test and s["mask"] == "unseen" and s["train"] in (test, "none")]
+        sel = [s for s in summ if s["test"] == test and s["mask"] == "unseen" and _shown(s, test)]
         if not sel:
             continue
         cols = min(4, len(sel))
@@ -780,7 +848,7 @@ def figures(summ: list[dict], out: Path) -> list[Path]:
     for mask in MASKS:
         fig, axes = plt.subplots(2, len(tests), figsize=(3.6 * len(tests), 6), squeeze=False)
         for j, test in enumerate(tests):
-            sel = [s for s in summ if s["test"] == test and s["mask"] == mask and s["train"] in (test, "none")]
+            sel = [s for s in summ if s["test"] == test and s["mask"] == mask and _shown(s, test)]
             labels = [_label(s["prior_name"], test) for s in sel]
             for i, key in enumerate(("nll_bits", "auc")):
                 ax = axes[i, j]
@@ -822,7 +890,26 @@ def figures(summ: list[dict], out: Path) -> list[Path]:
 
 def parse_args(argv=None) -> argparse.Namespace:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--test", nargs="+", default=list(TEST_CORPORA), choices=TEST_CORPORA, help="test corpora")
+    ap.add_argument(
+        "--test",
+        nargs="+",
+        default=None,
+        choices=TEST_CORPORA,
+        help="test corpora (default: all of them, or none where --plan-files is given)",
+    )
+    ap.add_argument(
+        "--plan-files",
+        nargs="+",
+        type=Path,
+        default=None,
+        metavar="PATH",
+        help="also score plans of other buildings: ROS map YAMLs or images, or folders of them "
+        "(ogm_ppl.datasets.plan_files), as one more test set",
+    )
+    ap.add_argument("--plan-set", default="files", help="the label of the --plan-files test set (default files)")
+    ap.add_argument(
+        "--pixel-size", type=float, default=None, help="metres per pixel of --plan-files images (a YAML has its own)"
+    )
     ap.add_argument("--train", nargs="+", default=None, help="training corpora of the tables (default: all shipped)")
     ap.add_argument(
         "--priors",
@@ -892,6 +979,13 @@ def parse_args(argv=None) -> argparse.Namespace:
         args.train = args.train or ["houseexpo"]
     args.train = args.train or available_tables()
     args.priors = args.priors or default_priors(args.train)
+    if args.test is None:
+        args.test = [] if args.plan_files else list(TEST_CORPORA)
+    if args.plan_files:
+        if args.plan_set in TEST_CORPORA or not args.plan_set.replace("_", "").replace("-", "").isalnum():
+            ap.error(f"--plan-set {args.plan_set!r}: a name of letters, digits, - and _ that is not a test corpus")
+    elif args.pixel_size is not None:
+        ap.error("--pixel-size applies to --plan-files only")
     return args
 
 
@@ -921,6 +1015,11 @@ def main(argv=None) -> dict:
     settings = {k: v for k, v in vars(args).items() if k not in ("out", "fresh", "no_figures", "bias_file", *own)}
     if not args.bias:  # settings without biases read as those of runs made before --bias-file existed
         del settings["bias"]
+    if args.plan_files:
+        settings["plan_files"] = [str(p) for p in args.plan_files]
+    else:  # likewise for runs made before --plan-files existed
+        for k in ("plan_files", "plan_set", "pixel_size"):
+            del settings[k]
     rows, runs = _load_previous(path, settings, args.fresh)
     done = {_row_key(r) for r in rows}
     skipped: list[dict] = []
@@ -944,12 +1043,20 @@ def main(argv=None) -> dict:
         }
         atomic_write_text(path, json.dumps(doc, indent=1))
 
-    for test in args.test:
-        maps = heldout_maps(test, args.plans, args.window, args.generated_shape)
-        pairs_here = [(n, c) for n, c in pairs if not args.diagonal or n.startswith(GUIDE_PREFIX) or c in (None, test)]
-        for name, train in pairs_here:  # refuse leakage before anything runs
+    test_sets = [(test, heldout_maps(test, args.plans, args.window, args.generated_shape)) for test in args.test]
+    if args.plan_files:
+        test_sets.append(
+            (args.plan_set, plan_file_maps(args.plan_files, args.plans, args.window, args.pixel_size, args.plan_set))
+        )
+    runs_of = {}
+    for test, maps in test_sets:  # refuse leakage before anything runs
+        own = test in TEST_CORPORA and args.diagonal  # a plan set has no priors of its own: every one runs on it
+        runs_of[test] = [(n, c) for n, c in pairs if not own or n.startswith(GUIDE_PREFIX) or c in (None, test)]
+        for name, train in runs_of[test]:
             for c in guide_corpora(train) if name.startswith(GUIDE_PREFIX) else [train]:
                 check_heldout(test, [t.plan for t in maps], c)
+    for test, maps in test_sets:
+        pairs_here = runs_of[test]
         print(
             f"[{test}] {len(maps)} held-out maps: " + ", ".join(f"{t.name} {t.truth.shape}" for t in maps), flush=True
         )

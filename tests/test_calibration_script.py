@@ -236,3 +236,86 @@ def test_a_bias_file_runs_each_named_prior_biased_beside_it(cal, tmp_path):
     bias.write_text('{"format": "ogm_ppl.prior_bias", "bias": {"patch3:houseexpo": "high"}}')
     with pytest.raises(SystemExit, match=f"{bias}: not a bias file"):
         cal.main([*argv, "--bias-file", str(bias), "--out", str(tmp_path / "bad")])
+
+
+def _plan_folder(tmp_path):
+    """Two plans of buildings in no corpus: a generated office map as a PNG (0.025 m pixels, so read at half
+    size) and a hall map as a ROS map (0.05 m cells)."""
+    import numpy as np
+    from PIL import Image
+
+    from ogm_ppl import Grid
+    from ogm_ppl.datasets.mapgen import generate_map
+    from ogm_ppl.rosmap import save_ros_map
+
+    d = tmp_path / "plans"
+    d.mkdir()
+    office = generate_map("office", (80, 80), seed=3)
+    Image.fromarray(np.where(office, 0, 255).astype(np.uint8)).resize((160, 160), Image.NEAREST).save(d / "office.png")
+    hall = generate_map("hall", (80, 80), seed=4)
+    save_ros_map(d / "hall.yaml", hall[::-1].astype(float).ravel(), Grid(hall.shape, resolution=0.05), sidecar=False)
+    return d
+
+
+PLAN_RUN = (
+    "--train houseexpo --priors independent patch3 --diagonal --plans 5 --window 36 --poses 2 --beams 45 "
+    "--range-cells 30 --sweeps 8 --burn 2 --no-figures --plan-set mine --pixel-size 0.025"
+).split()
+
+
+def test_plan_files_are_one_more_test_set_scored_with_every_prior(cal, tmp_path):
+    d = _plan_folder(tmp_path)
+    res = cal.main([*PLAN_RUN, "--plan-files", str(d), "--out", str(tmp_path / "out")])
+    rows = res["rows"]
+    assert {r["test"] for r in rows} == {"mine"}  # no corpus runs unless --test names one
+    assert sorted({r["plan"].split("@")[0] for r in rows}) == ["hall", "office"]
+    # --diagonal limits the corpora's own priors; a plan set has none, so every prior runs on it
+    assert {r["prior_name"] for r in rows} == {
+        "traditional OGM (p21)",
+        "independent",
+        "independent:houseexpo",
+        "patch3:houseexpo",
+    }
+    for r in rows:
+        assert r["nll_bits"] > 0 and 0 < r["cells"] <= 36 * 36
+    md = (tmp_path / "out" / "calibration.md").read_text()
+    assert "**mine**, unseen cells (2 maps)" in md and "| patch3:houseexpo |" in md.split("**mine**, near")[0]
+    settings = json.loads((tmp_path / "out" / "calibration.json").read_text())["settings"]
+    assert settings["plan_files"] == [str(d)] and settings["plan_set"] == "mine" and settings["test"] == []
+    # the same maps as the plan reader gives, cropped as the corpora's are
+    maps = cal.plan_file_maps([d], 5, 36, 0.025, "mine")
+    assert [t.corpus for t in maps] == ["mine", "mine"] and all(t.truth.shape == (36, 36) for t in maps)
+
+
+def test_runs_without_plan_files_keep_their_settings(cal, tmp_path):
+    argv = "--test generated --train houseexpo --priors independent --plans 1 --window 36 --quick --no-figures"
+    cal.main([*argv.split(), "--out", str(tmp_path)])
+    settings = json.loads((tmp_path / "calibration.json").read_text())["settings"]
+    assert not {"plan_files", "plan_set", "pixel_size"} & set(settings)
+
+
+def test_plan_file_arguments_are_checked(cal):
+    with pytest.raises(SystemExit):
+        cal.parse_args(["--plan-files", "x", "--plan-set", "generated"])  # a corpus's name
+    with pytest.raises(SystemExit):
+        cal.parse_args(["--plan-files", "x", "--plan-set", "a b"])
+    with pytest.raises(SystemExit):
+        cal.parse_args(["--pixel-size", "0.05"])  # without plan files
+    assert cal.parse_args(["--plan-files", "x"]).test == [] and cal.parse_args([]).test == list(cal.TEST_CORPORA)
+
+
+def test_a_corpus_plan_given_as_a_file_is_refused(cal, tmp_path):
+    from ogm_ppl.datasets import floorplans as fp
+
+    root = fp.floorplan_root()
+    png = sorted((root / "houseexpo-subset100" / "png").glob("*.png"))
+    if not png:
+        pytest.skip("the HouseExpo corpus is not beside the repository")
+    with pytest.raises(cal.LeakageError, match="a plan of the floor-plan corpora"):
+        cal.check_plan_files([png[0]])
+    (tmp_path / "copy.png").write_bytes(png[0].read_bytes())
+    with pytest.raises(cal.LeakageError, match="the same bytes as the corpus plan"):
+        cal.check_plan_files([tmp_path / "copy.png"])
+    from ogm_ppl.datasets.plan_files import plan_files
+
+    cal.check_plan_files(plan_files([_plan_folder(tmp_path)]))  # plans of no corpus pass

@@ -1,0 +1,223 @@
+r"""Floor plans of any building, read from files: ROS map_server maps and plain images.
+
+The corpora of :mod:`ogm_ppl.datasets.floorplans` are fixed collections. A plan of a building in none of them
+comes as a file, and :func:`load_plan_file` turns it into the same :class:`~ogm_ppl.datasets.floorplans.FloorPlan`
+the corpora give (occupancy and known masks, ``H x W`` bool, row 0 at the top of the image), so every
+experiment that scores held-out plans can score it (``experiments/calibration.py --plan-files``).
+
+Two kinds of file:
+
+* ``.yaml`` / ``.yml``: a ROS ``map_server`` map (:func:`ogm_ppl.rosmap.load_ros_map`, Nav2's reading): a cell
+  is occupied where map_server publishes 100, free where it publishes 0 and unknown where it publishes -1;
+  *scale* mode's values in between count as occupied from 50 up. The map's own ``resolution`` is its pixel
+  size. Images a YAML in the same folder names are read through that YAML only.
+* ``.png`` / ``.pgm`` / ``.bmp``: a drawn or scanned plan, dark = occupied, light = free, converted to grey and
+  classified as the IPA corpus is (the most common grey of the image border, when it is neither black nor
+  white, +-3 is unknown; the rest is thresholded at 128). An image has no scale: ``pixel_size`` (metres per
+  pixel) must be given.
+
+Then as every corpus plan (the module docstring of :mod:`~ogm_ppl.datasets.floorplans`, steps 2-5): resampled to
+``resolution`` metres per cell (a cell is occupied if any pixel whose top-left corner lies in it is occupied;
+a plan coarser than ``resolution`` is repeated, each cell taking the pixel under its centre), cropped to the
+free space plus ``margin`` cells, the exterior marked, and unknown cells made occupied (``outside="occupied"``,
+the default) or left unknown.
+
+Plans are untrusted input: every problem raises :class:`PlanFileError` naming the file, and a plan whose grid
+would exceed :data:`MAX_PLAN_CELLS` cells is refused before it is built.
+
+>>> import numpy as np, tempfile, pathlib
+>>> from PIL import Image
+>>> px = np.full((40, 40), 255, np.uint8); px[:, :4] = 0                # a wall along the left edge
+>>> d = pathlib.Path(tempfile.mkdtemp()); Image.fromarray(px).save(d / "room.png")
+>>> plan = load_plan_file(d / "room.png", pixel_size=0.025)            # 2 x 2 pixels a cell at 0.05 m
+>>> plan.name, plan.shape, int((~plan.occupancy[30]).sum())           # 36 free pixels -> 18 free cells
+('room', (60, 58), 18)
+"""
+
+from __future__ import annotations
+
+import math
+import os
+import re
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from ogm_ppl.datasets.floorplans import FloorPlan, _classify_ipa, _natural_key, _open_image, rasterise
+
+__all__ = ["PLAN_SUFFIXES", "MAX_PLAN_CELLS", "PlanFileError", "load_plan_file", "plan_files", "plan_names"]
+
+IMAGE_SUFFIXES: tuple[str, ...] = (".png", ".pgm", ".bmp")
+YAML_SUFFIXES: tuple[str, ...] = (".yaml", ".yml")
+PLAN_SUFFIXES: tuple[str, ...] = YAML_SUFFIXES + IMAGE_SUFFIXES
+#: Largest plan grid built (cells, after resampling); a larger one is refused with this limit in the message.
+MAX_PLAN_CELLS = 50_000_000
+
+
+class PlanFileError(ValueError):
+    """A plan file is missing, unreadable, malformed or unusable; the message names the path."""
+
+    def __init__(self, path: str | os.PathLike, problem: str):
+        self.path, self.problem = str(path), problem
+        super().__init__(f"{path}: {problem}")
+
+
+def _positive(value, what: str, path: Path) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise PlanFileError(path, f"{what} must be a number, got {value!r}") from None
+    if not math.isfinite(v) or v <= 0:
+        raise PlanFileError(path, f"{what} must be a positive number of metres, got {value!r}")
+    return v
+
+
+def _pixels_of_yaml(path: Path) -> tuple[np.ndarray, np.ndarray, float]:
+    from ogm_ppl.rosmap import RosMapError, load_ros_map
+
+    try:
+        m = load_ros_map(path)
+    except RosMapError as e:
+        raise PlanFileError(e.path, e.problem) from None
+    rows, cols = m.grid.shape if m.grid.ndim == 2 else (1, m.grid.num_cells)
+    v = m.occupancy.reshape(rows, cols)[::-1]  # OccupancyGrid row 0 is the bottom; plans have the top first
+    occ = v >= 50
+    free = (v >= 0) & (v < 50)
+    return occ, free, float(m.settings.resolution)
+
+
+def _pixels_of_image(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    try:
+        im = _open_image(path, str(path))
+    except ValueError as e:
+        raise PlanFileError(path, str(e).removeprefix(f"{path}: ")) from None
+    return _classify_ipa(im)
+
+
+def _resample(occ: np.ndarray, free: np.ndarray, f: float) -> tuple[np.ndarray, np.ndarray]:
+    """Pixels -> cells of ``f`` pixels a side (``f`` need not be an integer)."""
+    H, W = occ.shape
+    if f >= 1:
+        rows = np.floor(np.arange(math.ceil(H / f)) * f).astype(np.int64)
+        cols = np.floor(np.arange(math.ceil(W / f)) * f).astype(np.int64)
+        rows, cols = rows[rows < H], cols[cols < W]
+
+        def pool(a: np.ndarray) -> np.ndarray:
+            return np.logical_or.reduceat(np.logical_or.reduceat(a, rows, axis=0), cols, axis=1)
+
+        o, fr = pool(occ), pool(free)
+        return o, fr & ~o
+    rows = np.minimum(np.floor((np.arange(math.floor(H / f)) + 0.5) * f).astype(np.int64), H - 1)
+    cols = np.minimum(np.floor((np.arange(math.floor(W / f)) + 0.5) * f).astype(np.int64), W - 1)
+    return occ[np.ix_(rows, cols)], free[np.ix_(rows, cols)] & ~occ[np.ix_(rows, cols)]
+
+
+def load_plan_file(
+    path: str | os.PathLike,
+    *,
+    pixel_size: float | None = None,
+    resolution: float = 0.05,
+    margin: int | None = 20,
+    wall_cells: int = 2,
+    outside: str = "occupied",
+    name: str | None = None,
+    corpus: str = "files",
+) -> FloorPlan:
+    """Read one plan file (the module docstring) into a :class:`~ogm_ppl.datasets.floorplans.FloorPlan` at
+    ``resolution`` metres per cell.
+
+    Args:
+        path: a ROS map YAML or an image (:data:`PLAN_SUFFIXES`).
+        pixel_size: metres per pixel of an image (required for one); a ROS map's YAML states its own
+            (``resolution``), and ``pixel_size`` does not apply to it, so one value serves a folder of both.
+        resolution: metres per cell of the plan returned (the learned priors and guides use 0.05).
+        margin, wall_cells, outside: as :func:`~ogm_ppl.datasets.floorplans.load_plan`.
+        name: the plan's name (default the file's stem); also its building.
+        corpus: the label the plan carries as its corpus.
+
+    Raises:
+        PlanFileError: the file is missing, unreadable, malformed, has no free pixel, lacks a scale or would
+            give more than :data:`MAX_PLAN_CELLS` cells.
+    """
+    p = Path(path)
+    if not p.is_file():
+        raise PlanFileError(p, "no such plan file")
+    suffix = p.suffix.lower()
+    if suffix not in PLAN_SUFFIXES:
+        raise PlanFileError(p, f"not a plan file: expected one of {', '.join(PLAN_SUFFIXES)}")
+    res = _positive(resolution, "resolution", p)
+    if suffix in YAML_SUFFIXES:
+        occ, free, px = _pixels_of_yaml(p)
+    else:
+        if pixel_size is None:
+            raise PlanFileError(p, "an image has no scale: give its pixel size in metres (pixel_size, --pixel-size)")
+        px = _positive(pixel_size, "pixel_size", p)
+        occ, free = _pixels_of_image(p)
+    f = res / px
+    cells = math.ceil(occ.shape[0] / f) * math.ceil(occ.shape[1] / f)
+    if cells > MAX_PLAN_CELLS:
+        raise PlanFileError(
+            p,
+            f"{occ.shape[1]} x {occ.shape[0]} pixels of {px} m give {cells:,} cells of {res} m, over the limit "
+            f"of {MAX_PLAN_CELLS:,}; pass a coarser resolution",
+        )
+    if not free.any():
+        raise PlanFileError(p, "no free pixel: not a plan (dark = occupied, light = free)")
+    occ, free = _resample(occ, free, f)
+    if not free.any():
+        raise PlanFileError(p, f"no free cell left at {res} m a cell")
+    occupancy, known = rasterise(occ, free, 1, margin, wall_cells, outside)
+    label = p.stem if name is None else str(name)
+    return FloorPlan(
+        name=label, corpus=corpus, occupancy=occupancy, known=known, resolution=res, building=label, split="test"
+    )
+
+
+def _images_named_by_yaml(yaml_path: Path) -> Path | None:
+    try:
+        text = yaml_path.read_text(encoding="utf-8-sig", errors="replace")[:65536]
+    except OSError:
+        return None
+    m = re.search(r"^\s*image\s*:\s*['\"]?([^'\"#\n]+?)['\"]?\s*(#.*)?$", text, re.MULTILINE)
+    if m is None:
+        return None
+    img = Path(os.path.expanduser(m.group(1).strip()))
+    return (img if img.is_absolute() else yaml_path.parent / img).resolve()
+
+
+def plan_files(paths: Iterable[str | os.PathLike]) -> list[Path]:
+    """The plan files of ``paths`` (files, or folders whose plan files are taken, not recursively), in natural
+    order per folder; an image that a YAML among them names is left to that YAML. Raises
+    :class:`PlanFileError` for a path that does not exist, a file that is not a plan file, or no plan at all."""
+    found: list[Path] = []
+    for item in paths:
+        p = Path(item)
+        if p.is_dir():
+            found += sorted(
+                (q for q in p.iterdir() if q.is_file() and q.suffix.lower() in PLAN_SUFFIXES),
+                key=lambda q: _natural_key(q.name),
+            )
+        elif p.is_file():
+            if p.suffix.lower() not in PLAN_SUFFIXES:
+                raise PlanFileError(p, f"not a plan file: expected one of {', '.join(PLAN_SUFFIXES)}")
+            found.append(p)
+        else:
+            raise PlanFileError(p, "no such file or folder")
+    found = list(dict.fromkeys(found))
+    named = {_images_named_by_yaml(q) for q in found if q.suffix.lower() in YAML_SUFFIXES}
+    out = [q for q in found if q.suffix.lower() in YAML_SUFFIXES or q.resolve() not in named]
+    if not out:
+        raise PlanFileError(", ".join(str(Path(x)) for x in paths), f"no plan file ({', '.join(PLAN_SUFFIXES)})")
+    return out
+
+
+def plan_names(files: Sequence[Path]) -> list[str]:
+    """One distinct name per file: its stem, or where stems repeat (``a/ros/map.yaml``, ``b/ros/map.yaml``) the
+    path below the files' common folder without the suffix (``a/ros/map``, ``b/ros/map``)."""
+    stems = [f.stem for f in files]
+    if len(set(stems)) == len(stems):
+        return stems
+    full = [f.resolve() for f in files]
+    root = Path(os.path.commonpath([str(f.parent) for f in full]))
+    return [f.relative_to(root).with_suffix("").as_posix() for f in full]

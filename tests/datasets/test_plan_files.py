@@ -1,0 +1,143 @@
+"""Plans of any building from files: ROS maps and images -> FloorPlan, exactly as a corpus plan is built."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from PIL import Image
+
+from ogm_ppl import Grid
+from ogm_ppl.datasets.floorplans import rasterise
+from ogm_ppl.datasets.plan_files import (
+    MAX_PLAN_CELLS,
+    PlanFileError,
+    _resample,
+    load_plan_file,
+    plan_files,
+    plan_names,
+)
+from ogm_ppl.rosmap import save_ros_map
+
+
+def _room(h: int = 30, w: int = 40) -> np.ndarray:
+    """A grey image: a free room (255) with 2-pixel black walls, a black pillar, on a grey (205) background."""
+    px = np.full((h + 8, w + 8), 205, np.uint8)
+    px[4 : 4 + h, 4 : 4 + w] = 0
+    px[6 : 2 + h, 6 : 2 + w] = 255
+    px[12:15, 20:23] = 0
+    return px
+
+
+def test_image_at_its_own_pixel_size_is_the_corpus_rasterisation(tmp_path):
+    px = _room()
+    Image.fromarray(px).save(tmp_path / "room.png")
+    plan = load_plan_file(tmp_path / "room.png", pixel_size=0.05)
+    grey = px.astype(np.int16)
+    unknown = np.abs(grey - 205) <= 3
+    occ, known = rasterise((grey < 128) & ~unknown, (grey >= 128) & ~unknown)
+    np.testing.assert_array_equal(plan.occupancy, occ)
+    np.testing.assert_array_equal(plan.known, known)
+    assert (plan.name, plan.building, plan.split, plan.resolution, plan.corpus) == (
+        "room",
+        "room",
+        "test",
+        0.05,
+        "files",
+    )
+    # the room's free cells survive, the pillar stays occupied
+    assert (~plan.occupancy).sum() == (px == 255).sum()
+
+
+def test_ros_map_reads_as_the_image_it_was_saved_from(tmp_path):
+    """One plan two ways: an image, and the same cells written as a ROS map (OccupancyGrid rows bottom-up)."""
+    px = _room()
+    Image.fromarray(px).save(tmp_path / "room.png")
+    from_image = load_plan_file(tmp_path / "room.png", pixel_size=0.05)
+    grey = px.astype(np.int16)
+    p = np.where(grey < 128, 1.0, 0.0)
+    unknown = np.abs(grey - 205) <= 3
+    grid = Grid(px.shape, resolution=0.05)
+    # ogm_ppl cell (row, col) is image pixel (rows - 1 - row, col): flip the image rows into grid order
+    save_ros_map(tmp_path / "ros" / "room.yaml", p[::-1].ravel(), grid, unknown=unknown[::-1].ravel(), sidecar=False)
+    from_ros = load_plan_file(tmp_path / "ros" / "room.yaml")
+    np.testing.assert_array_equal(from_ros.occupancy, from_image.occupancy)
+    np.testing.assert_array_equal(from_ros.known, from_image.known)
+    again = load_plan_file(tmp_path / "ros" / "room.yaml", pixel_size=0.1)  # an image's pixel size: not a YAML's
+    np.testing.assert_array_equal(again.occupancy, from_image.occupancy)
+
+
+@pytest.mark.parametrize("f", [2.0, 3.0, 2.5, 0.5])
+def test_resample_keeps_every_occupied_pixel_and_is_the_block_or_for_integer_factors(f):
+    rng = np.random.default_rng(1)
+    occ = rng.random((37, 29)) < 0.1
+    free = ~occ & (rng.random(occ.shape) < 0.9)
+    o, fr = _resample(occ, free, f)
+    assert not (o & fr).any()
+    if f >= 1:
+        assert o.shape == (int(np.ceil(37 / f)), int(np.ceil(29 / f)))
+        starts_r = np.floor(np.arange(o.shape[0]) * f).astype(int)
+        starts_c = np.floor(np.arange(o.shape[1]) * f).astype(int)
+        rows = np.searchsorted(starts_r, np.arange(37), side="right") - 1
+        cols = np.searchsorted(starts_c, np.arange(29), side="right") - 1
+        want = np.zeros(o.shape, bool)
+        np.logical_or.at(want, (rows[:, None], cols[None, :]), occ)
+        np.testing.assert_array_equal(o, want)  # each pixel lands in the cell holding its top-left corner
+        if f == int(f):
+            k = int(f)
+            pad = np.pad(occ, ((0, -37 % k), (0, -29 % k)))
+            np.testing.assert_array_equal(o, pad.reshape(o.shape[0], k, o.shape[1], k).any((1, 3)))
+    else:  # finer cells: each takes the pixel under its centre
+        assert o.shape == (74, 58)
+        np.testing.assert_array_equal(o[::2, ::2], occ)
+        np.testing.assert_array_equal(o[1::2, 1::2], occ)
+
+
+def test_bad_plan_files_name_the_file(tmp_path):
+    Image.fromarray(_room()).save(tmp_path / "room.png")
+    with pytest.raises(PlanFileError, match=r"room\.png: an image has no scale"):
+        load_plan_file(tmp_path / "room.png")
+    with pytest.raises(PlanFileError, match="positive number"):
+        load_plan_file(tmp_path / "room.png", pixel_size=-1)
+    with pytest.raises(PlanFileError, match="no such plan file"):
+        load_plan_file(tmp_path / "none.png", pixel_size=0.05)
+    (tmp_path / "junk.png").write_bytes(b"not an image")
+    with pytest.raises(PlanFileError, match=r"junk\.png: unreadable image"):
+        load_plan_file(tmp_path / "junk.png", pixel_size=0.05)
+    Image.fromarray(np.zeros((20, 20), np.uint8)).save(tmp_path / "black.png")
+    with pytest.raises(PlanFileError, match=r"black\.png: no free pixel"):
+        load_plan_file(tmp_path / "black.png", pixel_size=0.05)
+    (tmp_path / "bad.yaml").write_text("image: missing.pgm\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\n")
+    with pytest.raises(PlanFileError, match=r"bad\.yaml: missing required key"):
+        load_plan_file(tmp_path / "bad.yaml")
+    keys = "occupied_thresh: 0.65\nfree_thresh: 0.196\nnegate: 0\n"
+    (tmp_path / "bad.yaml").write_text("image: missing.pgm\nresolution: 0.05\norigin: [0.0, 0.0, 0.0]\n" + keys)
+    with pytest.raises(PlanFileError, match=r"missing\.pgm"):
+        load_plan_file(tmp_path / "bad.yaml")
+    (tmp_path / "notes.txt").write_text("x")
+    with pytest.raises(PlanFileError, match="not a plan file"):
+        load_plan_file(tmp_path / "notes.txt", pixel_size=0.05)
+    side = int(np.sqrt(MAX_PLAN_CELLS)) // 100 + 1  # pixels of 1 m at 0.01 m a cell: over the limit
+    Image.fromarray(np.full((side, side), 255, np.uint8)).save(tmp_path / "big.png")
+    with pytest.raises(PlanFileError, match="over the limit"):
+        load_plan_file(tmp_path / "big.png", pixel_size=1.0, resolution=0.01)
+
+
+def test_plan_files_and_names(tmp_path):
+    px = _room()
+    for d in ("a", "b"):
+        grid = Grid(px.shape, resolution=0.05)
+        save_ros_map(tmp_path / d / "map.yaml", np.where(px < 128, 1.0, 0.0).ravel(), grid, sidecar=False)
+    Image.fromarray(px).save(tmp_path / "a" / "extra.png")
+    (tmp_path / "a" / "readme.txt").write_text("not a plan")
+    files = plan_files([tmp_path / "a", tmp_path / "b" / "map.yaml"])
+    # the PGM the YAML names is read through the YAML only; the text file is not a plan
+    assert [f.name for f in files] == ["extra.png", "map.yaml", "map.yaml"]
+    assert plan_names(files) == ["a/extra", "a/map", "b/map"]
+    assert plan_names(files[:2]) == ["extra", "map"]
+    with pytest.raises(PlanFileError, match="no such file or folder"):
+        plan_files([tmp_path / "nowhere"])
+    with pytest.raises(PlanFileError, match="not a plan file"):
+        plan_files([tmp_path / "a" / "readme.txt"])
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(PlanFileError, match="no plan file"):
+        plan_files([tmp_path / "empty"])
