@@ -262,7 +262,12 @@ def check_plan_files(files: Sequence[Path]) -> None:
 
 
 def plan_file_maps(
-    paths: Sequence[Path], n: int, window: int, pixel_size: float | None, label: str = "files"
+    paths: Sequence[Path],
+    n: int,
+    window: int,
+    pixel_size: float | None,
+    label: str = "files",
+    outside: str = "occupied",
 ) -> list[TestMap]:
     """The first ``n`` plans of ``paths`` (:func:`~ogm_ppl.datasets.plan_files.plan_files`: ROS map YAMLs,
     images or folders of them, read at 0.05 m a cell by :func:`~ogm_ppl.datasets.plan_files.load_plan_file`)
@@ -276,7 +281,7 @@ def plan_file_maps(
     for f, name in zip(files, plan_names(files)):
         if len(out) == n:
             break
-        p = load_plan_file(f, pixel_size=pixel_size, name=name, corpus=label)
+        p = load_plan_file(f, pixel_size=pixel_size, name=name, corpus=label, outside=outside)
         t = _crop(label, name, p.occupancy, p.known, p.resolution or 0.05, window)
         if (t.known & ~t.truth).sum() >= 200:
             out.append(t)
@@ -526,9 +531,11 @@ class Scene:
 
 
 def make_scene(t: TestMap, args) -> Scene:
+    """The sparse dataset of a test map and its scored masks. Cells the map does not know (``~t.known``) are
+    walls to the simulated sensor and are never scored (the corpora's maps know every cell)."""
     grid = Grid(t.truth.shape, resolution=t.resolution)
     data = stop_and_scan(
-        t.truth,
+        t.truth | ~t.known,
         grid,
         num_poses=args.poses,
         beams=args.beams,
@@ -910,6 +917,14 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument(
         "--pixel-size", type=float, default=None, help="metres per pixel of --plan-files images (a YAML has its own)"
     )
+    ap.add_argument(
+        "--plan-outside",
+        default="occupied",
+        choices=("occupied", "unknown"),
+        help="a plan file's unknown and exterior cells: occupied and scored, as the corpora's (default), or unknown: "
+        "walls to the simulated sensor, never scored (for maps built from logs, whose unknown cells include "
+        "rooms nobody entered)",
+    )
     ap.add_argument("--train", nargs="+", default=None, help="training corpora of the tables (default: all shipped)")
     ap.add_argument(
         "--priors",
@@ -984,8 +999,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     if args.plan_files:
         if args.plan_set in TEST_CORPORA or not args.plan_set.replace("_", "").replace("-", "").isalnum():
             ap.error(f"--plan-set {args.plan_set!r}: a name of letters, digits, - and _ that is not a test corpus")
-    elif args.pixel_size is not None:
-        ap.error("--pixel-size applies to --plan-files only")
+    elif args.pixel_size is not None or args.plan_outside != "occupied":
+        ap.error("--pixel-size and --plan-outside apply to --plan-files only")
     return args
 
 
@@ -1018,7 +1033,7 @@ def main(argv=None) -> dict:
     if args.plan_files:
         settings["plan_files"] = [str(p) for p in args.plan_files]
     else:  # likewise for runs made before --plan-files existed
-        for k in ("plan_files", "plan_set", "pixel_size"):
+        for k in ("plan_files", "plan_set", "pixel_size", "plan_outside"):
             del settings[k]
     rows, runs = _load_previous(path, settings, args.fresh)
     done = {_row_key(r) for r in rows}
@@ -1046,7 +1061,12 @@ def main(argv=None) -> dict:
     test_sets = [(test, heldout_maps(test, args.plans, args.window, args.generated_shape)) for test in args.test]
     if args.plan_files:
         test_sets.append(
-            (args.plan_set, plan_file_maps(args.plan_files, args.plans, args.window, args.pixel_size, args.plan_set))
+            (
+                args.plan_set,
+                plan_file_maps(
+                    args.plan_files, args.plans, args.window, args.pixel_size, args.plan_set, args.plan_outside
+                ),
+            )
         )
     runs_of = {}
     for test, maps in test_sets:  # refuse leakage before anything runs

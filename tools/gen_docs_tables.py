@@ -599,6 +599,38 @@ def _calibration_targets(doc: dict) -> Table:
     )
 
 
+def _calibration_plans(doc: dict) -> Table:
+    """``calibration.py --plan-files``: every method on the plan set's unseen cells (no prior was learned on
+    those buildings, so every training corpus's priors and every guide are listed), as
+    :func:`_calibration_targets` lists a corpus's own."""
+    _, summ = _calibration_rows(doc, "unseen")
+    keys = ("nll_bits", "ece", "ece_pooled", "brier", "auc", "best_f1", "iou")
+    rows = [
+        [s["prior_name"], *(_f(s.get(k)) for k in keys), _f(s.get("rhat_below"), 2), _f(s["seconds"], 1)] for s in summ
+    ]
+    st = doc["settings"]
+    outside = {
+        "unknown": "cells the plan does not know are walls to the simulated sensor and are not scored",
+        "occupied": "cells the plan does not know count as occupied, as the corpora's exteriors do",
+    }[st.get("plan_outside", "occupied")]
+    maps = summ[0]["maps"] if summ else 0
+    return Table(
+        caption=(
+            f"Unseen cells of {maps} plans of buildings in no corpus ({st['plan_set']}; a {st['window']} x "
+            f"{st['window']}-cell window of each, {st['poses']} stops x {st['beams']} beams), means over the plans; "
+            f"{outside}; chains: 3 from different starts, {st['sweeps']} sweeps each"
+        ),
+        header=["method", "NLL", "ECE", "ECE pooled", "Brier", "AUC", "best F1", "IoU", "R-hat < 1.05", "s / map"],
+        rows=rows,
+        provenance=doc["provenance"],
+        note=(
+            "KIND:CORPUS: the prior learned on that corpus; guide:C: the guide learned there (@sym: symmetrised); "
+            "NLL in bits per cell; ECE: mean over plans of each plan's ECE; ECE pooled: one reliability diagram of "
+            "every plan's unseen cells; – : no chain (OGM, guides)"
+        ),
+    )
+
+
 def _method_by_test(summ: list[dict], tests: list[str], keep, cell) -> list[list[str]]:
     """One row per method (``prior_name``, in order of first appearance) of the summary rows ``keep`` admits,
     one column per test corpus: ``cell(row)``, or ``"–"`` where the method did not run on it."""
@@ -1079,6 +1111,8 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "calibration_mix": ("calibration_mix", _calibration_guides),
     "calibration_generated": ("calibration_generated", _calibration_guides),
     "calibration_all": ("calibration_all", _calibration_guides),
+    "calibration_logs": ("calibration_logs", _calibration_plans),
+    "calibration_logs_occupied": ("calibration_logs_occupied", _calibration_plans),
     "calibration_cycle": ("calibration_cycle", _calibration_kernels),
     "unseen_by_distance": ("unseen_by_distance", _unseen_by_distance),
     "unseen_by_distance_chains": ("unseen_by_distance_chains", _unseen_by_distance),
