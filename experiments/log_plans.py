@@ -8,17 +8,19 @@ leave thin streaks of free cells far outside the building. Per log, with ``p`` t
 ``map_server`` publishes it (``ogm-ppl map`` wrote it as ``<log>/ros/map.yaml``):
 
 * occupied where ``p = 100``; free where ``p = 0`` *and* the cell lies in a ``k x k`` square of such cells
-  (a morphological opening of the free cells, ``k = --min-free-cells``, default 5 cells = 25 cm: the streaks go,
-  rooms and corridors stay); every other cell unknown (the plan reader then makes it occupied, as the corpora's
-  exteriors are);
+  (a morphological opening of the free cells, ``k = --min-free-cells``, default 9 cells = 45 cm, narrower than a
+  door a robot drives through: the streaks go, rooms, doors and corridors stay) *and* in the largest connected
+  component of those (the building the robot drove through; islands seen through windows go); every other cell
+  unknown (the plan reader makes it occupied, as the corpora's exteriors are, or with
+  ``calibration.py --plan-outside unknown`` leaves it unscored);
 * written as ``<out>/<log>.yaml`` + ``.pgm`` (:func:`ogm_ppl.rosmap.save_ros_map`), 0.05 m a cell.
 
 The outdoor log (``freiburg-campus``) is left out by default (``--exclude``).
 
     python experiments/map_all_logs.py --out out/logs          # 30-60 s: a map per log
     python experiments/log_plans.py --maps out/logs --out out/log_plans
-    python experiments/calibration.py --plan-files out/log_plans --plan-set logs --plans 9 --priors independent \
-        --guides houseexpo+ipa@sym --out out/calibration_logs
+    python experiments/calibration.py --plan-files out/log_plans --plan-set logs --plans 9 --plan-outside unknown \
+        --priors independent --guides houseexpo+ipa@sym --out out/calibration_logs
 """
 
 from __future__ import annotations
@@ -34,6 +36,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 from ogm_ppl.rosmap import load_ros_map, save_ros_map
 
 OUTDOOR = ("freiburg-campus",)
+MIN_FREE_CELLS = 9
 
 
 def clean(occupancy: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
@@ -56,7 +59,12 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--maps", type=Path, default=Path("out/logs"), help="map_all_logs.py's output folder")
     ap.add_argument("--out", type=Path, default=Path("out/log_plans"), help="output folder (default out/log_plans)")
-    ap.add_argument("--min-free-cells", type=int, default=5, help="side k of the opening square (default 5)")
+    ap.add_argument(
+        "--min-free-cells",
+        type=int,
+        default=MIN_FREE_CELLS,
+        help=f"side k of the opening square (default {MIN_FREE_CELLS})",
+    )
     ap.add_argument("--exclude", nargs="*", default=list(OUTDOOR), help="logs left out (default the outdoor one)")
     args = ap.parse_args(argv)
     if args.min_free_cells < 1:

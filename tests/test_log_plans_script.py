@@ -51,7 +51,7 @@ def test_main_writes_plans_the_plan_reader_reads(lp, tmp_path):
     assert lp.main(["--maps", str(tmp_path / "logs"), "--out", str(tmp_path / "plans")]) == 0
     assert sorted(f.name for f in (tmp_path / "plans").iterdir()) == ["hall.pgm", "hall.yaml"]  # outdoor left out
     back = load_ros_map(tmp_path / "plans" / "hall.yaml")
-    p, unknown = lp.clean(v, 5)
+    p, unknown = lp.clean(v, lp.MIN_FREE_CELLS)
     np.testing.assert_array_equal(back.occupancy.reshape(v.shape), np.where(unknown, -1, np.where(p == 1, 100, 0)))
     plan = load_plan_file(tmp_path / "plans" / "hall.yaml")
     assert plan.name == "hall" and (~plan.occupancy).sum() == 20 * 30
