@@ -290,6 +290,48 @@ def plan_file_maps(
     return out
 
 
+def add_plan_file_arguments(ap: argparse.ArgumentParser) -> None:
+    """``--plan-files``, ``--plan-set``, ``--pixel-size`` and ``--plan-outside`` (the scripts that score held-out
+    maps take plans of other buildings alike; :func:`check_plan_file_arguments`, :func:`plan_set_maps`)."""
+    ap.add_argument(
+        "--plan-files",
+        nargs="+",
+        type=Path,
+        default=None,
+        metavar="PATH",
+        help="also score plans of other buildings: ROS map YAMLs or images, or folders of them "
+        "(ogm_ppl.datasets.plan_files), as one more test set",
+    )
+    ap.add_argument("--plan-set", default="files", help="the label of the --plan-files test set (default files)")
+    ap.add_argument(
+        "--pixel-size", type=float, default=None, help="metres per pixel of --plan-files images (a YAML has its own)"
+    )
+    ap.add_argument(
+        "--plan-outside",
+        default="occupied",
+        choices=("occupied", "unknown"),
+        help="a plan file's unknown and exterior cells: occupied and scored, as the corpora's (default), or unknown: "
+        "walls to the simulated sensor, never scored (for maps built from logs, whose unknown cells include "
+        "rooms nobody entered)",
+    )
+
+
+def check_plan_file_arguments(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
+    """Refuse (``ap.error``) a plan-set label that is empty of letters or a test corpus's name, and plan-file
+    options without ``--plan-files``."""
+    if args.plan_files:
+        if args.plan_set in TEST_CORPORA or not args.plan_set.replace("_", "").replace("-", "").isalnum():
+            ap.error(f"--plan-set {args.plan_set!r}: a name of letters, digits, - and _ that is not a test corpus")
+    elif args.pixel_size is not None or args.plan_outside != "occupied":
+        ap.error("--pixel-size and --plan-outside apply to --plan-files only")
+
+
+def plan_set_maps(args: argparse.Namespace, n: int) -> list[TestMap]:
+    """The first ``n`` usable maps of the ``--plan-files`` test set (:func:`plan_file_maps` with the options of
+    :func:`add_plan_file_arguments`)."""
+    return plan_file_maps(args.plan_files, n, args.window, args.pixel_size, args.plan_set, args.plan_outside)
+
+
 def generated_windows(n: int, shape: int, window: int, seed0: int) -> list[TestMap]:
     """``n`` generated maps, map ``i`` = ``generate_map(KINDS[i % 4], (shape, shape), seed=seed0 + i)``,
     cropped to ``window``."""
@@ -904,27 +946,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         choices=TEST_CORPORA,
         help="test corpora (default: all of them, or none where --plan-files is given)",
     )
-    ap.add_argument(
-        "--plan-files",
-        nargs="+",
-        type=Path,
-        default=None,
-        metavar="PATH",
-        help="also score plans of other buildings: ROS map YAMLs or images, or folders of them "
-        "(ogm_ppl.datasets.plan_files), as one more test set",
-    )
-    ap.add_argument("--plan-set", default="files", help="the label of the --plan-files test set (default files)")
-    ap.add_argument(
-        "--pixel-size", type=float, default=None, help="metres per pixel of --plan-files images (a YAML has its own)"
-    )
-    ap.add_argument(
-        "--plan-outside",
-        default="occupied",
-        choices=("occupied", "unknown"),
-        help="a plan file's unknown and exterior cells: occupied and scored, as the corpora's (default), or unknown: "
-        "walls to the simulated sensor, never scored (for maps built from logs, whose unknown cells include "
-        "rooms nobody entered)",
-    )
+    add_plan_file_arguments(ap)
     ap.add_argument("--train", nargs="+", default=None, help="training corpora of the tables (default: all shipped)")
     ap.add_argument(
         "--priors",
@@ -996,11 +1018,7 @@ def parse_args(argv=None) -> argparse.Namespace:
     args.priors = args.priors or default_priors(args.train)
     if args.test is None:
         args.test = [] if args.plan_files else list(TEST_CORPORA)
-    if args.plan_files:
-        if args.plan_set in TEST_CORPORA or not args.plan_set.replace("_", "").replace("-", "").isalnum():
-            ap.error(f"--plan-set {args.plan_set!r}: a name of letters, digits, - and _ that is not a test corpus")
-    elif args.pixel_size is not None or args.plan_outside != "occupied":
-        ap.error("--pixel-size and --plan-outside apply to --plan-files only")
+    check_plan_file_arguments(ap, args)
     return args
 
 
@@ -1060,14 +1078,7 @@ def main(argv=None) -> dict:
 
     test_sets = [(test, heldout_maps(test, args.plans, args.window, args.generated_shape)) for test in args.test]
     if args.plan_files:
-        test_sets.append(
-            (
-                args.plan_set,
-                plan_file_maps(
-                    args.plan_files, args.plans, args.window, args.pixel_size, args.plan_set, args.plan_outside
-                ),
-            )
-        )
+        test_sets.append((args.plan_set, plan_set_maps(args, args.plans)))
     runs_of = {}
     for test, maps in test_sets:  # refuse leakage before anything runs
         own = test in TEST_CORPORA and args.diagonal  # a plan set has no priors of its own: every one runs on it

@@ -19,6 +19,10 @@ values: one run per value, from the same seeds, so agreement can be followed as 
     python experiments/unseen_by_distance.py --guide houseexpo+ipa@sym --test houseexpo ipa   # about a minute
     python experiments/unseen_by_distance.py --prior border_bo@cal --kernel cycle --test dungeon --plans 2 \
         --sweeps 200 1000 3000
+    python experiments/unseen_by_distance.py --plan-files out/log_plans --plan-set logs --plan-outside unknown
+
+``--plan-files`` (and ``--plan-set``, ``--pixel-size``, ``--plan-outside``, as ``calibration.py`` takes them) bins
+plans of other buildings too; a prior run on them must name its corpus (``KIND:CORPUS``).
 
 Writes ``OUT/unseen_by_distance.json`` (settings, provenance, one row per corpus, bin and sweep count) and
 prints a table.
@@ -55,7 +59,10 @@ def _bins(d: np.ndarray, unseen: np.ndarray) -> list[np.ndarray]:
 
 
 def _maps(test: str, args: argparse.Namespace, train_corpora: list[str]):
-    maps = calibration.heldout_maps(test, args.plans, args.window)
+    if args.plan_files and test == args.plan_set:
+        maps = calibration.plan_set_maps(args, args.plans)
+    else:
+        maps = calibration.heldout_maps(test, args.plans, args.window)
     for corpus in train_corpora:  # never a map of the method's training plans
         calibration.check_heldout(test, [t.plan for t in maps], corpus)
     return maps
@@ -122,6 +129,8 @@ def chains_by_distance(test: str, args: argparse.Namespace) -> list[dict]:
     the guide rows' fields, plus ``agree`` (share of the bin's cells whose split R-hat is below 1.05) and
     ``chain_occupied`` (each chain's mean marginal over the bin's cells, in :data:`calibration.STARTS` order)."""
     name, train = calibration.prior_names([args.prior], [test])[-1]  # KIND:TEST[@MOD] unless it names a corpus
+    if test not in TESTS and train == test:
+        raise SystemExit(f"{args.prior}: no prior is learned on the plan set {test!r}; name one as KIND:CORPUS")
     maps = _maps(test, args, [train])
     nb, C = len(EDGES) - 1, len(calibration.STARTS)
     acc = {S: {**_sums(nb), "ok": np.zeros(nb), "chain": np.zeros((nb, C))} for S in args.sweeps}
@@ -184,7 +193,10 @@ def main(argv=None) -> dict:
     ap.add_argument("--kernel", default="cycle", choices=sorted(calibration.KERNELS), help="a prior's sampler")
     ap.add_argument("--sweeps", type=int, nargs="+", default=[200], help="kept sweeps per chain (one run each)")
     ap.add_argument("--burn", type=int, default=None, help="warm-up sweeps per chain (default: a quarter of --sweeps)")
-    ap.add_argument("--test", nargs="+", default=list(TESTS), choices=TESTS)
+    ap.add_argument(
+        "--test", nargs="+", default=None, choices=TESTS, help="test corpora (default: all, or none with --plan-files)"
+    )
+    calibration.add_plan_file_arguments(ap)
     ap.add_argument("--plans", type=int, default=10, help="held-out maps per test corpus (default 10)")
     ap.add_argument("--out", type=Path, default=Path("out/unseen_by_distance"))
     args = ap.parse_args(argv)
@@ -194,6 +206,10 @@ def main(argv=None) -> dict:
         raise SystemExit("--sweeps must be at least 4 (split R-hat halves each chain) and --burn at least 0")
     if args.prior is None and args.guide is None:
         args.guide = "houseexpo+ipa@sym"
+    calibration.check_plan_file_arguments(ap, args)
+    if args.test is None:
+        args.test = [] if args.plan_files else list(TESTS)
+    tests = args.test + ([args.plan_set] if args.plan_files else [])
     proto = calibration.parse_args(["--plans", str(args.plans)])  # the calibration protocol's sensor and window
     for k in ("window", "poses", "beams", "range_cells", "sigma", "seed", "max_support"):
         setattr(args, k, getattr(proto, k))
@@ -202,12 +218,12 @@ def main(argv=None) -> dict:
 
     t0 = time.perf_counter()
     if args.prior is not None:
-        rows = [r for test in args.test for r in chains_by_distance(test, args)]
+        rows = [r for test in tests for r in chains_by_distance(test, args)]
         _print(rows, f"{args.prior} ({args.kernel}, 3 chains)")
         settings = {"prior": args.prior, "kernel": args.kernel, "sweeps": args.sweeps, "burn": args.burn}
     else:
         guide = calibration.guide_for(args.guide, args.guide_dir)
-        rows = [r for test in args.test for r in by_distance(test, guide, args)]
+        rows = [r for test in tests for r in by_distance(test, guide, args)]
         _print(rows, f"guide:{args.guide}")
         settings = {"guide": args.guide, "guide_dir": None if args.guide_dir is None else str(args.guide_dir)}
     doc = {
@@ -217,6 +233,16 @@ def main(argv=None) -> dict:
             "plans": args.plans,
             "window": args.window,
             "edges": [e if np.isfinite(e) else None for e in EDGES],
+            **(
+                {
+                    "plan_files": [str(p) for p in args.plan_files],
+                    "plan_set": args.plan_set,
+                    "pixel_size": args.pixel_size,
+                    "plan_outside": args.plan_outside,
+                }
+                if args.plan_files
+                else {}
+            ),
         },
         "rows": rows,
         "seconds": time.perf_counter() - t0,

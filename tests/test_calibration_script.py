@@ -8,7 +8,7 @@ import sys
 import pytest
 import torch
 
-from tests._scripts import load_experiment
+from tests._scripts import load_experiment, write_plan_folder
 
 
 @pytest.fixture(scope="module")
@@ -238,25 +238,6 @@ def test_a_bias_file_runs_each_named_prior_biased_beside_it(cal, tmp_path):
         cal.main([*argv, "--bias-file", str(bias), "--out", str(tmp_path / "bad")])
 
 
-def _plan_folder(tmp_path):
-    """Two plans of buildings in no corpus: a generated office map as a PNG (0.025 m pixels, so read at half
-    size) and a hall map as a ROS map (0.05 m cells)."""
-    import numpy as np
-    from PIL import Image
-
-    from ogm_ppl import Grid
-    from ogm_ppl.datasets.mapgen import generate_map
-    from ogm_ppl.rosmap import save_ros_map
-
-    d = tmp_path / "plans"
-    d.mkdir()
-    office = generate_map("office", (80, 80), seed=3)
-    Image.fromarray(np.where(office, 0, 255).astype(np.uint8)).resize((160, 160), Image.NEAREST).save(d / "office.png")
-    hall = generate_map("hall", (80, 80), seed=4)
-    save_ros_map(d / "hall.yaml", hall[::-1].astype(float).ravel(), Grid(hall.shape, resolution=0.05), sidecar=False)
-    return d
-
-
 PLAN_RUN = (
     "--train houseexpo --priors independent patch3 --diagonal --plans 5 --window 36 --poses 2 --beams 45 "
     "--range-cells 30 --sweeps 8 --burn 2 --no-figures --plan-set mine --pixel-size 0.025"
@@ -264,7 +245,7 @@ PLAN_RUN = (
 
 
 def test_plan_files_are_one_more_test_set_scored_with_every_prior(cal, tmp_path):
-    d = _plan_folder(tmp_path)
+    d = write_plan_folder(tmp_path)
     res = cal.main([*PLAN_RUN, "--plan-files", str(d), "--out", str(tmp_path / "out")])
     rows = res["rows"]
     assert {r["test"] for r in rows} == {"mine"}  # no corpus runs unless --test names one
@@ -318,7 +299,7 @@ def test_a_corpus_plan_given_as_a_file_is_refused(cal, tmp_path):
         cal.check_plan_files([tmp_path / "copy.png"])
     from ogm_ppl.datasets.plan_files import plan_files
 
-    cal.check_plan_files(plan_files([_plan_folder(tmp_path)]))  # plans of no corpus pass
+    cal.check_plan_files(plan_files([write_plan_folder(tmp_path)]))  # plans of no corpus pass
 
 
 def test_cells_a_plan_does_not_know_are_walls_to_the_sensor_and_never_scored(cal, tmp_path):

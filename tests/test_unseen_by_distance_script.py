@@ -67,3 +67,20 @@ def test_bad_chain_settings_are_refused(ubd, tmp_path, argv, match, capsys):
         ubd.main([*argv, "--out", str(tmp_path)])
     if "not allowed" in match:
         assert match in capsys.readouterr().err
+
+
+def test_plan_files_are_binned_as_calibration_scores_them(ubd, tmp_path):
+    from tests._scripts import write_plan_folder
+
+    d = write_plan_folder(tmp_path)
+    argv = ["--guide", "houseexpo", "--plan-files", str(d), "--plan-set", "mine", "--pixel-size", "0.025"]
+    doc = ubd.main([*argv, "--plans", "1", "--out", str(tmp_path / "out")])
+    rows = doc["rows"]
+    assert {r["test"] for r in rows} == {"mine"} and doc["settings"]["plan_set"] == "mine"
+    cal = ubd.calibration
+    args = cal.parse_args(["--plans", "1", "--plan-files", str(d), "--plan-set", "mine", "--pixel-size", "0.025"])
+    scene = cal.make_scene(cal.plan_set_maps(args, 1)[0], args)
+    scored = cal.run_guide(scene, cal.guide_for("houseexpo"), args)["scores"]["unseen"]["nll_bits"]
+    assert sum(r["share"] * r["nll_bits"] for r in rows) == pytest.approx(scored, rel=1e-6)
+    with pytest.raises(SystemExit, match="no prior is learned on the plan set"):
+        ubd.main(["--prior", "patch3", "--plan-files", str(d), "--pixel-size", "0.025", "--out", str(tmp_path)])
