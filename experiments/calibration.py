@@ -59,12 +59,13 @@ prior name, fitted so that the prior fills an empty window as its training corpu
 tables alone) also runs every prior it names as ``NAME+bias``, the prior times ``exp(h sum_k m_k)``
 (:class:`~ogm_ppl.priors.BiasedPrior`), beside the prior itself.
 
-Plans of other buildings. ``--plan-files PATH ...`` (ROS map YAMLs, images with ``--pixel-size``, or folders of
-them; :mod:`ogm_ppl.datasets.plan_files`, read at 0.05 m a cell) adds one more test set, labelled ``--plan-set``
-(default ``files``), whose first ``--plans`` usable plans are cropped and scored as the corpora's held-out maps
-are, with every prior of every ``--train`` corpus (no prior was learned on them, so ``--diagonal`` does not
-thin them) and every guide; without ``--test`` only the plan set runs. A file under the floor-plan corpora's
-folder, or with the bytes of a corpus plan, is refused (:func:`check_plan_files`).
+Plans of other buildings. ``--plan-files PATH ...`` (ROS map YAMLs, HouseExpo layouts, images with
+``--pixel-size``, or folders of them; :mod:`ogm_ppl.datasets.plan_files`, read at 0.05 m a cell) adds one more
+test set, labelled ``--plan-set`` (default ``files``), whose first ``--plans`` usable plans are cropped and
+scored as the corpora's held-out maps are, with every prior of every ``--train`` corpus (no prior was learned on
+them, so ``--diagonal`` does not thin them) and every guide; without ``--test`` only the plan set runs. A file
+under the floor-plan corpora's folder, with the bytes of a corpus plan, or a layout under a corpus plan's
+HouseExpo id, is refused (:func:`check_plan_files`).
 ``experiments/log_plans.py`` makes such plans of the real logs' buildings.
 
 Outputs under ``--out`` (default ``out/calibration/``): ``calibration.json`` (settings, provenance, one row per
@@ -242,11 +243,18 @@ def corpus_file_digests() -> dict[str, str]:
 
 def check_plan_files(files: Sequence[Path]) -> None:
     """Refuse (:class:`LeakageError`) plan files that are plans of the corpora: a file under the floor-plan
-    root, or one whose bytes are those of a corpus plan file (for a YAML, the image it names too)."""
-    from ogm_ppl.datasets.plan_files import YAML_SUFFIXES, _images_named_by_yaml
+    root, one whose bytes are those of a corpus plan file (for a YAML, the image it names too), or a HouseExpo
+    layout named as one of the ``houseexpo`` corpus's plans (their names are HouseExpo ids)."""
+    from ogm_ppl.datasets.plan_files import LAYOUT_SUFFIXES, YAML_SUFFIXES, _images_named_by_yaml
 
     root = fp.floorplan_root().resolve()
     digests: dict[str, str] | None = None
+    layouts = [f for f in files if f.suffix.lower() in LAYOUT_SUFFIXES]
+    if layouts:
+        ids = set(fp.list_plans("houseexpo"))
+        for f in layouts:
+            if f.stem in ids:
+                raise LeakageError(f"{f}: the layout of the houseexpo corpus's plan {f.stem}; score it as its corpus")
     for f in files:
         pieces = [f.resolve()]
         if f.suffix.lower() in YAML_SUFFIXES:
@@ -270,9 +278,9 @@ def plan_file_maps(
     outside: str = "occupied",
 ) -> list[TestMap]:
     """The first ``n`` plans of ``paths`` (:func:`~ogm_ppl.datasets.plan_files.plan_files`: ROS map YAMLs,
-    images or folders of them, read at 0.05 m a cell by :func:`~ogm_ppl.datasets.plan_files.load_plan_file`)
-    whose chosen window holds at least 200 known free cells, each cropped to it; corpus plans refused
-    (:func:`check_plan_files`)."""
+    HouseExpo layouts, images or folders of them, read at 0.05 m a cell by
+    :func:`~ogm_ppl.datasets.plan_files.load_plan_file`) whose chosen window holds at least 200 known free
+    cells, each cropped to it; corpus plans refused (:func:`check_plan_files`)."""
     from ogm_ppl.datasets.plan_files import load_plan_file, plan_files, plan_names
 
     files = plan_files(paths)
@@ -299,7 +307,8 @@ def add_plan_file_arguments(ap: argparse.ArgumentParser) -> None:
         type=Path,
         default=None,
         metavar="PATH",
-        help="also score plans of other buildings: ROS map YAMLs or images, or folders of them "
+        help="also score plans of other buildings: ROS map YAMLs, HouseExpo layouts (.json) or images, or folders "
+        "of them "
         "(ogm_ppl.datasets.plan_files), as one more test set",
     )
     ap.add_argument("--plan-set", default="files", help="the label of the --plan-files test set (default files)")

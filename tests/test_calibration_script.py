@@ -297,6 +297,10 @@ def test_a_corpus_plan_given_as_a_file_is_refused(cal, tmp_path):
     (tmp_path / "copy.png").write_bytes(png[0].read_bytes())
     with pytest.raises(cal.LeakageError, match="the same bytes as the corpus plan"):
         cal.check_plan_files([tmp_path / "copy.png"])
+    layout = tmp_path / f"{png[0].stem}.json"  # a HouseExpo layout under a corpus plan's id
+    layout.write_text('{"verts": [[0, 0], [4, 0], [4, 3], [0, 3]]}')
+    with pytest.raises(cal.LeakageError, match="the layout of the houseexpo corpus's plan"):
+        cal.check_plan_files([layout])
     from ogm_ppl.datasets.plan_files import plan_files
 
     cal.check_plan_files(plan_files([write_plan_folder(tmp_path)]))  # plans of no corpus pass

@@ -1,16 +1,20 @@
-r"""Floor plans of any building, read from files: ROS map_server maps and plain images.
+r"""Floor plans of any building, read from files: ROS map_server maps, HouseExpo layouts and plain images.
 
 The corpora of :mod:`ogm_ppl.datasets.floorplans` are fixed collections. A plan of a building in none of them
 comes as a file, and :func:`load_plan_file` turns it into the same :class:`~ogm_ppl.datasets.floorplans.FloorPlan`
 the corpora give (occupancy and known masks, ``H x W`` bool, row 0 at the top of the image), so every
 experiment that scores held-out plans can score it (``experiments/calibration.py --plan-files``).
 
-Two kinds of file:
+Three kinds of file:
 
 * ``.yaml`` / ``.yml``: a ROS ``map_server`` map (:func:`ogm_ppl.rosmap.load_ros_map`, Nav2's reading): a cell
   is occupied where map_server publishes 100, free where it publishes 0 and unknown where it publishes -1;
   *scale* mode's values in between count as occupied from 50 up. The map's own ``resolution`` is its pixel
   size. Images a YAML in the same folder names are read through that YAML only.
+* ``.json``: a HouseExpo layout (Li et al., IROS 2020; the format of its 35,357 plans, of which the
+  ``houseexpo`` corpus here holds 100 renderings): ``verts``, the house's outline as one polygon of ``[x, y]``
+  metres, rendered as HouseExpo renders it (``pseudoslam/viz/vis_maps.py``): 1 cm pixels, the vertices
+  truncated to whole pixels, the polygon filled free, 25 pixels of exterior around it. Its pixel size is 0.01 m.
 * ``.png`` / ``.pgm`` / ``.bmp``: a drawn or scanned plan, dark = occupied, light = free, converted to grey and
   classified as the IPA corpus is (the most common grey of the image border, when it is neither black nor
   white, +-3 is unknown; the rest is thresholded at 128). An image has no scale: ``pixel_size`` (metres per
@@ -46,13 +50,28 @@ import numpy as np
 
 from ogm_ppl.datasets.floorplans import FloorPlan, _classify_ipa, _natural_key, _open_image, rasterise
 
-__all__ = ["PLAN_SUFFIXES", "MAX_PLAN_CELLS", "PlanFileError", "load_plan_file", "plan_files", "plan_names"]
+__all__ = [
+    "PLAN_SUFFIXES",
+    "MAX_PLAN_CELLS",
+    "PlanFileError",
+    "load_plan_file",
+    "plan_files",
+    "plan_names",
+    "render_layout",
+]
 
 IMAGE_SUFFIXES: tuple[str, ...] = (".png", ".pgm", ".bmp")
 YAML_SUFFIXES: tuple[str, ...] = (".yaml", ".yml")
-PLAN_SUFFIXES: tuple[str, ...] = YAML_SUFFIXES + IMAGE_SUFFIXES
+LAYOUT_SUFFIXES: tuple[str, ...] = (".json",)
+PLAN_SUFFIXES: tuple[str, ...] = YAML_SUFFIXES + LAYOUT_SUFFIXES + IMAGE_SUFFIXES
+#: HouseExpo's rendering: pixels per metre and exterior pixels around the outline
+HOUSEEXPO_PX_PER_M, HOUSEEXPO_PAD = 100, 25
+_MAX_LAYOUT_BYTES = 16 * 2**20
+_MAX_LAYOUT_VERTS = 100_000
 #: Largest plan grid built (cells, after resampling); a larger one is refused with this limit in the message.
 MAX_PLAN_CELLS = 50_000_000
+#: Largest HouseExpo rendering (1 cm pixels: a 140 m x 140 m outline)
+MAX_LAYOUT_PIXELS = 200_000_000
 
 
 class PlanFileError(ValueError):
@@ -85,6 +104,57 @@ def _pixels_of_yaml(path: Path) -> tuple[np.ndarray, np.ndarray, float]:
     occ = v >= 50
     free = (v >= 0) & (v < 50)
     return occ, free, float(m.settings.resolution)
+
+
+def _layout_verts(path: Path) -> np.ndarray:
+    """The ``verts`` of a HouseExpo layout, ``V x 2`` float metres, validated."""
+    import json
+
+    try:
+        raw = path.read_bytes()
+    except OSError as e:
+        raise PlanFileError(path, f"cannot read ({e.strerror or e})") from None
+    if len(raw) > _MAX_LAYOUT_BYTES:
+        raise PlanFileError(path, f"over {_MAX_LAYOUT_BYTES // 2**20} MiB: not a layout")
+    try:
+        doc = json.loads(raw.decode("utf-8-sig"))
+    except (UnicodeDecodeError, json.JSONDecodeError) as e:
+        where = f" (line {e.lineno}, column {e.colno})" if isinstance(e, json.JSONDecodeError) else ""
+        raise PlanFileError(path, f"not JSON text{where}: {e}") from None
+    if not isinstance(doc, dict) or "verts" not in doc:
+        raise PlanFileError(path, "not a HouseExpo layout: no 'verts' (the outline as [[x, y], ...] metres)")
+    verts = doc["verts"]
+    ok = isinstance(verts, list) and 3 <= len(verts) <= _MAX_LAYOUT_VERTS
+    ok = ok and all(
+        isinstance(v, list)
+        and len(v) == 2
+        and all(isinstance(c, (int, float)) and not isinstance(c, bool) and math.isfinite(c) for c in v)
+        for v in verts
+    )
+    if not ok:
+        raise PlanFileError(path, f"'verts' must be 3 to {_MAX_LAYOUT_VERTS:,} pairs of finite numbers [x, y]")
+    return np.asarray(verts, dtype=np.float64)
+
+
+def _layout_size(verts: np.ndarray) -> tuple[int, int]:
+    px = (verts * HOUSEEXPO_PX_PER_M).astype(np.int64)
+    return (
+        int(px[:, 1].max() - px[:, 1].min()) + 2 * HOUSEEXPO_PAD,
+        int(px[:, 0].max() - px[:, 0].min()) + 2 * HOUSEEXPO_PAD,
+    )
+
+
+def _pixels_of_layout(verts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """HouseExpo's rendering of ``verts``: the filled outline free, the rest occupied (wall or outside)."""
+    from PIL import Image, ImageDraw
+
+    px = (verts * HOUSEEXPO_PX_PER_M).astype(np.int64)  # truncated, as the reference renderer does
+    px = px - px.min(0) + HOUSEEXPO_PAD
+    h, w = _layout_size(verts)
+    im = Image.new("L", (w, h), 0)
+    ImageDraw.Draw(im).polygon([(int(x), int(y)) for x, y in px], fill=255, outline=255)
+    free = np.asarray(im) >= 128
+    return ~free, free
 
 
 def _pixels_of_image(path: Path) -> tuple[np.ndarray, np.ndarray]:
@@ -128,9 +198,10 @@ def load_plan_file(
     ``resolution`` metres per cell.
 
     Args:
-        path: a ROS map YAML or an image (:data:`PLAN_SUFFIXES`).
+        path: a ROS map YAML, a HouseExpo layout or an image (:data:`PLAN_SUFFIXES`).
         pixel_size: metres per pixel of an image (required for one); a ROS map's YAML states its own
-            (``resolution``), and ``pixel_size`` does not apply to it, so one value serves a folder of both.
+            (``resolution``) and a layout is rendered at 0.01 m, so ``pixel_size`` does not apply to them and one
+            value serves a folder of all three.
         resolution: metres per cell of the plan returned (the learned priors and guides use 0.05).
         margin, wall_cells, outside: as :func:`~ogm_ppl.datasets.floorplans.load_plan`.
         name: the plan's name (default the file's stem); also its building.
@@ -149,6 +220,15 @@ def load_plan_file(
     res = _positive(resolution, "resolution", p)
     if suffix in YAML_SUFFIXES:
         occ, free, px = _pixels_of_yaml(p)
+    elif suffix in LAYOUT_SUFFIXES:
+        verts = _layout_verts(p)
+        px = 1.0 / HOUSEEXPO_PX_PER_M
+        h, w = _layout_size(verts)
+        if h * w > MAX_LAYOUT_PIXELS:
+            raise PlanFileError(
+                p, f"an outline of {w} x {h} pixels of 1 cm, over the limit of {MAX_LAYOUT_PIXELS:,} pixels"
+            )
+        occ, free = _pixels_of_layout(verts)
     else:
         if pixel_size is None:
             raise PlanFileError(p, "an image has no scale: give its pixel size in metres (pixel_size, --pixel-size)")
@@ -221,3 +301,11 @@ def plan_names(files: Sequence[Path]) -> list[str]:
     full = [f.resolve() for f in files]
     root = Path(os.path.commonpath([str(f.parent) for f in full]))
     return [f.relative_to(root).with_suffix("").as_posix() for f in full]
+
+
+def render_layout(path: str | os.PathLike) -> np.ndarray:
+    """A HouseExpo layout rendered as HouseExpo renders it: ``H x W`` uint8, 255 free (inside the outline), 0
+    wall or outside, 1 cm pixels (the ``houseexpo`` corpus's PNGs are such renderings)."""
+    p = Path(path)
+    occ, _ = _pixels_of_layout(_layout_verts(p))
+    return np.where(occ, 0, 255).astype(np.uint8)

@@ -141,3 +141,47 @@ def test_plan_files_and_names(tmp_path):
     (tmp_path / "empty").mkdir()
     with pytest.raises(PlanFileError, match="no plan file"):
         plan_files([tmp_path / "empty"])
+
+
+def _layout(tmp_path, verts, name="house.json", **extra):
+    import json
+
+    path = tmp_path / name
+    path.write_text(json.dumps({"id": name.removesuffix(".json"), "verts": verts, **extra}))
+    return path
+
+
+def test_houseexpo_layout_renders_as_houseexpo_renders_it(tmp_path):
+    """An L-shaped outline (metres): its rendering at 1 cm with 25 pixels around it, and the plan equals the
+    corpus pipeline run on that rendering saved as a PNG (what the houseexpo corpus's PNGs are)."""
+    from ogm_ppl.datasets.plan_files import render_layout
+
+    verts = [[1.0, 2.0], [5.0, 2.0], [5.0, 4.0], [3.0, 4.0], [3.0, 6.5], [1.0, 6.5]]
+    path = _layout(tmp_path, verts, room_category={"bedroom": [[1.0, 2.0, 5.0, 4.0]]})
+    img = render_layout(path)
+    assert img.shape == (450 + 50, 400 + 50)  # (6.5 - 2) m x (5 - 1) m at 100 px a metre, plus 25 px a side
+    assert img[25 + 10, 25 + 10] == 255 and img[25 + 300, 25 + 300] == 0  # inside the L; in its notch
+    assert img[:25].max() == 0 and img[:, :25].max() == 0  # the exterior band
+    inside = (img == 255).sum()
+    assert abs(inside - (400 * 200 + 200 * 250)) <= 2 * (400 + 450) + 4  # the area, up to the outline's pixels
+    Image.fromarray(img).save(tmp_path / "house.png")
+    from_png = load_plan_file(tmp_path / "house.png", pixel_size=0.01)
+    plan = load_plan_file(path)
+    np.testing.assert_array_equal(plan.occupancy, from_png.occupancy)
+    assert plan.name == "house" and plan.resolution == 0.05
+
+
+def test_bad_layouts_name_the_file_and_line(tmp_path):
+    p = tmp_path / "bad.json"
+    p.write_text('{"verts": [[0, 0], [1, 0],\n [1, 1]')
+    with pytest.raises(PlanFileError, match=r"bad\.json: not JSON text \(line 2"):
+        load_plan_file(p)
+    (tmp_path / "other.json").write_text('{"rooms": []}')
+    with pytest.raises(PlanFileError, match=r"other\.json: not a HouseExpo layout: no 'verts'"):
+        load_plan_file(tmp_path / "other.json")
+    with pytest.raises(PlanFileError, match="pairs of finite numbers"):
+        load_plan_file(_layout(tmp_path, [[0, 0], [1, 0]], name="two.json"))
+    with pytest.raises(PlanFileError, match="pairs of finite numbers"):
+        load_plan_file(_layout(tmp_path, [[0, 0], [1, "a"], [1, 1]], name="text.json"))
+    with pytest.raises(PlanFileError, match="over the limit"):
+        load_plan_file(_layout(tmp_path, [[0, 0], [500, 0], [500, 500]], name="huge.json"))
