@@ -736,9 +736,16 @@ def _unseen_by_distance(doc: dict) -> Table:
         what = f"guide:{st['guide']}"
     return Table(
         caption=(
-            f"{what} on the unseen cells of {st['plans']} held-out maps per corpus, by distance to the "
-            "nearest cell a ray reached: share of the unseen cells, occupied share, NLL (bits/cell)"
-            + (", chain agreement and occupancy" if chains else "")
+            f"{what} on the unseen cells of {st['plans']} held-out maps per corpus"
+            + (
+                f" (plans of other buildings: {st['plan_set']}, their unknown cells "
+                + ("unscored" if st.get("plan_outside") == "unknown" else "occupied")
+                + ")"
+                if st.get("plan_files")
+                else ""
+            )
+            + ", by distance to the nearest cell a ray reached: share of the unseen cells, occupied share, NLL "
+            "(bits/cell)" + (", chain agreement and occupancy" if chains else "")
         ),
         header=header,
         rows=rows,
@@ -1116,6 +1123,8 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "calibration_cycle": ("calibration_cycle", _calibration_kernels),
     "unseen_by_distance": ("unseen_by_distance", _unseen_by_distance),
     "unseen_by_distance_chains": ("unseen_by_distance_chains", _unseen_by_distance),
+    "unseen_by_distance_logs": ("unseen_by_distance_logs", _unseen_by_distance),
+    "unseen_by_distance_logs_occupied": ("unseen_by_distance_logs_occupied", _unseen_by_distance),
     "prior_occupancy": ("prior_occupancy", _prior_occupancy),
     "calibration_bias": ("calibration_bias", _calibration_bias),
     "calibration_bias10": ("calibration_bias10", _calibration_bias),
