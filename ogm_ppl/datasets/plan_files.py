@@ -235,6 +235,8 @@ def load_plan_file(
         px = _positive(pixel_size, "pixel_size", p)
         occ, free = _pixels_of_image(p)
     f = res / px
+    if abs(f - round(f)) <= 1e-5 * f:  # a pixel size written to 6 digits (0.0166667 m: 3 a cell) -> whole blocks
+        f = float(round(f))
     cells = math.ceil(occ.shape[0] / f) * math.ceil(occ.shape[1] / f)
     if cells > MAX_PLAN_CELLS:
         raise PlanFileError(

@@ -185,3 +185,17 @@ def test_bad_layouts_name_the_file_and_line(tmp_path):
         load_plan_file(_layout(tmp_path, [[0, 0], [1, "a"], [1, 1]], name="text.json"))
     with pytest.raises(PlanFileError, match="over the limit"):
         load_plan_file(_layout(tmp_path, [[0, 0], [500, 0], [500, 500]], name="huge.json"))
+
+
+def test_a_pixel_size_a_whole_fraction_of_the_cell_gives_whole_blocks(tmp_path):
+    """A pixel size written to six digits (0.0166667 m, 3 pixels a 0.05 m cell: 0.05 / 0.0166667 = 2.999994) gives
+    whole blocks of pixels all the same (the corpora's integer downsampling)."""
+    rng = np.random.default_rng(2)
+    px = np.where(rng.random((100, 120)) < 0.05, 0, 255).astype(np.uint8)
+    px[:, :3] = 0
+    Image.fromarray(px).save(tmp_path / "speckle.png")
+    occ_px, free_px = px < 128, px >= 128
+    for pixel_size, k in ((0.01, 5), (0.0166667, 3), (0.00833333, 6), (0.025, 2)):
+        plan = load_plan_file(tmp_path / "speckle.png", pixel_size=pixel_size)
+        occ, _ = rasterise(occ_px, free_px, k)
+        np.testing.assert_array_equal(plan.occupancy, occ)
