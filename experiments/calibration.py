@@ -271,14 +271,14 @@ def check_plan_files(files: Sequence[Path]) -> None:
 
 def plan_file_maps(
     paths: Sequence[Path],
-    n: int,
+    n: int | None,
     window: int,
     pixel_size: float | None,
     label: str = "files",
     outside: str = "occupied",
 ) -> list[TestMap]:
-    """The first ``n`` plans of ``paths`` (:func:`~ogm_ppl.datasets.plan_files.plan_files`: ROS map YAMLs,
-    HouseExpo layouts, images or folders of them, read at 0.05 m a cell by
+    """The first ``n`` (``None``: all) plans of ``paths`` (:func:`~ogm_ppl.datasets.plan_files.plan_files`: ROS
+    map YAMLs, HouseExpo layouts, images or folders of them, read at 0.05 m a cell by
     :func:`~ogm_ppl.datasets.plan_files.load_plan_file`) whose chosen window holds at least 200 known free
     cells, each cropped to it; corpus plans refused (:func:`check_plan_files`)."""
     from ogm_ppl.datasets.plan_files import load_plan_file, plan_files, plan_names
@@ -287,7 +287,7 @@ def plan_file_maps(
     check_plan_files(files)
     out: list[TestMap] = []
     for f, name in zip(files, plan_names(files)):
-        if len(out) == n:
+        if n is not None and len(out) == n:
             break
         p = load_plan_file(f, pixel_size=pixel_size, name=name, corpus=label, outside=outside)
         t = _crop(label, name, p.occupancy, p.known, p.resolution or 0.05, window)
@@ -335,9 +335,9 @@ def check_plan_file_arguments(ap: argparse.ArgumentParser, args: argparse.Namesp
         ap.error("--pixel-size and --plan-outside apply to --plan-files only")
 
 
-def plan_set_maps(args: argparse.Namespace, n: int) -> list[TestMap]:
-    """The first ``n`` usable maps of the ``--plan-files`` test set (:func:`plan_file_maps` with the options of
-    :func:`add_plan_file_arguments`)."""
+def plan_set_maps(args: argparse.Namespace, n: int | None) -> list[TestMap]:
+    """The first ``n`` usable maps of the ``--plan-files`` test set (``None``: all of them; :func:`plan_file_maps`
+    with the options of :func:`add_plan_file_arguments`)."""
     return plan_file_maps(args.plan_files, n, args.window, args.pixel_size, args.plan_set, args.plan_outside)
 
 
@@ -981,7 +981,9 @@ def parse_args(argv=None) -> argparse.Namespace:
         action="store_true",
         help="score each test corpus only with the priors learned on it (every guide still runs on every corpus)",
     )
-    ap.add_argument("--plans", type=int, default=2, help="held-out maps per test corpus")
+    ap.add_argument(
+        "--plans", type=int, default=None, help="held-out maps per test corpus (default 2; every plan of --plan-files)"
+    )
     ap.add_argument("--window", type=int, default=96, help="maps are cropped to this many cells a side")
     ap.add_argument("--generated-shape", type=int, default=160, help="side of the held-out generated maps")
     ap.add_argument("--poses", type=int, default=3, help="stops of the sparse route")
@@ -1028,6 +1030,9 @@ def parse_args(argv=None) -> argparse.Namespace:
     if args.test is None:
         args.test = [] if args.plan_files else list(TEST_CORPORA)
     check_plan_file_arguments(ap, args)
+    args.plan_limit = args.plans  # None: every plan of --plan-files
+    if args.plans is None:
+        args.plans = 2
     return args
 
 
@@ -1060,7 +1065,7 @@ def main(argv=None) -> dict:
     if args.plan_files:
         settings["plan_files"] = [str(p) for p in args.plan_files]
     else:  # likewise for runs made before --plan-files existed
-        for k in ("plan_files", "plan_set", "pixel_size", "plan_outside"):
+        for k in ("plan_files", "plan_set", "pixel_size", "plan_outside", "plan_limit"):
             del settings[k]
     rows, runs = _load_previous(path, settings, args.fresh)
     done = {_row_key(r) for r in rows}
@@ -1087,7 +1092,7 @@ def main(argv=None) -> dict:
 
     test_sets = [(test, heldout_maps(test, args.plans, args.window, args.generated_shape)) for test in args.test]
     if args.plan_files:
-        test_sets.append((args.plan_set, plan_set_maps(args, args.plans)))
+        test_sets.append((args.plan_set, plan_set_maps(args, args.plan_limit)))
     runs_of = {}
     for test, maps in test_sets:  # refuse leakage before anything runs
         own = test in TEST_CORPORA and args.diagonal  # a plan set has no priors of its own: every one runs on it

@@ -60,7 +60,7 @@ def _bins(d: np.ndarray, unseen: np.ndarray) -> list[np.ndarray]:
 
 def _maps(test: str, args: argparse.Namespace, train_corpora: list[str]):
     if args.plan_files and test == args.plan_set:
-        maps = calibration.plan_set_maps(args, args.plans)
+        maps = calibration.plan_set_maps(args, args.plan_limit)
     else:
         maps = calibration.heldout_maps(test, args.plans, args.window)
     for corpus in train_corpora:  # never a map of the method's training plans
@@ -197,9 +197,13 @@ def main(argv=None) -> dict:
         "--test", nargs="+", default=None, choices=TESTS, help="test corpora (default: all, or none with --plan-files)"
     )
     calibration.add_plan_file_arguments(ap)
-    ap.add_argument("--plans", type=int, default=10, help="held-out maps per test corpus (default 10)")
+    ap.add_argument(
+        "--plans", type=int, default=None, help="held-out maps per test corpus (default 10; every plan of --plan-files)"
+    )
     ap.add_argument("--out", type=Path, default=Path("out/unseen_by_distance"))
     args = ap.parse_args(argv)
+    args.plan_limit = args.plans  # None: every plan of --plan-files
+    args.plans = 10 if args.plans is None else args.plans
     if args.plans < 1:
         raise SystemExit("--plans must be at least 1")
     if min(args.sweeps) < 4 or (args.burn is not None and args.burn < 0):

@@ -266,6 +266,8 @@ def test_plan_files_are_one_more_test_set_scored_with_every_prior(cal, tmp_path)
     # the same maps as the plan reader gives, cropped as the corpora's are
     maps = cal.plan_file_maps([d], 5, 36, 0.025, "mine")
     assert [t.corpus for t in maps] == ["mine", "mine"] and all(t.truth.shape == (36, 36) for t in maps)
+    assert [t.name for t in cal.plan_file_maps([d], None, 36, 0.025)] == [t.name for t in maps]
+    assert len(cal.plan_file_maps([d], 1, 36, 0.025)) == 1
 
 
 def test_runs_without_plan_files_keep_their_settings(cal, tmp_path):
@@ -283,6 +285,9 @@ def test_plan_file_arguments_are_checked(cal):
     with pytest.raises(SystemExit):
         cal.parse_args(["--pixel-size", "0.05"])  # without plan files
     assert cal.parse_args(["--plan-files", "x"]).test == [] and cal.parse_args([]).test == list(cal.TEST_CORPORA)
+    args = cal.parse_args(["--plan-files", "x"])  # no --plans: 2 maps a corpus, every plan of the plan set
+    assert (args.plans, args.plan_limit) == (2, None)
+    assert cal.parse_args(["--plan-files", "x", "--plans", "3"]).plan_limit == 3
 
 
 def test_a_corpus_plan_given_as_a_file_is_refused(cal, tmp_path):
