@@ -15,10 +15,12 @@ Three kinds of file:
   ``houseexpo`` corpus here holds 100 renderings): ``verts``, the house's outline as one polygon of ``[x, y]``
   metres, rendered as HouseExpo renders it (``pseudoslam/viz/vis_maps.py``): 1 cm pixels, the vertices
   truncated to whole pixels, the polygon filled free, 25 pixels of exterior around it. Its pixel size is 0.01 m.
-* ``.png`` / ``.pgm`` / ``.bmp``: a drawn or scanned plan, dark = occupied, light = free, converted to grey and
-  classified as the IPA corpus is (the most common grey of the image border, when it is neither black nor
-  white, +-3 is unknown; the rest is thresholded at 128). An image has no scale: ``pixel_size`` (metres per
-  pixel) must be given.
+* ``.png`` / ``.pgm`` / ``.bmp``: a drawn or scanned plan, dark = occupied, light = free, converted to 8-bit grey
+  (16-bit images scaled, not clipped) and classified as the IPA corpus is (the most common grey of the image
+  border, when it is neither black nor white, +-3 is unknown; the rest is thresholded at 128); transparent
+  pixels are unknown. The outside of the building must be dark, that grey or transparent: a plan drawn on white
+  paper reads its surroundings as free space. An image has no scale: ``pixel_size`` (metres per pixel) must be
+  given.
 
 Then as every corpus plan (the module docstring of :mod:`~ogm_ppl.datasets.floorplans`, steps 2-5): resampled to
 ``resolution`` metres per cell (a cell is occupied if any pixel whose top-left corner lies in it is occupied;
@@ -98,7 +100,8 @@ def _pixels_of_yaml(path: Path) -> tuple[np.ndarray, np.ndarray, float]:
     try:
         m = load_ros_map(path)
     except RosMapError as e:
-        raise PlanFileError(e.path, e.problem) from None
+        problem = e.problem if Path(e.path) == path else f"its image {e.path}: {e.problem}"
+        raise PlanFileError(path, problem) from None
     rows, cols = m.grid.shape if m.grid.ndim == 2 else (1, m.grid.num_cells)
     v = m.occupancy.reshape(rows, cols)[::-1]  # OccupancyGrid row 0 is the bottom; plans have the top first
     occ = v >= 50
@@ -157,12 +160,36 @@ def _pixels_of_layout(verts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return ~free, free
 
 
+def _grey8(im, path: Path):
+    """The image as 8-bit grey (``"L"``): 16-bit and 32-bit integer images scaled by ``1/257`` (Pillow's own
+    conversion clips them at 255), anything else converted by Pillow; ``(grey, transparent)`` with
+    ``transparent`` the pixels of alpha 0 (None without alpha)."""
+    from PIL import Image
+
+    transparent = None
+    if im.mode in ("RGBA", "LA", "PA") or (im.mode == "P" and "transparency" in im.info):
+        transparent = np.asarray(im.convert("RGBA"))[..., 3] == 0
+    if im.mode.startswith("I;16") or im.mode == "I":
+        a = np.asarray(im).astype(np.int64)
+        if a.min() < 0 or a.max() > 65535:
+            raise PlanFileError(path, f"{im.mode} pixels outside 0..65535 ({a.min()}..{a.max()}): not a grey image")
+        eight = a if im.mode == "I" and a.max() <= 255 else (a + 128) // 257
+        return Image.fromarray(eight.astype(np.uint8)), transparent
+    if im.mode == "F":
+        raise PlanFileError(path, "a floating-point image: save the plan as 8- or 16-bit grey")
+    return im.convert("L"), transparent
+
+
 def _pixels_of_image(path: Path) -> tuple[np.ndarray, np.ndarray]:
     try:
         im = _open_image(path, str(path))
     except ValueError as e:
         raise PlanFileError(path, str(e).removeprefix(f"{path}: ")) from None
-    return _classify_ipa(im)
+    grey, transparent = _grey8(im, path)
+    occ, free = _classify_ipa(grey)
+    if transparent is not None:  # transparent pixels are unknown, as map_server reads them
+        occ, free = occ & ~transparent, free & ~transparent
+    return occ, free
 
 
 def _resample(occ: np.ndarray, free: np.ndarray, f: float) -> tuple[np.ndarray, np.ndarray]:
@@ -242,13 +269,13 @@ def load_plan_file(
         raise PlanFileError(
             p,
             f"{occ.shape[1]} x {occ.shape[0]} pixels of {px} m give {cells:,} cells of {res} m, over the limit "
-            f"of {MAX_PLAN_CELLS:,}; pass a coarser resolution",
+            f"of {MAX_PLAN_CELLS:,}: is the pixel size right?",
         )
     if not free.any():
         raise PlanFileError(p, "no free pixel: not a plan (dark = occupied, light = free)")
     occ, free = _resample(occ, free, f)
     if not free.any():
-        raise PlanFileError(p, f"no free cell left at {res} m a cell")
+        raise PlanFileError(p, f"no free cell left at {res} m a cell ({f:.3g} pixels of {px} m a cell side)")
     occupancy, known = rasterise(occ, free, 1, margin, wall_cells, outside)
     label = p.stem if name is None else str(name)
     return FloorPlan(
@@ -286,7 +313,8 @@ def plan_files(paths: Iterable[str | os.PathLike]) -> list[Path]:
             found.append(p)
         else:
             raise PlanFileError(p, "no such file or folder")
-    found = list(dict.fromkeys(found))
+    seen: set[Path] = set()
+    found = [q for q in found if not (q.resolve() in seen or seen.add(q.resolve()))]  # each file once, first kept
     named = {_images_named_by_yaml(q) for q in found if q.suffix.lower() in YAML_SUFFIXES}
     out = [q for q in found if q.suffix.lower() in YAML_SUFFIXES or q.resolve() not in named]
     if not out:
@@ -295,14 +323,19 @@ def plan_files(paths: Iterable[str | os.PathLike]) -> list[Path]:
 
 
 def plan_names(files: Sequence[Path]) -> list[str]:
-    """One distinct name per file: its stem, or where stems repeat (``a/ros/map.yaml``, ``b/ros/map.yaml``) the
-    path below the files' common folder without the suffix (``a/ros/map``, ``b/ros/map``)."""
+    """One distinct name per file: its stem; where stems repeat (``a/ros/map.yaml``, ``b/ros/map.yaml``) the
+    path below the files' common folder without the suffix (``a/ros/map``, ``b/ros/map``); where those repeat
+    too (``house.png``, ``house.json``), with it. Raises :class:`PlanFileError` for a file given twice."""
+    full = [f.resolve() for f in files]
+    if len(set(full)) < len(full):
+        twice = next(f for f in full if full.count(f) > 1)
+        raise PlanFileError(twice, "given twice")
     stems = [f.stem for f in files]
     if len(set(stems)) == len(stems):
         return stems
-    full = [f.resolve() for f in files]
     root = Path(os.path.commonpath([str(f.parent) for f in full]))
-    return [f.relative_to(root).with_suffix("").as_posix() for f in full]
+    rel = [f.relative_to(root).with_suffix("").as_posix() for f in full]
+    return rel if len(set(rel)) == len(rel) else [f.relative_to(root).as_posix() for f in full]
 
 
 def render_layout(path: str | os.PathLike) -> np.ndarray:

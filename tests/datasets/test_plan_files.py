@@ -199,3 +199,48 @@ def test_a_pixel_size_a_whole_fraction_of_the_cell_gives_whole_blocks(tmp_path):
         plan = load_plan_file(tmp_path / "speckle.png", pixel_size=pixel_size)
         occ, _ = rasterise(occ_px, free_px, k)
         np.testing.assert_array_equal(plan.occupancy, occ)
+
+
+def test_16_bit_grey_and_transparent_images(tmp_path):
+    """A 16-bit plan reads as its 8-bit copy (Pillow's own conversion would clip every value over 255 to white);
+    transparent pixels are unknown."""
+    px = _room()
+    Image.fromarray(px).save(tmp_path / "room8.png")
+    Image.fromarray(px.astype(np.uint16) * 257).save(tmp_path / "room16.png")
+    assert Image.open(tmp_path / "room16.png").mode.startswith("I")
+    a = load_plan_file(tmp_path / "room8.png", pixel_size=0.05)
+    b = load_plan_file(tmp_path / "room16.png", pixel_size=0.05)
+    np.testing.assert_array_equal(a.occupancy, b.occupancy)
+    np.testing.assert_array_equal(a.known, b.known)
+    dark = np.where(px == 0, 1000, 65535).astype(np.uint16)  # walls at 1000 / 65535: dark, though over 255
+    dark[px == 205] = 205 * 257
+    Image.fromarray(dark).save(tmp_path / "dark16.png")
+    np.testing.assert_array_equal(load_plan_file(tmp_path / "dark16.png", pixel_size=0.05).occupancy, a.occupancy)
+    # RGBA: the grey background drawn transparent instead reads as the same unknown cells
+    rgba = np.zeros((*px.shape, 4), np.uint8)
+    rgba[..., :3] = np.where(px == 205, 0, px)[..., None]
+    rgba[..., 3] = np.where(px == 205, 0, 255)
+    Image.fromarray(rgba, "RGBA").save(tmp_path / "room_rgba.png")
+    c = load_plan_file(tmp_path / "room_rgba.png", pixel_size=0.05, outside="unknown")
+    ref = load_plan_file(tmp_path / "room8.png", pixel_size=0.05, outside="unknown")
+    np.testing.assert_array_equal(c.known, ref.known)
+    np.testing.assert_array_equal(c.occupancy, ref.occupancy)
+
+
+def test_names_stay_distinct_and_a_file_is_read_once(tmp_path):
+    import json
+
+    Image.fromarray(_room()).save(tmp_path / "house.png")
+    (tmp_path / "house.json").write_text(json.dumps({"verts": [[0, 0], [4, 0], [4, 3], [0, 3]]}))
+    (tmp_path / "x").mkdir()
+    files = plan_files([tmp_path, tmp_path / "x" / ".." / "house.png"])  # the same PNG twice: read once
+    assert sorted(plan_names(files)) == ["house.json", "house.png"]
+    with pytest.raises(PlanFileError, match="given twice"):
+        plan_names([tmp_path / "house.png", tmp_path / "x" / ".." / "house.png"])
+
+
+def test_a_yaml_naming_a_missing_image_is_named(tmp_path):
+    keys = "resolution: 0.05\norigin: [0.0, 0.0, 0.0]\noccupied_thresh: 0.65\nfree_thresh: 0.196\nnegate: 0\n"
+    (tmp_path / "map.yaml").write_text("image: nosuch.pgm\n" + keys)
+    with pytest.raises(PlanFileError, match=r"map\.yaml: its image .*nosuch\.pgm"):
+        load_plan_file(tmp_path / "map.yaml")
