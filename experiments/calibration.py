@@ -108,6 +108,7 @@ from ogm_ppl import GaussianRange, Grid, OccupancyModel, Rays, raycast
 from ogm_ppl.datasets import floorplans as fp
 from ogm_ppl.datasets.mapgen import KINDS as MAP_KINDS
 from ogm_ppl.datasets.mapgen import generate_map
+from ogm_ppl.datasets.plan_files import PlanFileError
 from ogm_ppl.datasets.stop_and_scan import stop_and_scan
 from ogm_ppl.inference import CellGibbs, PatchGibbs, RunningStats, evidence_grid, run_gibbs
 from ogm_ppl.inference.mcmc import mixing_cycle
@@ -149,6 +150,7 @@ RUN_KEYS = (
     "temper",
     "patch",
     "bias",
+    "plan_digests",
 )
 
 
@@ -241,10 +243,62 @@ def corpus_file_digests() -> dict[str, str]:
     return out
 
 
+#: share of equal pixels (occupied or not) at which a plan file's pixels are a copy of a corpus plan's
+NEAR_COPY = 0.99
+
+
+def corpus_image_sizes() -> dict[tuple[int, int], list[tuple[str, str]]]:
+    """``(rows, cols)`` of every HouseExpo and IPA plan image (read from the file headers) -> ``(corpus, name)``."""
+    from PIL import Image
+
+    out: dict[tuple[int, int], list[tuple[str, str]]] = {}
+    for corpus in ("houseexpo", "ipa"):
+        for name in fp.list_plans(corpus):
+            with Image.open(fp.plan_image_path(corpus, name)) as im:
+                out.setdefault((im.size[1], im.size[0]), []).append((corpus, name))
+    return out
+
+
+def _plan_pixels(f: Path) -> np.ndarray:
+    """The occupied pixels of a plan file before resampling (image order)."""
+    from ogm_ppl.datasets import plan_files as pf
+
+    suffix = f.suffix.lower()
+    if suffix in pf.YAML_SUFFIXES:
+        return pf._pixels_of_yaml(f)[0]
+    if suffix in pf.LAYOUT_SUFFIXES:
+        return pf._pixels_of_layout(pf._layout_verts(f))[0]
+    return pf._pixels_of_image(f)[0]
+
+
+def check_near_copies(files: Sequence[Path]) -> None:
+    """Refuse (:class:`LeakageError`) a plan file whose pixels, in any of the 8 turns and flips, agree with a
+    HouseExpo or IPA plan image of the same size on at least :data:`NEAR_COPY` of them (a corpus plan re-saved,
+    touched up or turned). A copy at another scale is not caught."""
+    sizes = corpus_image_sizes()
+    seen: dict[tuple[str, str], np.ndarray] = {}
+    for f in files:
+        occ = _plan_pixels(f)
+        for k in range(8):
+            a = np.rot90(occ, k % 4)
+            a = a[:, ::-1] if k >= 4 else a
+            for corpus, name in sizes.get(a.shape, []):
+                if (corpus, name) not in seen:
+                    seen[corpus, name] = fp._pixels(corpus, name, None)[0]
+                agree = float((seen[corpus, name] == a).mean())
+                if agree >= NEAR_COPY:
+                    raise LeakageError(
+                        f"{f}: {agree:.1%} of its pixels are those of the {corpus} plan {name}: a copy of a corpus "
+                        "plan; score it as its corpus instead"
+                    )
+
+
 def check_plan_files(files: Sequence[Path]) -> None:
     """Refuse (:class:`LeakageError`) plan files that are plans of the corpora: a file under the floor-plan
-    root, one whose bytes are those of a corpus plan file (for a YAML, the image it names too), or a HouseExpo
-    layout named as one of the ``houseexpo`` corpus's plans (their names are HouseExpo ids)."""
+    root, one whose bytes are those of a corpus plan file (for a YAML, the image it names too), a HouseExpo
+    layout named as one of the ``houseexpo`` corpus's plans (their names are HouseExpo ids), or a near copy of a
+    corpus plan's pixels (:func:`check_near_copies`). DungeonMaps (synthetic, inside one archive) are not
+    compared."""
     from ogm_ppl.datasets.plan_files import LAYOUT_SUFFIXES, YAML_SUFFIXES, _images_named_by_yaml
 
     root = fp.floorplan_root().resolve()
@@ -267,6 +321,7 @@ def check_plan_files(files: Sequence[Path]) -> None:
             same = digests.get(hashlib.sha256(piece.read_bytes()).hexdigest())
             if same is not None:
                 raise LeakageError(f"{f}: the same bytes as the corpus plan {same}; score it as its corpus instead")
+    check_near_copies(files)
 
 
 def plan_file_maps(
@@ -328,11 +383,28 @@ def add_plan_file_arguments(ap: argparse.ArgumentParser) -> None:
 def check_plan_file_arguments(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
     """Refuse (``ap.error``) a plan-set label that is empty of letters or a test corpus's name, and plan-file
     options without ``--plan-files``."""
+    if args.plans is not None and args.plans < 1:
+        ap.error("--plans must be at least 1")
     if args.plan_files:
-        if args.plan_set in TEST_CORPORA or not args.plan_set.replace("_", "").replace("-", "").isalnum():
-            ap.error(f"--plan-set {args.plan_set!r}: a name of letters, digits, - and _ that is not a test corpus")
+        reserved = {c.lower() for c in TEST_CORPORA} | {"none"}  # "none": the training corpus of OGM's rows
+        if args.plan_set.lower() in reserved or not args.plan_set.replace("_", "").replace("-", "").isalnum():
+            ap.error(f"--plan-set {args.plan_set!r}: a name of letters, digits, - and _, not a test corpus nor 'none'")
     elif args.pixel_size is not None or args.plan_outside != "occupied":
         ap.error("--pixel-size and --plan-outside apply to --plan-files only")
+
+
+def plan_digests(paths: Sequence[Path]) -> dict[str, str]:
+    """SHA-256 of every plan file of ``paths`` (and of the image each YAML names), by path: what a resumed run
+    must find unchanged."""
+    from ogm_ppl.datasets.plan_files import YAML_SUFFIXES, _images_named_by_yaml, plan_files
+
+    out = {}
+    for f in plan_files(paths):
+        pieces = [f] + ([_images_named_by_yaml(f)] if f.suffix.lower() in YAML_SUFFIXES else [])
+        for q in pieces:
+            if q is not None and q.is_file():
+                out[str(q)] = hashlib.sha256(q.read_bytes()).hexdigest()
+    return out
 
 
 def plan_set_maps(args: argparse.Namespace, n: int | None) -> list[TestMap]:
@@ -835,7 +907,8 @@ def tables_md(summ: list[dict], settings: dict) -> str:
         "# Priors as predictors of unseen cells: prediction and calibration\n",
         f"Settings: {json.dumps(settings)}\n",
         "Means over the held-out maps. `rhat<1.05`: share of unseen cells whose split R-hat over the chains from "
-        "OGM, all-free and prior-draw starts is below 1.05. Priors learned on the test corpus:\n",
+        "OGM, all-free and prior-draw starts is below 1.05. Per test corpus, the priors learned on it (on a set of "
+        "plan files, which no prior was learned on, every prior):\n",
     ]
     for mask in MASKS:
         for test in tests:
@@ -915,7 +988,7 @@ def figures(summ: list[dict], out: Path) -> list[Path]:
                 ax.set_ylabel({"nll_bits": "NLL (bits/cell)", "auc": "ROC AUC"}[key], fontsize=8)
                 if i == 0:
                     ax.set_title(test, fontsize=9)
-        fig.suptitle(f"{mask} cells, priors learned on the test corpus", fontsize=10)
+        fig.suptitle(f"{mask} cells, priors learned on the test corpus (every prior on plan files)", fontsize=10)
         fig.tight_layout()
         p = out / f"bars_{mask}.png"
         fig.savefig(p, dpi=110)
@@ -1015,6 +1088,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument("--no-figures", action="store_true")
     ap.add_argument("--quick", action="store_true", help="smoke run: 1 map of 48 cells per corpus, 3 priors")
     args = ap.parse_args(argv)
+    if args.sweeps < 4 or args.burn < 0:
+        ap.error("--sweeps must be at least 4 (split R-hat halves each chain) and --burn at least 0")
     if args.kernel == "tempering":
         try:
             geometric_ladder(args.rungs, args.beta_min)
@@ -1064,6 +1139,10 @@ def main(argv=None) -> dict:
         del settings["bias"]
     if args.plan_files:
         settings["plan_files"] = [str(p) for p in args.plan_files]
+        try:
+            settings["plan_digests"] = plan_digests(args.plan_files)  # a changed plan file refuses to resume
+        except PlanFileError as e:
+            raise SystemExit(f"calibration.py: {e}") from None
     else:  # likewise for runs made before --plan-files existed
         for k in ("plan_files", "plan_set", "pixel_size", "plan_outside", "plan_limit"):
             del settings[k]
@@ -1092,7 +1171,10 @@ def main(argv=None) -> dict:
 
     test_sets = [(test, heldout_maps(test, args.plans, args.window, args.generated_shape)) for test in args.test]
     if args.plan_files:
-        test_sets.append((args.plan_set, plan_set_maps(args, args.plan_limit)))
+        try:
+            test_sets.append((args.plan_set, plan_set_maps(args, args.plan_limit)))
+        except (PlanFileError, LeakageError) as e:
+            raise SystemExit(f"calibration.py: {e}") from None
     runs_of = {}
     for test, maps in test_sets:  # refuse leakage before anything runs
         own = test in TEST_CORPORA and args.diagonal  # a plan set has no priors of its own: every one runs on it

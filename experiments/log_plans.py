@@ -1,5 +1,7 @@
-r"""Floor plans of the buildings of the real logs: the maps ``experiments/map_all_logs.py`` builds from every
-reading of each log, cleaned into plans that ``experiments/calibration.py --plan-files`` scores.
+r"""Floor plans of the real logs' buildings, cleaned from the maps of all their readings.
+
+The maps are those ``experiments/map_all_logs.py`` builds from every reading of each log; the plans are what
+``experiments/calibration.py --plan-files`` scores.
 
 None of these buildings is in a floor-plan corpus (the IPA plans of Intel and Freiburg are left out of every
 training set, :data:`~ogm_ppl.datasets.floorplans.REAL_LOG_BUILDINGS`), so they test the learned priors and guides
@@ -57,7 +59,9 @@ def clean(occupancy: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--maps", type=Path, default=Path("out/logs"), help="map_all_logs.py's output folder")
+    ap.add_argument(
+        "--maps", type=Path, default=Path("out/logs"), help="map_all_logs.py's output folder (default out/logs)"
+    )
     ap.add_argument("--out", type=Path, default=Path("out/log_plans"), help="output folder (default out/log_plans)")
     ap.add_argument(
         "--min-free-cells",
@@ -79,7 +83,8 @@ def main(argv: list[str] | None = None) -> int:
         p, unknown = clean(m.occupancy.reshape(rows, cols), args.min_free_cells)
         files = save_ros_map(args.out / f"{name}.yaml", p.ravel(), m.grid, unknown=unknown.ravel(), sidecar=False)
         print(
-            f"{name}: {rows} x {cols} cells, {int((p == 1).sum()):,} occupied, {int((~unknown & (p == 0)).sum()):,} "
+            f"{name}: {cols} x {rows} cells (W x H), {int((p == 1).sum()):,} occupied, "
+            f"{int((~unknown & (p == 0)).sum()):,} "
             f"free -> {files.yaml}",
             flush=True,
         )

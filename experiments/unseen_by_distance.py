@@ -60,7 +60,10 @@ def _bins(d: np.ndarray, unseen: np.ndarray) -> list[np.ndarray]:
 
 def _maps(test: str, args: argparse.Namespace, train_corpora: list[str]):
     if args.plan_files and test == args.plan_set:
-        maps = calibration.plan_set_maps(args, args.plan_limit)
+        try:
+            maps = calibration.plan_set_maps(args, args.plan_limit)
+        except (calibration.PlanFileError, calibration.LeakageError) as e:
+            raise SystemExit(f"unseen_by_distance.py: {e}") from None
     else:
         maps = calibration.heldout_maps(test, args.plans, args.window)
     for corpus in train_corpora:  # never a map of the method's training plans

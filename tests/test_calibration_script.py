@@ -302,6 +302,14 @@ def test_a_corpus_plan_given_as_a_file_is_refused(cal, tmp_path):
     (tmp_path / "copy.png").write_bytes(png[0].read_bytes())
     with pytest.raises(cal.LeakageError, match="the same bytes as the corpus plan"):
         cal.check_plan_files([tmp_path / "copy.png"])
+    import numpy as np
+    from PIL import Image
+
+    px = np.asarray(Image.open(png[0]).convert("L")).copy()
+    px[30, 30] = 255 - px[30, 30]  # touched up, turned and saved anew: other bytes, the same plan
+    Image.fromarray(np.rot90(px)).save(tmp_path / "touched.png")
+    with pytest.raises(cal.LeakageError, match=r"of its pixels are those of the houseexpo plan"):
+        cal.check_plan_files([tmp_path / "touched.png"])
     layout = tmp_path / f"{png[0].stem}.json"  # a HouseExpo layout under a corpus plan's id
     layout.write_text('{"verts": [[0, 0], [4, 0], [4, 3], [0, 3]]}')
     with pytest.raises(cal.LeakageError, match="the layout of the houseexpo corpus's plan"):
@@ -343,3 +351,28 @@ def test_cells_a_plan_does_not_know_are_walls_to_the_sensor_and_never_scored(cal
     np.testing.assert_array_equal(t_occ.truth, t.truth | ~t.known)
     with pytest.raises(SystemExit):
         cal.parse_args(["--plan-outside", "unknown"])  # without plan files
+
+
+def test_a_changed_plan_file_refuses_to_resume_and_bad_files_exit_cleanly(cal, tmp_path):
+    import numpy as np
+    from PIL import Image
+
+    from tests._scripts import write_plan_folder
+
+    d = write_plan_folder(tmp_path)
+    argv = [*PLAN_RUN, "--plan-files", str(d), "--out", str(tmp_path / "out")]
+    argv[argv.index("--priors") + 2] = "independent"  # independent only: two priors are enough here
+    cal.main(argv)
+    cal.main(argv)  # unchanged files: resumes, nothing to run
+    px = np.asarray(Image.open(d / "office.png")).copy()
+    px[40:44, 40:120] = 0  # a wall added to the plan
+    Image.fromarray(px).save(d / "office.png")
+    with pytest.raises(SystemExit, match="settings differ in \\['plan_digests'\\]"):
+        cal.main(argv)
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / "junk.png").write_bytes(b"no image")
+    with pytest.raises(SystemExit, match=r"calibration\.py: .*junk\.png: unreadable image"):
+        cal.main([*PLAN_RUN, "--plan-files", str(tmp_path / "bad"), "--out", str(tmp_path / "out2")])
+    for bad in (["--plan-set", "IPA"], ["--plan-set", "none"], ["--sweeps", "3"], ["--plans", "0"]):
+        with pytest.raises(SystemExit):
+            cal.parse_args(["--plan-files", "x", *bad])

@@ -267,19 +267,28 @@ def _classify_dungeon(im, where: str) -> tuple[np.ndarray, np.ndarray]:
     return occ, free
 
 
-def _pixels(corpus: str, name: str, root) -> tuple[np.ndarray, np.ndarray]:
+def plan_image_path(corpus: str, name: str, root=None) -> Path:
+    """The image file of a HouseExpo or IPA plan (DungeonMaps live inside one archive: ``KeyError``)."""
     base = floorplan_root(root)
     if corpus == "houseexpo":
         path = base / _HOUSEEXPO_DIR / f"{name}.png"
         if not path.is_file():
             raise KeyError(f"no HouseExpo plan {name!r} under {path.parent}")
-        return _classify_binary(_open_image(path, str(path)))
+        return path
     if corpus == "ipa":
         d = base / _IPA_DIR
         found = next((d / f"{name}{ext}" for ext in (".png", ".pgm") if (d / f"{name}{ext}").is_file()), None)
         if found is None:
             raise KeyError(f"no IPA plan {name!r} under {d}")
-        return _classify_ipa(_open_image(found, str(found)))
+        return found
+    raise KeyError(f"{corpus} plans are not image files")
+
+
+def _pixels(corpus: str, name: str, root) -> tuple[np.ndarray, np.ndarray]:
+    if corpus in ("houseexpo", "ipa"):
+        path = plan_image_path(corpus, name, root)
+        classify = _classify_binary if corpus == "houseexpo" else _classify_ipa
+        return classify(_open_image(path, str(path)))
     data, where = _dungeon_bytes([name], root)[name]
     return _classify_dungeon(_open_image(data, where), where)
 
