@@ -314,7 +314,12 @@ def plan_files(paths: Iterable[str | os.PathLike]) -> list[Path]:
         else:
             raise PlanFileError(p, "no such file or folder")
     seen: set[Path] = set()
-    found = [q for q in found if not (q.resolve() in seen or seen.add(q.resolve()))]  # each file once, first kept
+    unique = []
+    for q in found:  # each file once, the first mention kept
+        if q.resolve() not in seen:
+            seen.add(q.resolve())
+            unique.append(q)
+    found = unique
     named = {_images_named_by_yaml(q) for q in found if q.suffix.lower() in YAML_SUFFIXES}
     out = [q for q in found if q.suffix.lower() in YAML_SUFFIXES or q.resolve() not in named]
     if not out:
