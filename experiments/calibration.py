@@ -61,11 +61,12 @@ tables alone) also runs every prior it names as ``NAME+bias``, the prior times `
 
 Plans of other buildings. ``--plan-files PATH ...`` (ROS map YAMLs, HouseExpo layouts, images with
 ``--pixel-size``, or folders of them; :mod:`ogm_ppl.datasets.plan_files`, read at 0.05 m a cell) adds one more
-test set, labelled ``--plan-set`` (default ``files``), whose first ``--plans`` usable plans are cropped and
-scored as the corpora's held-out maps are, with every prior of every ``--train`` corpus (no prior was learned on
-them, so ``--diagonal`` does not thin them) and every guide; without ``--test`` only the plan set runs. A file
-under the floor-plan corpora's folder, with the bytes of a corpus plan, or a layout under a corpus plan's
-HouseExpo id, is refused (:func:`check_plan_files`).
+test set, labelled ``--plan-set`` (default ``files``), whose usable plans (all, or the first ``--plans``) are
+cropped and scored as the corpora's held-out maps are, with every prior of every ``--train`` corpus (no prior was
+learned on them, so ``--diagonal`` does not thin them) and every guide (without ``--guides``,
+:data:`PLAN_FILES_GUIDE`); without ``--test`` only the plan set runs. A file under the floor-plan corpora's
+folder, with the bytes of a corpus plan, a near copy of one, or a layout under a corpus plan's HouseExpo id is
+refused (:func:`check_plan_files`). A rerun resumes only if no plan file changed.
 ``experiments/log_plans.py`` makes such plans of the real logs' buildings.
 
 Outputs under ``--out`` (default ``out/calibration/``): ``calibration.json`` (settings, provenance, one row per
@@ -243,6 +244,9 @@ def corpus_file_digests() -> dict[str, str]:
     return out
 
 
+#: the guide a run on plan files scores when ``--guides`` is not given: the one learned on both floor-plan corpora,
+#: symmetrised (the headline's guide; the best on the real logs' buildings, docs/results.md)
+PLAN_FILES_GUIDE = "houseexpo+ipa@sym"
 #: share of equal pixels (occupied or not) at which a plan file's pixels are a copy of a corpus plan's
 NEAR_COPY = 0.99
 
@@ -1039,9 +1043,10 @@ def parse_args(argv=None) -> argparse.Namespace:
     ap.add_argument(
         "--guides",
         nargs="*",
-        default=[],
+        default=None,
         help="also score the amortised guide learned on each of these corpora (guide:CORPUS rows; "
-        "experiments/train_corpus_guide.py); CORPUS@sym: the guide symmetrised",
+        "experiments/train_corpus_guide.py); CORPUS@sym: the guide symmetrised (default: none, or with "
+        f"--plan-files the floor-plan guide {PLAN_FILES_GUIDE})",
     )
     ap.add_argument(
         "--guide-dir",
@@ -1104,6 +1109,8 @@ def parse_args(argv=None) -> argparse.Namespace:
     args.priors = args.priors or default_priors(args.train)
     if args.test is None:
         args.test = [] if args.plan_files else list(TEST_CORPORA)
+    if args.guides is None:  # a building in no corpus: the guide the docs recommend for one runs by default
+        args.guides = [PLAN_FILES_GUIDE] if args.plan_files else []
     check_plan_file_arguments(ap, args)
     args.plan_limit = args.plans  # None: every plan of --plan-files
     if args.plans is None:

@@ -256,6 +256,7 @@ def test_plan_files_are_one_more_test_set_scored_with_every_prior(cal, tmp_path)
         "independent",
         "independent:houseexpo",
         "patch3:houseexpo",
+        "guide:houseexpo+ipa@sym",  # without --guides, the floor-plan guide
     }
     for r in rows:
         assert r["nll_bits"] > 0 and 0 < r["cells"] <= 36 * 36
@@ -287,6 +288,8 @@ def test_plan_file_arguments_are_checked(cal):
     assert cal.parse_args(["--plan-files", "x"]).test == [] and cal.parse_args([]).test == list(cal.TEST_CORPORA)
     args = cal.parse_args(["--plan-files", "x"])  # no --plans: 2 maps a corpus, every plan of the plan set
     assert (args.plans, args.plan_limit) == (2, None)
+    assert args.guides == [cal.PLAN_FILES_GUIDE] and cal.parse_args([]).guides == []  # the floor-plan guide runs
+    assert cal.parse_args(["--plan-files", "x", "--guides"]).guides == []
     assert cal.parse_args(["--plan-files", "x", "--plans", "3"]).plan_limit == 3
 
 
