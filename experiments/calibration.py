@@ -367,8 +367,7 @@ def add_plan_file_arguments(ap: argparse.ArgumentParser) -> None:
         default=None,
         metavar="PATH",
         help="also score plans of other buildings: ROS map YAMLs, HouseExpo layouts (.json) or images, or folders "
-        "of them "
-        "(ogm_ppl.datasets.plan_files), as one more test set",
+        "of them (ogm_ppl.datasets.plan_files), as one more test set",
     )
     ap.add_argument("--plan-set", default="files", help="the label of the --plan-files test set (default files)")
     ap.add_argument(
@@ -385,8 +384,8 @@ def add_plan_file_arguments(ap: argparse.ArgumentParser) -> None:
 
 
 def check_plan_file_arguments(ap: argparse.ArgumentParser, args: argparse.Namespace) -> None:
-    """Refuse (``ap.error``) a plan-set label that is empty of letters or a test corpus's name, and plan-file
-    options without ``--plan-files``."""
+    """Refuse (``ap.error``) ``--plans`` below 1, a plan-set label that is not a plain name or is a test corpus's
+    name (in any case) or ``none``, and plan-file options without ``--plan-files``."""
     if args.plans is not None and args.plans < 1:
         ap.error("--plans must be at least 1")
     if args.plan_files:
