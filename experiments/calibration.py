@@ -1144,6 +1144,8 @@ def main(argv=None) -> dict:
     if not args.bias:  # settings without biases read as those of runs made before --bias-file existed
         del settings["bias"]
     if args.plan_files:
+        if not args.test:  # "plans" counts the corpora's maps; plan_limit the plan set's (None: all)
+            del settings["plans"]
         settings["plan_files"] = [str(p) for p in args.plan_files]
         try:
             settings["plan_digests"] = plan_digests(args.plan_files)  # a changed plan file refuses to resume

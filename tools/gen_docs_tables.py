@@ -734,18 +734,15 @@ def _unseen_by_distance(doc: dict) -> Table:
         )
     else:
         what = f"guide:{st['guide']}"
+    if st.get("plan_files"):  # plans of other buildings: as many as ran, and how their unknown cells were read
+        unknown = "unscored" if st.get("plan_outside") == "unknown" else "occupied"
+        where = f"{doc['rows'][0]['maps']} plans of other buildings ({st['plan_set']}; their unknown cells {unknown})"
+    else:
+        where = f"{st['plans']} held-out maps per corpus"
     return Table(
         caption=(
-            f"{what} on the unseen cells of {st['plans']} held-out maps per corpus"
-            + (
-                f" (plans of other buildings: {st['plan_set']}, their unknown cells "
-                + ("unscored" if st.get("plan_outside") == "unknown" else "occupied")
-                + ")"
-                if st.get("plan_files")
-                else ""
-            )
-            + ", by distance to the nearest cell a ray reached: share of the unseen cells, occupied share, NLL "
-            "(bits/cell)" + (", chain agreement and occupancy" if chains else "")
+            f"{what} on the unseen cells of {where}, by distance to the nearest cell a ray reached: share of the "
+            "unseen cells, occupied share, NLL (bits/cell)" + (", chain agreement and occupancy" if chains else "")
         ),
         header=header,
         rows=rows,
