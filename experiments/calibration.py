@@ -64,9 +64,10 @@ Plans of other buildings. ``--plan-files PATH ...`` (ROS map YAMLs, HouseExpo la
 test set, labelled ``--plan-set`` (default ``files``), whose usable plans (all, or the first ``--plans``) are
 cropped and scored as the corpora's held-out maps are, with every prior of every ``--train`` corpus (no prior was
 learned on them, so ``--diagonal`` does not thin them) and every guide (without ``--guides``,
-:data:`PLAN_FILES_GUIDE`); without ``--test`` only the plan set runs. A file under the floor-plan corpora's
-folder, with the bytes of a corpus plan, a near copy of one, or a layout under a corpus plan's HouseExpo id is
-refused (:func:`check_plan_files`). A rerun resumes only if no plan file changed.
+:data:`PLAN_FILES_GUIDE`); without ``--test`` only the plan set runs, and without ``--priors`` then the kinds of
+:data:`PLAN_FILES_PRIORS`. A file under the floor-plan corpora's folder, with the bytes of a corpus plan, a near
+copy of one, or a layout under a corpus plan's HouseExpo id is refused (:func:`check_plan_files`). A rerun
+resumes only if no plan file changed.
 ``experiments/log_plans.py`` makes such plans of the real logs' buildings.
 
 Outputs under ``--out`` (default ``out/calibration/``): ``calibration.json`` (settings, provenance, one row per
@@ -247,6 +248,10 @@ def corpus_file_digests() -> dict[str, str]:
 #: the guide a run on plan files scores when ``--guides`` is not given: the one learned on both floor-plan corpora,
 #: symmetrised (the headline's guide; the best on the real logs' buildings, docs/results.md)
 PLAN_FILES_GUIDE = "houseexpo+ipa@sym"
+#: the prior kinds a run on plan files alone scores when ``--priors`` is not given (each learned on every
+#: ``--train`` corpus): the uniform prior, the tempered backed-off tables, the tempered 8-neighbour MRF and the
+#: pattern field, as the results page scores the real logs' buildings
+PLAN_FILES_PRIORS: tuple[str, ...] = ("independent", "patch3_bo@cal", "border_bo@cal", "mrf8@cal", "field2")
 #: share of equal pixels (occupied or not) at which a plan file's pixels are a copy of a corpus plan's
 NEAR_COPY = 0.99
 
@@ -1037,7 +1042,8 @@ def parse_args(argv=None) -> argparse.Namespace:
         "--priors",
         nargs="+",
         default=None,
-        help="prior kinds or names (default: every kind, and KIND@cal where fitted)",
+        help="prior kinds or names (default: every kind, and KIND@cal where fitted; with --plan-files alone, "
+        f"{' '.join(PLAN_FILES_PRIORS)})",
     )
     ap.add_argument(
         "--guides",
@@ -1105,9 +1111,10 @@ def parse_args(argv=None) -> argparse.Namespace:
         args.priors = args.priors or ["independent", "mrf", "border"]
         args.train = args.train or ["houseexpo"]
     args.train = args.train or available_tables()
-    args.priors = args.priors or default_priors(args.train)
     if args.test is None:
         args.test = [] if args.plan_files else list(TEST_CORPORA)
+    if args.priors is None:  # plan files alone: the priors of the results page's buildings in no corpus
+        args.priors = list(PLAN_FILES_PRIORS) if args.plan_files and not args.test else default_priors(args.train)
     if args.guides is None:  # a building in no corpus: the guide the docs recommend for one runs by default
         args.guides = [PLAN_FILES_GUIDE] if args.plan_files else []
     check_plan_file_arguments(ap, args)

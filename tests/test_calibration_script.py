@@ -289,6 +289,8 @@ def test_plan_file_arguments_are_checked(cal):
     args = cal.parse_args(["--plan-files", "x"])  # no --plans: 2 maps a corpus, every plan of the plan set
     assert (args.plans, args.plan_limit) == (2, None)
     assert args.guides == [cal.PLAN_FILES_GUIDE] and cal.parse_args([]).guides == []  # the floor-plan guide runs
+    assert args.priors == list(cal.PLAN_FILES_PRIORS)  # and a few priors, not every kind
+    assert len(cal.parse_args(["--plan-files", "x", "--test", "ipa"]).priors) > len(cal.PLAN_FILES_PRIORS)
     assert cal.parse_args(["--plan-files", "x", "--guides"]).guides == []
     assert cal.parse_args(["--plan-files", "x", "--plans", "3"]).plan_limit == 3
 
