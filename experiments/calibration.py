@@ -233,18 +233,6 @@ def usable_windows(corpus: str, names: Sequence[str], n: int, window: int) -> li
     return out
 
 
-def corpus_file_digests() -> dict[str, str]:
-    """SHA-256 of every plan file of the floor-plan corpora stored as files (HouseExpo, IPA) -> its path."""
-    from ogm_ppl.datasets.plan_files import PLAN_SUFFIXES
-
-    root = fp.floorplan_root()
-    out = {}
-    for p in sorted(root.rglob("*")):
-        if p.is_file() and p.suffix.lower() in PLAN_SUFFIXES:
-            out[hashlib.sha256(p.read_bytes()).hexdigest()] = str(p)
-    return out
-
-
 #: the guide a run on plan files scores when ``--guides`` is not given: the one learned on both floor-plan corpora,
 #: symmetrised (the headline's guide; the best on the real logs' buildings, docs/results.md)
 PLAN_FILES_GUIDE = "houseexpo+ipa@sym"
@@ -252,85 +240,18 @@ PLAN_FILES_GUIDE = "houseexpo+ipa@sym"
 #: ``--train`` corpus): the uniform prior, the tempered backed-off tables, the tempered 8-neighbour MRF and the
 #: pattern field, as the results page scores the real logs' buildings
 PLAN_FILES_PRIORS: tuple[str, ...] = ("independent", "patch3_bo@cal", "border_bo@cal", "mrf8@cal", "field2")
-#: share of equal pixels (occupied or not) at which a plan file's pixels are a copy of a corpus plan's
-NEAR_COPY = 0.99
-
-
-def corpus_image_sizes() -> dict[tuple[int, int], list[tuple[str, str]]]:
-    """``(rows, cols)`` of every HouseExpo and IPA plan image (read from the file headers) -> ``(corpus, name)``."""
-    from PIL import Image
-
-    out: dict[tuple[int, int], list[tuple[str, str]]] = {}
-    for corpus in ("houseexpo", "ipa"):
-        for name in fp.list_plans(corpus):
-            with Image.open(fp.plan_image_path(corpus, name)) as im:
-                out.setdefault((im.size[1], im.size[0]), []).append((corpus, name))
-    return out
-
-
-def _plan_pixels(f: Path) -> np.ndarray:
-    """The occupied pixels of a plan file before resampling (image order)."""
-    from ogm_ppl.datasets import plan_files as pf
-
-    suffix = f.suffix.lower()
-    if suffix in pf.YAML_SUFFIXES:
-        return pf._pixels_of_yaml(f)[0]
-    if suffix in pf.LAYOUT_SUFFIXES:
-        return pf._pixels_of_layout(pf._layout_verts(f))[0]
-    return pf._pixels_of_image(f)[0]
-
-
-def check_near_copies(files: Sequence[Path]) -> None:
-    """Refuse (:class:`LeakageError`) a plan file whose pixels, in any of the 8 turns and flips, agree with a
-    HouseExpo or IPA plan image of the same size on at least :data:`NEAR_COPY` of them (a corpus plan re-saved,
-    touched up or turned). A copy at another scale is not caught."""
-    sizes = corpus_image_sizes()
-    seen: dict[tuple[str, str], np.ndarray] = {}
-    for f in files:
-        occ = _plan_pixels(f)
-        for k in range(8):
-            a = np.rot90(occ, k % 4)
-            a = a[:, ::-1] if k >= 4 else a
-            for corpus, name in sizes.get(a.shape, []):
-                if (corpus, name) not in seen:
-                    seen[corpus, name] = fp._pixels(corpus, name, None)[0]
-                agree = float((seen[corpus, name] == a).mean())
-                if agree >= NEAR_COPY:
-                    raise LeakageError(
-                        f"{f}: {agree:.1%} of its pixels are those of the {corpus} plan {name}: a copy of a corpus "
-                        "plan; score it as its corpus instead"
-                    )
 
 
 def check_plan_files(files: Sequence[Path]) -> None:
-    """Refuse (:class:`LeakageError`) plan files that are plans of the corpora: a file under the floor-plan
-    root, one whose bytes are those of a corpus plan file (for a YAML, the image it names too), a HouseExpo
-    layout named as one of the ``houseexpo`` corpus's plans (their names are HouseExpo ids), or a near copy of a
-    corpus plan's pixels (:func:`check_near_copies`). DungeonMaps (synthetic, inside one archive) are not
-    compared."""
-    from ogm_ppl.datasets.plan_files import LAYOUT_SUFFIXES, YAML_SUFFIXES, _images_named_by_yaml
+    """Refuse (:class:`LeakageError`) plan files that are plans of the corpora
+    (:func:`~ogm_ppl.datasets.plan_files.corpus_copy`: under the corpora's folder, the same bytes, a HouseExpo
+    layout under a corpus plan's id, or a near copy of its pixels in any turn or flip)."""
+    from ogm_ppl.datasets.plan_files import corpus_copy
 
-    root = fp.floorplan_root().resolve()
-    digests: dict[str, str] | None = None
-    layouts = [f for f in files if f.suffix.lower() in LAYOUT_SUFFIXES]
-    if layouts:
-        ids = set(fp.list_plans("houseexpo"))
-        for f in layouts:
-            if f.stem in ids:
-                raise LeakageError(f"{f}: the layout of the houseexpo corpus's plan {f.stem}; score it as its corpus")
     for f in files:
-        pieces = [f.resolve()]
-        if f.suffix.lower() in YAML_SUFFIXES:
-            img = _images_named_by_yaml(f)
-            pieces += [img] if img is not None and img.is_file() else []
-        for piece in pieces:
-            if piece.is_relative_to(root):
-                raise LeakageError(f"{f}: a plan of the floor-plan corpora ({root}); score it as its corpus instead")
-            digests = corpus_file_digests() if digests is None else digests
-            same = digests.get(hashlib.sha256(piece.read_bytes()).hexdigest())
-            if same is not None:
-                raise LeakageError(f"{f}: the same bytes as the corpus plan {same}; score it as its corpus instead")
-    check_near_copies(files)
+        copy = corpus_copy(f)
+        if copy is not None:
+            raise LeakageError(f"{f}: {copy}; score it as its corpus instead")
 
 
 def plan_file_maps(

@@ -313,7 +313,7 @@ def test_a_corpus_plan_given_as_a_file_is_refused(cal, tmp_path):
     px = np.asarray(Image.open(png[0]).convert("L")).copy()
     px[30, 30] = 255 - px[30, 30]  # touched up, turned and saved anew: other bytes, the same plan
     Image.fromarray(np.rot90(px)).save(tmp_path / "touched.png")
-    with pytest.raises(cal.LeakageError, match=r"of its pixels are those of the houseexpo plan"):
+    with pytest.raises(cal.LeakageError, match=r"its free space overlaps the houseexpo plan"):
         cal.check_plan_files([tmp_path / "touched.png"])
     layout = tmp_path / f"{png[0].stem}.json"  # a HouseExpo layout under a corpus plan's id
     layout.write_text('{"verts": [[0, 0], [4, 0], [4, 3], [0, 3]]}')

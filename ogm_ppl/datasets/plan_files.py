@@ -42,14 +42,17 @@ would exceed :data:`MAX_PLAN_CELLS` cells is refused before it is built.
 
 from __future__ import annotations
 
+import hashlib
 import math
 import os
 import re
 from collections.abc import Iterable, Sequence
+from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
 
+from ogm_ppl.datasets import floorplans as fp
 from ogm_ppl.datasets.floorplans import FloorPlan, _classify_ipa, _natural_key, _open_image, rasterise
 
 __all__ = [
@@ -60,6 +63,8 @@ __all__ = [
     "plan_files",
     "plan_names",
     "render_layout",
+    "corpus_copy",
+    "NEAR_COPY",
 ]
 
 IMAGE_SUFFIXES: tuple[str, ...] = (".png", ".pgm", ".bmp")
@@ -349,3 +354,84 @@ def render_layout(path: str | os.PathLike) -> np.ndarray:
     p = Path(path)
     occ, _ = _pixels_of_layout(_layout_verts(p))
     return np.where(occ, 0, 255).astype(np.uint8)
+
+
+# -- is it a corpus plan? ----------------------------------------------------------------------------------------
+#: intersection over union of the free pixels at which a plan file is a copy of a corpus plan (variants of one IPA
+#: building overlap at 0.92-1.0; two different buildings of the corpora with images of one size at 0.65 at most)
+NEAR_COPY = 0.9
+
+
+@lru_cache(maxsize=4)
+def _corpus_digests(root: Path) -> dict[str, str]:
+    """SHA-256 of every plan file of the corpora stored as files (HouseExpo, IPA) -> its path."""
+    out = {}
+    for p in sorted(root.rglob("*")):
+        if p.is_file() and p.suffix.lower() in PLAN_SUFFIXES:
+            out[hashlib.sha256(p.read_bytes()).hexdigest()] = str(p)
+    return out
+
+
+@lru_cache(maxsize=4)
+def _corpus_sizes(root: Path) -> dict[tuple[int, int], list[tuple[str, str]]]:
+    """``(rows, cols)`` of every HouseExpo and IPA plan image (from the file headers) -> ``(corpus, name)``."""
+    from PIL import Image
+
+    out: dict[tuple[int, int], list[tuple[str, str]]] = {}
+    for corpus in ("houseexpo", "ipa"):
+        for name in fp.list_plans(corpus, root):
+            with Image.open(fp.plan_image_path(corpus, name, root)) as im:
+                out.setdefault((im.size[1], im.size[0]), []).append((corpus, name))
+    return out
+
+
+@lru_cache(maxsize=16)
+def _corpus_free(root: Path, corpus: str, name: str) -> np.ndarray:
+    return fp._pixels(corpus, name, root)[1]
+
+
+def _plan_free(path: Path) -> np.ndarray:
+    """The free pixels of a plan file before resampling (image order)."""
+    suffix = path.suffix.lower()
+    if suffix in YAML_SUFFIXES:
+        return _pixels_of_yaml(path)[1]
+    if suffix in LAYOUT_SUFFIXES:
+        return _pixels_of_layout(_layout_verts(path))[1]
+    return _pixels_of_image(path)[1]
+
+
+def corpus_copy(path: str | os.PathLike, root=None) -> str | None:
+    """What makes a plan file a plan of the floor-plan corpora (so that scoring a prior learned on them on it would
+    be leakage), or ``None``: it lies under the corpora's folder; its bytes (for a ROS map, its image's too) are those
+    of a HouseExpo or IPA plan file; it is a HouseExpo layout named by a ``houseexpo`` plan's id; or its free pixels,
+    in any of the 8 turns and flips, overlap those of a HouseExpo or IPA plan image of the same size with an
+    intersection over union of at least :data:`NEAR_COPY` (re-saved, touched up, turned, or a variant of the
+    building). A copy at another scale is not caught, and
+    DungeonMaps (synthetic, inside one archive) are not compared."""
+    p = Path(path)
+    base = fp.floorplan_root(root).resolve()
+    if not base.is_dir():  # no corpora here: nothing to copy
+        return None
+    pieces = [p.resolve()]
+    if p.suffix.lower() in YAML_SUFFIXES:
+        img = _images_named_by_yaml(p)
+        pieces += [img] if img is not None and img.is_file() else []
+    for piece in pieces:
+        if piece.is_relative_to(base):
+            return f"a plan of the floor-plan corpora ({base})"
+        same = _corpus_digests(base).get(hashlib.sha256(piece.read_bytes()).hexdigest())
+        if same is not None:
+            return f"the same bytes as the corpus plan {same}"
+    if p.suffix.lower() in LAYOUT_SUFFIXES and p.stem in set(fp.list_plans("houseexpo", base)):
+        return f"the layout of the houseexpo corpus's plan {p.stem}"
+    free = _plan_free(p)
+    sizes = _corpus_sizes(base)
+    for k in range(8):
+        a = np.rot90(free, k % 4)
+        a = a[:, ::-1] if k >= 4 else a
+        for corpus, name in sizes.get(a.shape, []):
+            b = _corpus_free(base, corpus, name)
+            iou = float((a & b).sum() / max((a | b).sum(), 1))
+            if iou >= NEAR_COPY:
+                return f"its free space overlaps the {corpus} plan {name}'s at {iou:.1%} (intersection over union)"
+    return None

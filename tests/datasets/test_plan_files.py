@@ -244,3 +244,21 @@ def test_a_yaml_naming_a_missing_image_is_named(tmp_path):
     (tmp_path / "map.yaml").write_text("image: nosuch.pgm\n" + keys)
     with pytest.raises(PlanFileError, match=r"map\.yaml: its image .*nosuch\.pgm"):
         load_plan_file(tmp_path / "map.yaml")
+
+
+def test_corpus_copy_finds_corpus_plans_and_passes_others(tmp_path):
+    from ogm_ppl.datasets import floorplans as fp
+    from ogm_ppl.datasets.plan_files import corpus_copy
+
+    Image.fromarray(_room()).save(tmp_path / "room.png")
+    assert corpus_copy(tmp_path / "room.png", root=tmp_path / "no_corpora") is None  # no corpora: nothing to copy
+    root = fp.floorplan_root()
+    names = fp.list_plans("ipa", root) if root.is_dir() else []
+    if not names:
+        pytest.skip("the IPA corpus is not beside the repository")
+    assert corpus_copy(tmp_path / "room.png") is None
+    src = fp.plan_image_path("ipa", names[0])
+    assert "a plan of the floor-plan corpora" in corpus_copy(src)
+    px = np.asarray(Image.open(src).convert("L"))
+    Image.fromarray(px[:, ::-1]).save(tmp_path / "flipped.png")  # flipped and saved anew
+    assert f"overlaps the ipa plan {names[0]}'s" in corpus_copy(tmp_path / "flipped.png")
