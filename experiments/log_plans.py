@@ -3,9 +3,9 @@ r"""Floor plans of the real logs' buildings, cleaned from the maps of all their 
 The maps are those ``experiments/map_all_logs.py`` builds from every reading of each log; the plans are what
 ``experiments/calibration.py --plan-files`` scores.
 
-None of these buildings is in a floor-plan corpus (the IPA plans of Intel and Freiburg are left out of every
-training set, :data:`~ogm_ppl.datasets.floorplans.REAL_LOG_BUILDINGS`), so they test the learned priors and guides
-on buildings nobody trained on. A map from a whole log is not yet a plan: beams through glass, doors and gaps
+None of these buildings is in a training set (seven are in no floor-plan corpus; the IPA corpus's plans of Intel
+and Freiburg 101 are left out of every training set, :data:`~ogm_ppl.datasets.floorplans.REAL_LOG_BUILDINGS`), so
+they test the learned priors and guides on buildings nobody trained on. A map from a whole log is not yet a plan: beams through glass, doors and gaps
 leave thin streaks of free cells far outside the building. Per log, with ``p`` the map's occupancy as
 ``map_server`` publishes it (``ogm-ppl map`` wrote it as ``<log>/ros/map.yaml``):
 

@@ -616,7 +616,7 @@ def _calibration_plans(doc: dict) -> Table:
     maps = summ[0]["maps"] if summ else 0
     return Table(
         caption=(
-            f"Unseen cells of {maps} plans of buildings in no corpus ({st['plan_set']}; a {st['window']} x "
+            f"Unseen cells of {maps} plans of buildings in no training set ({st['plan_set']}; a {st['window']} x "
             f"{st['window']}-cell window of each, {st['poses']} stops x {st['beams']} beams), means over the plans; "
             f"{outside}; chains: 3 from different starts, {st['sweeps']} sweeps each"
         ),
