@@ -5,9 +5,9 @@ The maps are those ``experiments/map_all_logs.py`` builds from every reading of 
 
 None of these buildings is in a training set (seven are in no floor-plan corpus; the IPA corpus's plans of Intel
 and Freiburg 101 are left out of every training set, :data:`~ogm_ppl.datasets.floorplans.REAL_LOG_BUILDINGS`), so
-they test the learned priors and guides on buildings nobody trained on. A map from a whole log is not yet a plan: beams through glass, doors and gaps
-leave thin streaks of free cells far outside the building. Per log, with ``p`` the map's occupancy as
-``map_server`` publishes it (``ogm-ppl map`` wrote it as ``<log>/ros/map.yaml``):
+they test the learned priors and guides on buildings nobody trained on. A map from a whole log is not yet a plan:
+beams through glass, doors and gaps leave thin streaks of free cells far outside the building. Per log, with ``p``
+the map's occupancy as ``map_server`` publishes it (``ogm-ppl map`` wrote it as ``<log>/ros/map.yaml``):
 
 * occupied where ``p = 100``; free where ``p = 0`` *and* the cell lies in a ``k x k`` square of such cells
   (a morphological opening of the free cells, ``k = --min-free-cells``, default 9 cells = 45 cm, narrower than a
