@@ -325,15 +325,9 @@ def check_plan_file_arguments(ap: argparse.ArgumentParser, args: argparse.Namesp
 def plan_digests(paths: Sequence[Path]) -> dict[str, str]:
     """SHA-256 of every plan file of ``paths`` (and of the image each YAML names), by path: what a resumed run
     must find unchanged."""
-    from ogm_ppl.datasets.plan_files import YAML_SUFFIXES, _images_named_by_yaml, plan_files
+    from ogm_ppl.datasets.plan_files import plan_file_pieces, plan_files
 
-    out = {}
-    for f in plan_files(paths):
-        pieces = [f] + ([_images_named_by_yaml(f)] if f.suffix.lower() in YAML_SUFFIXES else [])
-        for q in pieces:
-            if q is not None and q.is_file():
-                out[str(q)] = hashlib.sha256(q.read_bytes()).hexdigest()
-    return out
+    return {str(q): hashlib.sha256(q.read_bytes()).hexdigest() for f in plan_files(paths) for q in plan_file_pieces(f)}
 
 
 def plan_set_maps(args: argparse.Namespace, n: int | None) -> list[TestMap]:

@@ -96,6 +96,7 @@ __all__ = [
     "THRESHOLDS",
     "save_ros_map",
     "load_ros_map",
+    "read_ros_map_yaml",
     "to_occupancy_grid",
     "from_occupancy_grid",
 ]
@@ -781,21 +782,13 @@ def _read_sidecar(path: Path, image_bytes: bytes, settings: RosMapSettings, hw: 
     return p.astype(np.float64), unk, tuple(int(s) for s in shape)
 
 
-def load_ros_map(yaml_path: str | os.PathLike, *, flavor: Literal["nav2", "ros1"] = "nav2") -> RosMap:
-    """Read a map_server map (YAML + image) and, if present, its ``<stem>.npz`` sidecar.
-
-    ``occupancy`` is what map_server publishes (see the module docstring for the formulas); ``flavor``
-    picks Nav2's or ROS 1's reading where they differ (scale mode's middle values, alpha, raw mode).
-    The YAML accepted is what map_server accepts in practice: comments, quoted strings, flow or block
-    ``origin``, ``negate`` as an int or a bool, ``mode`` optional (trinary), extra keys ignored;
-    images: binary/ASCII PGM (own reader, strictly validated) and whatever Pillow opens (PNG, BMP ...).
-    A relative ``image`` is resolved against the YAML's directory.
+def read_ros_map_yaml(yaml_path: str | os.PathLike) -> tuple[RosMapSettings, Path]:
+    """The YAML of a map_server map, validated as :func:`load_ros_map` reads it: its settings and the path of the
+    image it names (a relative ``image`` resolved against the YAML's directory; the image is not read).
 
     Raises:
-        RosMapError: a missing or malformed file, naming the path and the problem.
+        RosMapError: a missing, unreadable or malformed YAML, naming the path and the problem.
     """
-    if flavor not in ("nav2", "ros1"):
-        raise ValueError(f"flavor must be 'nav2' or 'ros1', got {flavor!r}")
     path = Path(yaml_path)
     try:
         raw = path.read_bytes()
@@ -813,8 +806,26 @@ def load_ros_map(yaml_path: str | os.PathLike, *, flavor: Literal["nav2", "ros1"
         raise RosMapError(path, f"malformed YAML: {e}") from None
     s = _settings(doc, path)
     image_path = Path(os.path.expanduser(s.image))
-    if not image_path.is_absolute():
-        image_path = path.parent / image_path
+    return s, image_path if image_path.is_absolute() else path.parent / image_path
+
+
+def load_ros_map(yaml_path: str | os.PathLike, *, flavor: Literal["nav2", "ros1"] = "nav2") -> RosMap:
+    """Read a map_server map (YAML + image) and, if present, its ``<stem>.npz`` sidecar.
+
+    ``occupancy`` is what map_server publishes (see the module docstring for the formulas); ``flavor``
+    picks Nav2's or ROS 1's reading where they differ (scale mode's middle values, alpha, raw mode).
+    The YAML accepted is what map_server accepts in practice: comments, quoted strings, flow or block
+    ``origin``, ``negate`` as an int or a bool, ``mode`` optional (trinary), extra keys ignored;
+    images: binary/ASCII PGM (own reader, strictly validated) and whatever Pillow opens (PNG, BMP ...).
+    A relative ``image`` is resolved against the YAML's directory.
+
+    Raises:
+        RosMapError: a missing or malformed file, naming the path and the problem.
+    """
+    if flavor not in ("nav2", "ros1"):
+        raise ValueError(f"flavor must be 'nav2' or 'ros1', got {flavor!r}")
+    path = Path(yaml_path)
+    s, image_path = read_ros_map_yaml(path)
     pixels, image_bytes = _read_image(image_path)
     h, w = pixels.shape[:2]
     if s.origin[2] != 0.0:

@@ -545,6 +545,15 @@ def _calibration(doc: dict) -> Table:
     )
 
 
+TARGET_HEADER = ("method", "NLL", "ECE", "ECE pooled", "Brier", "AUC", "best F1", "IoU", "R-hat < 1.05", "s / map")
+
+
+def _target_cells(s: dict) -> list[str]:
+    """A method's cells under :data:`TARGET_HEADER`, from one calibration summary row."""
+    keys = ("nll_bits", "ece", "ece_pooled", "brier", "auc", "best_f1", "iou")
+    return [s["prior_name"], *(_f(s.get(k)) for k in keys), _f(s.get("rhat_below"), 2), _f(s["seconds"], 1)]
+
+
 def _calibration_targets(doc: dict) -> Table:
     """Per test corpus, every method learned on it (and traditional OGM, the uniform prior): the unseen cells'
     NLL, ECE (mean over maps, and pooled over them), Brier, ROC AUC, best F1, occupied-class IoU, the share of
@@ -560,15 +569,7 @@ def _calibration_targets(doc: dict) -> Table:
         own = [s for s in summ if s["test"] == t and s["train"] in (t, "none")]
         own.sort(key=lambda s: order.index(key(s)) if key(s) in order else len(order))
         for s in own:
-            rows.append(
-                [
-                    t,
-                    s["prior_name"],
-                    *(_f(s.get(k)) for k in ("nll_bits", "ece", "ece_pooled", "brier", "auc", "best_f1", "iou")),
-                    _f(s.get("rhat_below"), 2),
-                    _f(s["seconds"], 1),
-                ]
-            )
+            rows.append([t, *_target_cells(s)])
     settings = doc["settings"]
     return Table(
         caption=(
@@ -577,19 +578,7 @@ def _calibration_targets(doc: dict) -> Table:
             f"each prior and guide learned on the test corpus; chains: 3 from different starts, {settings['sweeps']} "
             "sweeps each"
         ),
-        header=[
-            "test",
-            "method",
-            "NLL",
-            "ECE",
-            "ECE pooled",
-            "Brier",
-            "AUC",
-            "best F1",
-            "IoU",
-            "R-hat < 1.05",
-            "s / map",
-        ],
+        header=["test", *TARGET_HEADER],
         rows=rows,
         provenance=doc["provenance"],
         note=(
@@ -604,10 +593,7 @@ def _calibration_plans(doc: dict) -> Table:
     those buildings, so every training corpus's priors and every guide are listed), as
     :func:`_calibration_targets` lists a corpus's own."""
     _, summ = _calibration_rows(doc, "unseen")
-    keys = ("nll_bits", "ece", "ece_pooled", "brier", "auc", "best_f1", "iou")
-    rows = [
-        [s["prior_name"], *(_f(s.get(k)) for k in keys), _f(s.get("rhat_below"), 2), _f(s["seconds"], 1)] for s in summ
-    ]
+    rows = [_target_cells(s) for s in summ]
     st = doc["settings"]
     outside = {
         "unknown": "cells the plan does not know are walls to the simulated sensor and are not scored",
@@ -620,7 +606,7 @@ def _calibration_plans(doc: dict) -> Table:
             f"{st['window']}-cell window of each, {st['poses']} stops x {st['beams']} beams), means over the plans; "
             f"{outside}; chains: 3 from different starts, {st['sweeps']} sweeps each"
         ),
-        header=["method", "NLL", "ECE", "ECE pooled", "Brier", "AUC", "best F1", "IoU", "R-hat < 1.05", "s / map"],
+        header=list(TARGET_HEADER),
         rows=rows,
         provenance=doc["provenance"],
         note=(

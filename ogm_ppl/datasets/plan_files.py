@@ -45,7 +45,6 @@ from __future__ import annotations
 import hashlib
 import math
 import os
-import re
 from collections.abc import Iterable, Sequence
 from functools import lru_cache
 from pathlib import Path
@@ -64,6 +63,7 @@ __all__ = [
     "plan_names",
     "render_layout",
     "corpus_copy",
+    "plan_file_pieces",
     "NEAR_COPY",
 ]
 
@@ -288,16 +288,23 @@ def load_plan_file(
     )
 
 
-def _images_named_by_yaml(yaml_path: Path) -> Path | None:
+def _image_of_yaml(yaml_path: Path) -> Path | None:
+    """The image a ROS map's YAML names (resolved), or ``None`` where the YAML cannot be read (the plan reader
+    then reports why)."""
+    from ogm_ppl.rosmap import RosMapError, read_ros_map_yaml
+
     try:
-        text = yaml_path.read_text(encoding="utf-8-sig", errors="replace")[:65536]
-    except OSError:
+        return read_ros_map_yaml(yaml_path)[1].resolve()
+    except RosMapError:
         return None
-    m = re.search(r"^\s*image\s*:\s*['\"]?([^'\"#\n]+?)['\"]?\s*(#.*)?$", text, re.MULTILINE)
-    if m is None:
-        return None
-    img = Path(os.path.expanduser(m.group(1).strip()))
-    return (img if img.is_absolute() else yaml_path.parent / img).resolve()
+
+
+def plan_file_pieces(path: str | os.PathLike) -> list[Path]:
+    """The files a plan is read from: the file itself and, for a ROS map's YAML, the image it names (when the
+    YAML reads and the image exists)."""
+    p = Path(path)
+    img = _image_of_yaml(p) if p.suffix.lower() in YAML_SUFFIXES else None
+    return [p] + ([img] if img is not None and img.is_file() else [])
 
 
 def plan_files(paths: Iterable[str | os.PathLike]) -> list[Path]:
@@ -325,7 +332,7 @@ def plan_files(paths: Iterable[str | os.PathLike]) -> list[Path]:
             seen.add(q.resolve())
             unique.append(q)
     found = unique
-    named = {_images_named_by_yaml(q) for q in found if q.suffix.lower() in YAML_SUFFIXES}
+    named = {_image_of_yaml(q) for q in found if q.suffix.lower() in YAML_SUFFIXES}
     out = [q for q in found if q.suffix.lower() in YAML_SUFFIXES or q.resolve() not in named]
     if not out:
         raise PlanFileError(", ".join(str(Path(x)) for x in paths), f"no plan file ({', '.join(PLAN_SUFFIXES)})")
@@ -412,11 +419,7 @@ def corpus_copy(path: str | os.PathLike, root=None) -> str | None:
     base = fp.floorplan_root(root).resolve()
     if not base.is_dir():  # no corpora here: nothing to copy
         return None
-    pieces = [p.resolve()]
-    if p.suffix.lower() in YAML_SUFFIXES:
-        img = _images_named_by_yaml(p)
-        pieces += [img] if img is not None and img.is_file() else []
-    for piece in pieces:
+    for piece in (q.resolve() for q in plan_file_pieces(p)):
         if piece.is_relative_to(base):
             return f"a plan of the floor-plan corpora ({base})"
         same = _corpus_digests(base).get(hashlib.sha256(piece.read_bytes()).hexdigest())

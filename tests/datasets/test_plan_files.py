@@ -13,6 +13,7 @@ from ogm_ppl.datasets.plan_files import (
     PlanFileError,
     _resample,
     load_plan_file,
+    plan_file_pieces,
     plan_files,
     plan_names,
 )
@@ -134,6 +135,8 @@ def test_plan_files_and_names(tmp_path):
     assert [f.name for f in files] == ["extra.png", "map.yaml", "map.yaml"]
     assert plan_names(files) == ["a/extra", "a/map", "b/map"]
     assert plan_names(files[:2]) == ["extra", "map"]
+    assert plan_file_pieces(files[1]) == [files[1], (tmp_path / "a" / "map.pgm").resolve()]  # the YAML, its image
+    assert plan_file_pieces(files[0]) == [files[0]]
     with pytest.raises(PlanFileError, match="no such file or folder"):
         plan_files([tmp_path / "nowhere"])
     with pytest.raises(PlanFileError, match="not a plan file"):

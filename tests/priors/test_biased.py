@@ -62,7 +62,7 @@ def test_a_biased_tile_bundle_adds_h_per_occupied_tile_cell(name):
     base = prior_by_name(name, (12, 12)).compiled()
     t = base.biased(0.4)
     inner = base.keys & ((1 << base.n_inner) - 1)
-    want = np.where(np.isfinite(base.logp), base.logp + 0.4 * np.bitwise_count(inner), base.logp)
+    want = np.where(np.isfinite(base.logp), base.logp + 0.4 * np.array([int(k).bit_count() for k in inner]), base.logp)
     if base.border_seg >= 0:
         a, b = base.seg_off[base.border_seg], base.seg_off[base.border_seg + 1]
         want[a:b] = base.logp[a:b]

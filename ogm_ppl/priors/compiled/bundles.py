@@ -211,8 +211,11 @@ class Tiles(NamedTuple):
         h = _check_bias(bias)
         if h == 0.0:
             return self
-        mask = (np.int64(1) << self.n_inner) - 1
-        add = h * np.bitwise_count(self.keys & mask).astype(np.float64)
+        inner = self.keys & ((np.int64(1) << self.n_inner) - 1)
+        occupied = np.zeros(self.keys.shape, dtype=np.float64)
+        for b in range(int(self.n_inner)):  # popcount, bit by bit over the array (numpy < 2 has no bitwise_count)
+            occupied += (inner >> b) & 1
+        add = h * occupied
         if self.border_seg >= 0:
             add[self.seg_off[self.border_seg] : self.seg_off[self.border_seg + 1]] = 0.0
         out = self._replace(logp=_shifted(self.logp, add))
