@@ -245,13 +245,31 @@ PLAN_FILES_PRIORS: tuple[str, ...] = ("independent", "patch3_bo@cal", "border_bo
 def check_plan_files(files: Sequence[Path]) -> None:
     """Refuse (:class:`LeakageError`) plan files that are plans of the corpora
     (:func:`~ogm_ppl.datasets.plan_files.corpus_copy`: under the corpora's folder, the same bytes, a HouseExpo
-    layout under a corpus plan's id, or a near copy of its pixels in any turn or flip)."""
+    layout under a corpus plan's id, or a near copy of its pixels in any turn or flip), and unreadable ones
+    (:class:`~ogm_ppl.datasets.plan_files.PlanFileError`); the error names every such file, one a line."""
     from ogm_ppl.datasets.plan_files import corpus_copy
 
+    leaks: list[str] = []
+    bad: list[PlanFileError] = []
     for f in files:
-        copy = corpus_copy(f)
+        try:
+            copy = corpus_copy(f)
+        except PlanFileError as e:
+            bad.append(e)
+            continue
         if copy is not None:
-            raise LeakageError(f"{f}: {copy}; score it as its corpus instead")
+            leaks.append(f"{f}: {copy}; score it as its corpus instead")
+    if leaks:
+        raise LeakageError("\n".join(leaks + [str(e) for e in bad]))
+    if bad:
+        raise _every_error(bad)
+
+
+def _every_error(errors: Sequence[PlanFileError]) -> PlanFileError:
+    """One :class:`~ogm_ppl.datasets.plan_files.PlanFileError` whose message names every file of ``errors``, one a
+    line (the first file is its ``path``)."""
+    rest = "".join(f"\n{e}" for e in errors[1:])
+    return PlanFileError(errors[0].path, errors[0].problem + rest)
 
 
 def plan_file_maps(
@@ -271,13 +289,20 @@ def plan_file_maps(
     files = plan_files(paths)
     check_plan_files(files)
     out: list[TestMap] = []
+    bad: list[PlanFileError] = []
     for f, name in zip(files, plan_names(files)):
-        if n is not None and len(out) == n:
+        if n is not None and len(out) == n and not bad:
             break
-        p = load_plan_file(f, pixel_size=pixel_size, name=name, corpus=label, outside=outside)
+        try:
+            p = load_plan_file(f, pixel_size=pixel_size, name=name, corpus=label, outside=outside)
+        except PlanFileError as e:  # read on, to name every bad file at once
+            bad.append(e)
+            continue
         t = _crop(label, name, p.occupancy, p.known, p.resolution or 0.05, window)
-        if (t.known & ~t.truth).sum() >= 200:
+        if (t.known & ~t.truth).sum() >= 200 and (n is None or len(out) < n):
             out.append(t)
+    if bad:
+        raise _every_error(bad)
     if not out:
         raise SystemExit(f"no plan of {[str(p) for p in paths]} has a {window}-cell window with 200 known free cells")
     return out
@@ -869,8 +894,11 @@ def _shown(s: dict, test: str) -> bool:
     return test not in TEST_CORPORA or s["train"].removesuffix(GUIDE_SYM) in (test, "none")
 
 
-def _label(name: str, test: str) -> str:
-    return "independent (0.5)" if name == "independent" else name.replace(f":{test}", "")
+def _labels(names: Sequence[str], test: str) -> list[str]:
+    """Bar labels: the prior names without ``:<test>``, except where that would make two alike (``independent``,
+    the uniform prior, beside ``independent:<test>``, the one learned on the test corpus)."""
+    short = [n.replace(f":{test}", "") for n in names]
+    return [s if short.count(s) == 1 else n for s, n in zip(short, names)]
 
 
 def figures(summ: list[dict], out: Path) -> list[Path]:
@@ -903,7 +931,7 @@ def figures(summ: list[dict], out: Path) -> list[Path]:
         fig, axes = plt.subplots(2, len(tests), figsize=(3.6 * len(tests), 6), squeeze=False)
         for j, test in enumerate(tests):
             sel = [s for s in summ if s["test"] == test and s["mask"] == mask and _shown(s, test)]
-            labels = [_label(s["prior_name"], test) for s in sel]
+            labels = _labels([s["prior_name"] for s in sel], test)
             for i, key in enumerate(("nll_bits", "auc")):
                 ax = axes[i, j]
                 ax.bar(range(len(sel)), [s[key] for s in sel], color="C0")
@@ -923,20 +951,19 @@ def figures(summ: list[dict], out: Path) -> list[Path]:
         nll = np.full((len(names), len(tests)), np.nan)
         for s in unseen:
             nll[names.index(s["prior_name"]), tests.index(s["test"])] = s["nll_bits"]
-        fig, ax = plt.subplots(figsize=(1.4 * len(tests) + 2.5, 0.28 * len(names) + 1.2))
+        fig, ax = plt.subplots(figsize=(1.4 * len(tests) + 3.5, 0.28 * len(names) + 1.6))
         im = ax.imshow(nll, cmap="viridis_r", aspect="auto")
+        mid = (np.nanmin(nll) + np.nanmax(nll)) / 2  # white on the darker half of the colour map
         for (i, j), v in np.ndenumerate(nll):
             if np.isfinite(v):
-                ax.text(
-                    j, i, f"{v:.2f}", ha="center", va="center", fontsize=6, color="w" if v > np.nanmean(nll) else "k"
-                )
+                ax.text(j, i, f"{v:.2f}", ha="center", va="center", fontsize=6, color="w" if v > mid else "k")
         ax.set_xticks(range(len(tests)), tests, fontsize=8)
         ax.set_yticks(range(len(names)), names, fontsize=6)
         ax.set_xlabel("test corpus")
         fig.colorbar(im, ax=ax, label="NLL on unseen cells (bits/cell)")
         fig.tight_layout()
         p = out / "matrix_unseen.png"
-        fig.savefig(p, dpi=110)
+        fig.savefig(p, dpi=110, bbox_inches="tight")  # long prior names and the colour bar's label kept whole
         plt.close(fig)
         paths.append(p)
     return paths

@@ -378,6 +378,19 @@ def test_a_changed_plan_file_refuses_to_resume_and_bad_files_exit_cleanly(cal, t
     (tmp_path / "bad" / "junk.png").write_bytes(b"no image")
     with pytest.raises(SystemExit, match=r"calibration\.py: .*junk\.png: unreadable image"):
         cal.main([*PLAN_RUN, "--plan-files", str(tmp_path / "bad"), "--out", str(tmp_path / "out2")])
+    (tmp_path / "bad" / "walls.json").write_text('{"verts": [[0, 0], [4, 0]]')  # cut short
+    (tmp_path / "bad" / "room.png").write_bytes((d / "office.png").read_bytes())  # a good plan among them
+    with pytest.raises(SystemExit) as e:  # every bad file is named, one a line
+        cal.main([*PLAN_RUN, "--plan-files", str(tmp_path / "bad"), "--out", str(tmp_path / "out2")])
+    lines = str(e.value).splitlines()
+    assert len(lines) == 2 and "junk.png: unreadable image" in lines[0] and "walls.json: " in lines[1]
+    errors = [cal.PlanFileError(f"f{i}", "wrong") for i in range(3)]
+    assert str(cal._every_error(errors)) == "f0: wrong\nf1: wrong\nf2: wrong"
     for bad in (["--plan-set", "IPA"], ["--plan-set", "none"], ["--sweeps", "3"], ["--plans", "0"]):
         with pytest.raises(SystemExit):
             cal.parse_args(["--plan-files", "x", *bad])
+
+
+def test_bar_labels_drop_the_test_corpus_unless_two_would_read_alike(cal):
+    names = ["independent", "independent:ipa", "patch3:ipa", "guide:houseexpo"]
+    assert cal._labels(names, "ipa") == ["independent", "independent:ipa", "patch3", "guide:houseexpo"]
