@@ -588,12 +588,12 @@ def _beam_mi_kernel(pf, offsets, t_enter, Fray, kind, sigma, p_rand, width, p_oc
             i += 1
         mi = 0.0
         for i in range(ns):
-            acc = 0.0
             for j in range(J + 1):
-                v = rows[i, j]
-                if v > 0.0:
-                    acc += v * math.log(v / q[j])
-            mi += ps[i] * acc
+                pv = ps[i] * rows[i, j]
+                # q[j] sums such products, so q[j] >= pv > 0 here; a product that underflows to 0 (a max-range
+                # probability of 1e-320 times its first hit's) adds nothing and is skipped, as q[j] may be 0
+                if pv > 0.0:
+                    mi += pv * math.log(rows[i, j] / q[j])
         out[r] = max(mi, 0.0)
     return out
 

@@ -429,3 +429,18 @@ def test_tabulated_normal_tail_matches_erfc():
     for x in np.concatenate([np.linspace(0, 12, 20011), np.random.default_rng(0).uniform(0, 10, 5000)]):
         exact = 0.5 * math.erfc(x / math.sqrt(2))
         assert abs(_tail(x) / exact - 1) < 1e-13, x
+
+
+def test_beam_information_survives_max_range_terms_that_underflow():
+    """Two first hits a thousandth of a cell apart at the start of a 10-cell ray, sigma = 0.26 cells: each one's
+    max-range probability is 5e-324, and times its first-hit probability it rounds to 0, so that outcome's
+    total probability is 0 while its terms are not. The beam's information is still finite and at most the
+    entropy of the first hit, log 2."""
+    from ogm_ppl.exploration import information as inf
+
+    F = 10.0
+    sigma = F / (27.2 * math.sqrt(2.0))
+    assert 0.0 < 0.5 * math.erfc(F / (sigma * math.sqrt(2.0))) < 1e-323
+    pf = np.array([[0.5, 0.5, 0.0]])  # hits at kappa 0 and 1, never none
+    mi = inf._beam_mi_kernel(pf, np.array([0, 2]), np.array([0.0, 0.001]), np.array([F]), 0, sigma, 0.0, 1.0, 0.5)
+    assert np.isfinite(mi).all() and 0.0 <= mi[0] <= math.log(2.0)
