@@ -74,6 +74,14 @@ def _mode_for(path: Path) -> int:
         return 0o666 & ~_UMASK
 
 
+def _dir_mode_for(path: Path) -> int:
+    """The folder's current mode if it exists, else ``0o777`` less the umask (as ``mkdir`` gives)."""
+    try:
+        return os.stat(path).st_mode & 0o7777
+    except FileNotFoundError:
+        return 0o777 & ~_UMASK
+
+
 def atomic_write_text(path: str | os.PathLike, text: str, encoding: str = "utf-8") -> Path:
     """Write ``text`` to ``path`` atomically (see :func:`atomic_write`); returns the path."""
     with atomic_write(path, "w", encoding=encoding) as f:
@@ -93,8 +101,10 @@ class StagedFolder:
 
     Files go into :attr:`path`, a hidden sibling ``.NAME.staging-XXXX`` of ``target`` (same file system, so
     renames are atomic). :meth:`commit` swaps it in with two renames: ``target -> .NAME.old-XXXX``, then
-    staging ``-> target``; entries of the old folder that the new one does not have (caches, checkpoints)
-    are then moved across, and the old folder is deleted. An interruption before the first rename leaves
+    staging ``-> target``; entries of the old folder that the new one does not have (caches, checkpoints,
+    the user's own files) are then moved across, and the old folder is deleted: an old entry with an
+    output's name (file or folder) is replaced by the output. The folder keeps the old one's permissions (a
+    new one gets ``0o777`` less the umask). An interruption before the first rename leaves
     ``target`` untouched (the staging folder is removed when this object is collected or at exit); one
     between the two renames (two system calls) leaves the old outputs whole in ``.NAME.old-XXXX``, which the
     next :class:`StagedFolder` for ``target`` puts back.
@@ -122,6 +132,8 @@ class StagedFolder:
         """Swap the staged outputs in (see the class docstring); returns ``target``."""
         if self._done:
             raise RuntimeError(f"{self.target}: staged outputs already committed")
+        # the folder keeps the target's permissions (a new one gets those of mkdir), not mkdtemp's private 0o700
+        os.chmod(self.path, _dir_mode_for(self.target))
         old = None
         if self.target.exists():
             old = Path(tempfile.mkdtemp(dir=self.target.parent, prefix=f".{self.target.name}.old-"))

@@ -64,6 +64,22 @@ def test_staged_folder_all_old_until_commit_then_all_new(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["out"]
 
 
+def test_staged_folder_keeps_the_folders_permissions(tmp_path):
+    """A committed folder has the old folder's mode, or a new folder's (``0o777`` less the umask), not the
+    private ``0o700`` of the staging folder, so that a map server running as another user can read it."""
+    from ogm_ppl.io import _UMASK
+
+    out = tmp_path / "out"
+    out.mkdir()
+    out.chmod(0o751)
+    s = StagedFolder(out)
+    atomic_write_text(s.path / "map.npz", "new")
+    assert (s.commit().stat().st_mode & 0o7777) == 0o751
+    s = StagedFolder(tmp_path / "fresh")
+    atomic_write_text(s.path / "map.npz", "new")
+    assert (s.commit().stat().st_mode & 0o7777) == 0o777 & ~_UMASK
+
+
 def test_staged_folder_interrupted_leaves_the_old_folder(tmp_path):
     out = tmp_path / "out"
     out.mkdir()
