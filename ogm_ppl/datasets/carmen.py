@@ -177,11 +177,12 @@ def _read_text(path: Path, strict: bool, bad: list[tuple[int, str]]) -> str:
         try:
             raw = gzip.decompress(raw)
         except (OSError, EOFError, zlib.error) as e:
-            if strict:
-                raise CarmenFormatError(path, 0, "gzip", f"corrupt or truncated gzip stream ({e})") from None
             raw = _decompress_prefix(raw)
             raw = raw[: raw.rfind(b"\n") + 1]  # the last, cut-off line is not a good line
             stop = raw.count(b"\n") + 1
+            if strict:
+                msg = f"corrupt or truncated gzip stream ({e}); the {stop - 1} lines before it are whole"
+                raise CarmenFormatError(path, stop, "gzip", msg) from None
             msg = f"corrupt or truncated gzip stream ({e}); read the {stop - 1} whole lines before it, "
             msg += f"stopped at line {stop}"
             bad.append((stop, msg))
@@ -296,7 +297,7 @@ def _parse_group(key: tuple, rows: list[list[str]]) -> tuple[np.ndarray, list[in
     names = _names(key)
     for row in bad_rows:
         col = int(np.argmin(good[row]))
-        errors.append((ok_rows[row], _LineError(names[col + 1], f"{vals[row, col]!r} is not a valid value")))
+        errors.append((ok_rows[row], _LineError(names[col + 1], f"{float(vals[row, col])!r} is not a valid value")))
     keep = np.setdiff1d(np.arange(len(ok_rows)), bad_rows)
     return vals[keep], [(ok_rows[k]) for k in keep], errors
 

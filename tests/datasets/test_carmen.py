@@ -226,6 +226,7 @@ def test_strict_error_names_file_line_and_field(tmp_path, bad, field):
         read_carmen(path, messages=("FLASER", "ROBOTLASER1"))
     assert (e.value.line_no, e.value.field) == (3, field)
     assert str(path) in str(e.value) and "line 3" in str(e.value) and repr(field) in str(e.value)
+    assert "np." not in str(e.value)  # values as written (nan), not numpy's repr (np.float64(nan))
     log = read_carmen(path, strict=False, messages=("FLASER", "ROBOTLASER1"))
     assert [no for no, _ in log.bad_lines] == [3] and field in log.bad_lines[0][1]
     assert log.line_numbers.tolist() == [1, 4] and log.scans.ranges[:, :2].tolist() == [
@@ -244,11 +245,12 @@ def test_empty_truncated_gzip_and_no_scans(tmp_path):
     data = gzip.compress(("\n".join(flaser([float(i)] * 50) for i in range(1, 200)) + "\n").encode())
     cut = tmp_path / "cut.log.gz"
     cut.write_bytes(data[: len(data) // 2])
-    with pytest.raises(CarmenFormatError, match="gzip"):
+    with pytest.raises(CarmenFormatError, match="gzip") as e:
         read_carmen(cut)
     with pytest.warns(CarmenReadWarning, match="stopped at line"):
         log = read_carmen(cut, strict=False)
     assert log.bad_lines[0][0] == log.scans.num_scans + 1 and 0 < log.scans.num_scans < 199
+    assert f"line {log.scans.num_scans + 1}," in str(e.value)  # strict mode names the line it stops at too
     assert log.scans.ranges[:, 0].tolist() == list(range(1, log.scans.num_scans + 1))
 
 
