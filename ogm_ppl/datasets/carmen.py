@@ -106,8 +106,14 @@ _NUMERIC_PARAMS = {
 }
 
 
+#: metres between two consecutive scans' poses beyond which the reader warns (:class:`CarmenReadWarning`): the
+#: corrected logs step at most 1.8 m, and a wrong pose stretches the grid that covers the poses
+MAX_POSE_STEP = 25.0
+
+
 class CarmenReadWarning(UserWarning):
-    """Lenient reading stopped early (a damaged gzip stream): the message names the file and the line."""
+    """Lenient reading stopped early (a damaged gzip stream), or two consecutive poses lie more than
+    :data:`MAX_POSE_STEP` apart: the message names the file and the lines."""
 
 
 class CarmenFormatError(ValueError):
@@ -550,6 +556,7 @@ def _stack(parsed: list, geom: dict, apply_offset: bool) -> tuple[np.ndarray, ..
 def _assemble(path, num_lines, bad, skipped, params, geom, parsed, settings) -> CarmenLog:
     """Apply the no-return, usable-range, min-range and subsampling rules; build the CarmenLog."""
     poses, angles, ranges, present, thr, nos, ts, is_flaser = _stack(parsed, geom, settings["apply_laser_offset"])
+    _warn_pose_jumps(path, np.asarray(poses, dtype=np.float64), nos)
     auto_band = None
     if settings["no_return_threshold"] is not None:
         thr[:] = float(settings["no_return_threshold"])
@@ -579,6 +586,21 @@ def _assemble(path, num_lines, bad, skipped, params, geom, parsed, settings) -> 
         beam_counts=sorted({int(k[1]) for k, _, _ in parsed}),
     )
     return CarmenLog(scans, str(path), num_lines, bad, skipped, float(scans.max_range), settings, nos, ts, counts)
+
+
+def _warn_pose_jumps(path, poses: np.ndarray, nos: np.ndarray) -> None:
+    """Warn (:class:`CarmenReadWarning`) where consecutive scans' poses (``S x 3``, line order, lines ``nos``)
+    lie more than :data:`MAX_POSE_STEP` metres apart, naming the largest step's lines and the number of such
+    steps. Timestamps are not checked: corrected logs often hold zeros, and some go back."""
+    if len(poses) < 2:
+        return
+    step = np.hypot(*np.diff(poses[:, :2], axis=0).T)
+    far = np.flatnonzero(step > MAX_POSE_STEP)
+    if far.size:
+        i = int(far[np.argmax(step[far])])
+        msg = f"the pose moves {step[i]:.1f} m between lines {nos[i]} and {nos[i + 1]}"
+        msg += f" ({far.size} steps over {MAX_POSE_STEP:g} m); the grid that covers the poses grows with it"
+        warnings.warn(f"{path}: {msg}", CarmenReadWarning, stacklevel=4)
 
 
 def _sentinel_band(top: float) -> float | None:

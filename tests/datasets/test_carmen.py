@@ -4,6 +4,7 @@ import gzip
 import math
 import re
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -430,3 +431,16 @@ def test_log_round_trips_through_a_dataset_file(tmp_path):
     assert d.settings == log.settings and d.grid == log.grid(0.5)
     assert np.array_equal(d.scans.ranges, log.scans.ranges) and np.array_equal(d.scans.is_max, log.scans.is_max)
     assert d.scans.valid.tolist() == [[True, False, True]] and d.scans.is_max.tolist() == [[False, False, True]]
+
+
+def test_a_pose_far_from_the_one_before_it_is_named(tmp_path):
+    """Consecutive scans 1 km apart (a mistyped pose) warn with the lines; 1.8 m steps, as in the corrected
+    logs, do not."""
+    steps = [flaser([1.0, 2.0], pose=(1.8 * i, 0.0, 0.0)) for i in range(4)]
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        read_carmen(write(tmp_path, steps))
+    jump = [*steps[:2], flaser([1.0, 2.0], pose=(1000.0, 0.0, 0.0)), *steps[2:]]
+    with pytest.warns(CarmenReadWarning, match=r"moves 998\.2 m between lines 2 and 3 \(2 steps over 25 m\)"):
+        log = read_carmen(write(tmp_path, jump))
+    assert log.scans.num_scans == 5  # read all the same
