@@ -45,6 +45,8 @@ class StencilPrior(LocalMapPrior):
             made symmetric: ``-d`` is added with the weights of ``d`` when absent.
         coupling: ``J_d``, a scalar or ``D`` values (``J_d = J_{-d}`` is required).
         bias: ``a_d``, a scalar or ``D`` values: added to the log-odds of a cell per neighbour inside the grid.
+        outside: ``lambda_out`` of :meth:`outside_occupancy` (the occupancy of cells beyond the grid edge);
+            ``None``: the field's own cell marginal away from the edges.
 
     >>> p = StencilPrior((2, 3), unary=-1.0, offsets=[(0, 1), (1, 0)], coupling=2.0)
     >>> round(float(p.log_prob(torch.tensor([1., 1., 0., 0., 0., 0.]))), 4)  # 2 h + J
@@ -53,7 +55,10 @@ class StencilPrior(LocalMapPrior):
 
     normalised = False
 
-    def __init__(self, shape, unary=0.0, offsets=(), coupling=0.0, bias=0.0) -> None:
+    def __init__(self, shape, unary=0.0, offsets=(), coupling=0.0, bias=0.0, outside: float | None = None) -> None:
+        if outside is not None and not 0.0 <= float(outside) <= 1.0:
+            raise ValueError(f"{type(self).__name__}.outside must lie in [0, 1], got {outside}")
+        self._outside = None if outside is None else float(outside)
         self.rows, self.cols, self.ndim = grid_shape(shape)
         self.shape = (self.cols,) if self.ndim == 1 else (self.rows, self.cols)
         self.num_cells = K = self.rows * self.cols
@@ -99,6 +104,21 @@ class StencilPrior(LocalMapPrior):
 
     def __repr__(self) -> str:
         return f"{type(self).__name__}(shape={self.shape}, offsets={len(self.offsets)})"
+
+    def outside_occupancy(self) -> float:
+        """``outside`` if given, else the field's cell marginal ``P(m_k = 1)`` away from the edges: with no
+        coupling the mean of ``sigmoid(h_k + sum_d a_d)`` (independent cells), otherwise estimated once
+        (seeded, cached) by compiled prior Gibbs chains on a ``48 x 48`` grid (``48`` cells in 1D) with the mean
+        unary weight, as :meth:`MRFPrior.outside_occupancy`."""
+        if self._outside is None:
+            interior = self.unary + self.bias.sum()
+            if not self.coupling.any():
+                self._outside = float(np.mean(1.0 / (1.0 + np.exp(-interior))))
+            else:
+                shape = (48, 48) if self.ndim == 2 else (48,)
+                field = StencilPrior(shape, float(self.unary.mean()), self.offsets, self.coupling, self.bias)
+                self._outside = _estimate_marginal(field.compiled(), shape)
+        return self._outside
 
     def log_prob(self, maps):
         """``log p~(m)`` (without ``-log Z``) for ``... x K`` maps -> ``...``."""
@@ -169,7 +189,7 @@ class MRFPrior(StencilPrior):
         super().__init__(shape, np.log(lam) - np.log1p(-lam), _mrf_offsets(int(order), ndim), -2.0 * lp, lp)
         self.order, self.psi, self.cell_prior = int(order), float(psi), lam
         self.mean_occupancy = float(lam.mean())
-        self._outside = None if outside is None else float(outside)
+        self._outside = None if outside is None else float(outside)  # (set again: the base class cleared it)
 
     def __repr__(self) -> str:
         return f"MRFPrior(shape={self.shape}, order={self.order}, psi={self.psi:.4g})"
@@ -185,16 +205,17 @@ class MRFPrior(StencilPrior):
         if self._outside is None and (self.psi == 1.0 or self.order == 0):
             return lam
         if self._outside is None:
-            self._outside = _estimate_marginal(self.order, self.psi, lam, len(self.shape))
+            shape = (48, 48) if len(self.shape) == 2 else (48,)
+            self._outside = _estimate_marginal(MRFPrior(shape, self.order, self.psi, lam).compiled(), shape)
         return self._outside
 
 
-def _estimate_marginal(order: int, psi: float, lam: float, ndim: int, size: int = 48, chains: int = 8) -> float:
-    """``P(m_k = 1)`` of a stationary MRF by compiled prior Gibbs (see :meth:`MRFPrior.outside_occupancy`)."""
+def _estimate_marginal(bundle, shape: tuple[int, ...], chains: int = 8) -> float:
+    """``P(m_k = 1)`` away from the edges of the compiled prior ``bundle`` on a grid of ``shape`` by compiled
+    prior Gibbs (see :meth:`MRFPrior.outside_occupancy`)."""
     from ogm_ppl.priors.compiled import prior_gibbs_sweeps
 
-    shape = (size, size) if ndim == 2 else (size,)
-    bundle = MRFPrior(shape, order=order, psi=psi, cell_prior=lam).compiled()
+    ndim = len(shape)
     rng = np.random.default_rng(0)
     maps = np.ascontiguousarray(rng.random((chains, int(np.prod(shape)))) < 0.5, dtype=np.uint8)
     prior_gibbs_sweeps(bundle, maps, 200, 0)

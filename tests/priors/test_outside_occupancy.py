@@ -65,6 +65,30 @@ def test_bare_mrf_estimates_its_own_marginal():
     assert MRFPrior((5,), outside=0.25).outside_occupancy() == 0.25
 
 
+def test_stencil_prior_estimates_its_own_marginal():
+    """A :class:`StencilPrior` (the documented way to a researcher's own pairwise prior) reports its cell
+    marginal, not the uniform prior's 0.5: exact without coupling, and the 1D chain's transfer-matrix marginal
+    within the sampling tolerance of :func:`test_bare_mrf_estimates_its_own_marginal` with it."""
+    from ogm_ppl.priors import StencilPrior
+
+    assert StencilPrior((4, 5), unary=-3.0).outside_occupancy() == pytest.approx(1 / (1 + math.exp(3.0)), abs=1e-15)
+    # h = -1, J = 1.5, a = -0.2: interior log-odds h + 2 a + J (m_left + m_right); an Ising chain with
+    # psi = exp(-J / 2) and lambda = sigmoid(h + 2 a + J)
+    h, J, a = -1.0, 1.5, -0.2
+    lam = 1 / (1 + math.exp(-(h + 2 * a + J)))
+    exact = _chain_marginal(lam, math.exp(-J / 2))
+    p = StencilPrior((30,), unary=h, offsets=[1], coupling=J, bias=a)
+    assert p.outside_occupancy() == pytest.approx(exact, abs=0.04) and abs(exact - 0.5) > 0.04
+    # the same field as an MRF gives the same estimate, to the bit
+    lp = math.log(0.5)
+    mrf = MRFPrior((10, 10), order=2, psi=0.5, cell_prior=0.3)
+    field = StencilPrior((10, 10), math.log(0.3 / 0.7), [(0, 1), (1, 0), (1, 1), (1, -1)], -2 * lp, lp)
+    assert field.outside_occupancy() == mrf.outside_occupancy()
+    assert StencilPrior((5,), outside=0.25).outside_occupancy() == 0.25
+    with pytest.raises(ValueError, match="outside"):
+        StencilPrior((5,), outside=-0.1)
+
+
 def test_likelihood_of_a_cut_ray_follows_the_priors_outside_occupancy():
     # a 9-cell line and a sensor reaching 20 cells: the "no hit in the grid" column equals the one an
     # independent prior with lambda = the prior's outside occupancy gives
