@@ -362,6 +362,7 @@ MALFORMED = [
     ("map {log} --out {d}/o --method foo", "unknown method 'foo'"),
     ("map {sim} --out {d}/o --method gibbs --prior mrf:nowhere", "no shipped tables for corpus 'nowhere'"),
     ("map {sim} --out {d}/o --method gibbs --prior crf:houseexpo", "unknown prior kind 'crf'"),
+    ("map {sim} --out {d}/o --method gibbs --prior crf:houseexpo", "name the module in $OGM_PPL_METHODS"),
     ("map {log} --out {d}/o --delta nope", "unknown Delta name 'nope'"),
     ("map {log} --out {d}/o --method gibbs --delta p21", "--delta sets the parameter 'delta' of ogm"),
     ("map {log} --out {d}/o --warmup 2", "--warmup sets the parameter 'burn_in' of gibbs"),

@@ -143,7 +143,11 @@ def prior_by_name(name: str, shape, tables: PriorTables | None = None) -> MapPri
     """
     kind, corpus, at, modifier = split_prior_name(name)
     if kind not in _FACTORIES:
-        raise ValueError(f"unknown prior kind {kind!r} in {name!r}; kinds: {', '.join(prior_kinds())}")
+        raise ValueError(
+            f"unknown prior kind {kind!r} in {name!r}; kinds: {', '.join(prior_kinds())} (a kind registered "
+            "in a module of your own: import it first, or name the module in $OGM_PPL_METHODS for the command "
+            "line and dask workers)"
+        )
     beta = _exponent(name, kind, corpus, modifier, tables) if at else 1.0
     prior = _FACTORIES[kind](_shape(shape), CorpusTables(corpus, tables))
     if beta == 1.0:

@@ -12,18 +12,35 @@ __all__ = ["PriorContract"]
 
 
 class PriorContract:
-    """Mix into a pytest class and define ``make_prior(num_cells)``.
+    """Mix into a pytest class and define ``make_prior(num_cells)`` (a 1D prior of ``num_cells`` cells) and,
+    for a prior with structure across rows, ``make_prior_2d(shape)`` (the same prior on a ``2 x 3`` grid):
+    every check then runs on both, as the 1D checks never see a vertical or diagonal neighbour.
 
     A prior whose ``log_prob`` is exact only up to its log partition function says so with
-    ``normalised = False`` (and is normalised here by enumeration). Priors with a compiled local
-    conditional (``prior.local()``) also get their compiled cell log-odds checked against ``log_prob``.
+    ``normalised = False`` (and is normalised here by enumeration). Priors with a compiled form
+    (``prior.compiled()`` not ``None``) also get the bundle's cell and patch conditionals checked against
+    ``log_prob``.
     """
 
     num_cells = 6
+    #: the grid of :meth:`make_prior_2d`: ``num_cells`` cells in rows x cols
+    shape_2d = (2, 3)
     num_prior_samples = 20000
 
     def make_prior(self, num_cells):  # pragma: no cover - to be provided
         raise NotImplementedError
+
+    def make_prior_2d(self, shape):
+        """The prior on the 2D grid ``shape`` (rows, cols), or ``None`` (the default) to check it in 1D only."""
+        return None
+
+    def _priors(self):
+        """The priors every check runs on: ``make_prior(num_cells)`` and, if given, ``make_prior_2d``."""
+        yield self.make_prior(self.num_cells)
+        prior_2d = self.make_prior_2d(self.shape_2d)
+        if prior_2d is not None:
+            assert math.prod(self.shape_2d) == self.num_cells, "shape_2d must hold num_cells cells"
+            yield prior_2d
 
     def _all_maps(self):
         return torch.tensor(list(itertools.product([0.0, 1.0], repeat=self.num_cells)), dtype=torch.float64)
@@ -35,41 +52,42 @@ class PriorContract:
         return lp
 
     def test_normalised_over_all_maps(self):
-        lp = self._log_prob(self.make_prior(self.num_cells), self._all_maps())
-        assert lp.shape == (2**self.num_cells,) and not torch.isnan(lp).any()
-        assert abs(torch.logsumexp(lp, 0).item()) < 1e-10
+        for prior in self._priors():
+            lp = self._log_prob(prior, self._all_maps())
+            assert lp.shape == (2**self.num_cells,) and not torch.isnan(lp).any()
+            assert abs(torch.logsumexp(lp, 0).item()) < 1e-10
 
     def test_patch_conditional_matches_log_prob(self):
-        prior = self.make_prior(self.num_cells)
-        maps = self._all_maps()
-        cells = torch.tensor([1, 3, 4])
-        configs = torch.tensor(list(itertools.product([0.0, 1.0], repeat=3)), dtype=torch.float64)
-        got = prior.log_prob_patch(maps, cells, configs)  # B x W
-        trial = maps[:, None, :].repeat(1, len(configs), 1)
-        trial[:, :, cells] = configs
-        want = prior.log_prob(trial)
-        # equal up to a per-map constant (finite entries), same -inf pattern
-        assert torch.equal(torch.isinf(got), torch.isinf(want))
-        fin = torch.isfinite(want)
-        diff = torch.where(fin, got - want, torch.nan)
-        spread = diff.nan_to_num(-math.inf).amax(1) - diff.nan_to_num(math.inf).amin(1)
-        rows = fin.any(1)
-        assert (spread[rows] < 1e-10).all()
+        for prior in self._priors():
+            maps = self._all_maps()
+            cells = torch.tensor([1, 3, 4])
+            configs = torch.tensor(list(itertools.product([0.0, 1.0], repeat=3)), dtype=torch.float64)
+            got = prior.log_prob_patch(maps, cells, configs)  # B x W
+            trial = maps[:, None, :].repeat(1, len(configs), 1)
+            trial[:, :, cells] = configs
+            want = prior.log_prob(trial)
+            # equal up to a per-map constant (finite entries), same -inf pattern
+            assert torch.equal(torch.isinf(got), torch.isinf(want))
+            fin = torch.isfinite(want)
+            diff = torch.where(fin, got - want, torch.nan)
+            spread = diff.nan_to_num(-math.inf).amax(1) - diff.nan_to_num(math.inf).amin(1)
+            rows = fin.any(1)
+            assert (spread[rows] < 1e-10).all()
 
     def test_samples_follow_log_prob(self):
         from pyro.distributions.testing.gof import multinomial_goodness_of_fit
 
-        prior = self.make_prior(self.num_cells)
-        g = torch.Generator().manual_seed(0)
-        s = prior.sample((self.num_prior_samples,), generator=g)
-        codes = (s * (2 ** torch.arange(self.num_cells - 1, -1, -1))).sum(-1).long()
-        counts = torch.bincount(codes, minlength=2**self.num_cells).double()
-        probs = self._log_prob(prior, self._all_maps()).exp()
-        support = probs > 0
-        assert counts[~support].sum() == 0  # nothing sampled where the prior has no mass
-        # chi-square needs expected counts of at least ~5: test the common maps (a truncated test)
-        big = probs * counts.sum() >= 5
-        assert multinomial_goodness_of_fit(probs[big], counts[big], total_count=int(counts.sum())) > 1e-3
+        for prior in self._priors():
+            g = torch.Generator().manual_seed(0)
+            s = prior.sample((self.num_prior_samples,), generator=g)
+            codes = (s * (2 ** torch.arange(self.num_cells - 1, -1, -1))).sum(-1).long()
+            counts = torch.bincount(codes, minlength=2**self.num_cells).double()
+            probs = self._log_prob(prior, self._all_maps()).exp()
+            support = probs > 0
+            assert counts[~support].sum() == 0  # nothing sampled where the prior has no mass
+            # chi-square needs expected counts of at least ~5: test the common maps (a truncated test)
+            big = probs * counts.sum() >= 5
+            assert multinomial_goodness_of_fit(probs[big], counts[big], total_count=int(counts.sum())) > 1e-3
 
     def test_compiled_cell_conditional_matches_log_prob(self):
         """The log-odds the compiled kernels read equal ``log p(m_k = 1, m_-k) - log p(m_k = 0, m_-k)``."""
@@ -77,23 +95,23 @@ class PriorContract:
 
         from ogm_ppl.inference._kernels.cell_sweep import prior_log_odds
 
-        prior = self.make_prior(self.num_cells)
-        bundle = prior.compiled()
-        if bundle is None:
-            return
-        maps = self._all_maps()
-        for k in range(self.num_cells):
-            on, off = maps.clone(), maps.clone()
-            on[:, k], off[:, k] = 1.0, 0.0
-            a, b = prior.log_prob(on), prior.log_prob(off)
-            for i in range(len(maps)):
-                m = maps[i].numpy().astype(np.uint8)
-                got = prior_log_odds(bundle, k, m)
-                assert np.array_equal(m, maps[i].numpy().astype(np.uint8))  # state restored
-                if torch.isinf(a[i]) and torch.isinf(b[i]):  # a map the prior rules out either way
-                    continue
-                want = float(a[i] - b[i])
-                assert (math.isinf(want) and got == want) or abs(got - want) < 1e-10, (k, i, got, want)
+        for prior in self._priors():
+            bundle = prior.compiled()
+            if bundle is None:
+                continue
+            maps = self._all_maps()
+            for k in range(self.num_cells):
+                on, off = maps.clone(), maps.clone()
+                on[:, k], off[:, k] = 1.0, 0.0
+                a, b = prior.log_prob(on), prior.log_prob(off)
+                for i in range(len(maps)):
+                    m = maps[i].numpy().astype(np.uint8)
+                    got = prior_log_odds(bundle, k, m)
+                    assert np.array_equal(m, maps[i].numpy().astype(np.uint8))  # state restored
+                    if torch.isinf(a[i]) and torch.isinf(b[i]):  # a map the prior rules out either way
+                        continue
+                    want = float(a[i] - b[i])
+                    assert (math.isinf(want) and got == want) or abs(got - want) < 1e-10, (k, i, got, want)
 
     def test_compiled_patch_weights_match_log_prob(self):
         """The patch weights the compiled patch kernels read (``patch_prior_batch``, through the bundle's
@@ -102,23 +120,23 @@ class PriorContract:
 
         from ogm_ppl.priors.compiled import patch_prior_batch
 
-        prior = self.make_prior(self.num_cells)
-        bundle = prior.compiled()
-        if bundle is None:
-            return
-        maps = self._all_maps()
-        cells = np.array([1, 3, 4], np.int64)
-        cands = np.arange(8, dtype=np.int64)
-        got = np.empty((len(maps), 8))
-        patch_prior_batch(bundle, np.ascontiguousarray(maps.numpy().astype(np.uint8)), cells, cands, got)
-        configs = torch.tensor(list(itertools.product([0.0, 1.0], repeat=3)), dtype=torch.float64).flip(1)
-        trial = maps[:, None, :].repeat(1, 8, 1)
-        trial[:, :, torch.from_numpy(cells)] = configs  # candidate j sets bit b = the b-th patch cell
-        want = prior.log_prob(trial).numpy()
-        assert np.array_equal(np.isinf(got), np.isinf(want))
-        fin = np.isfinite(want)
-        with np.errstate(invalid="ignore"):  # -inf - -inf where both rule a map out
-            diff = np.where(fin, got - want, np.nan)
-        rows = fin.any(1)
-        spread = np.nanmax(diff[rows], 1) - np.nanmin(diff[rows], 1)
-        assert (spread < 1e-10).all()
+        for prior in self._priors():
+            bundle = prior.compiled()
+            if bundle is None:
+                continue
+            maps = self._all_maps()
+            cells = np.array([1, 3, 4], np.int64)
+            cands = np.arange(8, dtype=np.int64)
+            got = np.empty((len(maps), 8))
+            patch_prior_batch(bundle, np.ascontiguousarray(maps.numpy().astype(np.uint8)), cells, cands, got)
+            configs = torch.tensor(list(itertools.product([0.0, 1.0], repeat=3)), dtype=torch.float64).flip(1)
+            trial = maps[:, None, :].repeat(1, 8, 1)
+            trial[:, :, torch.from_numpy(cells)] = configs  # candidate j sets bit b = the b-th patch cell
+            want = prior.log_prob(trial).numpy()
+            assert np.array_equal(np.isinf(got), np.isinf(want))
+            fin = np.isfinite(want)
+            with np.errstate(invalid="ignore"):  # -inf - -inf where both rule a map out
+                diff = np.where(fin, got - want, np.nan)
+            rows = fin.any(1)
+            spread = np.nanmax(diff[rows], 1) - np.nanmin(diff[rows], 1)
+            assert (spread < 1e-10).all()

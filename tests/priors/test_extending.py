@@ -23,6 +23,34 @@ class TestCheckerboardContract(PriorContract):
     def make_prior(self, num_cells):
         return CheckerboardPrior((num_cells,), beta=0.7)
 
+    def make_prior_2d(self, shape):
+        return CheckerboardPrior(shape, beta=0.7)
+
+
+class TestContractSeesRowsOnlyIn2D:
+    """A stencil bundle that drops the vertical couplings agrees with ``log_prob`` on every 1D map and is
+    caught by the 2D checks only."""
+
+    class _Contract(PriorContract):
+        def make_prior(self, num_cells):
+            return _NoVertical((num_cells,), beta=0.7)
+
+        def make_prior_2d(self, shape):
+            return _NoVertical(shape, beta=0.7)
+
+    def test_1d_passes_and_2d_fails(self):
+        c = self._Contract()
+        c.make_prior_2d = lambda shape: None
+        c.test_compiled_cell_conditional_matches_log_prob()
+        with pytest.raises(AssertionError):
+            self._Contract().test_compiled_cell_conditional_matches_log_prob()
+
+
+class _NoVertical(CheckerboardPrior):
+    def compiled(self):
+        b = super().compiled()
+        return b._replace(coupling=np.where(b.dr != 0, 0.0, b.coupling), bias=np.where(b.dr != 0, 0.0, b.bias))
+
 
 def test_the_name_builds_it_and_it_declares_a_stencil():
     assert KIND in prior_kinds()

@@ -8,6 +8,7 @@ values of chosen cells (``RunningStats(trace_cells=...)``).
 
 from __future__ import annotations
 
+import contextlib
 import math
 import multiprocessing
 import pickle
@@ -30,11 +31,13 @@ __all__ = [
     "effective_sample_size",
     "ess",
     "kl_trace",
+    "print_summary",
     "rhat_agreement",
     "run_chains",
     "run_from_starts",
     "split_rhat",
     "start_maps",
+    "summary",
 ]
 
 
@@ -91,6 +94,52 @@ def ess(traces: np.ndarray | torch.Tensor) -> torch.Tensor:
     """Effective sample size per traced cell, over all chains (NaN for constant cells); see
     :func:`effective_sample_size`."""
     return _per_cell(effective_sample_size, traces)
+
+
+def _samples_of(mcmc_or_samples) -> dict[str, torch.Tensor]:
+    if hasattr(mcmc_or_samples, "get_samples"):
+        return mcmc_or_samples.get_samples(group_by_chain=True)
+    return dict(mcmc_or_samples)
+
+
+@contextlib.contextmanager
+def _per_cell_pyro_ess():
+    """Within the block, Pyro's ``stats.effective_sample_size`` is :func:`effective_sample_size` applied to the
+    non-constant entries of each site (``chains x draws x event``): what :func:`summary` runs Pyro's summary
+    with. Restored on leaving."""
+    import pyro.ops.stats as pyro_stats
+
+    def per_entry(value, chain_dim=0, sample_dim=1):
+        v = torch.as_tensor(value).movedim((chain_dim, sample_dim), (0, 1))
+        flat = v.reshape(v.shape[0], v.shape[1], -1)
+        return _per_cell(effective_sample_size, flat).to(v.dtype).reshape(v.shape[2:])
+
+    original = pyro_stats.effective_sample_size
+    pyro_stats.effective_sample_size = per_entry
+    try:
+        yield
+    finally:
+        pyro_stats.effective_sample_size = original
+
+
+def summary(mcmc_or_samples, prob: float = 0.9) -> dict[str, dict[str, torch.Tensor]]:
+    """``MCMC.summary()``'s numbers (``pyro.infer.mcmc.util.summary``: mean, std, median, the ``prob``
+    interval, ``n_eff``, ``r_hat`` per site, each of the site's event shape) for an ``MCMC`` or a dict of
+    ``chains x draws x ...`` samples, with ``n_eff`` per cell by :func:`effective_sample_size`. Pyro's own
+    is NaN for *every* cell of a site once one cell never changes (pyro 1.9), and a map always has such
+    cells; here those cells alone get NaN (and ``r_hat`` is NaN for them too, as in Pyro)."""
+    from pyro.infer.mcmc.util import summary as pyro_summary
+
+    with _per_cell_pyro_ess():
+        return pyro_summary(_samples_of(mcmc_or_samples), prob=prob, group_by_chain=True)
+
+
+def print_summary(mcmc_or_samples, prob: float = 0.9) -> None:
+    """Print ``MCMC.summary()``'s table with the per-cell ``n_eff`` of :func:`summary`."""
+    from pyro.infer.mcmc.util import print_summary as pyro_print_summary
+
+    with _per_cell_pyro_ess():
+        pyro_print_summary(_samples_of(mcmc_or_samples), prob=prob, group_by_chain=True)
 
 
 @dataclass

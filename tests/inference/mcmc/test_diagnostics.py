@@ -77,3 +77,28 @@ def test_run_from_starts_runs_one_seeded_chain_per_start(kind):
     assert rhat_agreement(res)["cells"] == 3
     with pytest.raises(ValueError, match="at least one start"):
         run_from_starts(make, {}, 5, cells)
+
+
+def test_summary_gives_each_cell_its_own_n_eff_under_pyro_mcmc(capsys):
+    """``MCMC.summary()``'s table with one ``n_eff`` per cell: a cell pinned by the data (constant in every
+    draw) gets NaN alone, where Pyro's estimator makes every cell NaN; the rest equal :func:`ess` of the same
+    draws, and Pyro's own estimator is restored afterwards."""
+    import pyro.ops.stats as pyro_stats
+    from pyro.infer import MCMC
+    from pyro.infer.mcmc.util import summary as pyro_summary
+
+    from ogm_ppl.inference.mcmc.diagnostics import ess, print_summary, summary
+
+    torch.manual_seed(0)
+    mcmc = MCMC(CellGibbs(enumerable_1d()), num_samples=300, warmup_steps=20, num_chains=1, disable_progbar=True)
+    mcmc.run()
+    draws = mcmc.get_samples(group_by_chain=True)["m"]
+    x = torch.cat([draws, torch.zeros_like(draws[..., :1])], -1)  # one more cell, never occupied
+    assert torch.isnan(pyro_summary({"m": x})["m"]["n_eff"]).all()  # Pyro's: NaN for every cell
+    got = summary({"m": x})["m"]
+    assert torch.isnan(got["n_eff"][-1]) and torch.isfinite(got["n_eff"][:-1]).all()
+    torch.testing.assert_close(got["n_eff"][:-1], ess(draws), rtol=0, atol=0)
+    assert torch.equal(summary(mcmc)["m"]["mean"], x[..., :-1].reshape(-1, x.shape[-1] - 1).mean(0))
+    print_summary(mcmc)
+    assert "n_eff" in capsys.readouterr().out
+    assert pyro_stats.effective_sample_size.__module__ == "pyro.ops.stats"
