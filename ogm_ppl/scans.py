@@ -192,6 +192,34 @@ class Scans:
             min_range=self.min_range,
         )
 
+    def select(self, which) -> Scans:
+        """The scans ``which`` picks, in its order: scan indices (a stretch of a log,
+        ``scans.select(range(100, 160))``) or an ``S`` boolean mask (the scans taken inside a region,
+        ``scans.select(grid.contains(scans.poses[:, :2]))``, as a map of part of a building needs: every pose
+        must lie on the grid)."""
+        idx = np.asarray(which)
+        S = self.num_scans
+        if idx.dtype == bool:
+            if idx.shape != (S,):
+                raise ValueError(f"Scans.select: a mask must have shape ({S},), got {idx.shape}")
+            idx = np.flatnonzero(idx)
+        elif idx.size and not np.issubdtype(idx.dtype, np.integer):
+            raise ValueError(f"Scans.select: scan indices must be integers or an S mask, got dtype {idx.dtype}")
+        idx = idx.astype(np.int64).reshape(-1)
+        if idx.size == 0:
+            raise ValueError("Scans.select: no scan selected")
+        if idx.min() < -S or idx.max() >= S:
+            raise ValueError(f"Scans.select: scan indices must lie in [0, {S}), got {idx.min()}..{idx.max()}")
+        assert self.valid is not None  # Scans.__post_init__ always sets the S x B mask
+        return Scans(
+            self.poses[idx],
+            self.angles[idx],
+            self.ranges[idx],
+            self.max_range,
+            valid=self.valid[idx],
+            min_range=self.min_range,
+        )
+
     def extent(self) -> tuple[float, float, float, float]:
         """``(xmin, xmax, ymin, ymax)`` in metres of the poses and the end points of every valid hit."""
         hit = self.valid & ~self.is_max

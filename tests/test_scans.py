@@ -67,3 +67,29 @@ def test_one_d():
     assert s.num_scans == 2 and s.beams_per_scan == 1
     with pytest.raises(ValueError, match="direction"):
         Scans.one_d([3.0], max_range=10.0, direction=0)
+
+
+def test_select_takes_scans_by_index_or_mask():
+    """``select`` keeps each picked scan whole (pose, per-scan angles, ranges, valid beams), in the order asked,
+    and refuses what picks nothing or lies outside."""
+    from ogm_ppl import Grid
+
+    poses = np.array([[0.5, 0.5, 0.0], [5.0, 5.0, 1.0], [1.0, 1.5, 2.0]])
+    angles = np.array([[0.0, 0.1], [0.2, 0.3], [0.4, 0.5]])
+    ranges = np.array([[1.0, 2.0], [3.0, 4.0], [0.5, 9.0]])
+    valid = np.array([[True, False], [True, True], [False, True]])
+    s = Scans(poses, angles, ranges, 9.0, valid=valid, min_range=0.2)
+    two = s.select([2, 0])
+    np.testing.assert_array_equal(two.poses, poses[[2, 0]])
+    np.testing.assert_array_equal(two.angles, angles[[2, 0]])
+    np.testing.assert_array_equal(two.ranges, s.ranges[[2, 0]])
+    np.testing.assert_array_equal(two.valid, valid[[2, 0]])
+    np.testing.assert_array_equal(two.is_max, s.is_max[[2, 0]])
+    assert two.max_range == 9.0 and two.min_range == 0.2
+    grid = Grid((40, 40), resolution=0.05)  # 2 m x 2 m: the third scan's pose and the first's
+    inside = s.select(grid.contains(poses[:, :2]))
+    np.testing.assert_array_equal(inside.poses, poses[[0, 2]])
+    np.testing.assert_array_equal(s.select(range(1, 3)).ranges, s.ranges[1:])
+    for bad, message in (([], "no scan"), ([3], r"\[0, 3\)"), ([0.5], "integers"), (np.ones(2, bool), "shape")):
+        with pytest.raises(ValueError, match=message):
+            s.select(bad)
