@@ -1,13 +1,14 @@
 """Contract checks that every sensor model, prior and map kernel must pass (GPyTorch-style test mixins).
 
 A new prior gets the generic suite by subclassing :class:`PriorContract` in a test module and writing one
-factory method; likewise :class:`SensorContract` for sensor models and :class:`KernelContract` for map
-kernels. The checks are exact (enumeration over
-small problems) or statistical with tolerances derived from the sample size.
+factory method; likewise :class:`SensorContract` for sensor models, :class:`KernelContract` for map
+kernels and :class:`MethodContract` for map methods (a registered name and its parameters). The checks
+are exact (enumeration over small problems) or statistical with tolerances derived from the sample size.
 """
 
 from ogm_ppl.testing.kernels import KernelContract
+from ogm_ppl.testing.methods import MethodContract
 from ogm_ppl.testing.priors import PriorContract
 from ogm_ppl.testing.sensors import SensorContract
 
-__all__ = ["KernelContract", "PriorContract", "SensorContract"]
+__all__ = ["KernelContract", "MethodContract", "PriorContract", "SensorContract"]
