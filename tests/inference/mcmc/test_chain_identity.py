@@ -92,6 +92,7 @@ def priors_2d(shape):
             offsets=[(0, 1), (1, 0), (1, 1)],
             coupling=[0.9, 0.7, -0.3],
             bias=0.1,
+            outside=0.5,  # the recorded chains' occupancy beyond the grid edge
         ),
         "table3": lambda: PatchTablePrior(s, c3, n3, patch=(3, 3), origin=(1, 2)),
         "table5": lambda: PatchTablePrior(s, c5, n5, patch=(5, 5), origin=(2, 1)),

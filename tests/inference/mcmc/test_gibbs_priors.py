@@ -194,7 +194,11 @@ def test_user_prior_on_the_2d_example_generic_and_stencil_agree():
     h, J = -1.2, 1.5
     slow = OccupancyModel(ex.grid, rays, GaussianRange(3.0), IsingByLogProbOnly(64, 64, h, J))
     fast = OccupancyModel(
-        ex.grid, rays, GaussianRange(3.0), StencilPrior((64, 64), unary=h, offsets=[(0, 1), (1, 0)], coupling=J)
+        ex.grid,
+        rays,
+        GaussianRange(3.0),
+        # outside=0.5: the log_prob-only prior's occupancy beyond the grid edge (the base class's default)
+        StencilPrior((64, 64), unary=h, offsets=[(0, 1), (1, 0)], coupling=J, outside=0.5),
     )
     ks, kf = CellGibbs(slow), CellGibbs(fast)
     ks.setup()
