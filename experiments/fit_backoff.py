@@ -34,16 +34,14 @@ from ogm_ppl.datasets.mapgen import iter_corpus  # noqa: E402
 from ogm_ppl.io import atomic_write_text  # noqa: E402
 from ogm_ppl.priors.backoff import (  # noqa: E402
     BACKOFF_FORMAT,
+    KAPPA_RANGE,
     backoff_patch_probs,
     border_log_likelihood,
-    fit_kappa,
-    independent_table,
-    table_log_likelihood,
+    fit_backoff_params,
 )
 from ogm_ppl.priors.learn import count_tables  # noqa: E402
 
 CORPORA = ("generated", "houseexpo", "ipa", "dungeon")
-KAPPA_RANGE = (1e-6, 1e9)
 
 
 def _split(n: int) -> tuple[list[int], list[int]]:
@@ -84,14 +82,13 @@ def fit_corpus(corpus: str, quick: bool) -> dict:
     tf = count_tables(make_fit(), symmetries=True, min_count_5x5=2, progress=False)
     tv = count_tables(make_val(), symmetries=True, min_count_5x5=1, progress=False)
     counted = time.perf_counter() - t0
-    ind = independent_table(tf.lam, 9)
-    k3, ll3 = fit_kappa(lambda k: table_log_likelihood(tf.counts3x3, tv.counts3x3, k, ind), *KAPPA_RANGE)
+    hp = fit_backoff_params(tf, tv, corpus)
+    k3, kb, k1 = hp.kappa_patch3, hp.kappa_border, hp.kappa_border1
+    lls = hp.provenance["validation_mean_log_lik"]
+    ll3, llb, ll1 = lls["patch3"], lls["border"], lls["border1"]
     back3 = backoff_patch_probs(tf, k3)
     fb, vb = tf.border_table().triples(), tv.border_table().triples()
-    kb, llb = fit_kappa(lambda k: border_log_likelihood(fb, vb, k, back3), *KAPPA_RANGE)
-    back1 = np.array([1 - tf.lam, tf.lam])
     f1, v1 = tf.border1_triples(), tv.border1_triples()
-    k1, ll1 = fit_kappa(lambda k: border_log_likelihood(f1, v1, k, back1), *KAPPA_RANGE)
     # references: the unsmoothed tables give -inf wherever a validation pair was never counted
     unseen_b = float(_unseen_share(fb, vb))
     unseen_1 = float(_unseen_share(f1, v1))

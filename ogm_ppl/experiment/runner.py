@@ -123,13 +123,15 @@ def plan_tasks(spec: ExperimentSpec, out: Path, resume: bool = True) -> list[Tas
                 h,
             )
         )
+    priors = {alg.name: T.prior_digest(alg) for alg in spec.algorithms}  # a changed prior reruns its runs
     for ds in spec.datasets:
         for alg in spec.algorithms:
             hs = []
             for c in range(alg.chains):
                 seed = derive_seed(spec.seed, "run", ds.name, alg.name, c)
                 rec_metrics = m if alg.records_metrics else None  # the F1 records depend on them
-                h = T.task_hash("run", ds_h[ds.name], T.spec_entry(alg), c, seed, rec_metrics, o["maps"])
+                run_of = (ds_h[ds.name], T.spec_entry(alg), c, seed, rec_metrics, o["maps"])
+                h = T.task_hash("run", *run_of, *([priors[alg.name]] if priors[alg.name] else []))
                 hs.append(h)
                 tid = f"run/{ds.name}/{alg.name}/c{c}"
                 run_h[tid] = h

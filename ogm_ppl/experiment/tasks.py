@@ -24,6 +24,7 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
+import math
 import threading
 import time
 from dataclasses import asdict
@@ -45,6 +46,7 @@ __all__ = [
     "run_score",
     "score_path",
     "task_env",
+    "prior_digest",
     "task_hash",
 ]
 
@@ -53,6 +55,27 @@ _RNG_LOCK = threading.Lock()  # torch's global RNG is per process: one stochasti
 
 
 # ------------------------------------------------------------------------------------------ helpers
+def prior_digest(alg) -> str | None:
+    """A digest of the prior that ``alg``'s ``prior`` parameter names, built on a 16 x 16 grid (16 cells for a
+    1D-only kind): its type, tables and weights and its ``log_prob`` of seeded maps
+    (:func:`~ogm_ppl.inference.mcmc.fingerprint.prior_digest`). Part of a run's hash, so that a rerun after
+    the prior changed under the same name (tables of your own counted anew, a registered kind edited)
+    recomputes instead of reusing the old result. ``None`` for a method without a prior name."""
+    name = alg.params.get("prior")
+    if not isinstance(name, str):
+        return None
+    from ogm_ppl.inference.mcmc.fingerprint import prior_digest as digest_of
+    from ogm_ppl.priors import prior_by_name
+
+    problems = []
+    for shape in ((16, 16), (16,)):
+        try:
+            return digest_of(prior_by_name(name, shape), math.prod(shape))
+        except ValueError as e:  # a 2D-only or 1D-only kind
+            problems.append(str(e))
+    raise ValueError(f"algorithm {alg.name!r}: cannot build its prior {name!r}: {'; '.join(problems)}")
+
+
 def task_hash(*parts) -> str:
     """A short hash of what a task is asked to do (JSON of ``parts`` and :data:`TASK_VERSION`)."""
     text = json.dumps([TASK_VERSION, *parts], sort_keys=True, default=str)

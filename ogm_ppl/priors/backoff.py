@@ -56,6 +56,7 @@ __all__ = [
     "backed_off_prior",
     "backoff_patch_probs",
     "border_log_likelihood",
+    "fit_backoff_params",
     "fit_kappa",
     "independent_table",
     "load_backoff_params",
@@ -357,12 +358,46 @@ class BackoffBorderPrior(LocalMapPrior):
         return self._gibbs_sample(sample_shape, generator, num_sweeps)
 
 
-def backed_off_prior(kind: str, shape, tables, corpus: str) -> LocalMapPrior:
-    """The named backed-off prior ``kind`` (``patch3_bo``, ``border_bo``, ``border1_bo``) over ``shape``
-    from ``tables``, with the hyper-parameters fitted for ``corpus`` (:func:`load_backoff_params`)."""
+#: the ``kappa`` search range of :func:`fit_backoff_params` (and of ``experiments/fit_backoff.py``)
+KAPPA_RANGE = (1e-6, 1e9)
+
+
+def fit_backoff_params(fit, val, corpus: str = "own") -> BackoffParams:
+    """The ``kappa`` of each level fitted as the shipped ones are (module docstring), for tables of your own:
+    ``fit`` counted on some of your plans, ``val`` on the others (:func:`~ogm_ppl.priors.learn.count_tables`
+    of each), bottom-up (the 3 x 3 table against independent cells with ``fit``'s ``lambda``, then the border
+    table against that smoothed table, the 1-given-8 table against ``(1 - lambda, lambda)``). Apply them to the
+    tables counted on all your plans: ``backed_off_prior(kind, shape, tables, params=...)``."""
+    ind = independent_table(fit.lam, 9)
+    k3, ll3 = fit_kappa(lambda k: table_log_likelihood(fit.counts3x3, val.counts3x3, k, ind), *KAPPA_RANGE)
+    back3 = backoff_patch_probs(fit, k3)
+    fb, vb = fit.border_table().triples(), val.border_table().triples()
+    kb, llb = fit_kappa(lambda k: border_log_likelihood(fb, vb, k, back3), *KAPPA_RANGE)
+    back1 = np.array([1 - fit.lam, fit.lam])
+    f1, v1 = fit.border1_triples(), val.border1_triples()
+    k1, ll1 = fit_kappa(lambda k: border_log_likelihood(f1, v1, k, back1), *KAPPA_RANGE)
+    prov = {
+        "fitted_by": "fit_backoff_params",
+        "kappa_search_range": list(KAPPA_RANGE),
+        "validation_mean_log_lik": {"patch3": ll3, "border": llb, "border1": ll1},
+    }
+    return BackoffParams(corpus, kappa_patch3=k3, kappa_border=kb, kappa_border1=k1, provenance=prov)
+
+
+def backed_off_prior(
+    kind: str, shape, tables, corpus: str | None = None, params: BackoffParams | None = None
+) -> LocalMapPrior:
+    """The backed-off prior ``kind`` (``patch3_bo``, ``border_bo``, ``border1_bo``) over ``shape`` from
+    ``tables``, with the hyper-parameters ``params`` (:func:`fit_backoff_params`, for tables of your own) or
+    those fitted for the shipped ``corpus`` (:func:`load_backoff_params`)."""
     from ogm_ppl.priors.patch_table import PatchTablePrior
 
-    hp = load_backoff_params(corpus)
+    if params is None and not corpus:
+        raise ValueError(
+            f"backed_off_prior({kind!r}): give params (fit_backoff_params on your own fit and validation "
+            "tables) or the shipped corpus whose hyper-parameters to use"
+        )
+    hp = params if params is not None else load_backoff_params(str(corpus))
     back3 = backoff_patch_probs(tables, hp.kappa_patch3)
     if kind == "patch3_bo":
         return PatchTablePrior(shape, codes=np.arange(512), counts=back3, patch=(3, 3))

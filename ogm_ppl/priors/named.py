@@ -138,8 +138,12 @@ def prior_by_name(name: str, shape, tables: PriorTables | None = None) -> MapPri
     (a tuple or a ``Grid``).
 
     Args:
-        tables: a :class:`~ogm_ppl.priors.tables.PriorTables` to use instead of the shipped corpus (``@cal``
-            then needs the corpus in the name: the fitted exponent belongs to the shipped corpus's kind).
+        tables: a :class:`~ogm_ppl.priors.tables.PriorTables` (counted on plans of your own) to use instead of
+            the shipped corpus's counts. A corpus in the name then picks only what was fitted for that
+            shipped corpus: the back-off weights of the ``*_bo`` kinds (which, without a corpus, refuse: fit
+            yours with :func:`~ogm_ppl.priors.backoff.fit_backoff_params`) and the ``@cal`` exponent;
+            ``independent:ANY`` is the tables' own ``lambda`` (``independent`` alone, the uniform prior).
+            The pattern fields (``field``, ``field2``) are not built from tables and refuse them.
     """
     kind, corpus, at, modifier = split_prior_name(name)
     if kind not in _FACTORIES:
@@ -247,6 +251,7 @@ class CorpusTables:
             raise ValueError(f"no shipped tables for corpus {corpus!r}; shipped: {available_tables()}")
         self.corpus = corpus
         self._tables = tables
+        self.own = tables is not None  # tables given to prior_by_name, not the shipped ones
 
     def __call__(self) -> PriorTables:
         if self._tables is None:
@@ -320,7 +325,14 @@ def _field(scales: int) -> PriorFactory:
     def build(shape, tables) -> MapPrior:
         from ogm_ppl.priors.pattern_field import field_by_name
 
-        _two_d("field" if scales == 1 else "field2", shape)
+        kind = "field" if scales == 1 else "field2"
+        _two_d(kind, shape)
+        if tables.own:
+            raise ValueError(
+                f"prior {kind!r} is a fitted pattern field, not count tables: fit one on your plans "
+                "(ogm_ppl.priors.learn_field.fit_pattern_field) and build a PatternFieldPrior, or leave out "
+                "tables= for the shipped corpus's field"
+            )
         return field_by_name(tables.corpus or DEFAULT_CORPUS, shape, scales)
 
     return build
@@ -346,6 +358,13 @@ def _backed_off(kind: str) -> PriorFactory:
         from ogm_ppl.priors.backoff import backed_off_prior
 
         _two_d(kind, shape)
+        if tables.own and not tables.corpus:
+            raise ValueError(
+                f"prior {kind!r} with your own tables needs smoothing weights fitted on them: "
+                f"backed_off_prior({kind!r}, shape, tables, params=fit_backoff_params(fit, val)) "
+                "(ogm_ppl.priors.backoff), or name a shipped corpus (KIND:CORPUS) to smooth your counts with "
+                "the weights fitted for it"
+            )
         return backed_off_prior(kind, shape, tables(), tables.corpus or DEFAULT_CORPUS)
 
     return build

@@ -51,6 +51,7 @@ permutations"), i.e. it equals the sum of the tables of the 8 transformed maps.
 
 from __future__ import annotations
 
+import hashlib
 import json
 import os
 import tempfile
@@ -368,6 +369,21 @@ def _validate(arrays: dict, where: str) -> None:
         bad(f"line_counts must have a power-of-two length >= 2, got {lc}")
     if arrays["run_counts"].shape[0] != 2:
         bad(f"run_counts must have shape (2, R + 1), got {arrays['run_counts'].shape}")
+    if (arrays["cell_counts"] == 0).any():
+        bad(f"cell_counts {arrays['cell_counts'].tolist()} must count free and occupied cells (lambda in (0, 1))")
+    if arrays["counts3x3"].sum() == 0:
+        bad("counts3x3 counts no window")
+
+
+def _content_digest(arrays: dict) -> str:
+    """SHA-256 of the tables' arrays (as int64, in :data:`_ARRAYS` order): written beside them by
+    :func:`save_tables` and checked by :func:`load_tables`, so an array edited after saving is refused."""
+    h = hashlib.sha256()
+    for name in _ARRAYS:
+        a = np.ascontiguousarray(arrays[name], dtype=np.int64)
+        h.update(f"{name}{a.shape}".encode())
+        h.update(a.tobytes())
+    return h.hexdigest()
 
 
 def save_tables(tables: PriorTables, path) -> Path:
@@ -377,7 +393,15 @@ def save_tables(tables: PriorTables, path) -> Path:
     arrays = {name: np.asarray(getattr(tables, name), dtype=np.int64) for name in _ARRAYS}
     arrays["codes5x5"] = arrays["codes5x5"].astype(np.int32)  # 25 bits fit
     _validate(arrays, str(path))
-    meta = json.dumps({"format": "ogm_ppl.prior_tables", "format_version": FORMAT_VERSION, **tables.provenance})
+    prov = {k: v for k, v in tables.provenance.items() if k != "sha256"}
+    meta = json.dumps(
+        {
+            "format": "ogm_ppl.prior_tables",
+            "format_version": FORMAT_VERSION,
+            **prov,
+            "sha256": _content_digest(arrays),
+        }
+    )
     fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
     try:
         with os.fdopen(fd, "wb") as f:
@@ -393,7 +417,9 @@ def save_tables(tables: PriorTables, path) -> Path:
 
 
 def load_tables(path) -> PriorTables:
-    """Read tables written by :func:`save_tables`; a malformed file raises ``ValueError`` naming ``path``."""
+    """Read tables written by :func:`save_tables`; a malformed file raises ``ValueError`` naming ``path``, as
+    does one whose arrays were edited after saving (the SHA-256 :func:`save_tables` records no longer matches;
+    files written without one are read unchecked)."""
     path = Path(path)
     try:
         with np.load(path, allow_pickle=False) as z:
@@ -416,7 +442,9 @@ def load_tables(path) -> PriorTables:
             f"(this version reads {FORMAT_VERSION})"
         )
     _validate(data, str(path))
-    provenance = {k: v for k, v in meta.items() if k not in ("format", "format_version")}
+    if "sha256" in meta and meta["sha256"] != _content_digest(data):  # files written before it have none
+        raise ValueError(f"prior tables {path}: the arrays differ from those saved (their SHA-256 does not match)")
+    provenance = {k: v for k, v in meta.items() if k not in ("format", "format_version", "sha256")}
     return PriorTables(
         cell_counts=data["cell_counts"].astype(np.int64),
         counts3x3=data["counts3x3"].astype(np.int64),

@@ -212,6 +212,28 @@ def test_resume_skips_finished_tasks_and_reruns_missing(serial_run, tmp_path):
     assert r.executed == ["run/office/ogm/c0", "score/office/ogm"]
 
 
+def test_a_prior_changed_under_its_name_is_rerun(tmp_path):
+    """A registered prior whose tables change between two runs (tables of your own counted anew) has the same
+    name in the spec: its runs are recomputed, not found done; an unchanged prior's are found done."""
+    from ogm_ppl.priors import IndependentPrior, register_prior, unregister_prior
+
+    state = {"lam": 0.3}
+    register_prior("test_changing", lambda shape, tables: IndependentPrior(state["lam"], int(np.prod(shape))))
+    try:
+        d = tiny()
+        d["algorithms"] = [{"name": "gibbs-mine", "kind": "gibbs", "prior": "test_changing", "sweeps": 3}]
+        spec = parse_spec(d, "tiny.toml")
+        first = run_experiment(spec, tmp_path, scheduler="serial", progress=False)
+        assert "run/office/gibbs-mine/c0" in first.executed
+        again = run_experiment(spec, tmp_path, scheduler="serial", progress=False)
+        assert again.executed == []
+        state["lam"] = 0.6
+        changed = run_experiment(spec, tmp_path, scheduler="serial", progress=False)
+        assert changed.executed == ["run/office/gibbs-mine/c0", "score/office/gibbs-mine"]
+    finally:
+        unregister_prior("test_changing")
+
+
 def test_interrupted_gibbs_task_resumes_bit_for_bit(serial_run, tmp_path):
     import shutil
 

@@ -272,6 +272,16 @@ def test_malformed_files(tmp_path):
     with pytest.raises(ValueError, match=r"f\.npz"):
         load_tables(write("f.npz", counts3x3=np.array([{"x": 1}], dtype=object)))
     assert zipfile.is_zipfile(good)
+    # well formed but edited after saving: the recorded SHA-256 no longer matches
+    edited = arrays["counts3x3"].copy()
+    edited[0] += 1000
+    with pytest.raises(ValueError, match=r"g\.npz: the arrays differ from those saved"):
+        load_tables(write("g.npz", counts3x3=edited))
+    unchecked = {k: v for k, v in meta.items() if k != "sha256"}  # a file written without one is read
+    assert load_tables(write("h.npz", meta=np.array(json.dumps(unchecked)))).counts3x3.sum() == t.counts3x3.sum()
+    no_occupied = np.array([arrays["cell_counts"][0], 0])
+    with pytest.raises(ValueError, match=r"i\.npz: cell_counts .* must count free and occupied"):
+        load_tables(write("i.npz", cell_counts=no_occupied, meta=np.array(json.dumps(unchecked))))
 
 
 def test_shipped_tables():

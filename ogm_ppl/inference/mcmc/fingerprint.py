@@ -21,7 +21,7 @@ import hashlib
 import numpy as np
 import torch
 
-__all__ = ["digest", "fingerprint"]
+__all__ = ["digest", "fingerprint", "prior_digest"]
 
 
 def digest(*parts) -> str:
@@ -60,7 +60,7 @@ def _tables(obj) -> list:
     return out
 
 
-def _priordigest(prior, num_cells: int) -> str:
+def prior_digest(prior, num_cells: int) -> str:
     """The prior's type, its compiled bundle's tables (every array: the patch tables, stencil weights,
     border segments), the arrays and plain settings it holds, and its ``log_prob`` of seeded maps at
     densities 0, 0.05, 0.3, 0.6 and 1 (for priors whose state is neither)."""
@@ -100,7 +100,7 @@ def fingerprint(kernel, stats) -> dict[str, str]:
         "grid": digest(g.shape, g.resolution, tuple(np.asarray(g.origin).tolist())),
         "readings": digest(r.offsets, r.cells, r.z, r.is_max, r.range_cells, model.known_free),
         "sensor": digest(repr(model.sensor), model.loglik_table),
-        "prior": _priordigest(model.prior, model.num_cells),
+        "prior": prior_digest(model.prior, model.num_cells),
         "kernel": digest(type(kernel).__qualname__, _settings(kernel)),
         "stats": digest(stats.rays, stats.pairs, [p.numpy() for p in stats.paths], stats.trace_cells),
     }
