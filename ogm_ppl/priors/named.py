@@ -330,8 +330,8 @@ def _field(scales: int) -> PriorFactory:
         if tables.own:
             raise ValueError(
                 f"prior {kind!r} is a fitted pattern field, not count tables: fit one on your plans "
-                "(ogm_ppl.priors.learn_field.fit_pattern_field) and build a PatternFieldPrior, or leave out "
-                "tables= for the shipped corpus's field"
+                "(ogm_ppl.priors.learn_field.fit_pattern_field; save_field / field_from_file keep it) and build a "
+                "PatternFieldPrior, or leave out tables= for the shipped corpus's field"
             )
         return field_by_name(tables.corpus or DEFAULT_CORPUS, shape, scales)
 

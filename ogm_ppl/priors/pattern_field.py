@@ -33,10 +33,12 @@ from ogm_ppl.priors.local import LocalMapPrior, grid_shape
 __all__ = [
     "FIELD_FORMAT_VERSION",
     "PatternFieldPrior",
+    "field_from_file",
     "field_path",
     "load_field",
     "orbits_to_table",
     "pooled_grid",
+    "save_field",
     "symmetry_orbits",
     "table_to_orbits",
 ]
@@ -219,8 +221,9 @@ def load_field(path) -> dict:
     """Read and validate a fitted pattern field (``np.load(allow_pickle=False)``).
 
     The file holds ``w`` (int), the one-scale fit ``theta`` (orbit parameters) and ``occupancy``, and the
-    two-scale fit ``theta2_scale1``, ``theta2_scale2`` and ``occupancy2``. Returns them as a dict of numpy
-    values; raises ``ValueError`` naming the path for a missing key, a wrong shape or a non-finite value.
+    two-scale fit ``theta2_scale1``, ``theta2_scale2`` and ``occupancy2`` (the shipped fits; a file of
+    :func:`save_field` may hold the one-scale fit alone). Returns them as a dict of numpy values; raises
+    ``ValueError`` naming the path for a missing key, a wrong shape or a non-finite value.
     """
     path = Path(path)
     try:
@@ -228,7 +231,9 @@ def load_field(path) -> dict:
             data = {k: z[k] for k in z.files}
     except (OSError, ValueError) as e:
         raise ValueError(f"{path}: not a readable npz file of a pattern field ({e})") from None
-    missing = sorted(set(_KEYS) - set(data))
+    two = {"theta2_scale1", "theta2_scale2", "occupancy2"}
+    keys = dict(_KEYS) if two & set(data) else {k: v for k, v in _KEYS.items() if k not in two}  # one scale
+    missing = sorted(set(keys) - set(data))
     if missing:
         raise ValueError(f"{path}: missing arrays {missing}")
     if data["w"].shape != () or not np.issubdtype(data["w"].dtype, np.integer):
@@ -237,17 +242,58 @@ def load_field(path) -> dict:
     if not 1 <= w <= MAX_WINDOW:
         raise ValueError(f"{path}: window side w = {w} outside 1..{MAX_WINDOW}")
     _, n = symmetry_orbits(w)
-    for k, shape in _KEYS.items():
+    for k, shape in keys.items():
         a = data[k]
         want = (n,) if shape is None else shape
         if a.shape != want:
             raise ValueError(f"{path}: {k!r} has shape {a.shape}, expected {want}")
         if not np.issubdtype(a.dtype, np.number) or not np.isfinite(a).all():
             raise ValueError(f"{path}: {k!r} must be finite numbers")
-    for k in ("occupancy", "occupancy2"):
+    for k in ("occupancy", "occupancy2") if "occupancy2" in keys else ("occupancy",):
         if not 0.0 <= float(data[k]) <= 1.0:
             raise ValueError(f"{path}: {k!r} = {float(data[k])} outside [0, 1]")
     return {k: (int(v) if k == "w" else np.asarray(v, np.float64)) for k, v in data.items() if k in _KEYS}
+
+
+def save_field(path, field: PatternFieldPrior, field2: PatternFieldPrior | None = None) -> Path:
+    """Write a fitted pattern field (one scale: ``field``; and optionally a two-scale one, ``field2``, of the
+    same window side) in the format of the shipped fits, atomically: ``w``, the orbit parameters and each
+    field's cell marginal (estimated now where the field has none). Read it back with :func:`field_from_file`
+    (or :func:`load_field`). The potentials must be tied over the 8 symmetries, as every fit is."""
+    from ogm_ppl.io import atomic_write
+
+    def orbits(table: np.ndarray, what: str) -> np.ndarray:
+        params = table_to_orbits(table, field.w)
+        if not np.allclose(orbits_to_table(params, field.w), table, rtol=0, atol=1e-12):
+            raise ValueError(f"save_field: {what} is not tied over the 8 symmetries of the window")
+        return params
+
+    if field.theta2 is not None:
+        raise ValueError("save_field: field is the one-scale fit; give a two-scale field as field2")
+    arrays = {"w": np.int64(field.w), "theta": orbits(field.theta, "theta")}
+    arrays["occupancy"] = np.float64(field.outside_occupancy())
+    if field2 is not None:
+        if field2.theta2 is None or field2.w != field.w:
+            raise ValueError(f"save_field: field2 must be a two-scale field with w = {field.w}")
+        arrays["theta2_scale1"] = orbits(field2.theta, "field2's theta")
+        arrays["theta2_scale2"] = orbits(field2.theta2, "field2's theta2")
+        arrays["occupancy2"] = np.float64(field2.outside_occupancy())
+    path = Path(path)
+    with atomic_write(path, "wb") as f:
+        np.savez(f, **arrays)  # type: ignore[arg-type]
+    return path
+
+
+def field_from_file(path, shape, scales: int = 1) -> PatternFieldPrior:
+    """The field of a file of :func:`save_field` (or a shipped fit), one or two scales, over ``shape``."""
+    d = load_field(path)
+    if scales == 2 and "theta2_scale1" not in d:
+        raise ValueError(f"{path}: holds the one-scale field only")
+    if scales == 1:
+        return PatternFieldPrior(shape, d["theta"], d["w"], occupancy=float(d["occupancy"]))
+    return PatternFieldPrior(
+        shape, d["theta2_scale1"], d["w"], theta2=d["theta2_scale2"], occupancy=float(d["occupancy2"])
+    )
 
 
 def field_by_name(corpus: str, shape, scales: int = 1) -> PatternFieldPrior:

@@ -233,3 +233,29 @@ def test_all_maps_positive():
     p = random_field((2, 3), 2, True, 7, scale=3.0)
     maps = torch.tensor(list(itertools.product([0.0, 1.0], repeat=6)))
     assert torch.isfinite(p.log_prob(maps)).all()
+
+
+def test_a_field_of_your_own_saves_and_loads_back(tmp_path):
+    """``save_field`` writes a fit in the shipped fits' format (one scale alone, or with a two-scale fit) and
+    ``field_from_file`` builds the same field from it; fields not tied over the symmetries are refused."""
+    from ogm_ppl.priors.pattern_field import field_from_file, load_field, save_field
+
+    one = random_field((6, 7), 3, False, 3)
+    one.occupancy = 0.37  # a fitted marginal, stored as given
+    two = random_field((6, 7), 3, True, 4)
+    two.occupancy = 0.41
+    maps = (torch.rand(20, 42, generator=torch.Generator().manual_seed(0)) < 0.4).double()
+    p = save_field(tmp_path / "mine.npz", one)
+    back = field_from_file(p, (6, 7))
+    torch.testing.assert_close(back.log_prob(maps), one.log_prob(maps), rtol=0, atol=1e-12)
+    assert back.outside_occupancy() == 0.37 and "theta2_scale1" not in load_field(p)
+    with pytest.raises(ValueError, match="one-scale field only"):
+        field_from_file(p, (6, 7), scales=2)
+    p2 = save_field(tmp_path / "both.npz", one, two)
+    back2 = field_from_file(p2, (6, 7), scales=2)
+    torch.testing.assert_close(back2.log_prob(maps), two.log_prob(maps), rtol=0, atol=1e-12)
+    assert back2.outside_occupancy() == 0.41
+    untied = PatternFieldPrior((6, 7), np.arange(512.0) / 512, 3)
+    with pytest.raises(ValueError, match="not tied"):
+        save_field(tmp_path / "untied.npz", untied)
+    assert not (tmp_path / "untied.npz").exists()
