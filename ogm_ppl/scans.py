@@ -208,7 +208,7 @@ class Scans:
         idx = idx.astype(np.int64).reshape(-1)
         if idx.size == 0:
             raise ValueError("Scans.select: no scan selected")
-        if idx.min() < -S or idx.max() >= S:
+        if idx.min() < 0 or idx.max() >= S:
             raise ValueError(f"Scans.select: scan indices must lie in [0, {S}), got {idx.min()}..{idx.max()}")
         assert self.valid is not None  # Scans.__post_init__ always sets the S x B mask
         return Scans(

@@ -90,6 +90,12 @@ def test_select_takes_scans_by_index_or_mask():
     inside = s.select(grid.contains(poses[:, :2]))
     np.testing.assert_array_equal(inside.poses, poses[[0, 2]])
     np.testing.assert_array_equal(s.select(range(1, 3)).ranges, s.ranges[1:])
-    for bad, message in (([], "no scan"), ([3], r"\[0, 3\)"), ([0.5], "integers"), (np.ones(2, bool), "shape")):
+    for bad, message in (
+        ([], "no scan"),
+        ([3], r"\[0, 3\)"),
+        ([-1], r"\[0, 3\)"),
+        ([0.5], "integers"),
+        (np.ones(2, bool), "shape"),
+    ):
         with pytest.raises(ValueError, match=message):
             s.select(bad)

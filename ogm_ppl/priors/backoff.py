@@ -380,6 +380,11 @@ def fit_backoff_params(fit, val, corpus: str = "own") -> BackoffParams:
         "fitted_by": "fit_backoff_params",
         "kappa_search_range": list(KAPPA_RANGE),
         "validation_mean_log_lik": {"patch3": ll3, "border": llb, "border1": ll1},
+        # at the search's lower end: the validation likelihood still grows as the smoothing vanishes (almost
+        # every validation configuration was counted in the fit part); the tables stay strictly positive
+        "kappa_at_lower_bound": [
+            name for name, k in (("patch3", k3), ("border", kb), ("border1", k1)) if k <= 1.001 * KAPPA_RANGE[0]
+        ],
     }
     return BackoffParams(corpus, kappa_patch3=k3, kappa_border=kb, kappa_border1=k1, provenance=prov)
 
