@@ -239,11 +239,10 @@ def enumerable_1d(K: int = 6, readings=(3.0, 4.0, 2.0), sensor=None, prior=None)
     return OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), sensor or GaussianRange(1.5), prior)
 
 
-def enumerable_2d(sensor=None, prior=None):
-    """A 2 x 4 grid (7 latent cells) with four max-range-capable readings, ``GaussianRange(0.9)`` unless
-    given, and ``prior`` (default: a graded independent prior ``linspace(0.25, 0.55)``)."""
-    from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
-    from ogm_ppl.priors import IndependentPrior
+def enumerable_2d_data():
+    """``(grid, scans)`` of :func:`enumerable_2d`: a 2 x 4 grid of 1 m cells and four readings (one robot in
+    cell 0, two beams along the bottom row, one back along the top row, one up), max-range ones among them."""
+    from ogm_ppl import Grid, Scans
 
     grid = Grid((2, 4), resolution=1.0)
     scans = Scans(
@@ -253,6 +252,17 @@ def enumerable_2d(sensor=None, prior=None):
         max_range=3.9,
         over_range="max",
     )
+    return grid, scans
+
+
+def enumerable_2d(sensor=None, prior=None):
+    """A 2 x 4 grid (7 latent cells) with four max-range-capable readings (:func:`enumerable_2d_data`),
+    ``GaussianRange(0.9)`` unless given, and ``prior`` (default: a graded independent prior
+    ``linspace(0.25, 0.55)``)."""
+    from ogm_ppl import GaussianRange, OccupancyModel, raycast
+    from ogm_ppl.priors import IndependentPrior
+
+    grid, scans = enumerable_2d_data()
     prior = prior if prior is not None else IndependentPrior(torch.linspace(0.25, 0.55, 8))
     return OccupancyModel(grid, raycast(grid, scans), sensor or GaussianRange(0.9), prior)
 

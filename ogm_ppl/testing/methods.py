@@ -20,7 +20,6 @@ readings among them):
 from __future__ import annotations
 
 import json
-import math
 from typing import Any, ClassVar
 
 import numpy as np
@@ -30,19 +29,12 @@ __all__ = ["MethodContract", "method_problems"]
 
 def method_problems():
     """``[(name, MapProblem)]``: the contract's 1D and 2D problems (enumerable: 6 and 7 latent cells)."""
-    from ogm_ppl import Grid, Scans
     from ogm_ppl.datasets import toy_1d
     from ogm_ppl.methods import MapProblem
+    from ogm_ppl.testing.kernels import enumerable_2d_data
 
-    toy = toy_1d(num_cells=7, wall=1, readings=(3.0, 4.0, 2.0))
-    grid = Grid((2, 4), resolution=1.0)
-    scans = Scans(
-        [[0.5, 0.5, 0.0], [0.5, 0.5, 0.0], [3.5, 1.5, math.pi], [0.5, 0.5, math.pi / 2]],
-        [0.0],
-        [[2.2], [3.9], [1.4], [1.0]],
-        max_range=3.9,
-        over_range="max",
-    )
+    toy = toy_1d(num_cells=7, wall=1, readings=(3.0, 4.0, 2.0))  # the problem of enumerable_1d
+    grid, scans = enumerable_2d_data()
     return [("1d", MapProblem(toy.grid, toy.scans, sigma_cells=1.5)), ("2d", MapProblem(grid, scans, 0.9))]
 
 

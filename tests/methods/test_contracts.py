@@ -43,33 +43,23 @@ class TestGibbs(MethodContract):
     exact_tolerance = 0.025
 
 
-class TestPatchGibbs(MethodContract):
-    method = "gibbs"
-    exact_params = {"sweeps": 20000}
-    exact_tolerance = 0.025
-
+class TestPatchGibbs(TestGibbs):
     def params_for(self, problem_name):
         return {"sweeps": 50, "patch": 2 if problem_name == "1d" else [1, 2]}
 
 
-class TestMetropolis(MethodContract):
+class TestMetropolis(TestGibbs):
     method = "metropolis"
-    params = {"sweeps": 50}
-    exact_params = {"sweeps": 20000}
-    exact_tolerance = 0.025
 
 
-class TestTempering(MethodContract):
+class TestTempering(TestGibbs):
     method = "tempering"
-    params = {"sweeps": 50}
     exact_params = {"sweeps": 5000}
     exact_tolerance = 0.05
 
 
-class TestGuidedGibbs(MethodContract):
+class TestGuidedGibbs(TestTempering):  # its sample size and tolerance
     method = "guided_gibbs"
-    exact_params = {"sweeps": 5000}
-    exact_tolerance = 0.05
 
     def params_for(self, problem_name):
         return {"sweeps": 50, "block": [1, 3] if problem_name == "1d" else [2, 2]}
