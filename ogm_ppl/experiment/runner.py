@@ -123,7 +123,7 @@ def plan_tasks(spec: ExperimentSpec, out: Path, resume: bool = True) -> list[Tas
                 h,
             )
         )
-    priors = {alg.name: T.prior_digest(alg) for alg in spec.algorithms}  # a changed prior reruns its runs
+    priors = {alg.name: T.algorithm_prior_digest(alg) for alg in spec.algorithms}  # a changed prior reruns its runs
     for ds in spec.datasets:
         for alg in spec.algorithms:
             hs = []

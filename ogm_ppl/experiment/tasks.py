@@ -46,7 +46,7 @@ __all__ = [
     "run_score",
     "score_path",
     "task_env",
-    "prior_digest",
+    "algorithm_prior_digest",
     "task_hash",
 ]
 
@@ -55,7 +55,7 @@ _RNG_LOCK = threading.Lock()  # torch's global RNG is per process: one stochasti
 
 
 # ------------------------------------------------------------------------------------------ helpers
-def prior_digest(alg) -> str | None:
+def algorithm_prior_digest(alg) -> str | None:
     """A digest of the prior that ``alg``'s ``prior`` parameter names, built on a 16 x 16 grid (16 cells for a
     1D-only kind): its type, tables and weights and its ``log_prob`` of seeded maps
     (:func:`~ogm_ppl.inference.mcmc.fingerprint.prior_digest`). Part of a run's hash, so that a rerun after
