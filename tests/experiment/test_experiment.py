@@ -427,3 +427,26 @@ def test_beam_increment_in_degrees_is_the_multiple_of_the_logs(room_bag):
     d["datasets"][0]["beam_step"] = 2
     with pytest.raises(SpecError, match="beam_step or beam_increment_deg, not both"):
         parse_spec(d, "inc.toml")
+
+
+def test_a_prior_that_cannot_be_fingerprinted_warns():
+    """A registered prior built for one grid size only cannot be fingerprinted on the 8 x 8 grid: no digest, and
+    a warning that a change of that prior would not be noticed (a spec refuses such a name when it is read)."""
+    from types import SimpleNamespace
+
+    from ogm_ppl.priors import IndependentPrior, register_prior, unregister_prior
+
+    def only_64(shape, tables):
+        if tuple(shape) != (64, 64):
+            raise RuntimeError(f"built for 64 x 64 grids, got {shape}")
+        return IndependentPrior(0.3, 64 * 64)
+
+    register_prior("test_only_64", only_64)
+    try:
+        alg = SimpleNamespace(name="gibbs-64", params={"prior": "test_only_64"})
+        with pytest.warns(UserWarning, match="could not be built on an 8 x 8 grid"):
+            assert T.algorithm_prior_digest(alg) is None
+        assert T.algorithm_prior_digest(SimpleNamespace(name="ogm", params={"prior": 0.4})) is None
+        assert len(T.algorithm_prior_digest(SimpleNamespace(name="g", params={"prior": "mrf:houseexpo"}))) == 16
+    finally:
+        unregister_prior("test_only_64")
