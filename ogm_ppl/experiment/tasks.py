@@ -59,10 +59,10 @@ _RNG_LOCK = threading.Lock()  # torch's global RNG is per process: one stochasti
 def algorithm_prior_digest(alg) -> str | None:
     """A digest of the prior that ``alg``'s ``prior`` parameter names, built on an 8 x 8 grid (where a spec's
     prior names are checked; 8 cells for a 1D-only kind): its type, tables and weights and its ``log_prob``
-    of seeded maps (:func:`~ogm_ppl.inference.mcmc.fingerprint.prior_digest`). Part of a run's hash, so that a rerun after
-    the prior changed under the same name (tables of your own counted anew, a registered kind edited)
-    recomputes instead of reusing the old result. ``None`` for a method without a prior name, and (with a
-    warning) for a prior that cannot be built on those grids."""
+    of seeded maps (:func:`~ogm_ppl.inference.mcmc.fingerprint.prior_digest`). Part of a run's hash, so that
+    a rerun after the prior changed under the same name (tables of your own counted anew, a registered kind
+    edited) recomputes instead of reusing the old result. ``None`` for a method without a prior name, and
+    (with a warning) for a prior that cannot be built on those grids."""
     name = alg.params.get("prior")
     if not isinstance(name, str):
         return None
