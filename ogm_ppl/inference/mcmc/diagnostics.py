@@ -127,7 +127,9 @@ def summary(mcmc_or_samples, prob: float = 0.9) -> dict[str, dict[str, torch.Ten
     interval, ``n_eff``, ``r_hat`` per site, each of the site's event shape) for an ``MCMC`` or a dict of
     ``chains x draws x ...`` samples, with ``n_eff`` per cell by :func:`effective_sample_size`. Pyro's own
     is NaN for *every* cell of a site once one cell never changes (pyro 1.9), and a map always has such
-    cells; here those cells alone get NaN (and ``r_hat`` is NaN for them too, as in Pyro)."""
+    cells; here those cells alone get NaN (and ``r_hat`` is NaN for them too, as in Pyro). Pyro's estimator is
+    swapped for ours during the call only (not thread-safe against Pyro summaries run meanwhile in other
+    threads)."""
     from pyro.infer.mcmc.util import summary as pyro_summary
 
     with _per_cell_pyro_ess():
