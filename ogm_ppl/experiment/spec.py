@@ -13,7 +13,10 @@ Tables (every key optional unless marked *required*; defaults in brackets)::
       simulated:        map ["office"; a mapgen kind or "mixed" = kinds in turn by map_seed],
                         size [500] (int or [rows, cols]), border [20], resolution [0.05] (m/cell),
                         map_seed [0], seed [derived], poses [route until coverage], beams [720],
-                        max_range_cells [75], sigma_cells [3.0], pose_fraction [1.0], beam_step [1]
+                        max_range_cells [75], sigma_cells [3.0], pose_fraction [1.0], beam_step [1];
+                        or, instead of map, size, border and map_seed, plan = a floor plan of your own
+                        (ogm_ppl.datasets.plan_files: an image, a ROS map YAML or a HouseExpo layout; relative
+                        to the spec file) and pixel_size (metres, for an image); its unknown cells are walls
       log:              path (*required*; relative to the spec file; ~ and $VARS expanded),
                         reader [{max_usable_range = 20.0}] (read_carmen options), resolution [0.05],
                         extent [x0, y0, width, height] metres (else the log's extent + margin [1.0]),
@@ -62,6 +65,7 @@ not on its position in the spec, so adding an algorithm or a dataset changes no 
 
 from __future__ import annotations
 
+import hashlib
 import itertools
 import json
 import math
@@ -339,27 +343,67 @@ def _named_entry(source: str, section: str, i: int, entry) -> tuple[_Table, str]
     return t, name
 
 
+def _generated_keys(t: _Table) -> dict:
+    """``map``, ``size``, ``border`` and ``map_seed`` of a simulated dataset on a generated map."""
+    p: dict = {"map": t.get("map", "str", "office", choices=MAP_KINDS)}
+    size = t.raw("size", 500)
+    if isinstance(size, int) and not isinstance(size, bool):
+        size = [size, size]
+    if not (
+        isinstance(size, list) and len(size) == 2 and all(isinstance(s, int) and not isinstance(s, bool) for s in size)
+    ):
+        t.fail("size", f"must be an int or [rows, cols], got {size!r}")
+    if min(size) < 60:
+        t.fail("size", f"generated maps need at least 60 x 60 cells, got {size}")
+    p["size"] = [int(s) for s in size]
+    p["border"] = t.get("border", "int", 20, lo=1, hi=min(size) // 4)
+    p["map_seed"] = t.get("map_seed", "int", 0, sweep=True, lo=0)
+    return p
+
+
+def _plan_keys(t: _Table, base_dir: Path) -> dict:
+    """``plan`` (resolved like a log's path), the SHA-256 of its files (a changed plan is a new dataset) and
+    ``pixel_size`` of a simulated dataset on a floor plan of your own."""
+    from ogm_ppl.datasets.plan_files import plan_file_pieces
+
+    raw = t.get("plan", "str")
+    path = Path(os.path.expandvars(os.path.expanduser(raw)))
+    if not path.is_absolute():
+        path = (base_dir / path).resolve()
+    if not path.is_file():
+        t.fail("plan", f"no such plan file: {path}")
+    h = hashlib.sha256()
+    for piece in plan_file_pieces(path):
+        h.update(piece.read_bytes())
+    pixel = t.get("pixel_size", "float", None, lo=0, lo_open=True)
+    return {"plan": str(path), "plan_sha256": h.hexdigest(), "pixel_size": pixel}
+
+
+def _check_plan(t: _Table, p: dict) -> None:
+    """Read the plan once as :func:`~ogm_ppl.experiment.tasks.run_base` will, so a bad file fails here."""
+    from ogm_ppl.datasets.plan_files import PlanFileError, load_plan_file
+
+    try:
+        load_plan_file(p["plan"], pixel_size=p["pixel_size"], resolution=p["resolution"])
+    except (PlanFileError, OSError) as e:
+        t.fail("plan", str(e))
+
+
 def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[DatasetSpec]:
     t, name = _named_entry(source, "datasets", i, d)
     kind = t.get("kind", "str", required=True, choices=("simulated", "log", "bag"))
     p: dict = {}
-    if kind == "simulated":
-        p["map"] = t.get("map", "str", "office", choices=MAP_KINDS)
-        size = t.raw("size", 500)
-        if isinstance(size, int) and not isinstance(size, bool):
-            size = [size, size]
-        if not (
-            isinstance(size, list)
-            and len(size) == 2
-            and all(isinstance(s, int) and not isinstance(s, bool) for s in size)
-        ):
-            t.fail("size", f"must be an int or [rows, cols], got {size!r}")
-        if min(size) < 60:
-            t.fail("size", f"generated maps need at least 60 x 60 cells, got {size}")
-        p["size"] = [int(s) for s in size]
-        p["border"] = t.get("border", "int", 20, lo=1, hi=min(size) // 4)
+    if kind == "simulated" and t.has("plan"):  # scanned on a floor plan of your own
+        for k in ("map", "size", "border", "map_seed"):
+            if t.has(k):
+                t.fail(k, "applies to generated maps, not to a plan")
+        p.update(_plan_keys(t, base_dir))
         p["resolution"] = t.get("resolution", "float", 0.05, lo=0, lo_open=True)
-        p["map_seed"] = t.get("map_seed", "int", 0, sweep=True, lo=0)
+        _check_plan(t, p)
+    if kind == "simulated":
+        if "plan" not in p:
+            p.update(_generated_keys(t))
+            p["resolution"] = t.get("resolution", "float", 0.05, lo=0, lo_open=True)
         p["seed"] = t.get("seed", "int", derive_seed(seed, "dataset", name, bits=32), sweep=True, lo=0)
         p["poses"] = t.get("poses", "int", None, lo=1)
         p["beams"] = t.get("beams", "int", 720, lo=1)
@@ -370,16 +414,11 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
         for bs in np.atleast_1d(p["beam_step"]):
             if bs > p["beams"]:
                 t.fail("beam_step", f"{bs} exceeds beams = {p['beams']}")
-        base_keys: tuple[str, ...] = (
-            "map",
-            "size",
-            "border",
-            "resolution",
-            "map_seed",
-            "seed",
-            "poses",
-            "max_range_cells",
-        )
+        shared = ("resolution", "seed", "poses", "max_range_cells")
+        if "plan" in p:
+            base_keys: tuple[str, ...] = ("plan", "plan_sha256", "pixel_size", *shared)
+        else:
+            base_keys = ("map", "size", "border", "map_seed", *shared)
     else:
         raw_path = t.get("path", "str", required=True)
         path = Path(os.path.expandvars(os.path.expanduser(raw_path)))

@@ -181,8 +181,15 @@ def run_base(ds, out: str | Path, h: str) -> dict:
             from ogm_ppl.datasets.mapgen import KINDS, generate_map
             from ogm_ppl.datasets.stop_and_scan import plan_route
 
-            kind = KINDS[p["map_seed"] % len(KINDS)] if p["map"] == "mixed" else p["map"]
-            truth = generate_map(kind, tuple(p["size"]), seed=p["map_seed"], border=p["border"])
+            if "plan" in p:  # a floor plan of your own: its unknown cells (outside, unseen) are walls
+                from ogm_ppl.datasets.plan_files import load_plan_file
+
+                plan = load_plan_file(p["plan"], pixel_size=p["pixel_size"], resolution=p["resolution"])
+                kind = "plan"
+                truth = np.asarray(plan.occupancy, bool) | ~np.asarray(plan.known, bool)
+            else:
+                kind = KINDS[p["map_seed"] % len(KINDS)] if p["map"] == "mixed" else p["map"]
+                truth = generate_map(kind, tuple(p["size"]), seed=p["map_seed"], border=p["border"])
             grid = Grid(truth.shape, resolution=p["resolution"])
             route = plan_route(
                 truth,

@@ -450,3 +450,45 @@ def test_a_prior_that_cannot_be_fingerprinted_warns():
         assert len(T.algorithm_prior_digest(SimpleNamespace(name="g", params={"prior": "mrf:houseexpo"}))) == 16
     finally:
         unregister_prior("test_only_64")
+
+
+def test_a_simulated_dataset_on_a_plan_of_your_own(tmp_path):
+    """``plan = FILE`` scans a floor plan of your own instead of a generated map: the dataset's truth is the
+    plan read at the spec's resolution; generated-map keys are refused beside it, a bad file fails when the
+    spec is read (naming the key), and an edited plan is a new dataset."""
+    from PIL import Image
+
+    from ogm_ppl.datasets.plan_files import load_plan_file
+    from tests._scripts import write_plan_folder
+
+    plans = write_plan_folder(tmp_path)
+    d = tiny()
+    d["datasets"][0] = {
+        "name": "mine",
+        "kind": "simulated",
+        "plan": str(plans / "office.png"),
+        "pixel_size": 0.025,
+        "poses": 3,
+        "beams": 90,
+        "max_range_cells": 30,
+        "sigma_cells": 1.0,
+    }
+    d["algorithms"] = [d["algorithms"][0]]  # OGM
+    r = run_experiment(parse_spec(d, "tiny.toml"), tmp_path / "out", scheduler="serial", progress=False)
+    assert not r.failed and "base/mine" in r.executed
+    with np.load(tmp_path / "out" / "datasets" / "mine.eval.npz") as z:
+        truth = z["truth"]
+    plan = load_plan_file(plans / "office.png", pixel_size=0.025)
+    np.testing.assert_array_equal(truth, plan.occupancy | ~plan.known)
+    again = run_experiment(parse_spec(d, "tiny.toml"), tmp_path / "out", scheduler="serial", progress=False)
+    assert again.executed == []
+    px = np.asarray(Image.open(plans / "office.png")).copy()
+    px[60:64, 20:120] = 0  # a wall added
+    Image.fromarray(px).save(plans / "office.png")
+    edited = run_experiment(parse_spec(d, "tiny.toml"), tmp_path / "out", scheduler="serial", progress=False)
+    assert "base/mine" in edited.executed
+    with pytest.raises(SpecError, match=r"datasets\[0\] \('mine'\)\.size: applies to generated maps"):
+        parse_spec({**d, "datasets": [{**d["datasets"][0], "size": 80}]}, "tiny.toml")
+    (tmp_path / "junk.png").write_bytes(b"no image")
+    with pytest.raises(SpecError, match=r"\.plan: .*junk\.png"):
+        parse_spec({**d, "datasets": [{**d["datasets"][0], "plan": str(tmp_path / "junk.png")}]}, "tiny.toml")
