@@ -107,9 +107,7 @@ def fit_corpus(corpus: str, quick: bool) -> dict:
         "kappa_border1": k1,
         # kappa at the search's lower end: the validation likelihood still grows as the smoothing vanishes
         # (almost every validation pair was counted in the fit plans); the tables stay strictly positive
-        "kappa_at_lower_bound": [
-            name for name, k in (("patch3", k3), ("border", kb), ("border1", k1)) if k <= 1.001 * KAPPA_RANGE[0]
-        ],
+        "kappa_at_lower_bound": hp.provenance["kappa_at_lower_bound"],
         "kappa_search_range": list(KAPPA_RANGE),
         "validation": {
             "patch3_mean_log_lik": ll3,

@@ -393,17 +393,17 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
     t, name = _named_entry(source, "datasets", i, d)
     kind = t.get("kind", "str", required=True, choices=("simulated", "log", "bag"))
     p: dict = {}
-    if kind == "simulated" and t.has("plan"):  # scanned on a floor plan of your own
-        for k in ("map", "size", "border", "map_seed"):
-            if t.has(k):
-                t.fail(k, "applies to generated maps, not to a plan")
-        p.update(_plan_keys(t, base_dir))
-        p["resolution"] = t.get("resolution", "float", 0.05, lo=0, lo_open=True)
-        _check_plan(t, p)
     if kind == "simulated":
-        if "plan" not in p:
+        if t.has("plan"):  # scanned on a floor plan of your own
+            for k in ("map", "size", "border", "map_seed"):
+                if t.has(k):
+                    t.fail(k, "applies to generated maps, not to a plan")
+            p.update(_plan_keys(t, base_dir))
+        else:
             p.update(_generated_keys(t))
-            p["resolution"] = t.get("resolution", "float", 0.05, lo=0, lo_open=True)
+        p["resolution"] = t.get("resolution", "float", 0.05, lo=0, lo_open=True)
+        if "plan" in p:
+            _check_plan(t, p)
         p["seed"] = t.get("seed", "int", derive_seed(seed, "dataset", name, bits=32), sweep=True, lo=0)
         p["poses"] = t.get("poses", "int", None, lo=1)
         p["beams"] = t.get("beams", "int", 720, lo=1)

@@ -175,8 +175,6 @@ class MRFPrior(StencilPrior):
     """
 
     def __init__(self, shape, order: int = 1, psi: float = 0.5, cell_prior=0.5, outside: float | None = None) -> None:
-        if outside is not None and not 0.0 <= float(outside) <= 1.0:
-            raise ValueError(f"MRFPrior.outside must lie in [0, 1], got {outside}")
         if not 0.0 < float(psi) <= 1.0:
             raise ValueError(f"MRFPrior.psi must lie in (0, 1], got {psi}")
         lam = np.asarray(cell_prior, np.float64)
@@ -186,10 +184,9 @@ class MRFPrior(StencilPrior):
             raise ValueError(f"MRF order must be a non-negative integer, got {order}")
         _, _, ndim = grid_shape(shape)
         lp = math.log(float(psi))
-        super().__init__(shape, np.log(lam) - np.log1p(-lam), _mrf_offsets(int(order), ndim), -2.0 * lp, lp)
+        super().__init__(shape, np.log(lam) - np.log1p(-lam), _mrf_offsets(int(order), ndim), -2.0 * lp, lp, outside)
         self.order, self.psi, self.cell_prior = int(order), float(psi), lam
         self.mean_occupancy = float(lam.mean())
-        self._outside = None if outside is None else float(outside)  # (set again: the base class cleared it)
 
     def __repr__(self) -> str:
         return f"MRFPrior(shape={self.shape}, order={self.order}, psi={self.psi:.4g})"

@@ -113,7 +113,9 @@ class MethodContract:
 
     def test_matches_the_exact_posterior(self):
         if self.exact_tolerance is None:
-            return
+            import pytest
+
+            pytest.skip("no exact_tolerance: the method does not target the posterior")
         from ogm_ppl.inference.exact import brute_force
 
         m = self._method()
