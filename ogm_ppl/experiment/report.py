@@ -94,6 +94,7 @@ def markdown(result) -> str:
         lines += [spec.description, ""]
     mask_desc = {
         "all": "all cells",
+        "known": "the cells the map knows (a plan's walls and free space)",
         "near_mapped": f"cells within {spec.metrics.near_mapped_distance:g} cells of a mapped cell",
     }
     lines += [

@@ -95,7 +95,8 @@ def plan_tasks(spec: ExperimentSpec, out: Path, resume: bool = True) -> list[Tas
     base_h, ds_h, run_h = {}, {}, {}
     for ds in spec.datasets:
         if ds.base not in base_h:
-            h = T.task_hash("base", ds.base_params)
+            plan_version = [T.PLAN_BASE_VERSION] if "plan" in ds.base_params else []
+            h = T.task_hash("base", ds.base_params, *plan_version)
             base_h[ds.base] = h
             tasks.append(
                 Task(

@@ -16,7 +16,9 @@ Tables (every key optional unless marked *required*; defaults in brackets)::
                         max_range_cells [75], sigma_cells [3.0], pose_fraction [1.0], beam_step [1];
                         or, instead of map, size, border and map_seed, plan = a floor plan of your own
                         (ogm_ppl.datasets.plan_files: an image, a ROS map YAML or a HouseExpo layout; relative
-                        to the spec file) and pixel_size (metres, for an image); its unknown cells are walls
+                        to the spec file) and pixel_size (metres, for an image); its unknown cells are walls;
+                        the grid's origin is (0, 0) at the bottom-left corner of the cropped plan, the image's
+                        top row at the top (largest y)
       log:              path (*required*; relative to the spec file; ~ and $VARS expanded),
                         reader [{max_usable_range = 20.0}] (read_carmen options), resolution [0.05],
                         extent [x0, y0, width, height] metres (else the log's extent + margin [1.0]),
@@ -45,7 +47,9 @@ Tables (every key optional unless marked *required*; defaults in brackets)::
                         prior ["independent"], sigma_cells [the dataset's]
       amortised:        guide ["shipped"; "corpus:CORPUS": the guide learned on a corpus's plans; or a .npz]
       also:             metropolis, vi, guided_gibbs, and the aliases p21, elfes, patch
-    [metrics]           mask ["auto": "all" for simulated, "near_mapped" for logs], near_mapped_distance
+    [metrics]           mask ["auto": "known" for simulated, "near_mapped" for logs; "all": every cell;
+                        "known": a plan's walls and free space, not its exterior nor the crop's margin (every
+                        cell of a generated map)], near_mapped_distance
                         [10.0] (cells), touched_only [true], thresholds [99: 0.01..0.99, or a list],
                         scores [["f1", "auc", "max_precision"]; also "nll_bits", "brier", "ece"]
     [output]            maps [true] (per-task npz + PNG), figures [true], fpfn ["first" | "all" |
@@ -195,9 +199,11 @@ class MetricsSpec:
     scores: tuple = ("f1", "auc", "max_precision")
 
     def mask_for(self, dataset_kind: str) -> str:
+        """The mask scored on a dataset of ``dataset_kind``: :attr:`mask`, ``"auto"`` read as
+        ``"near_mapped"`` for logs and bags and ``"known"`` for simulated data."""
         if self.mask != "auto":
             return self.mask
-        return "near_mapped" if dataset_kind in ("log", "bag") else "all"
+        return "near_mapped" if dataset_kind in ("log", "bag") else "known"
 
 
 @dataclass(frozen=True)
@@ -663,7 +669,7 @@ def parse_spec(data: dict, source: str = "<dict>", base_dir: str | os.PathLike =
     if not isinstance(scores, list) or any(s not in SCORES for s in scores):
         m.fail("scores", f"must be a list of {', '.join(map(repr, SCORES))}, got {scores!r}")
     metrics = MetricsSpec(
-        mask=m.get("mask", "str", "auto", choices=("auto", "all", "near_mapped")),
+        mask=m.get("mask", "str", "auto", choices=("auto", "all", "known", "near_mapped")),
         near_mapped_distance=m.get("near_mapped_distance", "float", 10.0, lo=0),
         touched_only=m.get("touched_only", "bool", True),
         thresholds=thresholds,

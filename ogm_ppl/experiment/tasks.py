@@ -52,6 +52,9 @@ __all__ = [
 ]
 
 TASK_VERSION = 2  # 2: the sensor model sees walls in the last half cell of the range (sensors._common)
+#: how a floor plan of your own becomes a dataset's base (2: the image's top row at the grid's top; the exterior
+#: recorded as unknown, outside the "known" mask), in the hash of such a base only
+PLAN_BASE_VERSION = 2
 _RNG_LOCK = threading.Lock()  # torch's global RNG is per process: one stochastic run at a time per process
 
 
@@ -184,12 +187,17 @@ def run_base(ds, out: str | Path, h: str) -> dict:
             if "plan" in p:  # a floor plan of your own: its unknown cells (outside, unseen) are walls
                 from ogm_ppl.datasets.plan_files import load_plan_file
 
-                plan = load_plan_file(p["plan"], pixel_size=p["pixel_size"], resolution=p["resolution"])
+                plan = load_plan_file(
+                    p["plan"], pixel_size=p["pixel_size"], resolution=p["resolution"], outside="unknown"
+                )
                 kind = "plan"
-                truth = np.asarray(plan.occupancy, bool) | ~np.asarray(plan.known, bool)
+                # a plan's row 0 is the image's top; a grid's row 0 is its bottom (smallest y)
+                known = np.flipud(np.asarray(plan.known, bool))
+                truth = np.flipud(np.asarray(plan.occupancy, bool)) | ~known
             else:
                 kind = KINDS[p["map_seed"] % len(KINDS)] if p["map"] == "mixed" else p["map"]
                 truth = generate_map(kind, tuple(p["size"]), seed=p["map_seed"], border=p["border"])
+                known = np.ones_like(truth)
             grid = Grid(truth.shape, resolution=p["resolution"])
             route = plan_route(
                 truth,
@@ -198,9 +206,10 @@ def run_base(ds, out: str | Path, h: str) -> dict:
                 max_range_cells=p["max_range_cells"],
                 seed=p["seed"],
             )
-            _savez(npz, grid=_grid_array(grid), truth=truth, route=route)
+            _savez(npz, grid=_grid_array(grid), truth=truth, known=known, route=route)
             info = {
                 "map_kind": kind,
+                "known_share": float(known.mean()),
                 "route_poses": len(route),
                 "occupied_share": float(truth.mean()),
             }
@@ -265,6 +274,7 @@ def run_dataset(ds, out: str | Path, h: str, _base=None) -> dict:
             grid, truth = _grid_from(z["grid"]), z["truth"].astype(bool)
             route = z["route"] if "route" in z.files else None
             mapped = z["mapped"].astype(bool) if "mapped" in z.files else None
+            known = z["known"].astype(bool) if "known" in z.files else np.ones_like(truth)
         if ds.kind == "simulated":
             from ogm_ppl.datasets.stop_and_scan import stop_and_scan
 
@@ -299,6 +309,7 @@ def run_dataset(ds, out: str | Path, h: str, _base=None) -> dict:
             truth=truth,
             mapped=mapped,
             touched=touched,
+            known=known,
         )
     rec = {
         "hash": h,
@@ -325,8 +336,12 @@ def load_eval(out: Path, ds, metrics):
             z["mapped"].astype(bool),
             z["touched"].astype(bool),
         )
-    if metrics.mask_for(ds.kind) == "near_mapped":
+        known = z["known"].astype(bool) if "known" in z.files else np.ones_like(truth)
+    kind = metrics.mask_for(ds.kind)
+    if kind == "near_mapped":
         mask = near_mapped_mask(mapped, metrics.near_mapped_distance)
+    elif kind == "known":
+        mask = known
     else:
         mask = np.ones_like(truth)
     return truth.ravel(), mask.ravel(), (mask & touched).ravel()

@@ -474,12 +474,21 @@ def test_a_simulated_dataset_on_a_plan_of_your_own(tmp_path):
         "sigma_cells": 1.0,
     }
     d["algorithms"] = [d["algorithms"][0]]  # OGM
+    d["metrics"] = {**d["metrics"], "mask": "auto"}  # "known" for simulated data
     r = run_experiment(parse_spec(d, "tiny.toml"), tmp_path / "out", scheduler="serial", progress=False)
     assert not r.failed and "base/mine" in r.executed
     with np.load(tmp_path / "out" / "datasets" / "mine.eval.npz") as z:
-        truth = z["truth"]
-    plan = load_plan_file(plans / "office.png", pixel_size=0.025)
-    np.testing.assert_array_equal(truth, plan.occupancy | ~plan.known)
+        truth, known = z["truth"], z["known"]
+    plan = load_plan_file(plans / "office.png", pixel_size=0.025, outside="unknown")
+    # the image's top row is the grid's top row (largest y), as in a ROS map
+    np.testing.assert_array_equal(truth, np.flipud(plan.occupancy | ~plan.known))
+    np.testing.assert_array_equal(known, np.flipud(plan.known))
+    assert 0 < known.mean() < 1  # the exterior and the crop's margin are not scored
+    from ogm_ppl.experiment.tasks import load_eval
+
+    spec = parse_spec(d, "tiny.toml")
+    _, mask, _ = load_eval(tmp_path / "out", spec.datasets[0], spec.metrics)
+    np.testing.assert_array_equal(mask, known.ravel())
     again = run_experiment(parse_spec(d, "tiny.toml"), tmp_path / "out", scheduler="serial", progress=False)
     assert again.executed == []
     px = np.asarray(Image.open(plans / "office.png")).copy()
