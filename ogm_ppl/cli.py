@@ -48,7 +48,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ogm_ppl.datasets.mapgen import KINDS
-from ogm_ppl.grid import Grid
+from ogm_ppl.grid import MAX_CELLS, Grid
 from ogm_ppl.io import StagedFolder, atomic_write, atomic_write_text
 from ogm_ppl.methods import MapProblem, ParamError, RunContext, get_method, method_names, methods
 
@@ -58,7 +58,6 @@ if TYPE_CHECKING:
     from ogm_ppl.methods import MapMethod
     from ogm_ppl.scans import Scans
 
-MAX_CELLS = 50_000_000
 _PNG_UNKNOWN = (217, 217, 217)  # the light grey of viz.plot_map for unknown cells
 MAP_FORMAT = "ogm_ppl.map"
 MAP_FORMAT_VERSION = 1

@@ -15,7 +15,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Grid"]
+__all__ = ["Grid", "MAX_CELLS"]
+
+#: Default limit on the cells of a grid the command line and the experiments build from a file or a spec: a
+#: larger grid is refused with this limit in the message (``--max-cells``, ``[experiment] max_cells``), before a
+#: float64 map of it (8 bytes a cell, several at once) takes the machine's memory.
+MAX_CELLS = 50_000_000
 
 
 def _cell_count(value: object, i: int, shape: object) -> int:

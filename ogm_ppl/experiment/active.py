@@ -467,6 +467,8 @@ def run_active(
     if failed:
         first = next(iter(failed.items()))
         raise ExperimentError(
-            f"{len(failed)} of {len(todo)} tasks failed (first: {first[0]}: {first[1]}); rerun to resume", result
+            f"{len(failed)} of {len(todo)} tasks failed (first: {first[0]}: {first[1]}); finished tasks are kept: "
+            "rerun to resume once the cause is mended",
+            result,
         )
     return result

@@ -150,7 +150,7 @@ def markdown(result) -> str:
         lines.append("")
     if sec:
         lines += [
-            "## Run time (seconds per run task: mean over datasets and chains)",
+            "## Run time (seconds per run task, mean over datasets and chains; untimed warm-up compiles the kernels)",
             "",
             "| algorithm | mean s | runs |",
             "|---|---|---|",

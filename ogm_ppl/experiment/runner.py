@@ -104,7 +104,7 @@ def plan_tasks(spec: ExperimentSpec, out: Path, resume: bool = True) -> list[Tas
                     "base",
                     T.run_base,
                     (ds, str(out), h),
-                    {},
+                    {"max_cells": spec.max_cells},
                     [],
                     T.base_dir(out) / f"{ds.base}.json",
                     h,
@@ -130,7 +130,7 @@ def plan_tasks(spec: ExperimentSpec, out: Path, resume: bool = True) -> list[Tas
             hs = []
             for c in range(alg.chains):
                 seed = derive_seed(spec.seed, "run", ds.name, alg.name, c)
-                rec_metrics = m if alg.records_metrics else None  # the F1 records depend on them
+                rec_metrics = T.records_key(spec.metrics, ds) if alg.records_metrics else None
                 run_of = (ds_h[ds.name], T.spec_entry(alg), c, seed, rec_metrics, o["maps"])
                 h = T.task_hash("run", *run_of, *([priors[alg.name]] if priors[alg.name] else []))
                 hs.append(h)
@@ -313,7 +313,9 @@ def run_experiment(
     if failed:
         first = next(iter(failed.items()))
         raise ExperimentError(
-            f"{len(failed)} of {len(todo)} tasks failed (first: {first[0]}: {first[1]}); rerun to resume", result
+            f"{len(failed)} of {len(todo)} tasks failed (first: {first[0]}: {first[1]}); finished tasks are kept: "
+            "rerun to resume once the cause is mended",
+            result,
         )
     return result
 

@@ -8,7 +8,8 @@ fall back to a default).
 Tables (every key optional unless marked *required*; defaults in brackets)::
 
     [experiment]        name [file stem], seed [0], description [""], kind ["map"; "active": an active-mapping
-                        spec, its own tables: ogm_ppl.experiment.active]
+                        spec, its own tables: ogm_ppl.experiment.active], max_cells [50,000,000: a dataset's
+                        grid of more cells is refused, when the spec is read where its size is known then]
     [[datasets]]        kind = "simulated" | "log" | "bag" (*required*), name (*required*, [A-Za-z0-9_.-]+)
       simulated:        map ["office"; a mapgen kind or "mixed" = kinds in turn by map_seed],
                         size [500] (int or [rows, cols]), border [20], resolution [0.05] (m/cell),
@@ -81,6 +82,8 @@ from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
+
+from ogm_ppl.grid import MAX_CELLS
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -228,6 +231,8 @@ class ExperimentSpec:
     output: OutputSpec = field(default_factory=OutputSpec)
     source: str = "<dict>"
     raw: dict = field(default_factory=dict, repr=False)
+    #: the largest grid (cells) a dataset may have
+    max_cells: int = MAX_CELLS
 
     def only(self, algorithms) -> ExperimentSpec:
         """The same spec with only the named algorithms (in the spec's order): run a subset now, the rest
@@ -314,10 +319,13 @@ class _Table:
             return vals
         return self._one(key, v, kind, **check)
 
-    def finish(self):
-        unknown = sorted(set(self.table) - self.used)
+    def finish(self, optional=()):
+        """Refuse a key no ``get``/``raw`` read, listing the keys read and the ``optional`` ones (keys a table
+        takes that were read only where present)."""
+        known = self.used | set(optional)
+        unknown = sorted(set(self.table) - known)
         if unknown:
-            self.fail(unknown[0], f"unknown key (known here: {', '.join(sorted(self.used))})")
+            self.fail(unknown[0], f"unknown key (known here: {', '.join(sorted(known))})")
 
 
 def _check_delta(t: _Table, key: str, default: str) -> str:
@@ -385,17 +393,27 @@ def _plan_keys(t: _Table, base_dir: Path) -> dict:
     return {"plan": str(path), "plan_sha256": h.hexdigest(), "pixel_size": pixel}
 
 
-def _check_plan(t: _Table, p: dict) -> None:
+def _check_plan(t: _Table, p: dict, max_cells: int) -> None:
     """Read the plan once as :func:`~ogm_ppl.experiment.tasks.run_base` will, so a bad file fails here."""
     from ogm_ppl.datasets.plan_files import PlanFileError, load_plan_file
 
     try:
-        load_plan_file(p["plan"], pixel_size=p["pixel_size"], resolution=p["resolution"])
+        plan = load_plan_file(p["plan"], pixel_size=p["pixel_size"], resolution=p["resolution"])
     except (PlanFileError, OSError) as e:
         t.fail("plan", str(e))
+    _too_many(t, "plan", *plan.shape, max_cells, f"{p['plan']} at {p['resolution']} m a cell")
 
 
-def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[DatasetSpec]:
+def _too_many(t: _Table, key: str, rows: int, cols: int, max_cells: int, what: str) -> None:
+    if rows * cols > max_cells:
+        t.fail(
+            key,
+            f"{what} gives a grid of {rows:,} x {cols:,} = {rows * cols:,} cells, over the limit of {max_cells:,} "
+            "([experiment] max_cells)",
+        )
+
+
+def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int, max_cells: int = MAX_CELLS) -> list[DatasetSpec]:
     t, name = _named_entry(source, "datasets", i, d)
     kind = t.get("kind", "str", required=True, choices=("simulated", "log", "bag"))
     p: dict = {}
@@ -407,9 +425,10 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
             p.update(_plan_keys(t, base_dir))
         else:
             p.update(_generated_keys(t))
+            _too_many(t, "size", *p["size"], max_cells, f"size = {p['size']}")
         p["resolution"] = t.get("resolution", "float", 0.05, lo=0, lo_open=True)
         if "plan" in p:
-            _check_plan(t, p)
+            _check_plan(t, p, max_cells)
         p["seed"] = t.get("seed", "int", derive_seed(seed, "dataset", name, bits=32), sweep=True, lo=0)
         p["poses"] = t.get("poses", "int", None, lo=1)
         p["beams"] = t.get("beams", "int", 720, lo=1)
@@ -456,7 +475,7 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
             for k in ("usable_range_rule", "no_return"):
                 if k in r:
                     rt.get(k, "str", choices=("drop", "max"))
-        rt.finish()
+        rt.finish(optional=BAG_READER_KEYS if kind == "bag" else READER_KEYS)
         p["reader"] = r
         p["resolution"] = t.get("resolution", "float", 0.05, lo=0, lo_open=True)
         ext = t.raw("extent", None)
@@ -470,6 +489,8 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int) -> list[Da
             if ext[2] <= 0 or ext[3] <= 0:
                 t.fail("extent", f"width and height must be > 0, got {ext!r}")
             ext = [float(x) for x in ext]
+            res = p["resolution"]
+            _too_many(t, "extent", round(ext[3] / res), round(ext[2] / res), max_cells, f"{ext} at {res} m a cell")
         p["extent"] = ext
         p["margin"] = t.get("margin", "float", 1.0, lo=0)
         p["sigma_cells"] = t.get("sigma_cells", "float", 3.0, lo=0, lo_open=True)
@@ -623,6 +644,7 @@ def parse_spec(data: dict, source: str = "<dict>", base_dir: str | os.PathLike =
     else:
         name = e.get("name", "str", stem)
     seed = e.get("seed", "int", 0, lo=0)
+    max_cells = e.get("max_cells", "int", MAX_CELLS, lo=1)
     e.get("kind", "str", "map", choices=("map", "active"))
     description = e.raw("description", "")
     if not isinstance(description, str):
@@ -637,7 +659,7 @@ def parse_spec(data: dict, source: str = "<dict>", base_dir: str | os.PathLike =
     datasets: list[DatasetSpec] = []
     entries: set[str] = set()
     for i, d in enumerate(raw_ds):
-        ds = _dataset_entry(source, Path(base_dir), i, d, seed)
+        ds = _dataset_entry(source, Path(base_dir), i, d, seed, max_cells)
         if ds[0].entry in entries:
             raise SpecError(f"{source}: datasets[{i}].name: {ds[0].entry!r} is used twice")
         entries.add(ds[0].entry)
@@ -700,6 +722,7 @@ def parse_spec(data: dict, source: str = "<dict>", base_dir: str | os.PathLike =
         output,
         source,
         json.loads(json.dumps(data, default=str)),
+        max_cells,
     )
 
 

@@ -7,7 +7,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ogm_ppl.experiment import SpecError, derive_seed, load_spec, parse_spec, run_experiment
+from ogm_ppl.experiment import ExperimentError, SpecError, derive_seed, load_spec, parse_spec, run_experiment
 from ogm_ppl.experiment import tasks as T
 
 SMOKE = Path(__file__).resolve().parents[2] / "experiments" / "specs" / "smoke.toml"
@@ -111,6 +111,30 @@ def test_spec_errors_name_file_and_key(edit, message):
     assert str(e.value).startswith("smoke.toml: ") and message in str(e.value), str(e.value)
 
 
+@pytest.mark.parametrize(
+    "edit, message",
+    [
+        (lambda d: d["datasets"][0].update(size=200_000), "('office').size: size = [200000, 200000] gives a grid of"),
+        (
+            lambda d: d["datasets"].append(
+                {"name": "x", "kind": "log", "path": str(SMOKE), "extent": [0, 0, 1e5, 1e5]}
+            ),
+            "('x').extent: [0.0, 0.0, 100000.0, 100000.0] at 0.05 m a cell gives a grid of 2,000,000 x 2,000,000",
+        ),
+        (
+            lambda d: d["experiment"].update(max_cells=1000),
+            "size = [64, 64] gives a grid of 64 x 64 = 4,096 cells, over the limit of 1,000 ([experiment] max_cells)",
+        ),
+    ],
+)
+def test_grids_over_the_limit_are_refused_when_the_spec_is_read(edit, message):
+    d = tomllib.loads(SMOKE.read_text())
+    edit(d)
+    with pytest.raises(SpecError) as e:
+        parse_spec(d, "smoke.toml")
+    assert message in str(e.value), str(e.value)
+
+
 def test_bad_toml_and_missing_file(tmp_path):
     p = tmp_path / "bad.toml"
     p.write_text("[experiment\nname = 1")
@@ -144,6 +168,24 @@ def _plan(d):
     from ogm_ppl.experiment import plan_tasks
 
     return plan_tasks(parse_spec(d, "tiny.toml"), Path("/nonexistent"))
+
+
+def test_rescoring_reruns_no_chain_unless_the_records_change():
+    """A sampler's run hash holds what its F1 records depend on (mask as scored, thresholds), not the other
+    metrics keys: a new score list, or ``"auto"`` / ``"known"`` for the ``"all"`` they mean on a generated
+    map, reruns no chain; new thresholds do."""
+
+    def hashes(**metrics):
+        d = tiny()
+        d["metrics"] = {**d["metrics"], **metrics}
+        return {t.id: t.hash for t in _plan(d) if t.kind == "run"}
+
+    base = hashes()
+    assert hashes(scores=["f1", "nll_bits"]) == base
+    assert hashes(mask="auto") == base == hashes(mask="known")
+    changed = hashes(thresholds=50)
+    assert all(changed[k] != v for k, v in base.items() if "gibbs" in k)
+    assert all(changed[k] == v for k, v in base.items() if "gibbs" not in k)
 
 
 # ------------------------------------------------------------------------------------------ runs
@@ -379,6 +421,7 @@ def test_names_that_leave_the_output_folder_are_refused(edit, message):
         ({"min_range": -1}, "reader.min_range: must be >= 0"),
         ({"strict": "yes"}, "reader.strict: must be true or false"),
         ({"no_return": "keep"}, "reader.no_return: must be one of"),
+        ({"no_retrun": "max"}, "reader.no_retrun: unknown key (known here: apply_laser_offset, max_range, "),
     ],
 )
 def test_reader_options_checked_at_validation(reader, message):
@@ -501,3 +544,33 @@ def test_a_simulated_dataset_on_a_plan_of_your_own(tmp_path):
     (tmp_path / "junk.png").write_bytes(b"no image")
     with pytest.raises(SpecError, match=r"\.plan: .*junk\.png"):
         parse_spec({**d, "datasets": [{**d["datasets"][0], "plan": str(tmp_path / "junk.png")}]}, "tiny.toml")
+
+
+def test_a_log_whose_grid_is_over_the_limit_is_refused(room_bag, tmp_path):
+    """A log's grid is known only once the log is read: its base task refuses it, naming the log and the limit,
+    before any map of it is allocated."""
+    log_path, _ = room_bag
+    d = _bag_spec(log_path, log_path)
+    d["datasets"] = d["datasets"][:1]
+    d["experiment"]["max_cells"] = 100
+    with pytest.raises(ExperimentError) as e:
+        run_experiment(parse_spec(d, "bags.toml"), tmp_path / "out", scheduler="serial", progress=False)
+    assert f"{log_path}: the log's grid at 0.1 m a cell is " in str(e.value)
+    assert "over the limit of 100 ([experiment] max_cells; or set the dataset's extent)" in str(e.value)
+    assert not (tmp_path / "out" / "datasets" / "_base" / "log.npz").exists()
+
+
+def _method_names():
+    from ogm_ppl.methods import method_names
+
+    return method_names()
+
+
+@pytest.mark.parametrize("name", _method_names())
+def test_the_warm_up_run_of_each_method_succeeds(name):
+    """The untimed warm-up (numba compiling kept out of a task's seconds) runs each registered method with its
+    default parameters cut down; a warm-up that raised would be skipped silently, so check none does."""
+    from ogm_ppl.experiment.spec import AlgorithmSpec
+
+    r = T.warm_run(AlgorithmSpec(name=name, kind=name, params={}), 1.0, 0.05)
+    assert r.probabilities is not None and r.probabilities.shape == (24 * 24,)
