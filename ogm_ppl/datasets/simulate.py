@@ -43,7 +43,7 @@ def simulate_scans(
     Args:
         angles: beam angles relative to the yaw (``B``).
         max_range: metres.
-        sigma_cells: standard deviation of the range noise, in cells (> 0; 0 gives exact ranges).
+        sigma_cells: standard deviation of the range noise, in cells (>= 0; 0 gives exact ranges).
         seed: an int or a numpy Generator; the result is a deterministic function of it.
     """
     truth = np.asarray(truth, dtype=bool)

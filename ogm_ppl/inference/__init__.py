@@ -16,6 +16,7 @@ from ogm_ppl.inference.exact import MapEstimate, map_estimate
 from ogm_ppl.inference.log_odds import LogOddsMap, evidence_grid, evidence_grid_from_scans
 from ogm_ppl.inference.mcmc import (
     CellGibbs,
+    CheckpointError,
     GibbsRun,
     KernelCycle,
     KernelMixture,
@@ -37,6 +38,7 @@ from ogm_ppl.inference.variational import (
 
 __all__ = [
     "CellGibbs",
+    "CheckpointError",
     "ExactELBO",
     "FirstHitGuide",
     "GibbsRun",

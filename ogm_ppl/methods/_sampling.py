@@ -87,10 +87,13 @@ def run_kernel(kernel, params: SamplingParams, problem: MapProblem, ctx: RunCont
     elif trace_path.exists():
         trace_path.unlink()
     start = _ckpt_sweep(ckpt) if ckpt.exists() else 0
-    trace = [r for r in trace if r["sweep"] <= start]
     total = warm + n
     k = params.record
     marks = sorted({warm + math.ceil(i * n / k) for i in range(1, k + 1)} | {total}) if k else [total]
+    if start > total:  # a longer run's checkpoint (fewer sweeps asked for since): a chain cannot go back
+        ckpt.unlink()
+        start, trace = 0, []
+    trace = [r for r in trace if r["sweep"] <= start and r["sweep"] in marks]  # records of this run's schedule
     done, seconds = start, (trace[-1]["seconds"] if trace else 0.0)
     budget = ctx.stop_after
     details.update(resumed_from_sweep=start)

@@ -210,12 +210,23 @@ class OccupancyModel:
     """
 
     def __init__(self, grid, rays: Rays, sensor: SensorModel, prior, known_free="sensor") -> None:
+        if not isinstance(sensor, SensorModel):
+            raise TypeError(f"sensor must be a SensorModel (e.g. GaussianRange(sigma_cells)), got {sensor!r}")
+        if not hasattr(prior, "num_cells"):
+            raise TypeError(f"prior must be a MapPrior (e.g. IndependentPrior(0.5, grid.num_cells)), got {prior!r}")
         if rays.grid != grid:
             raise ValueError("rays were cast on a different grid")
         if rays.num_rays == 0:
             raise ValueError("OccupancyModel needs at least one ray (the ray set is empty)")
         if prior.num_cells != grid.num_cells:
             raise ValueError(f"prior has {prior.num_cells} cells, the grid {grid.num_cells}")
+        rows, cols = getattr(prior, "rows", None), getattr(prior, "cols", None)
+        layout = (1, grid.num_cells) if grid.ndim == 1 else tuple(grid.shape)
+        if rows is not None and cols is not None and (int(rows), int(cols)) != layout:
+            raise ValueError(
+                f"{type(prior).__name__} is laid out on {int(rows)} x {int(cols)} cells, the grid on "
+                f"{layout[0]} x {layout[1]}: build the prior for the grid's shape ({tuple(grid.shape)})"
+            )
         self.grid, self.rays, self.sensor, self.prior = grid, rays, sensor, prior
         K = grid.num_cells
         if isinstance(known_free, str):
@@ -394,9 +405,19 @@ class OccupancyModel:
         """The ``R x W`` likelihood table (as :attr:`loglik_table`) of other readings of the same rays
         (``R``: values of site ``"z"``)."""
         readings = torch.as_tensor(readings, dtype=torch.float64)
-        if readings.shape != (self.rays.num_rays,) or torch.isnan(readings).any():
-            raise ValueError(f"readings must be {self.rays.num_rays} numbers, one per ray")
+        if readings.shape != (self.rays.num_rays,):
+            raise ValueError(
+                f"readings must be {self.rays.num_rays} numbers, one per ray, got shape {tuple(readings.shape)}"
+            )
         F = torch.from_numpy(self.rays.max_range_cells()).to(torch.float64)
+        bad = ~torch.isfinite(readings) | (readings < 0) | (readings > F)
+        if bad.any():
+            i = int(torch.nonzero(bad)[0])
+            raise ValueError(
+                f"readings must be ranges in cells in [0, the ray's max range] (a max-range reading is the max "
+                f"range itself); {int(bad.sum())} are not, the first on ray {i}: {float(readings[i])!r} "
+                f"(max range {float(F[i]):g})"
+            )
         is_max = readings >= F
         return self._loglik_table(readings, self.range_to_kappa(readings), is_max)
 

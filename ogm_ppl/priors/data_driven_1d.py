@@ -28,6 +28,9 @@ class DataDriven1DPrior(MapPrior):
     [0.25, 0.0]
     """
 
+    #: maps that are not a wall from some cell onwards have zero mass
+    can_be_zero = True
+
     def __init__(self, num_cells: int, start: int = 0) -> None:
         if not 0 <= start < num_cells:
             raise ValueError(f"DataDriven1DPrior.start must lie in 0..{num_cells - 1}, got {start}")

@@ -24,6 +24,8 @@ class IndependentPrior(MapPrior):
         lam = torch.as_tensor(lambda_, dtype=torch.float64)
         if torch.isnan(lam).any() or (lam <= 0).any() or (lam >= 1).any():
             raise ValueError(f"IndependentPrior.lambda_ must lie in (0, 1), got {lambda_!r}")
+        if num_cells is not None and (isinstance(num_cells, bool) or int(num_cells) != num_cells or num_cells < 1):
+            raise ValueError(f"IndependentPrior.num_cells must be a whole number >= 1, got {num_cells!r}")
         if lam.dim() == 0:
             if num_cells is None:
                 raise ValueError("IndependentPrior with a scalar lambda_ needs num_cells")

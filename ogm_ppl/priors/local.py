@@ -18,6 +18,7 @@ A prior with only ``log_prob`` still works, through the generic (slow) path.
 from __future__ import annotations
 
 import numpy as np
+import torch
 
 from ogm_ppl.priors.base import MapPrior
 from ogm_ppl.priors.compiled import CompiledPrior, patch_prior_batch, prior_gibbs_sweeps
@@ -40,10 +41,16 @@ def table_occupancy(codes, weights, L: int) -> float:
 
 def grid_shape(shape) -> tuple[int, int, int]:
     """``(rows, cols, ndim)`` of a grid shape ``K``, ``(K,)`` or ``(rows, cols)`` (or a Grid)."""
-    shape = getattr(shape, "shape", shape)
+    if hasattr(shape, "num_cells"):  # a Grid
+        shape = shape.shape
+    elif isinstance(shape, np.ndarray | torch.Tensor):
+        shape = shape.tolist()
     if np.isscalar(shape):
         shape = (int(shape),)  # type: ignore[arg-type]  # numpy's isscalar TypeGuard narrows to generic | complex | bytes
-    shape = tuple(int(s) for s in shape)
+    raw = tuple(shape)
+    shape = tuple(int(s) for s in raw)
+    if shape != raw or any(s < 1 for s in shape):
+        raise ValueError(f"grid shape must hold whole numbers of cells >= 1, got {raw}")
     if len(shape) == 1:
         return 1, shape[0], 1
     if len(shape) == 2:

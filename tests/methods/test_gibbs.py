@@ -67,3 +67,26 @@ def test_cell_sweeps_cycle_patch_and_cell_gibbs_and_resume_from_a_checkpoint(box
     assert half.probabilities is None
     resumed = method.run(p, problem, RunContext(**ctx, resume=True))
     np.testing.assert_array_equal(resumed.probabilities, full.probabilities)
+
+
+def test_a_checkpoint_of_another_length_resumes_on_this_runs_schedule(box, tmp_path):  # noqa: F811
+    """The same chain asked for another length reuses the checkpoint where it can (a shorter stopped run goes
+    on) and starts afresh where it cannot (a checkpoint past the sweeps now asked for); either way its records
+    sit at the marks of the run asked for (those it passed before the resume are not made up) and its map is
+    that of an uninterrupted run."""
+    _, problem = box
+    method = get_method("gibbs")
+    ctx = dict(seed=3, checkpoint_dir=tmp_path / "ck")
+    long = method.parse({**BORDER, "sweeps": 40, "burn_in": 0, "record": 4, "checkpoint_every": 2})
+    short = method.parse({**BORDER, "sweeps": 12, "burn_in": 0, "record": 4, "checkpoint_every": 2})
+    fresh = method.run(short, problem, RunContext(seed=3))
+    assert method.run(long, problem, RunContext(**ctx, stop_after=22)).probabilities is None  # recorded 10, 20
+    r = method.run(short, problem, RunContext(**ctx))  # 22 > 12: cannot go back
+    assert [t["sweep"] for t in r.details["trace"]] == [3, 6, 9, 12]
+    np.testing.assert_array_equal(r.probabilities, fresh.probabilities)
+    (tmp_path / "ck" / "gibbs.npz").unlink()
+    assert method.run(long, problem, RunContext(**ctx, stop_after=11)).probabilities is None  # recorded 10
+    mid = method.parse({**BORDER, "sweeps": 24, "burn_in": 0, "record": 4, "checkpoint_every": 2})
+    r = method.run(mid, problem, RunContext(**ctx))
+    assert [t["sweep"] for t in r.details["trace"]] == [12, 18, 24]  # the longer run's record at 10 is dropped
+    np.testing.assert_array_equal(r.probabilities, method.run(mid, problem, RunContext(seed=3)).probabilities)

@@ -109,6 +109,28 @@ def test_model_validation():
         OccupancyModel(grid, rays, GaussianRange(1.0), IndependentPrior(0.5, 6), known_free=[9])
     m = OccupancyModel(grid, rays, GaussianRange(1.0), IndependentPrior(0.5, 6), known_free=None)
     assert len(m.latent) == 6
+    with pytest.raises(TypeError, match="sensor must be a SensorModel"):
+        OccupancyModel(grid, rays, "gaussian", IndependentPrior(0.5, 6))
+    with pytest.raises(TypeError, match="prior must be a MapPrior"):
+        OccupancyModel(grid, rays, GaussianRange(1.0), 0.3)
+
+
+def test_a_prior_laid_out_on_another_shape_is_refused():
+    """A spatial prior of the grid's cell count but another layout (a 1D chain of 16 cells, 2 x 8, 8 x 2 on a
+    4 x 4 grid; 3 x 4 on a line of 12) gives another posterior without a word: refused, wrapped or not."""
+    from ogm_ppl.priors import MRFPrior, TemperedPrior, prior_by_name
+
+    grid = Grid((4, 4), 1.0)
+    rays = raycast(grid, Scans(torch.tensor([[1.5, 1.5, 0.0]]), torch.tensor([[0.0]]), torch.tensor([[2.0]]), 3.0))
+    for prior in (MRFPrior((16,)), MRFPrior((2, 8)), prior_by_name("patch3_bo", (8, 2))):
+        with pytest.raises(ValueError, match=r"laid out on .* cells, the grid on 4 x 4"):
+            OccupancyModel(grid, rays, GaussianRange(1.0), prior)
+    with pytest.raises(ValueError, match="laid out on 1 x 16 cells"):
+        OccupancyModel(grid, rays, GaussianRange(1.0), TemperedPrior(MRFPrior((16,)), 0.5))
+    OccupancyModel(grid, rays, GaussianRange(1.0), MRFPrior((4, 4)))
+    line = Grid.line(12)
+    with pytest.raises(ValueError, match="laid out on 3 x 4 cells, the grid on 1 x 12"):
+        OccupancyModel(line, raycast(line, Scans.one_d([2.0], max_range=5.0)), GaussianRange(1.0), MRFPrior((3, 4)))
 
 
 @pytest.mark.parametrize("sensor", [GaussianRange(1.5, 1e-3), PatternMatch(0.8)])

@@ -222,3 +222,45 @@ def test_prior_without_sample_or_with_nan_gets_a_clear_error():
         Predictive(bad.model, num_samples=2)(readings=None)
     with pytest.raises(ValueError, match="NaN"):
         poutine.trace(poutine.condition(bad.model, data={"m": torch.zeros(9)})).get_trace().log_prob_sum()
+
+
+@pytest.mark.parametrize("bad", [math.nan, math.inf, -1.0, 1e3])
+def test_conditioning_on_readings_that_are_no_ranges_is_refused(bad):
+    """A NaN, an infinity, a negative range or one past the max range conditioned on site ``"z"`` is refused
+    naming the ray, not read as a max-range reading."""
+    _, model = toy_model(GaussianRange(3.0, 1e-3))
+    z = model.readings.clone()
+    z[2] = bad
+    cond = poutine.condition(model.model, data={"z": z})
+    with pytest.raises(ValueError, match=r"readings must be ranges in cells .* the first on ray 2"):
+        poutine.trace(cond).get_trace().log_prob_sum()
+
+
+def test_guides_take_the_models_arguments():
+    """A Pyro guide takes the model's arguments: posterior predictive simulation from a guide
+    (``readings=None``) and ``SVI.step(readings)`` work with every guide."""
+    from pyro.infer import SVI, TraceGraph_ELBO
+    from pyro.optim import Adam
+
+    from ogm_ppl.inference.variational.structured_guides import FirstHitGuide
+
+    _, model = toy_model(GaussianRange(3.0, 1e-3))
+    for guide in (MeanFieldGuide(model), PatchGuide(model, 2), FirstHitGuide(model)):
+        sim = Predictive(model.model, guide=guide, num_samples=5)(readings=None)
+        assert sim["z"].shape == (5, model.rays.num_rays) and sim["m"].shape == (5, len(model.latent))
+        svi = SVI(model.model, guide, Adam({"lr": 0.01}), TraceGraph_ELBO(num_particles=4))
+        assert math.isfinite(svi.step(model.readings))
+
+
+def test_mcmc_run_refuses_model_arguments_and_counts_each_chain_afresh():
+    """``MCMC.run(data)`` would silently sample the kernel's own model: refused. ``diagnostics()`` counts
+    each chain's own sweeps."""
+    from ogm_ppl.inference import CellGibbs
+
+    _, model = toy_model(GaussianRange(3.0, 1e-3))
+    mcmc = MCMC(CellGibbs(model), num_samples=20, warmup_steps=5, disable_progbar=True)
+    with pytest.raises(ValueError, match=r"MCMC\.run\(\) takes no model arguments"):
+        mcmc.run(model.readings + 5.0)
+    mcmc = MCMC(CellGibbs(model), num_samples=20, warmup_steps=5, num_chains=3, disable_progbar=True)
+    mcmc.run()
+    assert mcmc.diagnostics()["sweeps"] == {f"chain {c}": 25 for c in range(3)}

@@ -1,5 +1,6 @@
 import math
 
+import numpy as np
 import pytest
 import torch
 
@@ -48,3 +49,23 @@ def test_data_driven_prior_support():
         [[0, 0, 0, 0], [0, 0, 0, 1], [0, 0, 1, 1], [0, 1, 1, 1], [1, 1, 1, 1], [0, 1, 0, 1]], dtype=torch.float64
     )
     assert p.log_prob(maps).exp().tolist() == [0.25, 0.25, 0.25, 0.25, 0.0, 0.0]
+
+
+@pytest.mark.parametrize("shape", [(-4, 4), (0, 4), (4.5, 4), (4, 4, 4)])
+def test_a_prior_shape_that_is_no_grid_is_refused(shape):
+    from ogm_ppl.priors import MRFPrior
+
+    with pytest.raises(ValueError, match="grid shape"):
+        MRFPrior(shape)
+
+
+def test_a_prior_shape_given_as_an_array_is_read_as_a_shape():
+    from ogm_ppl.priors import MRFPrior
+
+    assert (MRFPrior(np.array([4, 5])).rows, MRFPrior(np.array([4, 5])).cols) == (4, 5)
+    assert MRFPrior(torch.tensor([3, 2])).num_cells == 6
+
+
+def test_independent_prior_refuses_a_cell_count_below_one():
+    with pytest.raises(ValueError, match="num_cells must be a whole number >= 1, got -3"):
+        IndependentPrior(0.5, -3)

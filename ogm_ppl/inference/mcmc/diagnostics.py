@@ -199,6 +199,13 @@ def run_chains(
     (``processes=1``), or on ``processes`` worker processes (one chain per task). Chain ``c`` draws the
     same numbers either way, so the results are identical, serial or parallel.
 
+    Every chain starts where ``make_kernel()``'s kernel starts: with the kernels' default ``init="ogm"``, all
+    from the one thresholded-OGM map (as ``pyro.infer.MCMC(num_chains=k)`` does). Their R-hat then tells whether
+    the seeds agree, not whether the chains have left that start: under a strongly coupled prior several
+    chains can agree on one wrong mode (R-hat 1.000 with marginals off by nearly 1). To judge mixing, start
+    chains far apart: :func:`run_from_starts` with :func:`start_maps` (thresholded OGM, all free, a prior
+    draw) and :func:`rhat_agreement`.
+
     With ``processes > 1``, ``make_kernel`` must be picklable: a class or ``functools.partial``, e.g.
     ``partial(CellGibbs, model, update="metropolised")``, not a lambda; it is sent once to each worker.
     Workers start with ``mp_context``: ``"fork"`` where the platform has it (as ``pyro.infer.MCMC`` does;

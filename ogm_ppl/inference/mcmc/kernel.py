@@ -211,8 +211,20 @@ class MapKernel(MCMCKernel):
         return initial_map(self.model, self.init, self.delta)
 
     def setup(self, warmup_steps=0, *args, **kwargs) -> None:
-        """Set up (once) and load the initial params as the state; warns (:class:`MasslessStartWarning`,
-        once per kernel) when the prior can give a map zero mass and gives the starting map zero mass."""
+        """Set up (once), load the initial params as the state and start the counts of :meth:`diagnostics`
+        afresh (``MCMC`` calls this at the start of each chain); warns (:class:`MasslessStartWarning`, once per
+        kernel) when the prior can give a map zero mass and gives the starting map zero mass.
+
+        ``args`` / ``kwargs`` are what ``MCMC.run(*args, **kwargs)`` passes for the model; this kernel samples
+        the posterior of the model it was built with, readings included, so any is refused (``ValueError``)
+        rather than ignored."""
+        if args or kwargs:
+            raise ValueError(
+                f"{type(self).__name__} samples the model it was built with (its readings fixed there), so "
+                f"MCMC.run() takes no model arguments; got {len(args)} positional and {sorted(kwargs)} keyword. "
+                "For other readings build an OccupancyModel of them (raycast of their Scans) and a kernel of it."
+            )
+        self.sweeps, self._changes, self._updates = 0, 0, 0
         self._prepare()
         m = self.initial_params[self.site]
         self._set_state(m)

@@ -170,7 +170,18 @@ def _save_checkpoint(path: Path, kernel, stats: RunningStats, sweep: int, seed: 
 _HINT = "delete it (or pass another checkpoint path) to start a fresh run"
 
 
-def _load_checkpoint(path: Path, kernel, stats: RunningStats, seed: int, warmup: int, fp: dict) -> int:
+#: what each fingerprint component (:mod:`~ogm_ppl.inference.mcmc.fingerprint`) covers, as a refusal names it
+_COMPONENTS = {
+    "grid": "the grid (shape, resolution, origin)",
+    "readings": "the readings or the pinned cells",
+    "sensor": "the likelihood table (the sensor model, or the prior's occupancy beyond the grid's edge)",
+    "prior": "the prior",
+    "kernel": "the kernel or its settings",
+    "stats": "the tracked statistics",
+}
+
+
+def _load_checkpoint(path: Path, kernel, stats: RunningStats, seed: int, warmup: int, fp: dict, total: int) -> int:
     try:
         z = np.load(path, allow_pickle=False)
     except Exception as e:  # BadZipFile, OSError, ValueError (pickled or not an npz), EOFError
@@ -198,8 +209,13 @@ def _load_checkpoint(path: Path, kernel, stats: RunningStats, seed: int, warmup:
             differ = [k for k, v in fp.items() if f"fp_{k}" not in files or str(z[f"fp_{k}"]) != v]
             if differ:
                 raise CheckpointError(
-                    f"{path}: checkpoint belongs to another run: its {', '.join(differ)} "
-                    f"differ from this run's; {_HINT}"
+                    f"{path}: checkpoint belongs to another run; what differs from this run: "
+                    f"{'; '.join(_COMPONENTS.get(k, k) for k in differ)}; {_HINT}"
+                )
+            if int(z["sweep"]) > total:
+                raise CheckpointError(
+                    f"{path}: checkpoint holds {int(z['sweep'])} sweeps (warm-up included), more than the {total} "
+                    f"this run asks for; ask for at least as many, or {_HINT}"
                 )
             kernel.load_state_dict({k[7:]: z[k] for k in z.files if k.startswith("kernel_")})
             stats.load_state_dict({k[6:]: z[k] for k in z.files if k.startswith("stats_")})
@@ -248,7 +264,7 @@ def run_gibbs(
     start = 0
     fp = fingerprint(kernel, stats) if ckpt is not None else {}
     if ckpt is not None and ckpt.exists():
-        start = _load_checkpoint(ckpt, kernel, stats, seed, warmup, fp)
+        start = _load_checkpoint(ckpt, kernel, stats, seed, warmup, fp, warmup + num_sweeps)
     else:
         torch.manual_seed(seed)  # before set-up: a drawn initial map ("prior") follows the seed too
         kernel.setup(warmup)

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import warnings
 
 import numpy as np
 import pyro
@@ -70,7 +71,10 @@ class MeanFieldGuide(PyroModule):
     def name(self) -> str:
         return self._pyro_name
 
-    def forward(self):
+    def forward(self, readings=None):
+        """Sample site ``"m"``. ``readings``, the model's argument (a Pyro guide takes the model's arguments, as
+        ``SVI.step(readings)`` and ``Predictive(..., guide=g)(readings=None)`` pass them), is not used: this
+        guide is fitted to one set of readings and does not condition on them."""
         return pyro.sample("m", dist.Bernoulli(logits=self.logits).to_event(1))
 
     def exact_elbo(self, model: OccupancyModel) -> torch.Tensor:
@@ -181,7 +185,10 @@ class PatchGuide(PyroModule):
         lg = torch.where(self._valid, lg, torch.tensor(-math.inf, dtype=lg.dtype))
         return PatchMapDistribution(lg, self.patches, self.occupancy.num_cells, self.occupancy.latent)
 
-    def forward(self):
+    def forward(self, readings=None):
+        """Sample site ``"m"``. ``readings``, the model's argument (a Pyro guide takes the model's arguments, as
+        ``SVI.step(readings)`` and ``Predictive(..., guide=g)(readings=None)`` pass them), is not used: this
+        guide is fitted to one set of readings and does not condition on them."""
         return pyro.sample("m", self.distribution())
 
     def marginals(self) -> torch.Tensor:
@@ -235,7 +242,19 @@ def fit_guide(
     pyro.set_rng_seed(seed)
     svi = SVI(model.model, guide, Adam({"lr": lr}), objective)
     losses = []
-    for _ in tqdm(range(steps), disable=not progress, desc="svi"):
-        out = svi.step()
-        losses.append(float(out[1] if isinstance(out, tuple) else out))
+    for step in tqdm(range(steps), disable=not progress, desc="svi"):
+        with warnings.catch_warnings():
+            warnings.filterwarnings("ignore", message="Encountered NaN", category=UserWarning)
+            out = svi.step()
+        value = float(out[1] if isinstance(out, tuple) else out)
+        if not math.isfinite(value):
+            why = (
+                f"{type(model.prior).__name__} gives some maps zero mass (can_be_zero) and the guide drew such "
+                "maps; use a guide whose support the prior covers (FirstHitGuide for DataDriven1DPrior) or a "
+                "strictly positive prior"
+                if getattr(model.prior, "can_be_zero", False)
+                else "the model's log joint or the guide's log density is not finite on the guide's draws"
+            )
+            raise ValueError(f"fit_guide: the {loss} loss is {value} at step {step + 1}: {why}")
+        losses.append(value)
     return losses

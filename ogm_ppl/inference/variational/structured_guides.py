@@ -108,7 +108,13 @@ def _ray_order(model: OccupancyModel):
     """Latent cells in ray order on a common ray: (positions along the ray ``L``, latent indices ``L``)."""
     from ogm_ppl.inference.exact.posteriors import _common_ray
 
-    cells = _common_ray(model)  # raises unless every reading shares one ray holding every latent cell
+    try:
+        cells = _common_ray(model)  # raises unless every reading shares one ray holding every latent cell
+    except ValueError as e:
+        raise ValueError(
+            f"FirstHitGuide models one ray: every reading on the same ray, holding every latent cell (a 1D map "
+            f"seen by a stationary robot); this model has {model.rays.num_rays} rays that do not ({e})"
+        ) from None
     lat_index = torch.full((model.num_cells,), -1, dtype=torch.long)
     lat_index[model.latent] = torch.arange(len(model.latent))
     pos = torch.nonzero(~model.known_free[cells]).flatten()
@@ -135,7 +141,10 @@ class FirstHitGuide(PyroModule):
         with self._pyro_context:
             return FirstHitMapDistribution(self.f_logits, self.behind_logits, self._order)
 
-    def forward(self):
+    def forward(self, readings=None):
+        """Sample site ``"m"``. ``readings``, the model's argument (a Pyro guide takes the model's arguments, as
+        ``SVI.step(readings)`` and ``Predictive(..., guide=g)(readings=None)`` pass them), is not used: this
+        guide is fitted to one set of readings and does not condition on them."""
         return pyro.sample("m", self.distribution())
 
     def exact_elbo(self, model: OccupancyModel) -> torch.Tensor:

@@ -2,8 +2,9 @@
 
 import numpy as np
 import pytest
+import torch
 
-from ogm_ppl import GaussianRange, OccupancyModel, raycast
+from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
 from ogm_ppl.datasets import THESIS_TOY_READINGS, toy_1d
 from ogm_ppl.inference import CellGibbs, PatchGibbs, RunningStats, run_gibbs
 from ogm_ppl.inference.mcmc.runner import CheckpointError
@@ -35,12 +36,12 @@ def _interrupted(tmp_path, model):
     "other, kernel, stats, what",
     [
         # same K, other readings: resumed silently before and mixed two posteriors
-        (lambda: _model(readings=(10.0, 9.0, 9.0, 11.0, 12.0, 8.0)), None, None, "readings"),
-        (lambda: _model(sigma=2.0), None, None, "sensor"),
-        (lambda: _model(lam=0.5), None, None, "prior"),
-        (lambda: _model(), lambda m: CellGibbs(m, scan="random"), None, "kernel"),
-        (lambda: _model(), lambda m: PatchGibbs(m, 3), None, "kernel"),
-        (lambda: _model(), None, lambda m: RunningStats(m, rays=[0], pairs=[[3, 4]]), "stats"),
+        (lambda: _model(readings=(10.0, 9.0, 9.0, 11.0, 12.0, 8.0)), None, None, "the readings or the pinned"),
+        (lambda: _model(sigma=2.0), None, None, r"the likelihood table \(the sensor model"),
+        (lambda: _model(lam=0.5), None, None, "the prior"),
+        (lambda: _model(), lambda m: CellGibbs(m, scan="random"), None, "the kernel or its settings"),
+        (lambda: _model(), lambda m: PatchGibbs(m, 3), None, "the kernel"),
+        (lambda: _model(), None, lambda m: RunningStats(m, rays=[0], pairs=[[3, 4]]), "the tracked statistics"),
     ],
 )
 def test_checkpoint_of_another_run_is_refused(tmp_path, other, kernel, stats, what):
@@ -48,7 +49,7 @@ def test_checkpoint_of_another_run_is_refused(tmp_path, other, kernel, stats, wh
     m = other()
     k = kernel(m) if kernel else CellGibbs(m)
     s = stats(m) if stats else RunningStats(m, rays=[0])
-    with pytest.raises(CheckpointError, match=rf"ck\.npz: checkpoint belongs to another run: its .*{what}"):
+    with pytest.raises(CheckpointError, match=rf"ck\.npz: checkpoint belongs to another run; what differs .*{what}"):
         run_gibbs(k, 200, s, seed=3, checkpoint=ck, progress=False)
     # the same run still resumes
     m0 = _model()
@@ -86,10 +87,26 @@ def test_prior_fingerprint_sees_the_tables(a, b):
     fps = []
     for name in (a, b, a):
         prior = prior_by_name(name, (6, 6))
-        toy = toy_1d(num_cells=36, readings=THESIS_TOY_READINGS[:1], wall=8)
-        model = OccupancyModel(toy.grid, raycast(toy.grid, toy.scans), GaussianRange(3.0), prior)
+        grid = Grid((6, 6), 1.0)
+        scans = Scans(torch.tensor([[2.5, 2.5, 0.0]]), torch.tensor([[0.0, 1.5]]), torch.tensor([[2.0, 2.5]]), 5.0)
+        model = OccupancyModel(grid, raycast(grid, scans), GaussianRange(3.0), prior)
         fps.append(fingerprint(CellGibbs(model), RunningStats(model))["prior"])
     assert fps[0] != fps[1] and fps[0] == fps[2]
+
+
+def test_a_checkpoint_past_the_sweeps_asked_for_is_refused(tmp_path):
+    """A finished checkpoint extends to more sweeps; asked for fewer than it holds it cannot go back, and says so
+    instead of returning its longer run."""
+    model = _model()
+    ck = tmp_path / "ck.npz"
+    run_gibbs(
+        CellGibbs(model), 60, warmup=10, seed=3, checkpoint=ck, checkpoint_every=10, stop_after=50, progress=False
+    )
+    with pytest.raises(
+        CheckpointError, match=r"ck\.npz: checkpoint holds 50 sweeps \(warm-up included\), more than the 40"
+    ):
+        run_gibbs(CellGibbs(model), 30, warmup=10, seed=3, checkpoint=ck, progress=False)
+    assert run_gibbs(CellGibbs(model), 60, warmup=10, seed=3, checkpoint=ck, progress=False).sweeps == 70
 
 
 def test_resume_with_another_warmup_is_refused(tmp_path):

@@ -63,6 +63,19 @@ def test_refuses_models_with_impossible_maps():
         fit_guide(model(p_rand=0.0), MeanFieldGuide(model(p_rand=0.0)), steps=1)
 
 
+@pytest.mark.parametrize("loss", ["tracegraph", "rws"])
+def test_a_guide_drawing_maps_the_prior_gives_no_mass_stops_with_the_reason(loss):
+    """Mean-field draws under the thick-wall prior are mostly massless: the loss is not finite within a step or two, and
+    fit_guide says why (not a NaN logit a step later)."""
+    from ogm_ppl.priors import DataDriven1DPrior
+
+    base = model()
+    m = OccupancyModel(base.grid, base.rays, base.sensor, DataDriven1DPrior(8, start=1))
+    assert m.prior.can_be_zero
+    with pytest.raises(ValueError, match=rf"the {loss} loss is .* at step \d: DataDriven1DPrior gives some maps zero"):
+        fit_guide(m, MeanFieldGuide(m), steps=3, num_particles=16, loss=loss)
+
+
 def test_patch_guide_needs_a_tiling():
     with pytest.raises(ValueError, match="tiling"):
         PatchGuide(model(), [[0, 0], [0, 2]])
