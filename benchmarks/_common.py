@@ -2,14 +2,8 @@
 
 from __future__ import annotations
 
-import datetime
 import json
-import os
-import platform
 import resource
-import shlex
-import subprocess
-import sys
 import time
 from pathlib import Path
 
@@ -35,68 +29,12 @@ def peak_rss_mb() -> float:
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024
 
 
-def _cpu_model() -> str:
-    try:
-        for line in Path("/proc/cpuinfo").read_text().splitlines():
-            if line.startswith("model name"):
-                return line.split(":", 1)[1].strip()
-    except OSError:
-        pass
-    return platform.processor() or platform.machine()
-
-
-def _git_commit(root: Path) -> str:
-    """``git rev-parse HEAD`` of ``root``, with ``-dirty`` when tracked files of the code that produces
-    results (``ogm_ppl/``, ``benchmarks/``, ``experiments/``) differ from it; edits to docs do not count."""
-    try:
-        head = subprocess.run(
-            ["git", "rev-parse", "HEAD"], cwd=root, capture_output=True, text=True, check=True
-        ).stdout.strip()
-        dirty = subprocess.run(
-            ["git", "status", "--porcelain", "--untracked-files=no", "--", "ogm_ppl", "benchmarks", "experiments"],
-            cwd=root,
-            capture_output=True,
-            text=True,
-            check=True,
-        ).stdout.strip()
-    except (OSError, subprocess.CalledProcessError):
-        return "unknown"
-    return head + ("-dirty" if dirty else "")
-
-
 def provenance(command: str | None = None) -> dict:
-    """What produced a result: the command line, the git commit of the checkout and the machine.
+    """The provenance block (:func:`ogm_ppl.provenance.provenance`): command (default this process's
+    ``python benchmarks/bench_NAME.py ...``), commit, machine, date."""
+    from ogm_ppl.provenance import provenance as _provenance
 
-    ``command`` defaults to this process's own command line (``python benchmarks/bench_ogm.py ...``,
-    relative to the repository root). Versions are read from the imported packages, so the stamp names
-    the torch and numba that ran, not the ones pinned.
-    """
-    import numba
-    import numpy
-    import torch
-
-    root = Path(__file__).resolve().parent.parent
-    if command is None:
-        script = Path(sys.argv[0]).resolve()
-        try:
-            script_name = str(script.relative_to(root))
-        except ValueError:
-            script_name = sys.argv[0]
-        command = shlex.join(["python", script_name, *sys.argv[1:]])
-    return {
-        "command": command,
-        "commit": _git_commit(root),
-        "machine": {
-            "cpu": _cpu_model(),
-            "cores": os.cpu_count(),
-            "python": platform.python_version(),
-            "torch": torch.__version__,
-            "numba": numba.__version__,
-            "numpy": numpy.__version__,
-            "platform": platform.platform(),
-        },
-        "date": datetime.datetime.now(datetime.timezone.utc).strftime("%Y-%m-%dT%H:%M:%SZ"),
-    }
+    return _provenance(command)
 
 
 def write_json(name: str, payload: dict) -> Path:

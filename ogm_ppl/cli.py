@@ -1386,6 +1386,7 @@ def cmd_experiment(args) -> int:
     except SpecError as e:
         raise CLIError(str(e)) from None
     out = args.out if args.out is not None else Path("out") / "experiments" / spec.name
+    _prepare_out_dir(Path(out))
     try:
         r = run_experiment(
             spec,

@@ -651,6 +651,13 @@ def _settings(doc: dict, path: Path) -> RosMapSettings:
 
 
 # --------------------------------------------------------------------------- image reading
+def _extra_data(n: int, what: str, w: int, h: int) -> str:
+    return (
+        f"PGM has {n} pixel {what} after the {w} x {h} its header states: the header's size is wrong, or the "
+        "file holds several images (a map is one)"
+    )
+
+
 def _read_pnm(data: bytes, path: Path) -> np.ndarray:
     magic = data[:2]
     pos, n = 2, len(data)
@@ -686,11 +693,16 @@ def _read_pnm(data: bytes, path: Path) -> np.ndarray:
         raw = data[pos + 1 : pos + 1 + w * h]
         if len(raw) < w * h:
             raise RosMapError(path, f"PGM truncated: {len(raw)} of {w * h} pixel bytes")
+        extra = data[pos + 1 + w * h :]
+        if extra.strip():
+            raise RosMapError(path, _extra_data(len(extra), "bytes", w, h))
         px = np.frombuffer(raw, dtype=np.uint8).reshape(h, w).copy()
     else:  # P2, ASCII
         body = data[pos:].split()
         if len(body) < w * h:
             raise RosMapError(path, f"PGM truncated: {len(body)} of {w * h} pixel values")
+        if len(body) > w * h:
+            raise RosMapError(path, _extra_data(len(body) - w * h, "values", w, h))
         try:
             px = np.array([int(t) for t in body[: w * h]], dtype=np.int64).reshape(h, w)
         except ValueError:

@@ -279,6 +279,8 @@ BAD_IMAGES = {
     "bad header": b"P5\n2 x\n255\n\0\0\0\0",
     "truncated header": b"P5\n2 2\n",
     "truncated data": b"P5\n2 2\n255\n\0\0\0",
+    "a row more than the header says": b"P5\n2 2\n255\n" + bytes(6),
+    "values after the ASCII pixels": b"P2\n2 1\n255\n3 4 5\n",
     "16 bit": b"P5\n2 2\n65535\n" + bytes(8),
     "zero width": b"P5\n0 2\n255\n",
     "value above maxval": b"P2\n2 1\n15\n3 16\n",
@@ -303,6 +305,13 @@ def test_malformed_image_raises(tmp_path, case):
     with pytest.raises(RosMapError) as e:
         load_ros_map(y)
     assert str(tmp_path / "map.pgm") in str(e.value)
+
+
+def test_trailing_whitespace_after_the_pixels_is_allowed(tmp_path):
+    y = _write(tmp_path, GOOD, b"P5\n2 2\n255\n" + bytes([0, 255, 254, 0]) + b"\n")
+    assert load_ros_map(y).grid.num_cells == 4
+    with pytest.raises(RosMapError, match="PGM has 2 pixel bytes after the 2 x 2 its header states"):
+        load_ros_map(_write(tmp_path, GOOD, b"P5\n2 2\n255\n" + bytes(6)))
 
 
 def test_missing_yaml_and_bad_sidecar_raise(tmp_path):

@@ -43,6 +43,7 @@ import numpy as np
 
 from ogm_ppl.experiment.spec import SpecError, _check_name, _named_entry, _Table
 from ogm_ppl.io import atomic_write_text
+from ogm_ppl.provenance import provenance
 
 __all__ = ["ActiveResult", "ActiveSpec", "parse_active_spec", "run_active", "run_active_task", "summarise"]
 
@@ -393,13 +394,13 @@ def run_active(
     :func:`~ogm_ppl.experiment.run_experiment`); raises :class:`~ogm_ppl.experiment.ExperimentError` (with
     ``.result``) when tasks failed, after writing what the finished ones allow."""
     from ogm_ppl.experiment import tasks as T
-    from ogm_ppl.experiment.runner import ExperimentError, Task, execute_tasks
+    from ogm_ppl.experiment.runner import SCRATCH, ExperimentError, Task, claim_output_folder, execute_tasks
     from ogm_ppl.experiment.spec import derive_seed
     from ogm_ppl.experiment.tasks import _savez
 
     t0 = time.perf_counter()
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    claim_output_folder(out, spec.name)
     if spec.source != "<dict>" and Path(spec.source).exists():
         atomic_write_text(out / "spec.toml", Path(spec.source).read_text(encoding="utf-8"))
     atomic_write_text(out / "spec.json", json.dumps(spec.to_json(), indent=1, default=str))
@@ -437,7 +438,9 @@ def run_active(
                         h,
                     )
                 )
-    todo, skipped, recs, results, failed = execute_tasks(tasks, scheduler, workers, resume, progress)
+    todo, skipped, recs, results, failed = execute_tasks(
+        tasks, scheduler, workers, resume, progress, scratch=out / SCRATCH
+    )
     recs.update(results)
     runs = [{k: v for k, v in recs[t.id].items() if k != "hash"} for t in tasks if t.id in recs]
     result = ActiveResult(spec, out, runs=runs, executed=[t.id for t in todo if t.id in results], skipped=skipped)
@@ -446,6 +449,7 @@ def run_active(
     doc = {
         "format": "ogm_ppl.experiment.active",
         "format_version": 1,
+        "provenance": provenance(),
         "experiment": spec.name,
         "seed": spec.seed,
         "plans": [{"id": pid, "plan": pname} for pid, pname, _ in plans],

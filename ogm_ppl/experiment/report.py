@@ -14,6 +14,7 @@ import math
 import numpy as np
 
 from ogm_ppl.io import atomic_write_text
+from ogm_ppl.provenance import provenance
 
 __all__ = ["pool", "markdown", "write_outputs"]
 
@@ -160,6 +161,15 @@ def markdown(result) -> str:
         lines.append("")
     if result.failed:
         lines += ["## Failed tasks", ""] + [f"- `{k}`: {v}" for k, v in result.failed.items()] + [""]
+    prov = result.provenance
+    if prov:
+        m = prov["machine"]
+        lines += [
+            f"Produced by `{prov['command']}` at commit {prov['commit']} (ogm_ppl {prov['ogm_ppl']}) on "
+            f"{m['cpu']} ({m['cores']} cores; Python {m['python']}, torch {m['torch']}, numba {m['numba']}), "
+            f"{prov['date']}.",
+            "",
+        ]
     return "\n".join(lines)
 
 
@@ -174,9 +184,11 @@ def write_outputs(result, tasks, recs: dict) -> None:
     result.runs = [_strip(recs[t.id]) for t in tasks if t.kind == "run" and t.id in recs]
     result.scores = [_strip(recs[t.id]) for t in tasks if t.kind == "score" and t.id in recs]
     result.pooled = pool(result.scores, spec)
+    result.provenance = provenance()
     doc = {
         "format": "ogm_ppl.experiment.metrics",
         "format_version": 1,
+        "provenance": result.provenance,
         "experiment": spec.name,
         "seed": spec.seed,
         "datasets": result.datasets,

@@ -65,6 +65,8 @@ class ExperimentResult:
         pooled: one record per condition x algorithm: counts summed over the condition's repeats.
         runs: one record per run task (seconds, Gibbs F1-against-time trace).
         executed / skipped: task ids run now / found done; failed: task id -> error.
+        provenance: what produced the outputs (:func:`ogm_ppl.provenance.provenance`: command, commit,
+            machine, date), written into ``metrics.json`` and under ``metrics.md``.
     """
 
     spec: ExperimentSpec
@@ -78,6 +80,7 @@ class ExperimentResult:
     failed: dict = field(default_factory=dict)
     seconds: float = 0.0
     files: list = field(default_factory=list)
+    provenance: dict = field(default_factory=dict)
 
     def table(self) -> str:
         """The Markdown results table (as in ``metrics.md``)."""
@@ -185,17 +188,28 @@ def _execute_serial(todo: list[Task], progress: bool):
 SCHEDULER_TIMEOUT_S = 5.0
 
 
-def _client(scheduler, workers):
-    """``(client, owned)``: a Client for ``scheduler`` and whether we must close it (and its cluster)."""
+def _client(scheduler, workers, scratch: Path | None = None):
+    """``(client, owned)``: a Client for ``scheduler`` and whether we must close it (and its cluster). A
+    ``LocalCluster``'s workers keep their scratch files in ``scratch`` (inside the output folder), not in the
+    system's temporary folder."""
     from distributed import Client, LocalCluster
 
     if isinstance(scheduler, Client):
         return scheduler, False
     if scheduler is None:
+        import dask
+
         n = int(workers) if workers else (os.cpu_count() or 1)
-        cluster = LocalCluster(
-            n_workers=n, threads_per_worker=1, processes=True, dashboard_address=None, silence_logs=logging.ERROR
-        )
+        where = {} if scratch is None else {"temporary-directory": str(scratch)}  # lock files too
+        with dask.config.set(where):
+            cluster = LocalCluster(
+                n_workers=n,
+                threads_per_worker=1,
+                processes=True,
+                dashboard_address=None,
+                silence_logs=logging.ERROR,
+                local_directory=None if scratch is None else str(scratch),
+            )
         return Client(cluster), True
     if isinstance(scheduler, str):
         try:
@@ -235,11 +249,14 @@ def _execute_dask(todo: list[Task], client, progress: bool):
     return results, failed
 
 
-def execute_tasks(tasks: list[Task], scheduler, workers: int | None, resume: bool, progress: bool):
+def execute_tasks(
+    tasks: list[Task], scheduler, workers: int | None, resume: bool, progress: bool, scratch: Path | None = None
+):
     """Run the tasks not already done: ``(todo, skipped, done_records, results, failed)``.
 
     A task is done when its done-file holds its settings' hash (``resume``) and every task it depends on is
-    done; the others run serially (``scheduler == "serial"``) or on dask (see :func:`run_experiment`)."""
+    done; the others run serially (``scheduler == "serial"``) or on dask (see :func:`run_experiment`; a local
+    cluster's scratch folder is ``scratch``, removed afterwards)."""
     todo, skipped, done_recs = [], [], {}
     for t in tasks:
         rec = T.read_done(t.done_file, t.hash) if resume else None
@@ -251,7 +268,7 @@ def execute_tasks(tasks: list[Task], scheduler, workers: int | None, resume: boo
     if scheduler == "serial" or not todo:
         results, failed = _execute_serial(todo, progress)
     else:
-        client, owned = _client(scheduler, workers)
+        client, owned = _client(scheduler, workers, scratch)
         try:
             results, failed = _execute_dask(todo, client, progress)
         finally:
@@ -260,10 +277,39 @@ def execute_tasks(tasks: list[Task], scheduler, workers: int | None, resume: boo
                 client.close()
                 if cluster is not None:
                     cluster.close()
+            if scratch is not None:
+                shutil.rmtree(scratch, ignore_errors=True)
     return todo, skipped, done_recs, results, failed
 
 
 # ------------------------------------------------------------------------------------------ the API
+#: the local dask cluster's scratch folder, inside the output folder while the tasks run
+SCRATCH = ".dask-scratch"
+
+
+def claim_output_folder(out: Path, name: str) -> None:
+    """Create the output folder ``out`` for experiment ``name``; refuse (``ValueError``) a path that is a file,
+    or a folder that holds another experiment's results (its ``spec.json`` names another experiment), rather
+    than mixing two experiments' files."""
+    if out.exists() and not out.is_dir():
+        raise ValueError(f"output folder {out}: exists and is not a folder")
+    prev = out / "spec.json"
+    if prev.is_file():
+        try:
+            old = json.loads(prev.read_text(encoding="utf-8")).get("name")
+        except (OSError, ValueError, AttributeError):
+            old = None
+        if isinstance(old, str) and old != name:
+            raise ValueError(
+                f"output folder {out}: holds the results of experiment {old!r} (its spec.json), not {name!r}; "
+                "name another output folder, or delete this one"
+            )
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise ValueError(f"output folder {out}: cannot be created ({e.strerror or e})") from None
+
+
 def run_experiment(
     spec_or_path, out_dir, *, scheduler=None, workers: int | None = None, resume: bool = True, progress: bool = True
 ) -> ExperimentResult:
@@ -280,7 +326,8 @@ def run_experiment(
 
     Returns:
         an :class:`ExperimentResult`; raises :class:`ExperimentError` (with ``.result``) if tasks failed,
-        after writing what the finished tasks allow.
+        after writing what the finished tasks allow, and ``ValueError`` before any task when ``out_dir``
+        cannot be the output folder (:func:`claim_output_folder`).
     """
     t0 = time.perf_counter()
     spec = spec_or_path if not isinstance(spec_or_path, (str, os.PathLike)) else load_spec(spec_or_path)
@@ -296,12 +343,14 @@ def run_experiment(
             progress=progress,
         )
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
+    claim_output_folder(out, spec.name)
     if spec.source != "<dict>" and Path(spec.source).exists():
         shutil.copyfile(spec.source, out / "spec.toml")
     atomic_write_text(out / "spec.json", json.dumps(spec.to_json(), indent=1, default=str))
     tasks = plan_tasks(spec, out, resume)
-    todo, skipped, done_recs, results, failed = execute_tasks(tasks, scheduler, workers, resume, progress)
+    todo, skipped, done_recs, results, failed = execute_tasks(
+        tasks, scheduler, workers, resume, progress, scratch=out / SCRATCH
+    )
     recs = {**done_recs, **{k: v for k, v in results.items() if v is not None}}
     result = ExperimentResult(
         spec, out, executed=[t.id for t in todo if t.id in results], skipped=skipped, failed=failed

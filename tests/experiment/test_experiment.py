@@ -574,3 +574,24 @@ def test_the_warm_up_run_of_each_method_succeeds(name):
 
     r = T.warm_run(AlgorithmSpec(name=name, kind=name, params={}), 1.0, 0.05)
     assert r.probabilities is not None and r.probabilities.shape == (24 * 24,)
+
+
+def test_an_output_folder_of_another_experiment_is_refused(serial_run, tmp_path):
+    """Running another experiment into a folder that holds one would mix their files (and overwrite the first's
+    metrics): refused before any task, naming both; a file is no output folder. The same experiment reruns."""
+    d = tiny()
+    d["experiment"] = {**d.get("experiment", {}), "name": "other"}
+    with pytest.raises(ValueError, match=r"holds the results of experiment 'smoke' \(its spec\.json\), not 'other'"):
+        run_experiment(parse_spec(d, "tiny.toml"), serial_run.out_dir, scheduler="serial", progress=False)
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(ValueError, match="exists and is not a folder"):
+        run_experiment(parse_spec(d, "tiny.toml"), tmp_path / "f", scheduler="serial", progress=False)
+
+
+def test_metrics_say_what_produced_them(serial_run):
+    """``metrics.json`` carries the provenance block (command, commit, machine, date) and ``metrics.md`` ends
+    with it."""
+    out = serial_run.out_dir
+    prov = json.loads((out / "metrics.json").read_text())["provenance"]
+    assert {"command", "commit", "machine", "date", "ogm_ppl"} <= set(prov) and prov["machine"]["cores"] >= 1
+    assert f"at commit {prov['commit']}" in (out / "metrics.md").read_text()
