@@ -82,7 +82,7 @@ class Progress:
         pct = 100.0 * self.done / self.total if self.total else 100.0
         parts = [f"{self.desc}: {self.done}/{self.total} ({pct:.0f} %), {_duration(el)}"]
         if final:
-            parts.append("done")
+            parts.append("done" if self.done >= self.total else "stopped")
         elif 0 < self.done < self.total:
             parts.append(f"~{_duration(el / self.done * (self.total - self.done))} left")
         line = ", ".join(parts) + (f"; last: {note}" if note and not final else "")

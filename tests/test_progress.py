@@ -34,3 +34,10 @@ def test_disabled_prints_nothing_and_close_is_idempotent():
     p.close()
     p.close()
     assert s.getvalue().count("done") == 1
+
+
+def test_a_run_closed_before_its_last_step_says_stopped_not_done():
+    s = io.StringIO()
+    with Progress(4, "tasks", stream=s, every=1e9) as p:
+        p.update()
+    assert s.getvalue().splitlines()[-1].endswith("1/4 (25 %), 0 s, stopped")

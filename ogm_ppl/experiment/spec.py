@@ -401,7 +401,8 @@ def _check_plan(t: _Table, p: dict, max_cells: int) -> None:
         plan = load_plan_file(p["plan"], pixel_size=p["pixel_size"], resolution=p["resolution"])
     except (PlanFileError, OSError) as e:
         t.fail("plan", str(e))
-    _too_many(t, "plan", *plan.shape, max_cells, f"{p['plan']} at {p['resolution']} m a cell")
+    rows, cols = plan.shape
+    _too_many(t, "plan", rows, cols, max_cells, f"{p['plan']} at {p['resolution']} m a cell")
 
 
 def _too_many(t: _Table, key: str, rows: int, cols: int, max_cells: int, what: str) -> None:
@@ -425,7 +426,8 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int, max_cells:
             p.update(_plan_keys(t, base_dir))
         else:
             p.update(_generated_keys(t))
-            _too_many(t, "size", *p["size"], max_cells, f"size = {p['size']}")
+            rows, cols = p["size"]
+            _too_many(t, "size", rows, cols, max_cells, f"size = {p['size']}")
         p["resolution"] = t.get("resolution", "float", 0.05, lo=0, lo_open=True)
         if "plan" in p:
             _check_plan(t, p, max_cells)
