@@ -248,13 +248,21 @@ def fit_guide(
             out = svi.step()
         value = float(out[1] if isinstance(out, tuple) else out)
         if not math.isfinite(value):
-            why = (
-                f"{type(model.prior).__name__} gives some maps zero mass (can_be_zero) and the guide drew such "
-                "maps; use a guide whose support the prior covers (FirstHitGuide for DataDriven1DPrior) or a "
-                "strictly positive prior"
-                if getattr(model.prior, "can_be_zero", False)
-                else "the model's log joint or the guide's log density is not finite on the guide's draws"
-            )
+            name = type(model.prior).__name__
+            if not getattr(model.prior, "can_be_zero", False):
+                why = "the model's log joint or the guide's log density is not finite on the guide's draws"
+            elif loss == "rws":
+                why = (
+                    f"{name} gives some maps zero mass (can_be_zero) and every one of the {num_particles} draws "
+                    "had zero mass, so none carries weight; use more particles or a guide that draws maps the "
+                    "prior allows more often (FirstHitGuide for DataDriven1DPrior)"
+                )
+            else:
+                why = (
+                    f"{name} gives some maps zero mass (can_be_zero) and the guide drew such maps, which makes "
+                    "the reverse KL infinite; use loss='rws' (such draws weigh nothing there) or a strictly "
+                    "positive prior"
+                )
             raise ValueError(f"fit_guide: the {loss} loss is {value} at step {step + 1}: {why}")
         losses.append(value)
     return losses

@@ -1,4 +1,5 @@
 import itertools
+import math
 
 import pytest
 import torch
@@ -74,6 +75,19 @@ def test_a_guide_drawing_maps_the_prior_gives_no_mass_stops_with_the_reason(loss
     assert m.prior.can_be_zero
     with pytest.raises(ValueError, match=rf"the {loss} loss is .* at step \d: DataDriven1DPrior gives some maps zero"):
         fit_guide(m, MeanFieldGuide(m), steps=3, num_particles=16, loss=loss)
+
+
+def test_the_advice_for_a_prior_that_can_be_zero_works():
+    """What the error advises for the thick-wall prior (``loss="rws"`` with the first-hit guide) fits."""
+    from ogm_ppl.inference.variational.structured_guides import FirstHitGuide
+    from ogm_ppl.priors import DataDriven1DPrior
+
+    base = model()
+    m = OccupancyModel(base.grid, base.rays, base.sensor, DataDriven1DPrior(8, start=1))
+    with pytest.raises(ValueError, match="use loss='rws'"):
+        fit_guide(m, FirstHitGuide(m), steps=3, num_particles=16)
+    losses = fit_guide(m, FirstHitGuide(m), steps=30, num_particles=64, loss="rws")
+    assert all(math.isfinite(v) for v in losses)
 
 
 def test_patch_guide_needs_a_tiling():
