@@ -8,8 +8,9 @@ fall back to a default).
 Tables (every key optional unless marked *required*; defaults in brackets)::
 
     [experiment]        name [file stem], seed [0], description [""], kind ["map"; "active": an active-mapping
-                        spec, its own tables: ogm_ppl.experiment.active], max_cells [50,000,000: a dataset's
-                        grid of more cells is refused, when the spec is read where its size is known then]
+                        spec, its own tables: ogm_ppl.experiment.active], max_cells [50,000,000: a dataset
+                        whose grid has more cells is refused: when the spec is read, or for a log without an
+                        extent when its base task has read the log, before any map is built]
     [[datasets]]        kind = "simulated" | "log" | "bag" (*required*), name (*required*, [A-Za-z0-9_.-]+)
       simulated:        map ["office"; a mapgen kind or "mixed" = kinds in turn by map_seed],
                         size [500] (int or [rows, cols]), border [20], resolution [0.05] (m/cell),
