@@ -206,7 +206,8 @@ def run_chains(
     chains far apart: :func:`run_from_starts` with :func:`start_maps` (thresholded OGM, all free, a prior
     draw) and :func:`rhat_agreement`.
 
-    With ``processes > 1``, ``make_kernel`` must be picklable: a class or ``functools.partial``, e.g.
+    With ``processes > 1``, forked workers inherit ``make_kernel`` (no copy is made in this process); with
+    ``mp_context="spawn"`` it must be picklable: a class or ``functools.partial``, e.g.
     ``partial(CellGibbs, model, update="metropolised")``, not a lambda; it is sent once to each worker.
     Workers start with ``mp_context``: ``"fork"`` where the platform has it (as ``pyro.infer.MCMC`` does;
     workers inherit the model and run torch on one thread), else ``"spawn"`` (each worker pays the imports
@@ -228,15 +229,16 @@ def run_chains(
             run_gibbs(kernel, num_sweeps, stats, warmup=warmup, seed=seed + c, progress=progress)
             out.append(stats)
         return ChainsResult(out)
-    try:
-        pickle.dumps(make_kernel)
-    except Exception as e:
-        raise ValueError(
-            "make_kernel must be picklable to run chains in processes (use a class or "
-            f"functools.partial, not a lambda): {e}"
-        ) from None
     if mp_context is None:
         mp_context = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
+    if mp_context != "fork":  # forked workers inherit make_kernel; a pickled copy of a big model costs its size
+        try:
+            pickle.dumps(make_kernel)
+        except Exception as e:
+            raise ValueError(
+                "make_kernel must be picklable to run chains in processes (use a class or "
+                f"functools.partial, not a lambda): {e}"
+            ) from None
     ctx = multiprocessing.get_context(mp_context)
     with ProcessPoolExecutor(
         max_workers=min(processes, num_chains), mp_context=ctx, initializer=_init_worker, initargs=(make_kernel,)
