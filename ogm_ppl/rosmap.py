@@ -54,7 +54,7 @@ Rows: image row 0 is the top of the map (largest ``y``); our cell ``(row, col)``
 ``(rows - 1 - row, col)`` and OccupancyGrid index ``row * cols + col`` (== our flat cell index).
 
 Next to the two files a *sidecar* ``<stem>.npz`` (``allow_pickle=False``, format version 1) keeps the
-float probabilities, the unknown mask, the grid and a SHA-256 of the image, so that
+float probabilities, the unknown mask, the grid and a SHA-256 of the image (zip-compressed), so that
 :func:`load_ros_map` can return the exact probabilities (a stale sidecar is ignored with a warning).
 All files are written atomically (:func:`ogm_ppl.io.atomic_write_bytes`); the YAML is written last.
 
@@ -471,7 +471,7 @@ def save_ros_map(
     atomic_write_bytes(image_path, data)
     if sidecar:
         buf = io.BytesIO()
-        np.savez(
+        np.savez_compressed(  # a map's probabilities repeat (the prior's value where unobserved): zip shrinks them
             buf,
             format_version=np.int64(FORMAT_VERSION),
             probabilities=p,
