@@ -1464,7 +1464,7 @@ def main(argv: list[str] | None = None) -> int:
         if show_tb:
             raise
         if isinstance(e, MemoryError):
-            msg = "out of memory; use a coarser --resolution or fewer scans (--pose-step)"
+            msg = _one_line(e) if str(e) else "out of memory; use a coarser --resolution or fewer scans (--pose-step)"
         else:
             msg = _one_line(e)
         print(f"ogm-ppl: error: {msg}", file=sys.stderr)

@@ -183,3 +183,16 @@ def test_several_rays_marginalise_the_outside_cells_each_on_their_own():
         for K in (9, 13)
     ]
     torch.testing.assert_close(one[0], one[1], rtol=0, atol=1e-12)
+
+
+def test_a_model_too_big_for_free_memory_is_refused_before_it_is_built(monkeypatch):
+    """A map too fine or a log too long for the machine fails at once with the numbers, not by swapping."""
+    import ogm_ppl.models.occupancy as occ
+
+    grid = Grid.line(6)
+    rays = raycast(grid, Scans.one_d([2.0, 4.0], max_range=5.0))
+    monkeypatch.setattr(occ, "available_memory", lambda: 100)
+    with pytest.raises(MemoryError, match=r"rays cross \d+ cells .* more than the 0\.0 GiB this machine has free"):
+        OccupancyModel(grid, rays, GaussianRange(1.0), IndependentPrior(0.5, 6))
+    monkeypatch.setattr(occ, "available_memory", lambda: None)  # unknown: not checked
+    OccupancyModel(grid, rays, GaussianRange(1.0), IndependentPrior(0.5, 6))
