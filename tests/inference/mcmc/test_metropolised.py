@@ -187,8 +187,14 @@ def test_parallel_chains_equal_serial_chains():
     assert (serial.rhat() - 1).abs().max() < 0.05
     exact = brute_force(model).marginals
     assert (parallel.marginals - exact).abs().max() < 4 * 0.5 * math.sqrt(10 / 1200)
+    # forked workers inherit make_kernel (no pickled copy of the model); spawned ones need a picklable one
+    forked = run_chains(lambda: CellGibbs(model), num_chains=2, num_sweeps=5, trace_cells=[2], seed=3, processes=2)
+    alone = run_chains(lambda: CellGibbs(model), num_chains=2, num_sweeps=5, trace_cells=[2], seed=3)
+    assert all(torch.equal(a.marginals, b.marginals) for a, b in zip(forked.stats, alone.stats))
     with pytest.raises(ValueError, match="picklable"):
-        run_chains(lambda: CellGibbs(model), num_chains=2, num_sweeps=5, trace_cells=[2], processes=2)
+        run_chains(
+            lambda: CellGibbs(model), num_chains=2, num_sweeps=5, trace_cells=[2], processes=2, mp_context="spawn"
+        )
 
 
 def test_pyro_mcmc_runs_several_chains_with_a_summary(capsys):
