@@ -788,9 +788,9 @@ def _compute_map(
     probs, ray, total = [], None, 0.0
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
-        from numba.core.errors import NumbaIRAssumptionWarning
+        from ogm_ppl.inference._kernels import quiet_numba_ir_check
 
-        warnings.filterwarnings("ignore", category=NumbaIRAssumptionWarning)  # as ogm_ppl.inference._kernels does
+        quiet_numba_ir_check()
         for c in range(chains):
             where = f"ogm-ppl map {args.input}"
             ctx = RunContext(seed=args.seed + c, cache_dir=args.out, progress=_progress(), where=where)

@@ -394,7 +394,7 @@ def run_active(
     :func:`~ogm_ppl.experiment.run_experiment`); raises :class:`~ogm_ppl.experiment.ExperimentError` (with
     ``.result``) when tasks failed, after writing what the finished ones allow."""
     from ogm_ppl.experiment import tasks as T
-    from ogm_ppl.experiment.runner import SCRATCH, ExperimentError, Task, claim_output_folder, execute_tasks
+    from ogm_ppl.experiment.runner import SCRATCH, Task, claim_output_folder, execute_tasks, failed_error
     from ogm_ppl.experiment.spec import derive_seed
     from ogm_ppl.experiment.tasks import _savez
 
@@ -469,10 +469,5 @@ def run_active(
     result.files = files
     result.seconds = time.perf_counter() - t0
     if failed:
-        first = next(iter(failed.items()))
-        raise ExperimentError(
-            f"{len(failed)} of {len(todo)} tasks failed (first: {first[0]}: {first[1]}); finished tasks are kept: "
-            "rerun to resume once the cause is mended",
-            result,
-        )
+        raise failed_error(failed, todo, result)
     return result

@@ -282,6 +282,16 @@ def execute_tasks(
     return todo, skipped, done_recs, results, failed
 
 
+def failed_error(failed: dict, todo: list, result) -> ExperimentError:
+    """The :class:`ExperimentError` of a run in which ``failed`` (task id -> error) of the ``todo`` tasks failed."""
+    first = next(iter(failed.items()))
+    return ExperimentError(
+        f"{len(failed)} of {len(todo)} tasks failed (first: {first[0]}: {first[1]}); finished tasks are kept: "
+        "rerun to resume once the cause is mended",
+        result,
+    )
+
+
 # ------------------------------------------------------------------------------------------ the API
 #: the local dask cluster's scratch folder, inside the output folder while the tasks run
 SCRATCH = ".dask-scratch"
@@ -360,12 +370,7 @@ def run_experiment(
     write_outputs(result, tasks, recs)
     result.seconds = time.perf_counter() - t0
     if failed:
-        first = next(iter(failed.items()))
-        raise ExperimentError(
-            f"{len(failed)} of {len(todo)} tasks failed (first: {first[0]}: {first[1]}); finished tasks are kept: "
-            "rerun to resume once the cause is mended",
-            result,
-        )
+        raise failed_error(failed, todo, result)
     return result
 
 

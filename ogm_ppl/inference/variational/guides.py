@@ -248,21 +248,24 @@ def fit_guide(
             out = svi.step()
         value = float(out[1] if isinstance(out, tuple) else out)
         if not math.isfinite(value):
-            name = type(model.prior).__name__
-            if not getattr(model.prior, "can_be_zero", False):
-                why = "the model's log joint or the guide's log density is not finite on the guide's draws"
-            elif loss == "rws":
-                why = (
-                    f"{name} gives some maps zero mass (can_be_zero) and every one of the {num_particles} draws "
-                    "had zero mass, so none carries weight; use more particles or a guide that draws maps the "
-                    "prior allows more often (FirstHitGuide for DataDriven1DPrior)"
-                )
-            else:
-                why = (
-                    f"{name} gives some maps zero mass (can_be_zero) and the guide drew such maps, which makes "
-                    "the reverse KL infinite; use loss='rws' (such draws weigh nothing there) or a strictly "
-                    "positive prior"
-                )
+            why = _why_not_finite(model.prior, loss, num_particles)
             raise ValueError(f"fit_guide: the {loss} loss is {value} at step {step + 1}: {why}")
         losses.append(value)
     return losses
+
+
+def _why_not_finite(prior, loss: str, num_particles: int) -> str:
+    """Why a ``fit_guide`` loss is not finite, and what to do."""
+    name = type(prior).__name__
+    if not getattr(prior, "can_be_zero", False):
+        return "the model's log joint or the guide's log density is not finite on the guide's draws"
+    if loss == "rws":
+        return (
+            f"{name} gives some maps zero mass (can_be_zero) and every one of the {num_particles} draws had zero "
+            "mass, so none carries weight; use more particles or a guide that draws maps the prior allows more "
+            "often (FirstHitGuide for DataDriven1DPrior)"
+        )
+    return (
+        f"{name} gives some maps zero mass (can_be_zero) and the guide drew such maps, which makes the reverse KL "
+        "infinite; use loss='rws' (such draws weigh nothing there) or a strictly positive prior"
+    )
