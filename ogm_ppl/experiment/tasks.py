@@ -470,7 +470,8 @@ def run_algorithm(
         result = method.run(alg.method_params(), problem, ctx)
     if not result.complete:
         return None
-    seconds = time.perf_counter() - t0
+    # a resumed chain's time includes the sampling of the calls before this one (its checkpoint keeps it)
+    seconds = time.perf_counter() - t0 + float(result.details.get("resumed_seconds") or 0.0)
     q = result.probabilities
     assert q is not None
     _savez(folder / "marginals.npz", marginals=q.reshape(grid.shape), format_version=np.int64(1))

@@ -5,7 +5,8 @@ With a checkpoint folder (``ctx.checkpoint_dir``) the run checkpoints every ``ch
 and resumes from the checkpoint; it records the running marginals' scores (``ctx.score``) at ``record``
 evenly spaced sweeps after burn-in (``trace.json``, kept across resumes), and ``ctx.stop_after`` stops it
 after that many sweeps of this call with the checkpoint kept and no map. The caller removes the spent checkpoint
-once it has stored the map.
+once it has stored the map. The records' ``seconds`` are the chain's sampling time across calls (the
+checkpoint carries it); ``details["resumed_seconds"]`` is the part spent before this call.
 """
 
 from __future__ import annotations
@@ -94,7 +95,7 @@ def run_kernel(kernel, params: SamplingParams, problem: MapProblem, ctx: RunCont
         ckpt.unlink()
         start, trace = 0, []
     trace = [r for r in trace if r["sweep"] <= start and r["sweep"] in marks]  # records of this run's schedule
-    done, seconds = start, (trace[-1]["seconds"] if trace else 0.0)
+    done, before = start, None
     budget = ctx.stop_after
     details.update(resumed_from_sweep=start)
     run_kw: dict[str, Any] = {
@@ -110,7 +111,10 @@ def run_kernel(kernel, params: SamplingParams, problem: MapProblem, ctx: RunCont
         if budget is not None:
             step = min(step, budget)
         r = run_gibbs(kernel, n, stats, **run_kw, progress=ctx.progress, stop_after=step)
-        done, seconds = r.sweeps, seconds + r.seconds
+        done, seconds = r.sweeps, r.seconds_total  # the chain's sampling time, earlier calls' included
+        if before is None:
+            before = r.seconds_total - r.seconds
+            details["resumed_seconds"] = before
         if budget is not None:
             budget -= step
         if done == mark:
@@ -126,4 +130,5 @@ def run_kernel(kernel, params: SamplingParams, problem: MapProblem, ctx: RunCont
     if stats.n == 0:  # every mark was reached before (killed after the last checkpoint): load it
         r = run_gibbs(kernel, n, stats, **run_kw, progress=False)
         done = r.sweeps
+        details["resumed_seconds"] = r.seconds_total
     return MapResult(stats.marginals.numpy(), observed, {**details, "trace": trace, "sweeps_total": done})

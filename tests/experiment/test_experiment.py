@@ -30,7 +30,10 @@ def serial_run(tmp_path_factory):
 
 def _numbers(out: Path) -> dict:
     m = json.loads((out / "metrics.json").read_text())
-    runs = [{k: v for k, v in r.items() if k not in ("seconds", "trace", "resumed_from_sweep")} for r in m["runs"]]
+    runs = [
+        {k: v for k, v in r.items() if k not in ("seconds", "trace", "resumed_from_sweep", "resumed_seconds")}
+        for r in m["runs"]
+    ]
     traces = [[{k: v for k, v in t.items() if k != "seconds"} for t in r.get("trace", [])] for r in m["runs"]]
     maps = {str(p.relative_to(out)): np.load(p)["marginals"] for p in sorted(out.glob("tasks/**/marginals.npz"))}
     return {
@@ -283,6 +286,7 @@ def test_interrupted_gibbs_task_resumes_bit_for_bit(serial_run, tmp_path):
     assert r.executed == ["run/office/gibbs-border-L9/c0", "score/office/gibbs-border-L9"]
     res = json.loads(task.done_file.read_text())
     assert res["resumed_from_sweep"] == 3
+    assert res["seconds"] > res["resumed_seconds"] > 0  # the run's time counts the stopped call's sampling
     _same(_numbers(serial_run.out_dir), _numbers(out))
 
 

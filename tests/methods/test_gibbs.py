@@ -67,6 +67,9 @@ def test_cell_sweeps_cycle_patch_and_cell_gibbs_and_resume_from_a_checkpoint(box
     assert half.probabilities is None
     resumed = method.run(p, problem, RunContext(**ctx, resume=True))
     np.testing.assert_array_equal(resumed.probabilities, full.probabilities)
+    # the records' clock counts the stopped call's sampling too (kept in the checkpoint)
+    before = resumed.details["resumed_seconds"]
+    assert before > 0 and resumed.details["trace"][-1]["seconds"] > before
 
 
 def test_a_checkpoint_of_another_length_resumes_on_this_runs_schedule(box, tmp_path):  # noqa: F811

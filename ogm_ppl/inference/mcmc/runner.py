@@ -150,9 +150,13 @@ class GibbsRun:
     seconds: float
     interrupted: bool
     state: np.ndarray
+    #: sampling seconds of the whole chain: the resumed checkpoint's (earlier calls) plus this call's
+    seconds_total: float = 0.0
 
 
-def _save_checkpoint(path: Path, kernel, stats: RunningStats, sweep: int, seed: int, warmup: int, fp: dict) -> None:
+def _save_checkpoint(
+    path: Path, kernel, stats: RunningStats, sweep: int, seed: int, warmup: int, fp: dict, seconds: float
+) -> None:
     payload: dict[str, np.ndarray] = {f"kernel_{k}": np.asarray(v) for k, v in kernel.state_dict().items()}
     payload.update({f"stats_{k}": np.asarray(v) for k, v in stats.state_dict().items()})
     payload["rng"] = torch.get_rng_state().numpy()
@@ -161,6 +165,7 @@ def _save_checkpoint(path: Path, kernel, stats: RunningStats, sweep: int, seed: 
     payload["warmup"] = np.asarray(warmup, np.int64)
     payload["format"] = np.asarray(_FORMAT, np.int64)
     payload["num_cells"] = np.asarray(kernel.model.num_cells, np.int64)
+    payload["seconds"] = np.asarray(seconds, np.float64)  # the chain's sampling time up to ``sweep``
     for k, v in fp.items():
         payload[f"fp_{k}"] = np.asarray(v)
     with atomic_write(path) as f:
@@ -181,7 +186,10 @@ _COMPONENTS = {
 }
 
 
-def _load_checkpoint(path: Path, kernel, stats: RunningStats, seed: int, warmup: int, fp: dict, total: int) -> int:
+def _load_checkpoint(
+    path: Path, kernel, stats: RunningStats, seed: int, warmup: int, fp: dict, total: int
+) -> tuple[int, float]:
+    """Restore ``kernel``, ``stats`` and torch's generator; returns ``(sweep, seconds)`` of the checkpoint."""
     try:
         z = np.load(path, allow_pickle=False)
     except Exception as e:  # BadZipFile, OSError, ValueError (pickled or not an npz), EOFError
@@ -220,7 +228,10 @@ def _load_checkpoint(path: Path, kernel, stats: RunningStats, seed: int, warmup:
             kernel.load_state_dict({k[7:]: z[k] for k in z.files if k.startswith("kernel_")})
             stats.load_state_dict({k[6:]: z[k] for k in z.files if k.startswith("stats_")})
             torch.set_rng_state(torch.from_numpy(z["rng"].copy()))
-            return int(z["sweep"])
+            seconds = float(z["seconds"]) if "seconds" in files else 0.0
+            if not np.isfinite(seconds) or seconds < 0:
+                raise CheckpointError(f"{path}: checkpoint's sampling time {seconds} is not a time; {_HINT}")
+            return int(z["sweep"]), seconds
         except CheckpointError:
             raise
         except Exception as e:
@@ -261,10 +272,10 @@ def run_gibbs(
         if ckpt.suffix != ".npz":
             raise ValueError("checkpoint must be an .npz path")
         ckpt.parent.mkdir(parents=True, exist_ok=True)
-    start = 0
+    start, before = 0, 0.0
     fp = fingerprint(kernel, stats) if ckpt is not None else {}
     if ckpt is not None and ckpt.exists():
-        start = _load_checkpoint(ckpt, kernel, stats, seed, warmup, fp, warmup + num_sweeps)
+        start, before = _load_checkpoint(ckpt, kernel, stats, seed, warmup, fp, warmup + num_sweeps)
     else:
         torch.manual_seed(seed)  # before set-up: a drawn initial map ("prior") follows the seed too
         kernel.setup(warmup)
@@ -295,7 +306,7 @@ def run_gibbs(
             done = i + 1
             bar.update(1)
             if ckpt is not None and done % checkpoint_every == 0:
-                _save_checkpoint(ckpt, kernel, stats, done, seed, warmup, fp)
+                _save_checkpoint(ckpt, kernel, stats, done, seed, warmup, fp, before + time.perf_counter() - t0)
             if stop["flag"] or (stop_after is not None and done - start >= stop_after):
                 stop["flag"] = True
                 break
@@ -303,9 +314,10 @@ def run_gibbs(
         bar.close()
         if old is not None:
             signal.signal(signal.SIGINT, old)
+        seconds = time.perf_counter() - t0
         if ckpt is not None:
-            _save_checkpoint(ckpt, kernel, stats, done, seed, warmup, fp)
-    return GibbsRun(stats, done, time.perf_counter() - t0, bool(stop["flag"]) and done < total, kernel.state.copy())
+            _save_checkpoint(ckpt, kernel, stats, done, seed, warmup, fp, before + seconds)
+    return GibbsRun(stats, done, seconds, bool(stop["flag"]) and done < total, kernel.state.copy(), before + seconds)
 
 
 def _main_thread() -> bool:

@@ -199,6 +199,9 @@ def test_resume_is_bit_for_bit(tmp_path):
         assert part.interrupted and part.sweeps == 123
         rest = run_gibbs(make(), 400, stats(), warmup=10, seed=11, checkpoint=ck, checkpoint_every=50, progress=False)
         assert not rest.interrupted and rest.sweeps == 410
+        # the chain's clock goes on from the checkpoint: the interrupted call's time, then this call's
+        assert part.seconds_total == part.seconds > 0
+        assert rest.seconds_total - rest.seconds == pytest.approx(part.seconds_total, rel=1e-9)
         assert np.array_equal(full.state, rest.state)
         assert torch.equal(full.stats.marginals, rest.stats.marginals)
         assert torch.equal(full.stats.first_hit(0), rest.stats.first_hit(0))
