@@ -11,7 +11,9 @@ Subcommands (``ogm-ppl SUBCOMMAND --help`` lists every option):
     ours beside it), ``report.json`` and ``report.md``. ``--method NAME`` is any registered map method
     (:mod:`ogm_ppl.methods`: ``ogm``, ``p21``, ``elfes``, ``gibbs``, ``patch``, ``vi``, ...), its
     parameters set by ``--param KEY=VALUE`` or the flags mapped onto them (``--delta``, ``--prior``,
-    ``--lambda``, ``--sigma``, ``--sweeps``, ``--warmup``, ``--patch``).
+    ``--lambda``, ``--sigma``, ``--sweeps``, ``--warmup``, ``--patch``). A sampling method's chains
+    checkpoint into ``DIR/.checkpoints`` every ``checkpoint_every`` sweeps and on Ctrl-C; the same command
+    resumes them (bit for bit), and the folder is removed once the map is written.
 ``methods [NAME]``
     The registered map methods, one line each, with their parameters (``NAME``: that method only).
 ``simulate --map KIND|PNG --out FILE.npz``
@@ -237,7 +239,8 @@ def build_parser() -> argparse.ArgumentParser:
         help="occupancy grid map of a CARMEN log, a ROS bag or a dataset file",
         description="Map INPUT (a CARMEN log, plain or gzip, a ROS 1 or ROS 2 bag, or an ogm_ppl dataset .npz) into "
         "DIR: map.npz, map.png, ros/map.yaml + ros/map.pgm (+ sidecar), "
-        "report.json, report.md.",
+        "report.json, report.md. A sampling method (gibbs, patch, ...) checkpoints its chains in DIR/.checkpoints "
+        "(every checkpoint_every sweeps, and on Ctrl-C): rerunning the same command resumes them.",
     )
     m.add_argument(
         "input",
@@ -785,6 +788,7 @@ def _compute_map(
     if getattr(args, "online", False):
         return _online_map(args, method, params, problem, times)
     chains = int(getattr(params, "chains", 1))
+    root = _checkpoint_root(args, params, inp, grid)
     probs, ray, total = [], None, 0.0
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
@@ -793,8 +797,18 @@ def _compute_map(
         quiet_numba_ir_check()
         for c in range(chains):
             where = f"ogm-ppl map {args.input}"
-            ctx = RunContext(seed=args.seed + c, cache_dir=args.out, progress=_progress(), where=where)
-            result = method.run(params, problem, ctx)
+            folder = None if root is None else root / f"chain-{c}"
+            if folder is not None and (folder / "gibbs.npz").exists():
+                print(f"ogm-ppl: chain {c} resumes from its checkpoint in {folder}", file=sys.stderr)
+            ctx = RunContext(
+                seed=args.seed + c, checkpoint_dir=folder, cache_dir=args.out, progress=_progress(), where=where
+            )
+            try:
+                result = method.run(params, problem, ctx)
+            except KeyboardInterrupt as e:
+                if root is not None and any(root.glob("chain-*/gibbs.npz")):
+                    raise KeyboardInterrupt(f"checkpoints kept in {root}: the same command resumes from them") from e
+                raise
             assert result.probabilities is not None  # no stop_after on the command line
             probs.append(result.probabilities)
             ray = result.seconds["ray_cast"] if ray is None else ray
@@ -804,6 +818,33 @@ def _compute_map(
     times["ray_cast_s"], times["map_s"] = ray, total
     details = {**dataclasses.asdict(params), **result.details, "seed": args.seed, "chains": chains}
     return np.mean(probs, axis=0) if chains > 1 else probs[0], result.observed, details
+
+
+#: where ``map`` keeps a sampling method's checkpoints, inside ``--out`` (removed once the map is written)
+CHECKPOINTS = ".checkpoints"
+
+
+def _checkpoint_root(args, params, inp: _Input, grid: Grid) -> Path | None:
+    """``DIR/.checkpoints/METHOD-KEY`` for a sampling method (``None`` for the others): ``KEY`` digests the
+    command's settings, the input file's size and modification time and the grid, so that only the same
+    command on the same input resumes a chain (each chain in ``chain-C``; its checkpoint's fingerprint
+    checks the model too, :func:`~ogm_ppl.inference.mcmc.run_gibbs`)."""
+    import hashlib
+
+    from ogm_ppl.methods._sampling import SamplingParams
+
+    if not isinstance(params, SamplingParams) or getattr(args, "online", False):
+        return None
+    st = Path(args.input).stat()
+    ignore = ("out", "traceback", "input")
+    key = {
+        "settings": _jsonable({k: v for k, v in sorted(vars(args).items()) if k not in ignore}),
+        "params": _jsonable(dataclasses.asdict(params)),
+        "input": [str(Path(args.input).resolve()), st.st_size, st.st_mtime_ns],
+        "grid": [grid.rows, grid.cols, grid.resolution, *grid.origin],
+    }
+    digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
+    return args.out / CHECKPOINTS / f"{args.method}-{digest}"
 
 
 def _online_map(
@@ -1041,6 +1082,9 @@ def _map(args, method, params) -> dict:
     atomic_write_text(out / "report.json", json.dumps(_jsonable(report), indent=2))
     atomic_write_text(out / "report.md", _report_md(report))
     stage.commit()
+    import shutil
+
+    shutil.rmtree(args.out / CHECKPOINTS, ignore_errors=True)  # the map is written: its chains' are spent
     return report
 
 
@@ -1469,8 +1513,8 @@ def main(argv: list[str] | None = None) -> int:
             msg = _one_line(e)
         print(f"ogm-ppl: error: {msg}", file=sys.stderr)
         return 2
-    except KeyboardInterrupt:
+    except KeyboardInterrupt as e:
         if show_tb:
             raise
-        print("ogm-ppl: interrupted", file=sys.stderr)
+        print(f"ogm-ppl: interrupted{'; ' + str(e) if str(e) else ''}", file=sys.stderr)
         return 130

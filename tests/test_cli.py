@@ -598,3 +598,50 @@ def test_map_output_folder_is_all_old_or_all_new(tmp_path, tiny_log, monkeypatch
     after = {p.relative_to(out): p.read_bytes() for p in out.rglob("*") if p.is_file()}
     assert after == before
     assert sorted(p.name for p in tmp_path.iterdir() if p.name.startswith(".out")) == []
+
+
+def test_an_interrupted_gibbs_map_resumes_from_its_checkpoint_bit_for_bit(sim_dataset, tmp_path, monkeypatch, capsys):
+    """Ctrl-C (the sampler's stop flag, here after 4 sweeps) keeps the chain's checkpoint in DIR/.checkpoints and
+    says so; the same command resumes it to the very map of an uninterrupted run and removes the checkpoints;
+    another seed is another chain and starts afresh."""
+    import ogm_ppl.inference.mcmc as mcmc
+
+    argv = ["map", str(sim_dataset), "--method", "gibbs", "--sweeps", "20", "--warmup", "2"]
+    argv += ["--param", "checkpoint_every=3", "--param", "chains=2"]
+    assert main([*argv, "--out", str(tmp_path / "full")]) == 0
+    full = load_map(tmp_path / "full" / "map.npz")
+    real = mcmc.run_gibbs
+    calls = []
+
+    def interrupted(*a, **kw):  # the second chain (seed + 1) stops as Ctrl-C stops it, 4 sweeps in
+        calls.append(kw["seed"])
+        if kw["seed"] == calls[0] + 1:
+            kw["stop_after"] = 4
+        return real(*a, **kw)
+
+    out = tmp_path / "o"
+    monkeypatch.setattr(mcmc, "run_gibbs", interrupted)
+    capsys.readouterr()
+    assert main([*argv, "--out", str(out)]) == 130
+    err = capsys.readouterr().err
+    assert "interrupted; checkpoints kept in" in err and "the same command resumes" in err
+    kept = sorted(p.relative_to(out).parts[-2] for p in out.glob(".checkpoints/*/chain-*/gibbs.npz"))
+    assert kept == ["chain-0", "chain-1"] and not (out / "map.npz").exists()
+    monkeypatch.setattr(mcmc, "run_gibbs", real)
+    assert main([*argv, "--out", str(out)]) == 0
+    err = capsys.readouterr().err
+    assert err.count("resumes from its checkpoint") == 2
+    m = load_map(out / "map.npz")
+    np.testing.assert_array_equal(m["probabilities"], full["probabilities"])
+    assert m["settings"]["method_details"]["resumed_from_sweep"] == 4
+    assert not (out / ".checkpoints").exists()
+    _check_outputs(out)
+    # another seed: other chains, nothing to resume
+    monkeypatch.setattr(mcmc, "run_gibbs", interrupted)
+    calls.clear()
+    assert main([*argv, "--out", str(out), "--seed", "5"]) == 130
+    monkeypatch.setattr(mcmc, "run_gibbs", real)
+    capsys.readouterr()
+    assert main([*argv, "--out", str(out), "--seed", "6"]) == 0
+    assert "resumes" not in capsys.readouterr().err
+    assert not (out / ".checkpoints").exists()
