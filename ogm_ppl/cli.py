@@ -800,9 +800,7 @@ def _compute_map(
             folder = None if root is None else root / f"chain-{c}"
             if folder is not None and (folder / "gibbs.npz").exists():
                 print(f"ogm-ppl: chain {c} resumes from its checkpoint in {folder}", file=sys.stderr)
-            ctx = RunContext(
-                seed=args.seed + c, checkpoint_dir=folder, cache_dir=args.out, progress=_progress(), where=where
-            )
+            ctx = RunContext(seed=args.seed + c, checkpoint_dir=folder, cache_dir=args.out, progress=True, where=where)
             try:
                 result = method.run(params, problem, ctx)
             except KeyboardInterrupt as e:
@@ -873,7 +871,7 @@ def _online_map(
         burn_in=params.burn_in,
         sweeps=params.sweeps,
         snapshot_every=args.snapshots,
-        progress=_progress(),
+        progress=True,  # a bar on a terminal, plain lines in a log once past 10 s
         seed=args.seed,
         update=params.update,
         init_new=init_new,

@@ -49,6 +49,9 @@ class Progress:
         every: seconds between plain lines (the first and last lines always print).
         stream: where to write (default ``sys.stderr``).
         bar: force the tqdm bar (``True``) or plain lines (``False``); default: :func:`interactive`.
+        initial: steps done before (a resumed run); the time left is estimated from this run's steps.
+        after: plain lines only: the first line waits this many seconds, and a run that ends sooner prints
+            nothing (a sampler's short runs stay quiet in logs and pipes).
     """
 
     def __init__(
@@ -61,19 +64,24 @@ class Progress:
         every: float = 10.0,
         stream: IO | None = None,
         bar: bool | None = None,
+        initial: int = 0,
+        after: float = 0.0,
     ) -> None:
         self.total, self.desc, self.enabled, self.every = int(total), desc, bool(enabled), float(every)
         self.stream = sys.stderr if stream is None else stream
-        self.done = 0
+        self.done = self.initial = int(initial)
         self._t0 = time.perf_counter()
         self._last = -float("inf")
+        self._printed = False
         self._bar = None
         if not self.enabled:
             return
         if interactive(self.stream) if bar is None else bar:
             from tqdm.auto import tqdm
 
-            self._bar = tqdm(total=self.total, desc=desc, unit=unit, file=self.stream)
+            self._bar = tqdm(total=self.total, initial=self.initial, desc=desc, unit=unit, file=self.stream)
+        elif after > 0:
+            self._last = self._t0 + after - self.every  # the first line once ``after`` seconds have passed
         else:
             self._line()
 
@@ -83,11 +91,12 @@ class Progress:
         parts = [f"{self.desc}: {self.done}/{self.total} ({pct:.0f} %), {_duration(el)}"]
         if final:
             parts.append("done" if self.done >= self.total else "stopped")
-        elif 0 < self.done < self.total:
-            parts.append(f"~{_duration(el / self.done * (self.total - self.done))} left")
+        elif self.initial < self.done < self.total:
+            parts.append(f"~{_duration(el / (self.done - self.initial) * (self.total - self.done))} left")
         line = ", ".join(parts) + (f"; last: {note}" if note and not final else "")
         print(line, file=self.stream, flush=True)
         self._last = time.perf_counter()
+        self._printed = True
 
     def update(self, n: int = 1, note: str = "") -> None:
         """``n`` more steps done; ``note`` (e.g. the task's name) goes into the next plain line."""
@@ -107,7 +116,8 @@ class Progress:
             self._bar.close()
             self._bar = None
         elif self._last != float("inf"):
-            self._line(final=True)
+            if self._printed:  # a run quieted by ``after`` that ended sooner prints nothing
+                self._line(final=True)
             self._last = float("inf")
 
     def __enter__(self) -> Progress:

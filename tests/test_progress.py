@@ -41,3 +41,31 @@ def test_a_run_closed_before_its_last_step_says_stopped_not_done():
     with Progress(4, "tasks", stream=s, every=1e9) as p:
         p.update()
     assert s.getvalue().splitlines()[-1].endswith("1/4 (25 %), 0 s, stopped")
+
+
+def test_after_keeps_a_short_run_quiet_and_a_resumed_run_estimates_from_its_own_steps(monkeypatch):
+    """``after``: no line before that many seconds, none at all for a run that ends sooner; ``initial``: a
+    resumed run starts at its steps done and times what is left by this run's pace."""
+    now = [0.0]
+    monkeypatch.setattr("ogm_ppl.progress.time.perf_counter", lambda: now[0])
+    s = io.StringIO()
+    with Progress(100, "gibbs sweeps", stream=s, after=10.0) as p:
+        now[0] = 9.0
+        p.update(50)
+    assert s.getvalue() == ""
+    now[0] = 0.0
+    p = Progress(100, "gibbs sweeps", stream=s, after=10.0, every=10.0, initial=40)
+    now[0] = 9.0
+    p.update(10)
+    assert s.getvalue() == ""
+    now[0] = 10.0
+    p.update(10)  # 20 steps in 10 s, 40 to go
+    now[0] = 15.0
+    p.update(10)  # within ``every`` of the last line: quiet
+    now[0] = 30.0
+    p.update(30)
+    p.close()
+    assert s.getvalue().splitlines() == [
+        "gibbs sweeps: 60/100 (60 %), 10 s, ~20 s left",
+        "gibbs sweeps: 100/100 (100 %), 30 s, done",
+    ]

@@ -655,20 +655,20 @@ def replay(
     S = scans.num_scans
     times = np.zeros(S)
     snaps: list[tuple[int, np.ndarray]] = []
-    steps = range(S)
-    if progress:
-        from tqdm.auto import tqdm
+    from ogm_ppl.progress import Progress
 
-        steps = tqdm(steps, desc="online scans", unit="scan", leave=False)
     assert scans.valid is not None  # Scans.__post_init__ always sets the S x B mask
-    for i in steps:
-        if not scans.valid[i].any():
-            continue  # a scan without a reading adds nothing
-        t0 = time.perf_counter()
-        om.add_scans(_one(scans, i))
-        times[i] = time.perf_counter() - t0
-        if snapshot_every is not None and (i + 1) % snapshot_every == 0:
-            snaps.append((i + 1, om.marginals.numpy().copy()))
+    # a bar on a terminal; elsewhere a plain line every 10 s once the replay has taken 10 s
+    with Progress(S, "online scans", unit="scan", enabled=progress, after=10.0) as bar:
+        for i in range(S):
+            bar.update()
+            if not scans.valid[i].any():
+                continue  # a scan without a reading adds nothing
+            t0 = time.perf_counter()
+            om.add_scans(_one(scans, i))
+            times[i] = time.perf_counter() - t0
+            if snapshot_every is not None and (i + 1) % snapshot_every == 0:
+                snaps.append((i + 1, om.marginals.numpy().copy()))
     om.sweep(burn_in, focus=False)
     om.reset_marginals()
     om.sweep(sweeps, focus=False)

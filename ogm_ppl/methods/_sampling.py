@@ -20,6 +20,7 @@ from ogm_ppl.io import atomic_write_text
 from ogm_ppl.methods._model import ModelParams
 from ogm_ppl.methods.params import DeltaName, Int, StartMap, param
 from ogm_ppl.methods.problem import MapProblem, MapResult, RunContext
+from ogm_ppl.progress import Progress
 
 __all__ = ["INITS", "SamplingParams", "run_kernel"]
 
@@ -104,29 +105,32 @@ def run_kernel(kernel, params: SamplingParams, problem: MapProblem, ctx: RunCont
         "checkpoint": ckpt,
         "checkpoint_every": params.checkpoint_every,
     }
-    for mark in marks:
-        if mark <= done:
-            continue
-        step = mark - done
-        if budget is not None:
-            step = min(step, budget)
-        r = run_gibbs(kernel, n, stats, **run_kw, progress=ctx.progress, stop_after=step)
-        done, seconds = r.sweeps, r.seconds_total  # the chain's sampling time, earlier calls' included
-        if before is None:
-            before = r.seconds_total - r.seconds
-            details["resumed_seconds"] = before
-        if budget is not None:
-            budget -= step
-        if done == mark:
-            rec = {"sweep": done, "samples": int(stats.n), "seconds": seconds}
-            if stats.n and ctx.score is not None:
-                rec.update(ctx.score(stats.marginals.numpy()))
-            trace.append(rec)
-            atomic_write_text(trace_path, json.dumps({"trace": trace}, indent=1, sort_keys=True, allow_nan=True))
-        elif budget is None or budget > 0:
-            raise KeyboardInterrupt  # interrupted (SIGINT): the checkpoint is kept for a resume
-        if budget is not None and budget <= 0 and done < total:
-            return MapResult(None, observed, {**details, "trace": trace, "sweeps_total": done})
+    # one progress for the chain's calls (one a mark): a bar on a terminal, plain lines past 10 s elsewhere
+    with Progress(total, "gibbs sweeps", unit="sweep", enabled=ctx.progress, initial=start, after=10.0) as bar:
+        for mark in marks:
+            if mark <= done:
+                continue
+            step = mark - done
+            if budget is not None:
+                step = min(step, budget)
+            r = run_gibbs(kernel, n, stats, **run_kw, progress=bar, stop_after=step)
+            done, seconds = r.sweeps, r.seconds_total  # the chain's sampling time, earlier calls' included
+            if before is None:
+                before = r.seconds_total - r.seconds
+                details["resumed_seconds"] = before
+            if budget is not None:
+                budget -= step
+            if done == mark:
+                rec = {"sweep": done, "samples": int(stats.n), "seconds": seconds}
+                if stats.n and ctx.score is not None:
+                    rec.update(ctx.score(stats.marginals.numpy()))
+                trace.append(rec)
+                text = json.dumps({"trace": trace}, indent=1, sort_keys=True, allow_nan=True)
+                atomic_write_text(trace_path, text)
+            elif budget is None or budget > 0:
+                raise KeyboardInterrupt  # interrupted (SIGINT): the checkpoint is kept for a resume
+            if budget is not None and budget <= 0 and done < total:
+                return MapResult(None, observed, {**details, "trace": trace, "sweeps_total": done})
     if stats.n == 0:  # every mark was reached before (killed after the last checkpoint): load it
         r = run_gibbs(kernel, n, stats, **run_kw, progress=False)
         done = r.sweeps

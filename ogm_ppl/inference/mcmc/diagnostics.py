@@ -20,10 +20,10 @@ from typing import Any
 import numpy as np
 import torch
 from pyro.ops.stats import autocovariance, split_gelman_rubin
-from tqdm.auto import tqdm
 
 from ogm_ppl.inference.mcmc.runner import RunningStats, run_gibbs
 from ogm_ppl.metrics import kl_divergence
+from ogm_ppl.progress import Progress
 
 __all__ = [
     "STARTS",
@@ -244,7 +244,11 @@ def run_chains(
         max_workers=min(processes, num_chains), mp_context=ctx, initializer=_init_worker, initargs=(make_kernel,)
     ) as pool:
         futures = [pool.submit(_run_chain, num_sweeps, trace_cells, warmup, seed + c) for c in range(num_chains)]
-        states = [f.result() for f in tqdm(futures, desc="chains", disable=not progress)]
+        states = []
+        with Progress(num_chains, "chains", unit="chain", enabled=progress, after=10.0) as bar:
+            for f in futures:
+                states.append(f.result())
+                bar.update()
     model = make_kernel().model
     out = []
     for state in states:

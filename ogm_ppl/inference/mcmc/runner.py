@@ -5,7 +5,8 @@ chosen rays (Eq. 4.6), the joint occupancy and mutual information of chosen cell
 probability that chosen paths are all free. It is also a ``hook_fn`` for ``pyro.infer.MCMC``, which
 otherwise keeps every sample in memory.
 
-:func:`run_gibbs` drives any of our kernels for ``num_sweeps`` sweeps with a progress bar (sweeps/s),
+:func:`run_gibbs` drives any of our kernels for ``num_sweeps`` sweeps with progress (a bar on a terminal, a
+plain line every 10 s elsewhere once the run has taken 10 s: :class:`~ogm_ppl.progress.Progress`),
 writes a checkpoint (map, torch RNG state, statistics; atomically) every ``checkpoint_every`` sweeps and
 when interrupted (Ctrl-C stops at the end of the current sweep), and resumes from it: an interrupted and
 resumed run gives bit for bit the result of an uninterrupted one with the same seed. A checkpoint carries
@@ -24,11 +25,11 @@ from pathlib import Path
 
 import numpy as np
 import torch
-from tqdm.auto import tqdm
 
 from ogm_ppl.inference.mcmc.fingerprint import fingerprint
 from ogm_ppl.io import atomic_write
 from ogm_ppl.posterior import mutual_information_from_joint
+from ogm_ppl.progress import Progress
 
 __all__ = ["CheckpointError", "GibbsRun", "RunningStats", "run_gibbs"]
 
@@ -248,7 +249,7 @@ def run_gibbs(
     checkpoint_every: int = 100,
     store_every: int = 0,
     store_dir: str | os.PathLike | None = None,
-    progress: bool = True,
+    progress: bool | Progress = True,
     stop_after: int | None = None,
 ) -> GibbsRun:
     """Run ``warmup + num_sweeps`` sweeps of ``kernel``; statistics count the last ``num_sweeps``.
@@ -262,6 +263,8 @@ def run_gibbs(
         checkpoint: an ``.npz`` path; if it exists the run resumes from it (with the same ``seed``,
             ``warmup``, model, kernel and statistics, else :class:`CheckpointError`).
         store_every: keep every ``store_every``-th sample (bit-packed ``.npy``) in ``store_dir``.
+        progress: show progress (:class:`~ogm_ppl.progress.Progress`); a caller that runs one chain in
+            several calls passes its own ``Progress``, which each call updates and leaves open.
         stop_after: stop (as if interrupted) after this many sweeps of this call: for tests.
     """
     if num_sweeps < 0 or warmup < 0:
@@ -294,7 +297,13 @@ def run_gibbs(
     params = kernel.current_params()
     t0 = time.perf_counter()
     done = start
-    bar = tqdm(total=total, initial=start, disable=not progress, unit="sweep", desc="gibbs")
+    # a bar on a terminal; elsewhere (logs, pipes, notebooks) a plain line every 10 s once a run passes 10 s
+    own = not isinstance(progress, Progress)
+    bar = (
+        progress
+        if isinstance(progress, Progress)
+        else Progress(total, "gibbs sweeps", unit="sweep", enabled=bool(progress), initial=start, after=10.0)
+    )
     try:
         for i in range(start, total):
             params = kernel.sample(params)
@@ -311,7 +320,8 @@ def run_gibbs(
                 stop["flag"] = True
                 break
     finally:
-        bar.close()
+        if own:
+            bar.close()
         if old is not None:
             signal.signal(signal.SIGINT, old)
         seconds = time.perf_counter() - t0

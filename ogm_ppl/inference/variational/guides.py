@@ -216,7 +216,8 @@ def fit_guide(
     """
     from pyro.infer import SVI, ReweightedWakeSleep, TraceGraph_ELBO
     from pyro.optim import Adam
-    from tqdm.auto import tqdm
+
+    from ogm_ppl.progress import Progress
 
     valid = torch.arange(model.loglik_table.shape[1])[None, :] <= model.lengths[:, None]
     if loss != "exact" and torch.isinf(model.loglik_table[valid]).any():
@@ -242,15 +243,18 @@ def fit_guide(
     pyro.set_rng_seed(seed)
     svi = SVI(model.model, guide, Adam({"lr": lr}), objective)
     losses = []
-    for step in tqdm(range(steps), disable=not progress, desc="svi"):
-        with warnings.catch_warnings():
-            warnings.filterwarnings("ignore", message="Encountered NaN", category=UserWarning)
-            out = svi.step()
-        value = float(out[1] if isinstance(out, tuple) else out)
-        if not math.isfinite(value):
-            why = _why_not_finite(model.prior, loss, num_particles)
-            raise ValueError(f"fit_guide: the {loss} loss is {value} at step {step + 1}: {why}")
-        losses.append(value)
+    # a bar on a terminal; elsewhere a plain line every 10 s once the fit has taken 10 s
+    with Progress(steps, "svi steps", unit="step", enabled=progress, after=10.0) as bar:
+        for step in range(steps):
+            with warnings.catch_warnings():
+                warnings.filterwarnings("ignore", message="Encountered NaN", category=UserWarning)
+                out = svi.step()
+            value = float(out[1] if isinstance(out, tuple) else out)
+            if not math.isfinite(value):
+                why = _why_not_finite(model.prior, loss, num_particles)
+                raise ValueError(f"fit_guide: the {loss} loss is {value} at step {step + 1}: {why}")
+            losses.append(value)
+            bar.update()
     return losses
 
 
