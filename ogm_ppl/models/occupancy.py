@@ -444,13 +444,17 @@ class OccupancyModel:
                 f"readings must be {self.rays.num_rays} numbers, one per ray, got shape {tuple(readings.shape)}"
             )
         F = torch.from_numpy(self.rays.max_range_cells()).to(torch.float64)
-        bad = ~torch.isfinite(readings) | (readings < 0) | (readings > F)
+        # a continuous sensor's noise reaches below zero (GaussianRange: a first hit near the sensor reads
+        # negative ranges, as simulate_readings draws them); a discrete sensor reads cells, from zero
+        continuous = self.sensor.continuous_range
+        bad = ~torch.isfinite(readings) | (readings > F) | (False if continuous else readings < 0)
         if bad.any():
             i = int(torch.nonzero(bad)[0])
+            lo = "up to" if continuous else "in [0,"
             raise ValueError(
-                f"readings must be ranges in cells in [0, the ray's max range] (a max-range reading is the max "
-                f"range itself); {int(bad.sum())} are not, the first on ray {i}: {float(readings[i])!r} "
-                f"(max range {float(F[i]):g})"
+                f"readings must be ranges in cells {lo} the ray's max range{'' if continuous else ']'} (a max-range "
+                f"reading is the max range itself); {int(bad.sum())} are not, the first on ray {i}: "
+                f"{float(readings[i])!r} (max range {float(F[i]):g})"
             )
         is_max = readings >= F
         return self._loglik_table(readings, self.range_to_kappa(readings), is_max)

@@ -2,6 +2,7 @@
 
 import math
 
+import pyro
 import pytest
 import torch
 from pyro import poutine
@@ -224,16 +225,37 @@ def test_prior_without_sample_or_with_nan_gets_a_clear_error():
         poutine.trace(poutine.condition(bad.model, data={"m": torch.zeros(9)})).get_trace().log_prob_sum()
 
 
-@pytest.mark.parametrize("bad", [math.nan, math.inf, -1.0, 1e3])
-def test_conditioning_on_readings_that_are_no_ranges_is_refused(bad):
-    """A NaN, an infinity, a negative range or one past the max range conditioned on site ``"z"`` is refused
-    naming the ray, not read as a max-range reading."""
-    _, model = toy_model(GaussianRange(3.0, 1e-3))
+@pytest.mark.parametrize(
+    "sensor, bad",
+    [(GaussianRange(3.0, 1e-3), b) for b in (math.nan, math.inf, -math.inf, 1e3)]
+    + [(PatternMatch(0.9), b) for b in (math.nan, -1.0, 1e3)],
+)
+def test_conditioning_on_readings_that_are_no_ranges_is_refused(sensor, bad):
+    """A NaN, an infinity, a range past the max range, or a negative range read by a discrete sensor,
+    conditioned on site ``"z"``, is refused naming the ray, not read as a max-range reading."""
+    _, model = toy_model(sensor)
     z = model.readings.clone()
     z[2] = bad
     cond = poutine.condition(model.model, data={"z": z})
     with pytest.raises(ValueError, match=r"readings must be ranges in cells .* the first on ray 2"):
         poutine.trace(cond).get_trace().log_prob_sum()
+
+
+def test_simulated_readings_round_trip_through_conditioning_negative_ranges_included():
+    """What ``Predictive`` simulates the model scores: a Gaussian sensor's noise puts first hits near the sensor
+    below zero (many of this toy's draws), and conditioning on such readings gives the sensor's own density."""
+    _, model = toy_model(GaussianRange(3.0, 1e-3))
+    pyro.set_rng_seed(0)
+    sim = Predictive(model.model, num_samples=50)(readings=None)
+    assert (sim["z"] < 0).any(dim=1).sum() >= 10  # the case at hand occurs in this toy
+    for z in sim["z"][(sim["z"] < 0).any(dim=1)]:
+        tr = poutine.trace(poutine.condition(model.model, data={"z": z})).get_trace()
+        assert torch.isfinite(tr.log_prob_sum())
+        i = int(torch.nonzero(z < 0)[0])
+        F = torch.tensor(float(model.rays.max_range_cells()[i]), dtype=torch.float64)
+        # a first hit in the sensor's own cell (continuous kappa 0, ogm_ppl.sensors): the sensor's log density
+        want = model.sensor.log_prob(z[i] + 0.5, torch.tensor(0.0, dtype=torch.float64), F)
+        torch.testing.assert_close(model.loglik_table_for(z)[i, 0], want, rtol=1e-12, atol=0)
 
 
 def test_guides_take_the_models_arguments():
