@@ -334,6 +334,9 @@ def report(res: dict, floor: dict | None = None) -> None:
 
 
 if __name__ == "__main__":
+    if len(sys.argv) > 1 and sys.argv[1] in ("-h", "--help"):
+        print(__doc__)
+        sys.exit(0)
     if len(sys.argv) > 1 and sys.argv[1] == "--interleaved":
         sys.path.insert(0, os.path.dirname(__file__))
         from bench_gibbs import build

@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 
 import matplotlib
+import numpy as np
 import pytest
 
 import ogm_ppl
@@ -36,7 +37,7 @@ def test_readme_quick_start_runs(tmp_path, monkeypatch):
         exec(compile(block, "README.md", "exec"), namespace)
 
 
-GUIDE = ["guide/model.md", "guide/priors.md", "guide/inference.md", "guide/real_data.md"]
+GUIDE = ["guide/model.md", "guide/priors.md", "guide/inference.md", "guide/real_data.md", "guide/exploration.md"]
 
 
 def test_guide_examples_run(tmp_path, monkeypatch):
@@ -51,6 +52,47 @@ def test_guide_examples_run(tmp_path, monkeypatch):
         assert blocks, page
         for block in blocks:
             exec(compile(block, page, "exec"), namespace)
+
+
+def test_extending_page_examples_run_and_build_what_their_contracts_test():
+    """The extending page's blocks, top to bottom in one namespace, with its placeholders (``MySensor``,
+    ``MyKernel``, ``MyPrior``: the reader's own classes) stood in by shipped ones and the page's own prior;
+    each contract class they define builds its object (the suites themselves run in
+    tests/priors/test_extending.py and the contract tests)."""
+    from ogm_ppl import GaussianRange
+    from ogm_ppl.inference.mcmc import PatchGibbs
+    from ogm_ppl.priors import unregister_prior
+    from ogm_ppl.testing import KernelContract, MethodContract, PriorContract, SensorContract
+
+    namespace = {
+        "MySensor": GaussianRange,
+        "MyKernel": lambda model, region=None: PatchGibbs(model, 2, region=region),
+        "MyPrior": lambda shape: namespace["CheckerboardPrior"](shape),  # the page's own prior
+    }
+    page = ROOT / "docs" / "extending.md"
+    blocks = re.findall(r"```python\n(.*?)```", page.read_text(), flags=re.S)
+    try:
+        for block in blocks:
+            exec(compile(block, str(page), "exec"), namespace)
+        tests = {k: v for k, v in namespace.items() if k.startswith("Test") and isinstance(v, type)}
+        kinds = {
+            c.__name__: sorted(n for n, t in tests.items() if issubclass(t, c))
+            for c in (PriorContract, SensorContract, KernelContract, MethodContract)
+        }
+        assert all(kinds.values()), kinds
+        for name in kinds["PriorContract"]:
+            assert tests[name]().make_prior(5).log_prob(np.zeros(5)).shape == ()
+        for name in kinds["SensorContract"]:
+            assert isinstance(tests[name]().make_sensor(), GaussianRange)
+        for name in kinds["KernelContract"]:
+            t = tests[name]()
+            for model in (t.problem_1d(), t.problem_2d()):
+                assert t.make_kernel(model).model is model
+    finally:
+        unregister_prior(namespace.get("KIND", "toy_checker"))
+        from ogm_ppl.methods import unregister_method
+
+        unregister_method("endpoints")
 
 
 @pytest.mark.parametrize("name", MODULES)
@@ -248,3 +290,15 @@ def test_merge_adds_an_explorations_rules_and_recomputes_its_summary(tmp_path):
     merged = gen_docs_tables.load_snapshot("a", results)
     assert json.dumps(merged["summary"]) == json.dumps(doc["summary"])  # ratios against the snapshot's first rule
     assert gen_docs_tables._active(merged).rows == gen_docs_tables._active(doc).rows
+
+
+def test_readme_requirements_name_every_dependency_at_its_lower_bound():
+    """The README's requirements line lists each of pyproject.toml's dependencies with its lower bound."""
+    import tomllib
+
+    deps = tomllib.loads((ROOT / "pyproject.toml").read_text())["project"]["dependencies"]
+    text = " ".join((ROOT / "README.md").read_text().split())
+    for dep in deps:
+        req = dep.split(";")[0].strip()
+        name, _, low = req.partition(">=")
+        assert f"{name} >= {low}" in text, f"README's requirements lack {req!r}"

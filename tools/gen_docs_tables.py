@@ -305,17 +305,23 @@ def _by_condition(pooled: list[dict]) -> tuple[dict[str, list[str]], list[str]]:
 
 
 def _f1_auc_touched(p: dict | None) -> str:
-    """One pooled row as ``best F1 / AUC / touched best F1`` on the mask; ``"–"`` for a run that did not happen."""
+    """One pooled row as ``best F1 / AUC / touched best F1`` on the mask (then `` / seconds per map`` where the
+    row holds it); ``"–"`` for a run that did not happen."""
     if p is None:
         return "–"
     t = p.get("touched") or {}
-    return f"{_f(p['mask'].get('best_f1'))} / {_f(p['mask'].get('auc'))} / {_f(t.get('best_f1'))}"
+    cell = f"{_f(p['mask'].get('best_f1'))} / {_f(p['mask'].get('auc'))} / {_f(t.get('best_f1'))}"
+    if p.get("seconds_per_map") is not None:
+        cell += f" / {p['seconds_per_map']:.1f} s"
+    return cell
 
 
 def _headline(doc: dict) -> Table:
     cells, header = _by_condition(doc["intel"]["pooled"])
+    timed = any(p.get("seconds_per_map") is not None for p in doc["intel"]["pooled"])
     return Table(
-        caption="Intel Lab log at 5 cm, half the beams: best F1 / ROC AUC / best F1 on the touched cells",
+        caption="Intel Lab log at 5 cm, half the beams: best F1 / ROC AUC / best F1 on the touched cells"
+        + (" / seconds per map (one chain, compiling excluded)" if timed else ""),
         header=["map", *header],
         rows=[[_headline_label(a, doc["intel"].get("prior")), *row] for a, row in cells.items()],
         provenance=doc["provenance"],

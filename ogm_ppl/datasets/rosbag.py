@@ -50,6 +50,8 @@ from __future__ import annotations
 import itertools
 import math
 import os
+import shutil
+import tempfile
 from collections import defaultdict
 from collections.abc import Iterator
 from contextlib import contextmanager, suppress
@@ -1109,6 +1111,9 @@ def write_bag(
     instead (``map -> odom`` = ``map_to_odom`` and ``odom -> base_link`` with each scan) and the laser
     mounting ``base_link -> laser_frame`` (``laser_offset``, ``laser_height``) to ``/tf_static``.
 
+    The bag is written beside ``path`` and swapped in, replacing a bag written there before (a folder that
+    is no ROS 2 bag is refused): an interrupted write leaves the old bag or the new one.
+
     Args:
         storage: ``"ros1"`` (a ``.bag`` file), ``"sqlite3"`` or ``"mcap"`` (a ROS 2 bag folder).
     """
@@ -1167,59 +1172,74 @@ def write_bag(
     valid, is_max = np.asarray(scans.valid), np.asarray(scans.is_max)
     out = np.where(valid & ~is_max, scans.ranges, np.where(is_max, scans.max_range, np.nan)).astype(np.float32)
     base_frame = "base_link"
+    if ros1 and path.is_dir():
+        raise ValueError(f"write_bag: {path} is a folder; a ROS 1 bag is a file")
+    if not ros1 and path.exists() and not (path / "metadata.yaml").is_file():
+        raise ValueError(f"write_bag: {path} exists and is not a ROS 2 bag folder (no metadata.yaml); not replacing it")
+    target = path
+    target.parent.mkdir(parents=True, exist_ok=True)
+    # written beside the target, then swapped in: an interrupted write leaves the old bag or the new one
+    stage = Path(tempfile.mkdtemp(dir=target.parent, prefix=f".{target.name}.staging-"))
+    path = stage / target.name
     if ros1:
         writer: object = Writer1(path)
     else:
         plugin = StoragePlugin.SQLITE3 if storage == "sqlite3" else StoragePlugin.MCAP
         writer = Writer2(path, version=9, storage_plugin=plugin)
-    with writer as w:  # type: ignore[attr-defined]
-        c_scan = w.add_connection(scan_topic, LASER_SCAN, typestore=ts)
-        if tf:
-            c_tf = w.add_connection("/tf", TF_MESSAGE, typestore=ts)
-            c_static = w.add_connection("/tf_static", TF_MESSAGE, typestore=ts)
-            mount = transform(int(ns.min()), base_frame, laser_frame, ox, oy, laser_height, oyaw)
-            w.write(c_static, int(ns.min()), ser(T[TF_MESSAGE](transforms=[mount]), TF_MESSAGE))
-        else:
-            c_pose = w.add_connection(pose_topic, pose_type, typestore=ts)
-        for k in range(scans.num_scans):
-            t, tb = int(ns[k]), int(bag_ns[k])
+    try:
+        with writer as w:  # type: ignore[attr-defined]
+            c_scan = w.add_connection(scan_topic, LASER_SCAN, typestore=ts)
             if tf:
-                # odom -> base_link = (map -> odom)^-1 (x) robot pose
-                c0, s0 = math.cos(myaw), math.sin(myaw)
-                dx, dy = float(rx[k]) - mx, float(ry[k]) - my
-                odom = transform(t, map_frame, "odom", mx, my, 0.0, myaw)
-                link = transform(
-                    t, "odom", base_frame, c0 * dx + s0 * dy, -s0 * dx + c0 * dy, 0.0, float(yaw_r[k]) - myaw
-                )
-                w.write(c_tf, tb, ser(T[TF_MESSAGE](transforms=[odom, link]), TF_MESSAGE))
+                c_tf = w.add_connection("/tf", TF_MESSAGE, typestore=ts)
+                c_static = w.add_connection("/tf_static", TF_MESSAGE, typestore=ts)
+                mount = transform(int(ns.min()), base_frame, laser_frame, ox, oy, laser_height, oyaw)
+                w.write(c_static, int(ns.min()), ser(T[TF_MESSAGE](transforms=[mount]), TF_MESSAGE))
             else:
-                h = header(t, map_frame, k)
-                p = pose(float(rx[k]), float(ry[k]), float(yaw_r[k]))
-                if pose_type == POSE_STAMPED:
-                    msg = T[POSE_STAMPED](header=h, pose=p)
+                c_pose = w.add_connection(pose_topic, pose_type, typestore=ts)
+            for k in range(scans.num_scans):
+                t, tb = int(ns[k]), int(bag_ns[k])
+                if tf:
+                    # odom -> base_link = (map -> odom)^-1 (x) robot pose
+                    c0, s0 = math.cos(myaw), math.sin(myaw)
+                    dx, dy = float(rx[k]) - mx, float(ry[k]) - my
+                    odom = transform(t, map_frame, "odom", mx, my, 0.0, myaw)
+                    link = transform(
+                        t, "odom", base_frame, c0 * dx + s0 * dy, -s0 * dx + c0 * dy, 0.0, float(yaw_r[k]) - myaw
+                    )
+                    w.write(c_tf, tb, ser(T[TF_MESSAGE](transforms=[odom, link]), TF_MESSAGE))
                 else:
-                    cov = T["geometry_msgs/msg/PoseWithCovariance"](pose=p, covariance=np.zeros(36))
-                    if pose_type == POSE_COV_STAMPED:
-                        msg = T[POSE_COV_STAMPED](header=h, pose=cov)
+                    h = header(t, map_frame, k)
+                    p = pose(float(rx[k]), float(ry[k]), float(yaw_r[k]))
+                    if pose_type == POSE_STAMPED:
+                        msg = T[POSE_STAMPED](header=h, pose=p)
                     else:
-                        z3 = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
-                        tw = T["geometry_msgs/msg/TwistWithCovariance"](
-                            twist=T["geometry_msgs/msg/Twist"](linear=z3, angular=z3), covariance=np.zeros(36)
-                        )
-                        msg = T[ODOMETRY](header=h, child_frame_id=base_frame, pose=cov, twist=tw)
-                w.write(c_pose, tb, ser(msg, pose_type))
-            n = B
-            scan = T[LASER_SCAN](
-                header=header(t, laser_frame, k),
-                angle_min=float(scans.angles[k, 0]),
-                angle_max=float(scans.angles[k, 0] + step[k] * (n - 1)),
-                angle_increment=float(step[k]),
-                time_increment=0.0,
-                scan_time=0.0,
-                range_min=float(scans.min_range),
-                range_max=float(scans.max_range),
-                ranges=out[k],
-                intensities=np.zeros(0, dtype=np.float32),
-            )
-            w.write(c_scan, tb, ser(scan, LASER_SCAN))
-    return path
+                        cov = T["geometry_msgs/msg/PoseWithCovariance"](pose=p, covariance=np.zeros(36))
+                        if pose_type == POSE_COV_STAMPED:
+                            msg = T[POSE_COV_STAMPED](header=h, pose=cov)
+                        else:
+                            z3 = T["geometry_msgs/msg/Vector3"](x=0.0, y=0.0, z=0.0)
+                            tw = T["geometry_msgs/msg/TwistWithCovariance"](
+                                twist=T["geometry_msgs/msg/Twist"](linear=z3, angular=z3), covariance=np.zeros(36)
+                            )
+                            msg = T[ODOMETRY](header=h, child_frame_id=base_frame, pose=cov, twist=tw)
+                    w.write(c_pose, tb, ser(msg, pose_type))
+                n = B
+                scan = T[LASER_SCAN](
+                    header=header(t, laser_frame, k),
+                    angle_min=float(scans.angles[k, 0]),
+                    angle_max=float(scans.angles[k, 0] + step[k] * (n - 1)),
+                    angle_increment=float(step[k]),
+                    time_increment=0.0,
+                    scan_time=0.0,
+                    range_min=float(scans.min_range),
+                    range_max=float(scans.max_range),
+                    ranges=out[k],
+                    intensities=np.zeros(0, dtype=np.float32),
+                )
+                w.write(c_scan, tb, ser(scan, LASER_SCAN))
+        if target.is_dir():  # a bag folder written before: swap, then drop the old one
+            os.replace(target, stage / ".old")
+        os.replace(path, target)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+    return target

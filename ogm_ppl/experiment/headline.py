@@ -222,7 +222,8 @@ def _maps_figure(result, out: Path, prior: HeadlinePrior) -> Path:
 def _table(result, prior: HeadlinePrior) -> list[str]:
     conds = list(dict.fromkeys(p["condition"] for p in result.pooled))
     frac = {p["condition"]: p["measurement_fraction"] for p in result.pooled}
-    head = "| map | " + " | ".join(f"{100 * frac[c]:.3g} % of readings: F1 / AUC / touched F1" for c in conds) + " |"
+    what = "F1 / AUC / touched F1 / seconds per map"
+    head = "| map | " + " | ".join(f"{100 * frac[c]:.3g} % of readings: {what}" for c in conds) + " |"
     lines = [head, "|---" * (1 + len(conds)) + "|"]
     for a in result.spec.algorithms:
         cells = []
@@ -232,8 +233,10 @@ def _table(result, prior: HeadlinePrior) -> list[str]:
                 cells.append("–")
                 continue
             m, t = p["mask"], p.get("touched", {})
+            sec = _seconds_per_map(result.runs, p)
             cells.append(
-                f"{m['best_f1']:.3f} / {m.get('auc', float('nan')):.3f} / {t.get('best_f1', float('nan')):.3f}"
+                f"{m['best_f1']:.3f} / {m.get('auc', float('nan')):.3f} / {t.get('best_f1', float('nan')):.3f} / "
+                + ("–" if sec is None else f"{sec:.1f} s")
             )
         lines.append(f"| {_label(a.name, prior)} | " + " | ".join(cells) + " |")
     return lines
@@ -295,6 +298,7 @@ def run_intel_headline(
         "pooled": [
             {k: v for k, v in r.items() if k not in ("mask", "touched")}
             | {"mask": _summary(r["mask"]), "touched": _summary(r.get("touched", {}))}
+            | {"seconds_per_map": _seconds_per_map(result.runs, r)}
             for r in result.pooled
         ],
         "figure": str(fig),
@@ -302,6 +306,13 @@ def run_intel_headline(
     }
     atomic_write_text(out / "intel_headline.json", json.dumps(doc, indent=1, default=str, allow_nan=True))
     return {"markdown": md, "json": doc}
+
+
+def _seconds_per_map(runs: list, pooled: dict) -> float | None:
+    """Mean seconds of one map (one chain: the method's run, compiling excluded) of ``pooled``'s algorithm
+    over its condition's datasets; ``None`` where no run record holds its time."""
+    t = [r["seconds"] for r in runs if r["algorithm"] == pooled["algorithm"] and r["dataset"] in pooled["datasets"]]
+    return float(sum(t) / len(t)) if t else None
 
 
 def _summary(block: dict) -> dict:

@@ -155,8 +155,9 @@ def check_delta_setting(
     warnings.warn(
         FittedSettingWarning(
             f"Delta term {name!r} was fitted for {fitted} but is used at {at}{loc} ({'; '.join(bad)}); "
-            f"outside its setting it can erase walls or blur them. Fit it for this setting: "
-            f"{_fit_hint(str(name), sigma_fit if sigma_cells is None else sigma_cells, F_cells)}"
+            f"outside its setting it can erase walls or blur them. Fit it for this setting (from "
+            f'ogm_ppl.inference.variational; or fit = "setting" in an experiment spec, --param fit=setting on '
+            f"the command line): {_fit_hint(str(name), sigma_fit if sigma_cells is None else sigma_cells, F_cells)}"
         ),
         stacklevel=2,
     )

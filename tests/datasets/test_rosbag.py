@@ -472,3 +472,22 @@ def test_fuzz_truncated_and_corrupted_bags(bags, tmp_path, storage):
                 assert str(e).startswith(str(q))
             assert time.perf_counter() - t0 < 10.0
     assert "error" in outcomes  # the cut files at least
+
+
+@needs_data
+@pytest.mark.parametrize("storage", STORAGES)
+def test_write_bag_replaces_its_own_bag_and_refuses_other_things(intel, tmp_path, storage):
+    """A second write to the same path replaces the bag (the docs' example reruns), leaving no staging
+    files; a folder that is no ROS 2 bag (or a folder where a ROS 1 bag file goes) is refused, untouched."""
+    scans, stamps = intel
+    p = _bag_path(tmp_path, storage)
+    write_bag(p, _slice(scans, slice(0, 10)), stamps[:10], storage=storage)
+    assert write_bag(p, scans, stamps, storage=storage) == p
+    assert read_bag(p, "/scan", "/odom").scans.num_scans == scans.num_scans
+    assert sorted(x.name for x in tmp_path.iterdir()) == [p.name]
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "notes.txt").write_text("keep")
+    with pytest.raises(ValueError, match=r"not replacing it|is a folder"):
+        write_bag(mine, scans, stamps, storage=storage)
+    assert (mine / "notes.txt").read_text() == "keep" and len(list(tmp_path.iterdir())) == 2
