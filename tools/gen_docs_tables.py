@@ -312,7 +312,7 @@ def _f1_auc_touched(p: dict | None) -> str:
     t = p.get("touched") or {}
     cell = f"{_f(p['mask'].get('best_f1'))} / {_f(p['mask'].get('auc'))} / {_f(t.get('best_f1'))}"
     if p.get("seconds_per_map") is not None:
-        cell += f" / {p['seconds_per_map']:.1f} s"
+        cell += f" / {p['seconds_per_map']:.2g} s"
     return cell
 
 
@@ -321,7 +321,12 @@ def _headline(doc: dict) -> Table:
     timed = any(p.get("seconds_per_map") is not None for p in doc["intel"]["pooled"])
     return Table(
         caption="Intel Lab log at 5 cm, half the beams: best F1 / ROC AUC / best F1 on the touched cells"
-        + (" / seconds per map (one chain, compiling excluded)" if timed else ""),
+        + (
+            " / seconds per map (one chain, compiling excluded; a method fitted for the sensor fits its term in"
+            " its first map)"
+            if timed
+            else ""
+        ),
         header=["map", *header],
         rows=[[_headline_label(a, doc["intel"].get("prior")), *row] for a, row in cells.items()],
         provenance=doc["provenance"],

@@ -236,7 +236,7 @@ def _table(result, prior: HeadlinePrior) -> list[str]:
             sec = _seconds_per_map(result.runs, p)
             cells.append(
                 f"{m['best_f1']:.3f} / {m.get('auc', float('nan')):.3f} / {t.get('best_f1', float('nan')):.3f} / "
-                + ("–" if sec is None else f"{sec:.1f} s")
+                + ("–" if sec is None else f"{sec:.2g} s")
             )
         lines.append(f"| {_label(a.name, prior)} | " + " | ".join(cells) + " |")
     return lines
