@@ -42,7 +42,9 @@ holds each corpus's training set, so a test plan of either corpus is checked aga
     python experiments/train_corpus_guide.py --corpus generated --scan-whole-map --poses 0 --beams 720 --sigma 3 \
         --window 128 --examples 640 --val 64 --crops 10 --dilations 1 2 4 8 16 16 1 --steps 1500   # Table 6.4
 
-Writes ``ogm_ppl/fitted/guide_<corpus>.npz`` (``guide_<c1>+<c2>.npz`` for several: the weights,
+Training checkpoints into ``OUT.ckpt.npz`` every ``--checkpoint-every`` steps and on Ctrl-C (at the end of the
+step); the same command resumes it, bit for bit, and a checkpoint of other settings is refused (``--fresh``
+starts afresh). Writes ``ogm_ppl/fitted/guide_<corpus>.npz`` (``guide_<c1>+<c2>.npz`` for several: the weights,
 :meth:`AmortisedGuide.save`) and its JSON sidecar (settings, training and validation losses, the time).
 """
 
@@ -52,6 +54,7 @@ import argparse
 import hashlib
 import json
 import math
+import signal
 import sys
 import time
 from dataclasses import dataclass
@@ -69,7 +72,7 @@ from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
 from ogm_ppl.datasets import floorplans as fp
 from ogm_ppl.datasets.stop_and_scan import stop_and_scan
 from ogm_ppl.inference.variational.amortised import AmortisedGuide, evidence_features
-from ogm_ppl.io import atomic_write_text
+from ogm_ppl.io import atomic_write, atomic_write_text
 from ogm_ppl.metrics import near_mapped_mask
 from ogm_ppl.priors import IndependentPrior
 from ogm_ppl.priors.tables import FITTED_DIR
@@ -331,7 +334,90 @@ def _share(n: int, k: int, i: int) -> int:
     return n // k + (1 if i < n % k else 0)
 
 
-def train(args) -> dict:
+# ------------------------------------------------------------------ checkpoints
+#: settings a checkpoint must share with the run resuming it (the rest: where to write, how often to save)
+_NOT_FINGERPRINTED = ("out", "fresh", "checkpoint_every")
+
+
+def checkpoint_path(out: Path) -> Path:
+    """Where the training of ``out`` keeps its checkpoint: ``out`` with ``.ckpt.npz``."""
+    return out.with_name(out.stem + ".ckpt.npz")
+
+
+def _settings(args) -> str:
+    return json.dumps({k: v for k, v in sorted(vars(args).items()) if k not in _NOT_FINGERPRINTED}, default=str)
+
+
+def save_checkpoint(path: Path, args, step: int, seconds: float, guide, opt, sched, rng, best, best_state, history):
+    """Everything the loop carries after ``step`` (weights, Adam's moments, the schedule, both generators, the
+    validation-best weights and the history), as plain arrays and JSON (never pickled), written atomically."""
+    arrays: dict[str, np.ndarray] = {f"net.{k}": t.detach().numpy() for k, t in guide.net.state_dict().items()}
+    if best_state is not None:
+        arrays.update({f"best.{k}": t.numpy() for k, t in best_state.items()})
+    osd = opt.state_dict()
+    for i, st in osd["state"].items():
+        for k, t in st.items():
+            arrays[f"opt.{i}.{k}"] = torch.as_tensor(t).numpy()
+    meta = {
+        "format": 1,
+        "step": step,
+        "seconds": seconds,
+        "settings": _settings(args),
+        "param_groups": osd["param_groups"],
+        "scheduler": sched.state_dict(),
+        "rng": rng.bit_generator.state,
+        "best": best,
+        "history": history,
+    }
+    arrays["torch_rng"] = torch.get_rng_state().numpy()
+    arrays["meta"] = np.array(json.dumps(meta, allow_nan=True))
+    with atomic_write(path) as f:
+        np.savez(f, **arrays)
+
+
+def load_checkpoint(path: Path, args, guide, opt, sched, rng):
+    """Restore what :func:`save_checkpoint` wrote into ``guide``, ``opt``, ``sched``, ``rng`` and torch's
+    generator; returns ``(first step to run, seconds spent, best, best weights, history)``. A checkpoint of other
+    settings, or one that cannot be read, is refused (``SystemExit`` naming the path)."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            meta = json.loads(str(z["meta"]))
+            arrays = {k: z[k] for k in z.files if k != "meta"}
+    except Exception as e:  # BadZipFile, OSError, ValueError, KeyError, JSONDecodeError
+        why = f"{type(e).__name__}: {e}"
+        raise SystemExit(f"{path}: not a readable checkpoint ({why}); delete it or pass --fresh") from None
+    if meta.get("format") != 1:
+        raise SystemExit(f"{path}: checkpoint format {meta.get('format')!r}, expected 1; delete it or pass --fresh")
+    mine, theirs = json.loads(_settings(args)), json.loads(meta["settings"])
+    differ = sorted(k for k in set(mine) | set(theirs) if mine.get(k) != theirs.get(k))
+    if differ:
+        raise SystemExit(
+            f"{path}: checkpoint of another training (settings that differ: {', '.join(differ)}); "
+            "rerun with its settings, or pass --fresh to start afresh"
+        )
+    try:
+        guide.net.load_state_dict(
+            {k[4:]: torch.from_numpy(v.copy()) for k, v in arrays.items() if k.startswith("net.")}
+        )
+        state: dict = {}
+        for k, v in arrays.items():
+            if k.startswith("opt."):
+                _, i, name = k.split(".", 2)
+                state.setdefault(int(i), {})[name] = torch.from_numpy(v.copy())
+        opt.load_state_dict({"state": state, "param_groups": meta["param_groups"]})
+        sched.load_state_dict(meta["scheduler"])
+        rng.bit_generator.state = meta["rng"]
+        torch.set_rng_state(torch.from_numpy(arrays["torch_rng"].copy()))
+    except Exception as e:
+        why = f"{type(e).__name__}: {e}"
+        raise SystemExit(f"{path}: damaged checkpoint ({why}); delete it or pass --fresh") from None
+    best_state = {k[5:]: torch.from_numpy(v.copy()) for k, v in arrays.items() if k.startswith("best.")} or None
+    return int(meta["step"]) + 1, float(meta["seconds"]), meta["best"], best_state, meta["history"]
+
+
+def train(args, stop_after: int | None = None) -> dict | None:
+    """Train as the module docstring says; ``stop_after``: stop (as Ctrl-C does) after that many steps of this
+    call, leaving the checkpoint (tests). Returns the artefact's record, or ``None`` when stopped."""
     torch.manual_seed(args.seed)
     corpora = list(args.corpus)
     name = GUIDE_JOIN.join(corpora)
@@ -368,34 +454,60 @@ def train(args) -> dict:
     best = {"bits_per_unseen_cell": math.inf}
     best_state = None
     history = []
-    t1 = time.perf_counter()
-    for step in range(1, args.steps + 1):
-        s = shapes[int(rng.choice(len(shapes), p=weights / weights.sum()))]
-        pool = by_shape[s]
-        idx = rng.choice(len(pool), size=min(args.batch, len(pool)), replace=False)
-        x, y, scored, _ = _batch([pool[i] for i in idx], int(rng.integers(8)))
-        logit = guide.net(x)
-        nll = torch.nn.functional.binary_cross_entropy_with_logits(logit, y, reduction="none")
-        loss = (nll * scored).sum() / scored.sum().clamp(min=1)
-        opt.zero_grad()
-        loss.backward()
-        opt.step()
-        sched.step()
-        if step % args.eval_every == 0 or step == args.steps:
-            v = losses(guide, val)
-            v["step"] = step
-            v["train_bits_per_cell"] = loss.item() / math.log(2)
-            history.append(v)
-            mark = ""
-            if v["bits_per_unseen_cell"] < best["bits_per_unseen_cell"]:
-                best, mark = v, " *"
-                best_state = {k: t.detach().clone() for k, t in guide.net.state_dict().items()}
-            print(
-                f"step {step}/{args.steps}: train {v['train_bits_per_cell']:.3f} bits/cell, validation "
-                f"{v['bits_per_cell']:.3f} bits/cell, {v['bits_per_unseen_cell']:.3f} bits/unseen cell{mark} "
-                f"({time.perf_counter() - t1:.0f} s)",
-                flush=True,
-            )
+    out = Path(args.out or FITTED_DIR / f"guide_{name}.npz")
+    ckpt = checkpoint_path(out)
+    first, spent = 1, 0.0
+    if ckpt.exists() and not args.fresh:
+        first, spent, best, best_state, history = load_checkpoint(ckpt, args, guide, opt, sched, rng)
+        print(f"resuming from {ckpt} at step {first - 1}/{args.steps}", flush=True)
+    stop = {"flag": False}
+
+    def on_sigint(signum, frame):
+        stop["flag"] = True
+
+    old_handler = signal.signal(signal.SIGINT, on_sigint)
+    t1 = time.perf_counter() - spent
+    step = first - 1
+    try:
+        for step in range(first, args.steps + 1):
+            s = shapes[int(rng.choice(len(shapes), p=weights / weights.sum()))]
+            pool = by_shape[s]
+            idx = rng.choice(len(pool), size=min(args.batch, len(pool)), replace=False)
+            x, y, scored, _ = _batch([pool[i] for i in idx], int(rng.integers(8)))
+            logit = guide.net(x)
+            nll = torch.nn.functional.binary_cross_entropy_with_logits(logit, y, reduction="none")
+            loss = (nll * scored).sum() / scored.sum().clamp(min=1)
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+            sched.step()
+            if step % args.eval_every == 0 or step == args.steps:
+                v = losses(guide, val)
+                v["step"] = step
+                v["train_bits_per_cell"] = loss.item() / math.log(2)
+                history.append(v)
+                mark = ""
+                if v["bits_per_unseen_cell"] < best["bits_per_unseen_cell"]:
+                    best, mark = v, " *"
+                    best_state = {k: t.detach().clone() for k, t in guide.net.state_dict().items()}
+                print(
+                    f"step {step}/{args.steps}: train {v['train_bits_per_cell']:.3f} bits/cell, validation "
+                    f"{v['bits_per_cell']:.3f} bits/cell, {v['bits_per_unseen_cell']:.3f} bits/unseen cell{mark} "
+                    f"({time.perf_counter() - t1:.0f} s)",
+                    flush=True,
+                )
+            done = step == args.steps
+            stopped = stop["flag"] or (stop_after is not None and step - first + 1 >= stop_after)
+            if stopped or (not done and step % args.checkpoint_every == 0):
+                spent = time.perf_counter() - t1
+                save_checkpoint(ckpt, args, step, spent, guide, opt, sched, rng, best, best_state, history)
+            if stopped and not done:
+                print(
+                    f"interrupted at step {step}/{args.steps}: checkpoint {ckpt}; the same command resumes", flush=True
+                )
+                return None
+    finally:
+        signal.signal(signal.SIGINT, old_handler)
     assert best_state is not None
     guide.net.load_state_dict(best_state)
     temperature = 1.0
@@ -443,16 +555,17 @@ def train(args) -> dict:
         "seconds": {"data": round(t_data, 1), "training": round(time.perf_counter() - t1, 1)},
         "torch": torch.__version__,
     }
-    out = Path(args.out or FITTED_DIR / f"guide_{name}.npz")
     guide.save(out, meta)
     side = out.with_suffix(".json")
     digest = hashlib.sha256(out.read_bytes()).hexdigest()
     atomic_write_text(side, json.dumps({"file": out.name, "sha256": digest, **meta, "history": history}, indent=1))
+    ckpt.unlink(missing_ok=True)  # the artefact is written: the checkpoint is spent
     print(f"wrote {out} and {side}: kept step {best['step']}, {best['bits_per_unseen_cell']:.3f} bits/unseen cell")
     return meta
 
 
-def main(argv=None) -> dict:
+def main(argv=None, stop_after: int | None = None) -> dict | None:
+    """The command line; ``stop_after``: see :func:`train`."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument(
         "--corpus",
@@ -506,6 +619,13 @@ def main(argv=None) -> dict:
         help="skip the temperature fitted on the validation windows' unseen cells",
     )
     ap.add_argument("--out", default=None, help="artefact path (.npz; default ogm_ppl/fitted/guide_CORPUS.npz)")
+    ap.add_argument(
+        "--checkpoint-every",
+        type=int,
+        default=100,
+        help="steps between checkpoints (OUT.ckpt.npz; Ctrl-C also saves one; the same command resumes)",
+    )
+    ap.add_argument("--fresh", action="store_true", help="ignore a checkpoint and start afresh")
     args = ap.parse_args(argv)
     if len(set(args.corpus)) != len(args.corpus):
         raise SystemExit(f"--corpus names a corpus twice: {' '.join(args.corpus)}")
@@ -523,10 +643,21 @@ def main(argv=None) -> dict:
         raise SystemExit("--plan-range-cells needs --scan-whole-map and a finite range above 0 cells")
     if args.fov != 360 and args.drive is None:
         raise SystemExit("--fov applies to driven scans only (--drive); the stops scan 360 degrees")
-    for k in ("examples", "val", "window", "beams", "channels", "steps", "batch", "eval_every", "crops"):
+    for k in (
+        "examples",
+        "val",
+        "window",
+        "beams",
+        "channels",
+        "steps",
+        "batch",
+        "eval_every",
+        "crops",
+        "checkpoint_every",
+    ):
         if getattr(args, k) < 1:
             raise SystemExit(f"--{k.replace('_', '-')} must be at least 1")
-    return train(args)
+    return train(args, stop_after)
 
 
 if __name__ == "__main__":

@@ -290,3 +290,29 @@ def test_several_corpora_refuse_too_few_windows_to_share(mods):
         tg.main(["--corpus", "ipa", "dungeon", "--examples", "6", "--val", "1"])
     with pytest.raises(SystemExit, match="names a corpus twice"):
         tg.main(["--corpus", "ipa", "ipa"])
+
+
+def test_an_interrupted_training_resumes_from_its_checkpoint_bit_for_bit(mods, artefact, tmp_path):
+    """Stopped after 4 of 6 steps (as Ctrl-C stops it: past the first validation, so the validation-best
+    weights ride in the checkpoint), the same command resumes to the uninterrupted run's artefact and history,
+    then drops the checkpoint; a checkpoint of other settings is refused naming them, and --fresh ignores it."""
+    tg, _ = mods
+    from ogm_ppl.inference.variational.amortised import AmortisedGuide
+
+    ref, ref_meta = artefact
+    out = tmp_path / "g.npz"
+    argv = ["--corpus", "ipa", *SMALL, "--steps", "6", "--eval-every", "3", "--out", str(out)]
+    assert tg.main(argv, stop_after=4) is None
+    ckpt = tg.checkpoint_path(out)
+    assert ckpt.exists() and not out.exists()
+    with pytest.raises(SystemExit, match=r"settings that differ: lr\); rerun with its settings, or pass --fresh"):
+        tg.main([*argv, "--lr", "0.01"])
+    meta = tg.main(argv)
+    assert not ckpt.exists()
+    a, b = AmortisedGuide.load(ref).net.state_dict(), AmortisedGuide.load(out).net.state_dict()
+    assert a.keys() == b.keys() and all(torch.equal(a[k], b[k]) for k in a)
+    hist = [json.loads(p.with_suffix(".json").read_text())["history"] for p in (ref, out)]
+    assert hist[0] == hist[1] and meta["validation"] == ref_meta["validation"]
+    assert tg.main(argv, stop_after=2) is None and ckpt.exists()
+    tg.main([*argv, "--lr", "0.01", "--fresh"])  # another training in the same place, from scratch
+    assert not ckpt.exists()
