@@ -168,6 +168,11 @@ def plan_tasks(spec: ExperimentSpec, out: Path, resume: bool = True) -> list[Tas
 
 
 # ------------------------------------------------------------------------------------------ executing
+def _with_progress(t: Task, progress: bool) -> dict:
+    """A task's keyword arguments; a run task also shows the progress of a long run (plain lines, labelled)."""
+    return {**t.kwargs, "progress": progress} if t.kind == "run" else dict(t.kwargs)
+
+
 def _execute_serial(todo: list[Task], progress: bool):
     results, failed = {}, {}
     with Progress(len(todo), "tasks", enabled=progress) as bar:
@@ -177,7 +182,7 @@ def _execute_serial(todo: list[Task], progress: bool):
                 failed[t.id] = f"dependency {bad[0]} failed"
             else:
                 try:
-                    results[t.id] = t.fn(*t.args, **t.kwargs)
+                    results[t.id] = t.fn(*t.args, **_with_progress(t, progress))
                 except Exception as e:  # keep going: independent tasks still finish, and a rerun resumes
                     failed[t.id] = f"{type(e).__name__}: {e}"
             bar.update(note=t.id)
@@ -230,7 +235,7 @@ def _execute_dask(todo: list[Task], client, progress: bool):
     token = f"{time.time_ns():x}"
     for t in todo:
         deps = [futures[d] for d in t.deps if d in futures]
-        kw = dict(t.kwargs)
+        kw = _with_progress(t, progress)
         if deps:
             kw["_deps" if t.kind != "dataset" else "_base"] = deps
         f = client.submit(t.fn, *t.args, key=f"{t.id}-{token}", pure=False, **kw)

@@ -432,6 +432,7 @@ def run_algorithm(
     h: str,
     resume: bool = True,
     stop_after: int | None = None,
+    progress: bool = False,
     _deps=None,
 ) -> dict | None:
     """Run one algorithm (a registered map method, :mod:`ogm_ppl.methods`) on one dataset (one chain);
@@ -441,7 +442,7 @@ def run_algorithm(
     A sampling method checkpoints into that folder and resumes from it; its F1-against-time records are
     scored on the dataset's mask. ``stop_after`` (tests, and a deliberate pause): stop a sampling run after
     that many sweeps of this call, leaving its checkpoint and no result (returns None); the next call
-    resumes it.
+    resumes it. ``progress``: plain progress lines of a long run, labelled ``DATASET/ALGORITHM/cN``.
     """
     from ogm_ppl.datasets.dataset_file import load_dataset
     from ogm_ppl.methods import MapProblem, RunContext
@@ -463,6 +464,8 @@ def run_algorithm(
         stop_after=stop_after,
         score=lambda q: _quick_scores(q, truth, mask, metrics.thresholds),
         where=f"experiment dataset {ds.name}",
+        progress=progress,
+        label=f"{ds.name}/{alg.name}/c{chain}",
     )
     with task_env(), _RNG_LOCK if method.stochastic else contextlib.nullcontext():
         _warm_up(alg, float(ds.params["sigma_cells"]), grid.resolution)

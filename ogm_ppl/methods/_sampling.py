@@ -20,7 +20,6 @@ from ogm_ppl.io import atomic_write_text
 from ogm_ppl.methods._model import ModelParams
 from ogm_ppl.methods.params import DeltaName, Int, StartMap, param
 from ogm_ppl.methods.problem import MapProblem, MapResult, RunContext
-from ogm_ppl.progress import Progress
 
 __all__ = ["INITS", "SamplingParams", "run_kernel"]
 
@@ -106,7 +105,7 @@ def run_kernel(kernel, params: SamplingParams, problem: MapProblem, ctx: RunCont
         "checkpoint_every": params.checkpoint_every,
     }
     # one progress for the chain's calls (one a mark): a bar on a terminal, plain lines past 10 s elsewhere
-    with Progress(total, "gibbs sweeps", unit="sweep", enabled=ctx.progress, initial=start, after=10.0) as bar:
+    with ctx.progress_for(total, "gibbs sweeps", "sweep", initial=start) as bar:
         for mark in marks:
             if mark <= done:
                 continue

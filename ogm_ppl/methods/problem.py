@@ -19,6 +19,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from ogm_ppl.progress import Progress
+
 if TYPE_CHECKING:
     from ogm_ppl.grid import Grid
     from ogm_ppl.models.occupancy import OccupancyModel
@@ -106,9 +108,12 @@ class RunContext:
         cache_dir: where results worth keeping between runs go (update terms fitted for a setting).
         resume: continue from the checkpoint if there is one.
         stop_after: stop a sampling run after this many sweeps of this call (its checkpoint kept, no map).
-        progress: show progress bars.
+        progress: show progress (:class:`~ogm_ppl.progress.Progress`: a bar on a terminal, plain lines
+            elsewhere once a run has taken 10 s).
         score: scores of running marginals (``K`` floats -> dict), recorded by sampling methods.
         where: names the run in warnings (``"experiment dataset office"``).
+        label: names the run in its progress lines (``"office/gibbs/c0"``); a labelled run prints plain
+            lines, never a bar, since it runs beside others (an experiment's tasks on dask workers).
     """
 
     seed: int = 0
@@ -119,6 +124,14 @@ class RunContext:
     progress: bool = False
     score: Callable[[np.ndarray], dict] | None = None
     where: str = ""
+    label: str = ""
+
+    def progress_for(self, total: int, what: str, unit: str, initial: int = 0) -> Progress:
+        """The run's :class:`~ogm_ppl.progress.Progress` over ``total`` ``unit`` (``what``: e.g. ``"gibbs
+        sweeps"``, prefixed by :attr:`label`; plain lines once past 10 s, as the class says)."""
+        desc = f"{self.label}: {what}" if self.label else what
+        bar = False if self.label else None
+        return Progress(total, desc, unit=unit, enabled=self.progress, after=10.0, bar=bar, initial=initial)
 
 
 @dataclass

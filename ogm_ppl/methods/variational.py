@@ -52,15 +52,16 @@ def vi(params: VIParams, problem: MapProblem, ctx: RunContext) -> MapResult:
         guide = PatchGuide(model, patch_arg(params.patch))
     else:
         guide = FirstHitGuide(model)
-    losses = fit_guide(
-        model,
-        guide,
-        steps=params.steps,
-        lr=params.lr,
-        num_particles=params.num_particles,
-        seed=ctx.seed,
-        progress=ctx.progress,
-        loss=params.loss,
-    )
+    with ctx.progress_for(params.steps, "svi steps", "step") as bar:
+        losses = fit_guide(
+            model,
+            guide,
+            steps=params.steps,
+            lr=params.lr,
+            num_particles=params.num_particles,
+            seed=ctx.seed,
+            progress=bar,
+            loss=params.loss,
+        )
     details = {**params.model_details(problem), "guide": type(guide).__name__, "final_loss": losses[-1]}
     return MapResult(guide.marginals().numpy(), problem.rays.reached(), details)

@@ -587,3 +587,24 @@ def test_metrics_say_what_produced_them(serial_run):
     prov = json.loads((out / "metrics.json").read_text())["provenance"]
     assert {"command", "commit", "machine", "date", "ogm_ppl"} <= set(prov) and prov["machine"]["cores"] >= 1
     assert f"at commit {prov['commit']}" in (out / "metrics.md").read_text()
+
+
+def test_a_long_run_task_prints_progress_lines_naming_it(serial_run, tmp_path, monkeypatch, capsys):
+    """With progress on, a run task longer than 10 s (a clock that moves a second a call here) prints plain
+    lines naming its dataset, algorithm and chain between the tasks' own lines; its numbers are unchanged."""
+    import shutil
+
+    out = tmp_path / "copy"
+    shutil.copytree(serial_run.out_dir, out)
+    spec = parse_spec(tiny(), "tiny.toml")
+    for f in out.glob("tasks/office/gibbs-border-L9/c0/result.json"):
+        f.unlink()
+    clock = iter(range(10**7))
+    monkeypatch.setattr("ogm_ppl.progress.time.perf_counter", lambda: float(next(clock)))
+    r = run_experiment(spec, out, scheduler="serial", progress=True)
+    assert r.executed == ["run/office/gibbs-border-L9/c0", "score/office/gibbs-border-L9"]
+    err = capsys.readouterr().err.splitlines()
+    mine = [line for line in err if line.startswith("office/gibbs-border-L9/c0: gibbs sweeps: ")]
+    assert mine and mine[-1].endswith(", done")
+    assert [line for line in err if line.startswith("tasks: ")]
+    _same(_numbers(serial_run.out_dir), _numbers(out))

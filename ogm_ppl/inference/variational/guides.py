@@ -22,6 +22,7 @@ ray that returned a hit is impossible, and every full-support guide samples such
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import math
 import warnings
@@ -37,6 +38,7 @@ from torch.distributions import constraints
 from ogm_ppl.inference.tiling import tile_patches
 from ogm_ppl.inference.variational.elbo import ExactELBO, mean_field_elbo
 from ogm_ppl.models.occupancy import OccupancyModel
+from ogm_ppl.progress import Progress
 
 __all__ = ["MeanFieldGuide", "PatchGuide", "PatchMapDistribution", "fit_guide", "guide_name"]
 
@@ -203,7 +205,7 @@ def fit_guide(
     lr: float = 0.05,
     num_particles: int = 256,
     seed: int = 0,
-    progress: bool = False,
+    progress: bool | Progress = False,
     loss: str = "tracegraph",
 ) -> list[float]:
     """Train ``guide`` with ``SVI(model.model, guide, Adam(lr), <loss>)``.
@@ -212,12 +214,11 @@ def fit_guide(
     KL), ``"rws"`` (``ReweightedWakeSleep(num_particles)``, wake-phi only: importance-weighted
     ``KL(p || q)``), or ``"exact"`` (:class:`~ogm_ppl.inference.variational.elbo.ExactELBO`, for guides with
     ``exact_elbo``). Returns the loss trace. Seeds Pyro; the guide's parameters live in the guide (a
-    ``PyroModule``), so other guides' parameters are untouched.
+    ``PyroModule``), so other guides' parameters are untouched. ``progress``: show progress
+    (:class:`~ogm_ppl.progress.Progress`), or a caller's own ``Progress`` to update (left open).
     """
     from pyro.infer import SVI, ReweightedWakeSleep, TraceGraph_ELBO
     from pyro.optim import Adam
-
-    from ogm_ppl.progress import Progress
 
     valid = torch.arange(model.loglik_table.shape[1])[None, :] <= model.lengths[:, None]
     if loss != "exact" and torch.isinf(model.loglik_table[valid]).any():
@@ -244,7 +245,13 @@ def fit_guide(
     svi = SVI(model.model, guide, Adam({"lr": lr}), objective)
     losses = []
     # a bar on a terminal; elsewhere a plain line every 10 s once the fit has taken 10 s
-    with Progress(steps, "svi steps", unit="step", enabled=progress, after=10.0) as bar:
+    own = not isinstance(progress, Progress)
+    bar = (
+        progress
+        if isinstance(progress, Progress)
+        else Progress(steps, "svi steps", unit="step", enabled=progress, after=10.0)
+    )
+    with bar if own else contextlib.nullcontext(bar):
         for step in range(steps):
             with warnings.catch_warnings():
                 warnings.filterwarnings("ignore", message="Encountered NaN", category=UserWarning)
