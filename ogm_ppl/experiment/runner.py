@@ -169,8 +169,9 @@ def plan_tasks(spec: ExperimentSpec, out: Path, resume: bool = True) -> list[Tas
 
 # ------------------------------------------------------------------------------------------ executing
 def _with_progress(t: Task, progress: bool) -> dict:
-    """A task's keyword arguments; a run task also shows the progress of a long run (plain lines, labelled)."""
-    return {**t.kwargs, "progress": progress} if t.kind == "run" else dict(t.kwargs)
+    """A task's keyword arguments; a map method's run task also shows the progress of a long run (plain lines,
+    labelled)."""
+    return {**t.kwargs, "progress": progress} if t.fn is T.run_algorithm else dict(t.kwargs)
 
 
 def _execute_serial(todo: list[Task], progress: bool):
