@@ -39,6 +39,7 @@ import dataclasses
 import json
 import math
 import os
+import shutil
 import sys
 import tempfile
 import time
@@ -1080,8 +1081,6 @@ def _map(args, method, params) -> dict:
     atomic_write_text(out / "report.json", json.dumps(_jsonable(report), indent=2))
     atomic_write_text(out / "report.md", _report_md(report))
     stage.commit()
-    import shutil
-
     shutil.rmtree(args.out / CHECKPOINTS, ignore_errors=True)  # the map is written: its chains' are spent
     return report
 
