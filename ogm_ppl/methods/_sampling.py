@@ -68,7 +68,8 @@ def run_kernel(kernel, params: SamplingParams, problem: MapProblem, ctx: RunCont
     warm, n = params.burn_in, params.sweeps
     stats = RunningStats(model)
     if ctx.checkpoint_dir is None:
-        r = run_gibbs(kernel, n, stats, warmup=warm, seed=ctx.seed, progress=ctx.progress)
+        with ctx.progress_for(warm + n, "gibbs sweeps", "sweep") as bar:
+            r = run_gibbs(kernel, n, stats, warmup=warm, seed=ctx.seed, progress=bar)
         if r.interrupted:
             raise KeyboardInterrupt
         q = stats.marginals.numpy()

@@ -95,16 +95,33 @@ def test_a_checkpoint_of_another_length_resumes_on_this_runs_schedule(box, tmp_p
     np.testing.assert_array_equal(r.probabilities, method.run(mid, problem, RunContext(seed=3)).probabilities)
 
 
-@pytest.mark.parametrize("method_name, params", [("gibbs", {"sweeps": 30, "burn_in": 5}), ("vi", {"steps": 30})])
-def test_a_labelled_run_shows_plain_progress_lines_once_long(box, monkeypatch, capsys, tmp_path, method_name, params):  # noqa: F811
+@pytest.mark.parametrize(
+    "method_name, params, checkpointed",
+    [
+        ("gibbs", {"sweeps": 30, "burn_in": 5}, True),
+        ("gibbs", {"sweeps": 30, "burn_in": 5}, False),
+        ("vi", {"steps": 30}, False),
+    ],
+)
+def test_a_labelled_run_shows_plain_progress_lines_once_long(
+    box,  # noqa: F811
+    monkeypatch,
+    capsys,
+    tmp_path,
+    method_name,
+    params,
+    checkpointed,
+):
     """An experiment's task labels its run: past 10 s (a clock that moves a second a call here) it prints plain
-    lines naming the run, never a bar, whatever stderr is; its chain's calls (one a record mark) share them."""
+    lines naming the run, never a bar, whatever stderr is; a checkpointed chain's calls (one a record mark)
+    share them."""
     _, problem = box
     clock = iter(range(10**6))
     monkeypatch.setattr("ogm_ppl.progress.time.perf_counter", lambda: float(next(clock)))
     monkeypatch.setattr("ogm_ppl.progress.interactive", lambda stream=None: True)  # as on a terminal
     method = get_method(method_name)
-    ctx = RunContext(seed=1, progress=True, label="office/x/c0", checkpoint_dir=tmp_path / "ck")
+    ckpt = {"checkpoint_dir": tmp_path / "ck"} if checkpointed else {}
+    ctx = RunContext(seed=1, progress=True, label="office/x/c0", **ckpt)
     method.run(method.parse(params), problem, ctx)
     lines = capsys.readouterr().err.splitlines()
     what = "gibbs sweeps" if method_name == "gibbs" else "svi steps"
