@@ -321,7 +321,15 @@ class MapKernel(MCMCKernel):
         return self._updates
 
     def settings(self) -> dict:
-        """The public settings (simple values; arrays as digests) that a checkpoint's fingerprint sees."""
+        """The public settings (simple values; arrays as digests) that a checkpoint's fingerprint sees.
+
+        Read once, at the first call (before the first checkpoint of a run: the kernel as built), and kept:
+        a public attribute a subclass updates while it samples (a counter) would otherwise make the same
+        chain's next checkpoint look like another kernel's. Counters belong in private attributes and, to be
+        checkpointed, in ``_extra_state``."""
+        cached = self.__dict__.get("_settings_at_start")
+        if cached is not None:
+            return dict(cached)
         out = {}
         for k, v in sorted(vars(self).items()):
             if k.startswith("_") or k in _DYNAMIC:
@@ -330,6 +338,7 @@ class MapKernel(MCMCKernel):
                 out[k] = v
             elif isinstance(v, (torch.Tensor, np.ndarray)):
                 out[k] = digest(v)
+        self._settings_at_start = dict(out)
         return out
 
     # --------------------------------------------------------------- sampling

@@ -119,3 +119,35 @@ def test_resume_with_another_warmup_is_refused(tmp_path):
         run_gibbs(CellGibbs(model), 50, warmup=0, seed=3, checkpoint=ck, progress=False)
     r = run_gibbs(CellGibbs(model), 50, warmup=30, seed=3, checkpoint=ck, progress=False)
     assert r.sweeps == 80 and r.stats.n == 50
+
+
+class _Counting(CellGibbs):
+    """A subclass keeping a public counter that its sweeps update (as a user's kernel may)."""
+
+    def __init__(self, model) -> None:
+        super().__init__(model)
+        self.visits = 0
+
+    def _sweep(self) -> int:
+        self.visits += 1
+        return super()._sweep()
+
+
+def test_a_public_counter_does_not_make_the_same_chain_look_like_another(tmp_path):
+    """The kernel's settings are read once, as built: the chain's own later calls (one a record mark, as a
+    map method runs it) and a new process's kernel resume its checkpoint; a changed setting is still refused."""
+    model = _model()
+    ck = tmp_path / "ck.npz"
+    full = run_gibbs(_Counting(model), 60, seed=3, progress=False)
+    k = _Counting(model)
+    a = run_gibbs(k, 60, seed=3, checkpoint=ck, stop_after=20, progress=False)
+    assert a.interrupted and k.visits == 20
+    b = run_gibbs(k, 60, seed=3, checkpoint=ck, stop_after=20, progress=False)  # the same object goes on
+    assert b.sweeps == 40
+    c = run_gibbs(_Counting(model), 60, seed=3, checkpoint=ck, progress=False)  # a new process's kernel
+    assert c.sweeps == 60 and torch.equal(c.stats.marginals, full.stats.marginals)
+    other = _Counting(model)
+    other.scan = "random"
+    run_gibbs(_Counting(model), 60, seed=3, checkpoint=tmp_path / "d.npz", stop_after=5, progress=False)
+    with pytest.raises(CheckpointError, match="the kernel or its settings"):
+        run_gibbs(other, 60, seed=3, checkpoint=tmp_path / "d.npz", progress=False)
