@@ -1,3 +1,10 @@
+"""Every shipped sensor passes :class:`~ogm_ppl.testing.SensorContract`, and the contract fails sensors with
+the bugs a user's trial found it blind to (a sampler that drops a component, vectorisation that reads one
+element's flags, a continuous sensor that does not say so, a hit past the last cell read as none)."""
+
+import pytest
+import torch
+
 from ogm_ppl import GaussianRange, PatternMatch
 from ogm_ppl.testing import SensorContract
 
@@ -17,3 +24,49 @@ class TestPatternMatch(SensorContract):
 
     def make_sensor(self):
         return PatternMatch(0.8)
+
+
+class _DropsRandomInSample(GaussianRange):
+    def sample(self, f, F, generator=None):
+        return GaussianRange(self.sigma).sample(f, F, generator=generator)
+
+
+class _FirstFlagOnly(GaussianRange):
+    def log_prob(self, z, f, F, is_max=None):
+        if is_max is not None:
+            is_max = (
+                torch.as_tensor(is_max)
+                .flatten()[0]
+                .expand(torch.broadcast_shapes(torch.as_tensor(z).shape, torch.as_tensor(f).shape))
+            )
+        return super().log_prob(z, f, F, is_max)
+
+
+class _Undeclared(GaussianRange):
+    continuous_range = False
+
+
+class _PastLastCellIsNone(GaussianRange):
+    def log_prob(self, z, f, F, is_max=None):
+        f = torch.as_tensor(f, dtype=torch.float64)
+        F_ = torch.as_tensor(F, dtype=torch.float64)
+        return super().log_prob(z, torch.where(f > F_, F_ + 1.0, f), F, is_max)
+
+
+@pytest.mark.parametrize(
+    "sensor, check",
+    [
+        (_DropsRandomInSample(1.5, p_rand=0.1), "test_samples_follow_log_prob"),
+        (_FirstFlagOnly(1.5, p_rand=0.1), "test_log_prob_is_vectorised"),
+        (_Undeclared(1.5), "test_declares_its_kind_of_range"),
+        (_PastLastCellIsNone(1.5, p_rand=0.1), "test_samples_follow_log_prob"),
+    ],
+    ids=["sample-drops-a-component", "vectorised-reads-one-flag", "continuous-undeclared", "past-last-cell-none"],
+)
+def test_the_contract_fails_a_buggy_sensor(sensor, check):
+    class Contract(SensorContract):
+        def make_sensor(self):
+            return sensor
+
+    with pytest.raises(AssertionError):
+        getattr(Contract(), check)()
