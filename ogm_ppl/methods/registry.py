@@ -116,7 +116,13 @@ class MapMethod:
         if result.probabilities is not None:
             import numpy as np
 
-            result.probabilities = np.asarray(result.probabilities, dtype=np.float64).ravel()
+            p = np.asarray(result.probabilities, dtype=np.float64)
+            if p.ndim > 1 and p.shape != problem.grid.shape:  # a transposed map would ravel into wrong cells
+                raise ValueError(
+                    f"method {self.name!r} returned probabilities of shape {p.shape}: give the grid's "
+                    f"{problem.grid.shape} (rows, cols) or its {problem.grid.num_cells} cells in row-major order"
+                )
+            result.probabilities = p.ravel()
             if result.probabilities.shape != (problem.grid.num_cells,):
                 raise ValueError(
                     f"method {self.name!r} returned {result.probabilities.shape} probabilities "

@@ -5,12 +5,13 @@
         params = {"level": 0.7}              # values over its defaults, small enough for a test
 
 and gets, on a 1D problem (7 cells, three readings) and a 2D one (2 x 4 cells, four readings, max-range
-readings among them):
+readings among them), and for the map's form also the 2D readings on a 4 x 5 grid that no ray fully crosses:
 
 * **registration**: the name resolves, every parameter is described (``ogm-ppl methods``), the defaults and
   ``params`` parse, and an unknown key is refused naming it (:class:`~ogm_ppl.methods.ParamError`);
-* **a map**: ``run`` returns ``K`` float64 probabilities in ``[0, 1]``, a ``K`` bool ``observed`` mask
-  within the cells some ray crosses (its traversal up to the sensor's range), and JSON-able ``details``;
+* **a map**: ``run`` returns ``K`` float64 probabilities in ``[0, 1]`` (a map of another shape than the
+  grid's is refused by the registry), a ``K`` bool ``observed`` mask within the cells some ray crosses (its
+  traversal up to the sensor's range), and JSON-able ``details``;
 * **reproducible**: two runs with one seed give the same map, bit for bit;
 * **exact** (where ``exact_tolerance`` is set): the map's probabilities, with ``exact_params`` over
   ``params``, equal the brute-force posterior marginals of the model the method targets
@@ -24,7 +25,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-__all__ = ["MethodContract", "method_problems"]
+__all__ = ["MethodContract", "method_problems", "unreached_problem"]
 
 
 def method_problems():
@@ -36,6 +37,17 @@ def method_problems():
     toy = toy_1d(num_cells=7, wall=1, readings=(3.0, 4.0, 2.0))  # the problem of enumerable_1d
     grid, scans = enumerable_2d_data()
     return [("1d", MapProblem(toy.grid, toy.scans, sigma_cells=1.5)), ("2d", MapProblem(grid, scans, 0.9))]
+
+
+def unreached_problem():
+    """``("2d-unreached", MapProblem)``: the 2D problem's readings on a 4 x 4 grid, whose top rows no ray
+    crosses (their cells must not be ``observed``), not square (a transposed map cannot pass)."""
+    from ogm_ppl import Grid
+    from ogm_ppl.methods import MapProblem
+    from ogm_ppl.testing.kernels import enumerable_2d_data
+
+    _, scans = enumerable_2d_data()
+    return "2d-unreached", MapProblem(Grid((4, 5), resolution=1.0), scans, 0.9)
 
 
 class MethodContract:
@@ -93,7 +105,7 @@ class MethodContract:
             raise AssertionError("an unknown parameter was accepted")
 
     def test_map_of_each_problem(self):
-        for name, problem in method_problems():
+        for name, problem in [*method_problems(), unreached_problem()]:
             result = self._run(name, problem)
             K = problem.grid.num_cells
             p = result.probabilities
@@ -104,6 +116,8 @@ class MethodContract:
             on_a_ray = np.zeros(K, bool)
             on_a_ray[problem.rays.cells] = True
             assert not (observed & ~on_a_ray).any(), name  # only cells on some ray
+            if name == "2d-unreached":
+                assert not on_a_ray.all()  # the problem has cells no ray crosses
             json.dumps(result.details)
 
     def test_reproducible_from_its_seed(self):

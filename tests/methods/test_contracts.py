@@ -95,3 +95,41 @@ def test_the_exact_check_fails_a_method_that_is_not_exact():
 
     with pytest.raises(AssertionError):
         NotExact().test_matches_the_exact_posterior()
+
+
+def test_the_contract_fails_a_transposed_map_and_an_all_observed_mask():
+    """A method returning its map as (cols, rows), or calling every cell observed, fails the contract (both
+    passed it when every cell of its problems lay on a ray and maps of any shape were ravelled)."""
+    from dataclasses import dataclass
+
+    import numpy as np
+    import pytest
+
+    from ogm_ppl.methods import MapResult, register_method, unregister_method
+
+    @dataclass(frozen=True)
+    class NoParams:
+        pass
+
+    def transposed(params, problem, ctx):
+        q = np.full(problem.grid.shape, 0.3)
+        return MapResult(q.T if problem.grid.ndim == 2 else q, problem.rays.reached())
+
+    def all_observed(params, problem, ctx):
+        return MapResult(np.full(problem.grid.num_cells, 0.3), np.ones(problem.grid.num_cells, bool))
+
+    cases = (
+        ("test_transposed", transposed, ValueError, "returned probabilities of shape"),
+        ("test_all_observed", all_observed, AssertionError, "2d-unreached"),
+    )
+    for name, fn, error, match in cases:
+        register_method(name, NoParams)(fn)
+        try:
+
+            class Contract(MethodContract):
+                method = name
+
+            with pytest.raises(error, match=match):
+                Contract().test_map_of_each_problem()
+        finally:
+            unregister_method(name)
