@@ -87,6 +87,12 @@ def test_extending_page_examples_run_and_build_what_their_contracts_test():
             assert tests[name]().make_prior(5).log_prob(np.zeros(5)).shape == ()
         for name in kinds["SensorContract"]:
             assert isinstance(tests[name]().make_sensor(), GaussianRange)
+        from ogm_ppl.methods import MapProblem, RunContext, get_method
+        from ogm_ppl.testing.kernels import enumerable_2d_data
+
+        chain = get_method("my_chain")  # the page's kernel method runs as the samplers run
+        r = chain.run(chain.parse({"sweeps": 20}), MapProblem(*enumerable_2d_data(), 0.9), RunContext(seed=0))
+        assert r.probabilities.shape == (8,) and r.details["kernel"] == "MetropolisCell"
         for name in kinds["KernelContract"]:
             t = tests[name]()
             for model in (t.problem_1d(), t.problem_2d()):
@@ -98,6 +104,7 @@ def test_extending_page_examples_run_and_build_what_their_contracts_test():
         from ogm_ppl.methods import unregister_method
 
         unregister_method("endpoints")
+        unregister_method("my_chain")
 
 
 @pytest.mark.parametrize("name", MODULES)

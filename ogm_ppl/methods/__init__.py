@@ -15,7 +15,10 @@ r"""Map methods by name: one registry for every way the library makes a map.
 
 Each has a parameter dataclass (:mod:`~ogm_ppl.methods.params`: kinds, ranges, unknown keys refused,
 errors naming the key) and one entry point ``run(params, problem, ctx) -> MapResult``
-(:mod:`~ogm_ppl.methods.problem`). :mod:`~ogm_ppl.methods.registry` says how to add one.
+(:mod:`~ogm_ppl.methods.problem`). :mod:`~ogm_ppl.methods.registry` says how to add one; a method that
+runs a map kernel of its own takes :class:`SamplingParams` (the model's parameters, the run's length,
+chains, checkpoints and records) and hands its kernel to :func:`run_kernel`, which runs it as the shipped
+samplers run (checkpoints, resume, records, progress).
 
 >>> from ogm_ppl.methods import get_method
 >>> method = get_method("gibbs")
@@ -23,6 +26,8 @@ errors naming the key) and one entry point ``run(params, problem, ctx) -> MapRes
 [3, 3]
 """
 
+from ogm_ppl.methods._model import ModelParams
+from ogm_ppl.methods._sampling import SamplingParams, run_kernel
 from ogm_ppl.methods.params import (
     Block,
     Bool,
@@ -69,12 +74,14 @@ __all__ = [
     "MapMethod",
     "MapProblem",
     "MapResult",
+    "ModelParams",
     "Optional",
     "Pair",
     "ParamError",
     "Patch",
     "PriorName",
     "RunContext",
+    "SamplingParams",
     "Text",
     "get_method",
     "method_names",
@@ -83,5 +90,6 @@ __all__ = [
     "param_fields",
     "parse_params",
     "register_method",
+    "run_kernel",
     "unregister_method",
 ]

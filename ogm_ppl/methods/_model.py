@@ -35,6 +35,7 @@ class ModelParams:
             raise ParamError("lam", f"applies to the prior 'independent' only, not to {self.prior!r}")
 
     def model(self, problem: MapProblem, p_rand: float = 0.0):
+        """The :class:`~ogm_ppl.models.OccupancyModel` of ``problem`` under these parameters."""
         return problem.model(self.prior, self.lam, self.sigma_cells, p_rand)
 
     def model_details(self, problem: MapProblem) -> dict:

@@ -32,7 +32,11 @@ class SamplingParams(ModelParams):
 
     sweeps: int = param(100, Int(lo=1), "sweeps counted in the marginals")
     burn_in: int = param(0, Int(lo=0), "sweeps run before counting")
-    chains: int = param(1, Int(lo=1), "independent chains, their marginals averaged")
+    chains: int = param(
+        1,
+        Int(lo=1),
+        "independent chains, their marginals averaged (the command line and experiments run them; run() one)",
+    )
     init: str = param(
         "ogm", StartMap(*INITS), "starting map (initial_map: thresholded OGM, a prior draw, a corpus guide's mode, ...)"
     )
@@ -59,7 +63,14 @@ def _ckpt_sweep(path) -> int:
 
 
 def run_kernel(kernel, params: SamplingParams, problem: MapProblem, ctx: RunContext, details: dict) -> MapResult:
-    """Run ``kernel`` as the module docstring says; ``details`` (the kernel's) go into the result."""
+    """Run ``kernel`` (any :class:`~ogm_ppl.inference.mcmc.kernel.MapKernel` of ``params.model(problem)``) for
+    ``params.burn_in + params.sweeps`` sweeps and return the marginals of the last ``params.sweeps`` as the
+    map (``observed``: the cells some ray reached; ``details``: the kernel's, the model's, the records).
+
+    With ``ctx.checkpoint_dir`` it checkpoints every ``params.checkpoint_every`` sweeps and on Ctrl-C,
+    resumes from the checkpoint (bit for bit), records ``ctx.score`` of the running marginals at
+    ``params.record`` marks and stops after ``ctx.stop_after`` sweeps of this call (``probabilities`` then
+    ``None``); progress as ``ctx.progress_for`` says. One chain, seeded ``ctx.seed``."""
     from ogm_ppl.inference.mcmc import RunningStats, run_gibbs
 
     model = kernel.model
