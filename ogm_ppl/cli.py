@@ -53,7 +53,15 @@ import numpy as np
 from ogm_ppl.datasets.mapgen import KINDS
 from ogm_ppl.grid import MAX_CELLS, Grid
 from ogm_ppl.io import StagedFolder, atomic_write, atomic_write_text
-from ogm_ppl.methods import MapProblem, ParamError, RunContext, get_method, method_names, methods
+from ogm_ppl.methods import (
+    MapProblem,
+    MethodModuleError,
+    ParamError,
+    RunContext,
+    get_method,
+    method_names,
+    methods,
+)
 
 if TYPE_CHECKING:
     from ogm_ppl.datasets.carmen import CarmenLog
@@ -1501,7 +1509,16 @@ def main(argv: list[str] | None = None) -> int:
             r = cmd_info(args)
             print(json.dumps(_jsonable(r), indent=2) if args.json else _info_text(r))
         return 0
-    except (CLIError, CarmenFormatError, DatasetFileError, RosMapError, ValueError, OSError, MemoryError) as e:
+    except (
+        CLIError,
+        CarmenFormatError,
+        DatasetFileError,
+        RosMapError,
+        MethodModuleError,
+        ValueError,
+        OSError,
+        MemoryError,
+    ) as e:
         if show_tb:
             raise
         if isinstance(e, MemoryError):

@@ -645,3 +645,21 @@ def test_an_interrupted_gibbs_map_resumes_from_its_checkpoint_bit_for_bit(sim_da
     assert main([*argv, "--out", str(out), "--seed", "6"]) == 0
     assert "resumes" not in capsys.readouterr().err
     assert not (out / ".checkpoints").exists()
+
+
+def test_a_module_in_ogm_ppl_methods_that_cannot_be_imported_is_one_line_naming_it(monkeypatch, capsys):
+    """A typo in $OGM_PPL_METHODS: one error line naming the variable, the module and the import's error (not
+    a traceback), and the registry is not left half-filled: the next call, the variable mended, finds all."""
+    from ogm_ppl.methods import registry
+
+    monkeypatch.setattr(registry, "_discovered", False)
+    monkeypatch.setenv("OGM_PPL_METHODS", "no_such_module_xyz")
+    capsys.readouterr()
+    assert main(["methods"]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and "$OGM_PPL_METHODS names the module 'no_such_module_xyz'" in err[0]
+    assert "ModuleNotFoundError" in err[0] and not registry._discovered
+    monkeypatch.delenv("OGM_PPL_METHODS")
+    assert "gibbs" in registry.method_names() and registry._discovered
+    assert main(["map", "x.log", "--out", "o", "--method", "nonexistent"]) == 2
+    assert "name the module in $OGM_PPL_METHODS" in capsys.readouterr().err

@@ -48,6 +48,7 @@ __all__ = [
     "ENTRY_POINT_GROUP",
     "ENV_VAR",
     "MapMethod",
+    "MethodModuleError",
     "get_method",
     "method_names",
     "methods",
@@ -143,6 +144,11 @@ _METHODS: dict[str, MapMethod] = {}
 _discovered = False
 
 
+class MethodModuleError(ImportError):
+    """A module named in ``$OGM_PPL_METHODS``, or an entry point of the group ``ogm_ppl.methods``, that cannot be
+    imported (the message names it and the import's own error)."""
+
+
 def _first_line(fn) -> str:
     doc = (fn.__doc__ or "").strip()
     return doc.splitlines()[0].strip() if doc else fn.__name__
@@ -205,19 +211,29 @@ def _discover() -> None:
     global _discovered
     if _discovered:
         return
-    _discovered = True
+    _discovered = True  # before the imports: their register_method calls come back here
     import ogm_ppl.methods as pkg
 
     names = [i.name for i in pkgutil.iter_modules(pkg.__path__)]
     names = sorted(n for n in names if not n.startswith("_") and n not in _INFRASTRUCTURE)
     for name in sorted(names, key=lambda n: (_FIRST.index(n) if n in _FIRST else len(_FIRST), n)):
         importlib.import_module(f"{pkg.__name__}.{name}")
-    for mod in filter(None, (s.strip() for s in os.environ.get(ENV_VAR, "").split(","))):
-        importlib.import_module(mod)
     from importlib.metadata import entry_points
 
-    for ep in entry_points(group=ENTRY_POINT_GROUP):
-        ep.load()
+    where = [
+        (mod, f"${ENV_VAR} names the module {mod!r}")
+        for mod in filter(None, (s.strip() for s in os.environ.get(ENV_VAR, "").split(",")))
+    ]
+    where += [
+        (ep, f"the entry point {ep.name!r} of the group {ENTRY_POINT_GROUP!r} ({ep.value})")
+        for ep in entry_points(group=ENTRY_POINT_GROUP)
+    ]
+    for what, said in where:
+        try:
+            importlib.import_module(what) if isinstance(what, str) else what.load()
+        except Exception as e:
+            _discovered = False  # no half-filled registry: the next call tries again and says why again
+            raise MethodModuleError(f"{said}, which cannot be imported: {type(e).__name__}: {e}") from e
 
 
 def method_names() -> list[str]:
@@ -238,4 +254,8 @@ def get_method(name: str) -> MapMethod:
     try:
         return _METHODS[name]
     except (KeyError, TypeError):
-        raise ParamError("method", f"unknown method {name!r}; choose from {', '.join(_METHODS)}") from None
+        raise ParamError(
+            "method",
+            f"unknown method {name!r}; choose from {', '.join(_METHODS)} (a method registered in a module of your "
+            f"own: import it first, or name the module in ${ENV_VAR} for the command line and dask workers)",
+        ) from None

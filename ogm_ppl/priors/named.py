@@ -103,17 +103,24 @@ _FACTORIES: dict[str, PriorFactory] = {}
 def register_prior(kind: str, factory: PriorFactory) -> None:
     """Make ``prior_by_name("KIND[:CORPUS]", shape)`` build ``factory(shape, tables)``.
 
-    ``kind`` is a non-empty name without ``:``; registering a shipped kind or a taken name is refused
-    (:func:`unregister_prior` first). ``tables()`` returns the tables of ``CORPUS`` (default
-    ``houseexpo``) or those passed to :func:`prior_by_name`.
+    ``kind`` is a non-empty name without ``:``; registering a shipped kind or a name another factory took is
+    refused (:func:`unregister_prior` first); the same factory's module run again (reloaded) registers anew.
+    ``tables()`` returns the tables of ``CORPUS`` (default ``houseexpo``) or those passed to
+    :func:`prior_by_name`.
     """
     if not isinstance(kind, str) or not kind or ":" in kind:
         raise ValueError(f"a prior kind is a non-empty name without ':', got {kind!r}")
-    if kind in _FACTORIES:
-        raise ValueError(f"prior kind {kind!r} is already registered")
     if not callable(factory):
         raise TypeError(f"the factory of prior kind {kind!r} must be callable, got {type(factory).__name__}")
+    old = _FACTORIES.get(kind)
+    if old is not None and _where(old) != _where(factory):  # the same place again: a module reloaded
+        raise ValueError(f"prior kind {kind!r} is already registered ({_where(old)[0]}.{_where(old)[1]})")
     _FACTORIES[kind] = factory
+
+
+def _where(factory) -> tuple[str, str]:
+    """Where a factory was defined: ``(module, qualified name)``."""
+    return getattr(factory, "__module__", "?") or "?", getattr(factory, "__qualname__", repr(factory))
 
 
 def unregister_prior(kind: str) -> None:

@@ -112,3 +112,27 @@ def test_the_command_line_names_it(tmp_path, simulated_dataset):
         == 0
     )
     assert load_map(out / "map.npz")["probabilities"].shape == (60, 60)
+
+
+def test_a_module_registering_a_prior_can_be_reloaded(tmp_path, monkeypatch):
+    """importlib.reload of a module that registers a kind (a notebook's edit-and-rerun) registers it anew;
+    another factory under a taken name is still refused."""
+    import importlib
+    import sys
+
+    from ogm_ppl.priors import IndependentPrior, register_prior
+
+    (tmp_path / "my_reloaded_prior.py").write_text(
+        "from ogm_ppl.priors import IndependentPrior, register_prior\n"
+        "register_prior('reloaded_kind', lambda shape, tables: IndependentPrior(0.3, int(shape[0])))\n"
+    )
+    monkeypatch.syspath_prepend(str(tmp_path))
+    try:
+        mod = importlib.import_module("my_reloaded_prior")
+        importlib.reload(mod)
+        assert isinstance(prior_by_name("reloaded_kind", (4,)), IndependentPrior)
+        with pytest.raises(ValueError, match=r"already registered \(my_reloaded_prior"):
+            register_prior("reloaded_kind", lambda shape, tables: IndependentPrior(0.5, 4))
+    finally:
+        unregister_prior("reloaded_kind")
+        sys.modules.pop("my_reloaded_prior", None)
