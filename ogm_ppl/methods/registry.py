@@ -33,6 +33,7 @@ or an entry point, which every process reads; a module imported by hand register
 from __future__ import annotations
 
 import dataclasses
+import functools
 import importlib
 import os
 import pkgutil
@@ -220,17 +221,17 @@ def _discover() -> None:
         importlib.import_module(f"{pkg.__name__}.{name}")
     from importlib.metadata import entry_points
 
-    where = [
-        (mod, f"${ENV_VAR} names the module {mod!r}")
+    where: list[tuple[Callable[[], object], str]] = [
+        (functools.partial(importlib.import_module, mod), f"${ENV_VAR} names the module {mod!r}")
         for mod in filter(None, (s.strip() for s in os.environ.get(ENV_VAR, "").split(",")))
     ]
     where += [
-        (ep, f"the entry point {ep.name!r} of the group {ENTRY_POINT_GROUP!r} ({ep.value})")
+        (ep.load, f"the entry point {ep.name!r} of the group {ENTRY_POINT_GROUP!r} ({ep.value})")
         for ep in entry_points(group=ENTRY_POINT_GROUP)
     ]
-    for what, said in where:
+    for load, said in where:
         try:
-            importlib.import_module(what) if isinstance(what, str) else what.load()
+            load()
         except Exception as e:
             _discovered = False  # no half-filled registry: the next call tries again and says why again
             raise MethodModuleError(f"{said}, which cannot be imported: {type(e).__name__}: {e}") from e
