@@ -57,6 +57,24 @@ class PriorContract:
             assert lp.shape == (2**self.num_cells,) and not torch.isnan(lp).any()
             assert abs(torch.logsumexp(lp, 0).item()) < 1e-10
 
+    def test_outside_occupancy_is_the_priors_own(self):
+        """``outside_occupancy()`` (the occupancy the model gives the cells past the grid's edge) lies in
+        ``[0, 1]``; a prior left with the base class's default (0.5, no ``mean_occupancy``) must occupy its
+        cells with probability near 0.5 (within 0.1 on the mean exact marginal), or it is a prior that forgot
+        to say its occupancy."""
+        from ogm_ppl.priors.base import MapPrior
+
+        for prior in self._priors():
+            lam = float(prior.outside_occupancy())
+            assert 0.0 <= lam <= 1.0, lam
+            if type(prior).outside_occupancy is MapPrior.outside_occupancy and not hasattr(prior, "mean_occupancy"):
+                p = self._log_prob(prior, self._all_maps()).exp()
+                mean = float((p[:, None] * self._all_maps()).sum(0).mean())
+                assert abs(mean - lam) <= 0.1, (
+                    f"{type(prior).__name__}: outside_occupancy() is the default {lam} but its cells are occupied "
+                    f"with probability {mean:.3f}: override outside_occupancy (or set mean_occupancy)"
+                )
+
     def test_patch_conditional_matches_log_prob(self):
         for prior in self._priors():
             maps = self._all_maps()

@@ -69,3 +69,22 @@ def test_a_prior_shape_given_as_an_array_is_read_as_a_shape():
 def test_independent_prior_refuses_a_cell_count_below_one():
     with pytest.raises(ValueError, match="num_cells must be a whole number >= 1, got -3"):
         IndependentPrior(0.5, -3)
+
+
+def test_the_contract_fails_a_prior_that_forgot_its_outside_occupancy():
+    """A prior of cells occupied with probability 0.2 that keeps the base class's outside_occupancy (0.5)
+    fails the contract (the model would fill the space past the grid's edge at 0.5)."""
+    import pytest
+
+    from ogm_ppl.priors import IndependentPrior
+    from ogm_ppl.priors.base import MapPrior
+
+    class Forgot(IndependentPrior):
+        outside_occupancy = MapPrior.outside_occupancy
+
+    class Contract(PriorContract):
+        def make_prior(self, num_cells):
+            return Forgot(0.2, num_cells)
+
+    with pytest.raises(AssertionError, match="override outside_occupancy"):
+        Contract().test_outside_occupancy_is_the_priors_own()

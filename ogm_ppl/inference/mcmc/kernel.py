@@ -19,13 +19,17 @@ r"""The map-kernel base: the protocol every MCMC kernel over whole maps follows 
   and raises :class:`KernelStateError` naming what is wrong; a kernel built with the same arguments that
   loads it continues the chain bit for bit.
 
-A subclass implements ``_sweep()`` (one sweep from the current state, drawing from torch's generator;
-adds its number of updates to ``self._updates`` and returns the number that changed the map) and may
+A subclass implements ``_sweep()`` (one sweep from the current state ``self._m``, drawing from torch's
+generator; adds its number of updates to ``self._updates`` and returns the number that changed the map; a
+sweep that changes ``self._m`` keeps every ray's first occupied cell ``self._f`` in step, or calls
+``self._load_map(self._m)`` at its end, which recomputes it) and may
 extend ``_prepare()`` (one-time set-up), ``_load_map(m)`` (rebuild state derived from the map, a checked
 ``(K,)`` uint8 array; call ``super()``: composite kernels hand maps over through it without re-checking
 them), ``_extra_state()`` / ``_load_extra_state(state)`` (more checkpoint entries) and ``_initial_map()`` (a
-``K`` starting map). ``ogm_ppl.testing.KernelContract`` checks a kernel against
-this protocol and the exact posterior.
+``K`` starting map). Public attributes are settings (the checkpoint's fingerprint reads them once, as the
+kernel was built): counters a sweep updates are private, checkpointed through ``_extra_state``. The model's
+ray index (``model.ray_index()``) and ``model.log_joint`` give what a sweep needs to score a change.
+``ogm_ppl.testing.KernelContract`` checks a kernel against this protocol and the exact posterior.
 """
 
 from __future__ import annotations
