@@ -292,14 +292,15 @@ def test_several_corpora_refuse_too_few_windows_to_share(mods):
         tg.main(["--corpus", "ipa", "ipa"])
 
 
-def test_an_interrupted_training_resumes_from_its_checkpoint_bit_for_bit(mods, artefact, tmp_path):
+def test_an_interrupted_training_resumes_from_its_checkpoint_bit_for_bit(mods, tmp_path):
     """Stopped after 4 of 6 steps (as Ctrl-C stops it: past the first validation, so the validation-best
     weights ride in the checkpoint), the same command resumes to the uninterrupted run's artefact and history,
     then drops the checkpoint; a checkpoint of other settings is refused naming them, and --fresh ignores it."""
     tg, _ = mods
     from ogm_ppl.inference.variational.amortised import AmortisedGuide
 
-    ref, ref_meta = artefact
+    ref = tmp_path / "ref.npz"  # uninterrupted, here: the same torch threads as the resumed run
+    ref_meta = tg.main(["--corpus", "ipa", *SMALL, "--steps", "6", "--eval-every", "3", "--out", str(ref)])
     out = tmp_path / "g.npz"
     argv = ["--corpus", "ipa", *SMALL, "--steps", "6", "--eval-every", "3", "--out", str(out)]
     assert tg.main(argv, stop_after=4) is None
