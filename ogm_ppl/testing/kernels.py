@@ -37,11 +37,11 @@ import math
 import numpy as np
 import pytest
 import torch
-from pyro.distributions.testing.gof import multinomial_goodness_of_fit
 
 from ogm_ppl.inference.exact import brute_force
 from ogm_ppl.inference.mcmc.kernel import KernelStateError
 from ogm_ppl.inference.tiling import patch_cells
+from ogm_ppl.testing._stats import check_draws as _check_draws
 
 __all__ = ["KernelContract", "enumerable_1d", "enumerable_2d", "enumerate_maps", "sweep_matrix"]
 
@@ -219,20 +219,6 @@ def sweep_matrix(kernel, rows: torch.Tensor | None = None) -> torch.Tensor | Non
         B = sweep_matrix(kernel.base, rows)
         return None if B is None else kernel.p_guide * G + (1 - kernel.p_guide) * B
     return None
-
-
-def _check_draws(probs: torch.Tensor, counts: torch.Tensor, what: str) -> None:
-    """Chi-square of ``counts`` against ``probs``: no count where ``probs`` is 0; bins of expected count
-    below 5 pooled into one."""
-    n = int(counts.sum())
-    assert counts[probs <= 1e-15].sum() == 0, f"{what}: draws at maps of probability 0"
-    big = probs * n >= 5
-    p = torch.cat([probs[big], probs[~big].sum()[None]])
-    c = torch.cat([counts[big], counts[~big].sum()[None]])
-    if p[-1] * n < 5:
-        p, c = p[:-1], c[:-1]
-    pval = multinomial_goodness_of_fit(p / p.sum(), c, total_count=int(c.sum()))
-    assert pval > 1e-3, f"{what}: chi-square p-value {pval:.2e}"
 
 
 def enumerable_1d(K: int = 6, readings=(3.0, 4.0, 2.0), sensor=None, prior=None):
