@@ -4,11 +4,11 @@ import math
 import numpy as np
 import pytest
 import torch
-from pyro.distributions.testing.gof import multinomial_goodness_of_fit
 from scipy import stats
 from scipy.integrate import quad
 
 from ogm_ppl import GaussianRange, PatternMatch
+from ogm_ppl.testing import multinomial_goodness_of_fit
 
 F = 20
 

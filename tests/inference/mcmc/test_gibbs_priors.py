@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 import torch
-from pyro.distributions.testing.gof import multinomial_goodness_of_fit
 
 from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
 from ogm_ppl.datasets import simple_2d_example
@@ -16,6 +15,7 @@ from ogm_ppl.inference.exact.map_estimate import map_estimate
 from ogm_ppl.inference.mcmc.gibbs import CellGibbs, PatchGibbs
 from ogm_ppl.inference.mcmc.runner import RunningStats, run_gibbs
 from ogm_ppl.priors import BorderPatchPrior, MapPrior, MRFPrior, PatchTablePrior, StencilPrior
+from ogm_ppl.testing import multinomial_goodness_of_fit
 from ogm_ppl.testing.kernels import enumerable_2d
 
 from .test_gibbs import cell_update_matrix, code_of, exact_pi, model_1d, patch_update_matrix, states

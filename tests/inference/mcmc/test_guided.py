@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 import torch
-from pyro.distributions.testing.gof import multinomial_goodness_of_fit
 from pyro.infer import MCMC
 
 from ogm_ppl.inference.exact import brute_force
@@ -15,6 +14,7 @@ from ogm_ppl.inference.mcmc import CellGibbs, PatchGibbs, RunningStats, run_gibb
 from ogm_ppl.inference.mcmc.guided import GuidedGibbs
 from ogm_ppl.inference.variational.amortised import AmortisedGuide
 from ogm_ppl.priors import PatchTablePrior
+from ogm_ppl.testing import multinomial_goodness_of_fit
 
 from .test_gibbs import exact_pi, model_2d, states
 from .test_gibbs_priors import PRIORS_2D, scene_3x4

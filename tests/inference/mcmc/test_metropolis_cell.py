@@ -6,11 +6,11 @@ swapped lies far outside its tolerance."""
 import math
 
 import torch
-from pyro.distributions.testing.gof import multinomial_goodness_of_fit
 
 from ogm_ppl.inference.exact import brute_force
 from ogm_ppl.inference.mcmc.gibbs import MetropolisCell
 from ogm_ppl.inference.mcmc.runner import RunningStats, run_gibbs
+from ogm_ppl.testing import multinomial_goodness_of_fit
 
 from .test_gibbs import _lik, code_of, exact_pi, model_2d, states
 

@@ -5,12 +5,12 @@ import math
 
 import pytest
 import torch
-from pyro.distributions.testing.gof import multinomial_goodness_of_fit
 
 from ogm_ppl.inference.exact import brute_force
 from ogm_ppl.inference.mcmc.gibbs import CellGibbs, MetropolisCell, PatchGibbs
 from ogm_ppl.inference.mcmc.runner import RunningStats, run_gibbs
 from ogm_ppl.priors import DataDriven1DPrior
+from ogm_ppl.testing import multinomial_goodness_of_fit
 
 from .test_gibbs import (
     MODELS,

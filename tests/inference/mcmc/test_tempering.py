@@ -7,7 +7,6 @@ import math
 import numpy as np
 import pytest
 import torch
-from pyro.distributions.testing.gof import multinomial_goodness_of_fit
 
 from ogm_ppl.inference.exact import brute_force
 from ogm_ppl.inference.mcmc import (
@@ -23,6 +22,7 @@ from ogm_ppl.inference.mcmc.diagnostics import ess
 from ogm_ppl.inference.mcmc.tempering import TemperedPrior, check_ladder, geometric_ladder, tempered_model
 from ogm_ppl.priors import BorderPatchPrior, IndependentPrior, MRFPrior, PatchTablePrior
 from ogm_ppl.priors.compiled import patch_prior_batch
+from ogm_ppl.testing import multinomial_goodness_of_fit
 from ogm_ppl.testing.kernels import enumerable_1d, enumerate_maps, sweep_matrix
 
 

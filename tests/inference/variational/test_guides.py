@@ -3,7 +3,6 @@ import math
 
 import pytest
 import torch
-from pyro.distributions.testing.gof import multinomial_goodness_of_fit
 
 from ogm_ppl import GaussianRange, OccupancyModel, raycast
 from ogm_ppl.datasets import THESIS_TOY_READINGS, toy_1d
@@ -11,6 +10,7 @@ from ogm_ppl.inference.exact import pose_constrained_1d
 from ogm_ppl.inference.variational.guides import MeanFieldGuide, PatchGuide, fit_guide
 from ogm_ppl.metrics import kl_divergence
 from ogm_ppl.priors import IndependentPrior
+from ogm_ppl.testing import multinomial_goodness_of_fit
 
 
 def model(K=8, p_rand=1e-3):
