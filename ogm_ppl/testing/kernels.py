@@ -13,6 +13,7 @@ and gets, on enumerable problems (``2^L`` maps; exact posterior by :func:`~ogm_p
   and the kernel's own sweeps from the posterior mode follow ``P``'s row (chi-square,
   ``multinomial_goodness_of_fit``); always, ``num_draws`` one-sweep chains started from exact posterior
   draws end distributed as ``pi`` (chi-square; bins of expected count < 5 pooled);
+* ``setup()`` **restarts the chain**: set up again from one seed, it repeats the chain of a new kernel;
 * the **checkpoint round trip**: ``state_dict`` through ``np.savez`` / ``np.load(allow_pickle=False)``
   into a new kernel continues the chain bit for bit, and bad states are refused with
   :class:`~ogm_ppl.inference.mcmc.kernel.KernelStateError`;
@@ -351,6 +352,22 @@ class KernelContract:
         kernel = self.make_kernel(model)
         kernel.setup()
         self._check_stationary(kernel, pi, dim)
+
+    def test_contract_setup_restarts_the_chain(self):
+        """``setup()`` starts a chain afresh (``pyro.infer.MCMC`` calls it for each chain): from one seed, the
+        same kernel set up again, and a new kernel, repeat the chain sweep for sweep."""
+        model = self.problem_2d()
+        traces = []
+        for kernel in (a := self.make_kernel(model), a, self.make_kernel(model)):
+            torch.manual_seed(4)
+            kernel.setup()
+            params, trace = kernel.current_params(), []
+            for _ in range(15):
+                params = kernel.sample(params)
+                trace.append(kernel.state.copy())
+            traces.append(np.stack(trace))
+        assert np.array_equal(traces[0], traces[2]), "two kernels from one seed differ"
+        assert np.array_equal(traces[0], traces[1]), "setup() again did not restart the chain"
 
     def test_contract_checkpoint_round_trip(self, tmp_path):
         model = self.problem_2d()
