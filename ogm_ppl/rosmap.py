@@ -1,7 +1,8 @@
 r"""Maps for robot stacks: ROS ``map_server`` / Nav2 ``map_server`` image + YAML files.
 
 A map is a pair of files (the format of the ROS wiki page *"map_server - ROS Wiki"*, section 1
-"Map format", and the Nav2 page *"Map Server / Saver"*): an 8-bit image and a YAML file naming it.
+"Map format", and the Nav2 page *"Map Server / Saver"*): an 8-bit image and a YAML file naming it (a PGM
+of another ``maxval``, 16-bit included, is read scaled to 8 bits).
 :func:`save_ros_map` writes exactly these YAML fields, in this order and with these types::
 
     image: map.pgm                  # str: image file name, relative to the YAML file
@@ -684,19 +685,20 @@ def _read_pnm(data: bytes, path: Path) -> np.ndarray:
     w, h, maxval = tokens
     if w < 1 or h < 1 or w * h > _MAX_PIXELS:
         raise RosMapError(path, f"PGM size {w} x {h} is not a usable image size")
-    if not 1 <= maxval <= 255:
-        raise RosMapError(path, f"PGM maxval {maxval} unsupported (need 1..255, 8-bit)")
+    if not 1 <= maxval <= 65535:
+        raise RosMapError(path, f"PGM maxval {maxval} unsupported (need 1..65535)")
     px: np.ndarray
     if magic == b"P5":
         if pos >= n:
             raise RosMapError(path, "PGM truncated: no pixel data")
-        raw = data[pos + 1 : pos + 1 + w * h]
-        if len(raw) < w * h:
-            raise RosMapError(path, f"PGM truncated: {len(raw)} of {w * h} pixel bytes")
-        extra = data[pos + 1 + w * h :]
+        size = w * h * (1 if maxval <= 255 else 2)  # 16-bit samples: two bytes each, most significant first
+        raw = data[pos + 1 : pos + 1 + size]
+        if len(raw) < size:
+            raise RosMapError(path, f"PGM truncated: {len(raw)} of {size} pixel bytes")
+        extra = data[pos + 1 + size :]
         if extra.strip():
             raise RosMapError(path, _extra_data(len(extra), "bytes", w, h))
-        px = np.frombuffer(raw, dtype=np.uint8).reshape(h, w).copy()
+        px = np.frombuffer(raw, dtype=np.uint8 if maxval <= 255 else ">u2").reshape(h, w).astype(np.int64)
     else:  # P2, ASCII
         body = data[pos:].split()
         if len(body) < w * h:

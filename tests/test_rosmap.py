@@ -254,6 +254,17 @@ def test_accepts_what_map_server_accepts(tmp_path):
     assert m2.occupancy.tolist() == [100, 100, 0, 100]
 
 
+def test_a_16_bit_pgm_reads_as_its_8_bit_scaling(tmp_path):
+    """Two bytes a sample, most significant first (netpbm), scaled by maxval to 8 bits as other maxvals are:
+    the same map as the 8-bit ASCII image of the test above."""
+    text = (
+        "image: map.pgm\nresolution: 0.1\norigin: [1, -2.5, 0]\nnegate: 0\noccupied_thresh: 0.65\nfree_thresh: 0.196\n"
+    )
+    px = np.array([[0, 65535], [48059, 65535]], dtype=">u2")
+    m = load_ros_map(_write(tmp_path, text, b"P5\n2 2\n65535\n" + px.tobytes()))
+    assert m.occupancy.tolist() == [-1, 0, 100, 0]
+
+
 MALFORMED = {
     "missing key": GOOD.replace("resolution: 0.1\n", ""),
     "resolution not a number": GOOD.replace("0.1", "fast"),
@@ -281,7 +292,8 @@ BAD_IMAGES = {
     "truncated data": b"P5\n2 2\n255\n\0\0\0",
     "a row more than the header says": b"P5\n2 2\n255\n" + bytes(6),
     "values after the ASCII pixels": b"P2\n2 1\n255\n3 4 5\n",
-    "16 bit": b"P5\n2 2\n65535\n" + bytes(8),
+    "maxval past 16 bits": b"P5\n2 2\n65536\n" + bytes(8),
+    "16-bit data cut short": b"P5\n2 2\n65535\n" + bytes(7),
     "zero width": b"P5\n0 2\n255\n",
     "value above maxval": b"P2\n2 1\n15\n3 16\n",
     "not an image": b"hello, world",
