@@ -15,7 +15,8 @@ readings among them), and for the map's form also the 2D readings on a 4 x 5 gri
 * **reproducible**: two runs with one seed give the same map, bit for bit;
 * **exact** (where ``exact_tolerance`` is set): the map's probabilities, with ``exact_params`` over
   ``params``, equal the brute-force posterior marginals of the model the method targets
-  (:meth:`MethodContract.exact_model`) within the tolerance, on every cell.
+  (:meth:`MethodContract.exact_model`) within the tolerance, on every cell, and exactly 0 on the cells the
+  posterior never occupies (a sensor's own cell).
 """
 
 from __future__ import annotations
@@ -139,3 +140,5 @@ class MethodContract:
             got = self._run(name, problem, extra=self.exact_params).probabilities
             err = float(np.abs(got - exact).max())
             assert err <= self.exact_tolerance, (name, err)
+            never = exact == 0  # cells no map of positive posterior mass occupies (the sensor's own cell)
+            assert (got[never] == 0).all(), (name, "cells the posterior never occupies", got[never].tolist())

@@ -133,3 +133,38 @@ def test_the_contract_fails_a_transposed_map_and_an_all_observed_mask():
                 Contract().test_map_of_each_problem()
         finally:
             unregister_method(name)
+
+
+def test_the_contract_fails_a_sampler_whose_map_is_shifted_within_its_tolerance():
+    """A sampler's map shifted by +0.03 passes a tolerance of 0.05 but not the cells the posterior never
+    occupies (the sensor's own), which must stay exactly 0."""
+    from dataclasses import dataclass
+
+    import numpy as np
+    import pytest
+
+    from ogm_ppl.methods import get_method, register_method, unregister_method
+
+    gibbs = get_method("gibbs")
+
+    @dataclass(frozen=True)
+    class Shifted(gibbs.params):
+        pass
+
+    def shifted(params, problem, ctx):
+        r = gibbs.function(params, problem, ctx)
+        r.probabilities = np.clip(r.probabilities + 0.03, 0, 1)
+        return r
+
+    register_method("test_shifted", Shifted, stochastic=True, sampler=True)(shifted)
+    try:
+
+        class Contract(MethodContract):
+            method = "test_shifted"
+            params = {"sweeps": 20000, "burn_in": 100}
+            exact_tolerance = 0.05
+
+        with pytest.raises(AssertionError, match="never occupies"):
+            Contract().test_matches_the_exact_posterior()
+    finally:
+        unregister_method("test_shifted")
