@@ -80,10 +80,9 @@ def _fit_hint(name: str, sigma: float, F: float | None) -> str:
     fam = fit_family_for(name)
     base, prior = fam if fam is not None else ("p21", "data_driven" if name.endswith("_dd") else "uniform")
     extra = "" if prior == "uniform" else f", prior={prior!r}"
-    if fam is None:
-        extra += "  # the closest family it fits"
     f = "" if F is None else f", F={round(F)}"
-    return f"fit_delta_for_setting({base!r}, sigma={sigma:g}{f}{extra})"
+    call = f"delta, _ = fit_delta_for_setting({base!r}, sigma={sigma:g}{f}{extra})"
+    return call + ("  (the closest family it fits)" if fam is None else "")
 
 
 def setting_mismatches(

@@ -325,7 +325,7 @@ class OccupancyModel:
         rows = max(1, _TABLE_BLOCK // W)
         blocks = range(0, R, rows)
         if len(blocks) > 8:
-            from tqdm.auto import tqdm
+            from tqdm import tqdm  # (not tqdm.auto: a notebook without ipywidgets warns)
 
             blocks = tqdm(blocks, desc="likelihood table", unit="block", leave=False, disable=None)
         offsets = r.offsets

@@ -24,7 +24,6 @@ from collections.abc import Iterable
 
 import numpy as np
 import torch
-from tqdm.auto import tqdm
 
 from ogm_ppl.priors.tables import PAIR_OFFSETS, PriorTables
 
@@ -267,6 +266,8 @@ def count_tables(
     # many small ops: one thread is ~10x faster than two contending ones on a loaded 2-core machine
     torch.set_num_threads(1)
     try:
+        from tqdm import tqdm  # (not tqdm.auto: a notebook without ipywidgets warns at import)
+
         for item in tqdm(maps, desc="counting windows", unit="map", disable=not progress):
             occ, known = _as_pair(item)
             if occ.ndim != 2:
