@@ -18,11 +18,12 @@ it runs and one at the end::
 
 from __future__ import annotations
 
+import contextlib
 import sys
 import time
 from typing import IO
 
-__all__ = ["Progress", "interactive"]
+__all__ = ["Progress", "interactive", "progress_over"]
 
 
 def interactive(stream: IO | None = None) -> bool:
@@ -125,3 +126,14 @@ class Progress:
 
     def __exit__(self, *exc) -> None:
         self.close()
+
+
+def progress_over(
+    progress: bool | Progress, total: int, desc: str, *, unit: str, initial: int = 0
+) -> contextlib.AbstractContextManager[Progress]:
+    """A context giving the :class:`Progress` of a run of ``total`` ``unit``: the caller's own (``progress`` a
+    ``Progress``, which the run updates and leaves open: one chain run in several calls), or a new one (shown
+    if ``progress`` is true; plain lines once the run has taken 10 s), closed at the end."""
+    if isinstance(progress, Progress):
+        return contextlib.nullcontext(progress)
+    return Progress(total, desc, unit=unit, enabled=bool(progress), initial=initial, after=10.0)

@@ -69,3 +69,21 @@ def test_after_keeps_a_short_run_quiet_and_a_resumed_run_estimates_from_its_own_
         "gibbs sweeps: 60/100 (60 %), 10 s, ~20 s left",
         "gibbs sweeps: 100/100 (100 %), 30 s, done",
     ]
+
+
+def test_progress_over_leaves_a_callers_progress_open_and_closes_its_own():
+    """A run given its caller's Progress updates it and leaves it open (one chain in several calls: one
+    "done" line at the end); given True it makes its own and closes it."""
+    from ogm_ppl.progress import progress_over
+
+    s = io.StringIO()
+    mine = Progress(4, "sweeps", stream=s, every=0.0, bar=False)
+    for _ in range(2):
+        with progress_over(mine, 4, "ignored", unit="sweep") as bar:
+            assert bar is mine
+            bar.update(2)
+    assert "done" not in s.getvalue()
+    mine.close()
+    assert s.getvalue().count("done") == 1
+    with progress_over(False, 3, "x", unit="sweep") as own:
+        assert isinstance(own, Progress) and not own.enabled

@@ -90,8 +90,9 @@ class ExperimentResult:
 
 
 # ------------------------------------------------------------------------------------------ planning
-def plan_tasks(spec: ExperimentSpec, out: Path, resume: bool = True) -> list[Task]:
-    """The tasks of ``spec`` in dependency order."""
+def plan_tasks(spec: ExperimentSpec, out: Path, resume: bool = True, progress: bool = False) -> list[Task]:
+    """The tasks of ``spec`` in dependency order; ``progress``: a run task prints the progress of a long run
+    (plain lines, labelled ``DATASET/ALGORITHM/cN``)."""
     out = Path(out)
     m, o = T.spec_entry(spec.metrics), T.spec_entry(spec.output)
     tasks: list[Task] = []
@@ -145,7 +146,7 @@ def plan_tasks(spec: ExperimentSpec, out: Path, resume: bool = True) -> list[Tas
                         "run",
                         T.run_algorithm,
                         (ds, alg, c, seed, spec.metrics, spec.output, str(out), h),
-                        {"resume": resume},
+                        {"resume": resume, "progress": progress},
                         [f"dataset/{ds.name}"],
                         T.run_dir(out, ds, alg, c) / "result.json",
                         h,
@@ -168,12 +169,6 @@ def plan_tasks(spec: ExperimentSpec, out: Path, resume: bool = True) -> list[Tas
 
 
 # ------------------------------------------------------------------------------------------ executing
-def _with_progress(t: Task, progress: bool) -> dict:
-    """A task's keyword arguments; a map method's run task also shows the progress of a long run (plain lines,
-    labelled)."""
-    return {**t.kwargs, "progress": progress} if t.fn is T.run_algorithm else dict(t.kwargs)
-
-
 def _execute_serial(todo: list[Task], progress: bool):
     results, failed = {}, {}
     with Progress(len(todo), "tasks", enabled=progress) as bar:
@@ -183,7 +178,7 @@ def _execute_serial(todo: list[Task], progress: bool):
                 failed[t.id] = f"dependency {bad[0]} failed"
             else:
                 try:
-                    results[t.id] = t.fn(*t.args, **_with_progress(t, progress))
+                    results[t.id] = t.fn(*t.args, **t.kwargs)
                 except Exception as e:  # keep going: independent tasks still finish, and a rerun resumes
                     failed[t.id] = f"{type(e).__name__}: {e}"
             bar.update(note=t.id)
@@ -236,7 +231,7 @@ def _execute_dask(todo: list[Task], client, progress: bool):
     token = f"{time.time_ns():x}"
     for t in todo:
         deps = [futures[d] for d in t.deps if d in futures]
-        kw = _with_progress(t, progress)
+        kw = dict(t.kwargs)
         if deps:
             kw["_deps" if t.kind != "dataset" else "_base"] = deps
         f = client.submit(t.fn, *t.args, key=f"{t.id}-{token}", pure=False, **kw)
@@ -363,7 +358,7 @@ def run_experiment(
     if spec.source != "<dict>" and Path(spec.source).exists():
         shutil.copyfile(spec.source, out / "spec.toml")
     atomic_write_text(out / "spec.json", json.dumps(spec.to_json(), indent=1, default=str))
-    tasks = plan_tasks(spec, out, resume)
+    tasks = plan_tasks(spec, out, resume, progress)
     todo, skipped, done_recs, results, failed = execute_tasks(
         tasks, scheduler, workers, resume, progress, scratch=out / SCRATCH
     )

@@ -41,7 +41,7 @@ def method_problems():
 
 
 def unreached_problem():
-    """``("2d-unreached", MapProblem)``: the 2D problem's readings on a 4 x 4 grid, whose top rows no ray
+    """``("2d-unreached", MapProblem)``: the 2D problem's readings on a 4 x 5 grid, whose top rows no ray
     crosses (their cells must not be ``observed``), not square (a transposed map cannot pass)."""
     from ogm_ppl import Grid
     from ogm_ppl.methods import MapProblem

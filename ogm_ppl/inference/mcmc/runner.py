@@ -29,7 +29,7 @@ import torch
 from ogm_ppl.inference.mcmc.fingerprint import fingerprint
 from ogm_ppl.io import atomic_write
 from ogm_ppl.posterior import mutual_information_from_joint
-from ogm_ppl.progress import Progress
+from ogm_ppl.progress import Progress, progress_over
 
 __all__ = ["CheckpointError", "GibbsRun", "RunningStats", "run_gibbs"]
 
@@ -297,31 +297,24 @@ def run_gibbs(
     params = kernel.current_params()
     t0 = time.perf_counter()
     done = start
-    # a bar on a terminal; elsewhere (logs, pipes, notebooks) a plain line every 10 s once a run passes 10 s
-    own = not isinstance(progress, Progress)
-    bar = (
-        progress
-        if isinstance(progress, Progress)
-        else Progress(total, "gibbs sweeps", unit="sweep", enabled=bool(progress), initial=start, after=10.0)
-    )
     try:
-        for i in range(start, total):
-            params = kernel.sample(params)
-            if i >= warmup:
-                stats.update(params[kernel.site])
-                if store is not None and store_every and (i - warmup) % store_every == 0:
-                    with atomic_write(store / f"sweep_{i:09d}.npy") as f:
-                        np.save(f, np.packbits(kernel.state))
-            done = i + 1
-            bar.update(1)
-            if ckpt is not None and done % checkpoint_every == 0:
-                _save_checkpoint(ckpt, kernel, stats, done, seed, warmup, fp, before + time.perf_counter() - t0)
-            if stop["flag"] or (stop_after is not None and done - start >= stop_after):
-                stop["flag"] = True
-                break
+        with progress_over(progress, total, "gibbs sweeps", unit="sweep", initial=start) as bar:
+            for i in range(start, total):
+                params = kernel.sample(params)
+                if i >= warmup:
+                    stats.update(params[kernel.site])
+                    if store is not None and store_every and (i - warmup) % store_every == 0:
+                        with atomic_write(store / f"sweep_{i:09d}.npy") as f:
+                            np.save(f, np.packbits(kernel.state))
+                done = i + 1
+                bar.update(1)
+                if ckpt is not None and done % checkpoint_every == 0:
+                    elapsed = before + time.perf_counter() - t0
+                    _save_checkpoint(ckpt, kernel, stats, done, seed, warmup, fp, elapsed)
+                if stop["flag"] or (stop_after is not None and done - start >= stop_after):
+                    stop["flag"] = True
+                    break
     finally:
-        if own:
-            bar.close()
         if old is not None:
             signal.signal(signal.SIGINT, old)
         seconds = time.perf_counter() - t0

@@ -22,7 +22,6 @@ ray that returned a hit is impossible, and every full-support guide samples such
 
 from __future__ import annotations
 
-import contextlib
 import itertools
 import math
 import warnings
@@ -38,7 +37,7 @@ from torch.distributions import constraints
 from ogm_ppl.inference.tiling import tile_patches
 from ogm_ppl.inference.variational.elbo import ExactELBO, mean_field_elbo
 from ogm_ppl.models.occupancy import OccupancyModel
-from ogm_ppl.progress import Progress
+from ogm_ppl.progress import Progress, progress_over
 
 __all__ = ["MeanFieldGuide", "PatchGuide", "PatchMapDistribution", "fit_guide", "guide_name"]
 
@@ -245,13 +244,7 @@ def fit_guide(
     svi = SVI(model.model, guide, Adam({"lr": lr}), objective)
     losses = []
     # a bar on a terminal; elsewhere a plain line every 10 s once the fit has taken 10 s
-    own = not isinstance(progress, Progress)
-    bar = (
-        progress
-        if isinstance(progress, Progress)
-        else Progress(steps, "svi steps", unit="step", enabled=progress, after=10.0)
-    )
-    with bar if own else contextlib.nullcontext(bar):
+    with progress_over(progress, steps, "svi steps", unit="step") as bar:
         for step in range(steps):
             with warnings.catch_warnings():
                 warnings.filterwarnings("ignore", message="Encountered NaN", category=UserWarning)
