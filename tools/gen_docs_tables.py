@@ -322,8 +322,8 @@ def _headline(doc: dict) -> Table:
     return Table(
         caption="Intel Lab log at 5 cm, half the beams: best F1 / ROC AUC / best F1 on the touched cells"
         + (
-            " / seconds per map (one chain, compiling excluded; a method fitted for the sensor fits its term in"
-            " its first map)"
+            " / seconds per map (wall time on the machine below, which a rerun elsewhere will not repeat; one"
+            " chain, compiling excluded; a method fitted for the sensor fits its term in its first map)"
             if timed
             else ""
         ),
