@@ -78,6 +78,7 @@ METHOD_FLAGS = {
     "--prior": ("prior", "prior"),
     "--lambda": ("lam", "lam"),
     "--sigma": ("sigma_cells", "sigma"),
+    "--sensor": ("sensor", "sensor"),
     "--sweeps": ("sweeps", "sweeps"),
     "--warmup": ("burn_in", "warmup"),
     "--patch": ("patch", "patch"),
@@ -343,6 +344,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="parameter sigma_cells: standard deviation of the Gaussian range model in cells "
         "(default: the dataset's simulation sigma if recorded, else 1.0 cell, about the "
         "scatter of a corrected real log at 5 cm)",
+    )
+    m.add_argument(
+        "--sensor",
+        metavar="NAME",
+        help="parameter sensor of the model-based methods: the forward sensor model by name "
+        "(ogm_ppl.sensors.sensor_by_name; default gaussian, the Gaussian range model of --sigma; a kind of "
+        "your own registered with register_sensor in a module named in $OGM_PPL_METHODS)",
     )
     m.add_argument(
         "--sweeps",
@@ -860,7 +868,6 @@ def _online_map(
     """``--online``: the scans replayed one at a time into :class:`~ogm_ppl.inference.online.OnlineMap`
     (:func:`~ogm_ppl.inference.online.replay`); the snapshots ride in ``details["_snapshots"]``."""
     from ogm_ppl.inference.online import replay
-    from ogm_ppl.sensors import GaussianRange
 
     if method.name != "gibbs" or params.patch != 1 or params.chains != 1 or params.update == "thesis":
         raise CLIError("--online runs one single-cell Gibbs chain: use --method gibbs (patch 1, one chain)")
@@ -871,11 +878,12 @@ def _online_map(
             f"--online starts from thresholded traditional OGM (init=ogm, init_delta=haehnel) or all free "
             f"(init=free), got init={params.init!r}, init_delta={params.init_delta!r}"
         )
+    sensor = problem.sensor(params.sensor, params.sigma_cells, params.p_rand)
     t0 = time.perf_counter()
     r = replay(
         problem.grid,
         problem.scans,
-        GaussianRange(problem.sigma(params.sigma_cells)),
+        sensor,
         problem.prior(params.prior, params.lam),
         burn_in=params.burn_in,
         sweeps=params.sweeps,
@@ -889,6 +897,7 @@ def _online_map(
     om = r.online
     details = {
         **dataclasses.asdict(params),
+        "sensor_model": repr(sensor),
         "kernel": "OnlineMap",
         "seed": args.seed,
         "online": {

@@ -26,15 +26,39 @@ kappa values. In 2D this keeps ``p(z | f)`` centred where the beam meets the wal
 (diagonal rays cross more cells per metre; integer kappa would shift the centre by up to half a cell).
 A discrete sensor (``continuous_range = False``, ``PatternMatch``) compares the reading's kappa
 ``rays.z`` with the first hit's kappa ``f``.
+
+**Sensors by name.** The map methods, the command line (``--sensor``) and experiment specs build their
+sensor with :func:`sensor_by_name` from a kind, the range noise ``sigma_cells`` and the share of random
+readings ``p_rand``. The library ships ``gaussian`` (:class:`GaussianRange`); a sensor of your own registers a
+factory ``factory(sigma_cells, p_rand) -> SensorModel`` with :func:`register_sensor`. Name its module in
+``$OGM_PPL_METHODS`` (comma-separated modules, imported by :mod:`ogm_ppl.methods` in every process) for the
+command line and dask workers to find it:
+
+>>> register_sensor("gaussian2", lambda sigma_cells, p_rand: GaussianRange(2 * sigma_cells, p_rand))
+>>> sensor_by_name("gaussian2", 1.5)
+GaussianRange(sigma=3.0, p_rand=0.0)
+>>> unregister_sensor("gaussian2")
 """
 
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import torch
 
-__all__ = ["SensorModel", "GaussianRange", "PatternMatch"]
+from ogm_ppl._registry import Registry
+
+__all__ = [
+    "SENSOR_KINDS",
+    "GaussianRange",
+    "PatternMatch",
+    "SensorModel",
+    "register_sensor",
+    "sensor_by_name",
+    "sensor_kinds",
+    "unregister_sensor",
+]
 
 _LOG_SQRT_2PI = 0.5 * math.log(2 * math.pi)
 
@@ -196,3 +220,51 @@ class PatternMatch(SensorModel):
         out = torch.where(keep, truth, other)
         is_max = out > F
         return torch.where(is_max, F + 1.0, out), is_max
+
+
+#: the kinds the library ships: ``gaussian`` is ``GaussianRange(sigma_cells, p_rand)``
+SENSOR_KINDS: tuple[str, ...] = ("gaussian",)
+
+#: ``factory(sigma_cells, p_rand) -> SensorModel``: the range noise in cells (the data's, or the method's
+#: ``sigma_cells``) and the share of random readings in ``[0, 1)``; a factory may ignore either
+SensorFactory = Callable[[float, float], SensorModel]
+_REGISTRY: Registry[SensorFactory] = Registry("sensor", SENSOR_KINDS)
+
+
+def register_sensor(kind: str, factory: SensorFactory) -> None:
+    """Make ``sensor_by_name(kind, sigma_cells, p_rand)`` build ``factory(sigma_cells, p_rand)``.
+
+    ``kind`` is a non-empty name without ``:``; registering a shipped kind or a name another factory took is
+    refused (:func:`unregister_sensor` first); the same factory's module run again (reloaded) registers anew.
+    Test the sensor with :class:`~ogm_ppl.testing.SensorContract`.
+    """
+    _REGISTRY.register(kind, factory)
+
+
+def unregister_sensor(kind: str) -> None:
+    """Remove a kind added by :func:`register_sensor` (the shipped kinds stay)."""
+    _REGISTRY.unregister(kind)
+
+
+def sensor_kinds() -> tuple[str, ...]:
+    """Every kind :func:`sensor_by_name` knows: the shipped ones, then the registered ones."""
+    return _REGISTRY.kinds()
+
+
+def sensor_by_name(name: str, sigma_cells: float = 1.0, p_rand: float = 0.0) -> SensorModel:
+    """The sensor of kind ``name`` (module docstring) for range noise ``sigma_cells`` (cells, ``> 0``) and a
+    share ``p_rand`` of random readings (``[0, 1)``); ``ValueError`` on an unknown kind (listing the kinds) or
+    on parameters out of range, ``TypeError`` if the factory returns no :class:`SensorModel`."""
+    factory = _REGISTRY.get(name, name)
+    sigma_cells, p_rand = float(sigma_cells), float(p_rand)
+    if not (math.isfinite(sigma_cells) and sigma_cells > 0):
+        raise ValueError(f"sigma_cells must be positive and finite, got {sigma_cells}")
+    if not 0.0 <= p_rand < 1.0:
+        raise ValueError(f"p_rand must lie in [0, 1), got {p_rand}")
+    sensor = factory(sigma_cells, p_rand)
+    if not isinstance(sensor, SensorModel):
+        raise TypeError(f"the factory of sensor kind {name!r} returned {type(sensor).__name__}, not a SensorModel")
+    return sensor
+
+
+register_sensor("gaussian", GaussianRange)

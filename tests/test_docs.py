@@ -87,6 +87,9 @@ def test_extending_page_examples_run_and_build_what_their_contracts_test():
             assert tests[name]().make_prior(5).log_prob(np.zeros(5)).shape == ()
         for name in kinds["SensorContract"]:
             assert isinstance(tests[name]().make_sensor(), GaussianRange)
+        from ogm_ppl.sensors import sensor_by_name
+
+        assert repr(sensor_by_name("my_sensor", 2.5, 0.1)) == "GaussianRange(sigma=2.5, p_rand=0.0)"
         from ogm_ppl.methods import MapProblem, RunContext, get_method
         from ogm_ppl.testing.kernels import enumerable_2d_data
 
@@ -105,6 +108,9 @@ def test_extending_page_examples_run_and_build_what_their_contracts_test():
 
         unregister_method("endpoints")
         unregister_method("my_chain")
+        from ogm_ppl.sensors import unregister_sensor
+
+        unregister_sensor("my_sensor")
 
 
 @pytest.mark.parametrize("name", MODULES)

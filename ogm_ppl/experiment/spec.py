@@ -48,7 +48,10 @@ Tables (every key optional unless marked *required*; defaults in brackets)::
       patch_map:        patch [[3, 3]], mode ["offline" | "online"], overlap [false],
                         prior ["independent"], sigma_cells [the dataset's]
       amortised:        guide ["shipped"; "corpus:CORPUS": the guide learned on a corpus's plans; or a .npz]
-      also:             metropolis, vi, guided_gibbs, and the aliases p21, elfes, patch
+      also:             metropolis, vi, guided_gibbs, tempering, and the aliases p21, elfes, patch
+      every model-based method (gibbs, patch_map, metropolis, vi, guided_gibbs, tempering) also takes
+                        sensor ["gaussian"; see ogm_ppl.sensors.sensor_by_name] and p_rand [0.0; vi 0.001]
+                        (the sensor model's share of random readings)
     [metrics]           mask ["auto": "known" for simulated, "near_mapped" for logs; "all": every cell;
                         "known": a plan's walls and free space, not its exterior nor the crop's margin (every
                         cell of a generated map)], near_mapped_distance

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from ogm_ppl.methods.params import Float, Optional, ParamError, PriorName, param
+from ogm_ppl.methods.params import Float, Optional, ParamError, PriorName, SensorName, param
 from ogm_ppl.methods.problem import MapProblem
 
 __all__ = ["ModelParams", "patch_arg"]
@@ -12,7 +12,8 @@ __all__ = ["ModelParams", "patch_arg"]
 
 @dataclass(frozen=True)
 class ModelParams:
-    """The model ``p(m) p(z | m)``: a prior by name and ``GaussianRange(sigma_cells)``."""
+    """The model ``p(m) p(z | m)``: a prior by name and a sensor by name
+    (:func:`~ogm_ppl.sensors.sensor_by_name`: ``gaussian`` is ``GaussianRange(sigma_cells, p_rand)``)."""
 
     prior: str = param(
         "independent",
@@ -29,17 +30,29 @@ class ModelParams:
         Optional(Float(0, lo_open=True)),
         "range noise of the sensor model in cells (default: the data's)",
     )
+    sensor: str = param(
+        "gaussian",
+        SensorName(),
+        "forward sensor model (sensor_by_name: gaussian, or a kind registered with register_sensor)",
+    )
+    p_rand: float = param(
+        0.0, Float(0, 1, hi_open=True), "sensor model's share of random readings (0: the thesis's model)"
+    )
 
     def check(self) -> None:
         if self.lam is not None and self.prior != "independent":
             raise ParamError("lam", f"applies to the prior 'independent' only, not to {self.prior!r}")
 
-    def model(self, problem: MapProblem, p_rand: float = 0.0):
+    def model(self, problem: MapProblem):
         """The :class:`~ogm_ppl.models.OccupancyModel` of ``problem`` under these parameters."""
-        return problem.model(self.prior, self.lam, self.sigma_cells, p_rand)
+        return problem.model(self.prior, self.lam, self.sigma_cells, self.p_rand, self.sensor)
 
     def model_details(self, problem: MapProblem) -> dict:
-        return {"sigma_cells": problem.sigma(self.sigma_cells), "ray_cells": int(problem.rays.nnz)}
+        return {
+            "sigma_cells": problem.sigma(self.sigma_cells),
+            "sensor_model": repr(problem.sensor(self.sensor, self.sigma_cells, self.p_rand)),
+            "ray_cells": int(problem.rays.nnz),
+        }
 
 
 def patch_arg(patch):

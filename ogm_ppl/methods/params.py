@@ -41,6 +41,7 @@ __all__ = [
     "ParamError",
     "Patch",
     "PriorName",
+    "SensorName",
     "Text",
     "param",
     "param_fields",
@@ -333,6 +334,25 @@ class PriorName(Kind):
 
     def describe(self):
         return "prior name"
+
+
+class SensorName(Kind):
+    """A forward sensor model by name (:func:`~ogm_ppl.sensors.sensor_by_name`: ``gaussian``, or a kind
+    registered with :func:`~ogm_ppl.sensors.register_sensor`)."""
+
+    def value(self, v):
+        name = Text().value(v)
+        from ogm_ppl.sensors import sensor_kinds
+
+        if name not in sensor_kinds():
+            raise _Bad(
+                f"unknown sensor kind {name!r}; kinds: {', '.join(sensor_kinds())} (a kind of your own: register "
+                "it with ogm_ppl.sensors.register_sensor in a module named in $OGM_PPL_METHODS)"
+            )
+        return name
+
+    def describe(self):
+        return "sensor name"
 
 
 class DeltaName(Kind):

@@ -2,8 +2,7 @@ r"""What a map method is given and what it returns.
 
 * :class:`MapProblem` — the data: a grid, the scans, the sensor's range noise in cells if known. It traces
   the rays once (:attr:`MapProblem.rays`, timed) and builds the occupancy model
-  ``p(m) prod_n p(z_n | f_n(m))`` (Eq. 2.6) of a prior and a Gaussian range sensor
-  (:meth:`MapProblem.model`).
+  ``p(m) prod_n p(z_n | f_n(m))`` (Eq. 2.6) of a prior and a sensor, each by name (:meth:`MapProblem.model`).
 * :class:`RunContext` — how to run: seed, chain, folders for checkpoints and caches, resume, a stop after
   some sweeps, progress, and a scoring function for the records of running marginals.
 * :class:`MapResult` — ``K`` occupancy probabilities, the observed mask, timings and JSON-able details.
@@ -26,6 +25,7 @@ if TYPE_CHECKING:
     from ogm_ppl.models.occupancy import OccupancyModel
     from ogm_ppl.raycast import Rays
     from ogm_ppl.scans import Scans
+    from ogm_ppl.sensors import SensorModel
 
 __all__ = ["DEFAULT_SIGMA_CELLS", "MapProblem", "MapResult", "RunContext"]
 
@@ -81,20 +81,27 @@ class MapProblem:
             return IndependentPrior(float(lam), self.grid.num_cells)
         return prior_by_name(name, self.grid.shape)
 
+    def sensor(self, name: str = "gaussian", sigma_cells: float | None = None, p_rand: float = 0.0) -> SensorModel:
+        """The sensor ``name`` (:func:`~ogm_ppl.sensors.sensor_by_name`) for the range noise
+        :meth:`sigma` ``(sigma_cells)`` and a share ``p_rand`` of random readings; ``"gaussian"`` is
+        ``GaussianRange(sigma(sigma_cells), p_rand)``."""
+        from ogm_ppl.sensors import sensor_by_name
+
+        return sensor_by_name(name, self.sigma(sigma_cells), p_rand)
+
     def model(
         self,
         prior: str = "independent",
         lam: float | None = None,
         sigma_cells: float | None = None,
         p_rand: float = 0.0,
+        sensor: str = "gaussian",
     ) -> OccupancyModel:
-        """The occupancy model of :meth:`prior` and ``GaussianRange(sigma(sigma_cells), p_rand)``."""
+        """The occupancy model of :meth:`prior` ``(prior, lam)`` and :meth:`sensor` ``(sensor, sigma_cells,
+        p_rand)``."""
         from ogm_ppl.models.occupancy import OccupancyModel
-        from ogm_ppl.sensors import GaussianRange
 
-        return OccupancyModel(
-            self.grid, self.rays, GaussianRange(self.sigma(sigma_cells), p_rand), self.prior(prior, lam)
-        )
+        return OccupancyModel(self.grid, self.rays, self.sensor(sensor, sigma_cells, p_rand), self.prior(prior, lam))
 
 
 @dataclass

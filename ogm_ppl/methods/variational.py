@@ -28,7 +28,9 @@ class VIParams(ModelParams):
     lr: float = param(0.05, Float(0, lo_open=True), "Adam's learning rate")
     num_particles: int = param(64, Int(lo=1), "particles per step (tracegraph, rws)")
     patch: object = param(3, Patch(max_cells=12), "patch guide: the patch shape")
-    p_rand: float = param(1e-3, Float(0, 1, hi_open=True), "sensor's uniform-outlier weight (reverse KL needs > 0)")
+    p_rand: float = param(
+        1e-3, Float(0, 1, hi_open=True), "sensor model's share of random readings (reverse KL needs > 0)"
+    )
 
     def check(self) -> None:
         super().check()
@@ -43,7 +45,7 @@ def vi(params: VIParams, problem: MapProblem, ctx: RunContext) -> MapResult:
     """Variational inference with a mean-field, patch or first-hit guide (Pyro SVI)."""
     from ogm_ppl.inference.variational import FirstHitGuide, MeanFieldGuide, PatchGuide, fit_guide
 
-    model = params.model(problem, p_rand=params.p_rand)
+    model = params.model(problem)
     if params.loss == "exact" and model.prior.cell_log_odds() is None:
         raise ParamError("loss", f"the closed-form ELBO needs a prior with independent cells, not {params.prior!r}")
     if params.guide == "mean_field":

@@ -58,6 +58,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from ogm_ppl._registry import Registry
 from ogm_ppl.priors.base import MapPrior
 
 if TYPE_CHECKING:
@@ -97,7 +98,8 @@ DEFAULT_CORPUS = "houseexpo"
 #: ``factory(shape, tables) -> MapPrior``: ``shape`` the grid's shape (a tuple), ``tables`` a
 #: :class:`CorpusTables` (``tables()`` the corpus's :class:`~ogm_ppl.priors.tables.PriorTables`)
 PriorFactory = Callable[[tuple, "CorpusTables"], MapPrior]
-_FACTORIES: dict[str, PriorFactory] = {}
+_REGISTRY: Registry[PriorFactory] = Registry("prior", PRIOR_KINDS)
+_FACTORIES = _REGISTRY.factories
 
 
 def register_prior(kind: str, factory: PriorFactory) -> None:
@@ -108,31 +110,17 @@ def register_prior(kind: str, factory: PriorFactory) -> None:
     ``tables()`` returns the tables of ``CORPUS`` (default ``houseexpo``) or those passed to
     :func:`prior_by_name`.
     """
-    if not isinstance(kind, str) or not kind or ":" in kind:
-        raise ValueError(f"a prior kind is a non-empty name without ':', got {kind!r}")
-    if not callable(factory):
-        raise TypeError(f"the factory of prior kind {kind!r} must be callable, got {type(factory).__name__}")
-    old = _FACTORIES.get(kind)
-    if old is not None and _where(old) != _where(factory):  # the same place again: a module reloaded
-        raise ValueError(f"prior kind {kind!r} is already registered ({_where(old)[0]}.{_where(old)[1]})")
-    _FACTORIES[kind] = factory
-
-
-def _where(factory) -> tuple[str, str]:
-    """Where a factory was defined: ``(module, qualified name)``."""
-    return getattr(factory, "__module__", "?") or "?", getattr(factory, "__qualname__", repr(factory))
+    _REGISTRY.register(kind, factory)
 
 
 def unregister_prior(kind: str) -> None:
     """Remove a kind added by :func:`register_prior` (the shipped kinds stay)."""
-    if kind in PRIOR_KINDS:
-        raise ValueError(f"{kind!r} is a shipped prior kind")
-    _FACTORIES.pop(kind, None)
+    _REGISTRY.unregister(kind)
 
 
 def prior_kinds() -> tuple[str, ...]:
     """Every kind :func:`prior_by_name` knows: the shipped ones, then the registered ones."""
-    return tuple(_FACTORIES)
+    return _REGISTRY.kinds()
 
 
 def _shape(shape) -> tuple[int, ...]:
@@ -153,14 +141,9 @@ def prior_by_name(name: str, shape, tables: PriorTables | None = None) -> MapPri
             The pattern fields (``field``, ``field2``) are not built from tables and refuse them.
     """
     kind, corpus, at, modifier = split_prior_name(name)
-    if kind not in _FACTORIES:
-        raise ValueError(
-            f"unknown prior kind {kind!r} in {name!r}; kinds: {', '.join(prior_kinds())} (a kind registered "
-            "in a module of your own: import it first, or name the module in $OGM_PPL_METHODS for the command "
-            "line and dask workers)"
-        )
+    factory = _REGISTRY.get(kind, name)
     beta = _exponent(name, kind, corpus, modifier, tables) if at else 1.0
-    prior = _FACTORIES[kind](_shape(shape), CorpusTables(corpus, tables))
+    prior = factory(_shape(shape), CorpusTables(corpus, tables))
     if beta == 1.0:
         return prior
     from ogm_ppl.priors.tempered import TemperedPrior
