@@ -189,9 +189,11 @@ def run_base(ds, out: str | Path, h: str, max_cells: int = MAX_CELLS) -> dict:
             if "plan" in p:  # a floor plan of your own: its unknown cells (outside, unseen) are walls
                 from ogm_ppl.datasets.plan_files import load_plan_file
 
-                plan = load_plan_file(
-                    p["plan"], pixel_size=p["pixel_size"], resolution=p["resolution"], outside="unknown"
-                )
+                with warnings.catch_warnings():  # parse_spec read the plan and showed its warnings once
+                    warnings.filterwarnings("ignore", message=r".*origin yaw .* ignored", category=UserWarning)
+                    plan = load_plan_file(
+                        p["plan"], pixel_size=p["pixel_size"], resolution=p["resolution"], outside="unknown"
+                    )
                 kind = "plan"
                 # a plan's row 0 is the image's top; a grid's row 0 is its bottom (smallest y)
                 known = np.flipud(np.asarray(plan.known, bool))

@@ -608,3 +608,37 @@ def test_a_long_run_task_prints_progress_lines_naming_it(serial_run, tmp_path, m
     assert mine and mine[-1].endswith(", done")
     assert [line for line in err if line.startswith("tasks: ")]
     _same(_numbers(serial_run.out_dir), _numbers(out))
+
+
+def test_a_ros_map_plan_with_an_origin_yaw_warns_once(tmp_path):
+    """The yaw a ROS map's origin carries is ignored with a warning: once per experiment (when the spec is read),
+    not again when the dataset's task reads the plan."""
+    import re
+    import warnings
+
+    from ogm_ppl.grid import Grid
+    from ogm_ppl.rosmap import save_ros_map
+
+    truth = np.zeros((64, 64))
+    truth[[0, -1], :] = truth[:, [0, -1]] = truth[30, 10:40] = 1.0
+    files = save_ros_map(tmp_path / "plan.yaml", truth, Grid((64, 64), resolution=0.05), sidecar=False)
+    text = files.yaml.read_text()
+    files.yaml.write_text(re.sub(r"origin: \[([^,]+), ([^,]+), [^\]]+\]", r"origin: [\1, \2, 0.5]", text))
+    d = tiny()
+    d["datasets"][0] = {
+        "name": "ros",
+        "kind": "simulated",
+        "plan": str(files.yaml),
+        "poses": 2,
+        "beams": 36,
+        "max_range_cells": 20,
+        "sigma_cells": 1.0,
+    }
+    d["algorithms"] = [d["algorithms"][0]]
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        r = run_experiment(parse_spec(d, "tiny.toml"), tmp_path / "out", scheduler="serial", progress=False)
+    assert not r.failed
+    assert [str(w.message) for w in caught if "origin yaw" in str(w.message)] == [
+        f"{files.yaml}: origin yaw 0.5 ignored (ogm_ppl grids are axis-aligned)"
+    ]
