@@ -288,6 +288,19 @@ def build_parser() -> argparse.ArgumentParser:
         help="world coordinates (metres) of the grid's lower-left corner",
     )
     m.add_argument(
+        "--crop",
+        action="store_true",
+        help="with --size: map the part of the data the grid covers, keeping the scans whose pose lies on "
+        "it (beams reaching beyond it are clipped at its edge) instead of refusing the others",
+    )
+    m.add_argument(
+        "--scans",
+        type=_scan_range,
+        metavar="A:B",
+        help="map the scans A to B - 1 of the input (0-based, as Python slices: 100:400, :400, 100:), "
+        "counted before --pose-step / --pose-fraction thin them",
+    )
+    m.add_argument(
         "--margin",
         type=_nonneg_float,
         metavar="M",
@@ -577,14 +590,32 @@ def _prepare_out_file(out: Path) -> None:
 
 
 def _reader_kwargs(args) -> dict:
+    stretch = getattr(args, "scans", None) is not None  # thinned after the stretch is cut (_select_scans)
     return dict(
         strict=not args.lenient,
         max_usable_range=args.max_usable_range,
         no_return=args.no_return or "drop",
-        pose_step=args.pose_step,
-        pose_fraction=args.pose_fraction,
+        pose_step=1 if stretch else args.pose_step,
+        pose_fraction=None if stretch else args.pose_fraction,
         beam_step=args.beam_step,
     )
+
+
+def _select_scans(args, inp: _Input) -> _Input:
+    """``--scans A:B``: the stretch of the scans as read (the reader did not thin them), then thinned by
+    ``--pose-step`` / ``--pose-fraction``."""
+    if getattr(args, "scans", None) is None:
+        return inp
+    lo, hi = args.scans
+    S = inp.scans.num_scans
+    a, b = lo or 0, S if hi is None else min(hi, S)
+    if a >= b:
+        given = f"{'' if lo is None else lo}:{'' if hi is None else hi}"
+        raise CLIError(f"--scans {given}: {inp.path} holds {S} scans (0..{S - 1})")
+    scans = inp.scans.select(np.arange(a, b))
+    if args.pose_step != 1 or args.pose_fraction is not None:
+        scans = scans.subsample(args.pose_step, 1, args.pose_fraction)
+    return dataclasses.replace(inp, scans=scans, selected_from=inp.selected_from or S)
 
 
 def _jsonable(x):
@@ -600,6 +631,22 @@ def _jsonable(x):
     if isinstance(x, float) and not math.isfinite(x):
         return None
     return x
+
+
+def _scan_range(text: str) -> tuple[int | None, int | None]:
+    """``A:B``, ``A:`` or ``:B`` (non-negative integers, ``A < B``) as ``(A, B)`` with ``None`` for an open end."""
+    a, colon, b = text.partition(":")
+    try:
+        if not colon:
+            raise ValueError
+        lo, hi = (int(a) if a.strip() else None), (int(b) if b.strip() else None)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"expected A:B (scan indices, e.g. 100:400), got {text!r}") from None
+    if (lo is not None and lo < 0) or (hi is not None and hi < 0):
+        raise argparse.ArgumentTypeError(f"scan indices must be >= 0, got {text!r}")
+    if lo is not None and hi is not None and hi <= lo:
+        raise argparse.ArgumentTypeError(f"the range {text!r} holds no scan (B must exceed A)")
+    return lo, hi
 
 
 def _check_cells(rows: int, cols: int, limit: int) -> None:
@@ -621,6 +668,7 @@ class _Input:
     log: CarmenLog | None = None
     settings: dict = field(default_factory=dict)
     bag: BagLog | None = None
+    selected_from: int | None = None  # the scans read before --scans or --crop kept some of them
 
 
 def _is_bag(path: Path) -> bool:
@@ -683,7 +731,7 @@ def _read_input(args) -> _Input:
 
     if _is_bag(args.input):
         bag = read_bag(args.input, **_bag_kwargs(args, args.input))
-        return _Input("bag", args.input, bag.scans, bag=bag)
+        return _select_scans(args, _Input("bag", args.input, bag.scans, bag=bag))
     _refuse_bag_flags(args, args.input)
     magic = _check_input(args.input)
     if magic[:2] == b"PK":
@@ -696,15 +744,19 @@ def _read_input(args) -> _Input:
                 raise CLIError(f"{flag} applies to CARMEN logs and ROS bags; {args.input} is a dataset file")
         ds = load_dataset(args.input)
         scans = ds.scans
-        if args.pose_step != 1 or args.pose_fraction is not None or args.beam_step != 1:
-            scans = scans.subsample(args.pose_step, args.beam_step, args.pose_fraction)
-        return _Input("dataset", args.input, scans, ds.grid, ds.truth, settings=ds.settings or {})
+        kw = _reader_kwargs(args)
+        if kw["pose_step"] != 1 or kw["pose_fraction"] is not None or args.beam_step != 1:
+            scans = scans.subsample(kw["pose_step"], args.beam_step, kw["pose_fraction"])
+        inp = _Input("dataset", args.input, scans, ds.grid, ds.truth, settings=ds.settings or {})
+        return _select_scans(args, inp)
     log = read_carmen(args.input, **_reader_kwargs(args))
-    return _Input("carmen", args.input, log.scans, log=log)
+    return _select_scans(args, _Input("carmen", args.input, log.scans, log=log))
 
 
 def _make_grid(args, inp: _Input) -> Grid:
     scans = inp.scans
+    if getattr(args, "crop", False) and args.size is None:
+        raise CLIError("--crop needs the grid's --size W H (and --origin X Y): the automatic extent covers all data")
     if args.size is not None:
         res = args.resolution or (inp.grid.resolution if inp.grid is not None else 0.05)
         cols, rows = args.size
@@ -736,16 +788,29 @@ def _make_grid(args, inp: _Input) -> Grid:
         rows = max(1, math.ceil((ymax + margin - oy) / res))
         _check_cells(rows, cols, args.max_cells)
         grid = Grid((rows, cols), res, (ox, oy))
-    inside = grid.contains(scans.poses[:, :2])
-    if not inside.all():
-        s = int(np.flatnonzero(~inside)[0])
-        x, y = scans.poses[s, :2]
-        xa, xb, ya, yb = grid.extent
-        raise CLIError(
-            f"pose of scan {s} at ({x:.3f}, {y:.3f}) lies outside the grid (x {xa:.3f} .. {xb:.3f}, "
-            f"y {ya:.3f} .. {yb:.3f}); {(~inside).sum()} of {len(inside)} poses are outside"
-        )
     return grid
+
+
+def _scans_on_grid(args, inp: _Input, grid: Grid) -> _Input:
+    """``inp`` with every pose on ``grid``: as it is, or (``--crop``) keeping the scans whose pose lies on it;
+    a pose off the grid without ``--crop`` is an error naming the scan."""
+    scans = inp.scans
+    inside = grid.contains(scans.poses[:, :2])
+    if inside.all():
+        return inp
+    xa, xb, ya, yb = grid.extent
+    where = f"the grid (x {xa:.3f} .. {xb:.3f}, y {ya:.3f} .. {yb:.3f})"
+    if getattr(args, "crop", False):
+        if not inside.any():
+            raise CLIError(f"--crop: no pose of the {len(inside)} scans lies on {where}")
+        return dataclasses.replace(inp, scans=scans.select(inside), selected_from=inp.selected_from or len(inside))
+    s = int(np.flatnonzero(~inside)[0])
+    x, y = scans.poses[s, :2]
+    hint = "; --crop maps the part the grid covers" if args.size is not None else ""
+    raise CLIError(
+        f"pose of scan {s} at ({x:.3f}, {y:.3f}) lies outside {where}; {(~inside).sum()} of {len(inside)} poses "
+        f"are outside{hint}"
+    )
 
 
 def _method_params(args) -> tuple[MapMethod, object]:
@@ -956,7 +1021,8 @@ def load_map(path: str | os.PathLike) -> dict:
 def _counts(inp: _Input) -> dict:
     s = inp.scans
     src = inp.log if inp.log is not None else inp.bag
-    present = int(src.counts["beams"]) if src is not None else int(s.num_readings)  # S x B
+    whole = src is not None and inp.selected_from is None  # the reader's count is of the scans mapped
+    present = int(src.counts["beams"]) if whole else int(s.num_readings)  # S x B
     c: dict[str, int | dict[str, int]] = {
         "scans": s.num_scans,
         "beams": present,
@@ -964,6 +1030,8 @@ def _counts(inp: _Input) -> dict:
         "dropped_beams": present - s.num_valid,
         "max_range_readings": int(s.is_max.sum()),
     }
+    if inp.selected_from is not None:  # --scans / --crop: the reader's counts below are of every scan read
+        c["scans_before_selection"] = inp.selected_from
     if inp.log is not None:
         for k in ("no_return", "beyond_usable", "below_min"):
             c[k] = int(inp.log.counts.get(k, 0))
@@ -1019,6 +1087,7 @@ def _map(args, method, params) -> dict:
         bar.update()
         bar.set_postfix_str("grid")
         grid = _make_grid(args, inp)
+        inp = _scans_on_grid(args, inp, grid)
         bar.update()
         bar.set_postfix_str("mapping")
         if getattr(args, "snapshots", None) is not None and not getattr(args, "online", False):
@@ -1115,11 +1184,12 @@ def _fmt_s(x) -> str:
 
 def _report_md(r: dict) -> str:
     c, g, t, m = r["counts"], r["grid"], r["times_s"], r["method"]
+    of = f" (kept of {c['scans_before_selection']:,} read: --scans / --crop)" if "scans_before_selection" in c else ""
     lines = [
         f"# ogm-ppl map: {Path(r['input']['path']).name}",
         "",
         f"- input: `{r['input']['path']}` ({r['input']['kind']}, {r['input']['size_bytes']:,} bytes)",
-        f"- scans: {c['scans']:,}; beams: {c['beams']:,}; valid: {c['valid_beams']:,}; dropped: "
+        f"- scans: {c['scans']:,}{of}; beams: {c['beams']:,}; valid: {c['valid_beams']:,}; dropped: "
         f"{c['dropped_beams']:,}; max-range readings: {c['max_range_readings']:,}",
     ]
     if "no_return" in c:

@@ -663,3 +663,59 @@ def test_a_module_in_ogm_ppl_methods_that_cannot_be_imported_is_one_line_naming_
     assert "gibbs" in registry.method_names() and registry._discovered
     assert main(["map", "x.log", "--out", "o", "--method", "nonexistent"]) == 2
     assert "name the module in $OGM_PPL_METHODS" in capsys.readouterr().err
+
+
+def _log_of(path, poses):
+    path.write_text(
+        "# part of the tiny log\nPARAM robot_front_laser_max 20.0\n"
+        + "".join(flaser_line(*POSES[i], ts=i + 1.0) for i in poses)
+    )
+    return path
+
+
+REGION = ["--size", "36", "60", "--origin", "0", "0"]  # x < 1.8 m: the poses 0 and 2 of the tiny log
+
+
+@pytest.mark.parametrize(
+    ("flags", "grid", "kept"),
+    [
+        (["--scans", "1:3"], [], [1, 2]),
+        (["--scans", "1:", "--pose-step", "2"], [], [1, 3]),  # the stretch is cut first, then thinned
+        (["--scans", ":2"], [], [0, 1]),
+        (["--crop"], REGION, [0, 2]),
+        (["--crop", "--scans", "1:"], REGION, [2]),
+    ],
+)
+def test_map_of_a_stretch_or_a_region_is_the_map_of_those_scans_alone(tmp_path, tiny_log, flags, grid, kept):
+    """``--scans A:B`` and ``--crop`` give the map of a log holding only the scans they keep, and the report
+    says how many of the scans read were kept. (The sensor's range is fixed: a log without one gets the largest
+    reading of all its scans, which a selection keeps.)"""
+    part = _log_of(tmp_path / "part.log", kept)
+    grid = [*grid, "--max-usable-range", "5"]
+    assert main(["map", str(tiny_log), "--out", str(tmp_path / "a"), *flags, *grid]) == 0
+    assert main(["map", str(part), "--out", str(tmp_path / "b"), *grid]) == 0
+    a, b = load_map(tmp_path / "a" / "map.npz"), load_map(tmp_path / "b" / "map.npz")
+    assert a["grid"] == b["grid"]
+    np.testing.assert_array_equal(a["probabilities"], b["probabilities"])
+    counts = json.loads((tmp_path / "a" / "report.json").read_text())["counts"]
+    assert (counts["scans"], counts["scans_before_selection"]) == (len(kept), len(POSES))
+    assert f"- scans: {len(kept)} (kept of {len(POSES)} read" in (tmp_path / "a" / "report.md").read_text()
+
+
+@pytest.mark.parametrize(
+    ("flags", "message"),
+    [
+        (["--crop"], "--crop needs the grid's --size W H"),
+        (["--scans", "7:9"], "--scans 7:9: "),
+        (["--scans", "3:1"], "holds no scan (B must exceed A)"),
+        (["--scans", "12"], "expected A:B (scan indices"),
+        (["--scans=-1:2"], "scan indices must be >= 0"),
+        (["--size", "10", "10", "--origin", "10", "10", "--crop"], "--crop: no pose of the 4 scans lies on the grid"),
+        (REGION, "are outside; --crop maps the part the grid covers"),
+    ],
+)
+def test_a_stretch_or_region_holding_no_scan_is_refused(tmp_path, tiny_log, capsys, flags, message):
+    capsys.readouterr()
+    assert main(["map", str(tiny_log), "--out", str(tmp_path / "a"), *flags]) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and message in err[0], err
