@@ -82,6 +82,7 @@ METHOD_FLAGS = {
     "--sweeps": ("sweeps", "sweeps"),
     "--warmup": ("burn_in", "warmup"),
     "--patch": ("patch", "patch"),
+    "--threads": ("threads", "threads"),
 }
 #: the command line's own defaults (``--help`` states them): sweeps, burn-in = sweeps // 10, and the
 #: thesis's cell prior 0.234 for the prior "independent"
@@ -364,6 +365,13 @@ def build_parser() -> argparse.ArgumentParser:
         help="parameter sensor of the model-based methods: the forward sensor model by name "
         "(ogm_ppl.sensors.sensor_by_name; default gaussian, the Gaussian range model of --sigma; a kind of "
         "your own registered with register_sensor in a module named in $OGM_PPL_METHODS)",
+    )
+    m.add_argument(
+        "--threads",
+        type=_pos_int,
+        metavar="N",
+        help="parameter threads of gibbs: chromatic tile sweeps on N of numba's threads (exact; one chain "
+        "whatever N, another than the serial kernel's; priors with a compiled face)",
     )
     m.add_argument(
         "--sweeps",

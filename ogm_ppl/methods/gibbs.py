@@ -7,6 +7,9 @@ each tile of a table prior from its own table and ignores its neighbours' factor
 ``warm_thesis = N`` starts an exact patch chain where N sweeps of that update end (a starting map only);
 ``cell_sweeps = true`` follows every patch sweep by a single-cell Gibbs sweep
 (:class:`~ogm_ppl.inference.mcmc.KernelCycle`), which moves the cells that straddle a table prior's tiles.
+``threads = N`` sweeps in chromatic tiles on ``N`` of numba's threads
+(:class:`~ogm_ppl.inference.mcmc.ChromaticCellGibbs`, :class:`~ogm_ppl.inference.mcmc.ChromaticPatchGibbs`):
+exact, and the chain does not depend on ``N``, but it is not the serial kernel's chain.
 ``metropolis``: single-cell Metropolis-Hastings (:class:`~ogm_ppl.inference.mcmc.MetropolisCell`) with
 uniform or end-point proposals.
 """
@@ -17,7 +20,7 @@ from dataclasses import dataclass
 
 from ogm_ppl.methods._model import check_patch_work, patch_arg
 from ogm_ppl.methods._sampling import SamplingParams, run_kernel
-from ogm_ppl.methods.params import Bool, Choice, Float, Int, ParamError, Patch, param
+from ogm_ppl.methods.params import Bool, Choice, Float, Int, Optional, ParamError, Patch, param
 from ogm_ppl.methods.problem import MapProblem, MapResult, RunContext
 from ogm_ppl.methods.registry import register_method
 
@@ -58,6 +61,12 @@ class GibbsParams(SamplingParams):
         "PatchGibbs: a single-cell Gibbs sweep after every patch sweep (KernelCycle), exact; frees the cells a "
         "tile update of a table prior leaves frozen",
     )
+    threads: int | None = param(
+        None,
+        Optional(Int(lo=1)),
+        "sweep on this many of numba's threads (ChromaticCellGibbs / ChromaticPatchGibbs: chromatic tile sweeps, "
+        "exact, priors with a compiled face; one chain whatever the number, not the serial kernel's)",
+    )
 
     def check(self) -> None:
         super().check()
@@ -67,6 +76,13 @@ class GibbsParams(SamplingParams):
             )
         if self.update == "thesis" and self.patch == 1:
             raise ParamError("update", "'thesis' is the border update of patch Gibbs: use a patch, e.g. [3, 3]")
+        if self.threads is not None:
+            from ogm_ppl.inference.mcmc.parallel import max_threads
+
+            if self.threads > max_threads():
+                raise ParamError("threads", f"at most numba's {max_threads()} threads (NUMBA_NUM_THREADS)")
+            if self.patch != 1 and self.scan == "random":
+                raise ParamError("scan", "chromatic patch sweeps order fixed patches: systematic or permutation")
         if self.warm_thesis and (self.patch == 1 or self.update == "thesis"):
             raise ParamError(
                 "warm_thesis", "starts a patch chain of another update from the thesis's: use a patch and update gibbs"
@@ -76,18 +92,29 @@ class GibbsParams(SamplingParams):
 @register_method("gibbs", GibbsParams, stochastic=True, sampler=True)
 def gibbs(params: GibbsParams, problem: MapProblem, ctx: RunContext) -> MapResult:
     """Gibbs sampling of the full posterior (Chapter 4): CellGibbs, or PatchGibbs for patches."""
-    from ogm_ppl.inference.mcmc import CellGibbs, KernelCycle, PatchGibbs
+    from ogm_ppl.inference.mcmc import (
+        CellGibbs,
+        ChromaticCellGibbs,
+        ChromaticPatchGibbs,
+        KernelCycle,
+        PatchGibbs,
+    )
 
     model = params.model(problem)
+    parallel = {"threads": params.threads} if params.threads is not None else {}
+    Cell = ChromaticCellGibbs if parallel else CellGibbs
+    Patch_ = ChromaticPatchGibbs if parallel else PatchGibbs
     if params.patch == 1:
-        kernel = CellGibbs(model, scan=params.scan, update=params.update, init=params.init, delta=params.init_delta)
-        details: dict = {"kernel": "CellGibbs"}
+        kernel = Cell(
+            model, scan=params.scan, update=params.update, init=params.init, delta=params.init_delta, **parallel
+        )
+        details: dict = {"kernel": type(kernel).__name__}
     else:
         passes = (params.burn_in + params.sweeps + params.warm_thesis) * params.chains
         check_patch_work(params.patch, problem.grid.ndim, problem.grid.num_cells, passes, False, "PatchGibbs")
 
         def patch_kernel(update: str, init) -> PatchGibbs:
-            return PatchGibbs(
+            return Patch_(
                 model,
                 patch=patch_arg(params.patch),
                 scan=params.scan,
@@ -98,16 +125,20 @@ def gibbs(params: GibbsParams, problem: MapProblem, ctx: RunContext) -> MapResul
                 init=init,
                 delta=params.init_delta,
                 p_escape=params.p_escape,
+                **parallel,
             )
 
         init = params.init
         if params.warm_thesis:
             init = _thesis_start(patch_kernel("thesis", params.init), params.warm_thesis, ctx.seed)
         kernel = patch_kernel(params.update, init)
-        details = {"kernel": "PatchGibbs", "patch": params.patch}
+        details = {"kernel": type(kernel).__name__, "patch": params.patch}
         if params.cell_sweeps:
-            kernel = KernelCycle([kernel, CellGibbs(model, scan=params.scan, update=params.update)])
-            details["kernel"] = "KernelCycle(PatchGibbs, CellGibbs)"
+            cells = Cell(model, scan=params.scan, update=params.update, **parallel)
+            details["kernel"] = f"KernelCycle({type(kernel).__name__}, {type(cells).__name__})"
+            kernel = KernelCycle([kernel, cells])
+    if parallel:
+        details["threads"] = params.threads
     return run_kernel(kernel, params, problem, ctx, details)
 
 

@@ -168,3 +168,12 @@ def test_the_contract_fails_a_sampler_whose_map_is_shifted_within_its_tolerance(
             Contract().test_matches_the_exact_posterior()
     finally:
         unregister_method("test_shifted")
+
+
+class TestGibbsOnThreads(TestGibbs):
+    params = {"sweeps": 50, "threads": 1}
+
+
+class TestPatchGibbsOnThreads(TestPatchGibbs):
+    def params_for(self, problem_name):
+        return {**super().params_for(problem_name), "threads": 1}

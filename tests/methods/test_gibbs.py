@@ -127,3 +127,44 @@ def test_a_labelled_run_shows_plain_progress_lines_once_long(
     what = "gibbs sweeps" if method_name == "gibbs" else "svi steps"
     assert lines and all(line.startswith(f"office/x/c0: {what}: ") for line in lines), lines
     assert lines[-1].endswith(", done") and len(lines) >= 3
+
+
+def test_gibbs_on_threads_is_one_chain_whatever_the_number_and_targets_the_posterior():
+    """``threads = N``: the chromatic kernels, whose chain does not depend on ``N`` (bit for bit); the serial
+    kernel's chain is another, and both estimate the same brute-force marginals."""
+    from ogm_ppl.inference.exact import brute_force
+    from ogm_ppl.inference.mcmc.parallel import max_threads
+    from ogm_ppl.methods import MapProblem, RunContext, get_method
+    from ogm_ppl.testing.kernels import enumerable_2d_data
+
+    problem = MapProblem(*enumerable_2d_data(), 0.9)
+    gibbs = get_method("gibbs")
+    exact = brute_force(problem.model()).marginals.numpy()
+    runs = {}
+    for threads in (None, 1, max_threads()):
+        for patch in (1, [2, 2]):
+            p = gibbs.parse({"sweeps": 4000, "burn_in": 100, "threads": threads, "patch": patch})
+            r = gibbs.run(p, problem, RunContext(seed=5))
+            runs[threads, str(patch)] = r
+            # a cell's mean over 4,000 sweeps: at most 0.5 / sqrt(4000) = 0.008 standard error were the sweeps
+            # uncorrelated; 0.05 leaves room for an autocorrelation time of about 1.5 at 5 standard errors
+            np.testing.assert_allclose(r.probabilities, exact, atol=0.05)
+    for patch in ("1", "[2, 2]"):
+        assert np.array_equal(runs[1, patch].probabilities, runs[max_threads(), patch].probabilities)
+        assert not np.array_equal(runs[None, patch].probabilities, runs[1, patch].probabilities)
+    assert runs[1, "1"].details["kernel"] == "ChromaticCellGibbs" and runs[1, "1"].details["threads"] == 1
+    assert runs[1, "[2, 2]"].details["kernel"] == "ChromaticPatchGibbs"
+    assert runs[None, "1"].details["kernel"] == "CellGibbs" and "threads" not in runs[None, "1"].details
+
+
+def test_gibbs_threads_are_checked():
+    from ogm_ppl.inference.mcmc.parallel import max_threads
+    from ogm_ppl.methods import ParamError, get_method
+
+    gibbs = get_method("gibbs")
+    with pytest.raises(ParamError, match="at most numba's"):
+        gibbs.parse({"threads": max_threads() + 1})
+    with pytest.raises(ParamError, match="systematic or permutation"):
+        gibbs.parse({"threads": 1, "patch": [2, 2], "scan": "random"})
+    with pytest.raises(ParamError):
+        gibbs.parse({"threads": 0})
