@@ -944,6 +944,10 @@ def _online_map(
 
     if method.name != "gibbs" or params.patch != 1 or params.chains != 1 or params.update == "thesis":
         raise CLIError("--online runs one single-cell Gibbs chain: use --method gibbs (patch 1, one chain)")
+    if params.threads is not None:
+        raise CLIError("--online sweeps around each new scan serially: drop --threads")
+    if params.threads is not None:
+        raise CLIError("--online sweeps around each new scan serially: drop --threads")
     # the offline chain's start, kept as the scans arrive: reached cells restart from thresholded OGM
     init_new = {"ogm": "ogm", "free": "keep"}.get(params.init)
     if init_new is None or (params.init == "ogm" and params.init_delta != "haehnel"):

@@ -706,6 +706,7 @@ def test_map_of_a_stretch_or_a_region_is_the_map_of_those_scans_alone(tmp_path, 
     ("flags", "message"),
     [
         (["--crop"], "--crop needs the grid's --size W H"),
+        (["--method", "gibbs", "--online", "--threads", "1"], "--online sweeps around each new scan serially"),
         (["--scans", "7:9"], "--scans 7:9: "),
         (["--scans", "3:1"], "holds no scan (B must exceed A)"),
         (["--scans", "12"], "expected A:B (scan indices"),

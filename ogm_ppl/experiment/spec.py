@@ -44,7 +44,8 @@ Tables (every key optional unless marked *required*; defaults in brackets)::
                         sweeps [100], burn_in [0], chains [1], init ["ogm"; "prior", "free", "occupied",
                         "guide:CORPUS": the mode of a corpus guide], init_delta ["haehnel"],
                         scan ["systematic"], update ["gibbs"], p_rand_patch [0.0], sigma_cells [the
-                        dataset's], checkpoint_every [10], record [5] (F1 records of the running marginals)
+                        dataset's], checkpoint_every [10], record [5] (F1 records of the running marginals),
+                        threads [none: the serial kernel; N: chromatic tile sweeps on N threads]
       patch_map:        patch [[3, 3]], mode ["offline" | "online"], overlap [false],
                         prior ["independent"], sigma_cells [the dataset's]
       amortised:        guide ["shipped"; "corpus:CORPUS": the guide learned on a corpus's plans; or a .npz]
