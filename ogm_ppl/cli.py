@@ -355,7 +355,8 @@ def build_parser() -> argparse.ArgumentParser:
         "--sigma",
         type=_pos_float,
         metavar="CELLS",
-        help="parameter sigma_cells: standard deviation of the Gaussian range model in cells "
+        help="parameter sigma_cells: range noise of the sensor model in cells (the Gaussian range model's "
+        "standard deviation) "
         "(default: the dataset's simulation sigma if recorded, else 1.0 cell, about the "
         "scatter of a corrected real log at 5 cm)",
     )
@@ -493,7 +494,8 @@ def build_parser() -> argparse.ArgumentParser:
         "methods",
         help="list the map methods and their parameters",
         description="List the registered map methods (ogm_ppl.methods): name, one line, and each parameter "
-        "with its default, kind and meaning.",
+        "with its default, kind and meaning; then the prior and sensor kinds the parameters prior and sensor "
+        "take (shipped and registered).",
     )
     ms.add_argument("name", nargs="?", metavar="NAME", help="show this method only")
 
@@ -1512,9 +1514,17 @@ def cmd_methods(args) -> str:
             return "\n".join(get_method(args.name).describe())
         except ParamError as e:
             raise CLIError(f"argument NAME: {e.message}") from None
+    from ogm_ppl.priors import prior_kinds
+    from ogm_ppl.sensors import sensor_kinds
+
     lines = []
     for m in methods():
         lines += [f"{m.name}: {m.doc}"] if m.alias_of else m.describe()
+    lines += [
+        "",
+        f"prior kinds (parameter prior, KIND[:CORPUS][@BETA|@cal]): {', '.join(prior_kinds())}",
+        f"sensor kinds (parameter sensor): {', '.join(sensor_kinds())}",
+    ]
     return "\n".join(lines)
 
 

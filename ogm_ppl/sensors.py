@@ -42,6 +42,7 @@ GaussianRange(sigma=3.0, p_rand=0.0)
 
 from __future__ import annotations
 
+import inspect
 import math
 from collections.abc import Callable
 
@@ -53,6 +54,7 @@ __all__ = [
     "SENSOR_KINDS",
     "GaussianRange",
     "PatternMatch",
+    "SensorFactoryError",
     "SensorModel",
     "register_sensor",
     "sensor_by_name",
@@ -225,19 +227,42 @@ class PatternMatch(SensorModel):
 #: the kinds the library ships: ``gaussian`` is ``GaussianRange(sigma_cells, p_rand)``
 SENSOR_KINDS: tuple[str, ...] = ("gaussian",)
 
-#: ``factory(sigma_cells, p_rand) -> SensorModel``: the range noise in cells (the data's, or the method's
-#: ``sigma_cells``) and the share of random readings in ``[0, 1)``; a factory may ignore either
+#: ``factory(sigma_cells, p_rand) -> SensorModel``, called with the two positionally: the range noise in cells
+#: (the data's, or the method's ``sigma_cells``) and the share of random readings in ``[0, 1)``; a factory may
+#: ignore either
 SensorFactory = Callable[[float, float], SensorModel]
 _REGISTRY: Registry[SensorFactory] = Registry("sensor", SENSOR_KINDS)
+
+
+class SensorFactoryError(TypeError, ValueError):
+    """A sensor factory that cannot be called as ``factory(sigma_cells, p_rand)`` or returns no
+    :class:`SensorModel` (a ``TypeError``, and a ``ValueError`` as every bad setting is)."""
 
 
 def register_sensor(kind: str, factory: SensorFactory) -> None:
     """Make ``sensor_by_name(kind, sigma_cells, p_rand)`` build ``factory(sigma_cells, p_rand)``.
 
-    ``kind`` is a non-empty name without ``:``; registering a shipped kind or a name another factory took is
-    refused (:func:`unregister_sensor` first); the same factory's module run again (reloaded) registers anew.
-    Test the sensor with :class:`~ogm_ppl.testing.SensorContract`.
+    The factory is called with the two *positionally*: a class whose first two parameters mean something else
+    is registered through a ``lambda sigma_cells, p_rand: MySensor(...)``. ``kind`` is a non-empty name without
+    ``:``; a name another factory took is refused (:func:`unregister_sensor` first), and a factory defined at
+    the same place (module and qualified name: a module reloaded) replaces the old one. A factory that cannot
+    take the two arguments is refused here (:class:`SensorFactoryError`). Test the sensor with
+    :class:`~ogm_ppl.testing.SensorContract`.
     """
+    if not isinstance(kind, str) or not kind or ":" in kind:
+        raise ValueError(f"a sensor kind is a non-empty name without ':', got {kind!r}")
+    try:
+        signature = inspect.signature(factory)
+    except (TypeError, ValueError):  # no signature to check (a builtin): sensor_by_name checks what it returns
+        signature = None
+    if signature is not None:
+        try:
+            signature.bind(1.0, 0.0)
+        except TypeError as e:
+            raise SensorFactoryError(
+                f"sensor kind {kind!r}: the factory {getattr(factory, '__qualname__', factory)!r}{signature} cannot "
+                f"be called as factory(sigma_cells, p_rand) ({e})"
+            ) from None
     _REGISTRY.register(kind, factory)
 
 
@@ -254,7 +279,7 @@ def sensor_kinds() -> tuple[str, ...]:
 def sensor_by_name(name: str, sigma_cells: float = 1.0, p_rand: float = 0.0) -> SensorModel:
     """The sensor of kind ``name`` (module docstring) for range noise ``sigma_cells`` (cells, ``> 0``) and a
     share ``p_rand`` of random readings (``[0, 1)``); ``ValueError`` on an unknown kind (listing the kinds) or
-    on parameters out of range, ``TypeError`` if the factory returns no :class:`SensorModel`."""
+    on parameters out of range, :class:`SensorFactoryError` if the factory returns no :class:`SensorModel`."""
     factory = _REGISTRY.get(name, name)
     sigma_cells, p_rand = float(sigma_cells), float(p_rand)
     if not (math.isfinite(sigma_cells) and sigma_cells > 0):
@@ -263,7 +288,9 @@ def sensor_by_name(name: str, sigma_cells: float = 1.0, p_rand: float = 0.0) -> 
         raise ValueError(f"p_rand must lie in [0, 1), got {p_rand}")
     sensor = factory(sigma_cells, p_rand)
     if not isinstance(sensor, SensorModel):
-        raise TypeError(f"the factory of sensor kind {name!r} returned {type(sensor).__name__}, not a SensorModel")
+        raise SensorFactoryError(
+            f"the factory of sensor kind {name!r} returned {type(sensor).__name__}, not a SensorModel"
+        )
     return sensor
 
 

@@ -53,6 +53,25 @@ class _PastLastCellIsNone(GaussianRange):
         return super().log_prob(z, torch.where(f > F_, F_ + 1.0, f), F, is_max)
 
 
+class _RandomDensityOfOneRayLength(GaussianRange):
+    """Random hits on a ray with nothing in it of density ``p_rand / 13`` whatever its length (right for rays of
+    12 cells only, the contract's ``F``)."""
+
+    def log_prob(self, z, f, F, is_max=None):
+        out = super().log_prob(z, f, F, is_max)
+        F = torch.as_tensor(F, dtype=torch.float64)
+        none = torch.as_tensor(f, dtype=torch.float64) > F + 0.5
+        shift = torch.where(none, torch.log((F + 1.0) / 13.0), torch.zeros_like(F))
+        if is_max is not None:
+            shift = torch.where(torch.as_tensor(is_max, dtype=torch.bool), 0.0, shift)
+        return out + shift
+
+
+class _CannotSample(GaussianRange):
+    def sample(self, f, F, generator=None):
+        raise NotImplementedError
+
+
 @pytest.mark.parametrize(
     "sensor, check",
     [
@@ -60,13 +79,34 @@ class _PastLastCellIsNone(GaussianRange):
         (_FirstFlagOnly(1.5, p_rand=0.1), "test_log_prob_is_vectorised"),
         (_Undeclared(1.5), "test_declares_its_kind_of_range"),
         (_PastLastCellIsNone(1.5, p_rand=0.1), "test_samples_follow_log_prob"),
+        (_RandomDensityOfOneRayLength(1.5, p_rand=0.1), "test_log_prob_normalises"),
+        (_CannotSample(1.5), "test_samples_follow_log_prob"),
     ],
-    ids=["sample-drops-a-component", "vectorised-reads-one-flag", "continuous-undeclared", "past-last-cell-none"],
+    ids=[
+        "sample-drops-a-component",
+        "vectorised-reads-one-flag",
+        "continuous-undeclared",
+        "past-last-cell-none",
+        "normalised-on-one-ray-length",
+        "cannot-sample-undeclared",
+    ],
 )
 def test_the_contract_fails_a_buggy_sensor(sensor, check):
     class Contract(SensorContract):
         def make_sensor(self):
             return sensor
 
-    with pytest.raises(AssertionError):
+    with pytest.raises((AssertionError, pytest.fail.Exception)):
         getattr(Contract(), check)()
+
+
+def test_a_sensor_that_cannot_sample_says_so():
+    class Contract(SensorContract):
+        can_sample = False
+
+        def make_sensor(self):
+            return _CannotSample(1.5)
+
+    with pytest.raises(pytest.skip.Exception):
+        Contract().test_samples_follow_log_prob()
+    Contract().test_log_prob_normalises()

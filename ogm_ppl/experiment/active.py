@@ -394,7 +394,14 @@ def run_active(
     :func:`~ogm_ppl.experiment.run_experiment`); raises :class:`~ogm_ppl.experiment.ExperimentError` (with
     ``.result``) when tasks failed, after writing what the finished ones allow."""
     from ogm_ppl.experiment import tasks as T
-    from ogm_ppl.experiment.runner import SCRATCH, Task, claim_output_folder, execute_tasks, failed_error
+    from ogm_ppl.experiment.runner import (
+        SCRATCH,
+        Task,
+        claim_output_folder,
+        execute_tasks,
+        failed_error,
+        record_failures,
+    )
     from ogm_ppl.experiment.spec import derive_seed
     from ogm_ppl.experiment.tasks import _savez
 
@@ -469,5 +476,6 @@ def run_active(
     result.files = files
     result.seconds = time.perf_counter() - t0
     if failed:
-        raise failed_error(failed, todo, result)
+        raise failed_error(failed, todo, result, out)
+    record_failures(out, failed)
     return result

@@ -20,6 +20,7 @@ import logging
 import os
 import shutil
 import time
+import traceback
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -169,6 +170,38 @@ def plan_tasks(spec: ExperimentSpec, out: Path, resume: bool = True, progress: b
 
 
 # ------------------------------------------------------------------------------------------ executing
+#: the file in the output folder that holds the tracebacks of the tasks that failed in the last run
+FAILURES = "failures.txt"
+
+
+class TaskFailure(str):
+    """A failed task's error as one line (``"ValueError: ..."``), with its Python traceback in
+    :attr:`traceback` (the text :data:`FAILURES` keeps)."""
+
+    traceback: str
+
+    def __new__(cls, line: str, tb: str = "") -> TaskFailure:
+        obj = super().__new__(cls, line)
+        obj.traceback = tb
+        return obj
+
+
+def _failure(e: BaseException, tb) -> TaskFailure:
+    return TaskFailure(f"{type(e).__name__}: {e}", "".join(traceback.format_exception(type(e), e, tb)))
+
+
+def _quiet_task_failures(record: logging.LogRecord) -> bool:
+    """A filter for dask workers' log: drop the "Compute Failed" reports (a traceback as one quoted string;
+    the runner reports each failure and keeps its traceback in :data:`FAILURES`)."""
+    return not str(record.msg).startswith("Compute Failed")
+
+
+def _quiet_worker_log() -> None:
+    logger = logging.getLogger("distributed.worker")
+    if _quiet_task_failures not in logger.filters:
+        logger.addFilter(_quiet_task_failures)
+
+
 def _execute_serial(todo: list[Task], progress: bool):
     results, failed = {}, {}
     with Progress(len(todo), "tasks", enabled=progress) as bar:
@@ -180,7 +213,7 @@ def _execute_serial(todo: list[Task], progress: bool):
                 try:
                     results[t.id] = t.fn(*t.args, **t.kwargs)
                 except Exception as e:  # keep going: independent tasks still finish, and a rerun resumes
-                    failed[t.id] = f"{type(e).__name__}: {e}"
+                    failed[t.id] = _failure(e, e.__traceback__)
             bar.update(note=t.id)
     return results, failed
 
@@ -211,7 +244,9 @@ def _client(scheduler, workers, scratch: Path | None = None):
                 silence_logs=logging.ERROR,
                 local_directory=None if scratch is None else str(scratch),
             )
-        return Client(cluster), True
+        client = Client(cluster)
+        client.run(_quiet_worker_log)  # the runner reports failed tasks itself (failures.txt)
+        return client, True
     if isinstance(scheduler, str):
         try:
             return Client(scheduler, timeout=SCHEDULER_TIMEOUT_S), True
@@ -244,8 +279,7 @@ def _execute_dask(todo: list[Task], client, progress: bool):
             if f.status == "finished":
                 results[tid] = f.result()
             else:
-                e = f.exception()
-                failed[tid] = f"{type(e).__name__}: {e}"
+                failed[tid] = _failure(f.exception(), f.traceback())
             bar.update(note=tid)
     return results, failed
 
@@ -283,12 +317,29 @@ def execute_tasks(
     return todo, skipped, done_recs, results, failed
 
 
-def failed_error(failed: dict, todo: list, result) -> ExperimentError:
-    """The :class:`ExperimentError` of a run in which ``failed`` (task id -> error) of the ``todo`` tasks failed."""
+def record_failures(out: Path, failed: dict) -> Path | None:
+    """Write each failed task's id, error and traceback to ``out/failures.txt`` (atomically), or remove the
+    file a previous run left when none failed; returns the file, if written."""
+    path = Path(out) / FAILURES
+    if not failed:
+        path.unlink(missing_ok=True)
+        return None
+    parts = []
+    for tid, err in failed.items():
+        tb = getattr(err, "traceback", "") or "(no traceback: it did not run)\n"
+        parts.append(f"== {tid}: {err}\n{tb}")
+    return atomic_write_text(path, "\n".join(parts))
+
+
+def failed_error(failed: dict, todo: list, result, out: Path | None = None) -> ExperimentError:
+    """The :class:`ExperimentError` of a run in which ``failed`` (task id -> error) of the ``todo`` tasks failed;
+    with ``out``, the tracebacks are written to ``out/failures.txt`` (:func:`record_failures`), which it names."""
     first = next(iter(failed.items()))
+    where = record_failures(out, failed) if out is not None else None
+    tracebacks = f"; tracebacks in {where}" if where is not None else ""
     return ExperimentError(
-        f"{len(failed)} of {len(todo)} tasks failed (first: {first[0]}: {first[1]}); finished tasks are kept: "
-        "rerun to resume once the cause is mended",
+        f"{len(failed)} of {len(todo)} tasks failed (first: {first[0]}: {first[1]}{tracebacks}); finished tasks "
+        "are kept: rerun to resume once the cause is mended",
         result,
     )
 
@@ -371,7 +422,8 @@ def run_experiment(
     write_outputs(result, tasks, recs)
     result.seconds = time.perf_counter() - t0
     if failed:
-        raise failed_error(failed, todo, result)
+        raise failed_error(failed, todo, result, out)
+    record_failures(out, failed)
     return result
 
 

@@ -342,13 +342,19 @@ class SensorName(Kind):
 
     def value(self, v):
         name = Text().value(v)
-        from ogm_ppl.sensors import sensor_kinds
+        from ogm_ppl.sensors import sensor_by_name, sensor_kinds
 
         if name not in sensor_kinds():
             raise _Bad(
                 f"unknown sensor kind {name!r}; kinds: {', '.join(sensor_kinds())} (a kind of your own: register "
                 "it with ogm_ppl.sensors.register_sensor in a module named in $OGM_PPL_METHODS)"
             )
+        try:  # a broken factory is found here, before any data is read (a value it refuses is the run's to tell)
+            sensor_by_name(name, 1.0, 0.0)
+        except TypeError as e:
+            raise _Bad(f"sensor kind {name!r}: {e}") from None
+        except ValueError:
+            pass
         return name
 
     def describe(self):

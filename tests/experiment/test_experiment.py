@@ -642,3 +642,41 @@ def test_a_ros_map_plan_with_an_origin_yaw_warns_once(tmp_path):
     assert [str(w.message) for w in caught if "origin yaw" in str(w.message)] == [
         f"{files.yaml}: origin yaw 0.5 ignored (ogm_ppl grids are axis-aligned)"
     ]
+
+
+@pytest.mark.parametrize("scheduler", ["serial", None])
+def test_a_failed_task_leaves_its_traceback_in_failures_txt(tmp_path, scheduler, capfd):
+    """A task that raises: the error names ``failures.txt``, which holds its traceback (on dask too, where the
+    workers' own "Compute Failed" reports are kept out of the log); a rerun with nothing failing removes it.
+    The sensor is registered in this process only: dask's worker processes do not know it (as when its module
+    is missing from $OGM_PPL_METHODS), and say so."""
+    from ogm_ppl.sensors import GaussianRange, register_sensor, unregister_sensor
+
+    state = {"fail": True}
+
+    def flaky(sigma_cells, p_rand):
+        if state["fail"]:
+            raise ValueError("flaky sensor refuses today")
+        return GaussianRange(sigma_cells, p_rand)
+
+    register_sensor("test_flaky", flaky)
+    try:
+        d = tiny()
+        d["algorithms"] = [d["algorithms"][0], {"name": "g", "kind": "gibbs", "sweeps": 2, "sensor": "test_flaky"}]
+        d["output"] = {"maps": False, "figures": False}
+        spec = parse_spec(d, "tiny.toml")
+        with pytest.raises(ExperimentError) as e:
+            run_experiment(spec, tmp_path, scheduler=scheduler, workers=1, progress=False)
+        failures = tmp_path / "failures.txt"
+        assert f"tracebacks in {failures}" in str(e.value)
+        text = failures.read_text()
+        assert "Compute Failed" not in capfd.readouterr().err
+        if scheduler is None:
+            assert "unknown sensor kind 'test_flaky'" in text and "Traceback (most recent call last)" in text
+            return
+        assert "ValueError: flaky sensor refuses today" in text and 'in flaky\n    raise ValueError("flaky' in text
+        state["fail"] = False
+        run_experiment(spec, tmp_path, scheduler=scheduler, progress=False)
+        assert not failures.exists()
+    finally:
+        unregister_sensor("test_flaky")

@@ -6,7 +6,14 @@ import numpy as np
 import pytest
 
 from ogm_ppl.methods import MapProblem, ParamError, RunContext, get_method, method_names
-from ogm_ppl.sensors import GaussianRange, PatternMatch, register_sensor, sensor_by_name, unregister_sensor
+from ogm_ppl.sensors import (
+    GaussianRange,
+    PatternMatch,
+    register_sensor,
+    sensor_by_name,
+    sensor_kinds,
+    unregister_sensor,
+)
 from ogm_ppl.testing.kernels import enumerable_2d_data
 
 MODEL_METHODS = ("gibbs", "metropolis", "tempering", "guided_gibbs", "patch_map", "vi")
@@ -74,7 +81,7 @@ def test_sensor_by_name_checks_its_arguments_and_the_factory():
     with pytest.raises(ValueError, match="shipped sensor kind"):
         unregister_sensor("gaussian")
     with pytest.raises(ValueError, match="already registered"):
-        register_sensor("gaussian", PatternMatch)
+        register_sensor("gaussian", lambda sigma_cells, p_rand: PatternMatch(0.9))
     with pytest.raises(ValueError, match="without ':'"):
         register_sensor("a:b", PatternMatch)
 
@@ -95,6 +102,8 @@ def test_the_command_line_maps_under_a_sensor_of_ones_own(tmp_path, simulated_da
         assert report["method"]["sensor"] == wide
         assert report["method"]["sensor_model"] == "GaussianRange(sigma=1.5, p_rand=0.0)"
     capsys.readouterr()
+    assert main(["methods"]) == 0
+    assert "\nsensor kinds (parameter sensor): gaussian, toy_wide\n" in capsys.readouterr().out + "\n"
     assert main([*args, "--sensor", "beam", "--out", str(tmp_path / "c")]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and "unknown sensor kind 'beam'" in err[0]
@@ -118,3 +127,31 @@ def test_a_spec_names_a_sensor(tmp_path, wide):
     d["algorithms"][0]["sensor"] = "beam"
     with pytest.raises(ValueError, match="unknown sensor kind 'beam'"):
         parse_spec(d, "wide.toml")
+
+
+def test_a_broken_factory_is_refused_where_it_is_registered_or_named():
+    """A factory that cannot take ``(sigma_cells, p_rand)`` is refused at registration; one that returns no
+    sensor when a method's parameters name it (before any data is read), as one ``ParamError``."""
+    from ogm_ppl.sensors import SensorFactoryError
+
+    with pytest.raises(SensorFactoryError, match=r"'toy_one'.*cannot be called as factory\(sigma_cells, p_rand\)"):
+        register_sensor("toy_one", lambda sigma: GaussianRange(sigma))
+    assert "toy_one" not in sensor_kinds()
+    register_sensor("toy_str", lambda sigma_cells, p_rand: "a string")
+
+    def picky(sigma_cells, p_rand):  # a sensor that needs random readings
+        if p_rand <= 0:
+            raise ValueError("toy_picky needs p_rand > 0")
+        return GaussianRange(sigma_cells, p_rand)
+
+    register_sensor("toy_picky", picky)
+    try:
+        with pytest.raises(ParamError, match=r"sensor kind 'toy_str': the factory .* returned str, not a SensorModel"):
+            get_method("gibbs").parse({"sensor": "toy_str"})
+        assert get_method("gibbs").parse({"sensor": "toy_picky"}).sensor == "toy_picky"  # its ValueError: at run
+        with pytest.raises(ValueError, match="toy_picky needs p_rand > 0"):
+            sensor_by_name("toy_picky")
+        assert sensor_by_name("toy_picky", 1.0, 0.1).p_rand == 0.1
+    finally:
+        unregister_sensor("toy_str")
+        unregister_sensor("toy_picky")
