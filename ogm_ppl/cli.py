@@ -1036,7 +1036,7 @@ def _counts(inp: _Input) -> dict:
     s = inp.scans
     src = inp.log if inp.log is not None else inp.bag
     whole = src is not None and inp.selected_from is None  # the reader's count is of the scans mapped
-    present = int(src.counts["beams"]) if whole else int(s.num_readings)  # S x B
+    present = int(src.counts["beams"]) if src is not None and whole else int(s.num_readings)  # S x B
     c: dict[str, int | dict[str, int]] = {
         "scans": s.num_scans,
         "beams": present,
