@@ -363,9 +363,10 @@ def build_parser() -> argparse.ArgumentParser:
     m.add_argument(
         "--sensor",
         metavar="NAME",
-        help="parameter sensor of the model-based methods: the forward sensor model by name "
-        "(ogm_ppl.sensors.sensor_by_name; default gaussian, the Gaussian range model of --sigma; a kind of "
-        "your own registered with register_sensor in a module named in $OGM_PPL_METHODS)",
+        help="parameter sensor of the model-based methods: the forward sensor model by name, KIND or "
+        "KIND:KEY=VALUE,... (ogm_ppl.sensors.sensor_by_name; default gaussian, the Gaussian range model of "
+        "--sigma; a kind of your own registered with register_sensor in a module named in $OGM_PPL_METHODS, "
+        "its factory's keyword parameters its options)",
     )
     m.add_argument(
         "--threads",

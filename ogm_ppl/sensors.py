@@ -30,7 +30,7 @@ A discrete sensor (``continuous_range = False``, ``PatternMatch``) compares the 
 **Sensors by name.** The map methods, the command line (``--sensor``) and experiment specs build their
 sensor with :func:`sensor_by_name` from a kind, the range noise ``sigma_cells`` and the share of random
 readings ``p_rand``. The library ships ``gaussian`` (:class:`GaussianRange`); a sensor of your own registers a
-factory ``factory(sigma_cells, p_rand) -> SensorModel`` with :func:`register_sensor`. Name its module in
+factory ``factory(sigma_cells, p_rand, **options) -> SensorModel`` with :func:`register_sensor`. Name its module in
 ``$OGM_PPL_METHODS`` (comma-separated modules, imported by :mod:`ogm_ppl.methods` in every process) for the
 command line and dask workers to find it:
 
@@ -38,6 +38,14 @@ command line and dask workers to find it:
 >>> sensor_by_name("gaussian2", 1.5)
 GaussianRange(sigma=3.0, p_rand=0.0)
 >>> unregister_sensor("gaussian2")
+
+A factory's keyword parameters beyond the two are the kind's options, given in the name as
+``KIND:KEY=VALUE,KEY=VALUE`` (numbers), so a spec or the command line can sweep them:
+
+>>> register_sensor("wide", lambda sigma_cells, p_rand, k=2: GaussianRange(k * sigma_cells, p_rand))
+>>> sensor_by_name("wide:k=3", 1.5, 0.1)
+GaussianRange(sigma=4.5, p_rand=0.1)
+>>> unregister_sensor("wide")
 """
 
 from __future__ import annotations
@@ -59,6 +67,7 @@ __all__ = [
     "register_sensor",
     "sensor_by_name",
     "sensor_kinds",
+    "split_sensor_name",
     "unregister_sensor",
 ]
 
@@ -276,20 +285,59 @@ def sensor_kinds() -> tuple[str, ...]:
     return _REGISTRY.kinds()
 
 
+def split_sensor_name(name: str) -> tuple[str, dict[str, int | float]]:
+    """``"KIND"`` or ``"KIND:KEY=VALUE,KEY=VALUE"`` as ``(KIND, {KEY: VALUE})``; values are numbers (an integer
+    literal stays an ``int``). ``ValueError`` on anything else."""
+    if not isinstance(name, str) or not name.strip():
+        raise ValueError(f"a sensor name is KIND or KIND:KEY=VALUE,..., got {name!r}")
+    kind, colon, rest = name.strip().partition(":")
+    options: dict[str, int | float] = {}
+    if colon:
+        for item in rest.split(","):
+            key, eq, text = item.partition("=")
+            key, text = key.strip(), text.strip()
+            if not eq or not key.isidentifier() or key in options:
+                raise ValueError(f"sensor {name!r}: options are KEY=VALUE pairs with distinct keys, got {item!r}")
+            try:
+                value: int | float = int(text) if text.lstrip("+-").isdigit() else float(text)
+            except ValueError:
+                raise ValueError(f"sensor {name!r}: option {key} must be a number, got {text!r}") from None
+            if not math.isfinite(value):
+                raise ValueError(f"sensor {name!r}: option {key} must be finite, got {text!r}")
+            options[key] = value
+    return kind, options
+
+
 def sensor_by_name(name: str, sigma_cells: float = 1.0, p_rand: float = 0.0) -> SensorModel:
-    """The sensor of kind ``name`` (module docstring) for range noise ``sigma_cells`` (cells, ``> 0``) and a
-    share ``p_rand`` of random readings (``[0, 1)``); ``ValueError`` on an unknown kind (listing the kinds) or
-    on parameters out of range, :class:`SensorFactoryError` if the factory returns no :class:`SensorModel`."""
-    factory = _REGISTRY.get(name, name)
+    """The sensor ``name`` (``KIND`` or ``KIND:KEY=VALUE,...``, module docstring) for range noise
+    ``sigma_cells`` (cells, ``> 0``) and a share ``p_rand`` of random readings (``[0, 1)``): the kind's
+    ``factory(sigma_cells, p_rand, **options)``. ``ValueError`` on an unknown kind (listing the kinds), a
+    malformed name or parameters out of range; :class:`SensorFactoryError` if the factory does not take the
+    options or returns no :class:`SensorModel`."""
+    kind, options = split_sensor_name(name)
+    factory = _REGISTRY.get(kind, name)
     sigma_cells, p_rand = float(sigma_cells), float(p_rand)
     if not (math.isfinite(sigma_cells) and sigma_cells > 0):
         raise ValueError(f"sigma_cells must be positive and finite, got {sigma_cells}")
     if not 0.0 <= p_rand < 1.0:
         raise ValueError(f"p_rand must lie in [0, 1), got {p_rand}")
-    sensor = factory(sigma_cells, p_rand)
+    if options:
+        try:
+            signature = inspect.signature(factory)
+        except (TypeError, ValueError):
+            signature = None
+        if signature is not None:
+            try:
+                signature.bind(sigma_cells, p_rand, **options)
+            except TypeError as e:
+                raise SensorFactoryError(
+                    f"sensor {name!r}: the factory of kind {kind!r}{signature} does not take the options "
+                    f"{', '.join(options)} ({e})"
+                ) from None
+    sensor = factory(sigma_cells, p_rand, **options)
     if not isinstance(sensor, SensorModel):
         raise SensorFactoryError(
-            f"the factory of sensor kind {name!r} returned {type(sensor).__name__}, not a SensorModel"
+            f"the factory of sensor kind {kind!r} returned {type(sensor).__name__}, not a SensorModel"
         )
     return sensor
 

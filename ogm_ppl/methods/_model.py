@@ -33,7 +33,8 @@ class ModelParams:
     sensor: str = param(
         "gaussian",
         SensorName(),
-        "forward sensor model (sensor_by_name: gaussian, or a kind registered with register_sensor)",
+        "forward sensor model (sensor_by_name: gaussian, or a kind registered with register_sensor; "
+        "KIND:KEY=VALUE,... sets its options)",
     )
     p_rand: float = param(
         0.0, Float(0, 1, hi_open=True), "sensor model's share of random readings (0: the thesis's model)"

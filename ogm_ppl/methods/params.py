@@ -338,15 +338,19 @@ class PriorName(Kind):
 
 class SensorName(Kind):
     """A forward sensor model by name (:func:`~ogm_ppl.sensors.sensor_by_name`: ``gaussian``, or a kind
-    registered with :func:`~ogm_ppl.sensors.register_sensor`)."""
+    registered with :func:`~ogm_ppl.sensors.register_sensor`, with its options: ``KIND:KEY=VALUE,...``)."""
 
     def value(self, v):
         name = Text().value(v)
-        from ogm_ppl.sensors import sensor_by_name, sensor_kinds
+        from ogm_ppl.sensors import sensor_by_name, sensor_kinds, split_sensor_name
 
-        if name not in sensor_kinds():
+        try:
+            kind, _ = split_sensor_name(name)
+        except ValueError as e:
+            raise _Bad(str(e)) from None
+        if kind not in sensor_kinds():
             raise _Bad(
-                f"unknown sensor kind {name!r}; kinds: {', '.join(sensor_kinds())} (a kind of your own: register "
+                f"unknown sensor kind {kind!r}; kinds: {', '.join(sensor_kinds())} (a kind of your own: register "
                 "it with ogm_ppl.sensors.register_sensor in a module named in $OGM_PPL_METHODS)"
             )
         try:  # a broken factory is found here, before any data is read (a value it refuses is the run's to tell)

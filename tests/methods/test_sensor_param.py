@@ -155,3 +155,40 @@ def test_a_broken_factory_is_refused_where_it_is_registered_or_named():
     finally:
         unregister_sensor("toy_str")
         unregister_sensor("toy_picky")
+
+
+def test_a_sensor_name_sets_its_factorys_options(tmp_path, simulated_dataset, capsys):
+    """``KIND:KEY=VALUE,...`` passes numbers to the factory's keyword parameters, through a method's parameters,
+    the command line and a spec; a malformed name or an option the factory does not take is refused."""
+    from ogm_ppl.cli import main
+    from ogm_ppl.sensors import SensorFactoryError, split_sensor_name
+
+    assert split_sensor_name("beam") == ("beam", {})
+    assert split_sensor_name("beam:k=3, lam=0.5") == ("beam", {"k": 3, "lam": 0.5})
+    for bad in ("beam:k", "beam:k=x", "beam:k=1,k=2", "beam:k=nan", ""):
+        with pytest.raises(ValueError):
+            split_sensor_name(bad)
+    register_sensor("toy_k", lambda sigma_cells, p_rand, k=2.0: GaussianRange(k * sigma_cells, p_rand))
+    try:
+        assert repr(sensor_by_name("toy_k:k=3", 0.5)) == "GaussianRange(sigma=1.5, p_rand=0.0)"
+        with pytest.raises(SensorFactoryError, match=r"does not take the options q"):
+            sensor_by_name("toy_k:q=1")
+        gibbs = get_method("gibbs")
+        problem = MapProblem(*enumerable_2d_data(), 0.9)
+        assert repr(gibbs.parse({"sensor": "toy_k:k=4"}).model(problem).sensor).startswith("GaussianRange(sigma=3.6")
+        with pytest.raises(ParamError, match="does not take the options q"):
+            gibbs.parse({"sensor": "toy_k:q=1"})
+        with pytest.raises(ParamError, match="unknown sensor kind 'toy_x'"):
+            gibbs.parse({"sensor": "toy_x:k=1"})
+        args = ["map", str(simulated_dataset), "--method", "gibbs", "--sweeps", "4"]
+        assert main([*args, "--sensor", "toy_k:k=3", "--sigma", "0.5", "--out", str(tmp_path / "a")]) == 0
+        assert main([*args, "--sigma", "1.5", "--out", str(tmp_path / "b")]) == 0
+        from ogm_ppl.cli import load_map
+
+        a, b = load_map(tmp_path / "a" / "map.npz"), load_map(tmp_path / "b" / "map.npz")
+        assert np.array_equal(a["probabilities"], b["probabilities"])
+        capsys.readouterr()
+        assert main([*args, "--sensor", "toy_k:k=", "--out", str(tmp_path / "c")]) == 2
+        assert "option k must be a number" in capsys.readouterr().err
+    finally:
+        unregister_sensor("toy_k")
