@@ -27,9 +27,13 @@ class Registry(Generic[F]):
         self.shipped = shipped
         self.factories: dict[str, F] = {}
 
-    def register(self, kind: str, factory: F) -> None:
+    def check_kind(self, kind: str) -> None:
+        """Refuse a kind that is not a non-empty name without ``:`` (``ValueError``)."""
         if not isinstance(kind, str) or not kind or ":" in kind:
             raise ValueError(f"a {self.role} kind is a non-empty name without ':', got {kind!r}")
+
+    def register(self, kind: str, factory: F) -> None:
+        self.check_kind(kind)
         if not callable(factory):
             raise TypeError(f"the factory of {self.role} kind {kind!r} must be callable, got {type(factory).__name__}")
         old = self.factories.get(kind)

@@ -258,21 +258,25 @@ def register_sensor(kind: str, factory: SensorFactory) -> None:
     take the two arguments is refused here (:class:`SensorFactoryError`). Test the sensor with
     :class:`~ogm_ppl.testing.SensorContract`.
     """
-    if not isinstance(kind, str) or not kind or ":" in kind:
-        raise ValueError(f"a sensor kind is a non-empty name without ':', got {kind!r}")
+    _REGISTRY.check_kind(kind)
+    if callable(factory):
+        _check_call(factory, {}, f"sensor kind {kind!r}", "cannot be called as factory(sigma_cells, p_rand)")
+    _REGISTRY.register(kind, factory)
+
+
+def _check_call(factory, options: dict, what: str, cannot: str) -> None:
+    """Raise :class:`SensorFactoryError` (``"{what}: the factory NAME(SIGNATURE) {cannot} (why)"``) if
+    ``factory(sigma_cells, p_rand, **options)`` does not bind to the factory's signature (a factory without one,
+    a builtin, passes)."""
     try:
         signature = inspect.signature(factory)
-    except (TypeError, ValueError):  # no signature to check (a builtin): sensor_by_name checks what it returns
-        signature = None
-    if signature is not None:
-        try:
-            signature.bind(1.0, 0.0)
-        except TypeError as e:
-            raise SensorFactoryError(
-                f"sensor kind {kind!r}: the factory {getattr(factory, '__qualname__', factory)!r}{signature} cannot "
-                f"be called as factory(sigma_cells, p_rand) ({e})"
-            ) from None
-    _REGISTRY.register(kind, factory)
+    except (TypeError, ValueError):
+        return
+    try:
+        signature.bind(1.0, 0.0, **options)
+    except TypeError as e:
+        name = getattr(factory, "__qualname__", repr(factory))
+        raise SensorFactoryError(f"{what}: the factory {name!r}{signature} {cannot} ({e})") from None
 
 
 def unregister_sensor(kind: str) -> None:
@@ -322,18 +326,7 @@ def sensor_by_name(name: str, sigma_cells: float = 1.0, p_rand: float = 0.0) -> 
     if not 0.0 <= p_rand < 1.0:
         raise ValueError(f"p_rand must lie in [0, 1), got {p_rand}")
     if options:
-        try:
-            signature = inspect.signature(factory)
-        except (TypeError, ValueError):
-            signature = None
-        if signature is not None:
-            try:
-                signature.bind(sigma_cells, p_rand, **options)
-            except TypeError as e:
-                raise SensorFactoryError(
-                    f"sensor {name!r}: the factory of kind {kind!r}{signature} does not take the options "
-                    f"{', '.join(options)} ({e})"
-                ) from None
+        _check_call(factory, options, f"sensor {name!r}", f"does not take the options {', '.join(options)}")
     sensor = factory(sigma_cells, p_rand, **options)
     if not isinstance(sensor, SensorModel):
         raise SensorFactoryError(
