@@ -949,8 +949,6 @@ def _online_map(
         raise CLIError("--online runs one single-cell Gibbs chain: use --method gibbs (patch 1, one chain)")
     if params.threads is not None:
         raise CLIError("--online sweeps around each new scan serially: drop --threads")
-    if params.threads is not None:
-        raise CLIError("--online sweeps around each new scan serially: drop --threads")
     # the offline chain's start, kept as the scans arrive: reached cells restart from thresholded OGM
     init_new = {"ogm": "ogm", "free": "keep"}.get(params.init)
     if init_new is None or (params.init == "ogm" and params.init_delta != "haehnel"):
@@ -1036,8 +1034,8 @@ def load_map(path: str | os.PathLike) -> dict:
 def _counts(inp: _Input) -> dict:
     s = inp.scans
     src = inp.log if inp.log is not None else inp.bag
-    whole = src is not None and inp.selected_from is None  # the reader's count is of the scans mapped
-    present = int(src.counts["beams"]) if src is not None and whole else int(s.num_readings)  # S x B
+    # the reader counts the beams of the scans it read: of those mapped unless --scans / --crop kept some
+    present = int(src.counts["beams"]) if src is not None and inp.selected_from is None else int(s.num_readings)
     c: dict[str, int | dict[str, int]] = {
         "scans": s.num_scans,
         "beams": present,
