@@ -76,6 +76,13 @@ def plot_map(probabilities, grid=None, ax=None, title: str | None = None, poses=
     return ax
 
 
+def _whole_cell_ticks(axis) -> None:
+    """Ticks at whole cells only (an axis of cell indices has no cell 2.5)."""
+    from matplotlib.ticker import MaxNLocator
+
+    axis.set_major_locator(MaxNLocator(integer=True))
+
+
 def plot_marginals_1d(series: Mapping[str, np.ndarray], ax=None, cells=None, title: str | None = None):
     """Grouped bars of 1D marginals ``p(m_k | z)`` for several algorithms (Fig. 2.1 style)."""
     plt = _plt()
@@ -90,6 +97,7 @@ def plot_marginals_1d(series: Mapping[str, np.ndarray], ax=None, cells=None, tit
     ax.set_xlabel("cell k")
     ax.set_ylabel("p(m_k = 1 | z)")
     ax.set_ylim(0, 1)
+    _whole_cell_ticks(ax.xaxis)
     ax.legend(fontsize=7, ncol=min(len(names), 3), loc="upper left", framealpha=0.9)
     if title:
         ax.set_title(title, fontsize=9)
@@ -110,6 +118,7 @@ def plot_first_hit(series: Mapping[str, np.ndarray], ax=None, title: str | None 
         ax.plot(np.arange(len(p)), p, marker="o", ms=3, label=name)
     ax.set_xlabel("first occupied cell f = k")
     ax.set_ylabel("p(f = k | z)")
+    _whole_cell_ticks(ax.xaxis)
     ax.legend(fontsize=7)
     if title:
         ax.set_title(title, fontsize=9)
@@ -133,6 +142,8 @@ def plot_mutual_information(mi, ax=None, title: str | None = None, cells=None):
     )
     ax.set_xlabel("cell j")
     ax.set_ylabel("cell k")
+    _whole_cell_ticks(ax.xaxis)
+    _whole_cell_ticks(ax.yaxis)
     ax.figure.colorbar(im, ax=ax, fraction=0.046, pad=0.04, label="MI (nats)")
     if title:
         ax.set_title(title, fontsize=9)
