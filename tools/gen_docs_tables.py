@@ -1133,6 +1133,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
         lambda doc: _calibration_kernels(doc, "calibration_shifted", seconds=True, lengths=True),
     ),
     "carmen_guide": ("carmen_guide", _experiment_by_log),
+    "p_rand_logs": ("p_rand_logs", _experiment_by_log),
     "headline": ("headline", _headline),
     "intel_guide": ("intel_guide", _experiment_conditions),
     "intel_guide_2cm": ("intel_guide_2cm", _experiment_conditions),
