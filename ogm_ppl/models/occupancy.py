@@ -193,8 +193,12 @@ class ReadingsDistribution(TorchDistribution):
 
 
 #: bytes per ray-cell crossing that a model and one Gibbs kernel over it hold at their peak (likelihood table,
-#: ray index in ray and cell order, first hits): measured 62-77 on the Intel log at 5 cm (66 M crossings)
+#: ray index in ray and cell order, first hits), beside the table's block temporaries below:
+#: ``benchmarks/bench_memory.py`` measures 46-64 on real logs of 3 M to 66 M crossings
 BYTES_PER_CROSSING = 64
+#: float64 temporaries of one block of the likelihood table (the sensor's ``log_prob`` and the masks; up to
+#: ``_TABLE_BLOCK`` entries each): about 0.6 GB once a table has that many entries, whatever the crossings
+TABLE_TEMPORARIES = 18
 
 
 def available_memory() -> int | None:
@@ -209,17 +213,26 @@ def available_memory() -> int | None:
     return None
 
 
+def memory_needed(rays: Rays) -> int:
+    """Bytes a model over ``rays`` and a Gibbs kernel need at their peak: :data:`BYTES_PER_CROSSING` per
+    ray-cell crossing and :data:`TABLE_TEMPORARIES` float64 blocks of the likelihood table (``R x W`` entries,
+    ``W`` the longest ray plus one, at most ``_TABLE_BLOCK`` a block)."""
+    entries = int(rays.num_rays) * (int(rays.lengths.max(initial=0)) + 1)
+    return int(rays.cells.size) * BYTES_PER_CROSSING + TABLE_TEMPORARIES * 8 * min(entries, _TABLE_BLOCK)
+
+
 def check_memory(rays: Rays) -> None:
-    """Refuse (``MemoryError``, with the numbers) a model whose rays cross more cells than this machine's free
-    memory can hold a model and a Gibbs kernel of (:data:`BYTES_PER_CROSSING` each), before the likelihood table
-    is built: a map too fine or a log too long for the machine fails at once instead of swapping."""
+    """Refuse (``MemoryError``, with the numbers) a model whose rays need more than this machine's free memory
+    (:func:`memory_needed`), before the likelihood table is built: a map too fine or a log too long for the
+    machine fails at once instead of swapping."""
     crossings = int(rays.cells.size)
-    need = crossings * BYTES_PER_CROSSING
+    need = memory_needed(rays)
     have = available_memory()
     if have is not None and need > have:
         raise MemoryError(
             f"the model's {rays.num_rays:,} rays cross {crossings:,} cells on a {rays.grid.shape} grid: about "
-            f"{need / 2**30:.1f} GiB for the model and a sampler ({BYTES_PER_CROSSING} bytes a crossing), more than "
+            f"{need / 2**30:.1f} GiB for the model and a sampler ({BYTES_PER_CROSSING} bytes a crossing and the "
+            "likelihood table's working blocks), more than "
             f"the {have / 2**30:.1f} GiB this machine has free; use a coarser resolution, fewer scans or beams, or "
             "a shorter usable range"
         )

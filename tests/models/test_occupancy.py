@@ -196,3 +196,16 @@ def test_a_model_too_big_for_free_memory_is_refused_before_it_is_built(monkeypat
         OccupancyModel(grid, rays, GaussianRange(1.0), IndependentPrior(0.5, 6))
     monkeypatch.setattr(occ, "available_memory", lambda: None)  # unknown: not checked
     OccupancyModel(grid, rays, GaussianRange(1.0), IndependentPrior(0.5, 6))
+
+
+def test_memory_needed_counts_crossings_and_the_tables_working_blocks(monkeypatch):
+    """The guard's estimate: 64 bytes a crossing plus the likelihood table's working blocks, at most
+    ``_TABLE_BLOCK`` entries a block (``benchmarks/bench_memory.py`` measures the peak against it)."""
+    import ogm_ppl.models.occupancy as occ
+
+    rays = raycast(Grid.line(6), Scans.one_d([2.0, 4.0], max_range=5.0))
+    R, W = rays.num_rays, int(rays.lengths.max()) + 1
+    per_crossing = rays.cells.size * occ.BYTES_PER_CROSSING
+    assert occ.memory_needed(rays) == per_crossing + occ.TABLE_TEMPORARIES * 8 * R * W
+    monkeypatch.setattr(occ, "_TABLE_BLOCK", 2)  # a table of more entries than a block: one block's worth
+    assert occ.memory_needed(rays) == per_crossing + occ.TABLE_TEMPORARIES * 8 * 2
