@@ -190,16 +190,28 @@ def _failure(e: BaseException, tb) -> TaskFailure:
     return TaskFailure(f"{type(e).__name__}: {e}", "".join(traceback.format_exception(type(e), e, tb)))
 
 
+#: worker log records the runner's own reports replace: a failed task (the runner keeps its traceback in
+#: :data:`FAILURES`), and a heartbeat to a scheduler the interrupted driver has closed
+_QUIET = ("Compute Failed", "Failed to communicate with scheduler during heartbeat")
+
+
 def _quiet_task_failures(record: logging.LogRecord) -> bool:
-    """A filter for dask workers' log: drop the "Compute Failed" reports (a traceback as one quoted string;
-    the runner reports each failure and keeps its traceback in :data:`FAILURES`)."""
-    return not str(record.msg).startswith("Compute Failed")
+    """A filter for dask workers' log: drop the records of :data:`_QUIET`."""
+    return not str(record.msg).startswith(_QUIET)
 
 
-def _quiet_worker_log() -> None:
+def _worker_setup() -> None:
+    """Run in each worker process of the runner's own ``LocalCluster``: keep "Compute Failed" reports out of
+    the log (:func:`_quiet_task_failures`), and ignore Ctrl-C, which a terminal sends to every process of the
+    run: the driver stops the run and closes the cluster, instead of each worker dying with a traceback."""
+    import signal
+    import threading
+
     logger = logging.getLogger("distributed.worker")
     if _quiet_task_failures not in logger.filters:
         logger.addFilter(_quiet_task_failures)
+    if threading.current_thread() is threading.main_thread():
+        signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _execute_serial(todo: list[Task], progress: bool):
@@ -245,7 +257,7 @@ def _client(scheduler, workers, scratch: Path | None = None):
                 local_directory=None if scratch is None else str(scratch),
             )
         client = Client(cluster)
-        client.run(_quiet_worker_log)  # the runner reports failed tasks itself (failures.txt)
+        client.run(_worker_setup)  # failed tasks go to failures.txt; Ctrl-C is the driver's
         return client, True
     if isinstance(scheduler, str):
         try:

@@ -691,3 +691,42 @@ def test_every_shipped_spec_is_valid(path):
         load_spec(path)
     except SpecError as e:
         assert "no such guide file: out/guides/" in str(e), str(e)
+
+
+def test_ctrl_c_stops_a_dask_run_with_one_line_and_no_worker_tracebacks(tmp_path):
+    """Ctrl-C reaches every process of the run (a terminal signals the whole process group): the driver stops
+    and closes its cluster, the workers ignore it (no "KeyboardInterrupt" traceback from each), and a worker's
+    heartbeat to the closed scheduler is kept out of the log; exit status 130."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    spec = SMOKE.read_text().replace("pose_fraction = [1.0, 0.5]", "pose_fraction = 1.0")
+    spec = spec.replace('name = "smoke"', 'name = "long"', 1)
+    spec += '\n[[algorithms]]\nname = "long"\nkind = "gibbs"\nsweeps = 200000\nchains = 2\n'
+    path = tmp_path / "long.toml"
+    path.write_text(spec)
+    env = dict(os.environ, PYTHONPATH=str(SMOKE.parents[2]))
+    p = subprocess.Popen(
+        [sys.executable, "-m", "ogm_ppl", "experiment", str(path), "--workers", "2", "--out", str(tmp_path / "out")],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+        env=env,
+        start_new_session=True,
+    )
+    try:
+        deadline = time.monotonic() + 120
+        while not list((tmp_path / "out").glob("tasks/*/long/c*/gibbs.npz")) and time.monotonic() < deadline:
+            assert p.poll() is None, p.communicate()
+            time.sleep(0.5)  # the long chains have started (their first checkpoint is written)
+        os.killpg(p.pid, signal.SIGINT)
+        _, err = p.communicate(timeout=120)
+    finally:
+        if p.poll() is None:
+            os.killpg(p.pid, signal.SIGKILL)
+    assert p.returncode == 130, err
+    assert err.rstrip().endswith("ogm-ppl: interrupted"), err
+    assert "Traceback" not in err and "KeyboardInterrupt" not in err, err
