@@ -298,8 +298,9 @@ def build_parser() -> argparse.ArgumentParser:
         "--scans",
         type=_scan_range,
         metavar="A:B",
-        help="map the scans A to B - 1 of the input (0-based, as Python slices: 100:400, :400, 100:), "
-        "counted before --pose-step / --pose-fraction thin them",
+        help="map the scans A to B - 1 of the input (0-based, A < B, either end may be left open: 100:400, :400, "
+        "100:; an end past the last scan stops there), counted before --pose-step / --pose-fraction thin them; "
+        "the report lists what each step kept",
     )
     m.add_argument(
         "--margin",
@@ -614,19 +615,22 @@ def _reader_kwargs(args) -> dict:
 
 def _select_scans(args, inp: _Input) -> _Input:
     """``--scans A:B``: the stretch of the scans as read (the reader did not thin them), then thinned by
-    ``--pose-step`` / ``--pose-fraction``."""
+    ``--pose-step`` / ``--pose-fraction``; :attr:`_Input.selection` records each step and its count."""
     if getattr(args, "scans", None) is None:
         return inp
     lo, hi = args.scans
     S = inp.scans.num_scans
+    given = f"{'' if lo is None else lo}:{'' if hi is None else hi}"
     a, b = lo or 0, S if hi is None else min(hi, S)
     if a >= b:
-        given = f"{'' if lo is None else lo}:{'' if hi is None else hi}"
         raise CLIError(f"--scans {given}: {inp.path} holds {S} scans (0..{S - 1})")
     scans = inp.scans.select(np.arange(a, b))
+    steps = [f"{S:,} read", f"--scans {given}: {scans.num_scans:,}"]
     if args.pose_step != 1 or args.pose_fraction is not None:
         scans = scans.subsample(args.pose_step, 1, args.pose_fraction)
-    return dataclasses.replace(inp, scans=scans, selected_from=inp.selected_from or S)
+        thin = f"--pose-step {args.pose_step}" if args.pose_step != 1 else f"--pose-fraction {args.pose_fraction:g}"
+        steps.append(f"{thin}: {scans.num_scans:,}")
+    return dataclasses.replace(inp, scans=scans, selection=tuple(steps))
 
 
 def _jsonable(x):
@@ -679,7 +683,7 @@ class _Input:
     log: CarmenLog | None = None
     settings: dict = field(default_factory=dict)
     bag: BagLog | None = None
-    selected_from: int | None = None  # the scans read before --scans or --crop kept some of them
+    selection: tuple[str, ...] = ()  # what --scans / --crop (and thinning after --scans) kept, step by step
 
 
 def _is_bag(path: Path) -> bool:
@@ -814,7 +818,9 @@ def _scans_on_grid(args, inp: _Input, grid: Grid) -> _Input:
     if getattr(args, "crop", False):
         if not inside.any():
             raise CLIError(f"--crop: no pose of the {len(inside)} scans lies on {where}")
-        return dataclasses.replace(inp, scans=scans.select(inside), selected_from=inp.selected_from or len(inside))
+        steps = inp.selection or (f"{len(inside):,} read",)
+        kept = int(inside.sum())
+        return dataclasses.replace(inp, scans=scans.select(inside), selection=(*steps, f"--crop: {kept:,}"))
     s = int(np.flatnonzero(~inside)[0])
     x, y = scans.poses[s, :2]
     hint = "; --crop maps the part the grid covers" if args.size is not None else ""
@@ -1035,16 +1041,16 @@ def _counts(inp: _Input) -> dict:
     s = inp.scans
     src = inp.log if inp.log is not None else inp.bag
     # the reader counts the beams of the scans it read: of those mapped unless --scans / --crop kept some
-    present = int(src.counts["beams"]) if src is not None and inp.selected_from is None else int(s.num_readings)
-    c: dict[str, int | dict[str, int]] = {
+    present = int(src.counts["beams"]) if src is not None and not inp.selection else int(s.num_readings)
+    c: dict[str, int | dict[str, int] | list[str]] = {
         "scans": s.num_scans,
         "beams": present,
         "valid_beams": s.num_valid,
         "dropped_beams": present - s.num_valid,
         "max_range_readings": int(s.is_max.sum()),
     }
-    if inp.selected_from is not None:  # --scans / --crop: the reader's counts below are of every scan read
-        c["scans_before_selection"] = inp.selected_from
+    if inp.selection:  # --scans / --crop: the reader's counts below are of every scan read
+        c["selection"] = list(inp.selection)
     if inp.log is not None:
         for k in ("no_return", "beyond_usable", "below_min"):
             c[k] = int(inp.log.counts.get(k, 0))
@@ -1180,8 +1186,28 @@ def _map(args, method, params) -> dict:
     atomic_write_text(out / "report.json", json.dumps(_jsonable(report), indent=2))
     atomic_write_text(out / "report.md", _report_md(report))
     stage.commit()
-    shutil.rmtree(args.out / CHECKPOINTS, ignore_errors=True)  # the map is written: its chains' are spent
+    _drop_own_checkpoints(args, _checkpoint_root(args, params, inp, grid))
     return report
+
+
+def _drop_own_checkpoints(args, own: Path | None) -> None:
+    """The map is written: its chains' checkpoints are spent. Those of other commands run into the same folder
+    (other settings or input, interrupted) stay, and a note says where they are."""
+    root = args.out / CHECKPOINTS
+    if own is not None:
+        shutil.rmtree(own, ignore_errors=True)
+    try:
+        others = sorted(p.name for p in root.iterdir())
+    except OSError:
+        return
+    if not others:
+        root.rmdir()
+        return
+    print(
+        f"ogm-ppl map: {root} keeps the checkpoints of {len(others)} other interrupted run(s) ({', '.join(others)}): "
+        "rerunning their command resumes them; delete the folder to drop them",
+        file=sys.stderr,
+    )
 
 
 def _size(path: Path) -> int:
@@ -1191,13 +1217,19 @@ def _size(path: Path) -> int:
     return path.stat().st_size
 
 
+def _plural(n: int, noun: str) -> str:
+    """``"1 scan"``, ``"2 scans"``."""
+    return f"{n:,} {noun}{'' if n == 1 else 's'}"
+
+
 def _fmt_s(x) -> str:
     return "fused with map" if x is None else f"{x:.3f} s"
 
 
 def _report_md(r: dict) -> str:
     c, g, t, m = r["counts"], r["grid"], r["times_s"], r["method"]
-    of = f" (kept of {c['scans_before_selection']:,} read: --scans / --crop)" if "scans_before_selection" in c else ""
+    of = f" ({'; '.join(c['selection'])})" if "selection" in c else ""
+    over = " (over all the scans read)" if "selection" in c else ""
     lines = [
         f"# ogm-ppl map: {Path(r['input']['path']).name}",
         "",
@@ -1209,7 +1241,7 @@ def _report_md(r: dict) -> str:
         bad = f"bad lines: {c['bad_lines']}" if "bad_lines" in c else f"bad messages: {c['bad_messages']}"
         lines.append(
             f"- dropped by rule: no return {c['no_return']:,}, beyond usable range "
-            f"{c['beyond_usable']:,}, below min range {c['below_min']:,}; {bad}"
+            f"{c['beyond_usable']:,}, below min range {c['below_min']:,}{over}; {bad}"
         )
     if "no_pose" in c:
         b = r["bag"]
@@ -1551,6 +1583,10 @@ def cmd_experiment(args) -> int:
     except ExperimentError as e:
         print(f"ogm-ppl: error: {_one_line(e)}", file=sys.stderr)
         return 1
+    except KeyboardInterrupt as e:
+        raise KeyboardInterrupt(
+            f"finished tasks and the samplers' checkpoints are kept in {out}: the same command resumes from them"
+        ) from e
     print(r.table())
     print(f"{len(r.executed)} tasks run, {len(r.skipped)} found done, {r.seconds:.1f} s; results in {out}")
     return 0
@@ -1586,8 +1622,9 @@ def main(argv: list[str] | None = None) -> int:
             r = cmd_map(args)
             t = r["times_s"]
             print(
-                f"ogm-ppl map: {r['grid']['cols']} x {r['grid']['rows']} cells, {r['counts']['scans']} scans, "
-                f"method {args.method}; read {_fmt_s(t['read'])}, map {_fmt_s(t['map'])} -> {args.out}"
+                f"ogm-ppl map: {r['grid']['cols']} x {r['grid']['rows']} cells, "
+                f"{_plural(r['counts']['scans'], 'scan')}, method {args.method}; read {_fmt_s(t['read'])}, "
+                f"map {_fmt_s(t['map'])} -> {args.out}"
             )
         elif args.command == "simulate":
             r = cmd_simulate(args)

@@ -272,11 +272,21 @@ def _check_call(factory, options: dict, what: str, cannot: str) -> None:
         signature = inspect.signature(factory)
     except (TypeError, ValueError):
         return
+    name = getattr(factory, "__qualname__", repr(factory))
+    positional = [
+        p.name for p in signature.parameters.values() if p.kind in (p.POSITIONAL_ONLY, p.POSITIONAL_OR_KEYWORD)
+    ][:2]
+    taken = [k for k in options if k in positional]
+    if taken:  # the two arguments every factory gets: from the method's parameters, never from the name
+        raise SensorFactoryError(
+            f"{what}: the factory's first two arguments ({', '.join(positional)}) are the range noise and the "
+            "share of random readings, set by the method's parameters sigma_cells and p_rand (the command "
+            f"line's --sigma and --param p_rand=...), not by the options of a name ({', '.join(taken)})"
+        )
     try:
         signature.bind(1.0, 0.0, **options)
     except TypeError as e:
-        name = getattr(factory, "__qualname__", repr(factory))
-        raise SensorFactoryError(f"{what}: the factory {name!r}{signature} {cannot} ({e})") from None
+        raise SensorFactoryError(f"{what}: the factory {name}{signature} {cannot} ({e})") from None
 
 
 def unregister_sensor(kind: str) -> None:

@@ -643,7 +643,13 @@ def test_an_interrupted_gibbs_map_resumes_from_its_checkpoint_bit_for_bit(sim_da
     monkeypatch.setattr(mcmc, "run_gibbs", real)
     capsys.readouterr()
     assert main([*argv, "--out", str(out), "--seed", "6"]) == 0
-    assert "resumes" not in capsys.readouterr().err
+    err = capsys.readouterr().err
+    assert "resumes from its checkpoint" not in err
+    # the interrupted seed-5 chains stay, and a note says so; rerunning that command resumes and spends them
+    assert len(list(out.glob(".checkpoints/*"))) == 1
+    assert f"{out / '.checkpoints'} keeps the checkpoints of 1 other interrupted run(s)" in err
+    assert main([*argv, "--out", str(out), "--seed", "5"]) == 0
+    assert capsys.readouterr().err.count("resumes from its checkpoint") == 2
     assert not (out / ".checkpoints").exists()
 
 
@@ -677,16 +683,18 @@ REGION = ["--size", "36", "60", "--origin", "0", "0"]  # x < 1.8 m: the poses 0 
 
 
 @pytest.mark.parametrize(
-    ("flags", "grid", "kept"),
+    ("flags", "grid", "kept", "steps"),
     [
-        (["--scans", "1:3"], [], [1, 2]),
-        (["--scans", "1:", "--pose-step", "2"], [], [1, 3]),  # the stretch is cut first, then thinned
-        (["--scans", ":2"], [], [0, 1]),
-        (["--crop"], REGION, [0, 2]),
-        (["--crop", "--scans", "1:"], REGION, [2]),
+        (["--scans", "1:3"], [], [1, 2], ["4 read", "--scans 1:3: 2"]),
+        # the stretch is cut first, then thinned
+        (["--scans", "1:", "--pose-step", "2"], [], [1, 3], ["4 read", "--scans 1:: 3", "--pose-step 2: 2"]),
+        (["--scans", ":2"], [], [0, 1], ["4 read", "--scans :2: 2"]),
+        (["--crop"], REGION, [0, 2], ["4 read", "--crop: 2"]),
+        (["--crop", "--scans", "1:"], REGION, [2], ["4 read", "--scans 1:: 3", "--crop: 1"]),
+        (["--crop", "--pose-step", "3"], REGION, [0], ["2 read", "--crop: 1"]),  # the reader thinned them
     ],
 )
-def test_map_of_a_stretch_or_a_region_is_the_map_of_those_scans_alone(tmp_path, tiny_log, flags, grid, kept):
+def test_map_of_a_stretch_or_a_region_is_the_map_of_those_scans_alone(tmp_path, tiny_log, flags, grid, kept, steps):
     """``--scans A:B`` and ``--crop`` give the map of a log holding only the scans they keep, and the report
     says how many of the scans read were kept. (The sensor's range is fixed: a log without one gets the largest
     reading of all its scans, which a selection keeps.)"""
@@ -698,8 +706,10 @@ def test_map_of_a_stretch_or_a_region_is_the_map_of_those_scans_alone(tmp_path, 
     assert a["grid"] == b["grid"]
     np.testing.assert_array_equal(a["probabilities"], b["probabilities"])
     counts = json.loads((tmp_path / "a" / "report.json").read_text())["counts"]
-    assert (counts["scans"], counts["scans_before_selection"]) == (len(kept), len(POSES))
-    assert f"- scans: {len(kept)} (kept of {len(POSES)} read" in (tmp_path / "a" / "report.md").read_text()
+    assert (counts["scans"], counts["selection"]) == (len(kept), steps)
+    report = (tmp_path / "a" / "report.md").read_text()
+    assert f"- scans: {len(kept)} ({'; '.join(steps)}); beams" in report
+    assert "below min range 0 (over all the scans read); bad lines" in report
 
 
 @pytest.mark.parametrize(

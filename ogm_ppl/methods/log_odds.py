@@ -68,7 +68,7 @@ def _delta(params: OGMParams, problem: MapProblem, ctx: RunContext):
     with warnings.catch_warnings(record=True) as caught:
         warnings.simplefilter("always")
         # the noise of a real log is not known: the range alone is checked
-        check_delta_setting(delta, sigma if known else None, F, where=ctx.where or "this map")
+        check_delta_setting(delta, sigma if known else None, F, where=ctx.where or "this map", fit_sigma=sigma)
     for w in caught:
         warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
     checked = setting if known else {"F_cells": F}

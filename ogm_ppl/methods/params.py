@@ -386,7 +386,8 @@ class GuideFile(Kind):
     """An amortised guide: ``"shipped"`` (``ogm_ppl/fitted/guide_amortised.npz``), ``"corpus:CORPUS"`` (the
     guide learned on a corpus's training plans, :func:`~ogm_ppl.inference.variational.corpus_guide`) or the
     path of a guide saved by :meth:`~ogm_ppl.inference.variational.AmortisedGuide.save` (``~`` and ``$VARS``
-    expanded). A bare corpus name that is no file is refused with a hint at ``"corpus:CORPUS"``."""
+    expanded; a relative path is read from the working directory, in a spec too). A bare corpus name that is no
+    file is refused with a hint at ``"corpus:CORPUS"``."""
 
     def value(self, v):
         name = Text().value(v)
@@ -402,7 +403,9 @@ class GuideFile(Kind):
         if not path.is_file():
             corpus = next((c for c in (name, name.lower()) if c in corpus_guides()), None)
             hint = f"did you mean 'corpus:{corpus}'?" if corpus else f"a guide is {self.describe()}"
-            raise _Bad(f"no such guide file: {path}; {hint}")
+            relative = not path.is_absolute() and not corpus
+            where = f" (a relative path is read from the working directory, {Path.cwd()})" if relative else ""
+            raise _Bad(f"no such guide file: {path}{where}; {hint}")
         return str(path)
 
     def describe(self):

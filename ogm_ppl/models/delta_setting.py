@@ -108,7 +108,12 @@ def setting_mismatches(
 
 
 def check_delta_setting(
-    delta_or_name: DeltaFamily | str, sigma_cells: float | None, F_cells: float | None = None, *, where: str = ""
+    delta_or_name: DeltaFamily | str,
+    sigma_cells: float | None,
+    F_cells: float | None = None,
+    *,
+    where: str = "",
+    fit_sigma: float | None = None,
 ) -> bool:
     """Whether a term is used inside the setting it was fitted for; warns (:class:`FittedSettingWarning`)
     if not.
@@ -121,6 +126,8 @@ def check_delta_setting(
     ``max_range_m / resolution``). Terms that hold no setting (``"haehnel"``: hand-set, or a family made by
     hand) never warn and return ``True``; the thesis's ``*_thesis`` values hold the setting Section 2.5
     states (sigma 3, F 75) and do warn. ``where`` (e.g. ``"experiment intel_5cm"``) goes into the message.
+    ``fit_sigma``: the noise the message's refit call names when ``sigma_cells`` is not known (the one a
+    refit of the map would use; default the term's own).
 
     >>> import warnings
     >>> check_delta_setting("p21", sigma_cells=3.0, F_cells=75)  # the shipped p21's own setting
@@ -151,12 +158,13 @@ def check_delta_setting(
         + ([] if F_cells is None else [f"F = {F_cells:g} cells"])
     )
     loc = f" in {where}" if where else ""
+    hint_sigma = sigma_cells if sigma_cells is not None else fit_sigma if fit_sigma is not None else sigma_fit
     warnings.warn(
         FittedSettingWarning(
             f"Delta term {name!r} was fitted for {fitted} but is used at {at}{loc} ({'; '.join(bad)}); "
             f"outside its setting it can erase walls or blur them. Fit it for this setting (from "
             f'ogm_ppl.inference.variational; or fit = "setting" in an experiment spec, --param fit=setting on '
-            f"the command line): {_fit_hint(str(name), sigma_fit if sigma_cells is None else sigma_cells, F_cells)}"
+            f"the command line): {_fit_hint(str(name), hint_sigma, F_cells)}"
         ),
         stacklevel=2,
     )

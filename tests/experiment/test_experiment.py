@@ -728,5 +728,8 @@ def test_ctrl_c_stops_a_dask_run_with_one_line_and_no_worker_tracebacks(tmp_path
         if p.poll() is None:
             os.killpg(p.pid, signal.SIGKILL)
     assert p.returncode == 130, err
-    assert err.rstrip().endswith("ogm-ppl: interrupted"), err
+    assert err.rstrip().endswith(
+        f"ogm-ppl: interrupted; finished tasks and the samplers' checkpoints are kept in {tmp_path / 'out'}: the "
+        "same command resumes from them"
+    ), err
     assert "Traceback" not in err and "KeyboardInterrupt" not in err, err

@@ -158,7 +158,11 @@ def test_a_guide_option_names_its_three_forms_and_hints_at_a_corpus(name):
         method.parse({"guide": "houseexpo"})
     with pytest.raises(ParamError, match="did you mean 'corpus:ipa'"):
         method.parse({"guide": "IPA"})
-    with pytest.raises(ParamError, match=r"no such guide file: nothing\.npz; a guide is 'shipped', 'corpus:CORPUS'"):
+    with pytest.raises(
+        ParamError,
+        match=r"no such guide file: nothing\.npz \(a relative path is read from the working directory, .*\); a guide "
+        r"is 'shipped', 'corpus:CORPUS'",
+    ):
         method.parse({"guide": "nothing.npz"})
     with pytest.raises(ParamError, match=r"no guide learned on corpus 'Dungeon' \(did you mean 'dungeon'\?\)"):
         method.parse({"guide": "corpus:Dungeon"})
@@ -356,3 +360,19 @@ def test_the_amortised_method_symmetrises_on_request():
     assert np.abs(sym - plain).max() > 1e-4
     np.testing.assert_array_equal(sym, method.run(params, problem, RunContext(seed=0)).probabilities)
     assert method.parse({"symmetrize": "yes"}, text=True).symmetrize is True
+
+
+def test_a_shipped_term_on_data_of_unknown_noise_hints_the_refit_that_fit_setting_runs():
+    """The data's noise unknown, the shipped p21 is checked on its range alone; its warning's refit call names
+    the noise that ``fit = "setting"`` would fit for (the method's default, 1 cell), not the term's own 3."""
+    truth = np.zeros((40, 40), bool)
+    truth[[0, -1], :] = truth[:, [0, -1]] = True
+    grid = Grid(truth.shape, resolution=0.05)
+    data = stop_and_scan(truth, grid, num_poses=2, beams=90, max_range_cells=400, sigma_cells=1.0, seed=0)
+    from ogm_ppl.inference.variational import FittedSettingWarning
+
+    method = get_method("p21")
+    with pytest.warns(FittedSettingWarning, match=r"fit_delta_for_setting\('p21', sigma=1, F=400\)"):
+        method.run(method.parse({}), MapProblem(grid, data.scans), RunContext(seed=0))
+    with pytest.warns(FittedSettingWarning, match=r"fit_delta_for_setting\('p21', sigma=2, F=400\)"):
+        method.run(method.parse({"sigma_cells": 2.0}), MapProblem(grid, data.scans), RunContext(seed=0))

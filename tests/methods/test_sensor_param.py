@@ -192,3 +192,12 @@ def test_a_sensor_name_sets_its_factorys_options(tmp_path, simulated_dataset, ca
         assert "option k must be a number" in capsys.readouterr().err
     finally:
         unregister_sensor("toy_k")
+
+
+def test_an_option_naming_the_factorys_two_arguments_says_where_they_are_set():
+    from ogm_ppl.sensors import SensorFactoryError
+
+    with pytest.raises(SensorFactoryError, match=r"first two arguments \(sigma, p_rand\) .* --param p_rand"):
+        sensor_by_name("gaussian:p_rand=0.1")
+    with pytest.raises(ParamError, match=r"not by the options of a name \(sigma\)"):
+        get_method("gibbs").parse({"sensor": "gaussian:sigma=2"})

@@ -564,10 +564,19 @@ def _positive(v) -> float | None:
 def _read_artefact(path: Path) -> tuple[GuideArchitecture, dict[str, torch.Tensor], dict]:
     hint = "expected a guide written by AmortisedGuide.save (experiments/train_amortised_guide.py)"
     try:
+        with open(path, "rb") as f:
+            magic = f.read(4)
+    except FileNotFoundError:
+        raise GuideFileError(f"{path}: no such file") from None
+    except OSError as e:
+        raise GuideFileError(f"{path}: cannot read it ({e.strerror or e})") from None
+    if magic != b"PK\x03\x04":  # an .npz is a zip archive
+        raise GuideFileError(f"{path}: not an .npz archive (it does not start as a zip file does); {hint}")
+    try:
         z = np.load(path, allow_pickle=False)
     except FileNotFoundError:
         raise GuideFileError(f"{path}: no such file") from None
-    except Exception as e:  # BadZipFile, OSError, ValueError (pickled data, not an npz), EOFError
+    except Exception as e:  # BadZipFile, OSError, EOFError
         raise GuideFileError(f"{path}: not a readable .npz ({type(e).__name__}: {e}); {hint}") from None
     if not hasattr(z, "files"):
         raise GuideFileError(f"{path}: a single array, not an .npz archive; {hint}")

@@ -189,9 +189,13 @@ def test_save_load_round_trip_and_refusals(tmp_path):
     with pytest.raises(GuideFileError, match=r"p\.npz: holds pickled Python objects; refused"):
         AmortisedGuide.load(pickled)
     junk = tmp_path / "junk.npz"
-    junk.write_bytes(b"not a zip")
-    with pytest.raises(GuideFileError, match=r"junk\.npz: not a readable"):
+    junk.write_bytes(b"not a zip")  # a text file: not numpy's misleading "contains pickled (object) data"
+    with pytest.raises(GuideFileError, match=r"junk\.npz: not an \.npz archive \(it does not start as a zip"):
         AmortisedGuide.load(junk)
+    broken = tmp_path / "broken.npz"
+    broken.write_bytes(b"PK\x03\x04 cut short")
+    with pytest.raises(GuideFileError, match=r"broken\.npz: not a readable \.npz"):
+        AmortisedGuide.load(broken)
     with pytest.raises(GuideFileError, match="no such file"):
         AmortisedGuide.load(tmp_path / "absent.npz")
     with pytest.raises(ValueError, match="architecture"):
