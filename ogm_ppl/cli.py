@@ -1540,11 +1540,17 @@ def _one_line(e: BaseException) -> str:
 
 def cmd_methods(args) -> str:
     """``ogm-ppl methods [NAME]``: each method's name, one line and parameters (default, kind, meaning)."""
+    cli_defaults = (
+        f"ogm-ppl map's own defaults, where a method has the parameter: sweeps = {CLI_SWEEPS}, burn_in = sweeps // "
+        f"10, lam = {CLI_LAMBDA} (prior independent); specs and the Python API use the defaults listed"
+    )
     if args.name is not None:
         try:
-            return "\n".join(get_method(args.name).describe())
+            m = get_method(args.name)
         except ParamError as e:
             raise CLIError(f"argument NAME: {e.message}") from None
+        shared = {"sweeps", "burn_in", "lam"} & set(m.param_names())
+        return "\n".join([*m.describe(), *(["", cli_defaults] if shared else [])])
     from ogm_ppl.priors import prior_kinds
     from ogm_ppl.sensors import sensor_kinds
 
@@ -1555,6 +1561,7 @@ def cmd_methods(args) -> str:
         "",
         f"prior kinds (parameter prior, KIND[:CORPUS][@BETA|@cal]): {', '.join(prior_kinds())}",
         f"sensor kinds (parameter sensor): {', '.join(sensor_kinds())}",
+        cli_defaults,
     ]
     return "\n".join(lines)
 

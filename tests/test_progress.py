@@ -18,8 +18,9 @@ def test_plain_lines_first_every_and_last(monkeypatch):
     p.close()
     lines = s.getvalue().splitlines()
     assert lines[0] == "tasks: 0/4 (0 %), 0 s"
-    assert lines[1] == "tasks: 2/4 (50 %), 12 s, ~12 s left; last: b"
-    assert lines[2] == "tasks: 3/4 (75 %), 30 s, ~10 s left; last: c"
+    # the pace after the first step: 7 s a step at b, (30 - 5) / 2 at c
+    assert lines[1] == "tasks: 2/4 (50 %), 12 s, ~14 s left; last: b"
+    assert lines[2] == "tasks: 3/4 (75 %), 30 s, ~12 s left; last: c"
     assert lines[3] == "tasks: 4/4 (100 %), 40 s, done" and len(lines) == 4
 
 
@@ -59,15 +60,33 @@ def test_after_keeps_a_short_run_quiet_and_a_resumed_run_estimates_from_its_own_
     p.update(10)
     assert s.getvalue() == ""
     now[0] = 10.0
-    p.update(10)  # 20 steps in 10 s, 40 to go
+    p.update(10)  # 10 steps in the 1 s after the first update, 40 to go
     now[0] = 15.0
     p.update(10)  # within ``every`` of the last line: quiet
     now[0] = 30.0
     p.update(30)
     p.close()
     assert s.getvalue().splitlines() == [
-        "gibbs sweeps: 60/100 (60 %), 10 s, ~20 s left",
+        "gibbs sweeps: 60/100 (60 %), 10 s, ~4 s left",
         "gibbs sweeps: 100/100 (100 %), 30 s, done",
+    ]
+
+
+def test_a_slow_first_step_does_not_set_the_pace(monkeypatch):
+    """A first step that compiled kernels (45 s) before steps of 0.1 s: the time left is that of 0.1 s steps."""
+    now = [0.0]
+    monkeypatch.setattr("ogm_ppl.progress.time.perf_counter", lambda: now[0])
+    s = io.StringIO()
+    p = Progress(1001, "gibbs sweeps", stream=s, every=10.0, after=10.0)
+    now[0] = 45.0
+    p.update()
+    for _ in range(100):
+        now[0] += 0.1
+        p.update()
+    # no time left after the first step alone; then the 0.1 s steps' pace
+    assert s.getvalue().splitlines() == [
+        "gibbs sweeps: 1/1001 (0 %), 45 s",
+        "gibbs sweeps: 101/1001 (10 %), 55 s, ~90 s left",
     ]
 
 
