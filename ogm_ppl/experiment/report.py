@@ -151,7 +151,8 @@ def markdown(result) -> str:
         lines.append("")
     if sec:
         lines += [
-            "## Run time (seconds per run task, mean over datasets and chains; untimed warm-up compiles the kernels)",
+            "## Run time (seconds per run task, mean over datasets and chains: ray cast, model and sampling; the "
+            "anytime-F1 figures count sampling alone; untimed warm-up compiles the kernels)",
             "",
             "| algorithm | mean s | runs |",
             "|---|---|---|",

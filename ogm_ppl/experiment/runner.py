@@ -346,12 +346,16 @@ def record_failures(out: Path, failed: dict) -> Path | None:
 def failed_error(failed: dict, todo: list, result, out: Path | None = None) -> ExperimentError:
     """The :class:`ExperimentError` of a run in which ``failed`` (task id -> error) of the ``todo`` tasks failed;
     with ``out``, the tracebacks are written to ``out/failures.txt`` (:func:`record_failures`), which it names."""
-    first = next(iter(failed.items()))
+    deps = {t.id: t.deps for t in todo}
+    own = [tid for tid in failed if not any(d in failed for d in deps.get(tid, ()))]  # not for a failed input
+    first = (own or list(failed))[0]
     where = record_failures(out, failed) if out is not None else None
     tracebacks = f"; tracebacks in {where}" if where is not None else ""
+    after = len(failed) - len(own)
+    also = f", and {after} that depend on them" if own and after else ""
     return ExperimentError(
-        f"{len(failed)} of {len(todo)} tasks failed (first: {first[0]}: {first[1]}{tracebacks}); finished tasks "
-        "are kept: rerun to resume once the cause is mended",
+        f"{len(own) or len(failed)} of {len(todo)} tasks failed{also} (first: {first}: {failed[first]}{tracebacks}); "
+        "finished tasks are kept: rerun to resume once the cause is mended",
         result,
     )
 

@@ -669,6 +669,8 @@ def test_a_failed_task_leaves_its_traceback_in_failures_txt(tmp_path, scheduler,
             run_experiment(spec, tmp_path, scheduler=scheduler, workers=1, progress=False)
         failures = tmp_path / "failures.txt"
         assert f"tracebacks in {failures}" in str(e.value)
+        # the one run task (one dataset, one chain) and the score task that needed it
+        assert "1 of " in str(e.value) and "tasks failed, and 1 that depend on them (first: run/" in str(e.value)
         text = failures.read_text()
         assert "Compute Failed" not in capfd.readouterr().err
         if scheduler is None:
