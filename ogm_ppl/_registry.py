@@ -11,15 +11,21 @@ __all__ = ["Registry"]
 
 
 def _where(factory) -> tuple[str, str]:
-    """Where a factory was defined: ``(module, qualified name)``."""
-    return getattr(factory, "__module__", "?") or "?", getattr(factory, "__qualname__", repr(factory))
+    """Where a factory was defined: ``(module, qualified name)``, a lambda's line too (every lambda of a module
+    has the qualified name ``<lambda>``)."""
+    name = getattr(factory, "__qualname__", repr(factory))
+    code = getattr(factory, "__code__", None)
+    if name.endswith("<lambda>") and code is not None:
+        name = f"{name} (line {code.co_firstlineno})"
+    return getattr(factory, "__module__", "?") or "?", name
 
 
 class Registry(Generic[F]):
     """Kinds of one role (``"prior"``, ``"sensor"``) and their factories.
 
     ``shipped`` kinds cannot be unregistered. A kind is a non-empty name without ``:``; registering a name
-    another factory took is refused, the same factory's module run again (reloaded) registers anew.
+    another factory took is refused; a factory defined at the same place (module, qualified name, and a
+    lambda's line: a module reloaded, a notebook cell run again) replaces the old one.
     """
 
     def __init__(self, role: str, shipped: tuple[str, ...]) -> None:

@@ -254,7 +254,8 @@ def register_sensor(kind: str, factory: SensorFactory) -> None:
     The factory is called with the two *positionally*: a class whose first two parameters mean something else
     is registered through a ``lambda sigma_cells, p_rand: MySensor(...)``. ``kind`` is a non-empty name without
     ``:``; a name another factory took is refused (:func:`unregister_sensor` first), and a factory defined at
-    the same place (module and qualified name: a module reloaded) replaces the old one. A factory that cannot
+    the same place (module, qualified name, and a lambda's line: a module reloaded, a notebook cell run again)
+    replaces the old one. A factory that cannot
     take the two arguments is refused here (:class:`SensorFactoryError`). Test the sensor with
     :class:`~ogm_ppl.testing.SensorContract`.
     """
@@ -305,6 +306,7 @@ def split_sensor_name(name: str) -> tuple[str, dict[str, int | float]]:
     if not isinstance(name, str) or not name.strip():
         raise ValueError(f"a sensor name is KIND or KIND:KEY=VALUE,..., got {name!r}")
     kind, colon, rest = name.strip().partition(":")
+    kind = kind.strip()
     options: dict[str, int | float] = {}
     if colon:
         for item in rest.split(","):
@@ -312,10 +314,14 @@ def split_sensor_name(name: str) -> tuple[str, dict[str, int | float]]:
             key, text = key.strip(), text.strip()
             if not eq or not key.isidentifier() or key in options:
                 raise ValueError(f"sensor {name!r}: options are KEY=VALUE pairs with distinct keys, got {item!r}")
+            value: int | float
             try:
-                value: int | float = int(text) if text.lstrip("+-").isdigit() else float(text)
+                value = int(text)
             except ValueError:
-                raise ValueError(f"sensor {name!r}: option {key} must be a number, got {text!r}") from None
+                try:
+                    value = float(text)
+                except ValueError:
+                    raise ValueError(f"sensor {name!r}: option {key} must be a number, got {text!r}") from None
             if not math.isfinite(value):
                 raise ValueError(f"sensor {name!r}: option {key} must be finite, got {text!r}")
             options[key] = value

@@ -65,7 +65,7 @@ def test_extending_page_examples_run_and_build_what_their_contracts_test():
     from ogm_ppl.testing import KernelContract, MethodContract, PriorContract, SensorContract
 
     namespace = {
-        "MySensor": GaussianRange,
+        "MySensor": lambda sigma, p_rand=0.0, p_short=0.0: GaussianRange(sigma, p_rand),  # options dropped
         "MyKernel": lambda model, region=None: PatchGibbs(model, 2, region=region),
         "MyPrior": lambda shape: namespace["CheckerboardPrior"](shape),  # the page's own prior
     }
@@ -89,7 +89,7 @@ def test_extending_page_examples_run_and_build_what_their_contracts_test():
             assert isinstance(tests[name]().make_sensor(), GaussianRange)
         from ogm_ppl.sensors import sensor_by_name
 
-        assert repr(sensor_by_name("my_sensor", 2.5, 0.1)) == "GaussianRange(sigma=2.5, p_rand=0.0)"
+        assert repr(sensor_by_name("my_sensor:p_short=0.2", 2.5, 0.1)) == "GaussianRange(sigma=2.5, p_rand=0.1)"
         from ogm_ppl.methods import MapProblem, RunContext, get_method
         from ogm_ppl.testing.kernels import enumerable_2d_data
 

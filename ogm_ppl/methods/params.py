@@ -355,8 +355,8 @@ class SensorName(Kind):
             )
         try:  # a broken factory is found here, before any data is read (a value it refuses is the run's to tell)
             sensor_by_name(name, 1.0, 0.0)
-        except TypeError as e:
-            raise _Bad(f"sensor kind {name!r}: {e}") from None
+        except TypeError as e:  # its message names the sensor
+            raise _Bad(str(e)) from None
         except ValueError:
             pass
         return name

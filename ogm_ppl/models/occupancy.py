@@ -192,9 +192,10 @@ class ReadingsDistribution(TorchDistribution):
         return self.model.simulate_readings(maps)
 
 
-#: bytes per ray-cell crossing that a model and one Gibbs kernel over it hold at their peak (likelihood table,
-#: ray index in ray and cell order, first hits), beside the table's block temporaries below:
-#: ``benchmarks/bench_memory.py`` measures 46-64 on real logs of 3 M to 66 M crossings
+#: bytes per ray-cell crossing allowed for a model and one Gibbs kernel over it (likelihood table, ray index in
+#: ray and cell order, first hits), beside the table's block temporaries below; with them an upper bound of the
+#: peak: ``benchmarks/bench_memory.py`` measures the peak of model, kernel and one sweep at 0.5-0.85 of
+#: :func:`memory_needed` on real logs of 3 M to 66 M crossings
 BYTES_PER_CROSSING = 64
 #: float64 temporaries of one block of the likelihood table (the sensor's ``log_prob`` and the masks; up to
 #: ``_TABLE_BLOCK`` entries each): about 0.6 GB once a table has that many entries, whatever the crossings
@@ -214,7 +215,8 @@ def available_memory() -> int | None:
 
 
 def memory_needed(rays: Rays) -> int:
-    """Bytes a model over ``rays`` and a Gibbs kernel need at their peak: :data:`BYTES_PER_CROSSING` per
+    """Bytes a model over ``rays`` and a Gibbs kernel may need at their peak (an upper bound, measured by
+    ``benchmarks/bench_memory.py``): :data:`BYTES_PER_CROSSING` per
     ray-cell crossing and :data:`TABLE_TEMPORARIES` float64 blocks of the likelihood table (``R x W`` entries,
     ``W`` the longest ray plus one, at most ``_TABLE_BLOCK`` a block)."""
     entries = int(rays.num_rays) * (int(rays.lengths.max(initial=0)) + 1)

@@ -84,6 +84,12 @@ def test_sensor_by_name_checks_its_arguments_and_the_factory():
         register_sensor("gaussian", lambda sigma_cells, p_rand: PatternMatch(0.9))
     with pytest.raises(ValueError, match="without ':'"):
         register_sensor("a:b", PatternMatch)
+    register_sensor("toy_twice", lambda sigma_cells, p_rand: GaussianRange(sigma_cells))
+    try:  # another lambda of this module under the same name: refused, not a silent replacement
+        with pytest.raises(ValueError, match=r"'toy_twice' is already registered .*<lambda> \(line \d+\)"):
+            register_sensor("toy_twice", lambda sigma_cells, p_rand: GaussianRange(5.0))
+    finally:
+        unregister_sensor("toy_twice")
 
 
 def test_the_command_line_maps_under_a_sensor_of_ones_own(tmp_path, simulated_dataset, wide, capsys):
@@ -146,7 +152,9 @@ def test_a_broken_factory_is_refused_where_it_is_registered_or_named():
 
     register_sensor("toy_picky", picky)
     try:
-        with pytest.raises(ParamError, match=r"sensor kind 'toy_str': the factory .* returned str, not a SensorModel"):
+        with pytest.raises(
+            ParamError, match=r"sensor: the factory of sensor kind 'toy_str' returned str, not a SensorModel"
+        ):
             get_method("gibbs").parse({"sensor": "toy_str"})
         assert get_method("gibbs").parse({"sensor": "toy_picky"}).sensor == "toy_picky"  # its ValueError: at run
         with pytest.raises(ValueError, match="toy_picky needs p_rand > 0"):
@@ -165,6 +173,7 @@ def test_a_sensor_name_sets_its_factorys_options(tmp_path, simulated_dataset, ca
 
     assert split_sensor_name("beam") == ("beam", {})
     assert split_sensor_name("beam:k=3, lam=0.5") == ("beam", {"k": 3, "lam": 0.5})
+    assert split_sensor_name(" beam : k = 1_000 ") == ("beam", {"k": 1000})
     for bad in ("beam:k", "beam:k=x", "beam:k=1,k=2", "beam:k=nan", ""):
         with pytest.raises(ValueError):
             split_sensor_name(bad)

@@ -212,7 +212,8 @@ def fit_guide(
     ``loss``: ``"tracegraph"`` (``TraceGraph_ELBO(num_particles, vectorised)``, score-function reverse
     KL), ``"rws"`` (``ReweightedWakeSleep(num_particles)``, wake-phi only: importance-weighted
     ``KL(p || q)``), or ``"exact"`` (:class:`~ogm_ppl.inference.variational.elbo.ExactELBO`, for guides with
-    ``exact_elbo``). Returns the loss trace. Seeds Pyro; the guide's parameters live in the guide (a
+    ``exact_elbo``). Returns the loss trace. Seeds Pyro with ``seed`` (any integer ``>= 0``; one of more than 32
+    bits, as experiments derive, is folded to the 32 NumPy takes); the guide's parameters live in the guide (a
     ``PyroModule``), so other guides' parameters are untouched. ``progress``: show progress
     (:class:`~ogm_ppl.progress.Progress`), or a caller's own ``Progress`` to update (left open).
     """
@@ -240,7 +241,10 @@ def fit_guide(
         objective = ExactELBO()
     else:
         raise ValueError(f"loss must be 'tracegraph', 'rws' or 'exact', got {loss!r}")
-    pyro.set_rng_seed(seed)
+    seed = int(seed)
+    if seed < 0:
+        raise ValueError(f"seed must be >= 0, got {seed}")
+    pyro.set_rng_seed((seed ^ (seed >> 32)) & 0xFFFFFFFF)  # NumPy takes 32 bits: a 64-bit seed is folded in
     svi = SVI(model.model, guide, Adam({"lr": lr}), objective)
     losses = []
     # a bar on a terminal; elsewhere a plain line every 10 s once the fit has taken 10 s
