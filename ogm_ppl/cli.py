@@ -981,6 +981,7 @@ def _online_map(
     om = r.online
     details = {
         **dataclasses.asdict(params),
+        "sigma_cells": problem.sigma(params.sigma_cells),  # the noise the sensor model was built with
         "sensor_model": repr(sensor),
         "kernel": "OnlineMap",
         "seed": args.seed,

@@ -107,6 +107,10 @@ def test_the_command_line_maps_under_a_sensor_of_ones_own(tmp_path, simulated_da
         report = load_json((tmp_path / "a" / "report.json").read_text())
         assert report["method"]["sensor"] == wide
         assert report["method"]["sensor_model"] == "GaussianRange(sigma=1.5, p_rand=0.0)"
+        assert report["method"]["sigma_cells"] == 0.5  # the method's, which the registered sensor tripled
+    assert main([*args, "--online", "--out", str(tmp_path / "n")]) == 0  # no --sigma: the data's noise, recorded
+    method = load_json((tmp_path / "n" / "report.json").read_text())["method"]
+    assert method["sensor_model"] == f"GaussianRange(sigma={method['sigma_cells']}, p_rand=0.0)"
     capsys.readouterr()
     assert main(["methods"]) == 0
     assert "\nsensor kinds (parameter sensor): gaussian, toy_wide\n" in capsys.readouterr().out + "\n"
