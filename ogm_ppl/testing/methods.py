@@ -71,8 +71,12 @@ class MethodContract:
         return dict(self.params)
 
     def exact_model(self, problem, params):
-        """The model whose posterior the method targets: by default its ``prior``, ``lam`` and
-        ``sigma_cells`` parameters (:class:`~ogm_ppl.methods._model.ModelParams`) on ``problem``."""
+        """The model whose posterior the method targets: by default the model of its
+        :class:`~ogm_ppl.methods._model.ModelParams` (``prior``, ``lam``, ``sigma_cells``, ``sensor``,
+        ``p_rand``) on ``problem``; for parameters without ``model``, ``prior``, ``lam`` and ``sigma_cells``."""
+        model = getattr(params, "model", None)
+        if callable(model):
+            return model(problem)
         return problem.model(params.prior, params.lam, params.sigma_cells)
 
     def _method(self):

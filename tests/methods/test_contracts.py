@@ -177,3 +177,9 @@ class TestGibbsOnThreads(TestGibbs):
 class TestPatchGibbsOnThreads(TestPatchGibbs):
     def params_for(self, problem_name):
         return {**super().params_for(problem_name), "threads": 1}
+
+
+class TestGibbsWithRandomReadings(TestGibbs):
+    """The exact check is against the model the parameters name, random readings included."""
+
+    params = {"sweeps": 50, "p_rand": 0.3}
