@@ -48,10 +48,12 @@ class ModelParams:
         """The :class:`~ogm_ppl.models.OccupancyModel` of ``problem`` under these parameters."""
         return problem.model(self.prior, self.lam, self.sigma_cells, self.p_rand, self.sensor)
 
-    def model_details(self, problem: MapProblem) -> dict:
+    def model_details(self, problem: MapProblem, model) -> dict:
+        """What to record of ``model`` (:meth:`model` of ``problem``): its range noise, its sensor, the rays'
+        cells."""
         return {
             "sigma_cells": problem.sigma(self.sigma_cells),
-            "sensor_model": repr(problem.sensor(self.sensor, self.sigma_cells, self.p_rand)),
+            "sensor_model": repr(model.sensor),
             "ray_cells": int(problem.rays.nnz),
         }
 

@@ -74,7 +74,7 @@ def run_kernel(kernel, params: SamplingParams, problem: MapProblem, ctx: RunCont
     from ogm_ppl.inference.mcmc import RunningStats, run_gibbs
 
     model = kernel.model
-    details = {**params.model_details(problem), **details}
+    details = {**params.model_details(problem, model), **details}
     observed = problem.rays.reached()
     warm, n = params.burn_in, params.sweeps
     stats = RunningStats(model)

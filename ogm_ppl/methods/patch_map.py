@@ -41,7 +41,7 @@ def patch_map(params: PatchMapParams, problem: MapProblem, ctx: RunContext) -> M
     else:
         pm = online_patch_map(model, patch_arg(params.patch))
     details = {
-        **params.model_details(problem),
+        **params.model_details(problem, model),
         "reference": "MAP map" if params.mode == "offline" else "online",
     }
     return MapResult(pm.marginals.numpy(), problem.rays.reached(), details)

@@ -65,5 +65,5 @@ def vi(params: VIParams, problem: MapProblem, ctx: RunContext) -> MapResult:
             progress=bar,
             loss=params.loss,
         )
-    details = {**params.model_details(problem), "guide": type(guide).__name__, "final_loss": losses[-1]}
+    details = {**params.model_details(problem, model), "guide": type(guide).__name__, "final_loss": losses[-1]}
     return MapResult(guide.marginals().numpy(), problem.rays.reached(), details)
