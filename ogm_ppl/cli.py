@@ -41,7 +41,6 @@ import math
 import os
 import shutil
 import sys
-import tempfile
 import time
 import warnings
 from dataclasses import dataclass, field
@@ -52,7 +51,7 @@ import numpy as np
 
 from ogm_ppl.datasets.mapgen import KINDS
 from ogm_ppl.grid import MAX_CELLS, Grid
-from ogm_ppl.io import StagedFolder, atomic_write, atomic_write_text
+from ogm_ppl.io import StagedFolder, atomic_write, atomic_write_text, writable_folder
 from ogm_ppl.methods import (
     MapProblem,
     MethodModuleError,
@@ -576,10 +575,7 @@ def _check_input(path: Path) -> bytes:
 def _check_writable(directory: Path, out: Path) -> None:
     """Create ``directory`` and write and remove a file there, naming ``--out`` on failure."""
     try:
-        directory.mkdir(parents=True, exist_ok=True)
-        fd, tmp = tempfile.mkstemp(dir=directory, prefix=".ogm-ppl-write-test.")
-        os.close(fd)
-        os.unlink(tmp)
+        writable_folder(directory)
     except OSError as e:
         raise CLIError(f"--out {out}: cannot write there ({e.strerror or e})") from None
 
@@ -1677,3 +1673,7 @@ def main(argv: list[str] | None = None) -> int:
             raise
         print(f"ogm-ppl: interrupted{'; ' + str(e) if str(e) else ''}", file=sys.stderr)
         return 130
+
+
+if __name__ == "__main__":  # python -m ogm_ppl.cli, as python -m ogm_ppl
+    raise SystemExit(main())

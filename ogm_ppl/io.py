@@ -17,6 +17,7 @@ left as it was.
 from __future__ import annotations
 
 import contextlib
+import errno
 import os
 import shutil
 import tempfile
@@ -25,7 +26,7 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["StagedFolder", "atomic_write", "atomic_write_bytes", "atomic_write_text"]
+__all__ = ["StagedFolder", "atomic_write", "atomic_write_bytes", "atomic_write_text", "writable_folder"]
 
 
 @contextlib.contextmanager
@@ -40,19 +41,49 @@ def atomic_write(path: str | os.PathLike, mode: str = "wb", **open_kwargs: Any) 
     if mode not in ("wb", "w"):
         raise ValueError(f"atomic_write mode must be 'wb' or 'w', got {mode!r}")
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    if path.is_dir():
+        raise IsADirectoryError(errno.EISDIR, "is a folder; give a file name", str(path))
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except OSError as e:  # name the file asked for, not the temporary one
+        raise _named(e, path) from None
     try:
         os.chmod(tmp, _mode_for(path))  # mkstemp makes 0600: give the file the mode open() would
         with os.fdopen(fd, mode, **open_kwargs) as f:
             yield f
             f.flush()
             os.fsync(f.fileno())
-        os.replace(tmp, path)
+        try:
+            os.replace(tmp, path)
+        except OSError as e:
+            raise _named(e, path) from None
     except BaseException:
         with contextlib.suppress(FileNotFoundError):
             os.unlink(tmp)
         raise
+
+
+def _named(e: OSError, path: Path) -> OSError:
+    """``e`` (of the same class) naming ``path``: ``[Errno 13] cannot write it (Permission denied): 'PATH'``."""
+    return type(e)(e.errno, f"cannot write it ({e.strerror or e})", str(path))
+
+
+def writable_folder(path: str | os.PathLike) -> Path:
+    """Create the folder ``path`` (and its parents) and check that a file can be written in it, by writing and
+    removing one: call it before a long computation that writes its results there. An ``OSError`` names
+    ``path`` and why (a file in the way, no permission, a read-only file system)."""
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise NotADirectoryError(errno.ENOTDIR, "exists and is not a folder", str(path))
+    try:
+        path.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(dir=path, prefix=".ogm-ppl-write-test.")
+        os.close(fd)
+        os.unlink(tmp)
+    except OSError as e:
+        raise type(e)(e.errno, f"cannot write there ({e.strerror or e})", str(path)) from None
+    return path
 
 
 def _read_umask() -> int:

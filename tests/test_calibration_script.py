@@ -394,3 +394,34 @@ def test_a_changed_plan_file_refuses_to_resume_and_bad_files_exit_cleanly(cal, t
 def test_bar_labels_drop_the_test_corpus_unless_two_would_read_alike(cal):
     names = ["independent", "independent:ipa", "patch3:ipa", "guide:houseexpo"]
     assert cal._labels(names, "ipa") == ["independent", "independent:ipa", "patch3", "guide:houseexpo"]
+
+
+def test_a_prior_of_ones_own_runs_once_and_reruns_when_it_changes(cal, tmp_path, monkeypatch):
+    """A registered kind named without a corpus runs once (trained on ``own``); a rerun computes again the rows
+    of a prior that changed since (and only those); an unknown name stops the run before any work."""
+    from ogm_ppl.priors import named
+
+    from .priors.toy_checkerboard import KIND, CheckerboardPrior
+
+    small = ["--test", "generated", "--train", "houseexpo", "--priors", KIND, "independent", *TINY[8:]]
+    assert cal.prior_names([KIND, f"{KIND}:ipa"], ["houseexpo"]) == [(KIND, "own"), (f"{KIND}:ipa", "ipa")]
+    first = cal.main([*small, "--out", str(tmp_path), "--no-figures"])["rows"]
+    mine = [r for r in first if r["prior_name"] == KIND]
+    assert len(mine) == 2 and {r["train"] for r in mine} == {"own"} and mine[0]["prior"] == KIND
+    calls = []
+    real = cal.run_prior
+    monkeypatch.setattr(cal, "run_prior", lambda scene, name, *a, **k: calls.append(name) or real(scene, name, *a, **k))
+    monkeypatch.setitem(named._FACTORIES, KIND, lambda shape, tables: CheckerboardPrior(shape, beta=2.0))
+    again = cal.main([*small, "--out", str(tmp_path), "--no-figures"])["rows"]
+    assert calls == [KIND] and len(again) == len(first)
+    assert [r["nll_bits"] for r in again if r["prior_name"] == KIND] != [r["nll_bits"] for r in mine]
+
+    def never(*a, **k):
+        raise AssertionError("work started before the prior names were checked")
+
+    monkeypatch.setattr(cal, "run_ogm", never)
+    with pytest.raises(SystemExit, match="unknown prior kind 'no_such_kind'"):
+        cal.main([*small, "--priors", "no_such_kind", "--out", str(tmp_path / "x")])
+    (tmp_path / "file").write_text("x")
+    with pytest.raises(SystemExit, match=r"--out .*exists and is not a folder"):
+        cal.main([*small, "--out", str(tmp_path / "file")])

@@ -730,3 +730,12 @@ def test_a_stretch_or_region_holding_no_scan_is_refused(tmp_path, tiny_log, caps
     assert main(["map", str(tiny_log), "--out", str(tmp_path / "a"), *flags]) == 2
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and message in err[0], err
+
+
+def test_python_m_cli_runs_the_command(tmp_path):
+    """``python -m ogm_ppl.cli`` is the command, as ``python -m ogm_ppl`` is (it did nothing and exited 0)."""
+    r = subprocess.run([sys.executable, "-m", "ogm_ppl.cli", "methods"], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert "gibbs" in r.stdout
+    r = subprocess.run([sys.executable, "-m", "ogm_ppl.cli", "no_such_command"], capture_output=True, text=True)
+    assert r.returncode == 2 and "invalid choice" in r.stderr

@@ -5,7 +5,7 @@ import os
 import numpy as np
 import pytest
 
-from ogm_ppl.io import StagedFolder, atomic_write, atomic_write_bytes, atomic_write_text
+from ogm_ppl.io import StagedFolder, atomic_write, atomic_write_bytes, atomic_write_text, writable_folder
 
 
 def test_new_file_gets_the_mode_open_would_give(tmp_path):
@@ -96,3 +96,31 @@ def test_staged_folder_interrupted_leaves_the_old_folder(tmp_path):
     os.replace(out, tmp_path / ".out.old-abc")
     StagedFolder(out)
     assert (out / "report.json").read_text() == "old"
+
+
+def test_a_write_that_cannot_happen_names_the_file_asked_for(tmp_path):
+    """Errors name the target (not the temporary file beside it) and leave nothing behind."""
+    folder = tmp_path / "maps"
+    folder.mkdir()
+    with pytest.raises(IsADirectoryError, match="is a folder; give a file name") as e:
+        atomic_write_text(folder, "x")
+    assert e.value.filename == str(folder)
+    blocker = tmp_path / "plain.txt"
+    blocker.write_text("keep")
+    with pytest.raises(OSError, match="cannot write it") as e:
+        atomic_write_text(blocker / "sub" / "a.json", "x")
+    assert e.value.filename == str(blocker / "sub" / "a.json")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["maps", "plain.txt"] and blocker.read_text() == "keep"
+    assert list(folder.iterdir()) == []
+
+
+def test_writable_folder_creates_it_or_says_why_not(tmp_path):
+    assert writable_folder(tmp_path / "a" / "b") == tmp_path / "a" / "b"
+    assert (tmp_path / "a" / "b").is_dir() and list((tmp_path / "a" / "b").iterdir()) == []
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(NotADirectoryError, match="exists and is not a folder") as e:
+        writable_folder(tmp_path / "f")
+    assert e.value.filename == str(tmp_path / "f")
+    with pytest.raises(OSError, match="cannot write there") as e:
+        writable_folder(tmp_path / "f" / "sub")
+    assert e.value.filename == str(tmp_path / "f" / "sub")

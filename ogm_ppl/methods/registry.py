@@ -51,6 +51,7 @@ __all__ = [
     "MapMethod",
     "MethodModuleError",
     "get_method",
+    "load_extensions",
     "method_names",
     "methods",
     "register_method",
@@ -205,6 +206,15 @@ def unregister_method(name: str) -> None:
     """Remove ``name`` and its aliases (tests)."""
     for key in [k for k, m in _METHODS.items() if k == name or m.alias_of == name]:
         del _METHODS[key]
+
+
+def load_extensions() -> None:
+    """Import the modules of this package, then those of ``$OGM_PPL_METHODS`` and the entry points of the group
+    ``ogm_ppl.methods`` (once per process; again after a failed import). Every lookup of a method calls it, and so
+    does a lookup of a prior or sensor kind that is not registered yet, so a kind of one's own registered in
+    such a module is found by any script, not only the command line. :class:`MethodModuleError` names a module
+    that cannot be imported."""
+    _discover()
 
 
 def _discover() -> None:

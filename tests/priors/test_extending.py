@@ -136,3 +136,27 @@ def test_a_module_registering_a_prior_can_be_reloaded(tmp_path, monkeypatch):
     finally:
         unregister_prior("reloaded_kind")
         sys.modules.pop("my_reloaded_prior", None)
+
+
+def test_a_script_finds_a_kind_registered_in_a_module_named_in_the_environment():
+    """Outside the command line (a script of one's own, ``experiments/calibration.py``), a kind that is not
+    registered yet makes the lookup import the modules of ``$OGM_PPL_METHODS``; a typo there is named."""
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "from ogm_ppl.priors import prior_by_name\n"
+        "from ogm_ppl.sensors import sensor_by_name\n"
+        "print(type(prior_by_name('toy_checker', (4, 5))).__name__)\n"
+    )
+    env = {**os.environ, "PYTHONPATH": str(ROOT), "OGM_PPL_METHODS": "tests.priors.toy_checkerboard"}
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.strip() == "CheckerboardPrior"
+    env["OGM_PPL_METHODS"] = ""
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT, timeout=120)
+    assert r.returncode != 0 and "unknown prior kind 'toy_checker'" in r.stderr
+    env["OGM_PPL_METHODS"] = "no_such_module_xyz"
+    r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT, timeout=120)
+    assert r.returncode != 0 and "$OGM_PPL_METHODS names the module 'no_such_module_xyz'" in r.stderr
