@@ -60,6 +60,7 @@ __all__ = [
     "fit_kappa",
     "independent_table",
     "load_backoff_params",
+    "save_backoff_params",
     "table_log_likelihood",
     "witten_bell",
     "witten_bell_border",
@@ -235,6 +236,23 @@ def load_backoff_params(corpus: str, path=None) -> BackoffParams:
     return BackoffParams(str(d["corpus"]), provenance=prov, **vals)
 
 
+def save_backoff_params(params: BackoffParams, path) -> Path:
+    """Write ``params`` (:func:`fit_backoff_params`) as JSON in the format of the shipped ones, atomically; read
+    them back with ``load_backoff_params(corpus, path=path)``. Returns the path."""
+    from ogm_ppl.io import atomic_write_text
+
+    doc = {
+        "format": BACKOFF_FORMAT,
+        "format_version": 1,
+        "corpus": params.corpus,
+        "kappa_patch3": float(params.kappa_patch3),
+        "kappa_border": float(params.kappa_border),
+        "kappa_border1": float(params.kappa_border1),
+        "provenance": params.provenance,
+    }
+    return atomic_write_text(Path(path), json.dumps(doc, indent=1) + "\n")
+
+
 def backoff_patch_probs(tables, kappa: float) -> np.ndarray:
     """The 512-entry smoothed 3 x 3 table of ``tables`` (:class:`~ogm_ppl.priors.tables.PriorTables`):
     :func:`witten_bell` of ``counts3x3`` towards independent cells with the corpus's ``lambda``."""
@@ -367,7 +385,8 @@ def fit_backoff_params(fit, val, corpus: str = "own") -> BackoffParams:
     ``fit`` counted on some of your plans, ``val`` on the others (:func:`~ogm_ppl.priors.learn.count_tables`
     of each), bottom-up (the 3 x 3 table against independent cells with ``fit``'s ``lambda``, then the border
     table against that smoothed table, the 1-given-8 table against ``(1 - lambda, lambda)``). Apply them to the
-    tables counted on all your plans: ``backed_off_prior(kind, shape, tables, params=...)``."""
+    tables counted on all your plans: ``backed_off_prior(kind, shape, tables, params=...)``; keep them with
+    :func:`save_backoff_params`."""
     ind = independent_table(fit.lam, 9)
     k3, ll3 = fit_kappa(lambda k: table_log_likelihood(fit.counts3x3, val.counts3x3, k, ind), *KAPPA_RANGE)
     back3 = backoff_patch_probs(fit, k3)

@@ -36,14 +36,34 @@ __all__ = [
 ]
 
 
-def _as_pair(item) -> tuple[np.ndarray, np.ndarray | None]:
-    """``(occupancy, known)`` from an array, a ``(occupancy, known)`` pair or an object with those attributes."""
+def _as_bool(a, what: str, index: int) -> np.ndarray:
+    """``a`` as a bool array: bool, or numbers that are all 0 or 1; anything else (an image's 0..255, a map of
+    probabilities) is refused, since ``bool()`` would call every non-zero value occupied."""
+    arr = np.asarray(a)
+    if arr.dtype == bool:
+        return arr
+    if arr.dtype.kind not in "biuf":
+        raise ValueError(f"map {index}: {what} must be a bool array, got dtype {arr.dtype}")
+    bad = (arr != 0) & (arr != 1)
+    if bad.any():
+        seen = np.unique(arr[bad])[:4]
+        raise ValueError(
+            f"map {index}: {what} must be bool (True = occupied) or 0/1, got values such as "
+            f"{', '.join(f'{v:g}' for v in seen)} (dtype {arr.dtype}); for an image, threshold it (dark = occupied: "
+            "image < 128) or read it with ogm_ppl.datasets.plan_files.load_plan_file"
+        )
+    return arr.astype(bool)
+
+
+def _as_pair(item, index: int = 0) -> tuple[np.ndarray, np.ndarray | None]:
+    """``(occupancy, known)`` from an array, a ``(occupancy, known)`` pair or an object with those attributes,
+    each checked to be bool or 0/1 (:func:`_as_bool`)."""
     if hasattr(item, "occupancy"):
-        return np.asarray(item.occupancy, dtype=bool), np.asarray(item.known, dtype=bool)
+        return _as_bool(item.occupancy, "occupancy", index), _as_bool(item.known, "known", index)
     if isinstance(item, tuple):
         occ, known = item
-        return np.asarray(occ, dtype=bool), None if known is None else np.asarray(known, dtype=bool)
-    return np.asarray(item, dtype=bool), None
+        return _as_bool(occ, "occupancy", index), None if known is None else _as_bool(known, "known", index)
+    return _as_bool(item, "the map", index), None
 
 
 def dihedral_maps(m: torch.Tensor, symmetries: bool = True) -> list[torch.Tensor]:
@@ -245,8 +265,9 @@ def count_tables(
 
     Args:
         maps: iterable of ``H x W`` bool arrays (all known), ``(occupancy, known)`` pairs, or objects with
-            ``occupancy`` and ``known`` attributes (e.g. :class:`ogm_ppl.datasets.floorplans.FloorPlan`).
-            Processed one at a time (a generator keeps memory bounded).
+            ``occupancy`` and ``known`` attributes (e.g. :class:`ogm_ppl.datasets.floorplans.FloorPlan`);
+            ``True`` (or 1) = occupied / known. Numbers other than 0 and 1 (an image's 0..255) and an empty
+            iterable are refused (``ValueError``). Processed one at a time (a generator keeps memory bounded).
         symmetries: add the 8 flips/rotations of every map (the thesis's "all eight permutations").
         line_length: ``L`` of the ``1 x L`` line table (``line_counts`` has ``2**L`` entries).
         max_run: run lengths ``>= max_run`` share the last bin of ``run_counts``.
@@ -269,7 +290,7 @@ def count_tables(
         from tqdm import tqdm  # (not tqdm.auto: a notebook without ipywidgets warns at import)
 
         for item in tqdm(maps, desc="counting windows", unit="map", disable=not progress):
-            occ, known = _as_pair(item)
+            occ, known = _as_pair(item, n_maps)
             if occ.ndim != 2:
                 raise ValueError(f"count_tables: map {n_maps} must be 2D, got shape {occ.shape}")
             if known is not None and known.shape != occ.shape:
@@ -278,6 +299,8 @@ def count_tables(
             n_maps += 1
     finally:
         torch.set_num_threads(threads)
+    if n_maps == 0:
+        raise ValueError("count_tables: no maps to count (the iterable was empty)")
     codes, counts = counter.c5_codes, counter.c5_counts
     truncated = 0
     if min_count_5x5 > 1:

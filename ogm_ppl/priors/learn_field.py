@@ -55,7 +55,8 @@ import torch
 
 from ogm_ppl.priors.compiled import prior_gibbs_sweeps
 from ogm_ppl.priors.compiled.field import field_window_codes, pattern_field
-from ogm_ppl.priors.pattern_field import symmetry_orbits
+from ogm_ppl.priors.learn import _as_pair as _as_pair_checked
+from ogm_ppl.priors.pattern_field import PatternFieldPrior, symmetry_orbits
 
 __all__ = [
     "FieldFit",
@@ -175,13 +176,11 @@ class FieldStats:
         return np.bincount(orbit, c.astype(np.float64), n) / max(c.sum(), 1)
 
 
-def _as_pair(item):
-    if hasattr(item, "occupancy"):
-        return np.asarray(item.occupancy, bool), np.asarray(item.known, bool)
-    if isinstance(item, tuple):
-        return np.asarray(item[0], bool), np.asarray(item[1], bool)
-    a = np.asarray(item, bool)
-    return a, np.ones_like(a)
+def _as_pair(item, index: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """``(occupancy, known)`` bool arrays of a map as :func:`~ogm_ppl.priors.learn.count_tables` takes it (checked
+    the same way), every cell known where it says nothing of them."""
+    occ, known = _as_pair_checked(item, index)
+    return occ, np.ones_like(occ) if known is None else known
 
 
 def field_stats(maps: Iterable, w: int = 3, scales: int = 1) -> FieldStats:
@@ -196,8 +195,8 @@ def field_stats(maps: Iterable, w: int = 3, scales: int = 1) -> FieldStats:
     win2 = np.zeros(n_codes, np.int64)
     acc: list[list[np.ndarray]] = [[], [], [], []]
     n_maps = n_cells = 0
-    for item in maps:
-        occ, known = _as_pair(item)
+    for index, item in enumerate(maps):
+        occ, known = _as_pair(item, index)
         g = np.ascontiguousarray(occ & known, np.uint8)
         bad = np.ascontiguousarray(~known, np.uint8)
         for i, k in enumerate(_nbhd_keys(g, bad, w, scales == 2)):
@@ -369,7 +368,7 @@ def _chain_freq(maps: np.ndarray, size: int, w: int, orbit: np.ndarray, n: int, 
 def data_crops(maps: Iterable, chains: int, size: int, seed: int = 0, tries: int = 200) -> np.ndarray:
     """``chains x size^2`` uint8 crops of the maps (``(occupancy, known)`` pairs or bool arrays), each at a
     seeded random map and offset, preferring crops wholly in known cells (unknown cells read as occupied)."""
-    pairs = [_as_pair(m) for m in maps]
+    pairs = [_as_pair(m, i) for i, m in enumerate(maps)]
     pairs = [(o, k) for o, k in pairs if o.shape[0] >= size and o.shape[1] >= size]
     if not pairs:
         raise ValueError(f"no map is at least {size} x {size} cells")
@@ -401,6 +400,11 @@ class FieldFit:
     curve: list = field(default_factory=list)
     occupancy: float = float("nan")
     beta: float = 1.0
+
+    def prior(self, shape) -> PatternFieldPrior:
+        """The fitted field over a grid of ``shape``: a :class:`~ogm_ppl.priors.PatternFieldPrior` (one or two
+        scales as fitted), which :func:`~ogm_ppl.priors.pattern_field.save_field` writes."""
+        return PatternFieldPrior(shape, self.theta, self.w, theta2=self.theta2, occupancy=self.occupancy)
 
 
 def fit_pcd(

@@ -262,6 +262,11 @@ def save_field(path, field: PatternFieldPrior, field2: PatternFieldPrior | None 
     (or :func:`load_field`). The potentials must be tied over the 8 symmetries, as every fit is."""
     from ogm_ppl.io import atomic_write
 
+    for f in (field, field2):
+        if f is not None and not isinstance(f, PatternFieldPrior):
+            hint = " (a FieldFit: pass fit.prior(shape))" if hasattr(f, "best_gap") else ""
+            raise TypeError(f"save_field: expected a PatternFieldPrior, got {type(f).__name__}{hint}")
+
     def orbits(table: np.ndarray, what: str) -> np.ndarray:
         params = table_to_orbits(table, field.w)
         if not np.allclose(orbits_to_table(params, field.w), table, rtol=0, atol=1e-12):

@@ -165,13 +165,13 @@ def test_bad_hyper_parameter_files_are_refused(tmp_path):
         load_backoff_params("nowhere")
 
 
-def test_your_own_tables_get_their_own_weights_or_a_clear_refusal():
+def test_your_own_tables_get_their_own_weights_or_a_clear_refusal(tmp_path):
     """Tables counted on plans of your own: the backed-off kinds refuse to smooth them with the default
     corpus's weights unless a corpus is named; ``fit_backoff_params`` fits weights on them (the shipped
     fitting, as ``experiments/fit_backoff.py`` runs it), and the pattern fields refuse tables outright."""
     from ogm_ppl.datasets.mapgen import generate_map
     from ogm_ppl.priors import prior_by_name
-    from ogm_ppl.priors.backoff import backed_off_prior, fit_backoff_params, load_backoff_params
+    from ogm_ppl.priors.backoff import backed_off_prior, fit_backoff_params, load_backoff_params, save_backoff_params
     from ogm_ppl.priors.learn import count_tables
 
     maps = [generate_map(k, (80, 80), seed=i, border=4) for i, k in enumerate(["office", "hall"] * 3)]
@@ -182,6 +182,8 @@ def test_your_own_tables_get_their_own_weights_or_a_clear_refusal():
             prior_by_name(kind, (12, 12), tables=fit)
     hp = fit_backoff_params(fit, val, "mine")
     assert hp.corpus == "mine" and all(k > 0 for k in (hp.kappa_patch3, hp.kappa_border, hp.kappa_border1))
+    kept = save_backoff_params(hp, tmp_path / "weights" / "backoff_mine.json")
+    assert load_backoff_params("mine", path=kept) == hp  # the shipped format, read back as it was
     own = backed_off_prior("border_bo", (12, 12), fit, params=hp)
     assert own.kappa == hp.kappa_border
     named = prior_by_name("border_bo:houseexpo", (12, 12), tables=fit)  # a corpus named: its weights, your counts

@@ -222,6 +222,20 @@ def test_bad_inputs():
         count_tables([np.zeros(5, bool)], progress=False)
     with pytest.raises(ValueError, match="known"):
         count_tables([(np.zeros((5, 5), bool), np.ones((4, 5), bool))], progress=False)
+    image = np.full((6, 6), 255, np.uint8)
+    image[2, :] = 0  # an image read as it is: 255 would count as occupied
+    with pytest.raises(ValueError, match=r"map 1: the map must be bool .* such as 255 \(dtype uint8\)"):
+        count_tables([np.zeros((6, 6), bool), image], progress=False)
+    with pytest.raises(ValueError, match=r"map 0: occupancy must be bool .* such as 0.5"):
+        count_tables([(np.full((6, 6), 0.5), None)], progress=False)
+    with pytest.raises(ValueError, match="map 0: known must be a bool array, got dtype <U1"):
+        count_tables([(np.zeros((2, 2), bool), np.full((2, 2), "y"))], progress=False)
+    with pytest.raises(ValueError, match="no maps to count"):
+        count_tables([], progress=False)
+    zero_one = (image == 0).astype(np.int64)  # numbers that are all 0 or 1 count as the bool map
+    assert np.array_equal(
+        count_tables([zero_one], progress=False).counts3x3, count_tables([zero_one == 1], progress=False).counts3x3
+    )
 
 
 def _small_tables():

@@ -4,6 +4,7 @@ compiled sampler of a known field, the backoff centre equals the smaller field, 
 mixing field from a bistable one, and the tempering search recovers the power of a known field."""
 
 import numpy as np
+import pytest
 import torch
 
 from ogm_ppl.inference._kernels.cell_sweep import prior_log_odds
@@ -165,7 +166,7 @@ def test_sampler_check_tells_mixing_from_two_phases():
     assert max(r["gap"] for r in g_true) < 0.05 < 0.2 < min(r["gap"] for r in g_zero), (g_true, g_zero)
 
 
-def test_fit_tempered_recovers_the_power_of_a_known_field():
+def test_fit_tempered_recovers_the_power_of_a_known_field(tmp_path):
     # handed TRUE / 0.8, the search over beta must pick 0.8: the known field mixes (both starts agree at
     # every beta here) and its window frequencies move by ~0.05 in L1 per 0.2 of beta, several times the
     # Monte Carlo spread of the gap (4 chains x 38^2 windows x 10 reads)
@@ -174,6 +175,15 @@ def test_fit_tempered_recovers_the_power_of_a_known_field():
     assert fit.beta == 0.8, fit.curve
     np.testing.assert_allclose(fit.theta, TRUE, rtol=0, atol=1e-12)
     assert all(abs(c[2] - c[3]) <= 0.1 for c in fit.curve)
+    # the fit becomes a prior, which save_field keeps and field_from_file reads back
+    from ogm_ppl.priors.pattern_field import field_from_file, save_field
+
+    with pytest.raises(TypeError, match=r"a FieldFit: pass fit.prior\(shape\)"):
+        save_field(tmp_path / "f.npz", fit)
+    prior = fit.prior((10, 12))
+    back = field_from_file(save_field(tmp_path / "f.npz", prior), (10, 12))
+    maps = torch.rand(5, 120, generator=torch.Generator().manual_seed(0), dtype=torch.float64) < 0.4
+    torch.testing.assert_close(back.log_prob(maps.double()), prior.log_prob(maps.double()), rtol=0, atol=1e-9)
 
 
 def test_unary_orbits_shift_every_interior_log_odds_by_the_bias():
