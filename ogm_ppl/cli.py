@@ -414,6 +414,14 @@ def build_parser() -> argparse.ArgumentParser:
         default="ros1",
         help="occupied/free thresholds of the ROS map: ros1 (0.65/0.196, default) or nav2 (0.65/0.25)",
     )
+    m.add_argument(
+        "--unobserved",
+        choices=("unknown", "predict"),
+        default="unknown",
+        help="cells no ray reached, in map.png and the ROS map: unknown (grey / -1, default; what a planner "
+        "should not drive into) or predict (drawn and thresholded from their probability, as every other cell: "
+        "what a correlated prior predicts there). map.npz always holds every cell's probability",
+    )
 
     # ---------------------------------------------------------------------------- simulate
     s = sub.add_parser(
@@ -570,6 +578,24 @@ def _check_input(path: Path) -> bytes:
             return f.read(4)
     except OSError as e:
         raise CLIError(f"{path}: cannot read ({e.strerror or e})") from None
+
+
+def _image_kind(magic: bytes) -> str | None:
+    """``"PNG"``, ``"JPEG"``, ``"PGM"`` (or another netpbm format), ``"GIF"``, ``"TIFF"`` or ``"BMP"`` from a
+    file's first bytes; ``None`` for anything else."""
+    if magic.startswith(b"\x89PNG"):
+        return "PNG"
+    if magic.startswith(b"\xff\xd8"):
+        return "JPEG"
+    if magic[:1] == b"P" and magic[1:2] in b"123456" and magic[2:3] in b" \t\r\n#":
+        return "PGM" if magic[1:2] in b"25" else "netpbm"
+    if magic.startswith(b"GIF8"):
+        return "GIF"
+    if magic[:4] in (b"II*\x00", b"MM\x00*"):
+        return "TIFF"
+    if magic.startswith(b"BM"):
+        return "BMP"
+    return None
 
 
 def _check_writable(directory: Path, out: Path) -> None:
@@ -745,6 +771,12 @@ def _read_input(args) -> _Input:
         return _select_scans(args, _Input("bag", args.input, bag.scans, bag=bag))
     _refuse_bag_flags(args, args.input)
     magic = _check_input(args.input)
+    image = _image_kind(magic)
+    if image:
+        raise CLIError(
+            f"{args.input}: a {image} image (a floor plan?), not a log, bag or dataset file; ogm-ppl simulate "
+            "--map PLAN.png scans a plan into a dataset that ogm-ppl map reads"
+        )
     if magic[:2] == b"PK":
         for flag, value in (
             ("--lenient", args.lenient),
@@ -867,10 +899,19 @@ def _method_params(args) -> tuple[MapMethod, object]:
         values.setdefault("lam", str(CLI_LAMBDA))
     text = {k: str(v) for k, v in values.items()}
     try:
-        return method, method.parse(text, text=True)
+        params = method.parse(text, text=True)
     except ParamError as e:
         where = source.get(e.key, f"parameter {e.key}")
         raise CLIError(f"{where}: {e.message}") from None
+    patch = getattr(params, "patch", None)
+    if isinstance(patch, int) and patch > 1 and math.isqrt(patch) ** 2 == patch:
+        side = math.isqrt(patch)
+        print(
+            f"ogm-ppl: note: --patch {patch} is a run of {patch} cells in one row; square {side} x {side} patches "
+            f"(L = {patch} in the thesis) are --patch {side}x{side}",
+            file=sys.stderr,
+        )
+    return method, params
 
 
 def _compute_map(
@@ -917,11 +958,23 @@ def _compute_map(
 CHECKPOINTS = ".checkpoints"
 
 
+def _prior_digest(params) -> str | None:
+    """:func:`~ogm_ppl.inference.mcmc.fingerprint.prior_digest` of the prior ``params`` names, on a 12 x 12 grid:
+    what its tables, weights and settings are now (tables counted again or a kind of one's own changed under the
+    same name give another)."""
+    from ogm_ppl.inference.mcmc.fingerprint import prior_digest
+    from ogm_ppl.priors import prior_by_name
+
+    name = getattr(params, "prior", None)
+    return None if not isinstance(name, str) else prior_digest(prior_by_name(name, (12, 12)), 144)
+
+
 def _checkpoint_root(args, params, inp: _Input, grid: Grid) -> Path | None:
     """``DIR/.checkpoints/METHOD-KEY`` for a sampling method (``None`` for the others): ``KEY`` digests the
-    command's settings, the input file's size and modification time and the grid, so that only the same
-    command on the same input resumes a chain (each chain in ``chain-C``; its checkpoint's fingerprint
-    checks the model too, :func:`~ogm_ppl.inference.mcmc.run_gibbs`)."""
+    command's settings, the prior's content (:func:`_prior_digest`), the input file's size and modification
+    time and the grid, so that only the same command on the same input under the same prior resumes a chain
+    (each chain in ``chain-C``; its checkpoint's fingerprint checks the model too,
+    :func:`~ogm_ppl.inference.mcmc.run_gibbs`)."""
     import hashlib
 
     from ogm_ppl.methods._sampling import SamplingParams
@@ -929,10 +982,11 @@ def _checkpoint_root(args, params, inp: _Input, grid: Grid) -> Path | None:
     if not isinstance(params, SamplingParams) or getattr(args, "online", False):
         return None
     st = Path(args.input).stat()
-    ignore = ("out", "traceback", "input")
+    ignore = ("out", "traceback", "input", "unobserved", "thresholds")  # how the map is written, not computed
     key = {
         "settings": _jsonable({k: v for k, v in sorted(vars(args).items()) if k not in ignore}),
         "params": _jsonable(dataclasses.asdict(params)),
+        "prior": _prior_digest(params),
         "input": [str(Path(args.input).resolve()), st.st_size, st.st_mtime_ns],
         "grid": [grid.rows, grid.cols, grid.resolution, *grid.origin],
     }
@@ -1133,9 +1187,10 @@ def _map(args, method, params) -> dict:
                 scans=np.array([n for n, _ in snapshots], dtype=np.int64),
                 probabilities=np.stack([p.reshape(grid.shape) for _, p in snapshots]),
             )
-        save_map_png(out / "map.png", probs, observed, grid)
+        shown = observed if args.unobserved == "unknown" else np.ones_like(observed)
+        save_map_png(out / "map.png", probs, shown, grid)
         (out / "ros").mkdir(exist_ok=True)
-        ros = save_ros_map(out / "ros" / "map.yaml", probs, grid, unknown=~observed, thresholds=args.thresholds)
+        ros = save_ros_map(out / "ros" / "map.yaml", probs, grid, unknown=~shown, thresholds=args.thresholds)
         assert ros.sidecar is not None  # save_ros_map writes one by default (sidecar=True)
         times["write_s"] = time.perf_counter() - t0
         bar.update()

@@ -26,7 +26,9 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import IO, Any
 
-__all__ = ["StagedFolder", "atomic_write", "atomic_write_bytes", "atomic_write_text", "writable_folder"]
+import numpy as np
+
+__all__ = ["StagedFolder", "atomic_write", "atomic_write_bytes", "atomic_write_text", "read_npz", "writable_folder"]
 
 
 @contextlib.contextmanager
@@ -67,6 +69,38 @@ def atomic_write(path: str | os.PathLike, mode: str = "wb", **open_kwargs: Any) 
 def _named(e: OSError, path: Path) -> OSError:
     """``e`` (of the same class) naming ``path``: ``[Errno 13] cannot write it (Permission denied): 'PATH'``."""
     return type(e)(e.errno, f"cannot write it ({e.strerror or e})", str(path))
+
+
+def read_npz(path: str | os.PathLike, what: str, error: type[Exception] = ValueError) -> dict[str, np.ndarray]:
+    """Every array of the ``.npz`` archive ``path`` (read with ``allow_pickle=False``: a file from elsewhere cannot
+    run code). Raises ``error`` (its message: ``"PATH: ..."``, naming ``what`` was expected) for a missing or
+    unreadable file, a file that is not a zip archive (an image, a text file), a single ``.npy`` array, pickled
+    objects or a damaged archive."""
+    p = Path(path)
+    try:
+        with open(p, "rb") as f:
+            magic = f.read(4)
+    except FileNotFoundError:
+        raise error(f"{p}: no such file") from None
+    except OSError as e:
+        raise error(f"{p}: cannot read it ({e.strerror or e})") from None
+    if magic != b"PK\x03\x04":  # an .npz is a zip archive
+        raise error(f"{p}: not an .npz archive (it does not start as a zip file does); expected {what}")
+    try:
+        z = np.load(p, allow_pickle=False)
+    except Exception as e:  # BadZipFile, OSError, EOFError
+        raise error(f"{p}: not a readable .npz ({type(e).__name__}: {e}); expected {what}") from None
+    if not hasattr(z, "files"):
+        raise error(f"{p}: a single array, not an .npz archive; expected {what}")
+    with z:
+        try:
+            return {k: z[k] for k in z.files}
+        except ValueError as e:
+            if "pickle" in str(e):
+                raise error(f"{p}: holds pickled Python objects; refused (expected {what}: plain arrays)") from None
+            raise error(f"{p}: damaged archive ({type(e).__name__}: {e})") from None
+        except Exception as e:
+            raise error(f"{p}: damaged archive ({type(e).__name__}: {e})") from None
 
 
 def writable_folder(path: str | os.PathLike) -> Path:

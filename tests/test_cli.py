@@ -739,3 +739,78 @@ def test_python_m_cli_runs_the_command(tmp_path):
     assert "gibbs" in r.stdout
     r = subprocess.run([sys.executable, "-m", "ogm_ppl.cli", "no_such_command"], capture_output=True, text=True)
     assert r.returncode == 2 and "invalid choice" in r.stderr
+
+
+def test_unobserved_cells_are_unknown_in_the_image_and_ros_map_unless_predicted(sim_dataset, tmp_path):
+    """``--unobserved predict`` draws and thresholds the cells no ray reached from their probability (what a
+    correlated prior predicts there); by default they are unknown, whatever the method says of them."""
+    from PIL import Image
+
+    argv = ["map", str(sim_dataset), "--method", "gibbs", "--prior", "border1_bo:houseexpo", "--sweeps", "20"]
+    assert main([*argv, "--out", str(tmp_path / "u")]) == 0
+    assert main([*argv, "--out", str(tmp_path / "p"), "--unobserved", "predict"]) == 0
+    m = load_map(tmp_path / "u" / "map.npz")
+    np.testing.assert_array_equal(m["probabilities"], load_map(tmp_path / "p" / "map.npz")["probabilities"])
+    hidden = ~m["observed"].ravel()
+    p = m["probabilities"].ravel()
+    decided = hidden & ((p > 0.65) | (p < 0.196))  # outside ROS 1's unknown band
+    assert decided.sum() > 20
+    unknown = load_ros_map(tmp_path / "u" / "ros" / "map.yaml", flavor="ros1").occupancy
+    predicted = load_ros_map(tmp_path / "p" / "ros" / "map.yaml", flavor="ros1").occupancy
+    assert (unknown[hidden] == -1).all()
+    assert (predicted[decided] != -1).all() and ((predicted[decided] == 100) == (p[decided] > 0.65)).all()
+    img_u = np.asarray(Image.open(tmp_path / "u" / "map.png"))[::-1].reshape(-1, 3)
+    img_p = np.asarray(Image.open(tmp_path / "p" / "map.png"))[::-1].reshape(-1, 3)
+    assert (img_u[hidden] == img_u[hidden][0]).all() and len(np.unique(img_p[hidden], axis=0)) > 2
+    np.testing.assert_array_equal(img_u[~hidden], img_p[~hidden])
+
+
+def test_an_interrupted_map_under_a_prior_that_changed_starts_afresh(sim_dataset, tmp_path, monkeypatch, capsys):
+    """A prior of one's own changed under the same name (tables counted again) is another chain: the same command
+    starts afresh instead of refusing the old checkpoint, and a note names the interrupted run left behind."""
+    import ogm_ppl.inference.mcmc as mcmc
+    from ogm_ppl.priors import IndependentPrior, named, register_prior, unregister_prior
+
+    register_prior("cli_probe_prior", lambda shape, tables: IndependentPrior(0.3, int(np.prod(shape))))
+    try:
+        argv = ["map", str(sim_dataset), "--method", "gibbs", "--prior", "cli_probe_prior", "--sweeps", "12"]
+        argv += ["--param", "checkpoint_every=2", "--out", str(tmp_path / "o")]
+        real = mcmc.run_gibbs
+        monkeypatch.setattr(mcmc, "run_gibbs", lambda *a, **kw: real(*a, **{**kw, "stop_after": 4}))
+        assert main(argv) == 130
+        assert len(list((tmp_path / "o").glob(".checkpoints/*/chain-0/gibbs.npz"))) == 1
+        monkeypatch.setattr(mcmc, "run_gibbs", real)
+        monkeypatch.setitem(
+            named._FACTORIES, "cli_probe_prior", lambda shape, tables: IndependentPrior(0.4, int(np.prod(shape)))
+        )
+        capsys.readouterr()
+        assert main(argv) == 0
+        err = capsys.readouterr().err
+        assert "resumes from its checkpoint" not in err and "keeps the checkpoints of 1 other interrupted" in err
+    finally:
+        unregister_prior("cli_probe_prior")
+
+
+def test_a_square_number_of_cells_as_patch_gets_a_note_on_the_square_patch(sim_dataset, tmp_path, capsys):
+    """``--patch 9`` is a 1 x 9 run (as the API's int L); "L = 9" in the thesis's 2D experiments is 3 x 3: a note
+    says which flag gives that."""
+    argv = ["map", str(sim_dataset), "--method", "gibbs", "--sweeps", "2", "--warmup", "0", "--out"]
+    assert main([*argv, str(tmp_path / "a"), "--patch", "9"]) == 0
+    assert "note: --patch 9 is a run of 9 cells in one row; square 3 x 3 patches" in capsys.readouterr().err
+    assert load_map(tmp_path / "a" / "map.npz")["settings"]["method_details"]["patch"] == 9
+    assert main([*argv, str(tmp_path / "b"), "--patch", "3x3"]) == 0
+    assert "note:" not in capsys.readouterr().err
+
+
+def test_an_image_given_as_a_log_is_named_as_such(tmp_path, capsys):
+    from PIL import Image
+
+    png = tmp_path / "plan.png"
+    Image.fromarray(np.full((8, 8), 255, np.uint8)).save(png)
+    pgm = tmp_path / "plan.pgm"
+    pgm.write_bytes(b"P5\n8 8\n255\n" + bytes(64))
+    for path, kind in ((png, "PNG"), (pgm, "PGM")):
+        assert main(["map", str(path), "--out", str(tmp_path / "o")]) == 2
+        err = capsys.readouterr().err
+        assert f"{path}: a {kind} image (a floor plan?), not a log, bag or dataset file" in err
+        assert "ogm-ppl simulate --map PLAN.png" in err

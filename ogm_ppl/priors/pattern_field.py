@@ -27,6 +27,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ogm_ppl.io import read_npz
 from ogm_ppl.priors.compiled.field import MAX_WINDOW, field_window_codes, pattern_field
 from ogm_ppl.priors.local import LocalMapPrior, grid_shape
 
@@ -226,11 +227,7 @@ def load_field(path) -> dict:
     ``ValueError`` naming the path for a missing key, a wrong shape or a non-finite value.
     """
     path = Path(path)
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
-    except (OSError, ValueError) as e:
-        raise ValueError(f"{path}: not a readable npz file of a pattern field ({e})") from None
+    data = read_npz(path, "a pattern field written by save_field")
     two = {"theta2_scale1", "theta2_scale2", "occupancy2"}
     keys = dict(_KEYS) if two & set(data) else {k: v for k, v in _KEYS.items() if k not in two}  # one scale
     missing = sorted(set(keys) - set(data))

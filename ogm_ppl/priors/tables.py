@@ -51,6 +51,7 @@ permutations"), i.e. it equals the sum of the tables of the 8 transformed maps.
 
 from __future__ import annotations
 
+import errno
 import hashlib
 import json
 import os
@@ -60,6 +61,8 @@ from functools import cached_property
 from pathlib import Path
 
 import numpy as np
+
+from ogm_ppl.io import read_npz
 
 __all__ = [
     "FORMAT_VERSION",
@@ -421,13 +424,9 @@ def load_tables(path) -> PriorTables:
     does one whose arrays were edited after saving (the SHA-256 :func:`save_tables` records no longer matches;
     files written without one are read unchecked)."""
     path = Path(path)
-    try:
-        with np.load(path, allow_pickle=False) as z:
-            data = {k: z[k] for k in z.files}
-    except FileNotFoundError:
-        raise
-    except Exception as e:  # zip errors, pickled objects, truncated files
-        raise ValueError(f"prior tables {path}: not a readable npz file ({type(e).__name__}: {e})") from e
+    if not path.exists():
+        raise FileNotFoundError(errno.ENOENT, "no such prior tables file", str(path))
+    data = read_npz(path, "prior tables written by save_tables")
     if "meta" not in data:
         raise ValueError(f"prior tables {path}: missing 'meta' (not an ogm_ppl prior-tables file)")
     try:

@@ -62,7 +62,7 @@ from torch import nn
 
 from ogm_ppl.grid import Grid
 from ogm_ppl.inference.variational.guides import guide_name
-from ogm_ppl.io import atomic_write
+from ogm_ppl.io import atomic_write, read_npz
 from ogm_ppl.models.occupancy import OBSERVED, OccupancyModel
 from ogm_ppl.priors.base import MapPrior
 from ogm_ppl.sensors import SensorModel
@@ -563,34 +563,7 @@ def _positive(v) -> float | None:
 
 def _read_artefact(path: Path) -> tuple[GuideArchitecture, dict[str, torch.Tensor], dict]:
     hint = "expected a guide written by AmortisedGuide.save (experiments/train_amortised_guide.py)"
-    try:
-        with open(path, "rb") as f:
-            magic = f.read(4)
-    except FileNotFoundError:
-        raise GuideFileError(f"{path}: no such file") from None
-    except OSError as e:
-        raise GuideFileError(f"{path}: cannot read it ({e.strerror or e})") from None
-    if magic != b"PK\x03\x04":  # an .npz is a zip archive
-        raise GuideFileError(f"{path}: not an .npz archive (it does not start as a zip file does); {hint}")
-    try:
-        z = np.load(path, allow_pickle=False)
-    except FileNotFoundError:
-        raise GuideFileError(f"{path}: no such file") from None
-    except Exception as e:  # BadZipFile, OSError, EOFError
-        raise GuideFileError(f"{path}: not a readable .npz ({type(e).__name__}: {e}); {hint}") from None
-    if not hasattr(z, "files"):
-        raise GuideFileError(f"{path}: a single array, not an .npz archive; {hint}")
-    with z:
-        try:
-            arrays = {k: z[k] for k in z.files}
-        except ValueError as e:
-            if "pickle" in str(e):
-                raise GuideFileError(
-                    f"{path}: holds pickled Python objects; refused (a guide artefact is plain arrays)"
-                ) from None
-            raise GuideFileError(f"{path}: damaged archive ({type(e).__name__}: {e})") from None
-        except Exception as e:
-            raise GuideFileError(f"{path}: damaged archive ({type(e).__name__}: {e})") from None
+    arrays = read_npz(path, hint[len("expected ") :], GuideFileError)
     fields = ("kind", "format", "feature_version", "channels", "dilations", "phase", "delta", "meta")
     missing = [k for k in fields if k not in arrays]
     if missing:
