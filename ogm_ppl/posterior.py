@@ -173,6 +173,18 @@ class WeightedMaps(MapPosterior):
             total += float(w[(maps[:, idx] == 0).all(1)].sum())
         return total
 
+    def mode(self) -> tuple[torch.Tensor, float]:
+        """The most probable map (``K`` float 0/1; of several equally probable, the first visited) and its
+        probability: under :func:`~ogm_ppl.inference.exact.brute_force` the MAP map, which hill-climbing
+        (:func:`~ogm_ppl.inference.exact.map_estimate.map_estimate`) may miss."""
+        best, p_best = None, -1.0
+        for maps, w in self.chunks():
+            i = int(torch.argmax(w))
+            if float(w[i]) > p_best:
+                best, p_best = maps[i].clone(), float(w[i])
+        assert best is not None  # every posterior holds at least one map
+        return best, p_best
+
 
 class ChainPosterior1D(MapPosterior):
     r"""Posterior of a stationary 1D robot: a distribution over the first occupied cell of the common

@@ -54,8 +54,16 @@ class PriorContract:
     def test_normalised_over_all_maps(self):
         for prior in self._priors():
             lp = self._log_prob(prior, self._all_maps())
-            assert lp.shape == (2**self.num_cells,) and not torch.isnan(lp).any()
-            assert abs(torch.logsumexp(lp, 0).item()) < 1e-10
+            name = type(prior).__name__
+            assert lp.shape == (2**self.num_cells,), (
+                f"{name}: log_prob of {2**self.num_cells} maps has shape {lp.shape}"
+            )
+            assert not torch.isnan(lp).any(), f"{name}: log_prob is NaN for {int(torch.isnan(lp).sum())} maps"
+            total = torch.logsumexp(lp, 0).item()
+            assert abs(total) < 1e-10, (
+                f"{name}: log of the sum of p over all {2**self.num_cells} maps is {total:.3g}, not 0 (within 1e-10); "
+                f"log_prob dtype {lp.dtype} (float32 arithmetic, e.g. torch.where of Python floats, is off by ~1e-8)"
+            )
 
     def test_outside_occupancy_is_the_priors_own(self):
         """``outside_occupancy()`` (the occupancy the model gives the cells past the grid's edge) lies in

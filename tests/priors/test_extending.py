@@ -6,6 +6,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from ogm_ppl import Grid
 from ogm_ppl.datasets import stop_and_scan
@@ -160,3 +161,21 @@ def test_a_script_finds_a_kind_registered_in_a_module_named_in_the_environment()
     env["OGM_PPL_METHODS"] = "no_such_module_xyz"
     r = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, env=env, cwd=ROOT, timeout=120)
     assert r.returncode != 0 and "$OGM_PPL_METHODS names the module 'no_such_module_xyz'" in r.stderr
+
+
+def test_an_unnormalised_prior_fails_the_contract_with_the_number():
+    """A prior off by a float32 rounding's worth: the contract's message gives the sum and the dtype."""
+
+    class _Float32(PriorContract):
+        def make_prior(self, num_cells):
+            return _Rounded((num_cells,), beta=0.7)
+
+    with pytest.raises(
+        AssertionError, match=r"_Rounded: log of the sum of p over all .* maps is .*dtype torch.float32"
+    ):
+        _Float32().test_normalised_over_all_maps()
+
+
+class _Rounded(CheckerboardPrior):
+    def log_prob(self, m):
+        return super().log_prob(m).to(torch.float32) + 1e-6

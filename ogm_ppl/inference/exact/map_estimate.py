@@ -1,4 +1,4 @@
-r"""The MAP map by hill-climbing (Section 2.2): iterated conditional modes with the forward model.
+r"""A mode of the posterior by hill-climbing (Section 2.2): iterated conditional modes with the forward model.
 
 Each cell in turn takes the value that maximises its conditional posterior given all other cells
 
@@ -6,8 +6,11 @@ Each cell in turn takes the value that maximises its conditional posterior given
           + \sum_n \log \frac{p(z_n \mid m_{-k}, m_k = 1)}{p(z_n \mid m_{-k}, m_k = 0)} \quad (2.4)
 
 (occupied if positive, free if negative, unchanged on a tie), sweeping until nothing changes: a local
-maximum of the joint. The thesis initialises all cells occupied so that unobserved cells reflect the
-sensor (needed by the offline patch map, Section 3.2); all-free and random starts are available too.
+maximum of the joint, not necessarily the MAP map (the global maximum): different starts can end in
+different local maxima. On a problem small enough to enumerate, ``brute_force(model).mode()`` (or Pyro's
+``infer_discrete(model.model_per_cell, temperature=0)``) is the MAP. The thesis initialises all cells occupied
+so that unobserved cells reflect the sensor (needed by the offline patch map, Section 3.2); all-free and random
+starts are available too.
 """
 
 from __future__ import annotations
@@ -26,7 +29,7 @@ __all__ = ["MapEstimate", "map_estimate"]
 
 @dataclass(frozen=True)
 class MapEstimate:
-    """The MAP map (``K`` float 0/1), its log joint, and how many sweeps it took."""
+    """The local maximum reached (``K`` float 0/1), its log joint, and how many sweeps it took."""
 
     map: torch.Tensor
     log_joint: float
@@ -52,7 +55,7 @@ def _initial(model: OccupancyModel, init, seed) -> np.ndarray:
 
 
 def map_estimate(model: OccupancyModel, init="occupied", max_sweeps: int = 100, seed: int = 0) -> MapEstimate:
-    """Hill-climb to a local maximum of ``log p(m, z)``.
+    """Hill-climb to a local maximum of ``log p(m, z)`` (not always the global one: module docstring).
 
     Args:
         model: the model; priors with a compiled face (``prior.compiled()``: independent cells, MRF /

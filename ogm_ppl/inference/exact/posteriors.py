@@ -141,14 +141,12 @@ def pose_constrained_1d(model: OccupancyModel) -> ChainPosterior1D:
 
 def pyro_enumeration(model: OccupancyModel, max_cells: int = 16) -> torch.Tensor:
     """Marginals ``p(m_k = 1 | z)`` (``K``) by Pyro's exact discrete enumeration (cross-check)."""
-    import pyro
     from pyro.infer import TraceEnum_ELBO
 
     L = len(model.latent)
     if L > max_cells:
         raise ValueError(f"Pyro enumeration over {L} latent cells exceeds max_cells = {max_cells}")
-    pyro.clear_param_store()
-    elbo = TraceEnum_ELBO(max_plate_nesting=0)
+    elbo = TraceEnum_ELBO(max_plate_nesting=0)  # the model has no parameters: the caller's param store is left alone
     marg = elbo.compute_marginals(model.model_per_cell, lambda: None)
     out = torch.zeros(model.num_cells, dtype=torch.float64)
     for k in model.latent.tolist():

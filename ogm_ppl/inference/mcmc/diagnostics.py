@@ -21,6 +21,7 @@ import numpy as np
 import torch
 from pyro.ops.stats import autocovariance, split_gelman_rubin
 
+from ogm_ppl._rng import keeps_global_rng
 from ogm_ppl.inference.mcmc.runner import RunningStats, run_gibbs
 from ogm_ppl.metrics import kl_divergence
 from ogm_ppl.progress import Progress
@@ -258,6 +259,7 @@ def run_chains(
     return ChainsResult(out)
 
 
+@keeps_global_rng
 def kl_trace(
     kernel, exact_marginals: torch.Tensor, checkpoints: Sequence[int], seed: int = 0, eps: float = 1e-9
 ) -> torch.Tensor:

@@ -69,7 +69,12 @@ def ogm_start_threshold(prior) -> float:
 def check_start(init) -> None:
     """Refuse (:class:`ValueError`) a starting map :func:`initial_map` would refuse by its name: a string
     other than :data:`START_MAPS`, or ``"guide:CORPUS"`` for a corpus with no shipped guide (checked by name,
-    the guide is not loaded). Maps are checked against the model when used."""
+    the guide is not loaded), or a bool or number (a map is a sequence or tensor of cells; ``True`` given
+    positionally where another argument was meant would otherwise fail later on its shape). Maps are checked
+    against the model when used."""
+    if isinstance(init, bool | int | float):
+        names = ", ".join(map(repr, (*START_MAPS, "guide:CORPUS")))
+        raise ValueError(f"init must be {names} or a map of cells, got {init!r}")
     if not isinstance(init, str):
         return
     if init.startswith("guide:"):
@@ -172,6 +177,9 @@ class MapKernel(MCMCKernel):
     def __init__(
         self, model: OccupancyModel, scan: str = "systematic", init="ogm", delta="haehnel", region=None
     ) -> None:
+        if not isinstance(model, OccupancyModel):
+            hint = " (pass the OccupancyModel itself, not its model function)" if callable(model) else ""
+            raise TypeError(f"{type(self).__name__} takes an OccupancyModel, got {type(model).__name__}{hint}")
         if scan not in SCANS:
             raise ValueError(f"scan must be one of {SCANS}, got {scan!r}")
         check_start(init)
@@ -256,6 +264,12 @@ class MapKernel(MCMCKernel):
 
     @initial_params.setter
     def initial_params(self, params) -> None:
+        if not isinstance(params, dict) or self.site not in params:
+            got = sorted(params) if isinstance(params, dict) else type(params).__name__
+            raise ValueError(
+                f"{type(self).__name__}: initial_params must be a dict with the site {self.site!r} (the latent "
+                f"cells, or a full map), got {got}"
+            )
         self._initial_params = params
 
     def _set_state(self, m) -> None:

@@ -26,6 +26,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from ogm_ppl._rng import keeps_global_rng
 from ogm_ppl.inference.mcmc.fingerprint import fingerprint
 from ogm_ppl.io import atomic_write
 from ogm_ppl.posterior import mutual_information_from_joint
@@ -239,6 +240,7 @@ def _load_checkpoint(
             raise CheckpointError(f"{path}: damaged checkpoint ({type(e).__name__}: {e}); {_HINT}") from None
 
 
+@keeps_global_rng
 def run_gibbs(
     kernel,
     num_sweeps: int,
@@ -259,7 +261,8 @@ def run_gibbs(
             ``MetropolisCell``, ``GuidedGibbs``); the run uses its public protocol only (``setup``,
             ``current_params``, ``sample``, ``state``, ``state_dict`` / ``load_state_dict``).
         stats: where statistics accumulate (default: marginals only).
-        seed: seeds torch's generator at the start of a fresh run (a resumed run restores its state).
+        seed: seeds torch's generator at the start of a fresh run (a resumed run restores its state); the
+            caller's global random streams (torch, NumPy, ``random``) are as they were when the run returns.
         checkpoint: an ``.npz`` path; if it exists the run resumes from it (with the same ``seed``,
             ``warmup``, model, kernel and statistics, else :class:`CheckpointError`).
         store_every: keep every ``store_every``-th sample (bit-packed ``.npy``) in ``store_dir``.

@@ -34,6 +34,7 @@ from pyro.distributions.torch_distribution import TorchDistribution
 from pyro.nn import PyroModule, PyroParam
 from torch.distributions import constraints
 
+from ogm_ppl._rng import keeps_global_rng
 from ogm_ppl.inference.tiling import tile_patches
 from ogm_ppl.inference.variational.elbo import ExactELBO, mean_field_elbo
 from ogm_ppl.models.occupancy import OccupancyModel
@@ -197,6 +198,7 @@ class PatchGuide(PyroModule):
             return self.distribution().marginals()
 
 
+@keeps_global_rng
 def fit_guide(
     model: OccupancyModel,
     guide,
@@ -213,7 +215,8 @@ def fit_guide(
     KL), ``"rws"`` (``ReweightedWakeSleep(num_particles)``, wake-phi only: importance-weighted
     ``KL(p || q)``), or ``"exact"`` (:class:`~ogm_ppl.inference.variational.elbo.ExactELBO`, for guides with
     ``exact_elbo``). Returns the loss trace. Seeds Pyro with ``seed`` (any integer ``>= 0``; one of more than 32
-    bits, as experiments derive, is folded to the 32 NumPy takes); the guide's parameters live in the guide (a
+    bits, as experiments derive, is folded to the 32 NumPy takes) and leaves the caller's global random streams
+    (torch, NumPy, ``random``) as it found them; the guide's parameters live in the guide (a
     ``PyroModule``), so other guides' parameters are untouched. ``progress``: show progress
     (:class:`~ogm_ppl.progress.Progress`), or a caller's own ``Progress`` to update (left open).
     """

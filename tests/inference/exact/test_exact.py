@@ -100,8 +100,15 @@ def test_pyro_enumeration_agrees_with_brute_force(which):
         model = model_1d(9, [3.0, 5.0], prior=DataDriven1DPrior(10, 1))
     else:
         model = tiny_2d()
+    import pyro
+
+    pyro.clear_param_store()
+    mine = pyro.param("users_own_param", torch.ones(3)).detach().clone()
     got = pyro_enumeration(model)
     torch.testing.assert_close(got, brute_force(model).marginals, rtol=0, atol=1e-6)
+    assert list(pyro.get_param_store().keys()) == ["users_own_param"]  # the caller's store is left alone
+    torch.testing.assert_close(pyro.param("users_own_param").detach(), mine)
+    pyro.clear_param_store()
 
 
 def test_mutual_information_properties():

@@ -63,3 +63,15 @@ def test_2d_map_and_bad_init():
         map_estimate(model, "zeros")
     with pytest.raises(ValueError, match="cells"):
         map_estimate(model, torch.zeros(5))
+
+
+@pytest.mark.parametrize("init", ["occupied", "free", "random"])
+def test_the_exact_mode_is_the_map_that_hill_climbing_may_miss(init):
+    """``brute_force(model).mode()`` is the most probable map (its log joint the largest of all 2^K); a
+    hill-climb ends at or below it."""
+    model = toy_model(prior=IndependentPrior(0.234, 14))
+    bf = brute_force(model)
+    m, p = bf.mode()
+    assert p == pytest.approx(bf.log_probs.max().exp().item(), rel=1e-12)
+    assert model.log_joint(m).item() == pytest.approx((bf.log_probs.max() + bf.log_evidence).item(), abs=1e-10)
+    assert map_estimate(model, init, seed=3).log_joint <= model.log_joint(m).item() + 1e-12

@@ -268,6 +268,8 @@ def test_a_start_name_is_checked_when_the_kernel_is_built(kernel, monkeypatch):
     model = model_1d()
     with pytest.raises(ValueError, match="init must be 'ogm', 'prior', 'occupied', 'free', 'guide:CORPUS'"):
         make("zeros")
+    with pytest.raises(ValueError, match="or a map of cells, got True"):  # mixing_cycle(model, patch, True)
+        make(True)
     with pytest.raises(ValueError) as e:
         make("guide:nope")
     assert str(e.value) == f"init 'guide:nope': {unknown_corpus_message('nope')}"
@@ -351,3 +353,17 @@ def test_a_start_the_prior_gives_zero_mass_warns_once():
         kernel.setup()  # once per kernel
         CellGibbs(model, init="free").setup()
         PatchGibbs(model_1d(K=5, prior=full), 2, init="occupied").setup()
+
+
+def test_pyro_habits_that_do_not_fit_a_kernel_are_named():
+    """``CellGibbs(model.model)`` (as ``NUTS(fn)`` takes a function) and ``initial_params`` without the site
+    ``m`` get messages that say what to pass, not an AttributeError or a bare KeyError."""
+    from pyro.infer import MCMC
+
+    model = model_1d()
+    with pytest.raises(TypeError, match=r"takes an OccupancyModel, got method \(pass the OccupancyModel itself"):
+        CellGibbs(model.model)
+    m = torch.zeros(len(model.latent), dtype=torch.float64)
+    with pytest.raises(ValueError, match=r"initial_params must be a dict with the site 'm' .*got \['M'\]"):
+        MCMC(CellGibbs(model), num_samples=2, initial_params={"M": m}).run()
+    MCMC(CellGibbs(model), num_samples=2, initial_params={"m": m}, disable_progbar=True).run()
