@@ -244,6 +244,8 @@ def load_plan_file(
             give more than :data:`MAX_PLAN_CELLS` cells.
     """
     p = Path(path)
+    if p.is_dir():
+        raise PlanFileError(p, "a folder, not a plan file: plan_files([folder]) lists the plan files in it")
     if not p.is_file():
         raise PlanFileError(p, "no such plan file")
     suffix = p.suffix.lower()
@@ -280,7 +282,9 @@ def load_plan_file(
         raise PlanFileError(p, "no free pixel: not a plan (dark = occupied, light = free)")
     occ, free = _resample(occ, free, f)
     if not free.any():
-        raise PlanFileError(p, f"no free cell left at {res} m a cell ({f:.3g} pixels of {px} m a cell side)")
+        raise PlanFileError(
+            p, f"no free cell left at {res} m a cell ({f:.3g} pixels of {px} m a cell side): is the pixel size right?"
+        )
     occupancy, known = rasterise(occ, free, 1, margin, wall_cells, outside)
     label = p.stem if name is None else str(name)
     return FloorPlan(

@@ -520,6 +520,11 @@ def fit_pattern_field(
     occupied share."""
     train_maps, val_maps = list(train_maps), list(val_maps)
     tr, va = field_stats(train_maps, w, scales), field_stats(val_maps, w, scales)
+    for what, maps, st in (("training", train_maps, tr), ("validation", val_maps, va)):
+        if not maps:
+            raise ValueError(f"fit_pattern_field: no {what} maps (the validation maps choose the power beta)")
+        if st.win1.sum() == 0:
+            raise ValueError(f"fit_pattern_field: the {what} maps hold no {w} x {w} window of known cells")
     theta0 = None
     if backoff_w is not None:
         phi, _, _ = fit_pl(field_stats(train_maps, backoff_w, 1), 1, backoff_lambda_, progress=progress)

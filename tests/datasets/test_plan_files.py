@@ -121,6 +121,10 @@ def test_bad_plan_files_name_the_file(tmp_path):
     Image.fromarray(np.full((side, side), 255, np.uint8)).save(tmp_path / "big.png")
     with pytest.raises(PlanFileError, match="over the limit"):
         load_plan_file(tmp_path / "big.png", pixel_size=1.0, resolution=0.01)
+    with pytest.raises(PlanFileError, match=r"no free cell left .*: is the pixel size right\?"):
+        load_plan_file(tmp_path / "room.png", pixel_size=0.0005)  # pixels of 0.5 mm: walls fill every cell
+    with pytest.raises(PlanFileError, match=r"a folder, not a plan file: plan_files\(\[folder\]\)"):
+        load_plan_file(tmp_path, pixel_size=0.05)
 
 
 def test_plan_files_and_names(tmp_path):

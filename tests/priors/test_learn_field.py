@@ -210,3 +210,15 @@ def test_fit_tempered_bias_reaches_the_target_occupancy():
     assert abs(fit.curve[0][4] - np.log(0.3 / 0.7)) < 0.1, fit.curve
     assert abs(fit.occupancy - 0.3) < 0.02, fit.curve
     np.testing.assert_allclose(fit.theta, fit.curve[0][4] * unary_orbits(W), rtol=0, atol=1e-12)
+
+
+def test_fit_pattern_field_refuses_what_it_cannot_fit_on():
+    from ogm_ppl.priors.learn_field import fit_pattern_field
+
+    maps = samples(2, 20, seed=1)
+    with pytest.raises(ValueError, match="no validation maps"):
+        fit_pattern_field(maps, [], progress=False)
+    with pytest.raises(ValueError, match="no training maps"):
+        fit_pattern_field([], maps, progress=False)
+    with pytest.raises(ValueError, match="the validation maps hold no 3 x 3 window of known cells"):
+        fit_pattern_field(maps, [(np.zeros((5, 5), bool), np.zeros((5, 5), bool))], progress=False)
