@@ -259,10 +259,10 @@ def save_field(path, field: PatternFieldPrior, field2: PatternFieldPrior | None 
     (or :func:`load_field`). The potentials must be tied over the 8 symmetries, as every fit is."""
     from ogm_ppl.io import atomic_write
 
-    for f in (field, field2):
-        if f is not None and not isinstance(f, PatternFieldPrior):
-            hint = " (a FieldFit: pass fit.prior(shape))" if hasattr(f, "best_gap") else ""
-            raise TypeError(f"save_field: expected a PatternFieldPrior, got {type(f).__name__}{hint}")
+    for given in (field, field2):
+        if given is not None and not isinstance(given, PatternFieldPrior):
+            hint = " (a FieldFit: pass fit.prior(shape))" if hasattr(given, "best_gap") else ""
+            raise TypeError(f"save_field: expected a PatternFieldPrior, got {type(given).__name__}{hint}")
 
     def orbits(table: np.ndarray, what: str) -> np.ndarray:
         params = table_to_orbits(table, field.w)
