@@ -175,13 +175,21 @@ def test_a_guide_of_two_corpora_records_each_training_set(mods, tmp_path, monkey
         cal.load_corpus_guide("ipa+dungeon")
 
 
+class _FakeGuide:
+    """What calibration.py reads of a guide before it scores one: its weights (for the rows' digest) and
+    ``symmetrize``."""
+
+    symmetrize = False
+    net = torch.nn.Linear(1, 1)
+
+
 def test_calibration_checks_a_two_corpus_guide_against_each_corpus(mods, monkeypatch, tmp_path):
     """The leakage check runs for every corpus a guide was learned on: a test plan that is a training plan of
     either corpus is refused."""
     _, cal = mods
     seen: list[tuple] = []
     monkeypatch.setattr(cal, "check_heldout", lambda test, plans, train: seen.append((test, train)))
-    monkeypatch.setattr(cal, "load_corpus_guide", lambda c, directory=None: None)
+    monkeypatch.setattr(cal, "load_corpus_guide", lambda c, directory=None: _FakeGuide())
     monkeypatch.setattr(cal, "make_scene", lambda t, args: (_ for _ in ()).throw(SystemExit("stop")))
     with pytest.raises(SystemExit, match="stop"):
         cal.main(
@@ -197,11 +205,8 @@ def test_a_symmetrised_guide_row_loads_the_guide_symmetrised_and_checks_its_corp
     seen: list[tuple] = []
     loaded: list = []
 
-    class Fake:
-        symmetrize = False
-
     def load(c, directory=None):
-        loaded.append((c, Fake()))
+        loaded.append((c, _FakeGuide()))
         return loaded[-1][1]
 
     monkeypatch.setattr(cal, "check_heldout", lambda test, plans, train: seen.append((test, train)))

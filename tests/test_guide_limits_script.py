@@ -1,0 +1,36 @@
+"""experiments/guide_limits.py: per-map NLLs equal calibration.py's for the same guide and map, and the oracle
+recalibrations, fitted on the maps they score, are never worse than the guide as it is."""
+
+import json
+
+import pytest
+
+from tests._scripts import experiment_beside_calibration
+
+
+@pytest.fixture(scope="module")
+def gl():
+    yield from experiment_beside_calibration("guide_limits_experiment", "guide_limits.py")
+
+
+def test_scores_agree_with_calibration_and_oracles_bound_them(gl, tmp_path):
+    doc = gl.main(["--test", "ipa", "--guides", "ipa", "houseexpo", "--plans", "2", "--out", str(tmp_path)])
+    cal = gl.C
+    args = cal.parse_args(["--plans", "2"])
+    maps = cal.heldout_maps("ipa", 2, args.window)
+    for row, t in zip(doc["rows"], maps, strict=True):
+        scored = cal.run_guide(cal.make_scene(t, args), cal.guide_for("ipa"), args)["scores"]["unseen"]
+        assert row["plan"] == t.name and row["ipa"] == pytest.approx(scored["nll_bits"], rel=1e-6)
+        assert row["unseen_cells"] == scored["cells"]
+    for g in ("ipa", "houseexpo"):
+        s = doc["summary"][g]
+        assert s["nll_oracle_affine"] <= s["nll_oracle_temperature"] + 1e-12 <= s["nll"] + 2e-12
+    assert json.loads((tmp_path / "guide_limits.json").read_text())["summary"] == doc["summary"]
+
+
+def test_bad_arguments_are_refused(gl, tmp_path):
+    with pytest.raises(SystemExit, match="--plans must be at least 1"):
+        gl.main(["--test", "ipa", "--guides", "ipa", "--plans", "0", "--out", str(tmp_path)])
+    (tmp_path / "f").write_text("x")
+    with pytest.raises(SystemExit, match=r"--out .*exists and is not a folder"):
+        gl.main(["--test", "ipa", "--guides", "ipa", "--out", str(tmp_path / "f")])
