@@ -132,11 +132,24 @@ class Grid:
         return np.stack([ox + (col + 0.5) * self.resolution, oy + (row + 0.5) * self.resolution], 1)
 
     def flat_index(self, cells: np.ndarray) -> np.ndarray:
-        """``(row, col)`` -> flat row-major index (identity for 1D)."""
+        """``(row, col)`` -> flat row-major index (identity for 1D). A cell off the grid (as
+        :meth:`world_to_cell` gives for a point outside it) is refused (``ValueError``): its row-major index
+        would name another cell, or none."""
         cells = np.asarray(cells, dtype=np.int64)
         if self.ndim == 1:
+            off = (cells < 0) | (cells >= self.num_cells)
+            if off.any():
+                raise ValueError(f"cell {int(cells[off].ravel()[0])} lies off the grid (cells 0..{self.num_cells - 1})")
             return cells
-        return cells[..., 0] * self.cols + cells[..., 1]
+        if cells.shape[-1:] != (2,):
+            raise ValueError(f"cells must be (..., 2) (row, col) pairs, got shape {cells.shape}")
+        r, c = cells[..., 0], cells[..., 1]
+        off = (r < 0) | (r >= self.rows) | (c < 0) | (c >= self.cols)
+        if off.any():
+            i = np.argwhere(off)[0]
+            bad = cells[tuple(i)] if cells.ndim > 1 else cells
+            raise ValueError(f"cell (row {int(bad[0])}, col {int(bad[1])}) lies off the {self.rows} x {self.cols} grid")
+        return r * self.cols + c
 
     def contains(self, xy: np.ndarray) -> np.ndarray:
         """Whether world points lie inside the grid (boolean ``N``)."""

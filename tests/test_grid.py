@@ -13,6 +13,13 @@ def test_world_cell_round_trip_2d():
     assert g.extent == (-1.0, 1.5, 2.0, 4.0)
     assert g.contains([[-1.0, 2.0], [1.49, 3.99]]).all()
     assert not g.contains([[1.5, 3.0], [0.0, 1.99]]).any()
+    # a point outside the grid has a cell of its own, whose row-major index would name another cell (or none)
+    with pytest.raises(ValueError, match=r"cell \(row 3, col -1\) lies off the 4 x 5 grid"):
+        g.flat_index(g.world_to_cell([[-1.1, 3.9]]))
+    with pytest.raises(ValueError, match=r"cell \(row -1, col 0\)"):
+        g.flat_index([-1, 0])
+    with pytest.raises(ValueError, match="cell 10 lies off the grid"):
+        Grid.line(10).flat_index([3, 10])
 
 
 def test_one_d_grid():

@@ -319,8 +319,22 @@ class PathPlanner:
         out = ndimage.convolve(logf, self._kernel, mode="constant", cval=np.log1p(-_P_MAX))
         return out.ravel()
 
+    def _start(self, start_cell) -> int:
+        """``start_cell`` checked: a flat cell index of the grid (:class:`CandidateError` otherwise)."""
+        K = self.grid.num_cells
+        v = np.asarray(start_cell)
+        if v.ndim != 0 or (v.dtype.kind not in "iu" and not (v.dtype.kind == "f" and float(v).is_integer())):
+            raise CandidateError(
+                f"start_cell must be one flat cell index (grid.flat_index(grid.world_to_cell(pose[None, :2]))[0]), "
+                f"got {start_cell!r}; goal_paths takes the robot's pose"
+            )
+        if not 0 <= int(v) < K:
+            raise CandidateError(f"start_cell {int(v)} lies off the grid (cells 0..{K - 1})")
+        return int(v)
+
     def distances(self, start_cell: int, marginals) -> tuple[np.ndarray, np.ndarray]:
         """Dijkstra from ``start_cell`` on the risk-weighted graph: ``(cost K, predecessors K)``."""
+        start_cell = self._start(start_cell)
         g = self._g
         risk = -self.disk_log_free(marginals)
         data = g.w + self.risk_weight * risk[g.dst]
@@ -331,9 +345,15 @@ class PathPlanner:
     def paths(self, start_cell: int, goals, marginals, samples=None, _dijkstra=None) -> Candidates:
         """The paths from ``start_cell`` to each goal (flat cells) and their ``P(path free)`` (samples when
         given, else the marginals under independence); goals that cannot be reached are dropped."""
+        start_cell = self._start(start_cell)
         q, s = _check_map(self.grid, marginals, samples)
         cost, pred = _dijkstra if _dijkstra is not None else self.distances(start_cell, q)
         goals = np.asarray(goals, dtype=np.int64).ravel()
+        off = (goals < 0) | (goals >= self.grid.num_cells)
+        if off.any():
+            raise CandidateError(
+                f"goal cell {int(goals[off][0])} lies off the grid (cells 0..{self.grid.num_cells - 1})"
+            )
         goals = goals[np.isfinite(cost[goals])]
         offs, cells = _trace_paths(pred.astype(np.int64), int(start_cell), goals)
         steps = np.abs(np.diff(cells))  # 1 or cols: a side step; cols +- 1: a diagonal one
@@ -395,6 +415,7 @@ class PathPlanner:
             raise ValueError(f"threshold must lie in (0, 1], got {threshold!r}")
         if stride is not None and (int(stride) != stride or stride < 1):
             raise ValueError(f"stride must be a positive integer or None, got {stride!r}")
+        start_cell = self._start(start_cell)
         q, s = _check_map(self.grid, marginals, samples)
         Cc = self.grid.cols
         lattice = np.zeros(self.grid.shape, dtype=bool)

@@ -48,12 +48,15 @@ kept in step.
 Random numbers: sweep ``t`` draws its uniforms from the SplitMix64 stream seeded by a hash of ``(seed,
 t)`` (:func:`~ogm_ppl.inference._kernels.cell_sweep.draws`), so a chain is reproducible from its seed.
 Priors: any prior with a compiled face (``prior.compiled()``: independent cells, MRF / stencil priors,
-pattern fields, tile tables), through the compiled single-cell sweep.
+pattern fields), through the compiled single-cell sweep. A tile-table prior is accepted with a
+:class:`TilePriorWarning`: single-cell moves under it are exact but leave the chain all but frozen, and such
+priors are mapped with patch Gibbs instead (:class:`~ogm_ppl.exploration.active.RebuildMapper`).
 """
 
 from __future__ import annotations
 
 import math
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -65,16 +68,21 @@ from ogm_ppl.inference._kernels import online as ok
 from ogm_ppl.inference.log_odds.maps import add_evidence
 from ogm_ppl.inference.mcmc.kernel import ogm_start_threshold
 from ogm_ppl.models.delta import Moravec
-from ogm_ppl.models.occupancy import OccupancyModel
+from ogm_ppl.models.occupancy import OccupancyModel, check_prior_fits
 from ogm_ppl.raycast import Rays, raycast
 from ogm_ppl.scans import Scans
 from ogm_ppl.sensors import SensorModel
 
-__all__ = ["OnlineMap", "OnlineStats", "Replay", "replay"]
+__all__ = ["OnlineMap", "OnlineStats", "Replay", "TilePriorWarning", "replay"]
 
 _UPDATES = {"gibbs": cs.HEAT_BATH, "metropolised": cs.METROPOLISED}
 _MIX = 0x9E3779B97F4A7C15
 _HAEHNEL = Moravec.haehnel()  # the update term of the thresholded-OGM start (initial_map's default)
+
+
+class TilePriorWarning(UserWarning):
+    """A tile-table prior (a compiled bundle with ``sparse_patches()``) given to :class:`OnlineMap`, whose
+    single-cell updates leave such a chain all but frozen."""
 
 
 @dataclass(frozen=True)
@@ -180,14 +188,27 @@ class OnlineMap:
             raise ValueError(f"OnlineMap supports kernel='cell' (single-cell updates), got {kernel!r}")
         if update not in _UPDATES:
             raise ValueError(f"update must be one of {tuple(_UPDATES)}, got {update!r}")
+        if not isinstance(grid, Grid):
+            raise TypeError(f"grid must be an ogm_ppl.Grid (cells, resolution, origin), got {type(grid).__name__}")
         if not isinstance(sensor, SensorModel):
             raise TypeError(f"sensor must be a SensorModel, got {type(sensor).__name__}")
-        if prior.num_cells != grid.num_cells:
-            raise ValueError(f"prior has {prior.num_cells} cells, the grid {grid.num_cells}")
+        if not hasattr(prior, "num_cells"):
+            raise TypeError(f"prior must be a MapPrior, got {type(prior).__name__}")
+        check_prior_fits(grid, prior)
         compiled = prior.compiled()
         if compiled is None:
             raise ValueError(
                 f"OnlineMap needs a prior with a compiled face (prior.compiled()); {type(prior).__name__} has none"
+            )
+        if compiled.sparse_patches():
+            warnings.warn(
+                TilePriorWarning(
+                    f"OnlineMap updates single cells, and under the tile-table prior {type(prior).__name__} a "
+                    "single cell can rarely change without making its tile one the table never counted: the chain "
+                    "is exact but barely moves. Map with patch Gibbs over the prior's tiles instead "
+                    "(ogm_ppl.exploration.active.RebuildMapper, which explore() uses for such priors)"
+                ),
+                stacklevel=2,
             )
         for name, v in (("sweeps_per_scan", sweeps_per_scan), ("full_every", full_every), ("margin", margin)):
             if int(v) != v or v < 0:

@@ -240,6 +240,21 @@ def check_memory(rays: Rays) -> None:
         )
 
 
+def check_prior_fits(grid, prior) -> None:
+    """Refuse (``ValueError``) a prior of another number of cells than ``grid``, or one laid out on another
+    shape (a prior with ``rows`` and ``cols``, e.g. built for ``(80, 60)`` on a ``60 x 80`` grid: same cell
+    count, transposed neighbourhoods)."""
+    if prior.num_cells != grid.num_cells:
+        raise ValueError(f"prior has {prior.num_cells} cells, the grid {grid.num_cells}")
+    rows, cols = getattr(prior, "rows", None), getattr(prior, "cols", None)
+    layout = (1, grid.num_cells) if grid.ndim == 1 else tuple(grid.shape)
+    if rows is not None and cols is not None and (int(rows), int(cols)) != layout:
+        raise ValueError(
+            f"{type(prior).__name__} is laid out on {int(rows)} x {int(cols)} cells, the grid on "
+            f"{layout[0]} x {layout[1]}: build the prior for the grid's shape ({tuple(grid.shape)})"
+        )
+
+
 class OccupancyModel:
     """The map model: grid, rays, forward sensor model and a pluggable prior.
 
@@ -266,16 +281,8 @@ class OccupancyModel:
             raise ValueError("rays were cast on a different grid")
         if rays.num_rays == 0:
             raise ValueError("OccupancyModel needs at least one ray (the ray set is empty)")
-        if prior.num_cells != grid.num_cells:
-            raise ValueError(f"prior has {prior.num_cells} cells, the grid {grid.num_cells}")
+        check_prior_fits(grid, prior)
         check_memory(rays)
-        rows, cols = getattr(prior, "rows", None), getattr(prior, "cols", None)
-        layout = (1, grid.num_cells) if grid.ndim == 1 else tuple(grid.shape)
-        if rows is not None and cols is not None and (int(rows), int(cols)) != layout:
-            raise ValueError(
-                f"{type(prior).__name__} is laid out on {int(rows)} x {int(cols)} cells, the grid on "
-                f"{layout[0]} x {layout[1]}: build the prior for the grid's shape ({tuple(grid.shape)})"
-            )
         self.grid, self.rays, self.sensor, self.prior = grid, rays, sensor, prior
         K = grid.num_cells
         if isinstance(known_free, str):

@@ -148,3 +148,19 @@ def test_the_robots_own_disk_is_no_part_of_a_paths_risk():
     grid_path = np.array([7 * 15 + 7, 7 * 15 + 8])
     p = path_free_probability(grid, [0, 2], grid_path[::-1], marginals=q.ravel(), clearance_cells=1.0)
     assert p[0] == pytest.approx(1e-9, rel=1e-6)
+
+
+def test_a_start_or_goal_cell_off_the_grid_is_refused_not_followed():
+    """A flat start cell of a pose just off the grid (negative) sent Dijkstra's path tracing into an endless loop
+    or a crash; a pose given where a cell is meant and a goal cell past the end are refused too."""
+    grid, q = _room()
+    planner = PathPlanner(grid)
+    with pytest.raises(CandidateError, match=r"start_cell -60 lies off the grid \(cells 0..599\)"):
+        planner.candidates(-60, q, threshold=0.5)
+    with pytest.raises(CandidateError, match="start_cell -1 lies off the grid"):
+        planner.paths(-1, [35, 36], q)
+    with pytest.raises(CandidateError, match=r"start_cell must be one flat cell index .*goal_paths takes the robot"):
+        planner.candidates(np.array([1.0, 1.0, 0.0]), q)
+    with pytest.raises(CandidateError, match="goal cell 600 lies off the grid"):
+        planner.paths(35, [36, 600], q)
+    assert planner.paths(np.int64(35), [37], q).distance.size == 1

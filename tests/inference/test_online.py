@@ -14,8 +14,8 @@ from ogm_ppl.datasets import simulate_scans
 from ogm_ppl.inference._kernels import cell_sweep as cs
 from ogm_ppl.inference._kernels import online as ok
 from ogm_ppl.inference.exact import brute_force
-from ogm_ppl.inference.online import OnlineMap
-from ogm_ppl.priors import IndependentPrior, MRFPrior, PatternFieldPrior
+from ogm_ppl.inference.online import OnlineMap, TilePriorWarning
+from ogm_ppl.priors import IndependentPrior, MRFPrior, PatternFieldPrior, prior_by_name
 from ogm_ppl.testing.kernels import _cell_matrix, enumerate_maps
 
 N = 16
@@ -198,6 +198,14 @@ def test_bad_input_is_refused():
         OnlineMap(grid, sensor, Plain(0.3, grid.num_cells))
     with pytest.raises(ValueError, match="kernel"):
         OnlineMap(grid, sensor, _prior("independent", (N, N)), kernel="patch")
+    # a prior of another shape with as many cells (transposed), a shape for a grid, a tile table
+    wide = Grid((6, 24), resolution=0.1)
+    with pytest.raises(ValueError, match="laid out on 24 x 6 cells, the grid on 6 x 24"):
+        OnlineMap(wide, sensor, prior_by_name("mrf8:houseexpo@cal", (24, 6)))
+    with pytest.raises(TypeError, match=r"grid must be an ogm_ppl\.Grid"):
+        OnlineMap(grid.shape, sensor, _prior("independent", (N, N)))  # type: ignore[arg-type]
+    with pytest.warns(TilePriorWarning, match="RebuildMapper"):
+        OnlineMap(grid, sensor, prior_by_name("patch3_bo:houseexpo", grid.shape))
     assert om.num_scans == 1  # the refused scans left the map as it was
     with pytest.raises(ValueError, match="pinned"):
         m = np.zeros(grid.num_cells)
