@@ -110,7 +110,10 @@ class Scans:
             raise ValueError(f"Scans.angles has a non-finite value at index {_first_bad(bad)}")
         bad = np.isnan(ranges)
         if bad.any():
-            raise ValueError(f"Scans.ranges is NaN at index {_first_bad(bad)}")
+            raise ValueError(
+                f"Scans.ranges is NaN at index {_first_bad(bad)}: mark beams with no reading invalid instead "
+                "(valid=..., an S x B bool mask; give them any finite range)"
+            )
         bad = np.isinf(ranges)
         if bad.any():
             raise ValueError(f"Scans.ranges is infinite at index {_first_bad(bad)}")

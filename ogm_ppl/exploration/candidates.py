@@ -265,6 +265,11 @@ def path_free_probability(
     cells = np.asarray(path_cells, dtype=np.int64)
     if cells.size and (cells.min() < 0 or cells.max() >= grid.num_cells):
         raise ValueError(f"path cells must lie in 0..{grid.num_cells - 1}")
+    if offs.ndim != 1 or offs.size < 1 or offs[0] != 0 or offs[-1] != cells.size or (np.diff(offs) < 0).any():
+        raise ValueError(
+            f"path_offsets must run from 0 to len(path_cells) = {cells.size} without decreasing (CSR: path i is "
+            f"path_cells[path_offsets[i]:path_offsets[i + 1]]), got {offs.tolist()[:8]}"
+        )
     dr, dc = _disk(float(clearance_cells))
     skip = np.zeros(grid.num_cells, dtype=np.bool_)
     if exclude is not None:

@@ -73,13 +73,14 @@ class MapProblem:
         return round(float(np.max(self.scans.max_range)) / self.grid.resolution)
 
     def prior(self, name: str, lam: float | None = None):
-        """The prior ``name`` (:func:`~ogm_ppl.priors.named.prior_by_name`) over the grid; ``name =
-        "independent"`` with ``lam``: every cell occupied with probability ``lam``."""
+        """The prior ``name`` (:func:`~ogm_ppl.priors.named.prior_by_name`) over the grid (which warns when the
+        grid's cells differ in size from those the prior was learned at); ``name = "independent"`` with ``lam``:
+        every cell occupied with probability ``lam``."""
         from ogm_ppl.priors import IndependentPrior, prior_by_name
 
         if name == "independent" and lam is not None:
             return IndependentPrior(float(lam), self.grid.num_cells)
-        return prior_by_name(name, self.grid.shape)
+        return prior_by_name(name, self.grid)
 
     def sensor(self, name: str = "gaussian", sigma_cells: float | None = None, p_rand: float = 0.0) -> SensorModel:
         """The sensor ``name`` (:func:`~ogm_ppl.sensors.sensor_by_name`) for the range noise

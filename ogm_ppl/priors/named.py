@@ -51,8 +51,10 @@ from __future__ import annotations
 
 import json
 import math
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from functools import lru_cache
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -143,12 +145,51 @@ def prior_by_name(name: str, shape, tables: PriorTables | None = None) -> MapPri
     kind, corpus, at, modifier = split_prior_name(name)
     factory = _REGISTRY.get(kind, name)
     beta = _exponent(name, kind, corpus, modifier, tables) if at else 1.0
+    _check_resolution(name, shape, corpus, tables)
     prior = factory(_shape(shape), CorpusTables(corpus, tables))
     if beta == 1.0:
         return prior
     from ogm_ppl.priors.tempered import TemperedPrior
 
     return TemperedPrior(prior, beta)
+
+
+@lru_cache(maxsize=16)
+def _corpus_resolution(corpus: str) -> float | None:
+    """Metres per cell of the plans the shipped tables of ``corpus`` were counted on, where their provenance
+    records it (``None``: not recorded, as for maps drawn in cells)."""
+    try:
+        res = json.loads((_FITTED / f"prior_{corpus}.json").read_text())["provenance"].get("resolution")
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return None
+    return float(res) if isinstance(res, int | float) and not isinstance(res, bool) and res > 0 else None
+
+
+def _check_resolution(name: str, shape, corpus: str, tables) -> None:
+    """Warn (:class:`~ogm_ppl.models.delta_setting.FittedSettingWarning`) when ``shape`` is a grid whose cells
+    differ in size from those of the plans the prior's tables were counted on (by more than 1 %): its windows
+    then span another piece of a building, and walls another number of cells."""
+    res = getattr(shape, "resolution", None)
+    if res is None or not (corpus or tables is not None):
+        return
+    if tables is not None:
+        learned = (getattr(tables, "provenance", None) or {}).get("resolution")
+        learned = float(learned) if isinstance(learned, int | float) and learned > 0 else None
+    else:
+        learned = _corpus_resolution(corpus)
+    if learned is None or abs(float(res) / learned - 1.0) <= 0.01:
+        return
+    from ogm_ppl.models.delta_setting import FittedSettingWarning
+
+    warnings.warn(
+        FittedSettingWarning(
+            f"prior {name!r} was learned on plans at {learned:g} m a cell and is used on a grid of {float(res):g} m "
+            f"a cell: its windows span {float(res) / learned:.3g} times the space, and walls are another number of "
+            f"cells thick. Map at {learned:g} m, or count tables on plans read at {float(res):g} m "
+            "(ogm_ppl.priors.learn.count_tables; plan_files.load_plan_file(..., resolution=...))"
+        ),
+        stacklevel=3,
+    )
 
 
 def split_prior_name(name: str) -> tuple[str, str, str, str]:

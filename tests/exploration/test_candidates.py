@@ -69,6 +69,8 @@ def test_path_free_probability_is_exact_for_samples_and_the_product_for_marginal
         w = _swept_brute(grid, p, clearance)
         assert got_s[i] == np.mean(~samples[:, w].any(1))  # exact: a share of the samples
         assert got_q[i] == pytest.approx(np.prod(1 - q[w]), rel=1e-12)
+    with pytest.raises(ValueError, match=r"path_offsets must run from 0 to len\(path_cells\) = 12"):
+        path_free_probability(grid, [0, 5], cells, marginals=q)  # offsets of one path, cells of three
 
 
 def test_paths_are_geodesic_octile_distances_on_an_empty_map():

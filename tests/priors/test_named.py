@@ -72,3 +72,21 @@ def test_broken_json_and_missing_file(tmp_path):
         load_temper_params("x", path=p)
     with pytest.raises(FileNotFoundError, match="no fitted tempering exponents"):
         load_temper_params("nowhere")
+
+
+def test_a_grid_of_other_cells_than_the_tables_were_counted_on_warns():
+    """HouseExpo's tables were counted at 0.05 m a cell: a 0.1 m grid warns, a 0.05 m grid, a bare shape and a
+    corpus that records no cell size (maps drawn in cells) do not."""
+    import warnings
+
+    from ogm_ppl import Grid
+    from ogm_ppl.models.delta_setting import FittedSettingWarning
+
+    with pytest.warns(FittedSettingWarning, match="learned on plans at 0.05 m a cell .* grid of 0.1 m a cell"):
+        prior_by_name("patch3:houseexpo", Grid((12, 12), resolution=0.1))
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        prior_by_name("patch3:houseexpo", Grid((12, 12), resolution=0.05))
+        prior_by_name("patch3:houseexpo", (12, 12))
+        prior_by_name("patch3:dungeon", Grid((12, 12), resolution=0.1))
+        prior_by_name("independent", Grid((12, 12), resolution=0.1))
