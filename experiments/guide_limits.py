@@ -18,6 +18,7 @@ stop-and-scan data and unseen near-mapped cells), for each guide ``g`` (``--guid
 
     python experiments/guide_limits.py --test ipa --guides ipa houseexpo+ipa@sym   # ~2 min on 2 cores
     python experiments/guide_limits.py --test houseexpo --guides houseexpo houseexpo+ipa@sym --guide-dir DIR
+    python experiments/guide_limits.py --test ipa --guides ipa ipa=out/capacity/c12 ipa=out/capacity/c48
 
 Writes ``--out`` (default ``out/guide_limits``)/``guide_limits.json`` (settings, provenance, per-map rows, summary).
 The leakage checks of ``calibration.py`` apply: a guide is never scored on a plan (or building) it was trained on.
@@ -71,7 +72,13 @@ def main(argv=None) -> dict:
 
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--test", required=True, choices=C.TEST_CORPORA, help="the test corpus")
-    ap.add_argument("--guides", nargs="+", required=True, help="guide names, as calibration.py --guides takes")
+    ap.add_argument(
+        "--guides",
+        nargs="+",
+        required=True,
+        help="guide names, as calibration.py --guides takes; NAME=DIR reads that guide from DIR (e.g. one trained "
+        "with other --channels), so several trainings of one guide can be compared",
+    )
     ap.add_argument("--guide-dir", type=Path, default=None, help="read the guides as DIR/guide_CORPUS.npz")
     ap.add_argument("--plans", type=int, default=10, help="held-out maps of the test corpus (default 10)")
     ap.add_argument("--out", type=Path, default=Path("out/guide_limits"))
@@ -85,9 +92,11 @@ def main(argv=None) -> dict:
         raise SystemExit("guide_limits.py: --plans must be at least 1")
     proto = C.parse_args(["--plans", str(args.plans)])  # calibration.py's protocol, at its defaults
     maps = C.heldout_maps(args.test, args.plans, proto.window, proto.generated_shape)
-    guides = {g: C.guide_for(g, args.guide_dir) for g in args.guides}
-    for g in args.guides:
-        for c in C.guide_corpora(g):
+    guides = {}
+    for entry in args.guides:  # NAME, or NAME=DIR: the guide NAME read from DIR (another training of it)
+        name, _, folder = entry.partition("=")
+        guides[entry] = C.guide_for(name, Path(folder) if folder else args.guide_dir)
+        for c in C.guide_corpora(name):
             C.check_heldout(args.test, [t.plan for t in maps], c)
     t0 = time.perf_counter()
     rows, logits, ys = [], {g: [] for g in guides}, []

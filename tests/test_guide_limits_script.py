@@ -14,7 +14,10 @@ def gl():
 
 
 def test_scores_agree_with_calibration_and_oracles_bound_them(gl, tmp_path):
-    doc = gl.main(["--test", "ipa", "--guides", "ipa", "houseexpo", "--plans", "2", "--out", str(tmp_path)])
+    from ogm_ppl.priors.tables import FITTED_DIR
+
+    shipped = f"ipa={FITTED_DIR}"  # the same guide named with its folder: NAME=DIR
+    doc = gl.main(["--test", "ipa", "--guides", "ipa", "houseexpo", shipped, "--plans", "2", "--out", str(tmp_path)])
     cal = gl.C
     args = cal.parse_args(["--plans", "2"])
     maps = cal.heldout_maps("ipa", 2, args.window)
@@ -22,6 +25,7 @@ def test_scores_agree_with_calibration_and_oracles_bound_them(gl, tmp_path):
         scored = cal.run_guide(cal.make_scene(t, args), cal.guide_for("ipa"), args)["scores"]["unseen"]
         assert row["plan"] == t.name and row["ipa"] == pytest.approx(scored["nll_bits"], rel=1e-6)
         assert row["unseen_cells"] == scored["cells"]
+    assert doc["summary"][shipped] == doc["summary"]["ipa"]
     for g in ("ipa", "houseexpo"):
         s = doc["summary"][g]
         assert s["nll_oracle_affine"] <= s["nll_oracle_temperature"] + 1e-12 <= s["nll"] + 2e-12

@@ -747,6 +747,36 @@ def _unseen_by_distance(doc: dict) -> Table:
     )
 
 
+def _guide_limits(doc: dict) -> Table:
+    """``experiments/guide_limits.py``: per guide, its NLL on the unseen cells of a test corpus's held-out maps,
+    and the NLL after the temperature (and shift) that is best on those very maps; the guides' ensemble."""
+    st = doc["settings"]
+    rows = []
+    for name, s in doc["summary"].items():
+        if name == "ensemble":
+            rows.append([f"mean of the {len(s['of'])} guides' probabilities", _f(s["nll"]), "–", "–"])
+            continue
+        T, b = s["oracle_affine"]
+        rows.append(
+            [
+                name,
+                _f(s["nll"]),
+                f"{_f(s['nll_oracle_temperature'])} (T = {s['oracle_temperature']:g})",
+                f"{_f(s['nll_oracle_affine'])} (T = {T:g}, b = {b:g})",
+            ]
+        )
+    return Table(
+        caption=(
+            f"Guides on the unseen cells of {st['plans']} held-out {st['test']} maps (calibration protocol): NLL "
+            "(bits/cell, mean over maps) as trained, and after the temperature T, or T and shift b (logit / T + b), "
+            "that is best on these maps themselves (a bound on any recalibration)"
+        ),
+        header=["guide", "NLL", "best temperature", "best temperature and shift"],
+        rows=rows,
+        provenance=doc["provenance"],
+    )
+
+
 def _prior_occupancy(doc: dict) -> Table:
     """``experiments/prior_occupancy.py``: each prior's occupied share on a window with no readings (the second
     half of three chains, and each chain's) against its training corpus's ``lambda``."""
@@ -1115,6 +1145,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "calibration_logs": ("calibration_logs", _calibration_plans),
     "calibration_logs_occupied": ("calibration_logs_occupied", _calibration_plans),
     "calibration_cycle": ("calibration_cycle", _calibration_kernels),
+    "guide_limits_ipa": ("guide_limits_ipa", _guide_limits),
     "unseen_by_distance": ("unseen_by_distance", _unseen_by_distance),
     "unseen_by_distance_chains": ("unseen_by_distance_chains", _unseen_by_distance),
     "unseen_by_distance_logs": ("unseen_by_distance_logs", _unseen_by_distance),
