@@ -940,9 +940,10 @@ def tables_md(summ: list[dict], settings: dict) -> str:
 
 
 def _shown(s: dict, test: str) -> bool:
-    """Whether a summary row goes into ``test``'s own table and figures: the methods learned on that corpus and
-    those learned on nothing; every method on a plan set (``--plan-files``), which no prior was learned on."""
-    return test not in TEST_CORPORA or s["train"].removesuffix(GUIDE_SYM) in (test, "none")
+    """Whether a summary row goes into ``test``'s own table and figures: the methods learned on that corpus,
+    those learned on nothing and priors of one's own (:data:`OWN`); every method on a plan set (``--plan-files``),
+    which no prior was learned on."""
+    return test not in TEST_CORPORA or s["train"].removesuffix(GUIDE_SYM) in (test, "none", OWN)
 
 
 def _labels(names: Sequence[str], test: str) -> list[str]:
@@ -1154,10 +1155,6 @@ def main(argv=None) -> dict:
     else:  # likewise for runs made before --plan-files existed
         for k in ("plan_files", "plan_set", "pixel_size", "plan_outside", "plan_limit"):
             del settings[k]
-    try:
-        writable_folder(out)
-    except OSError as e:
-        raise SystemExit(f"calibration.py: --out {e}") from None
     overrides = _patch_overrides(args.patch)
     pairs = prior_names(args.priors, args.train)
     pairs += [(n + BIAS_SUFFIX, c) for n, c in pairs if n in args.bias]  # each biased prior beside its base
@@ -1167,6 +1164,10 @@ def main(argv=None) -> dict:
         digests = {name: name_digest(name, args, guides) for name, _ in [(OGM_LABEL, None), *pairs]}
     except (ValueError, LookupError, OSError) as e:
         raise SystemExit(f"calibration.py: {e}") from None
+    try:  # after the names: a refused run leaves no folder behind
+        writable_folder(out)
+    except OSError as e:
+        raise SystemExit(f"calibration.py: --out {e}") from None
     rows, runs = _load_previous(path, settings, args.fresh)
     rows = drop_changed(rows, digests)
     done = {_row_key(r) for r in rows}

@@ -408,6 +408,7 @@ def test_a_prior_of_ones_own_runs_once_and_reruns_when_it_changes(cal, tmp_path,
     first = cal.main([*small, "--out", str(tmp_path), "--no-figures"])["rows"]
     mine = [r for r in first if r["prior_name"] == KIND]
     assert len(mine) == 2 and {r["train"] for r in mine} == {"own"} and mine[0]["prior"] == KIND
+    assert f"| {KIND} |" in (tmp_path / "calibration.md").read_text()  # in the test corpus's own table
     calls = []
     real = cal.run_prior
     monkeypatch.setattr(cal, "run_prior", lambda scene, name, *a, **k: calls.append(name) or real(scene, name, *a, **k))
@@ -422,6 +423,7 @@ def test_a_prior_of_ones_own_runs_once_and_reruns_when_it_changes(cal, tmp_path,
     monkeypatch.setattr(cal, "run_ogm", never)
     with pytest.raises(SystemExit, match="unknown prior kind 'no_such_kind'"):
         cal.main([*small, "--priors", "no_such_kind", "--out", str(tmp_path / "x")])
+    assert not (tmp_path / "x").exists()  # refused before anything was made
     (tmp_path / "file").write_text("x")
     with pytest.raises(SystemExit, match=r"--out .*exists and is not a folder"):
         cal.main([*small, "--out", str(tmp_path / "file")])

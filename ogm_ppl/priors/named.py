@@ -145,7 +145,8 @@ def prior_by_name(name: str, shape, tables: PriorTables | None = None) -> MapPri
     kind, corpus, at, modifier = split_prior_name(name)
     factory = _REGISTRY.get(kind, name)
     beta = _exponent(name, kind, corpus, modifier, tables) if at else 1.0
-    _check_resolution(name, shape, corpus, tables)
+    if kind != "independent":  # (which keeps only the corpus's occupied share)
+        _check_resolution(name, shape, corpus, tables)
     prior = factory(_shape(shape), CorpusTables(corpus, tables))
     if beta == 1.0:
         return prior

@@ -54,15 +54,13 @@ from __future__ import annotations
 import errno
 import hashlib
 import json
-import os
-import tempfile
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
 
 import numpy as np
 
-from ogm_ppl.io import read_npz
+from ogm_ppl.io import atomic_write, read_npz
 
 __all__ = [
     "FORMAT_VERSION",
@@ -390,9 +388,9 @@ def _content_digest(arrays: dict) -> str:
 
 
 def save_tables(tables: PriorTables, path) -> Path:
-    """Write ``tables`` to ``path`` (npz, compressed, no pickles) atomically (temporary file + rename)."""
+    """Write ``tables`` to ``path`` (npz, compressed, no pickles) atomically (:func:`~ogm_ppl.io.atomic_write`:
+    an error names ``path``)."""
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
     arrays = {name: np.asarray(getattr(tables, name), dtype=np.int64) for name in _ARRAYS}
     arrays["codes5x5"] = arrays["codes5x5"].astype(np.int32)  # 25 bits fit
     _validate(arrays, str(path))
@@ -405,17 +403,9 @@ def save_tables(tables: PriorTables, path) -> Path:
             "sha256": _content_digest(arrays),
         }
     )
-    fd, tmp = tempfile.mkstemp(prefix=path.name + ".", suffix=".tmp", dir=path.parent)
-    try:
-        with os.fdopen(fd, "wb") as f:
-            # numpy's stub: **kwds might also bind its `allow_pickle: bool`; our keys are table names
-            np.savez_compressed(f, meta=np.array(meta), **arrays)  # type: ignore[arg-type]
-        os.chmod(tmp, 0o644)
-        os.replace(tmp, path)
-    except BaseException:
-        if os.path.exists(tmp):
-            os.unlink(tmp)
-        raise
+    with atomic_write(path) as f:
+        # numpy's stub: **kwds might also bind its `allow_pickle: bool`; our keys are table names
+        np.savez_compressed(f, meta=np.array(meta), **arrays)  # type: ignore[arg-type]
     return path
 
 

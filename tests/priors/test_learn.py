@@ -251,6 +251,14 @@ def test_save_load_round_trip(tmp_path):
     _eq(u, {n: getattr(t, n) for n in ARRAYS})
     assert u.provenance["corpus"] == "test" and u.symmetries == 8
     assert u.summary() == t.summary()
+    # a write that cannot happen names the path given, not a temporary file or only its folder
+    with pytest.raises(IsADirectoryError, match="is a folder; give a file name") as e:
+        save_tables(t, tmp_path / "sub")
+    assert e.value.filename == str(tmp_path / "sub")
+    with pytest.raises(OSError, match="cannot write it") as e:
+        save_tables(t, p / "x.npz")  # under a file
+    assert e.value.filename == str(p / "x.npz")
+    assert sorted(q.name for q in p.parent.iterdir()) == ["t.npz"]
 
 
 def test_malformed_files(tmp_path):
