@@ -278,14 +278,17 @@ def _ray_F(rays: CandidateRays, kind: int) -> np.ndarray:
 
 
 def _pack_samples(samples, K: int) -> tuple[np.ndarray, int]:
-    """``S x K`` 0/1 maps -> ``K x W`` uint64 bit sets (bit ``s % 64`` of word ``s // 64``: sample ``s``)."""
+    """``S x K`` 0/1 maps (or grid-shaped, ``S x rows x cols``, as marginals may be) -> ``K x W`` uint64 bit sets
+    (bit ``s % 64`` of word ``s // 64``: sample ``s``)."""
     if isinstance(samples, torch.Tensor):
         samples = samples.detach().cpu().numpy()
     a = np.asarray(samples)
     if a.dtype.kind not in "biuf":
         raise TypeError(f"samples must be a 0/1 array of maps, got dtype {a.dtype}")
+    if a.ndim > 2 and int(np.prod(a.shape[1:])) == K:
+        a = a.reshape(a.shape[0], K)
     if a.ndim != 2 or a.shape[1] != K:
-        raise ValueError(f"samples must have shape S x {K} (S maps of the grid's cells), got {a.shape}")
+        raise ValueError(f"samples must have shape S x {K} (S maps of the grid's cells, or grid-shaped), got {a.shape}")
     S = a.shape[0]
     if S == 0:
         raise ValueError("samples is empty: the information gain needs at least one posterior sample")

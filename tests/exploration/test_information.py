@@ -156,6 +156,8 @@ def test_repeated_samples_equal_their_weights(problem):
     a = beam_information(model.grid, sensor, maps[idx].bool(), cr)
     b = beam_information(model.grid, sensor, maps, cr, weights=counts)
     torch.testing.assert_close(a, b, rtol=0, atol=1e-12)
+    grid_shaped = maps.reshape(len(maps), *model.grid.shape)  # as grid-shaped marginals are taken too
+    torch.testing.assert_close(beam_information(model.grid, sensor, grid_shaped, cr, weights=counts), b, rtol=0, atol=0)
     pf = first_hit_distribution(model.grid, maps[idx], cr)
     for c in range(len(POSES)):
         keep = maps[idx][:, int(cr.pose_cells[c])] == 0
