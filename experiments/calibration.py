@@ -123,7 +123,7 @@ from ogm_ppl.datasets.stop_and_scan import stop_and_scan
 from ogm_ppl.inference import CellGibbs, PatchGibbs, RunningStats, evidence_grid, run_gibbs
 from ogm_ppl.inference.mcmc import mixing_cycle
 from ogm_ppl.inference.mcmc.diagnostics import split_rhat
-from ogm_ppl.inference.mcmc.fingerprint import digest, prior_digest
+from ogm_ppl.inference.mcmc.fingerprint import digest, prior_name_digest
 from ogm_ppl.inference.mcmc.tempering import TEMPERS, ParallelTempering, geometric_ladder
 from ogm_ppl.io import atomic_write_text, writable_folder
 from ogm_ppl.metrics import Reliability, near_mapped_mask, prediction_scores, reliability
@@ -755,10 +755,10 @@ def _row_key(r: dict) -> tuple:
 
 def name_digest(name: str, args, guides: dict) -> str:
     """What a row of ``name`` scored, as a short hash: a guide's weights (and whether it is symmetrised); a prior's
-    :func:`~ogm_ppl.inference.mcmc.fingerprint.prior_digest` on a 12 x 12 grid (its tables, settings and
-    log-densities: tables counted again, refitted weights or exponents change it) and its bias; ``"unfitted"`` for
-    a ``@cal`` name without an exponent (skipped when run). Building each prior here also refuses an unknown
-    name before anything runs."""
+    :func:`~ogm_ppl.inference.mcmc.fingerprint.prior_name_digest` (its tables, settings and log-densities: tables
+    counted again, refitted weights or exponents change it) and its bias; ``"unfitted"`` for a ``@cal`` name
+    without an exponent (skipped when run). Building each prior here also refuses an unknown name before
+    anything runs."""
     if name == OGM_LABEL:
         return "ogm"
     if name.startswith(GUIDE_PREFIX):
@@ -768,8 +768,7 @@ def name_digest(name: str, args, guides: dict) -> str:
     kind, corpus, _, mod = split_prior_name(base)
     if mod == "cal" and kind in PRIOR_KINDS and kind not in load_temper_params(corpus).beta:
         return "unfitted"
-    prior = prior_by_name(base, (12, 12))
-    return digest(prior_digest(prior, 144), args.bias.get(base) if biased else None)
+    return digest(prior_name_digest(base), args.bias.get(base) if biased else None)
 
 
 def _kind_label(name: str) -> str:

@@ -959,14 +959,18 @@ CHECKPOINTS = ".checkpoints"
 
 
 def _prior_digest(params) -> str | None:
-    """:func:`~ogm_ppl.inference.mcmc.fingerprint.prior_digest` of the prior ``params`` names, on a 12 x 12 grid:
-    what its tables, weights and settings are now (tables counted again or a kind of one's own changed under the
-    same name give another)."""
-    from ogm_ppl.inference.mcmc.fingerprint import prior_digest
-    from ogm_ppl.priors import prior_by_name
+    """:func:`~ogm_ppl.inference.mcmc.fingerprint.prior_name_digest` of the prior ``params`` names (what its
+    tables, weights and settings are now); ``None`` without a prior name, or for one that builds only on the
+    map's own grid (the run says what is wrong with it)."""
+    from ogm_ppl.inference.mcmc.fingerprint import prior_name_digest
 
     name = getattr(params, "prior", None)
-    return None if not isinstance(name, str) else prior_digest(prior_by_name(name, (12, 12)), 144)
+    if not isinstance(name, str):
+        return None
+    try:
+        return prior_name_digest(name)
+    except ValueError:
+        return None
 
 
 def _checkpoint_root(args, params, inp: _Input, grid: Grid) -> Path | None:

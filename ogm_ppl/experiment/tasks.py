@@ -24,7 +24,6 @@ from __future__ import annotations
 import contextlib
 import hashlib
 import json
-import math
 import threading
 import time
 import warnings
@@ -70,21 +69,17 @@ def algorithm_prior_digest(alg) -> str | None:
     name = alg.params.get("prior")
     if not isinstance(name, str):
         return None
-    from ogm_ppl.inference.mcmc.fingerprint import prior_digest as digest_of
-    from ogm_ppl.priors import prior_by_name
+    from ogm_ppl.inference.mcmc.fingerprint import prior_name_digest
 
-    problems = []
-    for shape in ((8, 8), (8,)):
-        try:
-            return digest_of(prior_by_name(name, shape), math.prod(shape))
-        except Exception as e:  # a 2D-only or 1D-only kind, or one built for other grids only
-            problems.append(f"{type(e).__name__}: {e}")
-    warnings.warn(
-        f"algorithm {alg.name!r}: its prior {name!r} could not be built on an 8 x 8 grid to fingerprint it "
-        f"({'; '.join(problems)}); a rerun after that prior changes under its name reuses the old results",
-        stacklevel=2,
-    )
-    return None
+    try:
+        return prior_name_digest(name)
+    except ValueError as e:
+        warnings.warn(
+            f"algorithm {alg.name!r}: its prior {name!r} could not be built on an 8 x 8 grid to fingerprint it "
+            f"({e}); a rerun after that prior changes under its name reuses the old results",
+            stacklevel=2,
+        )
+        return None
 
 
 def task_hash(*parts) -> str:

@@ -17,11 +17,12 @@ stores one short hash per component and refuses a checkpoint whose hashes differ
 from __future__ import annotations
 
 import hashlib
+import math
 
 import numpy as np
 import torch
 
-__all__ = ["digest", "fingerprint", "prior_digest"]
+__all__ = ["digest", "fingerprint", "prior_digest", "prior_name_digest"]
 
 
 def digest(*parts) -> str:
@@ -76,6 +77,25 @@ def prior_digest(prior, num_cells: int) -> str:
         lp = torch.as_tensor(prior.log_prob(maps), dtype=torch.float64)
     lp = torch.where(torch.isfinite(lp), torch.round(lp * 1e6) / 1e6, lp)
     return digest(*parts, lp)
+
+
+def prior_name_digest(name: str) -> str:
+    """:func:`prior_digest` of the prior ``name`` (:func:`~ogm_ppl.priors.named.prior_by_name`) built on an
+    8 x 8 grid, or on 8 cells for a 1D-only kind: what the name stands for now (tables counted anew, refitted
+    weights or exponents, a registered kind edited give another digest). What a result computed under the name
+    records, so that a rerun after the prior changed recomputes it. ``ValueError`` (both grids' problems) when
+    it builds on neither."""
+    from ogm_ppl.priors import prior_by_name
+
+    problems: list[str] = []
+    for shape in ((8, 8), (8,)):
+        try:
+            return prior_digest(prior_by_name(name, shape), math.prod(shape))
+        except Exception as e:  # a 2D-only or 1D-only kind, or one built for other grids only
+            problems.append(f"{type(e).__name__}: {e}")
+    if problems[0] == problems[1]:  # the name itself is wrong (an unknown kind, unreadable tables)
+        raise ValueError(problems[0].partition(": ")[2])
+    raise ValueError(f"prior {name!r} builds on neither an 8 x 8 grid nor 8 cells ({'; '.join(problems)})")
 
 
 def _settings(kernel) -> dict:
