@@ -42,17 +42,12 @@ import calibration as C  # experiments/calibration.py: the protocol, windows, gu
 
 from ogm_ppl import GaussianRange, OccupancyModel
 from ogm_ppl.io import atomic_write_text, writable_folder
+from ogm_ppl.metrics import nll_bits
 from ogm_ppl.priors import IndependentPrior
 
 TEMPERATURES = np.round(np.arange(0.5, 4.0001, 0.05), 3)
 SHIFTS = np.round(np.arange(-1.5, 1.5001, 0.125), 3)
-EPS = 1e-12
-
-
-def nll_bits(p: np.ndarray, y: np.ndarray) -> float:
-    """Mean ``-log2 p(y)`` of Bernoulli probabilities ``p`` (clipped to ``[1e-12, 1 - 1e-12]``)."""
-    p = np.clip(p, EPS, 1 - EPS)
-    return float(-np.mean(y * np.log2(p) + (1 - y) * np.log2(1 - p)))
+EPS = 1e-6  # the clip of ogm_ppl.metrics.nll_bits: logits of clipped probabilities stay finite
 
 
 def recalibrated(logits: list[np.ndarray], ys: list[np.ndarray], shifts=(0.0,)) -> tuple[float, float, float]:

@@ -93,20 +93,14 @@ class Progress:
         parts = [f"{self.desc}: {self.done}/{self.total} ({pct:.0f} %), {_duration(el)}"]
         if final:
             parts.append("done" if self.done >= self.total else "stopped")
-        elif self.initial < self.done < self.total and (self._first is None or self.done > self._first[1]):
-            parts.append(f"~{_duration(self._per_step(el) * (self.total - self.done))} left")
+        elif self._first is not None and self._first[1] < self.done < self.total:  # a pace after the first step
+            t1, n1 = self._first
+            per_step = (time.perf_counter() - t1) / (self.done - n1)
+            parts.append(f"~{_duration(per_step * (self.total - self.done))} left")
         line = ", ".join(parts) + (f"; last: {note}" if note and not final else "")
         print(line, file=self.stream, flush=True)
         self._last = time.perf_counter()
         self._printed = True
-
-    def _per_step(self, elapsed: float) -> float:
-        """Seconds a step takes: the pace since the first update (a first step that compiled kernels or built
-        a model is not the pace of the rest; no time left is shown before a second update)."""
-        if self._first is not None and self.done > self._first[1]:
-            t1, n1 = self._first
-            return (time.perf_counter() - t1) / (self.done - n1)
-        return elapsed / (self.done - self.initial)
 
     def update(self, n: int = 1, note: str = "") -> None:
         """``n`` more steps done; ``note`` (e.g. the task's name) goes into the next plain line."""

@@ -23,7 +23,7 @@ def test_scores_agree_with_calibration_and_oracles_bound_them(gl, tmp_path):
     maps = cal.heldout_maps("ipa", 2, args.window)
     for row, t in zip(doc["rows"], maps, strict=True):
         scored = cal.run_guide(cal.make_scene(t, args), cal.guide_for("ipa"), args)["scores"]["unseen"]
-        assert row["plan"] == t.name and row["ipa"] == pytest.approx(scored["nll_bits"], rel=1e-6)
+        assert row["plan"] == t.name and row["ipa"] == pytest.approx(scored["nll_bits"], rel=1e-12)
         assert row["unseen_cells"] == scored["cells"]
     assert doc["summary"][shipped] == doc["summary"]["ipa"]
     for g in ("ipa", "houseexpo"):

@@ -177,7 +177,7 @@ def register_method(
     param_fields(params)  # every field made with param()
 
     def deco(fn: RunFunction) -> RunFunction:
-        _discover()  # the library's own methods first, whoever registers
+        load_extensions()  # the library's own methods first, whoever registers
         line = doc or _first_line(fn)
         new = [MapMethod(name, params, fn, line, stochastic=stochastic, sampler=sampler)]
         for alias, preset in (aliases or {}).items():
@@ -214,11 +214,6 @@ def load_extensions() -> None:
     does a lookup of a prior or sensor kind that is not registered yet, so a kind of one's own registered in
     such a module is found by any script, not only the command line. :class:`MethodModuleError` names a module
     that cannot be imported."""
-    _discover()
-
-
-def _discover() -> None:
-    """Import the modules of this package, then those of ``$OGM_PPL_METHODS`` and the entry points."""
     global _discovered
     if _discovered:
         return
@@ -249,19 +244,19 @@ def _discover() -> None:
 
 def method_names() -> list[str]:
     """Every registered name (aliases included), in registration order."""
-    _discover()
+    load_extensions()
     return list(_METHODS)
 
 
 def methods() -> Iterator[MapMethod]:
     """Every registered method (aliases included)."""
-    _discover()
+    load_extensions()
     return iter(list(_METHODS.values()))
 
 
 def get_method(name: str) -> MapMethod:
     """The method ``name``; :class:`~.params.ParamError` (key ``"method"``) naming the known ones if none."""
-    _discover()
+    load_extensions()
     try:
         return _METHODS[name]
     except (KeyError, TypeError):

@@ -155,15 +155,20 @@ def prior_by_name(name: str, shape, tables: PriorTables | None = None) -> MapPri
     return TemperedPrior(prior, beta)
 
 
+def _recorded_resolution(provenance) -> float | None:
+    """The ``resolution`` (metres per cell) a tables' provenance records, if it is a positive number."""
+    res = provenance.get("resolution") if isinstance(provenance, dict) else None
+    return float(res) if isinstance(res, int | float) and not isinstance(res, bool) and res > 0 else None
+
+
 @lru_cache(maxsize=16)
 def _corpus_resolution(corpus: str) -> float | None:
     """Metres per cell of the plans the shipped tables of ``corpus`` were counted on, where their provenance
     records it (``None``: not recorded, as for maps drawn in cells)."""
     try:
-        res = json.loads((_FITTED / f"prior_{corpus}.json").read_text())["provenance"].get("resolution")
-    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        return _recorded_resolution(json.loads((_FITTED / f"prior_{corpus}.json").read_text())["provenance"])
+    except (OSError, ValueError, KeyError, TypeError):
         return None
-    return float(res) if isinstance(res, int | float) and not isinstance(res, bool) and res > 0 else None
 
 
 def _check_resolution(name: str, shape, corpus: str, tables) -> None:
@@ -173,11 +178,7 @@ def _check_resolution(name: str, shape, corpus: str, tables) -> None:
     res = getattr(shape, "resolution", None)
     if res is None or not (corpus or tables is not None):
         return
-    if tables is not None:
-        learned = (getattr(tables, "provenance", None) or {}).get("resolution")
-        learned = float(learned) if isinstance(learned, int | float) and learned > 0 else None
-    else:
-        learned = _corpus_resolution(corpus)
+    learned = _recorded_resolution(tables.provenance) if tables is not None else _corpus_resolution(corpus)
     if learned is None or abs(float(res) / learned - 1.0) <= 0.01:
         return
     from ogm_ppl.models.delta_setting import FittedSettingWarning

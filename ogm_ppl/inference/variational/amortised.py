@@ -562,8 +562,9 @@ def _positive(v) -> float | None:
 
 
 def _read_artefact(path: Path) -> tuple[GuideArchitecture, dict[str, torch.Tensor], dict]:
-    hint = "expected a guide written by AmortisedGuide.save (experiments/train_amortised_guide.py)"
-    arrays = read_npz(path, hint[len("expected ") :], GuideFileError)
+    what = "a guide written by AmortisedGuide.save (experiments/train_amortised_guide.py)"
+    hint = f"expected {what}"
+    arrays = read_npz(path, what, GuideFileError)
     fields = ("kind", "format", "feature_version", "channels", "dilations", "phase", "delta", "meta")
     missing = [k for k in fields if k not in arrays]
     if missing:
