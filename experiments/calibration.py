@@ -99,7 +99,6 @@ average 2-3); without the ``@cal`` rows (512 rows) it took 23.5 min on 2 AMD EPY
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import math
 import sys
@@ -115,9 +114,35 @@ import torch
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ogm_ppl import GaussianRange, Grid, OccupancyModel, Rays, raycast
-from ogm_ppl.datasets import floorplans as fp
-from ogm_ppl.datasets.mapgen import KINDS as MAP_KINDS
-from ogm_ppl.datasets.mapgen import generate_map
+from ogm_ppl.calibration.heldout import (  # noqa: F401  (the names this script's users import)
+    GENERATED_HELDOUT_SEED,
+    PLAN_FILES_GUIDE,
+    PLAN_FILES_PRIORS,
+    TEST_CORPORA,
+    TestMap,
+    check_plan_files,
+    choose_window,
+    generated_seed,
+    generated_windows,
+    heldout_maps,
+    plan_digests,
+    plan_file_maps,
+    usable_windows,
+)
+from ogm_ppl.calibration.leakage import (  # noqa: F401
+    GUIDE_JOIN,
+    GUIDE_PREFIX,
+    GUIDE_SYM,
+    GuideNameError,
+    LeakageError,
+    check_heldout,
+    guide_corpora,
+    guide_for,
+    guide_path,
+    load_corpus_guide,
+    names_digest,
+    training_set,
+)
 from ogm_ppl.datasets.plan_files import PlanFileError
 from ogm_ppl.datasets.stop_and_scan import stop_and_scan
 from ogm_ppl.inference import CellGibbs, PatchGibbs, RunningStats, evidence_grid, run_gibbs
@@ -130,15 +155,11 @@ from ogm_ppl.metrics import Reliability, near_mapped_mask, prediction_scores, re
 from ogm_ppl.models import delta_by_name
 from ogm_ppl.priors import BiasedPrior
 from ogm_ppl.priors.named import PRIOR_KINDS, load_temper_params, prior_by_name, prior_kinds, split_prior_name
-from ogm_ppl.priors.tables import FITTED_DIR, available_tables
+from ogm_ppl.priors.tables import available_tables
 
 if TYPE_CHECKING:
-    from ogm_ppl.inference.variational.amortised import AmortisedGuide
+    pass
 
-TEST_CORPORA: tuple[str, ...] = ("generated", "houseexpo", "ipa", "dungeon")
-#: held-out generated map ``i`` is ``generate_map(KINDS[i % 4], seed=GENERATED_HELDOUT_SEED + i)``: a root seed
-#: stream, never one of the spawned children ``SeedSequence(seed).spawn(n)`` the tables counted
-GENERATED_HELDOUT_SEED = 50_000
 STARTS: tuple[str, ...] = ("ogm", "free", "prior")
 METRICS: tuple[str, ...] = ("nll_bits", "ece", "brier", "auc", "best_f1", "iou")
 MASKS: tuple[str, ...] = ("unseen", "near")
@@ -165,158 +186,6 @@ RUN_KEYS = (
     "bias",
     "plan_digests",
 )
-
-
-class LeakageError(ValueError):
-    """A test map belongs to the training set of the prior to be scored on it."""
-
-
-# --------------------------------------------------------------------------------------- held-out maps
-@dataclass(frozen=True)
-class TestMap:
-    """One held-out map: ``truth``, ``known`` ``H x W`` bool (True = occupied / known), its corpus and name
-    (``plan@rROW,cCOL`` for a window of a larger plan), metres per cell."""
-
-    corpus: str
-    name: str
-    plan: str
-    truth: np.ndarray
-    known: np.ndarray
-    resolution: float
-
-
-def choose_window(occupancy: np.ndarray, known: np.ndarray, window: int, stride: int = 4) -> tuple[int, int]:
-    """Top-left corner of the ``window x window`` crop holding the most *wall-side* cells (known free cells
-    with an occupied 4-neighbour), scanned with ``stride``; ``(0, 0)`` when the map is no larger.
-
-    Summed-area table of the wall-side map ``w``: the count of a window at ``(r, c)`` is
-    ``S[r+h, c+w] - S[r, c+w] - S[r+h, c] + S[r, c]``.
-    """
-    H, W = occupancy.shape
-    h, w = min(window, H), min(window, W)
-    free = known & ~occupancy
-    occ = np.pad(occupancy & known, 1)
-    side = free & (occ[:-2, 1:-1] | occ[2:, 1:-1] | occ[1:-1, :-2] | occ[1:-1, 2:])
-    S = np.zeros((H + 1, W + 1), dtype=np.int64)
-    S[1:, 1:] = side.cumsum(0).cumsum(1)
-    rs = np.unique(np.r_[np.arange(0, H - h + 1, stride), H - h])
-    cs = np.unique(np.r_[np.arange(0, W - w + 1, stride), W - w])
-    R, C = np.meshgrid(rs, cs, indexing="ij")
-    count = S[R + h, C + w] - S[R, C + w] - S[R + h, C] + S[R, C]
-    i = np.unravel_index(int(np.argmax(count)), count.shape)
-    return int(R[i]), int(C[i])
-
-
-def _crop(corpus, plan, occupancy, known, resolution, window) -> TestMap:
-    r0, c0 = choose_window(occupancy, known, window)
-    h, w = min(window, occupancy.shape[0]), min(window, occupancy.shape[1])
-    name = plan if (h, w) == occupancy.shape else f"{plan}@r{r0},c{c0}"
-    sl = (slice(r0, r0 + h), slice(c0, c0 + w))
-    return TestMap(corpus, name, plan, occupancy[sl].copy(), known[sl].copy(), resolution)
-
-
-def generated_seed(i: int) -> int:
-    """The integer seed of held-out generated map ``i``."""
-    return GENERATED_HELDOUT_SEED + int(i)
-
-
-def heldout_maps(corpus: str, n: int, window: int, generated_shape: int = 160) -> list[TestMap]:
-    """The first ``n`` held-out maps of ``corpus`` (natural order of the held-out plans, real-log buildings
-    left out; plans with fewer than 200 free cells in their window skipped), each cropped to ``window``.
-    ``generated``: ``generate_map(KINDS[i % 4], (generated_shape,) * 2, seed=generated_seed(i))``."""
-    if corpus == "generated":
-        return generated_windows(n, generated_shape, window, GENERATED_HELDOUT_SEED)
-    names = fp.heldout_plans(corpus, exclude_buildings=tuple(fp.REAL_LOG_BUILDINGS))
-    return usable_windows(corpus, names, n, window)
-
-
-def usable_windows(corpus: str, names: Sequence[str], n: int, window: int) -> list[TestMap]:
-    """The first ``n`` plans of ``names`` (in order) whose chosen ``window`` holds at least 200 known free
-    cells, each cropped to it (:func:`choose_window`); fewer when the names run out."""
-    out: list[TestMap] = []
-    for name in names:
-        if len(out) == n:
-            break
-        p = fp.load_plan(corpus, name)
-        t = _crop(corpus, name, p.occupancy, p.known, p.resolution or 0.05, window)
-        if (t.known & ~t.truth).sum() >= 200:
-            out.append(t)
-    return out
-
-
-#: the guide a run on plan files scores when ``--guides`` is not given: the one learned on both floor-plan corpora,
-#: symmetrised (the headline's guide; the best on the real logs' buildings, docs/results.md)
-PLAN_FILES_GUIDE = "houseexpo+ipa@sym"
-#: the prior kinds a run on plan files alone scores when ``--priors`` is not given (each learned on every
-#: ``--train`` corpus): the uniform prior, the tempered backed-off tables, the tempered 8-neighbour MRF and the
-#: pattern field, as the results page scores the real logs' buildings
-PLAN_FILES_PRIORS: tuple[str, ...] = ("independent", "patch3_bo@cal", "border_bo@cal", "mrf8@cal", "field2")
-
-
-def check_plan_files(files: Sequence[Path]) -> None:
-    """Refuse (:class:`LeakageError`) plan files that are plans of the corpora
-    (:func:`~ogm_ppl.datasets.plan_files.corpus_copy`: under the corpora's folder, the same bytes, a HouseExpo
-    layout under a corpus plan's id, or a near copy of its pixels in any turn or flip), and unreadable ones
-    (:class:`~ogm_ppl.datasets.plan_files.PlanFileError`); the error names every such file, one a line."""
-    from ogm_ppl.datasets.plan_files import corpus_copy
-
-    leaks: list[str] = []
-    bad: list[PlanFileError] = []
-    for f in files:
-        try:
-            copy = corpus_copy(f)
-        except PlanFileError as e:
-            bad.append(e)
-            continue
-        if copy is not None:
-            leaks.append(f"{f}: {copy}; score it as its corpus instead")
-    if leaks:
-        raise LeakageError("\n".join(leaks + [str(e) for e in bad]))
-    if bad:
-        raise _every_error(bad)
-
-
-def _every_error(errors: Sequence[PlanFileError]) -> PlanFileError:
-    """One :class:`~ogm_ppl.datasets.plan_files.PlanFileError` whose message names every file of ``errors``, one a
-    line (the first file is its ``path``)."""
-    rest = "".join(f"\n{e}" for e in errors[1:])
-    return PlanFileError(errors[0].path, errors[0].problem + rest)
-
-
-def plan_file_maps(
-    paths: Sequence[Path],
-    n: int | None,
-    window: int,
-    pixel_size: float | None,
-    label: str = "files",
-    outside: str = "occupied",
-) -> list[TestMap]:
-    """The first ``n`` (``None``: all) plans of ``paths`` (:func:`~ogm_ppl.datasets.plan_files.plan_files`: ROS
-    map YAMLs, HouseExpo layouts, images or folders of them, read at 0.05 m a cell by
-    :func:`~ogm_ppl.datasets.plan_files.load_plan_file`) whose chosen window holds at least 200 known free
-    cells, each cropped to it; corpus plans refused (:func:`check_plan_files`)."""
-    from ogm_ppl.datasets.plan_files import load_plan_file, plan_files, plan_names
-
-    files = plan_files(paths)
-    check_plan_files(files)
-    out: list[TestMap] = []
-    bad: list[PlanFileError] = []
-    for f, name in zip(files, plan_names(files)):
-        if n is not None and len(out) == n and not bad:
-            break
-        try:
-            p = load_plan_file(f, pixel_size=pixel_size, name=name, corpus=label, outside=outside)
-        except PlanFileError as e:  # read on, to name every bad file at once
-            bad.append(e)
-            continue
-        t = _crop(label, name, p.occupancy, p.known, p.resolution or 0.05, window)
-        if (t.known & ~t.truth).sum() >= 200 and (n is None or len(out) < n):
-            out.append(t)
-    if bad:
-        raise _every_error(bad)
-    if not out:
-        raise SystemExit(f"no plan of {[str(p) for p in paths]} has a {window}-cell window with 200 known free cells")
-    return out
 
 
 def add_plan_file_arguments(ap: argparse.ArgumentParser) -> None:
@@ -358,162 +227,10 @@ def check_plan_file_arguments(ap: argparse.ArgumentParser, args: argparse.Namesp
         ap.error("--pixel-size and --plan-outside apply to --plan-files only")
 
 
-def plan_digests(paths: Sequence[Path]) -> dict[str, str]:
-    """SHA-256 of every plan file of ``paths`` (and of the image each YAML names), by path: what a resumed run
-    must find unchanged."""
-    from ogm_ppl.datasets.plan_files import plan_file_pieces, plan_files
-
-    return {str(q): hashlib.sha256(q.read_bytes()).hexdigest() for f in plan_files(paths) for q in plan_file_pieces(f)}
-
-
 def plan_set_maps(args: argparse.Namespace, n: int | None) -> list[TestMap]:
     """The first ``n`` usable maps of the ``--plan-files`` test set (``None``: all of them; :func:`plan_file_maps`
     with the options of :func:`add_plan_file_arguments`)."""
     return plan_file_maps(args.plan_files, n, args.window, args.pixel_size, args.plan_set, args.plan_outside)
-
-
-def generated_windows(n: int, shape: int, window: int, seed0: int) -> list[TestMap]:
-    """``n`` generated maps, map ``i`` = ``generate_map(KINDS[i % 4], (shape, shape), seed=seed0 + i)``,
-    cropped to ``window``."""
-    out: list[TestMap] = []
-    for i in range(n):
-        kind = MAP_KINDS[i % len(MAP_KINDS)]
-        m = generate_map(kind, (shape, shape), seed=seed0 + i, border=20)
-        out.append(_crop("generated", f"{kind}/seed{seed0 + i}", m, np.ones_like(m), 0.05, window))
-    return out
-
-
-# --------------------------------------------------------------------------------------------- leakage
-def _tables_provenance(corpus: str) -> dict:
-    path = FITTED_DIR / f"prior_{corpus}.json"
-    try:
-        prov = json.loads(path.read_text())["provenance"]
-    except (OSError, ValueError, KeyError, TypeError) as e:
-        raise LeakageError(f"{path}: cannot read the tables' provenance ({type(e).__name__}: {e})") from None
-    if not isinstance(prov, dict):
-        raise LeakageError(f"{path}: 'provenance' is not an object")
-    return prov
-
-
-def training_set(corpus: str) -> set[str]:
-    """Names of the maps the shipped tables of ``corpus`` were learned from, rebuilt from their provenance
-    (``ogm_ppl/fitted/prior_<corpus>.json``). Floor plans: ``training_plans(corpus, excluded_buildings,
-    limit=plans)``, checked against the recorded SHA-256 of the names; ``generated``: ``"seedstream:E/K"``
-    for each spawned child (entropy ``E``, spawn key ``K``) of the recorded seed."""
-    prov = _tables_provenance(corpus)
-    path = FITTED_DIR / f"prior_{corpus}.json"
-    if corpus == "generated":
-        try:
-            children = np.random.SeedSequence(int(prov["seed"])).spawn(int(prov["n"]))
-        except (KeyError, TypeError, ValueError) as e:
-            raise LeakageError(f"{path}: provenance lacks the generator's seed and n ({e})") from None
-        return {f"seedstream:{c.entropy}/{tuple(c.spawn_key)}" for c in children}
-    try:
-        names = fp.training_plans(corpus, exclude_buildings=tuple(prov["excluded_buildings"]), limit=int(prov["plans"]))
-        want = prov["plan_names_sha256"]
-    except (KeyError, TypeError, ValueError) as e:
-        raise LeakageError(f"{path}: provenance lacks plans / excluded_buildings / plan_names_sha256 ({e})") from None
-    got = hashlib.sha256("\n".join(names).encode()).hexdigest()
-    if got != want:
-        raise LeakageError(
-            f"{path}: the training plans rebuilt from its provenance hash to {got[:12]}..., not the recorded "
-            f"{want[:12]}...: the floor-plan data changed since the tables were learned"
-        )
-    return set(names)
-
-
-def _identity(corpus: str, plan: str) -> str:
-    """What :func:`training_set` would call the map ``plan`` of ``corpus``."""
-    if corpus == "generated":
-        seed = int(plan.rsplit("seed", 1)[1])
-        s = np.random.SeedSequence(seed)
-        return f"seedstream:{s.entropy}/{tuple(s.spawn_key)}"
-    return plan
-
-
-def check_heldout(test_corpus: str, plans: Sequence[str], train_corpus: str | None, train: set[str] | None = None):
-    """Refuse (:class:`LeakageError`) to score a prior learned on ``train_corpus`` on ``plans`` of
-    ``test_corpus`` if one of them is a plan of a real-log building, or (same corpus) one of the training
-    maps (``train``, default :func:`training_set`) or of the same building as one of them. ``train_corpus``
-    ``None``: a prior learned from nothing (the uniform prior); only the real-log check applies."""
-    for p in plans:
-        if test_corpus != "generated" and fp.excluded(p):
-            raise LeakageError(f"{test_corpus} plan {p!r} is of a real-log building; it is excluded everywhere")
-    if train_corpus is None or train_corpus != test_corpus:
-        return
-    train = training_set(train_corpus) if train is None else train
-    ids = {_identity(test_corpus, p): p for p in plans}
-    clash = sorted(ids[i] for i in set(ids) & train)
-    if test_corpus != "generated":
-        buildings = {fp.building_of(test_corpus, t) for t in train}
-        clash += sorted(p for p in plans if p not in clash and fp.building_of(test_corpus, p) in buildings)
-    if clash:
-        raise LeakageError(
-            f"{len(clash)} {test_corpus} test map(s) are in (or share a building with) the training set of the "
-            f"{train_corpus} tables: {clash[:3]}"
-        )
-
-
-# ---------------------------------------------------------------------------------------------- kernels
-GUIDE_PREFIX = "guide:"
-GUIDE_JOIN = "+"  # a guide learned on several corpora: guide:houseexpo+ipa
-GUIDE_SYM = "@sym"  # the guide symmetrised: guide:houseexpo+ipa@sym
-
-
-def guide_corpora(name: str) -> list[str]:
-    """The corpora a guide named ``C``, ``C1+C2`` (either with ``@sym``) was learned on."""
-    return name.removesuffix(GUIDE_SYM).split(GUIDE_JOIN)
-
-
-def guide_for(name: str, directory: Path | None = None) -> AmortisedGuide:
-    """The guide a ``--guides`` name ``C``, ``C1+C2`` or either with ``@sym`` scores
-    (:func:`load_corpus_guide` from ``directory``, default the shipped ones; symmetrised for ``@sym``)."""
-    base = name.removesuffix(GUIDE_SYM)
-    if not base or "@" in base:
-        raise SystemExit(f"--guides takes CORPUS, C1+C2 or either with {GUIDE_SYM}, got {name!r}")
-    guide = load_corpus_guide(base, directory=directory)
-    if name.endswith(GUIDE_SYM):
-        guide.symmetrize = True
-    return guide
-
-
-def names_digest(names) -> str:
-    """SHA-256 of the sorted map names joined by newlines: what a corpus guide records of its training set."""
-    return hashlib.sha256("\n".join(sorted(names)).encode()).hexdigest()
-
-
-def guide_path(corpus: str, directory: Path | None = None) -> Path:
-    """The amortised guide learned on ``corpus``'s training plans (``experiments/train_corpus_guide.py``):
-    ``guide_<corpus>.npz`` in ``directory`` (default the shipped guides, ``ogm_ppl/fitted``)."""
-    return Path(directory or FITTED_DIR) / f"guide_{corpus}.npz"
-
-
-def load_corpus_guide(corpus: str, train: set[str] | None = None, directory: Path | None = None):
-    """The guide of :func:`guide_path`, refused (:class:`LeakageError`) unless its record names ``corpus`` and
-    the SHA-256 of the very plans the corpus's tables were learned from (``train``, default
-    :func:`training_set`), so that :func:`check_heldout` covers it as it covers the tables. A guide of several
-    corpora (``C1+C2``, :func:`guide_corpora`) records each one's plans under ``"corpora"``; each is checked
-    against that corpus's :func:`training_set` (``train`` applies to a one-corpus guide only)."""
-    from ogm_ppl.inference.variational.amortised import AmortisedGuide
-
-    path = guide_path(corpus, directory)
-    guide = AmortisedGuide.load(path)
-    meta = guide.trained_for
-    parts = guide_corpora(corpus)
-    if meta.get("corpus") != corpus:
-        raise LeakageError(f"{path}: its record names corpus {meta.get('corpus')!r}, not {corpus!r}")
-    records = {corpus: meta} if len(parts) == 1 else meta.get("corpora")
-    if not isinstance(records, dict) or sorted(records) != sorted(parts):
-        raise LeakageError(f"{path}: its record does not list the training sets of {', '.join(parts)}")
-    for c in parts:
-        got = records[c].get("plan_names_sha256") if isinstance(records[c], dict) else None
-        want = names_digest(training_set(c) if train is None or len(parts) > 1 else train)
-        if got != want:
-            raise LeakageError(
-                f"{path}: its record of {c} (plans {str(got)[:12]}...) is not the training set of the {c} tables "
-                f"({want[:12]}...)"
-            )
-    return guide
 
 
 def run_guide(scene: Scene, guide, args) -> dict:
@@ -1157,7 +874,10 @@ def main(argv=None) -> dict:
     overrides = _patch_overrides(args.patch)
     pairs = prior_names(args.priors, args.train)
     pairs += [(n + BIAS_SUFFIX, c) for n, c in pairs if n in args.bias]  # each biased prior beside its base
-    guides = {c: guide_for(c, args.guide_dir) for c in args.guides}
+    try:
+        guides = {c: guide_for(c, args.guide_dir) for c in args.guides}
+    except GuideNameError as e:
+        raise SystemExit(f"--guides: {e}") from None
     pairs += [(GUIDE_PREFIX + c, c) for c in args.guides]
     try:  # builds every prior once: an unknown name or unreadable tables stop the run before any work
         digests = {name: name_digest(name, args, guides) for name, _ in [(OGM_LABEL, None), *pairs]}

@@ -8,6 +8,7 @@ import sys
 import pytest
 import torch
 
+from ogm_ppl.calibration import heldout, leakage
 from tests._scripts import load_experiment, write_plan_folder
 
 
@@ -100,10 +101,12 @@ def test_a_map_in_the_training_set_is_refused(cal):
         cal.check_heldout("ipa", ["intel_map"], None)
     # generated: held-out maps are root seed streams, the tables counted spawned children
     gen = cal.training_set("generated")
-    assert len(gen) == 100 and cal._identity("generated", "office/seed0") not in gen
+    assert len(gen) == 100 and leakage._identity("generated", "office/seed0") not in gen
     cal.check_heldout("generated", [f"office/seed{cal.generated_seed(i)}" for i in range(4)], "generated")
     with pytest.raises(cal.LeakageError, match="generated"):
-        cal.check_heldout("generated", ["hall/seed7"], "generated", train={cal._identity("generated", "hall/seed7")})
+        cal.check_heldout(
+            "generated", ["hall/seed7"], "generated", train={leakage._identity("generated", "hall/seed7")}
+        )
 
 
 def test_prior_names_cover_the_matrix_once(cal):
@@ -385,7 +388,7 @@ def test_a_changed_plan_file_refuses_to_resume_and_bad_files_exit_cleanly(cal, t
     lines = str(e.value).splitlines()
     assert len(lines) == 2 and "junk.png: unreadable image" in lines[0] and "walls.json: " in lines[1]
     errors = [cal.PlanFileError(f"f{i}", "wrong") for i in range(3)]
-    assert str(cal._every_error(errors)) == "f0: wrong\nf1: wrong\nf2: wrong"
+    assert str(heldout._every_error(errors)) == "f0: wrong\nf1: wrong\nf2: wrong"
     for bad in (["--plan-set", "IPA"], ["--plan-set", "none"], ["--sweeps", "3"], ["--plans", "0"]):
         with pytest.raises(SystemExit):
             cal.parse_args(["--plan-files", "x", *bad])

@@ -9,6 +9,7 @@ import sys
 import pytest
 import torch
 
+from ogm_ppl.calibration import leakage
 from tests._scripts import load_experiment
 
 
@@ -100,14 +101,14 @@ def test_calibration_scores_the_guide_and_refuses_another_record(mods, artefact,
     out, _ = artefact
     shutil.copy(out, tmp_path / "guide_ipa.npz")
     assert cal.guide_path("ipa", tmp_path) == tmp_path / "guide_ipa.npz"
-    assert cal.guide_path("ipa") == cal.FITTED_DIR / "guide_ipa.npz"
+    assert cal.guide_path("ipa") == leakage.FITTED_DIR / "guide_ipa.npz"
     argv = (
         "--test ipa --train ipa --priors independent --guides ipa --plans 1 --window 36 --poses 2 --beams 45 "
         "--range-cells 30 --sweeps 4 --burn 2 --no-figures"
     ).split()
     res = cal.main([*argv, "--guide-dir", str(tmp_path), "--out", str(tmp_path / "cal")])
     assert json.loads(res["path"].read_text())["settings"]["guide_dir"] == str(tmp_path)
-    monkeypatch.setattr(cal, "guide_path", lambda corpus, directory=None: out)
+    monkeypatch.setattr(leakage, "guide_path", lambda corpus, directory=None: out)
     rows = [r for r in res["rows"] if r["prior_name"] == "guide:ipa"]
     assert {r["mask"] for r in rows} == {"unseen", "near"} and all(r["prior"] == "guide" for r in rows)
     assert all(r["train"] == "ipa" and 0 < r["nll_bits"] < 10 and "rhat_below" not in r for r in rows)
@@ -158,7 +159,7 @@ def test_a_guide_of_two_corpora_records_each_training_set(mods, tmp_path, monkey
         train, val = tg.split_plans(c)
         assert meta["corpora"][c]["training_plans"] == len(train) and meta["corpora"][c]["validation_plans"] == len(val)
     assert [tg._share(7, 2, i) for i in range(2)] == [4, 3]
-    monkeypatch.setattr(cal, "guide_path", lambda corpus, directory=None: out)
+    monkeypatch.setattr(leakage, "guide_path", lambda corpus, directory=None: out)
     assert cal.load_corpus_guide("ipa+dungeon").trained_for["corpus"] == "ipa+dungeon"
     with pytest.raises(cal.LeakageError, match="names corpus 'ipa\\+dungeon', not 'ipa'"):
         cal.load_corpus_guide("ipa")
@@ -167,7 +168,7 @@ def test_a_guide_of_two_corpora_records_each_training_set(mods, tmp_path, monkey
     g = AmortisedGuide.load(out)
     bad = {**g.trained_for, "corpora": {"ipa": meta["corpora"]["ipa"], "dungeon": {"plan_names_sha256": "0" * 64}}}
     g.save(tmp_path / "bad.npz", bad)
-    monkeypatch.setattr(cal, "guide_path", lambda corpus, directory=None: tmp_path / "bad.npz")
+    monkeypatch.setattr(leakage, "guide_path", lambda corpus, directory=None: tmp_path / "bad.npz")
     with pytest.raises(cal.LeakageError, match=r"record of dungeon .* is not the training set of the dungeon tables"):
         cal.load_corpus_guide("ipa+dungeon")
     g.save(tmp_path / "bad.npz", {**bad, "corpora": {"ipa": meta["corpora"]["ipa"]}})
@@ -189,7 +190,7 @@ def test_calibration_checks_a_two_corpus_guide_against_each_corpus(mods, monkeyp
     _, cal = mods
     seen: list[tuple] = []
     monkeypatch.setattr(cal, "check_heldout", lambda test, plans, train: seen.append((test, train)))
-    monkeypatch.setattr(cal, "load_corpus_guide", lambda c, directory=None: _FakeGuide())
+    monkeypatch.setattr(leakage, "load_corpus_guide", lambda c, directory=None: _FakeGuide())
     monkeypatch.setattr(cal, "make_scene", lambda t, args: (_ for _ in ()).throw(SystemExit("stop")))
     with pytest.raises(SystemExit, match="stop"):
         cal.main(
@@ -210,7 +211,7 @@ def test_a_symmetrised_guide_row_loads_the_guide_symmetrised_and_checks_its_corp
         return loaded[-1][1]
 
     monkeypatch.setattr(cal, "check_heldout", lambda test, plans, train: seen.append((test, train)))
-    monkeypatch.setattr(cal, "load_corpus_guide", load)
+    monkeypatch.setattr(leakage, "load_corpus_guide", load)
     monkeypatch.setattr(cal, "make_scene", lambda t, args: (_ for _ in ()).throw(SystemExit("stop")))
     assert cal.guide_corpora("ipa+dungeon@sym") == ["ipa", "dungeon"]
     with pytest.raises(SystemExit, match="stop"):
@@ -220,7 +221,7 @@ def test_a_symmetrised_guide_row_loads_the_guide_symmetrised_and_checks_its_corp
         )
     assert [(c, g.symmetrize) for c, g in loaded] == [("ipa+dungeon", True), ("ipa", False)]
     for bad in ("ipa@sym@sym", "@sym", "ipa@cal"):
-        with pytest.raises(SystemExit, match="--guides takes CORPUS"):
+        with pytest.raises(leakage.GuideNameError, match="a corpus guide is named CORPUS"):
             cal.guide_for(bad)
     assert ("ipa", "ipa") in seen and ("ipa", "dungeon") in seen
 

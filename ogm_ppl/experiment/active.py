@@ -7,7 +7,7 @@ A spec with ``[experiment] kind = "active"`` (read by :func:`ogm_ppl.experiment.
     [experiment]   kind = "active", name [file stem], seed [0], description [""]
     [plans]        corpus ["houseexpo"; a floor-plan corpus, or "generated"], count [2], window [64] (cells:
                    each plan cropped to the window holding the most wall-side cells,
-                   experiments/calibration.py's heldout_maps), seeds [[0]] (start, range noise and chain)
+                   :func:`~ogm_ppl.calibration.heldout_maps`), seeds [[0]] (start, range noise and chain)
     [robot]        the fields of ogm_ppl.exploration.active.Robot, and stops [10], stop_coverage [1.0]
     [[methods]]    name (*required*), rule (*required*: "frontier", "ogm_info", "sample_info",
                    "sample_coverage"), prior (rules sample_info, sample_coverage: a prior name), per_metre
@@ -17,7 +17,7 @@ A spec with ``[experiment] kind = "active"`` (read by :func:`ogm_ppl.experiment.
 
 Plans are the held-out plans of the corpus (:func:`~ogm_ppl.datasets.floorplans.heldout_plans`, real-log
 buildings left out) or held-out generated maps, as the calibration experiment chooses them, and every learned
-prior is checked against them before anything runs: ``check_heldout`` of ``experiments/calibration.py``
+prior is checked against them before anything runs: :func:`~ogm_ppl.calibration.check_heldout`
 rebuilds each shipped table's training set from its provenance and refuses a plan in it or of the same building.
 
 Outputs under ``--out``: ``plans/pNN.npz`` (truth), ``tasks/pNN/METHOD/sSEED.json`` (per-stop records, the
@@ -30,17 +30,16 @@ and the 25-75 % band; a run's last value holds after its last stop).
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
 import os
-import sys
 import time
 from dataclasses import asdict, dataclass, field, fields, replace
 from pathlib import Path
 
 import numpy as np
 
+from ogm_ppl.calibration import check_heldout, heldout_maps
 from ogm_ppl.experiment.spec import SpecError, _check_name, _named_entry, _Table
 from ogm_ppl.io import atomic_write_text
 from ogm_ppl.provenance import provenance
@@ -85,21 +84,6 @@ class ActiveSpec:
 
     def to_json(self) -> dict:
         return asdict(self)
-
-
-def _calibration():
-    """``experiments/calibration.py`` of the source tree (its held-out maps and leakage check)."""
-    path = Path(__file__).resolve().parents[2] / "experiments" / "calibration.py"
-    if not path.exists():
-        raise SpecError(f"{path}: the leakage check of active experiments lives there and is missing")
-    name = "_ogm_ppl_calibration"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, path)
-        assert spec is not None and spec.loader is not None
-        mod = importlib.util.module_from_spec(spec)
-        sys.modules[name] = mod
-        spec.loader.exec_module(mod)
-    return sys.modules[name]
 
 
 # ------------------------------------------------------------------------------------------ spec
@@ -411,15 +395,14 @@ def run_active(
     if spec.source != "<dict>" and Path(spec.source).exists():
         atomic_write_text(out / "spec.toml", Path(spec.source).read_text(encoding="utf-8"))
     atomic_write_text(out / "spec.json", json.dumps(spec.to_json(), indent=1, default=str))
-    cal = _calibration()
-    maps = cal.heldout_maps(spec.corpus, spec.count, spec.window)
+    maps = heldout_maps(spec.corpus, spec.count, spec.window)
     if len(maps) < spec.count:
         raise SpecError(f"{spec.source}: plans.count: only {len(maps)} held-out {spec.corpus} plans qualify")
     for m in spec.methods:  # leakage: refused before anything runs
         prior = m.get("prior")
         train = prior.partition(":")[2] or None if prior else None
         if prior is not None:
-            cal.check_heldout(spec.corpus, [t.plan for t in maps], train)
+            check_heldout(spec.corpus, [t.plan for t in maps], train)
     plans = []
     for i, t in enumerate(maps):
         pid = f"p{i:02d}"

@@ -93,13 +93,13 @@ def test_spec_errors_name_the_table_and_key():
 
 
 def test_a_learned_prior_is_refused_on_a_plan_it_was_trained_on(tmp_path, monkeypatch):
+    from ogm_ppl.calibration import LeakageError, heldout_maps, leakage
     from ogm_ppl.experiment import active
 
-    cal = active._calibration()
     spec = parse_spec(_tiny(methods=[{"name": "p", "rule": "sample_info", "prior": "patch3:houseexpo"}]), "t.toml")
-    plan = cal.heldout_maps("houseexpo", 1, 40)[0].plan
-    monkeypatch.setattr(cal, "training_set", lambda corpus: {plan})
-    with pytest.raises(cal.LeakageError, match="training set"):
+    plan = heldout_maps("houseexpo", 1, 40)[0].plan
+    monkeypatch.setattr(leakage, "training_set", lambda corpus: {plan})
+    with pytest.raises(LeakageError, match="training set"):
         active.run_active(spec, tmp_path, scheduler="serial", progress=False)
     assert not (tmp_path / "tasks").exists()  # refused before anything ran
     shutil.rmtree(tmp_path)
