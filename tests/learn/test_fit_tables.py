@@ -92,3 +92,14 @@ def test_the_command_fits_tables_and_refuses_a_bad_option(tmp_path, capsys):
     assert _same_arrays(load_tables(out / "prior_mine.npz"), direct)
     with pytest.raises(FitOptionError, match="min_count_5x5"):
         fit_prior([*argv, "--min-count-5x5", "0"])
+
+
+def test_the_fits_import_neither_the_experiments_nor_the_command_line_and_nothing_below_imports_them():
+    from tests.inference.test_layering import PKG, _imports
+
+    for path in sorted((PKG / "learn").rglob("*.py")):
+        up = [m for m in _imports(path) if m.startswith(("ogm_ppl.experiment", "ogm_ppl.cli"))]
+        assert not up, f"{path} imports {up}"
+    for part in ("priors", "models", "inference", "datasets", "io.py", "provenance.py", "progress.py"):
+        for path in sorted((PKG / part).rglob("*.py")) if not part.endswith(".py") else [PKG / part]:
+            assert not [m for m in _imports(path) if m.startswith("ogm_ppl.learn")], f"{path} imports ogm_ppl.learn"
