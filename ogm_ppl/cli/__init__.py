@@ -55,6 +55,7 @@ COMMANDS: dict[str, str] = {
     "simulate": "simulate",
     "convert": "convert",
     "info": "info",
+    "fit-prior": "fit_prior",
     "experiment": "experiment",
     "run": "run",
 }

@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import ogm_ppl.priors.learn_field as lf
+from ogm_ppl.cli import main as ogm_ppl
 from ogm_ppl.learn import FieldSettings, FitOptionError, fit_field
-from ogm_ppl.learn._fit_command import main as fit_prior
 from ogm_ppl.priors.pattern_field import PatternFieldPrior, field_from_file, load_field
 from tests.learn._helpers import PIXEL_SIZE, files_under, fitted_dir_listing, plan_folder, read_plans
 
@@ -113,7 +113,7 @@ def test_the_command_fits_a_field(tmp_path, capsys):
     argv += ["--validation-every", "2", "--betas", "0.5", "0.7", "--bias-steps", "1", "--pl-max-iter", "15"]
     argv += ["--check-size", "24", "--check-chains", "2", "--check-sweeps", "20"]
     argv += ["--report-sizes", "24", "--report-sweeps", "20"]
-    assert fit_prior(argv) == 0
+    assert ogm_ppl(argv) == 0
     assert "field_plans.npz" in capsys.readouterr().out
     assert files_under(out) == FILES
     assert load_field(out / "field_plans.npz")["w"] == 3

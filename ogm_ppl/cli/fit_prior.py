@@ -4,8 +4,8 @@
     ogm-ppl fit-prior backoff --plans my_plans/ --pixel-size 0.025 --out DIR   # backoff_plans.json
     ogm-ppl fit-prior field --corpus dungeon --limit 20 --out DIR              # field_dungeon.npz + .json
 
-A command module of the ``ogm-ppl`` command line: :func:`add_parser` adds the subcommand, :func:`run` runs
-it (:func:`ogm_ppl.learn.fit_tables`, :func:`~ogm_ppl.learn.fit_backoff`, :func:`~ogm_ppl.learn.fit_field`).
+A subcommand of :mod:`ogm_ppl.cli`: :func:`add_parser` adds it, :func:`run` runs it
+(:func:`ogm_ppl.learn.fit_tables`, :func:`~ogm_ppl.learn.fit_backoff`, :func:`~ogm_ppl.learn.fit_field`).
 """
 
 from __future__ import annotations
@@ -70,7 +70,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``fit-prior``; prints the files written. Option errors raise :class:`~ogm_ppl.learn.FitOptionError`
-    (a ``ValueError``: the command line reports it as an error and exits 2)."""
+    (a ``ValueError``: the command line reports it in one line naming the option and exits 2)."""
     from ogm_ppl.learn import FieldSettings, fit_backoff, fit_field, fit_tables
 
     source = args.corpus if args.corpus is not None else list(args.plans)
@@ -102,10 +102,3 @@ def run(args: argparse.Namespace) -> int:
         )
     print(f"ogm-ppl fit-prior {args.kind}: {r.seconds:.1f} s -> " + ", ".join(str(f) for f in r.files), file=sys.stdout)
     return 0
-
-
-def main(argv: list[str] | None = None) -> int:
-    """``fit-prior`` alone (until the command line registers it): parse ``argv`` and :func:`run`."""
-    parser = argparse.ArgumentParser(prog="ogm-ppl")
-    add_parser(parser.add_subparsers(dest="command", required=True))
-    return run(parser.parse_args(argv))
