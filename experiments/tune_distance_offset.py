@@ -39,8 +39,7 @@ from calibration import usable_windows  # noqa: E402
 from select_headline_prior import split_names  # noqa: E402
 
 from ogm_ppl.datasets import floorplans as fp  # noqa: E402
-from ogm_ppl.experiment import load_spec  # noqa: E402
-from ogm_ppl.experiment.spec import derive_seed  # noqa: E402
+from ogm_ppl.experiment import derive_seed, load_spec  # noqa: E402
 from ogm_ppl.experiment.tasks import task_env  # noqa: E402
 from ogm_ppl.exploration.active import Method, Robot, explore  # noqa: E402
 from ogm_ppl.grid import Grid  # noqa: E402

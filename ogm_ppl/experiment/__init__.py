@@ -9,31 +9,33 @@ are drivers built on them.
 >>> print(result.table())                                         # doctest: +SKIP
 """
 
-from ogm_ppl.experiment.runner import ExperimentError, ExperimentResult, plan_tasks, run_experiment
-from ogm_ppl.experiment.spec import (
-    AlgorithmSpec,
-    DatasetSpec,
-    ExperimentSpec,
-    MetricsSpec,
-    OutputSpec,
-    SpecError,
-    derive_seed,
+from ogm_ppl.experiment.kinds import (
+    ExperimentKind,
+    experiment_kinds,
     load_spec,
     parse_spec,
+    register_experiment_kind,
+    run_experiment,
 )
+from ogm_ppl.experiment.runner import ExperimentError, ExperimentResult, plan_tasks
+from ogm_ppl.experiment.spec import AlgorithmSpec, DatasetSpec, ExperimentSpec, MetricsSpec, OutputSpec
+from ogm_ppl.experiment.spec_tables import SpecError, derive_seed
 
 __all__ = [
     "AlgorithmSpec",
     "DatasetSpec",
     "ExperimentError",
+    "ExperimentKind",
     "ExperimentResult",
     "ExperimentSpec",
     "MetricsSpec",
     "OutputSpec",
     "SpecError",
     "derive_seed",
+    "experiment_kinds",
     "load_spec",
     "parse_spec",
     "plan_tasks",
+    "register_experiment_kind",
     "run_experiment",
 ]

@@ -40,7 +40,7 @@ from pathlib import Path
 import numpy as np
 
 from ogm_ppl.calibration import check_heldout, heldout_maps
-from ogm_ppl.experiment.spec import SpecError, _check_name, _named_entry, _Table
+from ogm_ppl.experiment.spec_tables import SpecError, Table, check_name, derive_seed, named_entry
 from ogm_ppl.io import atomic_write_text
 from ogm_ppl.provenance import provenance
 
@@ -94,18 +94,18 @@ def parse_active_spec(data: dict, source: str = "<dict>", base_dir: str | os.Pat
     unknown = sorted(set(data) - set(_TABLES))
     if unknown:
         raise SpecError(f"{source}: {unknown[0]}: unknown table (known in an active spec: {', '.join(_TABLES)})")
-    e = _Table(source, "experiment", data.get("experiment", {}))
+    e = Table(source, "experiment", data.get("experiment", {}))
     e.get("kind", "str", required=True, choices=("active",))
     stem = Path(source).stem if source != "<dict>" else "active"
     name = e.get("name", "str", stem)
-    _check_name(e, name)
+    check_name(e, name)
     seed = e.get("seed", "int", 0, lo=0)
     description = e.raw("description", "")
     if not isinstance(description, str):
         e.fail("description", "must be a string")
     e.finish()
 
-    p = _Table(source, "plans", data.get("plans", {}))
+    p = Table(source, "plans", data.get("plans", {}))
     from ogm_ppl.datasets.floorplans import CORPORA
 
     corpus = p.get("corpus", "str", "houseexpo", choices=("generated",) + CORPORA)
@@ -119,7 +119,7 @@ def parse_active_spec(data: dict, source: str = "<dict>", base_dir: str | os.Pat
         p.fail("seeds", f"lists a seed twice: {seeds!r}")
     p.finish()
 
-    r = _Table(source, "robot", data.get("robot", {}))
+    r = Table(source, "robot", data.get("robot", {}))
     robot: dict = {}
     for f in fields(Robot):
         if not r.has(f.name):
@@ -139,7 +139,7 @@ def parse_active_spec(data: dict, source: str = "<dict>", base_dir: str | os.Pat
         raise SpecError(f"{source}: methods: at least one [[methods]] entry is required")
     methods = []
     for i, m in enumerate(raw):
-        t, mname = _named_entry(source, "methods", i, m)
+        t, mname = named_entry(source, "methods", i, m)
         d = {"name": mname, "rule": t.get("rule", "str", required=True, choices=RULES)}
         if t.has("prior"):
             d["prior"] = t.get("prior", "str")
@@ -172,7 +172,7 @@ def parse_active_spec(data: dict, source: str = "<dict>", base_dir: str | os.Pat
     dup = next((n for n in names if names.count(n) > 1), None)
     if dup:
         raise SpecError(f"{source}: methods: the name {dup!r} is used twice")
-    o = _Table(source, "output", data.get("output", {}))
+    o = Table(source, "output", data.get("output", {}))
     figures = o.get("figures", "bool", True)
     dpi = o.get("dpi", "int", 100, lo=20, hi=600)
     o.finish()
@@ -386,7 +386,6 @@ def run_active(
         failed_error,
         record_failures,
     )
-    from ogm_ppl.experiment.spec import derive_seed
     from ogm_ppl.experiment.tasks import _savez
 
     t0 = time.perf_counter()

@@ -1,6 +1,6 @@
 r"""Run an experiment spec: independent tasks on dask.distributed (or in this process), resumable.
 
-:func:`run_experiment` plans the tasks of :mod:`ogm_ppl.experiment.tasks` (a base per shared dataset
+:func:`run_map_experiment` plans the tasks of :mod:`ogm_ppl.experiment.tasks` (a base per shared dataset
 part, a dataset per expanded entry, a run per dataset x algorithm x chain, a score per dataset x
 algorithm), skips those whose done-file is there with the same hash (``resume=True``; a Gibbs run that
 was stopped resumes from its checkpoint), runs the others, then writes ``metrics.json``, ``metrics.md``
@@ -29,11 +29,12 @@ from typing import Any
 import numpy as np
 
 from ogm_ppl.experiment import tasks as T
-from ogm_ppl.experiment.spec import ExperimentSpec, derive_seed, load_spec
+from ogm_ppl.experiment.spec import ExperimentSpec
+from ogm_ppl.experiment.spec_tables import derive_seed
 from ogm_ppl.io import atomic_write_text
 from ogm_ppl.progress import Progress
 
-__all__ = ["ExperimentResult", "ExperimentError", "run_experiment", "plan_tasks"]
+__all__ = ["ExperimentResult", "ExperimentError", "run_map_experiment", "plan_tasks"]
 
 
 class ExperimentError(RuntimeError):
@@ -58,7 +59,7 @@ class Task:
 
 @dataclass
 class ExperimentResult:
-    """What :func:`run_experiment` did and measured.
+    """What :func:`run_map_experiment` did and measured.
 
     Attributes:
         scores: one record per dataset x algorithm (``mask`` and ``touched`` blocks: best F1, threshold,
@@ -302,7 +303,7 @@ def execute_tasks(
     """Run the tasks not already done: ``(todo, skipped, done_records, results, failed)``.
 
     A task is done when its done-file holds its settings' hash (``resume``) and every task it depends on is
-    done; the others run serially (``scheduler == "serial"``) or on dask (see :func:`run_experiment`; a local
+    done; the others run serially (``scheduler == "serial"``) or on dask (see :func:`run_map_experiment`; a local
     cluster's scratch folder is ``scratch``, removed afterwards)."""
     todo, skipped, done_recs = [], [], {}
     for t in tasks:
@@ -388,10 +389,16 @@ def claim_output_folder(out: Path, name: str) -> None:
         raise ValueError(f"output folder {out}: cannot be created ({e.strerror or e})") from None
 
 
-def run_experiment(
-    spec_or_path, out_dir, *, scheduler=None, workers: int | None = None, resume: bool = True, progress: bool = True
+def run_map_experiment(
+    spec: ExperimentSpec,
+    out_dir,
+    *,
+    scheduler=None,
+    workers: int | None = None,
+    resume: bool = True,
+    progress: bool = True,
 ) -> ExperimentResult:
-    """Run an experiment spec (a path or an :class:`ExperimentSpec`) into ``out_dir``.
+    """Run a spec of the kind ``map`` into ``out_dir`` (:func:`ogm_ppl.experiment.run_experiment` runs any kind).
 
     Args:
         scheduler: ``None`` (a ``LocalCluster`` of ``workers`` processes, one thread each; default one
@@ -408,18 +415,6 @@ def run_experiment(
         cannot be the output folder (:func:`claim_output_folder`).
     """
     t0 = time.perf_counter()
-    spec = spec_or_path if not isinstance(spec_or_path, (str, os.PathLike)) else load_spec(spec_or_path)
-    if getattr(spec, "kind", "map") == "active":  # an active-mapping spec (ogm_ppl.experiment.active)
-        from ogm_ppl.experiment.active import run_active
-
-        return run_active(  # type: ignore[return-value]
-            spec,  # type: ignore[arg-type]
-            out_dir,
-            scheduler=scheduler,
-            workers=workers,
-            resume=resume,
-            progress=progress,
-        )
     out = Path(out_dir)
     claim_output_folder(out, spec.name)
     if spec.source != "<dict>" and Path(spec.source).exists():

@@ -80,20 +80,13 @@ import itertools
 import json
 import math
 import os
-import re
-import sys
-import zlib
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
+from ogm_ppl.experiment.spec_tables import SpecError, Table, check_name, derive_seed, named_entry
 from ogm_ppl.grid import MAX_CELLS
-
-if sys.version_info >= (3, 11):
-    import tomllib
-else:  # Python 3.10: the backport, the same parser (a dependency there)
-    import tomli as tomllib
 
 __all__ = [
     "AlgorithmSpec",
@@ -101,13 +94,9 @@ __all__ = [
     "ExperimentSpec",
     "MetricsSpec",
     "OutputSpec",
-    "SpecError",
-    "derive_seed",
-    "load_spec",
-    "parse_spec",
+    "parse_map_spec",
 ]
 
-_NAME = re.compile(r"[A-Za-z0-9_.-]+\Z")
 MAP_KINDS = ("office", "corridor", "cluttered", "hall", "mixed")
 SWEEP_KEYS = {"map_seed": "m", "seed": "s", "pose_fraction": "pf", "beam_step": "bs"}
 REPEAT_KEYS = ("map_seed", "seed")
@@ -134,24 +123,6 @@ BAG_READER_KEYS: dict[str, tuple] = {
     "widen": ("str", None, False, ("decimal", "binary")),
 }
 SCORES = ("f1", "auc", "max_precision", "nll_bits", "brier", "ece")
-
-
-class SpecError(ValueError):
-    """An invalid spec; the message names the file, the entry and the key."""
-
-
-def derive_seed(root: int, *parts, bits: int = 63) -> int:
-    """A seed for the task named by ``parts`` under the experiment seed ``root`` (``bits``-bit, >= 0).
-
-    ``SeedSequence(root, spawn_key=(crc32(part), ...))``: the same names give the same seed in any
-    process and on any machine (Python's ``hash`` of a string would not).
-
-    >>> derive_seed(0, "run", "office", "ogm", 0) == derive_seed(0, "run", "office", "ogm", 0)
-    True
-    """
-    key = tuple(zlib.crc32(str(p).encode()) for p in parts)
-    state = np.random.SeedSequence(int(root), spawn_key=key).generate_state(2, np.uint64)
-    return int(int(state[0]) >> (64 - bits))
 
 
 # ------------------------------------------------------------------------------------------ spec types
@@ -265,75 +236,7 @@ class ExperimentSpec:
 
 
 # ------------------------------------------------------------------------------------------ reading
-class _Table:
-    """Reads the keys of one TOML table; every error names the source, the table and the key."""
-
-    def __init__(self, source: str, where: str, table) -> None:
-        self.source, self.where = source, where
-        if not isinstance(table, dict):
-            self.fail(None, f"must be a table, got {type(table).__name__}")
-        self.table = table
-        self.used: set[str] = set()
-
-    def fail(self, key, msg):
-        loc = f"{self.where}.{key}" if key else self.where
-        raise SpecError(f"{self.source}: {loc}: {msg}")
-
-    def has(self, key) -> bool:
-        return key in self.table
-
-    def raw(self, key, default=None):
-        self.used.add(key)
-        return self.table.get(key, default)
-
-    def _one(self, key, v, kind, lo=None, hi=None, lo_open=False, choices=None):
-        if kind == "int":
-            if isinstance(v, bool) or not isinstance(v, int):
-                self.fail(key, f"must be an integer, got {v!r}")
-        elif kind == "float":
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                self.fail(key, f"must be a finite number, got {v!r}")
-            v = float(v)
-        elif kind == "bool":
-            if not isinstance(v, bool):
-                self.fail(key, f"must be true or false, got {v!r}")
-        elif kind == "str":
-            if not isinstance(v, str) or not v:
-                self.fail(key, f"must be a non-empty string, got {v!r}")
-        if choices is not None and v not in choices:
-            self.fail(key, f"must be one of {', '.join(map(repr, choices))}, got {v!r}")
-        if lo is not None and (v <= lo if lo_open else v < lo):
-            self.fail(key, f"must be {'>' if lo_open else '>='} {lo}, got {v!r}")
-        if hi is not None and v > hi:
-            self.fail(key, f"must be <= {hi}, got {v!r}")
-        return v
-
-    def get(self, key, kind, default=None, required=False, sweep=False, **check):
-        if key not in self.table:
-            if required:
-                self.fail(key, "is required")
-            self.used.add(key)
-            return default
-        v = self.raw(key)
-        if sweep and isinstance(v, list):
-            if not v:
-                self.fail(key, "an empty list sweeps over nothing")
-            vals = [self._one(f"{key}[{i}]", x, kind, **check) for i, x in enumerate(v)]
-            if len(set(vals)) != len(vals):
-                self.fail(key, f"lists a value twice: {v!r}")
-            return vals
-        return self._one(key, v, kind, **check)
-
-    def finish(self, optional=()):
-        """Refuse a key no ``get``/``raw`` read, listing the keys read and the ``optional`` ones (keys a table
-        takes that were read only where present)."""
-        known = self.used | set(optional)
-        unknown = sorted(set(self.table) - known)
-        if unknown:
-            self.fail(unknown[0], f"unknown key (known here: {', '.join(sorted(known))})")
-
-
-def _check_delta(t: _Table, key: str, default: str) -> str:
+def _check_delta(t: Table, key: str, default: str) -> str:
     name = t.get(key, "str", default)
     from ogm_ppl.models import delta_by_name
 
@@ -344,25 +247,7 @@ def _check_delta(t: _Table, key: str, default: str) -> str:
     return name
 
 
-def _check_name(t: _Table, name: str) -> None:
-    """A name that becomes a file or folder name under ``--out``: letters, digits, ``_ . -``, not starting
-    with a dot (so never ``..``, a path separator or an absolute path: nothing is written outside)."""
-    if not _NAME.match(name) or name.startswith("."):
-        t.fail("name", f"may hold only letters, digits, '_', '.', '-' and not start with '.', got {name!r}")
-
-
-def _named_entry(source: str, section: str, i: int, entry) -> tuple[_Table, str]:
-    """The table of ``section[i]`` (named in errors by index and name) and its validated name."""
-    where = f"{section}[{i}]"
-    if isinstance(entry, dict) and isinstance(entry.get("name"), str):
-        where += f" ({entry['name']!r})"
-    t = _Table(source, where, entry)
-    name = t.get("name", "str", required=True)
-    _check_name(t, name)
-    return t, name
-
-
-def _generated_keys(t: _Table) -> dict:
+def _generated_keys(t: Table) -> dict:
     """``map``, ``size``, ``border`` and ``map_seed`` of a simulated dataset on a generated map."""
     p: dict = {"map": t.get("map", "str", "office", choices=MAP_KINDS)}
     size = t.raw("size", 500)
@@ -380,7 +265,7 @@ def _generated_keys(t: _Table) -> dict:
     return p
 
 
-def _plan_keys(t: _Table, base_dir: Path) -> dict:
+def _plan_keys(t: Table, base_dir: Path) -> dict:
     """``plan`` (resolved like a log's path), the SHA-256 of its files (a changed plan is a new dataset) and
     ``pixel_size`` of a simulated dataset on a floor plan of your own."""
     from ogm_ppl.datasets.plan_files import plan_file_pieces
@@ -398,7 +283,7 @@ def _plan_keys(t: _Table, base_dir: Path) -> dict:
     return {"plan": str(path), "plan_sha256": h.hexdigest(), "pixel_size": pixel}
 
 
-def _check_plan(t: _Table, p: dict, max_cells: int) -> None:
+def _check_plan(t: Table, p: dict, max_cells: int) -> None:
     """Read the plan once as :func:`~ogm_ppl.experiment.tasks.run_base` will, so a bad file fails here."""
     from ogm_ppl.datasets.plan_files import PlanFileError, load_plan_file
 
@@ -410,7 +295,7 @@ def _check_plan(t: _Table, p: dict, max_cells: int) -> None:
     _too_many(t, "plan", rows, cols, max_cells, f"{p['plan']} at {p['resolution']} m a cell")
 
 
-def _too_many(t: _Table, key: str, rows: int, cols: int, max_cells: int, what: str) -> None:
+def _too_many(t: Table, key: str, rows: int, cols: int, max_cells: int, what: str) -> None:
     if rows * cols > max_cells:
         t.fail(
             key,
@@ -420,7 +305,7 @@ def _too_many(t: _Table, key: str, rows: int, cols: int, max_cells: int, what: s
 
 
 def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int, max_cells: int = MAX_CELLS) -> list[DatasetSpec]:
-    t, name = _named_entry(source, "datasets", i, d)
+    t, name = named_entry(source, "datasets", i, d)
     kind = t.get("kind", "str", required=True, choices=("simulated", "log", "bag"))
     p: dict = {}
     if kind == "simulated":
@@ -460,7 +345,7 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int, max_cells:
             t.fail("path", f"no such {'log file' if kind == 'log' else 'bag'}: {path}")
         p["path"] = str(path)
         reader = t.raw("reader", {"max_usable_range": 20.0})
-        rt = _Table(source, f"{t.where}.reader", reader)
+        rt = Table(source, f"{t.where}.reader", reader)
         r = {}
         if kind == "bag":
             p["bag"] = _bag_keys(t, path)
@@ -508,7 +393,7 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int, max_cells:
             p["beam_step"] = _steps_for_increment(t, kind, p)
         else:
             p["beam_step"] = t.get("beam_step", "int", 1, sweep=True, lo=1)
-        bt = _Table(source, f"{t.where}.benchmark", t.raw("benchmark", {}))
+        bt = Table(source, f"{t.where}.benchmark", t.raw("benchmark", {}))
         p["benchmark"] = {
             "delta": _check_delta(bt, "delta", "haehnel"),
             "threshold": bt.get("threshold", "float", 0.20, lo=0, lo_open=True, hi=1),
@@ -542,7 +427,7 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int, max_cells:
     return out
 
 
-def _log_increment_deg(t: _Table, kind: str, p: dict) -> float:
+def _log_increment_deg(t: Table, kind: str, p: dict) -> float:
     """The angular increment (degrees) between neighbouring beams of the log or bag of a dataset entry, read
     with the entry's reader options; refused (naming ``path``) if the scans have no single increment."""
     try:
@@ -566,7 +451,7 @@ def _log_increment_deg(t: _Table, kind: str, p: dict) -> float:
     return inc
 
 
-def _steps_for_increment(t: _Table, kind: str, p: dict):
+def _steps_for_increment(t: Table, kind: str, p: dict):
     """``beam_step`` for ``beam_increment_deg`` (a number or a sweep): the multiple of the log's increment,
     within 1 %; refused naming the nearest increment the log allows otherwise."""
     wanted = t.get("beam_increment_deg", "float", sweep=True, lo=0, lo_open=True)
@@ -584,7 +469,7 @@ def _steps_for_increment(t: _Table, kind: str, p: dict):
     return steps if isinstance(wanted, list) else steps[0]
 
 
-def _bag_keys(t: _Table, path: Path) -> dict:
+def _bag_keys(t: Table, path: Path) -> dict:
     """The topics and pose options of a ``kind = "bag"`` entry (module docstring), checked here."""
     from ogm_ppl.datasets.rosbag import bag_kind
 
@@ -618,7 +503,7 @@ def _algorithm(source: str, i: int, a) -> AlgorithmSpec:
     and that method's parameters, validated by its parameter dataclass."""
     from ogm_ppl.methods import ParamError, get_method, method_names
 
-    t, name = _named_entry(source, "algorithms", i, a)
+    t, name = named_entry(source, "algorithms", i, a)
     kind = t.get("kind", "str", required=True, choices=tuple(method_names()))
     method = get_method(kind)
     values = {k: t.raw(k) for k in t.table if k not in ("name", "kind")}
@@ -629,30 +514,26 @@ def _algorithm(source: str, i: int, a) -> AlgorithmSpec:
     return AlgorithmSpec(name, kind, asdict(params))
 
 
-def parse_spec(data: dict, source: str = "<dict>", base_dir: str | os.PathLike = ".") -> ExperimentSpec:
-    """Validate a spec given as a dict (the parsed TOML); ``source`` names it in errors."""
+def parse_map_spec(data: dict, source: str = "<dict>", base_dir: str | os.PathLike = ".") -> ExperimentSpec:
+    """Validate a spec of the kind ``map`` given as a dict (the parsed TOML); ``source`` names it in errors.
+    :func:`ogm_ppl.experiment.parse_spec` reads any kind."""
     if not isinstance(data, dict):
         raise SpecError(f"{source}: a spec is a table, got {type(data).__name__}")
-    exp = data.get("experiment")
-    if isinstance(exp, dict) and exp.get("kind", "map") == "active":  # active mapping: its own tables
-        from ogm_ppl.experiment.active import parse_active_spec
-
-        return parse_active_spec(data, source, base_dir)  # type: ignore[return-value]
     unknown = sorted(set(data) - {"experiment", "datasets", "algorithms", "metrics", "output"})
     if unknown:
         raise SpecError(
             f"{source}: {unknown[0]}: unknown table (known: experiment, datasets, algorithms, metrics, output)"
         )
-    e = _Table(source, "experiment", data.get("experiment", {}))
+    e = Table(source, "experiment", data.get("experiment", {}))
     stem = Path(source).stem if source != "<dict>" else "experiment"
     if e.has("name"):
         name = e.get("name", "str")
-        _check_name(e, name)
+        check_name(e, name)
     else:
         name = e.get("name", "str", stem)
     seed = e.get("seed", "int", 0, lo=0)
     max_cells = e.get("max_cells", "int", MAX_CELLS, lo=1)
-    e.get("kind", "str", "map", choices=("map", "active"))
+    e.get("kind", "str", "map", choices=("map",))
     description = e.raw("description", "")
     if not isinstance(description, str):
         e.fail("description", "must be a string")
@@ -680,7 +561,7 @@ def parse_spec(data: dict, source: str = "<dict>", base_dir: str | os.PathLike =
     dup = next((n for n in anames if anames.count(n) > 1), None)
     if dup:
         raise SpecError(f"{source}: algorithms: the name {dup!r} is used twice")
-    m = _Table(source, "metrics", data.get("metrics", {}))
+    m = Table(source, "metrics", data.get("metrics", {}))
     thr = m.raw("thresholds", 99)
     if isinstance(thr, int) and not isinstance(thr, bool):
         if thr < 1:
@@ -705,7 +586,7 @@ def parse_spec(data: dict, source: str = "<dict>", base_dir: str | os.PathLike =
         scores=tuple(scores),
     )
     m.finish()
-    o = _Table(source, "output", data.get("output", {}))
+    o = Table(source, "output", data.get("output", {}))
     fthr = o.raw("fpfn_thresholds", [0.1, 0.2, 0.6])
     if not isinstance(fthr, list) or not all(
         isinstance(x, (int, float)) and not isinstance(x, bool) and 0 <= x < 1 for x in fthr
@@ -731,21 +612,3 @@ def parse_spec(data: dict, source: str = "<dict>", base_dir: str | os.PathLike =
         json.loads(json.dumps(data, default=str)),
         max_cells,
     )
-
-
-def load_spec(path: str | os.PathLike) -> ExperimentSpec:
-    """Read and validate a TOML spec file (module docstring); raises :class:`SpecError`."""
-    path = Path(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise SpecError(f"{path}: no such spec file") from None
-    except UnicodeDecodeError as e:
-        raise SpecError(f"{path}: not a UTF-8 text file (byte {e.start}: {e.reason}); a spec is TOML") from None
-    except OSError as e:
-        raise SpecError(f"{path}: cannot read it ({e.strerror or e})") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise SpecError(f"{path}: not valid TOML ({e})") from None
-    return parse_spec(data, str(path), path.resolve().parent)
