@@ -22,7 +22,7 @@ import torch
 
 from ogm_ppl.priors.base import MapPrior
 from ogm_ppl.priors.compiled import CompiledPrior, patch_prior_batch, prior_gibbs_sweeps
-from ogm_ppl.priors.compiled.tiles import tiles_log_prob_batch
+from ogm_ppl.priors.compiled.tile_patches import tiles_log_prob_batch
 
 __all__ = ["LocalMapPrior", "grid_shape", "table_occupancy", "tiles_log_prob", "tiling"]
 

@@ -19,7 +19,7 @@ from ogm_ppl.priors.backoff import (
     witten_bell,
     witten_bell_border,
 )
-from ogm_ppl.priors.compiled.tiles import sparse_key_log_factor
+from ogm_ppl.priors.compiled.tile_factors import sparse_key_log_factor
 from ogm_ppl.priors.tables import available_tables, tables_by_name
 from ogm_ppl.testing import PriorContract
 

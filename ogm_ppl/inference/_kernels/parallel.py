@@ -62,7 +62,7 @@ from numba.extending import intrinsic
 
 from ogm_ppl.inference._kernels import cell_sweep as cs
 from ogm_ppl.inference._kernels.cells import _next_occupied
-from ogm_ppl.priors.compiled import IndependentCells, PatternField, Stencil, Tiles, cell_log_odds
+from ogm_ppl.priors.compiled import cell_log_odds
 
 __all__ = [
     "COLOURS",
@@ -167,18 +167,13 @@ def ray_extents(offsets, cells, cols):
 
 
 def prior_extent(prior) -> int:
-    """The largest extent of a factor of the compiled prior ``prior`` (module docstring): 0 for
-    independent cells, ``max(|dr|, |dc|)`` over a stencil's offsets, ``w - 1`` for a pattern field
-    (``2w - 1`` with the pooled scale), the window's span for a table prior's tiles."""
-    if isinstance(prior, IndependentCells):
-        return 0
-    if isinstance(prior, Stencil):
-        return int(max(np.abs(prior.dr).max(initial=0), np.abs(prior.dc).max(initial=0)))
-    if isinstance(prior, PatternField):
-        return 2 * prior.w - 1 if prior.n_scales == 2 else prior.w - 1
-    if isinstance(prior, Tiles):
-        return int(max(np.ptp(prior.w_dr), np.ptp(prior.w_dc)))
-    raise TypeError(f"no factor extent known for a compiled prior of type {type(prior).__name__}")
+    """The largest extent of a factor of the compiled prior ``prior`` (module docstring): what its bundle's
+    ``factor_extent()`` says (0 for independent cells, ``max(|dr|, |dc|)`` over a stencil's offsets, ``w - 1``
+    for a pattern field, ``2w - 1`` with the pooled scale, the window's span for a table prior's tiles)."""
+    extent = getattr(prior, "factor_extent", None)
+    if extent is None:
+        raise TypeError(f"a compiled prior of type {type(prior).__name__} does not say its factor_extent()")
+    return int(extent())
 
 
 def colour_of_tile(t: int | np.ndarray, n_tc: int):

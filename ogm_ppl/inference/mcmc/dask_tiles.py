@@ -56,7 +56,6 @@ from ogm_ppl.inference._kernels import parallel as par
 from ogm_ppl.inference.mcmc.gibbs import _SCAN_CODES
 from ogm_ppl.inference.mcmc.parallel import ChromaticCellGibbs
 from ogm_ppl.models.occupancy import OccupancyModel
-from ogm_ppl.priors.compiled import IndependentCells, PatternField, Stencil
 
 __all__ = ["DaskTileGibbs", "TileProblem", "run_tile", "run_tiles", "tile_problems", "window_prior"]
 
@@ -105,27 +104,17 @@ class TileProblem(NamedTuple):
 
 def window_prior(prior, grid_cols: int, r0: int, c0: int, rows: int, cols: int):
     """The compiled bundle ``prior`` of a grid ``grid_cols`` cells wide, restricted to the window of
-    ``rows x cols`` cells at ``(r0, c0)``: the same conditionals for every cell whose factors lie in the window
-    (module docstring). Independent cells and stencils crop their per-cell terms; a pattern field needs ``r0``,
-    ``c0`` even (its pooled pairs). Raises ``TypeError`` for a bundle anchored to the whole grid (a table
-    prior's tiling) or of a kind this module does not know."""
-    if isinstance(prior, IndependentCells):
-        return prior._replace(log_odds=_crop(prior.log_odds, grid_cols, r0, c0, rows, cols))
-    if isinstance(prior, Stencil):
-        return prior._replace(rows=rows, cols=cols, unary=_crop(prior.unary, grid_cols, r0, c0, rows, cols))
-    if isinstance(prior, PatternField):
-        if r0 % 2 or c0 % 2:
-            raise ValueError(f"a pattern field's window must start at an even row and column, got ({r0}, {c0})")
-        return prior._replace(rows=rows, cols=cols, prow=(rows + 1) // 2, pcol=(cols + 1) // 2)
-    raise TypeError(
-        f"DaskTileGibbs cannot restrict a compiled prior of type {type(prior).__name__} to a window: "
-        "table priors (patch tables, border priors) are tiled from the grid's origin; use ChromaticCellGibbs "
-        "or PatchGibbs for them"
-    )
-
-
-def _crop(a: np.ndarray, grid_cols: int, r0: int, c0: int, rows: int, cols: int) -> np.ndarray:
-    return np.ascontiguousarray(np.asarray(a).reshape(-1, grid_cols)[r0 : r0 + rows, c0 : c0 + cols].reshape(-1))
+    ``rows x cols`` cells at ``(r0, c0)`` by its ``window()`` method: the same conditionals for every cell whose
+    factors lie in the window (module docstring). Independent cells and stencils crop their per-cell terms; a
+    pattern field needs ``r0``, ``c0`` even (its pooled pairs). Raises ``TypeError`` for a bundle anchored to the
+    whole grid (a table prior's tiling) or one without a ``window()``."""
+    window = getattr(prior, "window", None)
+    if window is None:
+        raise TypeError(f"DaskTileGibbs cannot restrict a compiled prior of type {type(prior).__name__} to a window")
+    try:
+        return window(grid_cols, r0, c0, rows, cols)
+    except TypeError as e:
+        raise TypeError(f"DaskTileGibbs: {e}") from None
 
 
 def _ranges(starts: np.ndarray, lengths: np.ndarray) -> np.ndarray:

@@ -19,14 +19,13 @@ they call the generic entry points of :mod:`~ogm_ppl.priors.compiled.registry` (
 registered functions of the bundle's type when it compiles a kernel for that type: one specialised loop
 per kind, with no branch on the kind anywhere.
 
-**Adding a kind** is one module: a ``typing.NamedTuple`` bundle (numba takes it as one argument; give it
-the Python methods ``sparse_patches()``, ``patch_capacity(L)`` and ``tiles_patches(hw, anchors)`` of the bundles
-here), its
-compiled conditionals as plain functions numba compiles inline, and one :func:`register` call, which runs
-when the module is imported (a kind of your own needs no edit here; a kind shipped with the library is
-imported below and named in :data:`CompiledPrior`, the type the kernels' hints use). A prior then returns
-the bundle from ``compiled()``, and ``ogm_ppl.testing.PriorContract`` checks its conditionals against
-``log_prob``.
+**Adding a kind** is one module: a ``typing.NamedTuple`` bundle (numba takes it as one argument) with the Python
+methods every bundle has (:mod:`~ogm_ppl.priors.compiled.bundles`: ``sparse_patches()``, ``patch_capacity(L)``,
+``tiles_patches(hw, anchors)``, ``tempered(beta)``, ``biased(h)``, ``factor_extent()``, ``window(...)``), its
+compiled conditionals as plain functions numba compiles inline, and one :func:`register` call, which runs when the
+module is imported (a kind of your own needs no edit here; a kind shipped with the library is imported below and
+named in :data:`CompiledPrior`, the type the kernels' hints use). A prior then returns the bundle from
+``compiled()``, and ``ogm_ppl.testing.PriorContract`` checks its conditionals against ``log_prob``.
 """
 
 from ogm_ppl.priors.compiled.bundles import CompiledPrior, IndependentCells, PatternField, Stencil, Tiles

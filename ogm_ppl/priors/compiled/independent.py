@@ -1,15 +1,57 @@
-"""Compiled conditionals of independent cells (:class:`~ogm_ppl.priors.compiled.bundles.IndependentCells`):
+"""Compiled conditionals of independent cells (:class:`IndependentCells`):
 ``l(m_k | m_-k) = l_k``; a configuration's weight is the sum of its occupied cells' log-odds (additive)."""
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
 
-from ogm_ppl.priors.compiled.bundles import IndependentCells
 from ogm_ppl.priors.compiled.registry import register
+from ogm_ppl.priors.compiled.transforms import check_beta, check_bias, crop_cells, scaled, shifted
 
-__all__ = ["independent_cells", "independent_patch_weights"]
+__all__ = ["IndependentCells", "independent_cells", "independent_patch_weights"]
+
+
+class IndependentCells(NamedTuple):
+    """Cells independent a priori: ``log p(m) = sum_k m_k l_k + const``."""
+
+    log_odds: np.ndarray  # K float64: l_k = log lambda_k - log(1 - lambda_k)
+
+    def sparse_patches(self) -> bool:
+        """Whether patch updates may weigh a sparse support (so patches may exceed 20 cells)."""
+        return False
+
+    def patch_capacity(self, L: int) -> int:
+        return max(1 << L if L <= 20 else 0, 2)
+
+    def tempered(self, beta: float) -> IndependentCells:
+        """``log p~(m)^beta = beta sum_k m_k l_k``: log-odds ``beta l_k`` (``+-inf`` kept).
+
+        Tempering (for parallel tempering, Geyer 1991): the bundle of ``p~(m)^beta``, every log-potential
+        times ``beta``; ``-inf`` (a configuration the prior forbids) stays ``-inf``. ``beta = 1`` returns
+        this very bundle; ``beta = 0`` gives the uniform distribution over the prior's support (the limit
+        ``beta -> 0+``). Same type, so the compiled kernels sample the tempered prior unchanged.
+        """
+        b = check_beta(beta)
+        return self if b == 1.0 else self._replace(log_odds=scaled(self.log_odds, b))
+
+    def biased(self, bias: float) -> IndependentCells:
+        """``log p~(m) + h sum_k m_k``: log-odds ``l_k + h`` (``+-inf`` kept; :mod:`~ogm_ppl.priors.biased`)."""
+        h = check_bias(bias)
+        return self if h == 0.0 else self._replace(log_odds=shifted(self.log_odds, h))
+
+    def tiles_patches(self, hw, anchors) -> bool:
+        return False
+
+    def factor_extent(self) -> int:
+        """The largest extent of a factor (cells): 0, every factor is one cell."""
+        return 0
+
+    def window(self, grid_cols: int, r0: int, c0: int, rows: int, cols: int) -> IndependentCells:
+        """The bundle restricted to the ``rows x cols`` window at ``(r0, c0)`` of a grid ``grid_cols`` wide."""
+        return self._replace(log_odds=crop_cells(self.log_odds, grid_cols, r0, c0, rows, cols))
 
 
 def independent_cells(log_odds) -> IndependentCells:

@@ -1,4 +1,4 @@
-r"""Compiled conditionals of the stencil kind (:class:`~ogm_ppl.priors.compiled.bundles.Stencil`).
+r"""Compiled conditionals of the stencil kind (:class:`Stencil`).
 
 A pairwise binary field on a neighbourhood stencil (Section 5.2.1),
 
@@ -12,13 +12,63 @@ so that the conditional log-odds of a cell is affine in its neighbours,
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
 
-from ogm_ppl.priors.compiled.bundles import Stencil
 from ogm_ppl.priors.compiled.registry import register
+from ogm_ppl.priors.compiled.transforms import check_beta, check_bias, crop_cells, scaled, shifted
 
-__all__ = ["stencil", "stencil_cell_log_odds", "stencil_patch_weights"]
+__all__ = ["Stencil", "stencil", "stencil_cell_log_odds", "stencil_patch_weights"]
+
+
+class Stencil(NamedTuple):
+    r"""A pairwise binary field on a stencil of offsets ``d`` (Section 5.2.1):
+    ``l(m_k | m_-k) = h_k + sum_{d: k+d in G} (a_d + J_d m_{k+d})`` with ``J_d = J_{-d}``."""
+
+    rows: int
+    cols: int
+    unary: np.ndarray  # K float64: h_k
+    dr: np.ndarray  # D int64: the offsets
+    dc: np.ndarray  # D int64
+    bias: np.ndarray  # D float64: a_d
+    coupling: np.ndarray  # D float64: J_d
+
+    def sparse_patches(self) -> bool:
+        return False
+
+    def patch_capacity(self, L: int) -> int:
+        return max(1 << L if L <= 20 else 0, 2)
+
+    def tempered(self, beta: float) -> Stencil:
+        """``beta h_k``, ``beta a_d``, ``beta J_d``: the conditional log-odds scale by ``beta``.
+
+        Tempering (for parallel tempering, Geyer 1991): the bundle of ``p~(m)^beta``, every log-potential
+        times ``beta``; ``-inf`` (a configuration the prior forbids) stays ``-inf``. ``beta = 1`` returns
+        this very bundle; ``beta = 0`` gives the uniform distribution over the prior's support (the limit
+        ``beta -> 0+``). Same type, so the compiled kernels sample the tempered prior unchanged.
+        """
+        b = check_beta(beta)
+        if b == 1.0:
+            return self
+        return self._replace(unary=scaled(self.unary, b), bias=scaled(self.bias, b), coupling=scaled(self.coupling, b))
+
+    def biased(self, bias: float) -> Stencil:
+        """``log p~(m) + h sum_k m_k``: unary terms ``h_k + h`` (:mod:`~ogm_ppl.priors.biased`)."""
+        h = check_bias(bias)
+        return self if h == 0.0 else self._replace(unary=shifted(self.unary, h))
+
+    def tiles_patches(self, hw, anchors) -> bool:
+        return False
+
+    def factor_extent(self) -> int:
+        """The largest extent of a factor (cells): ``max(|dr|, |dc|)`` over the offsets."""
+        return int(max(np.abs(self.dr).max(initial=0), np.abs(self.dc).max(initial=0)))
+
+    def window(self, grid_cols: int, r0: int, c0: int, rows: int, cols: int) -> Stencil:
+        """The bundle restricted to the ``rows x cols`` window at ``(r0, c0)`` of a grid ``grid_cols`` wide."""
+        return self._replace(rows=rows, cols=cols, unary=crop_cells(self.unary, grid_cols, r0, c0, rows, cols))
 
 
 def stencil(rows, cols, unary, dr, dc, bias, coupling) -> Stencil:

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from ogm_ppl.priors import PatternFieldPrior
-from ogm_ppl.priors.compiled.field import GRAY_RESYNC, _rect_fits, _rect_shape, field_patch_weights
+from ogm_ppl.priors.compiled.field_patches import GRAY_RESYNC, _rect_fits, _rect_shape, field_patch_weights
 from ogm_ppl.priors.compiled.scratch import tile_scratch
 
 

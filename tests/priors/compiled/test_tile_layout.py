@@ -11,9 +11,9 @@ import pytest
 from ogm_ppl.priors import BorderPatchPrior
 from ogm_ppl.priors.backoff import BackoffBorderPrior
 from ogm_ppl.priors.compiled.scratch import tile_scratch, tile_scratch_on
-from ogm_ppl.priors.compiled.tiles import (
+from ogm_ppl.priors.compiled.tile_factors import tile_key
+from ogm_ppl.priors.compiled.tile_patches import (
     _layout_applies,
-    tile_key,
     tile_neighbour_factors,
     tile_patch_factors,
     tile_patch_setup,

@@ -8,7 +8,7 @@ import pytest
 
 from ogm_ppl.priors import BorderPatchPrior
 from ogm_ppl.priors.backoff import BackoffBorderPrior
-from ogm_ppl.priors.compiled.tiles import border_range, sparse_key_log_factor
+from ogm_ppl.priors.compiled.tile_factors import border_range, sparse_key_log_factor
 
 
 def _border_prior(seed):
