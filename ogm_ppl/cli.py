@@ -27,6 +27,9 @@ Subcommands (``ogm-ppl SUBCOMMAND --help`` lists every option):
     An experiment spec (TOML, :mod:`ogm_ppl.experiment`).
 ``run --out DIR``
     The headline experiment (what ``make run`` calls): :func:`ogm_ppl.experiment.headline.run_headline`.
+``calibrate [--quick] --out DIR``
+    Priors and guides scored as predictors of unseen cells on held-out maps (thesis 5.2):
+    :func:`ogm_ppl.calibration.calibrate`.
 
 Bad arguments and bad input files give one line ``ogm-ppl: error: ...`` on stderr and exit status 2
 (``--traceback`` shows the Python traceback instead).
@@ -240,7 +243,7 @@ def build_parser() -> argparse.ArgumentParser:
         dest="command",
         required=True,
         metavar="COMMAND",
-        help="map, methods, simulate, convert, info, experiment or run (COMMAND --help for its options)",
+        help="map, methods, simulate, convert, info, experiment, run or calibrate (COMMAND --help for its options)",
     )
 
     # --------------------------------------------------------------------------------- map
@@ -549,6 +552,11 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--quick", action="store_true", help="a small version (10 cm, 10 %% of poses, 6 sweeps)")
     run.add_argument("--scheduler", default=None, help="'serial', a dask scheduler address, or none for a LocalCluster")
     run.add_argument("--workers", type=_pos_int, default=None, help="LocalCluster workers (default: one per core)")
+
+    # --------------------------------------------------------------------------------- calibrate
+    from ogm_ppl.calibration import _command as calibrate_command
+
+    calibrate_command.add_parser(sub)
     return parser
 
 
@@ -1697,6 +1705,10 @@ def main(argv: list[str] | None = None) -> int:
             )
         elif args.command == "experiment":
             return cmd_experiment(args)
+        elif args.command == "calibrate":
+            from ogm_ppl.calibration import _command as calibrate_command
+
+            return calibrate_command.run(args)
         elif args.command == "methods":
             print(cmd_methods(args))
         elif args.command == "convert":
