@@ -13,7 +13,7 @@ from pathlib import Path
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from ogm_ppl.calibration import USER_ERRORS, CalibrationResult, SettingsError, calibrate
-from ogm_ppl.calibration._command import build_parser, settings_from_args
+from ogm_ppl.cli.calibrate import build_parser, settings_from_args
 
 
 def main(argv: list[str] | None = None) -> CalibrationResult:

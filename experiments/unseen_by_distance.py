@@ -43,7 +43,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 import ogm_ppl.calibration as calibration  # the protocol, windows and guides
 from ogm_ppl import GaussianRange, OccupancyModel
-from ogm_ppl.calibration._command import add_plan_file_arguments, check_plan_file_arguments
+from ogm_ppl.cli.calibrate import add_plan_file_arguments, check_plan_file_arguments
 from ogm_ppl.datasets.plan_files import PlanFileError
 from ogm_ppl.io import atomic_write_text
 from ogm_ppl.metrics import nll_bits

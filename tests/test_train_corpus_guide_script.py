@@ -12,7 +12,7 @@ import torch
 import ogm_ppl.calibration as cal
 from ogm_ppl.calibration import leakage
 from ogm_ppl.calibration import run as run_module
-from ogm_ppl.calibration._command import build_parser, settings_from_args
+from ogm_ppl.cli.calibrate import build_parser, settings_from_args
 from tests._scripts import load_experiment
 
 

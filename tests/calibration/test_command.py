@@ -1,22 +1,15 @@
-"""The ``calibrate`` command: its options map onto CalibrationSettings, it runs the library function, and a bad
-option is refused naming its flag."""
+"""``ogm-ppl calibrate`` (:mod:`ogm_ppl.cli.calibrate`): its options map onto CalibrationSettings, it runs the
+library function, and a bad option is refused naming its flag, as one error line with exit status 2."""
 
-import argparse
 import json
 
 import pytest
 import torch
 
 from ogm_ppl.calibration import CalibrationSettings, calibrate
-from ogm_ppl.calibration._command import (
-    NAME,
-    CalibrateArgumentError,
-    add_parser,
-    build_parser,
-    check_plan_file_arguments,
-    run,
-    settings_from_args,
-)
+from ogm_ppl.cli import build_parser as cli_parser
+from ogm_ppl.cli import main
+from ogm_ppl.cli.calibrate import build_parser, check_plan_file_arguments, settings_from_args
 
 TINY = (
     "--test generated --train houseexpo --priors independent --plans 1 --window 36 --generated-shape 80 "
@@ -24,25 +17,23 @@ TINY = (
 ).split()
 
 
-def _parse(argv):
-    parser = argparse.ArgumentParser(prog="ogm-ppl")
-    add_parser(parser.add_subparsers(dest="command"))
-    return parser.parse_args([NAME, *argv])
+@pytest.fixture(autouse=True)
+def _threads():
+    threads = torch.get_num_threads()
+    yield
+    torch.set_num_threads(threads)
 
 
 def test_the_defaults_are_the_settings_defaults():
-    args = _parse([])
+    args = cli_parser().parse_args(["calibrate"])
     assert settings_from_args(args) == CalibrationSettings() and str(args.out) == "out/calibration"
 
 
-def test_the_command_runs_the_library_function(tmp_path):
-    threads = torch.get_num_threads()
-    try:
-        assert run(_parse([*TINY, "--out", str(tmp_path / "cmd")])) == 0
-    finally:
-        torch.set_num_threads(threads)
+def test_the_command_runs_the_library_function(tmp_path, capsys):
+    assert main(["calibrate", *TINY, "--out", str(tmp_path / "cmd")]) == 0
+    assert f"wrote {tmp_path / 'cmd' / 'calibration.json'}" in capsys.readouterr().out
     doc = json.loads((tmp_path / "cmd" / "calibration.json").read_text())
-    s = settings_from_args(_parse(TINY))
+    s = settings_from_args(cli_parser().parse_args(["calibrate", *TINY]))
     assert s.window == 36 and s.figures is False and s.train == ("houseexpo",)
     lib = calibrate(s, tmp_path / "lib", progress=False)
     assert doc["settings"] == lib.settings
@@ -61,16 +52,19 @@ def test_the_command_runs_the_library_function(tmp_path):
         (["--patch", "border1=3"], "--patch"),
     ],
 )
-def test_a_bad_option_names_its_flag(argv, flag, tmp_path):
-    with pytest.raises(CalibrateArgumentError, match=f"^{flag}: "):
-        run(_parse([*argv, "--out", str(tmp_path)]))
+def test_a_bad_option_names_its_flag(argv, flag, tmp_path, capsys):
+    assert main(["calibrate", *argv, "--out", str(tmp_path / "out")]) == 2
+    assert capsys.readouterr().err.startswith(f"ogm-ppl: error: {flag}: ")
     assert not any(tmp_path.iterdir())
 
 
-def test_an_output_path_that_is_a_file_is_refused(tmp_path):
+def test_refusals_of_the_run_are_one_line_errors(tmp_path, capsys):
     (tmp_path / "file").write_text("x")
-    with pytest.raises(CalibrateArgumentError, match=r"^--out: .*exists and is not a folder"):
-        run(_parse([*TINY, "--out", str(tmp_path / "file")]))
+    assert main(["calibrate", *TINY, "--out", str(tmp_path / "file")]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("ogm-ppl: error: --out: ") and "exists and is not a folder" in err
+    assert main(["calibrate", *TINY, "--priors", "no_such_kind", "--out", str(tmp_path / "x")]) == 2
+    assert "unknown prior kind 'no_such_kind'" in capsys.readouterr().err and not (tmp_path / "x").exists()
 
 
 def test_plan_file_arguments_of_other_commands_are_checked(capsys):

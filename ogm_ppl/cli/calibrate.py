@@ -34,6 +34,9 @@ same settings resumes, computing again only the rows of a prior or guide that ch
     ogm-ppl calibrate                # the default matrix (about an hour on 2 cores)
     ogm-ppl calibrate --priors patch3 border --train houseexpo --test ipa dungeon
     ogm-ppl calibrate --plan-files my_plans/ --pixel-size 0.05 --guides houseexpo+ipa@sym
+
+A subcommand of :mod:`ogm_ppl.cli`: :func:`add_parser` adds it, :func:`run` runs it
+(:func:`ogm_ppl.calibration.calibrate` with :func:`settings_from_args`).
 """
 
 from __future__ import annotations
@@ -46,11 +49,11 @@ from ogm_ppl.calibration.errors import SettingsError
 from ogm_ppl.calibration.heldout import PLAN_FILES_GUIDE, PLAN_FILES_PRIORS, TEST_CORPORA
 from ogm_ppl.calibration.run import calibrate
 from ogm_ppl.calibration.settings import PLAN_OUTSIDE, CalibrationSettings
+from ogm_ppl.cli._common import CLIError
 from ogm_ppl.inference.mcmc.tempering import TEMPERS
 
 __all__ = [
     "NAME",
-    "CalibrateArgumentError",
     "add_arguments",
     "add_parser",
     "add_plan_file_arguments",
@@ -63,10 +66,6 @@ __all__ = [
 #: the subcommand's name
 NAME = "calibrate"
 HELP = "score priors and guides as predictors of unseen cells on held-out maps (thesis 5.2)"
-
-
-class CalibrateArgumentError(ValueError):
-    """A bad option of ``ogm-ppl calibrate``: the message is ``--option: reason``."""
 
 
 def add_plan_file_arguments(ap: argparse.ArgumentParser) -> None:
@@ -238,15 +237,15 @@ def settings_from_args(args: argparse.Namespace) -> CalibrationSettings:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``ogm-ppl calibrate`` with parsed options: :func:`~ogm_ppl.calibration.run.calibrate` into
-    ``args.out``; returns the exit status 0. A bad option raises :class:`CalibrateArgumentError`
-    (``--option: reason``); the workflow's other refusals (:data:`~ogm_ppl.calibration.errors.USER_ERRORS`)
-    pass through, for the command line to print."""
+    ``args.out``; returns the exit status 0. A bad option raises :class:`~ogm_ppl.cli._common.CLIError`
+    (``--option: reason``); the workflow's other refusals (:data:`~ogm_ppl.calibration.errors.USER_ERRORS`,
+    all ``ValueError``) pass through, for :func:`ogm_ppl.cli.main` to print."""
     try:
         settings = settings_from_args(args)
     except SettingsError as e:
-        raise CalibrateArgumentError(f"{e.flag}: {e.reason}") from None
+        raise CLIError(f"{e.flag}: {e.reason}") from None
     try:
         calibrate(settings, args.out, progress=True)
     except SettingsError as e:  # the output folder, a patch override
-        raise CalibrateArgumentError(f"{e.flag}: {e.reason}") from None
+        raise CLIError(f"{e.flag}: {e.reason}") from None
     return 0

@@ -1,0 +1,25 @@
+"""Learning artefacts from plan corpora: the learned priors' count tables, back-off weights and pattern fields,
+fitted on a corpus by name or on floor plans of one's own, each written with its provenance into a folder one
+names (``ogm-ppl fit-prior``).
+
+>>> from ogm_ppl.learn import fit_tables, fit_backoff, fit_field
+>>> sorted(CORPORA)
+['dungeon', 'generated', 'houseexpo', 'ipa']
+"""
+
+from ogm_ppl.learn._fit_common import CORPORA, FitOptionError, FitResult, TrainingPlans, training_plans
+from ogm_ppl.learn.backoff import fit_backoff
+from ogm_ppl.learn.field import FieldSettings, fit_field
+from ogm_ppl.learn.tables import fit_tables
+
+__all__ = [
+    "CORPORA",
+    "FieldSettings",
+    "FitOptionError",
+    "FitResult",
+    "TrainingPlans",
+    "fit_backoff",
+    "fit_field",
+    "fit_tables",
+    "training_plans",
+]
