@@ -17,7 +17,9 @@ from pathlib import Path
 from ogm_ppl.calibration.chains import KERNELS
 from ogm_ppl.calibration.errors import SettingsError
 from ogm_ppl.calibration.heldout import PLAN_FILES_GUIDE, PLAN_FILES_PRIORS, TEST_CORPORA
+from ogm_ppl.calibration.names import default_priors
 from ogm_ppl.inference.mcmc.tempering import TEMPERS, geometric_ladder
+from ogm_ppl.priors.tables import available_tables
 
 __all__ = ["PLAN_OUTSIDE", "CalibrationSettings", "parse_patch_overrides"]
 
@@ -172,9 +174,6 @@ class CalibrationSettings:
         test corpus (none with plan files), the default priors
         (:func:`~ogm_ppl.calibration.names.default_priors`, or :data:`PLAN_FILES_PRIORS` with plan files alone)
         and guides (:data:`PLAN_FILES_GUIDE` with plan files)."""
-        from ogm_ppl.calibration.names import default_priors
-        from ogm_ppl.priors.tables import available_tables
-
         s = self
         if s.quick:
             s = dataclasses.replace(  # 1 map of 48 cells per corpus, 40 sweeps after 10, generated maps of 96

@@ -159,7 +159,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--sigma", type=float, default=1.0, help="range noise, cells")
     ap.add_argument("--sweeps", type=int, default=200, help="kept sweeps per chain")
     ap.add_argument("--burn", type=int, default=50, help="warm-up sweeps per chain")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0, help="seed of the scans (and of chain c: seed + 1000 c)")
     ap.add_argument("--kernel", default="gibbs", choices=sorted(KERNELS), help="sampler (an entry of KERNELS)")
     ap.add_argument("--rungs", type=int, default=6, help="tempering: rungs of the geometric ladder (cold one included)")
     ap.add_argument("--beta-min", type=float, default=0.1, help="tempering: the hottest rung's exponent, in (0, 1)")
