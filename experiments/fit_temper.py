@@ -42,9 +42,9 @@ sys.path.insert(0, str(ROOT / "experiments"))
 
 import numpy as np  # noqa: E402
 import torch  # noqa: E402
-from calibration import generated_windows, make_scene, run_prior, usable_windows  # noqa: E402
 from select_headline_prior import split_names  # noqa: E402
 
+from ogm_ppl.calibration import generated_windows, make_scene, run_prior, usable_windows  # noqa: E402
 from ogm_ppl.datasets import floorplans as fp  # noqa: E402
 from ogm_ppl.io import atomic_write_text  # noqa: E402
 from ogm_ppl.priors.learn import count_tables  # noqa: E402

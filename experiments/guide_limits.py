@@ -1,8 +1,8 @@
 r"""What limits a corpus guide's prediction of unseen cells: its calibration, or what it can tell apart?
 
-On the held-out maps of a test corpus, under the calibration protocol (:mod:`calibration`: the same windows,
+On the held-out maps of a test corpus, under the calibration protocol (:mod:`ogm_ppl.calibration`: the same windows,
 stop-and-scan data and unseen near-mapped cells), for each guide ``g`` (``--guides``, names as
-``calibration.py --guides`` takes them) this reports, in bits per unseen cell (mean over maps):
+``ogm-ppl calibrate --guides`` takes them) this reports, in bits per unseen cell (mean over maps):
 
 * ``nll``: the guide as shipped;
 * ``nll_oracle_temperature``: the guide's logits divided by the one temperature ``T`` (on a grid of 0.5 .. 4)
@@ -21,7 +21,8 @@ stop-and-scan data and unseen near-mapped cells), for each guide ``g`` (``--guid
     python experiments/guide_limits.py --test ipa --guides ipa ipa=out/capacity/c12 ipa=out/capacity/c48
 
 Writes ``--out`` (default ``out/guide_limits``)/``guide_limits.json`` (settings, provenance, per-map rows, summary).
-The leakage checks of ``calibration.py`` apply: a guide is never scored on a plan (or building) it was trained on.
+The leakage checks of :mod:`ogm_ppl.calibration` apply: a guide is never scored on a plan (or building) it was
+trained on.
 """
 
 from __future__ import annotations
@@ -36,11 +37,9 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-import calibration as C  # experiments/calibration.py: the protocol, windows, guides and leakage checks
 
 from ogm_ppl import GaussianRange, OccupancyModel
+from ogm_ppl import calibration as C  # the protocol, windows, guides and leakage checks
 from ogm_ppl.io import atomic_write_text, writable_folder
 from ogm_ppl.metrics import nll_bits
 from ogm_ppl.priors import IndependentPrior
@@ -71,7 +70,7 @@ def main(argv=None) -> dict:
         "--guides",
         nargs="+",
         required=True,
-        help="guide names, as calibration.py --guides takes; NAME=DIR reads that guide from DIR (e.g. one trained "
+        help="guide names, as ogm-ppl calibrate --guides takes; NAME=DIR reads that guide from DIR (e.g. one trained "
         "with other --channels), so several trainings of one guide can be compared",
     )
     ap.add_argument("--guide-dir", type=Path, default=None, help="read the guides as DIR/guide_CORPUS.npz")
@@ -85,7 +84,7 @@ def main(argv=None) -> dict:
         raise SystemExit(f"guide_limits.py: --out {e}") from None
     if args.plans < 1:
         raise SystemExit("guide_limits.py: --plans must be at least 1")
-    proto = C.parse_args(["--plans", str(args.plans)])  # calibration.py's protocol, at its defaults
+    proto = C.CalibrationSettings(plans=args.plans)  # the calibration protocol, at its defaults
     maps = C.heldout_maps(args.test, args.plans, proto.window, proto.generated_shape)
     guides = {}
     for entry in args.guides:  # NAME, or NAME=DIR: the guide NAME read from DIR (another training of it)

@@ -7,7 +7,7 @@ maximum-likelihood fit of a joint whose sufficient statistics include the occupi
 of Chapter 5 are products of tile conditionals, not normalised fits of a joint, so nothing makes theirs match.
 
 For each prior (``--priors``, learned on each ``--train`` corpus; ``@cal`` names tempered as in
-``experiments/calibration.py``) this runs three chains of the prior's mixing cycle
+``ogm-ppl calibrate``) this runs three chains of the prior's mixing cycle
 (:func:`~ogm_ppl.inference.mcmc.mixing_cycle`: the calibration protocol's sampler, ``--kernel cycle``) on a
 ``--window`` square with no readings (one short ray at the centre, which the model needs; its cells are not
 counted), from the all-free map, the all-occupied map and a prior draw, and records the occupied share of the
@@ -20,7 +20,7 @@ corpus's is ``lambda`` of its tables (the learned independent prior: the occupie
 ``exp(h sum_k m_k)``) whose share is the corpus's: ``--bias-steps`` bisection steps on ``[-R, R]``
 (``--bias-range``) of the share of two chains (all-free and all-occupied starts), then the three-chain trace at
 the chosen ``h``. Only the training tables enter (the target is their ``lambda``). It writes ``OUT/bias.json``,
-which ``experiments/calibration.py --bias-file`` reads.
+which ``ogm-ppl calibrate --bias-file`` reads.
 
 Writes ``OUT/prior_occupancy.json`` (settings, provenance, one row per prior with each chain's trace) and prints
 a table.
@@ -38,15 +38,13 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
-
-import calibration  # experiments/calibration.py: prior names, the sampler's patch
 
 from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
+from ogm_ppl.calibration import BIAS_FORMAT, default_patch, prior_names
 from ogm_ppl.inference.mcmc import mixing_cycle
 from ogm_ppl.io import atomic_write_text
 from ogm_ppl.priors import BiasedPrior
-from ogm_ppl.priors.named import split_prior_name
+from ogm_ppl.priors.named import load_temper_params, prior_by_name, split_prior_name
 from ogm_ppl.priors.tables import tables_by_name
 
 TRAIN = ("generated", "houseexpo", "ipa", "dungeon")
@@ -68,8 +66,8 @@ def empty_model(prior, window: int) -> tuple[OccupancyModel, np.ndarray]:
 def occupancy_trace(name: str, args: argparse.Namespace, bias: float = 0.0, starts=STARTS) -> dict:
     """Chains under the prior ``name`` (times ``exp(bias sum_k m_k)``: :class:`~ogm_ppl.priors.BiasedPrior`) on an
     empty window, one from each of ``starts``: the occupied share every ``args.every`` sweeps."""
-    prior = calibration.prior_by_name(name, (args.window, args.window))
-    patch = calibration.default_patch(prior)
+    prior = prior_by_name(name, (args.window, args.window))
+    patch = default_patch(prior)
     if bias:
         prior = BiasedPrior(prior, bias)
     model, counted = empty_model(prior, args.window)
@@ -149,8 +147,8 @@ def main(argv=None) -> dict:
         lam = float(tables_by_name(corpus).lam)
         for kind in args.priors:
             base, _, _, mod = split_prior_name(kind)
-            name = calibration.prior_names([kind], [corpus])[-1][0]  # KIND:CORPUS[@MOD]
-            if mod == "cal" and base not in calibration.load_temper_params(corpus).beta:
+            name = prior_names([kind], [corpus])[-1][0]  # KIND:CORPUS[@MOD]
+            if mod == "cal" and base not in load_temper_params(corpus).beta:
                 print(f"{name:28s} skipped: no tempering exponent fitted")
                 continue
             r = occupancy_trace(name, args)
@@ -181,7 +179,7 @@ def main(argv=None) -> dict:
     atomic_write_text(path, json.dumps(doc, indent=1, allow_nan=False))
     if args.fit_bias:
         bias_doc = {
-            "format": calibration.BIAS_FORMAT,
+            "format": BIAS_FORMAT,
             "provenance": doc["provenance"],
             "settings": doc["settings"],
             "bias": biases,

@@ -36,9 +36,9 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "experiments"))
 
 import numpy as np  # noqa: E402
-from calibration import make_scene, usable_windows  # noqa: E402
 
 from ogm_ppl import GaussianRange, OccupancyModel  # noqa: E402
+from ogm_ppl.calibration import make_scene, usable_windows  # noqa: E402
 from ogm_ppl.datasets import floorplans as fp  # noqa: E402
 from ogm_ppl.experiment.headline import HEADLINE_PRIOR_FORMAT  # noqa: E402
 from ogm_ppl.inference import PatchGibbs, RunningStats, evidence_grid, run_gibbs  # noqa: E402

@@ -64,10 +64,8 @@ import numpy as np
 import torch
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import calibration  # experiments/calibration.py: the protocol, windows and training sets
-
+import ogm_ppl.calibration as calibration  # the protocol, windows and training sets
 from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
 from ogm_ppl.datasets import floorplans as fp
 from ogm_ppl.datasets.stop_and_scan import stop_and_scan

@@ -35,9 +35,9 @@ sys.path.insert(0, str(ROOT))
 sys.path.insert(0, str(ROOT / "experiments"))
 
 import numpy as np  # noqa: E402
-from calibration import usable_windows  # noqa: E402
 from select_headline_prior import split_names  # noqa: E402
 
+from ogm_ppl.calibration import usable_windows  # noqa: E402
 from ogm_ppl.datasets import floorplans as fp  # noqa: E402
 from ogm_ppl.experiment import derive_seed, load_spec  # noqa: E402
 from ogm_ppl.experiment.tasks import task_env  # noqa: E402

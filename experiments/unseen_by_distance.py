@@ -1,18 +1,18 @@
 r"""Where a method's bits go on the unseen cells: NLL by distance to the nearest cell some ray reached.
 
-The protocol of ``experiments/calibration.py`` (the same held-out maps, windows, stop-and-scan data and unseen
+The protocol of ``ogm-ppl calibrate`` (the same held-out maps, windows, stop-and-scan data and unseen
 cells ``U``: near-mapped cells no ray reached), and one method: an amortised guide (``--guide``, a name
-``calibration.py --guides`` takes, e.g. ``houseexpo+ipa@sym``) or a prior sampled by chains (``--prior``, a
+``ogm-ppl calibrate --guides`` takes, e.g. ``houseexpo+ipa@sym``) or a prior sampled by chains (``--prior``, a
 prior name; a name without ``:CORPUS`` is learned on each test corpus's own training plans, as
-``calibration.py --diagonal`` runs it), with the calibration script's leakage checks. Each unseen cell ``k`` is
+``ogm-ppl calibrate --diagonal`` runs it), with the calibration run's leakage checks. Each unseen cell ``k`` is
 binned by its Euclidean distance ``d_k`` (in cells) to the nearest reached cell; per test corpus and bin: the
 share of the unseen cells in it, their occupied share and the method's NLL in bits per cell,
 ``-1/|B| sum_{k in B} log2 q_k^{m_k} (1 - q_k)^{1 - m_k}`` (``q`` clipped as
 :func:`~ogm_ppl.metrics.nll_bits` clips it). The bins' NLLs weighted by their shares give the
-pooled NLL over the corpus's unseen cells (``calibration.py`` reports the mean over maps instead).
+pooled NLL over the corpus's unseen cells (``ogm-ppl calibrate`` reports the mean over maps instead).
 
 A prior runs the calibration protocol's three chains (``--kernel``, ``--sweeps``, ``--burn`` as
-``calibration.py`` takes them; ``q`` their pooled marginals), and each bin also gets the share of its cells
+``ogm-ppl calibrate`` takes them; ``q`` their pooled marginals), and each bin also gets the share of its cells
 whose chains agree (split R-hat below 1.05) and each chain's mean occupancy there. ``--sweeps`` takes several
 values: one run per value, from the same seeds, so agreement can be followed as the chains grow longer.
 
@@ -21,7 +21,7 @@ values: one run per value, from the same seeds, so agreement can be followed as 
         --sweeps 200 1000 3000
     python experiments/unseen_by_distance.py --plan-files out/log_plans --plan-set logs --plan-outside unknown
 
-``--plan-files`` (and ``--plan-set``, ``--pixel-size``, ``--plan-outside``, as ``calibration.py`` takes them) bins
+``--plan-files`` (and ``--plan-set``, ``--pixel-size``, ``--plan-outside``, as ``ogm-ppl calibrate`` takes them) bins
 plans of other buildings too; a prior run on them must name its corpus (``KIND:CORPUS``).
 
 Writes ``OUT/unseen_by_distance.json`` (settings, provenance, one row per corpus, bin and sweep count) and
@@ -40,11 +40,11 @@ import numpy as np
 from scipy.ndimage import distance_transform_edt
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
-sys.path.insert(0, str(Path(__file__).resolve().parent))
 
-import calibration  # experiments/calibration.py: the protocol, windows and guides
-
+import ogm_ppl.calibration as calibration  # the protocol, windows and guides
 from ogm_ppl import GaussianRange, OccupancyModel
+from ogm_ppl.cli.calibrate import add_plan_file_arguments, check_plan_file_arguments
+from ogm_ppl.datasets.plan_files import PlanFileError
 from ogm_ppl.io import atomic_write_text
 from ogm_ppl.metrics import nll_bits
 from ogm_ppl.priors import IndependentPrior
@@ -62,7 +62,7 @@ def _maps(test: str, args: argparse.Namespace, train_corpora: list[str]):
     if args.plan_files and test == args.plan_set:
         try:
             maps = calibration.plan_set_maps(args, args.plan_limit)
-        except (calibration.PlanFileError, calibration.LeakageError) as e:
+        except (PlanFileError, calibration.LeakageError, calibration.NoUsablePlanError) as e:
             raise SystemExit(f"unseen_by_distance.py: {e}") from None
     else:
         maps = calibration.heldout_maps(test, args.plans, args.window)
@@ -189,7 +189,7 @@ def main(argv=None) -> dict:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     what = ap.add_mutually_exclusive_group()
     what.add_argument(
-        "--guide", default=None, help="a guide name calibration.py --guides takes (default houseexpo+ipa@sym)"
+        "--guide", default=None, help="a guide name ogm-ppl calibrate --guides takes (default houseexpo+ipa@sym)"
     )
     what.add_argument("--prior", default=None, help="a prior name (KIND[:CORPUS][@MOD]), sampled by chains")
     ap.add_argument("--guide-dir", type=Path, default=None, help="read the guide as DIR/guide_C.npz")
@@ -199,7 +199,7 @@ def main(argv=None) -> dict:
     ap.add_argument(
         "--test", nargs="+", default=None, choices=TESTS, help="test corpora (default: all, or none with --plan-files)"
     )
-    calibration.add_plan_file_arguments(ap)
+    add_plan_file_arguments(ap)
     ap.add_argument(
         "--plans", type=int, default=None, help="held-out maps per test corpus (default 10; every plan of --plan-files)"
     )
@@ -213,11 +213,11 @@ def main(argv=None) -> dict:
         raise SystemExit("--sweeps must be at least 4 (split R-hat halves each chain) and --burn at least 0")
     if args.prior is None and args.guide is None:
         args.guide = "houseexpo+ipa@sym"
-    calibration.check_plan_file_arguments(ap, args)
+    check_plan_file_arguments(ap, args)
     if args.test is None:
         args.test = [] if args.plan_files else list(TESTS)
     tests = args.test + ([args.plan_set] if args.plan_files else [])
-    proto = calibration.parse_args(["--plans", str(args.plans)])  # the calibration protocol's sensor and window
+    proto = calibration.CalibrationSettings(plans=args.plans)  # the calibration protocol's sensor and window
     for k in ("window", "poses", "beams", "range_cells", "sigma", "seed", "max_support"):
         setattr(args, k, getattr(proto, k))
     args.sweeps = list(dict.fromkeys(args.sweeps))  # one run per distinct length

@@ -2,7 +2,6 @@
 
 import importlib.util
 import sys
-from collections.abc import Iterator
 from pathlib import Path
 from types import ModuleType
 
@@ -18,17 +17,6 @@ def load_experiment(name: str, file: str) -> ModuleType:
     sys.modules[name] = mod
     spec.loader.exec_module(mod)
     return mod
-
-
-def experiment_beside_calibration(name: str, file: str) -> Iterator[ModuleType]:
-    """For a module-scoped fixture: ``experiments/<file>``, which imports ``calibration.py`` beside it, loaded as
-    ``name`` with ``experiments/`` on ``sys.path`` while the fixture lives (both undone afterwards)."""
-    sys.path.insert(0, str(EXPERIMENTS))
-    try:
-        yield load_experiment(name, file)
-    finally:
-        sys.path.remove(str(EXPERIMENTS))
-        sys.modules.pop(name, None)
 
 
 def write_plan_folder(tmp_path: Path) -> Path:

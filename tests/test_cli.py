@@ -152,7 +152,7 @@ def test_every_option_has_help():
     for name, p in [("ogm-ppl", parser), *sub.choices.items()]:
         for a in p._actions:
             assert a.help, (name, a.option_strings or a.dest)
-    assert set(sub.choices) == {"map", "methods", "simulate", "convert", "info", "experiment", "run"}
+    assert set(sub.choices) == {"map", "methods", "simulate", "convert", "info", "experiment", "run", "calibrate"}
 
 
 def test_map_carmen_log(tmp_path, tiny_log, capsys):

@@ -1,16 +1,19 @@
-"""experiments/guide_limits.py: per-map NLLs equal calibration.py's for the same guide and map, and the oracle
+"""experiments/guide_limits.py: per-map NLLs equal the calibration run's for the same guide and map, and the oracle
 recalibrations, fitted on the maps they score, are never worse than the guide as it is."""
 
 import json
+import sys
 
 import pytest
 
-from tests._scripts import experiment_beside_calibration
+import ogm_ppl.calibration as cal
+from tests._scripts import load_experiment
 
 
 @pytest.fixture(scope="module")
 def gl():
-    yield from experiment_beside_calibration("guide_limits_experiment", "guide_limits.py")
+    yield load_experiment("guide_limits_experiment", "guide_limits.py")
+    sys.modules.pop("guide_limits_experiment", None)
 
 
 def test_scores_agree_with_calibration_and_oracles_bound_them(gl, tmp_path):
@@ -18,11 +21,10 @@ def test_scores_agree_with_calibration_and_oracles_bound_them(gl, tmp_path):
 
     shipped = f"ipa={FITTED_DIR}"  # the same guide named with its folder: NAME=DIR
     doc = gl.main(["--test", "ipa", "--guides", "ipa", "houseexpo", shipped, "--plans", "2", "--out", str(tmp_path)])
-    cal = gl.C
-    args = cal.parse_args(["--plans", "2"])
+    args = cal.CalibrationSettings(plans=2)
     maps = cal.heldout_maps("ipa", 2, args.window)
     for row, t in zip(doc["rows"], maps, strict=True):
-        scored = cal.run_guide(cal.make_scene(t, args), cal.guide_for("ipa"), args)["scores"]["unseen"]
+        scored = cal.run_guide(cal.make_scene(t, args), cal.guide_for("ipa"), args.sigma)["scores"]["unseen"]
         assert row["plan"] == t.name and row["ipa"] == pytest.approx(scored["nll_bits"], rel=1e-12)
         assert row["unseen_cells"] == scored["cells"]
     assert doc["summary"][shipped] == doc["summary"]["ipa"]

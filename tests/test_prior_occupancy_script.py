@@ -4,15 +4,18 @@ mean share must lie within 4 standard errors of the corpus's ``lambda``."""
 
 import json
 import math
+import sys
 
 import pytest
 
-from tests._scripts import experiment_beside_calibration
+from ogm_ppl.priors.named import prior_by_name
+from tests._scripts import load_experiment
 
 
 @pytest.fixture(scope="module")
 def po():
-    yield from experiment_beside_calibration("prior_occupancy_experiment", "prior_occupancy.py")
+    yield load_experiment("prior_occupancy_experiment", "prior_occupancy.py")
+    sys.modules.pop("prior_occupancy_experiment", None)
 
 
 def test_the_independent_prior_fills_its_lambda(po, tmp_path):
@@ -21,7 +24,7 @@ def test_the_independent_prior_fills_its_lambda(po, tmp_path):
     (row,) = doc["rows"]
     assert row["prior"] == "independent:dungeon" and [len(t) for t in row["traces"]] == [20, 20, 20]
     lam = row["corpus_share"]
-    _, counted = po.empty_model(po.calibration.prior_by_name("independent:dungeon", (20, 20)), 20)
+    _, counted = po.empty_model(prior_by_name("independent:dungeon", (20, 20)), 20)
     K, n = int(counted.sum()), 3 * 10  # counted cells; recorded states in the chains' second halves
     assert 0 < K < 400
     assert abs(row["share"] - lam) < 4 * math.sqrt(lam * (1 - lam) / (K * n))

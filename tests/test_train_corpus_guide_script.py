@@ -1,6 +1,6 @@
 """experiments/train_corpus_guide.py on tiny settings: it trains on the tables' training plans only, records
-them, keeps the validation-best step, and calibration.py scores the artefact (``--guides``) or refuses one whose
-record is not the tables' training set."""
+them, keeps the validation-best step, and the calibration run scores the artefact (``guides``) or refuses one
+whose record is not the tables' training set."""
 
 import json
 import math
@@ -9,7 +9,10 @@ import sys
 import pytest
 import torch
 
+import ogm_ppl.calibration as cal
 from ogm_ppl.calibration import leakage
+from ogm_ppl.calibration import run as run_module
+from ogm_ppl.cli.calibrate import build_parser, settings_from_args
 from tests._scripts import load_experiment
 
 
@@ -17,11 +20,15 @@ from tests._scripts import load_experiment
 def mods():
     threads = torch.get_num_threads()
     tg = load_experiment("train_corpus_guide_script", "train_corpus_guide.py")
-    cal = load_experiment("calibration_for_guides", "calibration.py")
     yield tg, cal
     torch.set_num_threads(threads)
-    for k in ("train_corpus_guide_script", "calibration_for_guides"):
-        sys.modules.pop(k, None)
+    sys.modules.pop("train_corpus_guide_script", None)
+
+
+def _calibrate(argv: list[str]) -> cal.CalibrationResult:
+    """The calibration run with the options of ``ogm-ppl calibrate``."""
+    args = build_parser().parse_args(argv)
+    return cal.calibrate(settings_from_args(args), args.out, progress=False)
 
 
 SMALL = "--examples 6 --val 2 --window 40 --poses 2 --beams 45 --range-cells 30 --channels 4 --dilations 1 2 1".split()
@@ -36,7 +43,7 @@ def artefact(mods, tmp_path_factory):
 
 
 def test_training_uses_the_tables_plans_and_records_them(mods, artefact):
-    tg, cal = mods
+    tg, _ = mods
     out, meta = artefact
     train, val = tg.split_plans("ipa")
     names = cal.training_set("ipa")
@@ -97,7 +104,6 @@ def test_calibration_scores_the_guide_and_refuses_another_record(mods, artefact,
     """``--guide-dir DIR`` reads ``DIR/guide_C.npz`` and checks its record as it checks a shipped guide's."""
     import shutil
 
-    _, cal = mods
     out, _ = artefact
     shutil.copy(out, tmp_path / "guide_ipa.npz")
     assert cal.guide_path("ipa", tmp_path) == tmp_path / "guide_ipa.npz"
@@ -106,10 +112,10 @@ def test_calibration_scores_the_guide_and_refuses_another_record(mods, artefact,
         "--test ipa --train ipa --priors independent --guides ipa --plans 1 --window 36 --poses 2 --beams 45 "
         "--range-cells 30 --sweeps 4 --burn 2 --no-figures"
     ).split()
-    res = cal.main([*argv, "--guide-dir", str(tmp_path), "--out", str(tmp_path / "cal")])
-    assert json.loads(res["path"].read_text())["settings"]["guide_dir"] == str(tmp_path)
+    res = _calibrate([*argv, "--guide-dir", str(tmp_path), "--out", str(tmp_path / "cal")])
+    assert json.loads(res.path.read_text())["settings"]["guide_dir"] == str(tmp_path)
     monkeypatch.setattr(leakage, "guide_path", lambda corpus, directory=None: out)
-    rows = [r for r in res["rows"] if r["prior_name"] == "guide:ipa"]
+    rows = [r for r in res.rows if r["prior_name"] == "guide:ipa"]
     assert {r["mask"] for r in rows} == {"unseen", "near"} and all(r["prior"] == "guide" for r in rows)
     assert all(r["train"] == "ipa" and 0 < r["nll_bits"] < 10 and "rhat_below" not in r for r in rows)
     with pytest.raises(cal.LeakageError, match="names corpus 'ipa', not 'houseexpo'"):
@@ -150,7 +156,7 @@ def test_a_guide_of_two_corpora_records_each_training_set(mods, tmp_path, monkey
     """``--corpus ipa dungeon``: one guide named ``ipa+dungeon``, windows from both corpora's training plans,
     each corpus's training set recorded; :func:`load_corpus_guide` checks every one and refuses a record that
     lacks one or names other plans; the calibration run checks the test plans against each corpus."""
-    tg, cal = mods
+    tg, _ = mods
     out = tmp_path / "g2.npz"
     meta = tg.main(["--corpus", "ipa", "dungeon", *SMALL, "--steps", "2", "--eval-every", "2", "--out", str(out)])
     assert meta["corpus"] == "ipa+dungeon" and "plan_names_sha256" not in meta
@@ -177,7 +183,7 @@ def test_a_guide_of_two_corpora_records_each_training_set(mods, tmp_path, monkey
 
 
 class _FakeGuide:
-    """What calibration.py reads of a guide before it scores one: its weights (for the rows' digest) and
+    """What the calibration run reads of a guide before it scores one: its weights (for the rows' digest) and
     ``symmetrize``."""
 
     symmetrize = False
@@ -187,13 +193,12 @@ class _FakeGuide:
 def test_calibration_checks_a_two_corpus_guide_against_each_corpus(mods, monkeypatch, tmp_path):
     """The leakage check runs for every corpus a guide was learned on: a test plan that is a training plan of
     either corpus is refused."""
-    _, cal = mods
     seen: list[tuple] = []
-    monkeypatch.setattr(cal, "check_heldout", lambda test, plans, train: seen.append((test, train)))
+    monkeypatch.setattr(run_module, "check_heldout", lambda test, plans, train: seen.append((test, train)))
     monkeypatch.setattr(leakage, "load_corpus_guide", lambda c, directory=None: _FakeGuide())
-    monkeypatch.setattr(cal, "make_scene", lambda t, args: (_ for _ in ()).throw(SystemExit("stop")))
+    monkeypatch.setattr(run_module, "make_scene", lambda t, args: (_ for _ in ()).throw(SystemExit("stop")))
     with pytest.raises(SystemExit, match="stop"):
-        cal.main(
+        _calibrate(
             "--test ipa --priors independent --guides ipa+dungeon --plans 1 --window 36 --no-figures --out".split()
             + [str(tmp_path)]
         )
@@ -202,7 +207,6 @@ def test_calibration_checks_a_two_corpus_guide_against_each_corpus(mods, monkeyp
 
 def test_a_symmetrised_guide_row_loads_the_guide_symmetrised_and_checks_its_corpora(mods, monkeypatch, tmp_path):
     """``--guides C1+C2@sym``: the guide of C1+C2 with ``symmetrize`` on, its leakage checked per corpus."""
-    _, cal = mods
     seen: list[tuple] = []
     loaded: list = []
 
@@ -210,12 +214,12 @@ def test_a_symmetrised_guide_row_loads_the_guide_symmetrised_and_checks_its_corp
         loaded.append((c, _FakeGuide()))
         return loaded[-1][1]
 
-    monkeypatch.setattr(cal, "check_heldout", lambda test, plans, train: seen.append((test, train)))
+    monkeypatch.setattr(run_module, "check_heldout", lambda test, plans, train: seen.append((test, train)))
     monkeypatch.setattr(leakage, "load_corpus_guide", load)
-    monkeypatch.setattr(cal, "make_scene", lambda t, args: (_ for _ in ()).throw(SystemExit("stop")))
+    monkeypatch.setattr(run_module, "make_scene", lambda t, args: (_ for _ in ()).throw(SystemExit("stop")))
     assert cal.guide_corpora("ipa+dungeon@sym") == ["ipa", "dungeon"]
     with pytest.raises(SystemExit, match="stop"):
-        cal.main(
+        _calibrate(
             "--test ipa --priors independent --guides ipa+dungeon@sym ipa --plans 1 --window 36 --no-figures".split()
             + ["--out", str(tmp_path)]
         )

@@ -27,6 +27,9 @@ Subcommands (``ogm-ppl SUBCOMMAND --help`` lists every option):
     An experiment spec (TOML, :mod:`ogm_ppl.experiment`).
 ``run --out DIR``
     The headline experiment (what ``make run`` calls): :func:`ogm_ppl.experiment.headline.run_headline`.
+``calibrate [--quick] [--out DIR]``
+    Priors and guides scored as predictors of unseen cells on held-out maps (thesis 5.2):
+    :func:`ogm_ppl.calibration.calibrate`.
 
 Each subcommand is a module of this package (:data:`COMMANDS`) with ``add_parser(sub)`` and ``run(args)``;
 a new workflow adds a module and one entry.
@@ -58,6 +61,7 @@ COMMANDS: dict[str, str] = {
     "fit-prior": "fit_prior",
     "experiment": "experiment",
     "run": "run",
+    "calibrate": "calibrate",
 }
 
 

@@ -3,7 +3,8 @@ r"""Floor plans of any building, read from files: ROS map_server maps, HouseExpo
 The corpora of :mod:`ogm_ppl.datasets.floorplans` are fixed collections. A plan of a building in none of them
 comes as a file, and :func:`load_plan_file` turns it into the same :class:`~ogm_ppl.datasets.floorplans.FloorPlan`
 the corpora give (occupancy and known masks, ``H x W`` bool, row 0 at the top of the image), so every
-experiment that scores held-out plans can score it (``experiments/calibration.py --plan-files``).
+experiment that scores held-out plans can score it (``ogm-ppl calibrate --plan-files``,
+:func:`ogm_ppl.calibration.calibrate`).
 
 Three kinds of file:
 

@@ -14,7 +14,7 @@ one counted pattern into another). ``KernelCycle([PatchGibbs(model, (3, 3)), Cel
 kinds of move in every sweep, and ``KernelCycle([CellGibbs(model), PatchGibbs(model, (2, 2)),
 PatchGibbs(model, (2, 2), offset=(1, 1))])`` adds small blocks to single cells; :func:`mixing_cycle` builds
 the one that fits a prior's sampler. On held-out maps
-(``experiments/calibration.py --kernel cycle``, docs/results.md) the chains of the backed-off 1-given-8 prior
+(``ogm-ppl calibrate --kernel cycle``, docs/results.md) the chains of the backed-off 1-given-8 prior
 from three different starts then agree on 99-100 % of the unseen cells (single-cell Gibbs: 12-38 %), and
 those of the tempered backed-off border prior on 90 % of a HouseExpo map pair's, where patch Gibbs alone
 leaves a quarter of them apart even after 10,000 sweeps.

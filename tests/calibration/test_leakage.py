@@ -1,0 +1,30 @@
+"""ogm_ppl.calibration.leakage: a test map in a prior's training set (or of a building in it, or of a real log's
+building) is refused."""
+
+import pytest
+
+from ogm_ppl.calibration import LeakageError, check_heldout, generated_seed, leakage, training_set
+
+
+def test_a_map_in_the_training_set_is_refused():
+    from ogm_ppl.datasets import floorplans as fp
+
+    train = training_set("houseexpo")
+    assert train == set(fp.training_plans("houseexpo", limit=len(train)))
+    held = fp.heldout_plans("houseexpo")
+    check_heldout("houseexpo", held, "houseexpo")  # the split is disjoint
+    check_heldout("ipa", fp.heldout_plans("ipa", exclude_buildings=tuple(fp.REAL_LOG_BUILDINGS)), "ipa")
+    leaked = sorted(train)[0]
+    with pytest.raises(LeakageError, match="training set of the houseexpo tables"):
+        check_heldout("houseexpo", [held[0], leaked], "houseexpo")
+    check_heldout("houseexpo", [leaked], "ipa")  # another corpus's tables: no overlap by construction
+    with pytest.raises(LeakageError, match="share a building"):
+        check_heldout("ipa", ["office_a"], "ipa", train={"office_a_furnitures"})
+    with pytest.raises(LeakageError, match="real-log building"):
+        check_heldout("ipa", ["intel_map"], None)
+    # generated: held-out maps are root seed streams, the tables counted spawned children
+    gen = training_set("generated")
+    assert len(gen) == 100 and leakage._identity("generated", "office/seed0") not in gen
+    check_heldout("generated", [f"office/seed{generated_seed(i)}" for i in range(4)], "generated")
+    with pytest.raises(LeakageError, match="generated"):
+        check_heldout("generated", ["hall/seed7"], "generated", train={leakage._identity("generated", "hall/seed7")})
