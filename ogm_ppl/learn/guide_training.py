@@ -301,7 +301,7 @@ def train_corpus_guide(
             **src.record,
         }
     t_data = time.perf_counter() - t0
-    key = json.dumps({"settings": json.loads(s.fingerprint()), "sources": records}, sort_keys=True)
+    key = json.dumps({**json.loads(s.fingerprint()), "sources": records}, sort_keys=True)
     by_shape: dict[tuple, list[Example]] = {}
     for e in tr:
         by_shape.setdefault(tuple(e.y.shape), []).append(e)
