@@ -20,10 +20,10 @@ test corpus with the priors learned on it only.
 
 Guides. ``--guides C ...`` adds a ``guide:C`` row per test map: the one-pass marginals of the amortised guide
 learned on corpus ``C``'s training plans (:func:`~ogm_ppl.inference.variational.corpus_guide`,
-``experiments/train_corpus_guide.py``), the posterior predictive with the corpus itself as the prior. It runs on
+``ogm-ppl train-guide --corpus C``), the posterior predictive with the corpus itself as the prior. It runs on
 every test corpus (with ``--diagonal`` too); :func:`load_corpus_guide` refuses a guide whose record is not the
 training set of corpus ``C``'s tables, so the leakage check below covers it. ``--guides houseexpo+ipa``
-scores the guide learned on both corpora (``train_corpus_guide.py --corpus houseexpo ipa``), checked against
+scores the guide learned on both corpora (``ogm-ppl train-guide --corpus houseexpo ipa``), checked against
 each; ``--guides houseexpo+ipa@sym`` the same guide with its logits averaged over the 8 turns and flips of the
 window (:attr:`~ogm_ppl.inference.variational.AmortisedGuide.symmetrize`).
 
@@ -760,7 +760,7 @@ def parse_args(argv=None) -> argparse.Namespace:
         nargs="*",
         default=None,
         help="also score the amortised guide learned on each of these corpora (guide:CORPUS rows; "
-        "experiments/train_corpus_guide.py); CORPUS@sym: the guide symmetrised (default: none, or with "
+        "ogm-ppl train-guide); CORPUS@sym: the guide symmetrised (default: none, or with "
         f"--plan-files the floor-plan guide {PLAN_FILES_GUIDE})",
     )
     ap.add_argument(
