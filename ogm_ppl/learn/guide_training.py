@@ -35,6 +35,7 @@ import json
 import math
 import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -321,7 +322,9 @@ def train_corpus_guide(
     def on_sigint(signum, frame):
         stop["flag"] = True
 
-    old_handler = signal.signal(signal.SIGINT, on_sigint)
+    # Ctrl-C stops at the end of a step, with a checkpoint (a handler can be set in the main thread only)
+    in_main = threading.current_thread() is threading.main_thread()
+    old_handler = signal.signal(signal.SIGINT, on_sigint) if in_main else None
     t1 = time.perf_counter() - spent
     step = first - 1
     rng = loop.rng
@@ -363,7 +366,8 @@ def train_corpus_guide(
                     _say(progress, f"interrupted at step {step}/{s.steps}: checkpoint {ckpt}; the same command resumes")
                     return GuideTrainingResult(False, out, out.with_suffix(".json"), ckpt, None, loop.history, step)
     finally:
-        signal.signal(signal.SIGINT, old_handler)
+        if in_main:
+            signal.signal(signal.SIGINT, old_handler)
     assert loop.best_state is not None
     guide.net.load_state_dict(loop.best_state)
     best = loop.best

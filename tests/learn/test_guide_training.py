@@ -430,3 +430,34 @@ def test_the_script_still_trains_through_the_library(tmp_path):
             tg.main(["--corpus", "ipa", "--fov", "180"])
     finally:
         sys.modules.pop("train_corpus_guide_script", None)
+
+
+def test_ctrl_c_stops_at_the_end_of_the_step_with_a_checkpoint(tmp_path, monkeypatch):
+    """SIGINT during a step: the step finishes, the checkpoint is written and the call returns unfinished; in a
+    worker thread (no signal handler there) training runs as well."""
+    import os
+    import signal
+    import threading
+
+    real, calls = gt.batch, []
+
+    def interrupting(exs, sym):
+        calls.append(sym)
+        if len(calls) == 2:
+            os.kill(os.getpid(), signal.SIGINT)
+        return real(exs, sym)
+
+    monkeypatch.setattr(gt, "batch", interrupting)
+    out = tmp_path / "g.npz"
+    before = signal.getsignal(signal.SIGINT)
+    r = train_corpus_guide(small(steps=6, eval_every=3), out, progress=False)
+    assert not r.finished and r.step == 2 and gt.checkpoint_path(out).exists()
+    assert signal.getsignal(signal.SIGINT) is before  # the handler before is back
+    monkeypatch.setattr(gt, "batch", real)
+    done: list = []
+    t = threading.Thread(
+        target=lambda: done.append(train_corpus_guide(small(steps=2), tmp_path / "t.npz", progress=False))
+    )
+    t.start()
+    t.join()
+    assert done and done[0].finished
