@@ -1,37 +1,29 @@
-"""Learn the shipped prior tables and report the thesis's patch statistics per corpus (Section 5.2.2-5.2.3).
+"""Report the thesis's patch statistics of the prior tables per corpus (Section 5.2.2-5.2.3).
 
     python experiments/prior_stats.py            # statistics of the shipped tables -> out/prior_stats.{md,json}
     python experiments/prior_stats.py --fit      # re-learn ogm_ppl/fitted/prior_*.npz (+ .json provenance) first
     python experiments/prior_stats.py --fit --quick   # tiny corpora, for a smoke test (writes under out/ only)
 
-Corpora (see ogm_ppl/datasets/floorplans.py for the rasterisation):
-  generated  100 maps of 500 x 500 cells from ogm_ppl.datasets.mapgen, seed 0 (the four kinds in turn)
-  houseexpo  HouseExpo train split at 0.05 m, outside = occupied, 20-cell margin
-  ipa        IPA train split at 0.05 m without the Intel and Freiburg buildings, outside = occupied
-  dungeon    the first 300 DungeonMaps train plans (natural order), 1 px = 1 cell, outside = occupied
-All with the 8 flips/rotations. 5 x 5 codes seen fewer than ``MIN_COUNT_5X5`` times are dropped from the
-shipped files (their mass is kept in ``truncated_mass``) so each file stays well under 1 MB.
+``--fit`` is ``ogm_ppl.learn.fit_tables`` of each corpus (``ogm-ppl fit-prior tables --corpus C --out DIR``;
+the corpora's training plans: ``ogm_ppl.learn``). The tables keep every window with the 8 flips/rotations;
+5 x 5 codes seen fewer than ``MIN_COUNT_5X5`` times are dropped (their mass is kept in ``truncated_mass``).
 """
 
 from __future__ import annotations
 
 import argparse
-import hashlib
 import json
 import sys
-import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from ogm_ppl.datasets import floorplans as fp  # noqa: E402
-from ogm_ppl.datasets.mapgen import iter_corpus  # noqa: E402
 from ogm_ppl.io import atomic_write_text  # noqa: E402
-from ogm_ppl.priors.learn import count_tables  # noqa: E402
-from ogm_ppl.priors.tables import FITTED_DIR, load_tables, save_tables  # noqa: E402
+from ogm_ppl.learn import CORPORA, fit_tables  # noqa: E402
+from ogm_ppl.learn.tables import MIN_COUNT_5X5  # noqa: E402
+from ogm_ppl.priors.tables import FITTED_DIR, load_tables  # noqa: E402
 
-MIN_COUNT_5X5 = 2
 THESIS = {
     "lambda": 0.234,
     "free3x3": 0.743,
@@ -64,69 +56,28 @@ ROWS = [
     ("mixed_border8", "8-cell borders seen with both centre values", "{}"),
     ("psi4", "psi = P(unequal)/P(equal), 4-neighbours", "{:.4f}"),
     ("windows3x3", "3x3 windows counted (x8 symmetries)", "{:.3g}"),
-    ("truncated_mass", "5x5 windows dropped by the count >= 2 cut", "{}"),
+    ("truncated_mass", f"5x5 windows dropped by the count >= {MIN_COUNT_5X5} cut", "{}"),
 ]
 
 
-def sources(quick: bool):
-    n_gen, n_dun, lim = (4, 5, 3) if quick else (100, 300, None)
-    yield (
-        "generated",
-        lambda: iter_corpus(n_gen, (500, 500), seed=0),
-        {
-            "corpus": "generated",
-            "generator": "ogm_ppl.datasets.mapgen.iter_corpus",
-            "n": n_gen,
-            "shape": [500, 500],
-            "seed": 0,
-            "kinds": ["office", "corridor", "cluttered", "hall"],
-            "border": 20,
-            "resolution": None,
-        },
-    )
-    for corpus, limit in (("houseexpo", lim), ("ipa", lim), ("dungeon", n_dun)):
-        names = fp.training_plans(corpus, limit=limit)
-        res = fp.DEFAULT_RESOLUTION[corpus]
-        yield (
-            corpus,
-            (lambda c=corpus, n=names: fp.iter_plans(c, n)),
-            {
-                "corpus": corpus,
-                "split": "train",
-                "plans": len(names),
-                "excluded_buildings": list(fp.REAL_LOG_BUILDINGS),
-                "resolution": res,
-                "outside": "occupied",
-                "margin": 20,
-                "wall_cells": 2,
-                "plan_names_sha256": hashlib.sha256("\n".join(names).encode()).hexdigest(),
-            },
-        )
+#: ``--quick``: the first plans of each corpus only (a smoke test)
+QUICK_LIMITS = {"generated": 4, "houseexpo": 3, "ipa": 3, "dungeon": 5}
 
 
 def fit(out_dir: Path, quick: bool) -> dict:
+    """``ogm_ppl.learn.fit_tables`` of every corpus into ``out_dir``; the seconds of each."""
     timings = {}
-    for name, make, prov in sources(quick):
-        t0 = time.perf_counter()
-        tables = count_tables(make(), symmetries=True, min_count_5x5=MIN_COUNT_5X5, provenance=prov)
-        timings[name] = round(time.perf_counter() - t0, 2)
-        path = save_tables(tables, out_dir / f"prior_{name}.npz")
-        info = {
-            "file": path.name,
-            "sha256": hashlib.sha256(path.read_bytes()).hexdigest(),
-            "bytes": path.stat().st_size,
-            "learning_seconds_incl_reading": timings[name],
-            "provenance": tables.provenance,
-            "statistics": tables.summary(),
-        }
-        atomic_write_text(out_dir / f"prior_{name}.json", json.dumps(info, indent=1) + "\n")
+    for name in CORPORA:
+        r = fit_tables(name, out_dir, limit=QUICK_LIMITS[name] if quick else None)
+        timings[name] = r.seconds
+        path = r.files[0]
         print(f"{name}: {path} {path.stat().st_size / 1e6:.2f} MB, {timings[name]} s", flush=True)
     return timings
 
 
 def report(table_dir: Path, out: Path, timings: dict | None) -> None:
     stats = {}
-    for name in ("generated", "houseexpo", "ipa", "dungeon"):
+    for name in CORPORA:
         p = table_dir / f"prior_{name}.npz"
         if p.is_file():
             t = load_tables(p)

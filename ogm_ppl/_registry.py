@@ -5,6 +5,8 @@ from __future__ import annotations
 from collections.abc import Callable
 from typing import Generic, TypeVar
 
+from ogm_ppl.extensions import load_extensions
+
 F = TypeVar("F", bound=Callable)
 
 __all__ = ["Registry"]
@@ -58,10 +60,8 @@ class Registry(Generic[F]):
     def get(self, kind: str, name: str) -> F:
         """The factory of ``kind`` (from the name ``name``), or a ``ValueError`` listing the kinds. A kind not
         registered yet first imports the extension modules (``$OGM_PPL_METHODS`` and the entry points,
-        :func:`ogm_ppl.methods.registry.load_extensions`), where it may be registered."""
+        :func:`ogm_ppl.extensions.load_extensions`), where it may be registered."""
         if kind not in self.factories:
-            from ogm_ppl.methods.registry import load_extensions  # the top layer, imported only on a miss
-
             load_extensions()
         if kind not in self.factories:
             where = f" in {name!r}" if name != kind else ""

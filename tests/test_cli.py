@@ -656,9 +656,11 @@ def test_an_interrupted_gibbs_map_resumes_from_its_checkpoint_bit_for_bit(sim_da
 def test_a_module_in_ogm_ppl_methods_that_cannot_be_imported_is_one_line_naming_it(monkeypatch, capsys):
     """A typo in $OGM_PPL_METHODS: one error line naming the variable, the module and the import's error (not
     a traceback), and the registry is not left half-filled: the next call, the variable mended, finds all."""
+    from ogm_ppl import extensions
     from ogm_ppl.methods import registry
 
     monkeypatch.setattr(registry, "_discovered", False)
+    monkeypatch.setattr(extensions, "_loaded", False)
     monkeypatch.setenv("OGM_PPL_METHODS", "no_such_module_xyz")
     capsys.readouterr()
     assert main(["methods"]) == 2

@@ -33,7 +33,6 @@ or an entry point, which every process reads; a module imported by hand register
 from __future__ import annotations
 
 import dataclasses
-import functools
 import importlib
 import os
 import pkgutil
@@ -42,6 +41,8 @@ from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
 from typing import Any
 
+from ogm_ppl.extensions import ENTRY_POINT_GROUP, ENV_VAR, MethodModuleError
+from ogm_ppl.extensions import load_extensions as _load_extension_modules
 from ogm_ppl.methods.params import ParamError, param_fields, parse_params
 from ogm_ppl.methods.problem import MapProblem, MapResult, RunContext
 
@@ -58,10 +59,6 @@ __all__ = [
     "unregister_method",
 ]
 
-#: environment variable naming extra modules (comma-separated) that register methods
-ENV_VAR = "OGM_PPL_METHODS"
-#: entry-point group of packages that register methods
-ENTRY_POINT_GROUP = "ogm_ppl.methods"
 _INFRASTRUCTURE = {"params", "problem", "registry"}
 _FIRST = ("log_odds", "patch_map", "gibbs")  # listed first: the thesis's order
 
@@ -146,11 +143,6 @@ _METHODS: dict[str, MapMethod] = {}
 _discovered = False
 
 
-class MethodModuleError(ImportError):
-    """A module named in ``$OGM_PPL_METHODS``, or an entry point of the group ``ogm_ppl.methods``, that cannot be
-    imported (the message names it and the import's own error)."""
-
-
 def _first_line(fn) -> str:
     doc = (fn.__doc__ or "").strip()
     return doc.splitlines()[0].strip() if doc else fn.__name__
@@ -209,37 +201,24 @@ def unregister_method(name: str) -> None:
 
 
 def load_extensions() -> None:
-    """Import the modules of this package, then those of ``$OGM_PPL_METHODS`` and the entry points of the group
-    ``ogm_ppl.methods`` (once per process; again after a failed import). Every lookup of a method calls it, and so
-    does a lookup of a prior or sensor kind that is not registered yet, so a kind of one's own registered in
-    such a module is found by any script, not only the command line. :class:`MethodModuleError` names a module
-    that cannot be imported."""
+    """Import the modules of this package, then the extension modules (:func:`ogm_ppl.extensions.load_extensions`:
+    ``$OGM_PPL_METHODS`` and the entry points of the group ``ogm_ppl.methods``), once per process and again after
+    a failed import. Every lookup of a method calls it. :class:`~ogm_ppl.extensions.MethodModuleError` names a
+    module that cannot be imported."""
     global _discovered
     if _discovered:
         return
     _discovered = True  # before the imports: their register_method calls come back here
-    import ogm_ppl.methods as pkg
-
-    names = [i.name for i in pkgutil.iter_modules(pkg.__path__)]
+    here = os.path.dirname(__file__)  # the package's own modules, found on disk (importing the package would circle)
+    names = [i.name for i in pkgutil.iter_modules([here])]
     names = sorted(n for n in names if not n.startswith("_") and n not in _INFRASTRUCTURE)
     for name in sorted(names, key=lambda n: (_FIRST.index(n) if n in _FIRST else len(_FIRST), n)):
-        importlib.import_module(f"{pkg.__name__}.{name}")
-    from importlib.metadata import entry_points
-
-    where: list[tuple[Callable[[], object], str]] = [
-        (functools.partial(importlib.import_module, mod), f"${ENV_VAR} names the module {mod!r}")
-        for mod in filter(None, (s.strip() for s in os.environ.get(ENV_VAR, "").split(",")))
-    ]
-    where += [
-        (ep.load, f"the entry point {ep.name!r} of the group {ENTRY_POINT_GROUP!r} ({ep.value})")
-        for ep in entry_points(group=ENTRY_POINT_GROUP)
-    ]
-    for load, said in where:
-        try:
-            load()
-        except Exception as e:
-            _discovered = False  # no half-filled registry: the next call tries again and says why again
-            raise MethodModuleError(f"{said}, which cannot be imported: {type(e).__name__}: {e}") from e
+        importlib.import_module(f"{__package__}.{name}")
+    try:
+        _load_extension_modules()
+    except MethodModuleError:
+        _discovered = False  # no half-filled registry: the next call tries again and says why again
+        raise
 
 
 def method_names() -> list[str]:

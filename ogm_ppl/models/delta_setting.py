@@ -13,6 +13,7 @@ import math
 import re
 import warnings
 
+from ogm_ppl.exceptions import FittedSettingWarning
 from ogm_ppl.models.delta import DeltaFamily, fitted_setting
 
 __all__ = [
@@ -48,10 +49,6 @@ def _check_name(name: str) -> None:
         return
     if name not in _OPT:
         raise ValueError(f"cannot fit a Delta named {name!r} for a setting; known: {setting_family_names()}")
-
-
-class FittedSettingWarning(UserWarning):
-    """A fitted update term used at a sensor setting far from the one it was fitted for (Section 2.5)."""
 
 
 def fit_family_for(delta_name: str) -> tuple[str, str] | None:

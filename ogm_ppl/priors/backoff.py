@@ -26,8 +26,8 @@ Every configuration then has positive mass. ``p_back`` is any strictly positive 
 fifth plan, in the corpus's natural order, to validation), tables are counted on the fit part, and
 ``kappa`` maximises the mean validation log-likelihood of the (border, inner) pairs (of the 3 x 3
 windows for ``patch3``). The chosen values are shipped in ``ogm_ppl/fitted/backoff_<corpus>.json``
-(:func:`load_backoff_params`; written by ``experiments/fit_backoff.py``) and applied to the full
-training tables.
+(:func:`load_backoff_params`; written by :func:`ogm_ppl.learn.fit_backoff`, ``ogm-ppl fit-prior backoff``)
+and applied to the full training tables.
 
 **The prior over a map** is the tiling joint of :mod:`ogm_ppl.priors.border`,
 ``p(m) = prod_t p(inner_t | border_t) / Z``, now strictly positive. Patch Gibbs keeps the sparse
@@ -376,7 +376,7 @@ class BackoffBorderPrior(LocalMapPrior):
         return self._gibbs_sample(sample_shape, generator, num_sweeps)
 
 
-#: the ``kappa`` search range of :func:`fit_backoff_params` (and of ``experiments/fit_backoff.py``)
+#: the ``kappa`` search range of :func:`fit_backoff_params` (and of :func:`ogm_ppl.learn.fit_backoff`)
 KAPPA_RANGE = (1e-6, 1e9)
 
 

@@ -61,6 +61,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from ogm_ppl._registry import Registry
+from ogm_ppl.exceptions import FittedSettingWarning
 from ogm_ppl.priors.base import MapPrior
 
 if TYPE_CHECKING:
@@ -172,7 +173,7 @@ def _corpus_resolution(corpus: str) -> float | None:
 
 
 def _check_resolution(name: str, shape, corpus: str, tables) -> None:
-    """Warn (:class:`~ogm_ppl.models.delta_setting.FittedSettingWarning`) when ``shape`` is a grid whose cells
+    """Warn (:class:`~ogm_ppl.exceptions.FittedSettingWarning`) when ``shape`` is a grid whose cells
     differ in size from those of the plans the prior's tables were counted on (by more than 1 %): its windows
     then span another piece of a building, and walls another number of cells."""
     res = getattr(shape, "resolution", None)
@@ -181,8 +182,6 @@ def _check_resolution(name: str, shape, corpus: str, tables) -> None:
     learned = _recorded_resolution(tables.provenance) if tables is not None else _corpus_resolution(corpus)
     if learned is None or abs(float(res) / learned - 1.0) <= 0.01:
         return
-    from ogm_ppl.models.delta_setting import FittedSettingWarning
-
     warnings.warn(
         FittedSettingWarning(
             f"prior {name!r} was learned on plans at {learned:g} m a cell and is used on a grid of {float(res):g} m "

@@ -261,8 +261,8 @@ def test_registering_a_taken_name_is_an_error():
 
 
 def test_command_line_defaults_map_onto_the_parameters():
-    from ogm_ppl.cli import _method_params as method_params
     from ogm_ppl.cli import build_parser
+    from ogm_ppl.cli.map import _method_params as method_params
 
     parse = build_parser().parse_args
     _, p = method_params(parse(["map", "x.log", "--out", "o", "--method", "gibbs"]))

@@ -168,7 +168,7 @@ def test_bad_hyper_parameter_files_are_refused(tmp_path):
 def test_your_own_tables_get_their_own_weights_or_a_clear_refusal(tmp_path):
     """Tables counted on plans of your own: the backed-off kinds refuse to smooth them with the default
     corpus's weights unless a corpus is named; ``fit_backoff_params`` fits weights on them (the shipped
-    fitting, as ``experiments/fit_backoff.py`` runs it), and the pattern fields refuse tables outright."""
+    fitting, as ``ogm_ppl.learn.fit_backoff`` runs it), and the pattern fields refuse tables outright."""
     from ogm_ppl.datasets.mapgen import generate_map
     from ogm_ppl.priors import prior_by_name
     from ogm_ppl.priors.backoff import backed_off_prior, fit_backoff_params, load_backoff_params, save_backoff_params

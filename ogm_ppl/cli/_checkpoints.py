@@ -1,0 +1,147 @@
+"""Checkpoints of ``ogm-ppl map``'s chains (``OUT/.checkpoints``, keyed by what the chain depends on) and the
+online map (``--online``: scans added one at a time to a running chain)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+import shutil
+import sys
+import time
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from ogm_ppl.grid import Grid
+from ogm_ppl.methods import (
+    MapProblem,
+)
+
+if TYPE_CHECKING:
+    from ogm_ppl.methods import MapMethod
+from ogm_ppl.cli._common import (
+    CLIError,
+    _jsonable,
+)
+from ogm_ppl.cli._input import (
+    _Input,
+)
+
+CHECKPOINTS = ".checkpoints"
+
+
+def _prior_digest(params) -> str | None:
+    """:func:`~ogm_ppl.inference.mcmc.fingerprint.prior_name_digest` of the prior ``params`` names (what its
+    tables, weights and settings are now); ``None`` without a prior name, or for one that builds only on the
+    map's own grid (the run says what is wrong with it)."""
+    from ogm_ppl.inference.mcmc.fingerprint import prior_name_digest
+
+    name = getattr(params, "prior", None)
+    if not isinstance(name, str):
+        return None
+    try:
+        return prior_name_digest(name)
+    except ValueError:
+        return None
+
+
+def _checkpoint_root(args, params, inp: _Input, grid: Grid) -> Path | None:
+    """``DIR/.checkpoints/METHOD-KEY`` for a sampling method (``None`` for the others): ``KEY`` digests the
+    command's settings, the prior's content (:func:`_prior_digest`), the input file's size and modification
+    time and the grid, so that only the same command on the same input under the same prior resumes a chain
+    (each chain in ``chain-C``; its checkpoint's fingerprint checks the model too,
+    :func:`~ogm_ppl.inference.mcmc.run_gibbs`)."""
+    import hashlib
+
+    from ogm_ppl.methods._sampling import SamplingParams
+
+    if not isinstance(params, SamplingParams) or getattr(args, "online", False):
+        return None
+    st = Path(args.input).stat()
+    ignore = ("out", "traceback", "input", "unobserved", "thresholds")  # how the map is written, not computed
+    key = {
+        "settings": _jsonable({k: v for k, v in sorted(vars(args).items()) if k not in ignore}),
+        "params": _jsonable(dataclasses.asdict(params)),
+        "prior": _prior_digest(params),
+        "input": [str(Path(args.input).resolve()), st.st_size, st.st_mtime_ns],
+        "grid": [grid.rows, grid.cols, grid.resolution, *grid.origin],
+    }
+    digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]
+    return args.out / CHECKPOINTS / f"{args.method}-{digest}"
+
+
+def _online_map(
+    args, method: MapMethod, params, problem: MapProblem, times: dict
+) -> tuple[np.ndarray, np.ndarray, dict]:
+    """``--online``: the scans replayed one at a time into :class:`~ogm_ppl.inference.online.OnlineMap`
+    (:func:`~ogm_ppl.inference.online.replay`); the snapshots ride in ``details["_snapshots"]``."""
+    from ogm_ppl.inference.online import replay
+
+    if method.name != "gibbs" or params.patch != 1 or params.chains != 1 or params.update == "thesis":
+        raise CLIError("--online runs one single-cell Gibbs chain: use --method gibbs (patch 1, one chain)")
+    if params.threads is not None:
+        raise CLIError("--online sweeps around each new scan serially: drop --threads")
+    # the offline chain's start, kept as the scans arrive: reached cells restart from thresholded OGM
+    init_new = {"ogm": "ogm", "free": "keep"}.get(params.init)
+    if init_new is None or (params.init == "ogm" and params.init_delta != "haehnel"):
+        raise CLIError(
+            f"--online starts from thresholded traditional OGM (init=ogm, init_delta=haehnel) or all free "
+            f"(init=free), got init={params.init!r}, init_delta={params.init_delta!r}"
+        )
+    sensor = problem.sensor(params.sensor, params.sigma_cells, params.p_rand)
+    t0 = time.perf_counter()
+    r = replay(
+        problem.grid,
+        problem.scans,
+        sensor,
+        problem.prior(params.prior, params.lam),
+        burn_in=params.burn_in,
+        sweeps=params.sweeps,
+        snapshot_every=args.snapshots,
+        progress=True,  # a bar on a terminal, plain lines in a log once past 10 s
+        seed=args.seed,
+        update=params.update,
+        init_new=init_new,
+    )
+    times["ray_cast_s"], times["map_s"] = None, time.perf_counter() - t0
+    om = r.online
+    details = {
+        **dataclasses.asdict(params),
+        "sigma_cells": problem.sigma(params.sigma_cells),  # the noise the sensor model was built with
+        "sensor_model": repr(sensor),
+        "kernel": "OnlineMap",
+        "seed": args.seed,
+        "online": {
+            "scans": om.num_scans,
+            "sweeps_per_scan": om.sweeps_per_scan,
+            "full_every": om.full_every,
+            "margin": om.margin,
+            "init_new": om.init_new,
+            "sweeps_total": om.sweeps_done,
+            "full_sweeps": om.full_sweeps,
+            "mean_seconds_per_scan": float(r.seconds_per_scan.mean()),
+        },
+        "_snapshots": r.snapshots,
+    }
+    return r.probabilities, r.observed, details
+
+
+def _drop_own_checkpoints(args, own: Path | None) -> None:
+    """The map is written: its chains' checkpoints are spent. Those of other commands run into the same folder
+    (other settings or input, interrupted) stay, and a note says where they are."""
+    root = args.out / CHECKPOINTS
+    if own is not None:
+        shutil.rmtree(own, ignore_errors=True)
+    try:
+        others = sorted(p.name for p in root.iterdir())
+    except OSError:
+        return
+    if not others:
+        root.rmdir()
+        return
+    print(
+        f"ogm-ppl map: {root} keeps the checkpoints of {len(others)} other interrupted run(s) ({', '.join(others)}): "
+        "rerunning their command resumes them; delete the folder to drop them",
+        file=sys.stderr,
+    )
