@@ -17,8 +17,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
+from ogm_ppl.cli.train_guide import add_arguments, settings_from_args, shipped_path
 from ogm_ppl.learn import train_corpus_guide
-from ogm_ppl.learn._guide_command import add_arguments, settings_from_args, shipped_path
 from ogm_ppl.provenance import command_line
 
 

@@ -27,6 +27,9 @@ Subcommands (``ogm-ppl SUBCOMMAND --help`` lists every option):
     An experiment spec (TOML, :mod:`ogm_ppl.experiment`).
 ``run --out DIR``
     The headline experiment (what ``make run`` calls): :func:`ogm_ppl.experiment.headline.run_headline`.
+``train-guide --corpus C ... | --plan-files PATH ... --out FILE.npz``
+    An amortised corpus guide for one's own sensor, trained on corpora's training plans or plan files of
+    one's own (:func:`ogm_ppl.learn.train_corpus_guide`); checkpoints, and the same command resumes.
 
 Each subcommand is a module of this package (:data:`COMMANDS`) with ``add_parser(sub)`` and ``run(args)``;
 a new workflow adds a module and one entry.
@@ -57,6 +60,7 @@ COMMANDS: dict[str, str] = {
     "info": "info",
     "experiment": "experiment",
     "run": "run",
+    "train-guide": "train_guide",
 }
 
 

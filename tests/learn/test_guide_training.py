@@ -14,6 +14,7 @@ import pytest
 import torch
 
 from ogm_ppl.calibration import leakage
+from ogm_ppl.cli import train_guide as command
 from ogm_ppl.inference.variational.amortised import AmortisedGuide
 from ogm_ppl.learn import (
     CheckpointError,
@@ -21,7 +22,6 @@ from ogm_ppl.learn import (
     GuideTrainingSettings,
     train_corpus_guide,
 )
-from ogm_ppl.learn import _guide_command as command
 from ogm_ppl.learn import guide_examples as ge
 from ogm_ppl.learn import guide_settings as gs
 from ogm_ppl.learn import guide_training as gt
@@ -461,3 +461,20 @@ def test_ctrl_c_stops_at_the_end_of_the_step_with_a_checkpoint(tmp_path, monkeyp
     t.start()
     t.join()
     assert done and done[0].finished
+
+
+def test_ogm_ppl_train_guide_runs_and_reports_bad_options_in_one_line(tmp_path, capsys):
+    """``ogm-ppl train-guide`` through the command line's entry point: 0 and the guide written; a bad option or
+    a missing ``--out`` give one ``ogm-ppl: error:`` line and exit status 2."""
+    from ogm_ppl.cli import COMMANDS, main
+
+    assert COMMANDS["train-guide"] == "train_guide"
+    out = tmp_path / "g.npz"
+    argv = ["train-guide", "--corpus", "ipa", *SMALL_FLAGS, "--steps", "2", "--eval-every", "2", "--quiet"]
+    assert main([*argv, "--out", str(out)]) == 0
+    assert out.exists() and out.with_suffix(".json").exists() and not gt.checkpoint_path(out).exists()
+    assert capsys.readouterr().err == ""  # --quiet
+    assert main(["train-guide", "--corpus", "ipa", "--window", "0", "--out", str(out)]) == 2
+    assert capsys.readouterr().err.strip() == "ogm-ppl: error: --window must be at least 1, got 0"
+    assert main(["train-guide", "--corpus", "ipa"]) == 2
+    assert "one of the arguments --out --ship is required" in capsys.readouterr().err

@@ -4,10 +4,10 @@
     ogm-ppl train-guide --plan-files my_plans/ --pixel-size 0.05 --range-m 8 --out my_guide.npz
     ogm-ppl train-guide --corpus ipa --steps 20 --examples 16 --val 4 --out /tmp/g.npz        # a smoke run
 
-The command of a subcommand module: :func:`add_parser` adds it to the ``ogm-ppl`` parser, :func:`run` runs it
+A command module of the ``ogm-ppl`` command line: :func:`add_parser` adds the subcommand, :func:`run` runs it
 (exit status 0 when the guide is written, 130 when stopped by Ctrl-C with a checkpoint kept). Bad options raise
 :class:`~ogm_ppl.learn.guide_settings.GuideSettingsError` (a ``ValueError``), which the command line prints as
-one line.
+one line ``ogm-ppl: error: ...`` (exit status 2).
 """
 
 from __future__ import annotations
@@ -17,7 +17,7 @@ from pathlib import Path
 
 from ogm_ppl.learn.guide_settings import CORPORA, GuideTrainingSettings
 
-__all__ = ["NAME", "add_arguments", "add_parser", "run", "settings_from_args"]
+__all__ = ["NAME", "add_arguments", "add_parser", "run", "settings_from_args", "shipped_path"]
 
 NAME = "train-guide"
 
