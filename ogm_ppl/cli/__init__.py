@@ -30,6 +30,9 @@ Subcommands (``ogm-ppl SUBCOMMAND --help`` lists every option):
 ``calibrate [--quick] [--out DIR]``
     Priors and guides scored as predictors of unseen cells on held-out maps (thesis 5.2):
     :func:`ogm_ppl.calibration.calibrate`.
+``train-guide --corpus C ... | --plan-files PATH ... --out FILE.npz``
+    An amortised corpus guide for one's own sensor, trained on corpora's training plans or plan files of
+    one's own (:func:`ogm_ppl.learn.train_corpus_guide`); checkpoints, and the same command resumes.
 
 Each subcommand is a module of this package (:data:`COMMANDS`) with ``add_parser(sub)`` and ``run(args)``;
 a new workflow adds a module and one entry.
@@ -62,6 +65,7 @@ COMMANDS: dict[str, str] = {
     "experiment": "experiment",
     "run": "run",
     "calibrate": "calibrate",
+    "train-guide": "train_guide",
 }
 
 

@@ -1,8 +1,13 @@
-"""Learning artefacts from plan corpora: the learned priors' count tables, back-off weights and pattern fields,
-fitted on a corpus by name or on floor plans of one's own, each written with its provenance into a folder one
-names (``ogm-ppl fit-prior``).
+"""Learning artefacts from plan corpora, fitted on a corpus by name or on floor plans of one's own, each written
+with its provenance: the learned priors' count tables, back-off weights and pattern fields (``ogm-ppl
+fit-prior``), the amortised guide of a corpus (:mod:`~ogm_ppl.learn.guide_training`, its windows
+:mod:`~ogm_ppl.learn.guide_examples` and settings :mod:`~ogm_ppl.learn.guide_settings`; ``ogm-ppl
+train-guide``) and the guide of a learned prior (:mod:`~ogm_ppl.learn.prior_guide`).
 
->>> from ogm_ppl.learn import fit_tables, fit_backoff, fit_field
+This package sits above the datasets, inference, priors and :mod:`ogm_ppl.calibration`, and below
+:mod:`ogm_ppl.experiment` and the command line, which it does not import.
+
+>>> from ogm_ppl.learn import fit_tables, fit_backoff, fit_field, train_corpus_guide
 >>> sorted(CORPORA)
 ['dungeon', 'generated', 'houseexpo', 'ipa']
 """
@@ -10,16 +15,29 @@ names (``ogm-ppl fit-prior``).
 from ogm_ppl.learn._fit_common import CORPORA, FitOptionError, FitResult, TrainingPlans, training_plans
 from ogm_ppl.learn.backoff import fit_backoff
 from ogm_ppl.learn.field import FieldSettings, fit_field
+from ogm_ppl.learn.guide_examples import TooFewWindowsError
+from ogm_ppl.learn.guide_settings import GuideSettingsError, GuideTrainingSettings
+from ogm_ppl.learn.guide_training import CheckpointError, GuideTrainingResult, train_corpus_guide
+from ogm_ppl.learn.prior_guide import PriorGuideResult, PriorGuideSettings, train_prior_guide
 from ogm_ppl.learn.tables import fit_tables
 
 __all__ = [
     "CORPORA",
+    "CheckpointError",
     "FieldSettings",
     "FitOptionError",
     "FitResult",
+    "GuideSettingsError",
+    "GuideTrainingResult",
+    "GuideTrainingSettings",
+    "PriorGuideResult",
+    "PriorGuideSettings",
+    "TooFewWindowsError",
     "TrainingPlans",
     "fit_backoff",
     "fit_field",
     "fit_tables",
+    "train_corpus_guide",
+    "train_prior_guide",
     "training_plans",
 ]

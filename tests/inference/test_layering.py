@@ -116,3 +116,16 @@ def test_compiled_priors_are_self_contained():
     for path in sorted((PKG / "priors" / "compiled").rglob("*.py")):
         for mod in _imports(path):
             assert mod.startswith("ogm_ppl.priors.compiled"), f"{path.relative_to(PKG)} imports {mod}"
+
+
+def test_learning_sits_above_inference_and_calibration_and_below_the_experiments():
+    """``ogm_ppl.learn`` (artefacts learned from corpora) may use datasets, inference, priors and calibration;
+    it imports neither the experiments nor the command line, and nothing it builds on imports it."""
+    for path in sorted((PKG / "learn").rglob("*.py")):
+        for mod in _imports(path):
+            assert not mod.startswith(("ogm_ppl.experiment", "ogm_ppl.cli")), f"{path.relative_to(PKG)} imports {mod}"
+    below = [PKG / "inference", PKG / "datasets", PKG / "priors", PKG / "calibration", *(PKG / n for n in LOWER)]
+    for root in below:
+        for path in sorted(root.rglob("*.py")) if root.is_dir() else [root.with_suffix(".py")]:
+            for mod in _imports(path):
+                assert not mod.startswith("ogm_ppl.learn"), f"{path.relative_to(PKG)} imports {mod}"

@@ -25,7 +25,7 @@ and readings simulated by the forward sensor model, ``(m, z) ~ p(m) p(z | m)`` (
 the forward (inclusive) KL averaged over data: it needs no posterior samples and no likelihood
 evaluations, only simulation (Le et al. 2017, Eq. 4). For a mean-field ``q`` its minimiser at each ``z`` is
 the posterior's marginals, the quantity the thesis's maps report (Chapter 4, Eq. 4.6). The training
-script is ``experiments/train_amortised_guide.py``; :meth:`AmortisedGuide.csis_loss` is the batch
+function is :func:`ogm_ppl.learn.train_prior_guide`; :meth:`AmortisedGuide.csis_loss` is the batch
 estimate, and ``pyro.infer.CSIS(model.model, guide, ...)`` trains the same objective one trace at a time
 (the guide takes ``observations={"z": ...}``).
 
@@ -422,14 +422,18 @@ class AmortisedGuide(PyroModule):
             return True
         corpus = self.trained_for.get("corpus")
         name = f"the guide learned on corpus {corpus!r}" if isinstance(corpus, str) else "this guide"
+        if corpus == "files":
+            name = "the guide learned on plan files"
         several = self.trained_for.get("corpora")  # a guide of several corpora records each one's plans
-        corpora = " ".join(several) if isinstance(several, dict) else corpus if isinstance(corpus, str) else "C"
+        sources = list(several) if isinstance(several, dict) else corpus.split("+") if isinstance(corpus, str) else []
+        corpora = [c for c in sources if c != "files"]  # "files": plan files of one's own
+        maps = (["--corpus", *corpora] if corpora else []) + (["--plan-files", "PLANS"] if "files" in sources else [])
         warnings.warn(
             FittedSettingWarning(
                 f"{name} was trained for {', '.join(fit)} but is used at {', '.join(used)} ({'; '.join(bad)}); "
-                f"outside its setting its marginals can be far off. Train one for this sensor: python "
-                f"experiments/train_corpus_guide.py --corpus {corpora} "
-                f"{' '.join(flags)}"
+                f"outside its setting its marginals can be far off. Train one for this sensor: ogm-ppl train-guide "
+                f"{' '.join(maps or ['--corpus', 'C'])} {' '.join(flags)} --out FILE.npz "
+                "(ogm_ppl.learn.train_corpus_guide)"
             ),
             stacklevel=2,
         )
@@ -562,7 +566,7 @@ def _positive(v) -> float | None:
 
 
 def _read_artefact(path: Path) -> tuple[GuideArchitecture, dict[str, torch.Tensor], dict]:
-    what = "a guide written by AmortisedGuide.save (experiments/train_amortised_guide.py)"
+    what = "a guide written by AmortisedGuide.save (ogm_ppl.learn.train_prior_guide, ogm-ppl train-guide)"
     hint = f"expected {what}"
     arrays = read_npz(path, what, GuideFileError)
     fields = ("kind", "format", "feature_version", "channels", "dilations", "phase", "delta", "meta")
@@ -660,12 +664,13 @@ def unknown_corpus_message(corpus: str) -> str:
     hint = f" (did you mean {low!r}?)" if low != corpus and low in shipped else ""
     return (
         f"no guide learned on corpus {corpus!r}{hint}; shipped: {', '.join(shipped)} "
-        "(experiments/train_corpus_guide.py --corpus C trains one)"
+        "(ogm-ppl train-guide --corpus C --out FILE.npz trains one: ogm_ppl.learn.train_corpus_guide)"
     )
 
 
 def corpus_guide(corpus: str, model: OccupancyModel | None = None) -> AmortisedGuide:
-    r"""The guide trained on the training plans of a floor-plan corpus (``experiments/train_corpus_guide.py``):
+    r"""The guide trained on the training plans of a floor-plan corpus (:func:`ogm_ppl.learn.train_corpus_guide`,
+    ``ogm-ppl train-guide --corpus C``):
     windows of the plans the corpus's prior tables were learned from, scanned by the stop-and-scan simulator,
     so that ``q(m_k = 1 | z)`` approximates the posterior marginal with the corpus itself as the prior,
 

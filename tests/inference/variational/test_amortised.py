@@ -306,7 +306,7 @@ def test_one_message_names_the_shipped_corpora_and_the_case_sensitive_name():
     msg = unknown_corpus_message("nope")
     assert msg == (
         f"no guide learned on corpus 'nope'; shipped: {', '.join(corpus_guides())} "
-        "(experiments/train_corpus_guide.py --corpus C trains one)"
+        "(ogm-ppl train-guide --corpus C --out FILE.npz trains one: ogm_ppl.learn.train_corpus_guide)"
     )
     with pytest.raises(GuideFileError) as e:
         corpus_guide("nope")
@@ -322,6 +322,21 @@ def test_one_message_names_the_shipped_corpora_and_the_case_sensitive_name():
     assert "did you mean" not in unknown_corpus_message("nope") + unknown_corpus_message("dungeon2")
     with pytest.raises(GuideFileError, match="'amortised'"):  # the shipped guide of Section 2.6 is no corpus's
         corpus_guide("amortised")
+
+
+def test_a_guide_of_plan_files_names_them_in_its_setting_warning(tmp_path):
+    """A guide trained on plan files of one's own (record ``corpus = "files"``) tells to train with
+    ``--plan-files``, not a corpus of that name."""
+    from ogm_ppl.inference.variational import FittedSettingWarning
+
+    AmortisedGuide(channels=2, dilations=(1,), phase=(0, 0), seed=0).save(
+        tmp_path / "g.npz", {"corpus": "files", "scans": {"range_cells": 75.0, "sigma_cells": 1.0}}
+    )
+    prior = IndependentPrior(0.5, 16 * 14)
+    _, short, _, _ = small_model(1, shape=(16, 14), prior=prior, max_range=6.0)
+    want = r"on plan files was trained .* train-guide --plan-files PLANS --range-cells 6 --sigma 1 --out FILE\.npz"
+    with pytest.warns(FittedSettingWarning, match=want):
+        assert not AmortisedGuide.load(tmp_path / "g.npz").check_setting(short)
 
 
 def test_a_corpus_guide_warns_once_outside_the_sensor_it_was_trained_for():
@@ -349,8 +364,10 @@ def test_a_corpus_guide_warns_once_outside_the_sensor_it_was_trained_for():
     assert len(rec) == 1
     text = str(rec[0].message)
     assert "'houseexpo' was trained for F = 75 cells, sigma = 1 cells but is used at F = 6 cells" in text
-    assert "factor 2" in text and "python experiments/train_corpus_guide.py --corpus houseexpo --range-cells 6" in text
-    with pytest.warns(FittedSettingWarning, match=r"train_corpus_guide.py --corpus houseexpo ipa --range-cells 6"):
+    assert "factor 2" in text
+    assert "ogm-ppl train-guide --corpus houseexpo --range-cells 6 --sigma 1 --out FILE.npz" in text
+    assert "ogm_ppl.learn.train_corpus_guide" in text
+    with pytest.warns(FittedSettingWarning, match=r"train-guide --corpus houseexpo ipa --range-cells 6 --sigma 1"):
         corpus_guide("houseexpo+ipa").check_setting(short)  # the command line names each corpus
     _, noisy, _, _ = small_model(1, shape=(16, 14), prior=prior, max_range=75.0, sensor=GaussianRange(3.0))
     with pytest.warns(FittedSettingWarning, match=r"sigma 3 cells is not within 25% of 1.*--sigma 3"):

@@ -1,0 +1,192 @@
+"""``ogm-ppl train-guide``: train a corpus guide for one's own sensor (:func:`~ogm_ppl.learn.train_corpus_guide`).
+
+    ogm-ppl train-guide --corpus houseexpo --range-cells 400 --sigma 0.5 --out guides/guide_houseexpo.npz
+    ogm-ppl train-guide --plan-files my_plans/ --pixel-size 0.05 --range-m 8 --out my_guide.npz
+    ogm-ppl train-guide --corpus ipa --steps 20 --examples 16 --val 4 --out /tmp/g.npz        # a smoke run
+
+A command module of the ``ogm-ppl`` command line: :func:`add_parser` adds the subcommand, :func:`run` runs it
+(exit status 0 when the guide is written, 130 when stopped by Ctrl-C with a checkpoint kept). Bad options raise
+:class:`~ogm_ppl.learn.guide_settings.GuideSettingsError` (a ``ValueError``), which the command line prints as
+one line ``ogm-ppl: error: ...`` (exit status 2).
+"""
+
+from __future__ import annotations
+
+import argparse
+from pathlib import Path
+
+from ogm_ppl.learn.guide_settings import CORPORA, GuideTrainingSettings
+
+__all__ = ["NAME", "add_arguments", "add_parser", "run", "settings_from_args", "shipped_path"]
+
+NAME = "train-guide"
+
+_DESCRIPTION = """\
+Train the amortised guide q(m | z) on the training plans of floor-plan corpora (--corpus), on plan files of
+one's own (--plan-files: ROS map YAMLs, images, HouseExpo JSON) or both, scanned by the simulator with the
+sensor given (range, noise, beams, stops or a driven route): the posterior predictive with those maps as the
+prior. Every fifth plan of each source validates: it picks the step kept and fits a temperature. Checkpoints
+into OUT.ckpt.npz every --checkpoint-every steps and on Ctrl-C; the same command resumes it bit for bit (a
+checkpoint of other settings is refused; --fresh starts afresh). Writes OUT (.npz) and OUT.json (the record:
+sources, sensor, training, validation losses, provenance)."""
+
+
+def add_arguments(p: argparse.ArgumentParser, *, out_required: bool = True) -> None:
+    """The options of the command (and of ``experiments/train_corpus_guide.py``, with ``out_required=False``)."""
+    d = GuideTrainingSettings(corpus=(CORPORA[0],))  # the defaults
+    src = p.add_argument_group("maps")
+    src.add_argument(
+        "--corpus",
+        nargs="+",
+        choices=CORPORA,
+        default=[],
+        help="corpus, or several: one guide learned on all their tables' training plans (windows shared evenly; "
+        "named C1+C2, e.g. guide:houseexpo+ipa)",
+    )
+    src.add_argument(
+        "--plan-files",
+        nargs="+",
+        type=Path,
+        default=[],
+        metavar="PATH",
+        help="plan files or folders of them (ROS map .yaml, .png/.pgm/.bmp images, HouseExpo .json) to train on, "
+        "alone or with --corpus; every fifth plan validates",
+    )
+    src.add_argument("--pixel-size", type=float, default=None, help="metres per pixel of the plan images")
+    sensor = p.add_argument_group("sensor and scans")
+    sensor.add_argument("--poses", type=int, default=d.poses, help="stops of a scan (0: the route planner's number)")
+    sensor.add_argument(
+        "--scan-whole-map",
+        action="store_true",
+        help="scan the whole map along a planned route, then crop --crops windows of it (Table 6.4's simulator)",
+    )
+    sensor.add_argument(
+        "--drive",
+        type=float,
+        nargs="+",
+        default=None,
+        metavar="CELLS",
+        help="with --scan-whole-map: scan while driving the route, a pose every CELLS of path (one of the "
+        "values drawn per map) instead of at the stops",
+    )
+    sensor.add_argument("--fov", type=float, default=d.fov, help="field of view of a driven scan, degrees ahead")
+    sensor.add_argument(
+        "--plan-range-cells",
+        type=float,
+        default=None,
+        help="with --scan-whole-map: the range the route planner assumes (default the range); a stop must show "
+        "2 %% of its disc, so at a long range most house plans get a single stop",
+    )
+    sensor.add_argument("--crops", type=int, default=d.crops, help="windows a whole-map scene gives (--scan-whole-map)")
+    sensor.add_argument("--beams", type=int, default=d.beams, help=f"beams a full turn (default {d.beams})")
+    rng = sensor.add_mutually_exclusive_group()
+    rng.add_argument("--range-cells", type=float, default=d.range_cells, help="maximum range, cells (default 75)")
+    rng.add_argument("--range-m", type=float, default=None, help="maximum range, metres (0.05 m a cell)")
+    sensor.add_argument("--sigma", type=float, default=d.sigma, help="Gaussian range noise, cells (default 1)")
+    train = p.add_argument_group("training")
+    train.add_argument("--examples", type=int, default=d.examples, help=f"training windows (default {d.examples})")
+    train.add_argument("--val", type=int, default=d.val, help=f"validation windows (default {d.val})")
+    train.add_argument("--window", type=int, default=d.window, help=f"window side, cells (default {d.window})")
+    train.add_argument("--channels", type=int, default=d.channels, help="channels of the network (default 24)")
+    train.add_argument(
+        "--dilations", type=int, nargs="+", default=list(d.dilations), help="layer dilations (default 1 2 4 8 16 1)"
+    )
+    train.add_argument("--steps", type=int, default=d.steps, help=f"Adam steps (default {d.steps})")
+    train.add_argument("--batch", type=int, default=d.batch, help=f"windows a step (default {d.batch})")
+    train.add_argument("--lr", type=float, default=d.lr, help="learning rate, cosine schedule (default 0.003)")
+    train.add_argument("--eval-every", type=int, default=d.eval_every, help="steps between validations (default 100)")
+    train.add_argument("--seed", type=int, default=d.seed, help="seed of the windows, scans and weights (default 0)")
+    train.add_argument(
+        "--no-temperature",
+        dest="temperature",
+        action="store_false",
+        help="skip the temperature fitted on the validation windows' unseen cells",
+    )
+    outg = p.add_argument_group("output")
+    where = outg.add_mutually_exclusive_group(required=out_required)
+    where.add_argument("--out", type=Path, default=None, metavar="FILE.npz", help="the guide file (and FILE.json)")
+    where.add_argument(
+        "--ship",
+        action="store_true",
+        help="maintainers: write ogm_ppl/fitted/guide_NAME.npz, the package's own guide (NAME: the corpora, C1+C2)",
+    )
+    outg.add_argument(
+        "--checkpoint-every",
+        type=int,
+        default=d.checkpoint_every,
+        help="steps between checkpoints (OUT.ckpt.npz; Ctrl-C also saves one; the same command resumes)",
+    )
+    outg.add_argument("--fresh", action="store_true", help="ignore a checkpoint and start afresh")
+    outg.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+def settings_from_args(args: argparse.Namespace) -> GuideTrainingSettings:
+    """The settings the parsed options give (checked: :class:`GuideSettingsError` naming an option)."""
+    return GuideTrainingSettings(
+        corpus=tuple(args.corpus),
+        plan_files=tuple(args.plan_files),
+        pixel_size=args.pixel_size,
+        examples=args.examples,
+        val=args.val,
+        window=args.window,
+        poses=args.poses,
+        scan_whole_map=args.scan_whole_map,
+        drive=None if args.drive is None else tuple(args.drive),
+        fov=args.fov,
+        plan_range_cells=args.plan_range_cells,
+        crops=args.crops,
+        beams=args.beams,
+        range_cells=args.range_cells,
+        range_m=args.range_m,
+        sigma=args.sigma,
+        channels=args.channels,
+        dilations=tuple(args.dilations),
+        steps=args.steps,
+        batch=args.batch,
+        lr=args.lr,
+        eval_every=args.eval_every,
+        seed=args.seed,
+        temperature=args.temperature,
+        checkpoint_every=args.checkpoint_every,
+    )
+
+
+def shipped_path(settings: GuideTrainingSettings) -> Path:
+    """Where ``--ship`` writes: the package's fitted guide of the settings' sources (``guide_C1+C2.npz``)."""
+    from ogm_ppl.calibration.leakage import GUIDE_JOIN, guide_path
+
+    return guide_path(GUIDE_JOIN.join(settings.sources))
+
+
+def add_parser(sub: argparse._SubParsersAction) -> None:
+    """Add ``train-guide`` to the subcommands ``sub`` of ``ogm-ppl``."""
+    p = sub.add_parser(
+        NAME,
+        help="train a corpus guide for one's own sensor on corpora or plan files",
+        description=_DESCRIPTION,
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    add_arguments(p)
+
+
+def run(args: argparse.Namespace) -> int:
+    """Run ``ogm-ppl train-guide``: 0 when the guide is written, 130 when stopped with a checkpoint kept."""
+    from ogm_ppl.learn.guide_training import train_corpus_guide
+
+    settings = settings_from_args(args)
+    out = shipped_path(settings) if args.ship else Path(args.out)
+    if out.suffix != ".npz":
+        raise ValueError(f"--out must name a .npz file, got {out}")
+    r = train_corpus_guide(
+        settings, out, progress=not args.quiet, fresh=args.fresh, command=settings.command(out, ship=args.ship)
+    )
+    if not r.finished:
+        print(f"ogm-ppl train-guide: stopped at step {r.step}; checkpoint {r.checkpoint}: the same command resumes")
+        return 130
+    assert r.record is not None
+    v = r.record["validation"]
+    print(
+        f"ogm-ppl train-guide: kept step {r.record['training']['kept_step']}, {v['bits_per_unseen_cell']:.3f} "
+        f"bits/unseen cell (validation) -> {r.path} and {r.sidecar}"
+    )
+    return 0
