@@ -177,6 +177,7 @@ def cross_validation(data: Any, folds: int, names: Sequence[str] = FAMILIES, pro
 
 
 def _n_params(name: str, family: Any) -> int:
+    """Free parameters: Marshall-Barfoot's ``l_occ`` and its chosen integer ``beta`` count as two."""
     return 2 if name == "marshall_barfoot_opt" else sum(p.numel() for p in family.parameters())
 
 
