@@ -1,12 +1,13 @@
 """Fit update terms Delta for one sensor setting (Section 2.5 at sigma, F in cells) and compare them with
-the shipped ones (fitted at sigma 3, F 75, wall 60) on held-out data of that setting.
+the shipped ones (fitted at sigma 3, F 75, wall 60) on held-out data of that setting:
+:func:`ogm_ppl.learn.fit_delta_setting` (``ogm-ppl fit-prior delta-setting``).
 
     python experiments/fit_delta_setting.py --sigma 1 --F 400 [--out DIR] [--names p21 moravec_opt]
 
 Intel at 5 cm: F = 20 m / 0.05 m = 400 cells; sigma in cells = sigma_m / 0.05. Prints, per term: data and
 fit seconds, train and held-out cross-entropy (mean over datasets of the summed cell cross-entropy, nats)
 of the fit and of the shipped term on the same held-out data. ``--out``: write (or reuse) the fitted
-artefacts there (``fit_deltas_for_setting(cache_dir=...)``). ``--compare-full``: also time the fit without
+terms there (``fit_delta_setting(out, reuse=True)``). ``--compare-full``: also time the fit without
 the near-wall reduction.
 """
 
@@ -19,8 +20,10 @@ import torch
 
 from ogm_ppl.datasets import wall_datasets
 from ogm_ppl.inference.variational.delta_fit import cross_entropy_loss
-from ogm_ppl.inference.variational.setting_fit import fit_deltas_for_setting, fit_on_data
+from ogm_ppl.inference.variational.setting_fit import fit_on_data
+from ogm_ppl.learn import fit_delta_setting
 from ogm_ppl.models import delta_by_name
+from ogm_ppl.models.delta import family_from_dict
 
 
 def main() -> None:
@@ -32,7 +35,7 @@ def main() -> None:
     ap.add_argument("--heldout", type=int, default=500, help="held-out datasets (seed + 1)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--names", nargs="+", default=["p21", "moravec_opt"])
-    ap.add_argument("--out", default=None, help="folder for the fitted artefacts (a cache)")
+    ap.add_argument("--out", default=None, help="folder for the fitted terms (reused when there)")
     ap.add_argument("--threads", type=int, default=1, help="torch threads (small matrices: 1 is fastest)")
     ap.add_argument("--compare-full", action="store_true", help="also time the unreduced fit")
     args = ap.parse_args()
@@ -42,8 +45,8 @@ def main() -> None:
     )  # the first optimiser imports torch._dynamo (~5 s): not the fit's
     wall = round(0.8 * args.F) if args.wall is None else args.wall
     t0 = time.perf_counter()
-    fits = fit_deltas_for_setting(
-        args.names, args.sigma, args.F, wall=wall, num=args.num, seed=args.seed, cache_dir=args.out
+    r = fit_delta_setting(
+        args.out, family=args.names, sigma=args.sigma, F=args.F, wall=wall, num=args.num, seed=args.seed, reuse=True
     )
     total = time.perf_counter() - t0
     held = wall_datasets(
@@ -51,13 +54,14 @@ def main() -> None:
     )  # as heldout= would
     print(
         f"setting: sigma {args.sigma:g} cells, F {args.F}, wall {wall}, {args.num} training / {args.heldout} "
-        f"held-out datasets; fit_deltas_for_setting {total:.1f} s in all"
+        f"held-out datasets; fit_delta_setting {total:.1f} s in all"
     )
     print("| term | data s (training) | fit s | train CE | held-out CE (fit) | held-out CE (shipped) |")
     print("|---|---|---|---|---|---|")
-    for name, (fam, tr) in fits.items():
+    for name, term in r.summary["terms"].items():
+        tr = term["training"]
         with torch.no_grad():
-            mine = float(cross_entropy_loss(fam, held))
+            mine = float(cross_entropy_loss(family_from_dict(term["delta"]), held))
             shipped = float(cross_entropy_loss(delta_by_name(name), held))
         sec = tr.get("seconds") or {}
         print(

@@ -1,11 +1,15 @@
-"""``ogm-ppl fit-prior tables|backoff|field``: fit a learned prior's artefacts on a corpus or on plan files.
+"""``ogm-ppl fit-prior tables|backoff|field|deltas|delta-setting``: fit a learned prior's artefacts on a corpus
+or on plan files, or the update terms Delta of traditional OGM against exact 1D posteriors.
 
     ogm-ppl fit-prior tables --corpus ipa --out DIR             # prior_ipa.npz + .json (count tables)
     ogm-ppl fit-prior backoff --plans my_plans/ --pixel-size 0.025 --out DIR   # backoff_plans.json
     ogm-ppl fit-prior field --corpus dungeon --limit 20 --out DIR              # field_dungeon.npz + .json
+    ogm-ppl fit-prior deltas --out DIR             # delta_<name>.json per term + delta_cv.json (the shipped fit)
+    ogm-ppl fit-prior delta-setting --family p21 --sigma 1 --F 400 --out DIR   # one's own sensor (cells)
 
 A subcommand of :mod:`ogm_ppl.cli`: :func:`add_parser` adds it, :func:`run` runs it
-(:func:`ogm_ppl.learn.fit_tables`, :func:`~ogm_ppl.learn.fit_backoff`, :func:`~ogm_ppl.learn.fit_field`).
+(:func:`ogm_ppl.learn.fit_tables`, :func:`~ogm_ppl.learn.fit_backoff`, :func:`~ogm_ppl.learn.fit_field`,
+:func:`~ogm_ppl.learn.fit_deltas`, :func:`~ogm_ppl.learn.fit_delta_setting`).
 """
 
 from __future__ import annotations
@@ -15,7 +19,8 @@ import sys
 from pathlib import Path
 
 NAME = "fit-prior"
-KINDS = ("tables", "backoff", "field")
+PLAN_KINDS = ("tables", "backoff", "field")
+KINDS = (*PLAN_KINDS, "deltas", "delta-setting")
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -25,7 +30,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         NAME,
-        help="fit a learned prior (count tables, back-off weights, pattern field) on a corpus or your plans",
+        help="fit a learned prior (count tables, back-off weights, pattern field) on a corpus or your plans, "
+        "or the update terms Delta",
         description=__doc__.splitlines()[0],
     )
     kinds = p.add_subparsers(dest="kind", metavar="{" + ",".join(KINDS) + "}", required=True)
@@ -33,9 +39,11 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "tables": "count tables: relative frequencies of window configurations (prior_NAME.npz + .json)",
         "backoff": "Witten-Bell back-off weights on a fit/validation split (backoff_NAME.json)",
         "field": "pattern fields, one and two scales, by pseudo-likelihood and tempering (field_NAME.npz + .json)",
+        "deltas": "update terms Delta of Table 2.1, pN and a network, cross-validated (delta_NAME.json, delta_cv.json)",
+        "delta-setting": "update terms Delta for your sensor's noise and range in cells (delta_NAME_sigma..json)",
     }
     d = FieldSettings()
-    for kind in KINDS:
+    for kind in PLAN_KINDS:
         k = kinds.add_parser(kind, help=helps[kind], description=helps[kind])
         src = k.add_mutually_exclusive_group(required=True)
         src.add_argument("--corpus", choices=CORPORA, help="fit on this corpus's training plans")
@@ -66,13 +74,77 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             k.add_argument("--report-sweeps", type=int, default=d.report_sweeps, help="sweeps of the final check")
             k.add_argument("--seed", type=int, default=d.seed, help="seed of every sampler (0)")
             k.add_argument("--no-resume", action="store_true", help="ignore a checkpoint in --out, start afresh")
+    _add_deltas(kinds.add_parser("deltas", help=helps["deltas"], description=helps["deltas"]))
+    _add_delta_setting(
+        kinds.add_parser("delta-setting", help=helps["delta-setting"], description=helps["delta-setting"])
+    )
+
+
+def _add_deltas(k: argparse.ArgumentParser) -> None:
+    from ogm_ppl.learn.deltas import DATASETS, FAMILIES, FOLDS, SETTING
+
+    k.add_argument("--out", type=Path, required=True, help="the folder the fitted files go to")
+    k.add_argument("--datasets", type=int, default=DATASETS, help="training datasets (%(default)s)")
+    k.add_argument("--folds", type=int, default=FOLDS, help="cross-validation folds, 0 for none (%(default)s)")
+    k.add_argument("--families", nargs="+", default=list(FAMILIES), metavar="NAME", help="the terms (all)")
+    k.add_argument("--seed", type=int, default=0, help="the datasets' seed (0)")
+    k.add_argument("--sigma", type=float, default=SETTING["sigma"], help="sensor noise, cells (%(default)s)")
+    k.add_argument("--F", type=int, default=SETTING["F"], help="sensor range, cells (%(default)s)")
+    k.add_argument("--wall", type=int, default=SETTING["wall"], help="the wall's cell (%(default)s)")
+    k.add_argument("--quiet", action="store_true", help="no progress output")
+
+
+def _add_delta_setting(k: argparse.ArgumentParser) -> None:
+    k.add_argument("--out", type=Path, required=True, help="the folder the fitted files go to")
+    k.add_argument("--family", nargs="+", default=["p21"], metavar="NAME", help="pN, moravec_opt, ... (p21)")
+    k.add_argument("--sigma", type=float, required=True, help="sensor noise in cells (sigma_m / resolution)")
+    k.add_argument("--F", type=int, required=True, help="sensor range in cells (max_range_m / resolution)")
+    k.add_argument("--wall", type=int, default=None, help="the wall's cell (round(0.8 F))")
+    k.add_argument("--num", type=int, default=1000, help="training datasets (1000)")
+    k.add_argument(
+        "--num-readings", type=int, nargs=2, default=[1, 10], metavar=("LO", "HI"), help="readings per dataset (1 10)"
+    )
+    k.add_argument("--seed", type=int, default=0, help="the datasets' seed (0)")
+    k.add_argument(
+        "--prior", choices=("uniform", "data_driven"), default="uniform", help="the exact posteriors' prior (uniform)"
+    )
+    k.add_argument("--heldout", type=int, default=0, help="also score this many fresh datasets (0)")
+    k.add_argument("--reuse", action="store_true", help="read a term of the same setting in --out, not refit")
 
 
 def run(args: argparse.Namespace) -> int:
     """Run ``fit-prior``; prints the files written. Option errors raise :class:`~ogm_ppl.learn.FitOptionError`
     (a ``ValueError``: the command line reports it in one line naming the option and exits 2)."""
-    from ogm_ppl.learn import FieldSettings, fit_backoff, fit_field, fit_tables
+    from ogm_ppl.learn import FieldSettings, fit_backoff, fit_delta_setting, fit_deltas, fit_field, fit_tables
 
+    if args.kind == "deltas":
+        r = fit_deltas(
+            args.out,
+            datasets=args.datasets,
+            folds=args.folds,
+            families=args.families,
+            seed=args.seed,
+            sigma=args.sigma,
+            F=args.F,
+            wall=args.wall,
+            progress=not args.quiet,
+        )
+        return _done(args.kind, r)
+    if args.kind == "delta-setting":
+        r = fit_delta_setting(
+            args.out,
+            family=args.family,
+            sigma=args.sigma,
+            F=args.F,
+            wall=args.wall,
+            num=args.num,
+            num_readings=tuple(args.num_readings),
+            seed=args.seed,
+            prior=args.prior,
+            heldout=args.heldout,
+            reuse=args.reuse,
+        )
+        return _done(args.kind, r)
     source = args.corpus if args.corpus is not None else list(args.plans)
     common = dict(limit=args.limit, pixel_size=args.pixel_size, resolution=args.resolution, name=args.name)
     if args.kind == "tables":
@@ -100,5 +172,9 @@ def run(args: argparse.Namespace) -> int:
             progress=not args.quiet,
             **common,
         )
-    print(f"ogm-ppl fit-prior {args.kind}: {r.seconds:.1f} s -> " + ", ".join(str(f) for f in r.files), file=sys.stdout)
+    return _done(args.kind, r)
+
+
+def _done(kind: str, r) -> int:
+    print(f"ogm-ppl fit-prior {kind}: {r.seconds:.1f} s -> " + ", ".join(str(f) for f in r.files), file=sys.stdout)
     return 0

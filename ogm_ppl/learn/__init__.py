@@ -1,19 +1,22 @@
 """Learning artefacts from plan corpora, fitted on a corpus by name or on floor plans of one's own, each written
-with its provenance: the learned priors' count tables, back-off weights and pattern fields (``ogm-ppl
-fit-prior``), the amortised guide of a corpus (:mod:`~ogm_ppl.learn.guide_training`, its windows
-:mod:`~ogm_ppl.learn.guide_examples` and settings :mod:`~ogm_ppl.learn.guide_settings`; ``ogm-ppl
+with its provenance into a folder one names: the learned priors' count tables, back-off weights and pattern fields,
+and the update terms Delta of traditional OGM fitted against exact 1D posteriors (the shipped setting, or one's
+own sensor's) (``ogm-ppl fit-prior``); the amortised guide of a corpus (:mod:`~ogm_ppl.learn.guide_training`, its
+windows :mod:`~ogm_ppl.learn.guide_examples` and settings :mod:`~ogm_ppl.learn.guide_settings`; ``ogm-ppl
 train-guide``) and the guide of a learned prior (:mod:`~ogm_ppl.learn.prior_guide`).
 
 This package sits above the datasets, inference, priors and :mod:`ogm_ppl.calibration`, and below
 :mod:`ogm_ppl.experiment` and the command line, which it does not import.
 
->>> from ogm_ppl.learn import fit_tables, fit_backoff, fit_field, train_corpus_guide
+>>> from ogm_ppl.learn import fit_tables, fit_backoff, fit_field, fit_deltas, fit_delta_setting, train_corpus_guide
 >>> sorted(CORPORA)
 ['dungeon', 'generated', 'houseexpo', 'ipa']
 """
 
 from ogm_ppl.learn._fit_common import CORPORA, FitOptionError, FitResult, TrainingPlans, training_plans
 from ogm_ppl.learn.backoff import fit_backoff
+from ogm_ppl.learn.delta_setting import fit_delta_setting
+from ogm_ppl.learn.deltas import fit_deltas
 from ogm_ppl.learn.field import FieldSettings, fit_field
 from ogm_ppl.learn.guide_examples import TooFewWindowsError
 from ogm_ppl.learn.guide_settings import GuideSettingsError, GuideTrainingSettings
@@ -35,6 +38,8 @@ __all__ = [
     "TooFewWindowsError",
     "TrainingPlans",
     "fit_backoff",
+    "fit_delta_setting",
+    "fit_deltas",
     "fit_field",
     "fit_tables",
     "train_corpus_guide",

@@ -419,8 +419,9 @@ def family_from_dict(spec: dict) -> DeltaFamily:
 
 
 def load_delta(path) -> DeltaFamily:
-    """Load a Delta artefact written by ``experiments/fit_deltas.py`` (or any JSON of the same format)
-    from ``path``, validating keys, shapes and finiteness (:class:`DeltaFileError` names what is wrong)."""
+    """Load a Delta artefact (``delta_<name>.json``, as :func:`ogm_ppl.learn.fit_deltas` and
+    :func:`~ogm_ppl.learn.fit_delta_setting` write it: ``ogm-ppl fit-prior deltas|delta-setting``) from ``path``,
+    validating keys, shapes and finiteness (:class:`DeltaFileError` names what is wrong)."""
     from pathlib import Path
 
     path = Path(path)
@@ -443,7 +444,7 @@ def _delta_from_record_text(text: str, where: str) -> tuple[DeltaFamily, dict]:
     except json.JSONDecodeError as e:
         raise DeltaFileError(
             f"{where}: not valid JSON (line {e.lineno}, column {e.colno}: {e.msg}); "
-            "expected a Delta artefact written by experiments/fit_deltas.py"
+            "expected a Delta artefact written by ogm-ppl fit-prior deltas (ogm_ppl.learn.fit_deltas)"
         ) from None
     if not isinstance(record, dict):
         raise DeltaFileError(f"{where}: expected a JSON object, got {type(record).__name__}")
@@ -520,7 +521,7 @@ def load_fitted(name: str) -> tuple[DeltaFamily, dict]:
     return _delta_from_record_text(path.read_text(encoding="utf-8"), str(path))
 
 
-def delta_by_name(name: str) -> DeltaFamily:
+def delta_by_name(name: str, path=None) -> DeltaFamily:
     """A Delta family with published or fitted values.
 
     Names: ``"haehnel"`` (traditional OGM); the thesis's optimised values (Table 2.1, 2.2):
@@ -528,8 +529,16 @@ def delta_by_name(name: str) -> DeltaFamily:
     ``"stachniss_thesis"``, ``"elfes_thesis"``, ``"p21_thesis"``; and our fits shipped with the library
     (:func:`fitted_names`: ``"moravec_opt"``, ``"elfes_opt"``, ``"p1"`` .. ``"p21"``, ``"neural_opt"``, ...).
 
+    ``path``: a fit of one's own instead: the artefact file itself, or a folder holding ``delta_<name>.json``
+    (the folder ``ogm-ppl fit-prior deltas|delta-setting --out`` wrote), read by :func:`load_delta`.
+
     Fitted and thesis terms carry the setting they were fitted for (:func:`fitted_setting`).
     """
+    if path is not None:
+        from pathlib import Path
+
+        p = Path(path)
+        return load_delta(p / f"delta_{name}.json" if p.is_dir() else p)
     makers = {
         "haehnel": Moravec.haehnel,
         "borenstein_koren_thesis": lambda: BorensteinKoren(-0.2197),

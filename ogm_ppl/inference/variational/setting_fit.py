@@ -19,7 +19,7 @@ Two facts make the fit cheap (the exact posteriors, ~5-8 ms per dataset, are the
 * **Convexity.** For the offset families fitted here (pN, Moravec, Borenstein-Koren, Marshall-Barfoot
   at fixed ``beta``) the logits are linear in the parameters and the cross-entropy is convex in the
   logits, so the objective is convex: its minimum does not depend on the start. pN starts at 0 (the
-  p1 -> p21 warm-start chain of ``experiments/fit_deltas.py`` reaches the same p21; measured at the shipped
+  p1 -> p21 warm-start chain of :func:`ogm_ppl.learn.fit_deltas` reaches the same p21; measured at the shipped
   setting it gives the same values to 1e-6 and starting at the shipped p21 is *slower*, 2.6 s against
   0.4 s, L-BFGS's line search idling at an optimum). Parameters that act only on cells whose exact
   posterior is ~0 (e.g. the far-before values of pN at sigma = 1, log-odds below -16) are weakly
@@ -338,8 +338,10 @@ def fit_deltas_for_setting(
     max_iter: int = 500,
     tol: float = 1e-10,
     cache_dir: str | Path | None = None,
+    provenance: dict | None = None,
 ) -> dict[str, tuple[DeltaFamily, dict]]:
-    """:func:`fit_delta_for_setting` for several names on one draw of the data: ``name -> (family, training)``."""
+    """:func:`fit_delta_for_setting` for several names on one draw of the data: ``name -> (family, training)``.
+    ``provenance``: recorded in the files written into ``cache_dir`` (:func:`save_setting_fit`)."""
     for name in names:
         _check_name(name)
     if wall is None and _is_int(F):
@@ -403,14 +405,17 @@ def fit_deltas_for_setting(
         }
         res.family.fitted_setting = {**training, "name": name}
         if name in paths:
-            save_setting_fit(paths[name], name, res.family, training)
+            save_setting_fit(paths[name], name, res.family, training, provenance=provenance)
         out[name] = res.family, training
     return {n: out[n] for n in names}
 
 
-def save_setting_fit(path: str | Path, name: str, family: DeltaFamily, training: dict) -> Path:
+def save_setting_fit(
+    path: str | Path, name: str, family: DeltaFamily, training: dict, *, provenance: dict | None = None
+) -> Path:
     """Write a fitted term as a Delta artefact (the format of ``ogm_ppl/fitted/delta_*.json``: ``format``,
-    ``name``, ``delta``, ``training``, ``train_cross_entropy``, ``heldout_cross_entropy``); atomic."""
+    ``name``, ``delta``, ``training``, ``train_cross_entropy``, ``heldout_cross_entropy``, and ``provenance``
+    when given); atomic."""
     import json
 
     from ogm_ppl.io import atomic_write_text
@@ -424,6 +429,7 @@ def save_setting_fit(path: str | Path, name: str, family: DeltaFamily, training:
         "training": training,
         "train_cross_entropy": training.get("train_cross_entropy"),
         "heldout_cross_entropy": training.get("heldout_cross_entropy"),
+        **({} if provenance is None else {"provenance": provenance}),
     }
     atomic_write_text(path, json.dumps(record, indent=1))
     return path
