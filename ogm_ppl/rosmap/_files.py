@@ -3,7 +3,6 @@ the sidecar together."""
 
 from __future__ import annotations
 
-import io
 import os
 import warnings
 from collections.abc import Sequence
@@ -15,7 +14,7 @@ import numpy as np
 
 from ogm_ppl.grid import Grid
 from ogm_ppl.io import atomic_write_bytes
-from ogm_ppl.rosmap._image import _read_image
+from ogm_ppl.rosmap._image import _encode_image, _read_image
 from ogm_ppl.rosmap._occupancy import (
     _FREE,
     _OCCUPIED,
@@ -159,19 +158,12 @@ def save_ros_map(
     img = x.astype(np.uint8).reshape(grid.rows, grid.cols)[::-1]
 
     yaml_path, image_path, npz_path = _paths(path, image_format)
-    if image_format == "pgm":
-        header = f"P5\n# CREATOR: ogm_ppl.rosmap {grid.resolution:.3f} m/pix\n{grid.cols} {grid.rows}\n255\n"
-        data = header.encode("ascii") + np.ascontiguousarray(img).tobytes()
-    else:
-        from PIL import Image
-
-        buf = io.BytesIO()
-        if mode == "scale":
-            alpha = np.where(unk, 0, 255).astype(np.uint8).reshape(grid.rows, grid.cols)[::-1]
-            Image.fromarray(np.ascontiguousarray(np.stack([img, alpha], -1))).save(buf, "PNG")  # LA
-        else:
-            Image.fromarray(np.ascontiguousarray(img)).save(buf, "PNG")  # L
-        data = buf.getvalue()
+    alpha = (
+        np.where(unk, 0, 255).astype(np.uint8).reshape(grid.rows, grid.cols)[::-1]
+        if mode == "scale" and image_format == "png"
+        else None
+    )
+    data = _encode_image(img, image_format, grid.resolution, alpha)
     settings = RosMapSettings(
         image=image_path.name,
         resolution=grid.resolution,

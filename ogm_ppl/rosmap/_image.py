@@ -1,5 +1,6 @@
-"""Map images read: binary and ASCII PGM by a strict reader of their own (any ``maxval``, 16 bits included,
-scaled to 8 bits), every other format through Pillow."""
+"""Map images: binary and ASCII PGM read by a strict reader of their own (any ``maxval``, 16 bits included,
+scaled to 8 bits), every other format through Pillow; written as map_saver writes them (binary PGM with its
+comment line) or as PNG."""
 
 from __future__ import annotations
 
@@ -109,3 +110,20 @@ def _read_image(path: Path) -> tuple[np.ndarray, bytes]:
         why = "unrecognised format" if type(e).__name__ == "UnidentifiedImageError" else f"{type(e).__name__}: {e}"
         raise RosMapError(path, f"not a readable image ({why})") from None
     return px, data
+
+
+def _encode_image(img: np.ndarray, image_format: str, resolution: float, alpha: np.ndarray | None = None) -> bytes:
+    """The file bytes of a map image ``img`` (``H x W`` uint8, row 0 at the top): a binary 8-bit PGM with
+    map_saver's comment line (``"pgm"``), or a PNG (``"png"``: grey, or grey + ``alpha`` when given)."""
+    if image_format == "pgm":
+        h, w = img.shape
+        header = f"P5\n# CREATOR: ogm_ppl.rosmap {resolution:.3f} m/pix\n{w} {h}\n255\n"
+        return header.encode("ascii") + np.ascontiguousarray(img).tobytes()
+    from PIL import Image
+
+    buf = io.BytesIO()
+    if alpha is not None:
+        Image.fromarray(np.ascontiguousarray(np.stack([img, alpha], -1))).save(buf, "PNG")  # LA
+    else:
+        Image.fromarray(np.ascontiguousarray(img)).save(buf, "PNG")  # L
+    return buf.getvalue()
