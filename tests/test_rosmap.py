@@ -364,3 +364,60 @@ def test_raw_mode_and_yaw(tmp_path):
     with pytest.warns(UserWarning, match="yaw"):
         m1 = load_ros_map(y, flavor="ros1")
     assert m1.occupancy.tolist() == [101, -56, 0, 100]  # ROS 1: unsigned char stored as int8
+
+
+@pytest.mark.parametrize(
+    ("value", "tag"),
+    [('!!python/object/apply:os.system ["true"]', "!!python/object/apply:os.system"), ("!!binary aGk=", "!!binary")],
+)
+def test_yaml_tags_other_than_yaml_types_are_refused_naming_the_file_and_line(tmp_path, value, tag):
+    y = _write(tmp_path, GOOD + f"extra: {value}\n")
+    with pytest.raises(RosMapError, match=f"line 7: tag '{re.escape(tag)}' is not allowed") as e:
+        load_ros_map(y)
+    assert str(y) in str(e.value)
+    y = _write(tmp_path, GOOD.replace("image: map.pgm", "image: !local map.pgm"))
+    with pytest.raises(RosMapError, match="line 1: tag '!local' is not allowed"):
+        load_ros_map(y)
+
+
+def test_yaml_parse_errors_name_the_file_and_line(tmp_path):
+    y = _write(tmp_path, GOOD.replace("[0.0, 0.0, 0.0]", "[0.0, 0.0, 0.0"))
+    with pytest.raises(RosMapError, match=r"malformed YAML: line 4: .*flow sequence on line 3") as e:
+        load_ros_map(y)
+    assert str(y) in str(e.value)
+    deep = _write(tmp_path, GOOD + "extra: " + "[" * 5000 + "\n")  # the composer recurses per level
+    with pytest.raises(RosMapError, match="malformed YAML"):
+        load_ros_map(deep)
+    with pytest.raises(RosMapError, match="line 7: character #x0000"):
+        load_ros_map(_write(tmp_path, GOOD + "extra: a\0b\n"))
+
+
+def test_yaml_scalars_are_read_from_their_text(tmp_path):
+    """Quoted numbers are numbers and YAML 1.1 booleans are booleans (as map_server's yaml-cpp reads them);
+    tabs after a key's colon or before a comment are separation, a tab that indents is not; a null mode is
+    the default."""
+    text = GOOD.replace("resolution: 0.1", 'resolution: "0.25"').replace("negate: 0", "negate:\tyes  \t# on")
+    m = load_ros_map(_write(tmp_path, text + "mode: ~\nnote: 12\n"))
+    assert m.grid.resolution == 0.25 and m.settings.negate and m.settings.mode == "trinary"
+    assert m.settings.extra == {"note": "12"}
+    with pytest.raises(RosMapError, match=r"malformed YAML: line 4: .*'\\t'"):
+        load_ros_map(_write(tmp_path, GOOD.replace("origin: [0.0, 0.0, 0.0]", "origin:\n\t- 0\n\t- 0\n\t- 0")))
+
+
+def test_written_yaml_reads_as_typed_yaml(tmp_path):
+    """The YAML written is plain YAML of the types the module docstring lists, for any YAML reader."""
+    from ruamel.yaml import YAML
+
+    grid = Grid((2, 3), resolution=1e-5, origin=(-1.5, 1e20))
+    files = save_ros_map(tmp_path / "lab map", np.full(6, 0.1), grid, negate=True)
+    doc = YAML(typ="safe").load(files.yaml.read_text())
+    assert doc == {
+        "image": "lab map.pgm",
+        "mode": "trinary",
+        "resolution": 1e-5,
+        "origin": [-1.5, 1e20, 0.0],
+        "negate": 1,
+        "occupied_thresh": 0.65,
+        "free_thresh": 0.196,
+    }
+    assert all(type(doc[k]) is float for k in ("resolution", "occupied_thresh", "free_thresh"))

@@ -15,13 +15,12 @@ from ogm_ppl.datasets.rosbag import (
     POSE_COV_STAMPED,
     POSE_STAMPED,
     TF_MESSAGE,
-    _angle64,
-    _widen_array,
     bag_kind,
     bag_topics,
     typestore,
     write_bag,
 )
+from ogm_ppl.datasets.rosbag._numbers import _angle64, _widen_array
 from ogm_ppl.inference import evidence_grid_from_scans
 from ogm_ppl.models import delta_by_name
 from ogm_ppl.scans import Scans
