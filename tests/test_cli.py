@@ -147,12 +147,29 @@ def test_version(capsys):
 
 
 def test_every_option_has_help():
-    parser = build_parser()
-    sub = next(a for a in parser._actions if a.dest == "command")
-    for name, p in [("ogm-ppl", parser), *sub.choices.items()]:
+    """Every option and positional of every subcommand (and of the sub-subcommands, as ``fit-prior``'s kinds) has
+    help text, and the subcommands are those of ``COMMANDS``, each a module with ``add_parser`` and ``run``."""
+    import argparse
+    import importlib
+
+    from ogm_ppl.cli import COMMANDS
+
+    def walk(name, p):
         for a in p._actions:
             assert a.help, (name, a.option_strings or a.dest)
-    assert set(sub.choices) == {"map", "methods", "simulate", "convert", "info", "experiment", "run", "calibrate"}
+            if isinstance(a, argparse._SubParsersAction):
+                for sub_name, q in a.choices.items():
+                    yield from walk(f"{name} {sub_name}", q)
+        yield name
+
+    names = list(walk("ogm-ppl", build_parser()))
+    top = {n.split()[1] for n in names if len(n.split()) == 2}
+    assert top == set(COMMANDS) >= {"map", "methods", "simulate", "convert", "info", "experiment", "run"}
+    assert {"calibrate", "train-guide", "fit-prior"} <= top
+    assert {"ogm-ppl fit-prior tables", "ogm-ppl fit-prior field", "ogm-ppl fit-prior deltas"} <= set(names)
+    for module in COMMANDS.values():
+        mod = importlib.import_module(f"ogm_ppl.cli.{module}")
+        assert callable(mod.add_parser) and callable(mod.run), module
 
 
 def test_map_carmen_log(tmp_path, tiny_log, capsys):

@@ -34,7 +34,12 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         "or the update terms Delta",
         description=__doc__.splitlines()[0],
     )
-    kinds = p.add_subparsers(dest="kind", metavar="{" + ",".join(KINDS) + "}", required=True)
+    kinds = p.add_subparsers(
+        dest="kind",
+        metavar="{" + ",".join(KINDS) + "}",
+        required=True,
+        help="what to fit (KIND --help for its options)",
+    )
     helps = {
         "tables": "count tables: relative frequencies of window configurations (prior_NAME.npz + .json)",
         "backoff": "Witten-Bell back-off weights on a fit/validation split (backoff_NAME.json)",
