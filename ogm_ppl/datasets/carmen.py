@@ -9,7 +9,7 @@ Line formats read (one message per line, whitespace separated; ``#`` lines are c
     PARAM name value [ipc_timestamp host logger_timestamp]
 
 ``x y theta`` of FLASER and ``laser_*`` of ROBOTLASER1 are the pose of the laser (in the ``*-corrected``
-logs of ``/work/shared/data`` the SLAM-corrected pose); it is the scan pose. Other message types (ODOM,
+logs of the shared data folder the SLAM-corrected pose); it is the scan pose. Other message types (ODOM,
 NEFF, RLASER, RAWLASER*, ...) are skipped and counted per type.
 
 **Beam angles.** ROBOTLASER1 carries them: ``start_angle + i * angular_res``. FLASER does not; its beams

@@ -1,7 +1,8 @@
 r"""Real and synthetic floor-plan corpora rasterised to occupancy grids (training data for learned priors).
 
-Three corpora live under ``<root>/`` (``root`` = ``$OGM_PPL_FLOORPLANS`` or ``/work/shared/data/floorplans``);
-see each corpus's ``PROVENANCE.md`` there:
+Three corpora live under ``<root>/`` (:func:`floorplan_root`: ``$OGM_PPL_FLOORPLANS``, else ``floorplans/`` of the
+shared data folder ``$OGM_PPL_DATA``, else ``shared/data/floorplans`` beside a source checkout); see each corpus's
+``PROVENANCE.md`` there:
 
 ::
 
@@ -57,6 +58,7 @@ import numpy as np
 
 __all__ = [
     "CORPORA",
+    "CorpusNotFoundError",
     "FloorPlan",
     "REAL_LOG_BUILDINGS",
     "floorplan_root",
@@ -117,15 +119,33 @@ class FloorPlan:
 
 # -- locating files --------------------------------------------------------------------------------------------
 def floorplan_root(root=None) -> Path:
-    """``root``, else ``$OGM_PPL_FLOORPLANS``, else ``shared/data/floorplans`` beside the repository (a source
-    checkout) or ``/work/shared/data/floorplans`` (the first that exists)."""
+    """``root``, else ``$OGM_PPL_FLOORPLANS``, else ``$OGM_PPL_DATA/floorplans`` (the shared data folder), else
+    ``shared/data/floorplans`` beside the repository of a source checkout. The folder need not exist (a plan file
+    is then compared with no corpus); reading a corpus from a missing folder raises :class:`CorpusNotFoundError`."""
     if root is not None:
         return Path(root)
     env = os.environ.get("OGM_PPL_FLOORPLANS")
     if env:
         return Path(env)
-    here = Path(__file__).resolve().parents[3] / "shared" / "data" / "floorplans"
-    return here if here.is_dir() else Path("/work/shared/data/floorplans")
+    data = os.environ.get("OGM_PPL_DATA")
+    if data:
+        return Path(data) / "floorplans"
+    return Path(__file__).resolve().parents[3] / "shared" / "data" / "floorplans"
+
+
+class CorpusNotFoundError(FileNotFoundError):
+    """A floor-plan corpus is not where :func:`floorplan_root` looks; the message says where it looked and how to
+    point the library at the data."""
+
+
+def _corpus_path(path: Path, corpus: str) -> Path:
+    """``path`` (a corpus's folder or archive) if it exists, else :class:`CorpusNotFoundError`."""
+    if not path.exists():
+        raise CorpusNotFoundError(
+            f"{path}: the {corpus} floor-plan corpus is not there; set $OGM_PPL_DATA to the shared data folder "
+            "(the one holding floorplans/) or $OGM_PPL_FLOORPLANS to the corpora's folder"
+        )
+    return path
 
 
 def _check_corpus(corpus: str) -> None:
@@ -159,12 +179,13 @@ def list_plans(corpus: str, root=None) -> list[str]:
     _check_corpus(corpus)
     base = floorplan_root(root)
     if corpus == "houseexpo":
-        return sorted((p.stem for p in (base / _HOUSEEXPO_DIR).glob("*.png")), key=_natural_key)
+        d = _corpus_path(base / _HOUSEEXPO_DIR, corpus)
+        return sorted((p.stem for p in d.glob("*.png")), key=_natural_key)
     if corpus == "ipa":
-        d = base / _IPA_DIR
+        d = _corpus_path(base / _IPA_DIR, corpus)
         files = [p for p in d.iterdir() if p.suffix in (".png", ".pgm") and "_gt_segmentation" not in p.stem]
         return sorted((p.stem for p in files), key=_natural_key)
-    return sorted(_dungeon_members(str(base / _DUNGEON_TAR)), key=_natural_key)
+    return sorted(_dungeon_members(str(_corpus_path(base / _DUNGEON_TAR, corpus))), key=_natural_key)
 
 
 def building_of(corpus: str, name: str) -> str:
@@ -295,7 +316,7 @@ def _pixels(corpus: str, name: str, root) -> tuple[np.ndarray, np.ndarray]:
 
 def _dungeon_bytes(names: Sequence[str], root) -> dict[str, tuple[bytes, str]]:
     """The PNG bytes of the named DungeonMaps, read in one pass over the archive (no extraction to disk)."""
-    tar_path = str(floorplan_root(root) / _DUNGEON_TAR)
+    tar_path = str(_corpus_path(floorplan_root(root) / _DUNGEON_TAR, "dungeon"))
     members = _dungeon_members(tar_path)
     wanted = {}
     for n in names:

@@ -112,3 +112,18 @@ def test_dungeon_bad_colour_names_member(tmp_path):
         tf.addfile(info, buf)
     with pytest.raises(ValueError, match=r"train/7\.png"):
         fp.load_plan("dungeon", "train/7", root=tmp_path)
+
+
+def test_the_corpora_are_found_under_the_shared_data_folder_and_a_missing_one_says_where_it_looked(
+    tmp_path, monkeypatch
+):
+    """``$OGM_PPL_DATA/floorplans`` holds the corpora (no machine path is assumed); a corpus that is not there is
+    a :class:`CorpusNotFoundError` naming the folder and the variables, not an empty list."""
+    monkeypatch.delenv("OGM_PPL_FLOORPLANS", raising=False)
+    monkeypatch.setenv("OGM_PPL_DATA", str(tmp_path))
+    assert fp.floorplan_root() == tmp_path / "floorplans"
+    for corpus in fp.CORPORA:
+        with pytest.raises(fp.CorpusNotFoundError, match=r"floorplans.* corpus is not there; set \$OGM_PPL_DATA"):
+            fp.list_plans(corpus)
+    monkeypatch.setenv("OGM_PPL_FLOORPLANS", str(tmp_path / "mine"))
+    assert fp.floorplan_root() == tmp_path / "mine"
