@@ -51,7 +51,11 @@ def test_wheel_ships_package_data(dist):
     assert not any(n.startswith("tests/") for n in names)
 
 
-def test_wheel_keeps_torch_and_quick_start_runs(dist, tmp_path):
+@pytest.fixture(scope="module")
+def installed(dist, tmp_path_factory):
+    """A fresh venv (no system site-packages) that held torch before the wheel was installed into it, with what
+    ``pip list`` said before and after: ``(venv, before, after)``."""
+    tmp_path = tmp_path_factory.mktemp("wheel")
     venv = tmp_path / "venv"
     _run(sys.executable, "-m", "venv", venv)  # no system site-packages: only what we install
     py = venv / "bin" / "python"
@@ -72,7 +76,20 @@ def test_wheel_keeps_torch_and_quick_start_runs(dist, tmp_path):
     assert not changed, f"the wheel would change installed packages: {changed}"
 
     _run(py, "-m", "pip", "install", "-q", "-c", CONSTRAINTS, dist)
-    after = _installed(py)
+    return venv, before, _installed(py)
+
+
+def _outside_env() -> dict:
+    """The environment of a user outside the source tree: no PYTHONPATH, the shared data named by
+    ``$OGM_PPL_DATA`` (as a user of the wheel names it)."""
+    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV", "OGM_PPL_FLOORPLANS")}
+    env.update(MPLBACKEND="Agg", PYTHONSAFEPATH="1", OGM_PPL_DATA=str(ROOT.parent / "shared" / "data"))
+    return env
+
+
+def test_wheel_keeps_torch_and_quick_start_runs(installed, tmp_path):
+    venv, before, after = installed
+    py = venv / "bin" / "python"
     assert after["torch"] == before["torch"]
     assert all(after.get(n) == v for n, v in before.items())
 
@@ -89,9 +106,83 @@ def test_wheel_keeps_torch_and_quick_start_runs(dist, tmp_path):
         + block
         + "\nprint('VERSION', ogm_ppl.__version__)\n"
     )
-    env = {k: v for k, v in os.environ.items() if k not in ("PYTHONPATH", "VIRTUAL_ENV")}
-    env.update(MPLBACKEND="Agg", PYTHONSAFEPATH="1")
+    env = _outside_env()
     out = _run(py, "-c", script, cwd=work, env=env)
     version = re.search(r"VERSION (\S+)", out).group(1)
     assert version == after["ogm-ppl"]
     assert _run(venv / "bin" / "ogm-ppl", "--version", cwd=work, env=env).strip() == f"ogm-ppl {version}"
+
+
+ACTIVE_SPEC = """
+[experiment]
+kind = "active"
+name = "tiny"
+
+[plans]
+corpus = "houseexpo"
+count = 1
+window = 40
+
+[robot]
+stops = 2
+beams = 45
+max_range_cells = 15
+samples = 4
+sweeps = 2
+
+[[methods]]
+name = "frontier"
+rule = "frontier"
+
+[[methods]]
+name = "patch3-ig"
+rule = "sample_info"
+prior = "patch3:houseexpo"
+"""
+
+
+def test_the_workflows_run_from_the_installed_wheel(installed, tmp_path):
+    """With no source tree: a prior fitted and a guide trained on plan files of one's own, priors and guides scored
+    on them (``calibrate``, with its leakage checks), and an active-mapping spec; each writes what the docs say."""
+    from tests._scripts import write_plan_folder
+
+    venv = installed[0]
+    ogm = venv / "bin" / "ogm-ppl"
+    work = tmp_path / "work"
+    work.mkdir()
+    plans = write_plan_folder(work)
+    env = _outside_env()
+
+    _run(
+        ogm,
+        "fit-prior",
+        "tables",
+        "--plans",
+        plans,
+        "--pixel-size",
+        "0.025",
+        "--out",
+        "tables",
+        "--quiet",
+        cwd=work,
+        env=env,
+    )
+    assert {p.name for p in (work / "tables").iterdir()} == {"prior_plans.npz", "prior_plans.json"}
+    record = json.loads((work / "tables" / "prior_plans.json").read_text())
+    assert record["provenance"]["command"].startswith("ogm-ppl fit-prior tables")
+
+    guide = ["--examples", "4", "--val", "2", "--window", "40", "--channels", "4", "--dilations", "1", "2", "1"]
+    _run(ogm, "train-guide", "--plan-files", plans, "--pixel-size", "0.025", *guide, "--steps", "2",
+         "--out", "guide.npz", "--quiet", cwd=work, env=env)  # fmt: skip
+    assert (work / "guide.npz").is_file() and (work / "guide.json").is_file()
+
+    scene = ["--plans", "2", "--window", "36", "--poses", "2", "--beams", "45", "--range-cells", "30"]
+    _run(ogm, "calibrate", "--plan-files", plans, "--pixel-size", "0.025", "--priors", "independent", "patch3",
+         "--train", "houseexpo", *scene, "--sweeps", "4", "--burn", "2", "--no-figures", "--out", "cal",
+         cwd=work, env=env)  # fmt: skip
+    summary = json.loads((work / "cal" / "calibration_summary.json").read_text())
+    assert {"independent:houseexpo", "patch3:houseexpo"} <= {r["prior_name"] for r in summary["summary"]}
+
+    (work / "tiny.toml").write_text(ACTIVE_SPEC)
+    _run(ogm, "experiment", "tiny.toml", "--scheduler", "serial", "--quiet", "--out", "active", cwd=work, env=env)
+    assert (work / "active" / "metrics.json").is_file() and (work / "active" / "metrics.md").is_file()
