@@ -74,7 +74,7 @@ from ogm_ppl.calibration.names import (
 )
 from ogm_ppl.calibration.results import METRICS, RUN_KEYS, drop_changed, summary
 from ogm_ppl.calibration.run import CalibrationResult, calibrate
-from ogm_ppl.calibration.scenes import MASKS, Scene, make_scene, plan_set_maps, score_marginals
+from ogm_ppl.calibration.scenes import MASKS, CalibrationScene, make_scene, plan_set_maps, score_marginals
 from ogm_ppl.calibration.settings import CalibrationSettings
 
 __all__ = [
@@ -105,7 +105,7 @@ __all__ = [
     "NoUsablePlanError",
     "PriorNameError",
     "ResultFileError",
-    "Scene",
+    "CalibrationScene",
     "SettingsError",
     "SettingsMismatchError",
     "TestMap",

@@ -24,7 +24,7 @@ from typing import TYPE_CHECKING, Any, Protocol
 import numpy as np
 
 from ogm_ppl.calibration.names import unbiased_name
-from ogm_ppl.calibration.scenes import Scene, score_marginals
+from ogm_ppl.calibration.scenes import CalibrationScene, score_marginals
 from ogm_ppl.inference import CellGibbs, PatchGibbs, RunningStats, evidence_grid, run_gibbs
 from ogm_ppl.inference.mcmc import mixing_cycle
 from ogm_ppl.inference.mcmc.diagnostics import split_rhat
@@ -163,7 +163,7 @@ def support(prior, patch: tuple[int, int] | None) -> int:
 
 
 def run_chains(
-    scene: Scene,
+    scene: CalibrationScene,
     name: str,
     options: ChainOptions,
     patch_override: Mapping[str, tuple[int, int] | None] | None = None,
@@ -217,7 +217,7 @@ def agreeing(rhat: np.ndarray) -> np.ndarray:
 
 
 def run_prior(
-    scene: Scene,
+    scene: CalibrationScene,
     name: str,
     options: ChainOptions,
     patch_override: Mapping[str, tuple[int, int] | None] | None = None,
@@ -247,7 +247,7 @@ def run_prior(
     }
 
 
-def run_ogm(scene: Scene) -> tuple[dict[str, dict], float]:
+def run_ogm(scene: CalibrationScene) -> tuple[dict[str, dict], float]:
     """Traditional OGM with the fitted ``p21`` update (:func:`~ogm_ppl.inference.evidence_grid`), scored:
     ``(scores by mask, seconds)``; never-observed cells keep ``q = 0.5`` and count free when thresholded."""
     t0 = time.perf_counter()
@@ -256,7 +256,7 @@ def run_ogm(scene: Scene) -> tuple[dict[str, dict], float]:
     return score_marginals(scene, q, unknown=~ogm.observed.numpy()), time.perf_counter() - t0
 
 
-def run_guide(scene: Scene, guide: AmortisedGuide, sigma: float) -> dict:
+def run_guide(scene: CalibrationScene, guide: AmortisedGuide, sigma: float) -> dict:
     """The guide's one-pass marginals ``q(m_k = 1 | z)`` (the model's likelihood with range noise ``sigma``
     cells under a uniform prior gives it the rays) scored like a prior's pooled marginals (no chains, so no
     R-hat): ``{"scores": {mask: ...}, "seconds"}``."""

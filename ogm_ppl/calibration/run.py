@@ -46,7 +46,7 @@ from ogm_ppl.calibration.leakage import GUIDE_PREFIX, check_heldout, guide_corpo
 from ogm_ppl.calibration.names import BIAS_SUFFIX, OGM_LABEL, OWN, load_bias_file, name_digest, prior_names
 from ogm_ppl.calibration.report import figures, fmt, tables_md
 from ogm_ppl.calibration.results import drop_changed, load_previous, row_key, rows_for, summary
-from ogm_ppl.calibration.scenes import Scene, make_scene, plan_set_maps
+from ogm_ppl.calibration.scenes import CalibrationScene, make_scene, plan_set_maps
 from ogm_ppl.calibration.settings import CalibrationSettings, parse_patch_overrides
 from ogm_ppl.io import atomic_write_text, writable_folder
 
@@ -201,7 +201,7 @@ def calibrate(
     for test, maps in test_sets:
         _say(progress, f"[{test}] {len(maps)} held-out maps: " + ", ".join(f"{t.name} {t.truth.shape}" for t in maps))
         for t in maps:
-            scene: Scene | None = None
+            scene: CalibrationScene | None = None
             for name, train in [(OGM_LABEL, None), *runs_of[test]]:
                 if (test, t.name, name) in done:
                     continue

@@ -27,7 +27,7 @@ __all__ = [
     "MASKS",
     "NEAR_CELLS",
     "PlanSetOptions",
-    "Scene",
+    "CalibrationScene",
     "SceneOptions",
     "make_scene",
     "plan_set_maps",
@@ -72,7 +72,7 @@ class PlanSetOptions(Protocol):
 
 
 @dataclass
-class Scene:
+class CalibrationScene:
     """A test map scanned: ``tmap``, its ``grid`` and cast ``rays``, and ``masks`` (``"near"``, ``"unseen"``:
     ``(K,)`` bool each, row-major over the grid)."""
 
@@ -82,7 +82,7 @@ class Scene:
     masks: dict[str, np.ndarray]
 
 
-def make_scene(t: TestMap, options: SceneOptions) -> Scene:
+def make_scene(t: TestMap, options: SceneOptions) -> CalibrationScene:
     """The sparse dataset of a test map and its scored masks. Cells the map does not know (``~t.known``) are
     walls to the simulated sensor and are never scored (the corpora's maps know every cell)."""
     grid = Grid(t.truth.shape, resolution=t.resolution)
@@ -99,10 +99,10 @@ def make_scene(t: TestMap, options: SceneOptions) -> Scene:
     reached = rays.reached().reshape(grid.shape)
     near = near_mapped_mask(reached, NEAR_CELLS) & t.known
     unseen = near & ~reached
-    return Scene(t, grid, rays, {"near": near.ravel(), "unseen": unseen.ravel()})
+    return CalibrationScene(t, grid, rays, {"near": near.ravel(), "unseen": unseen.ravel()})
 
 
-def score_marginals(scene: Scene, q: np.ndarray, unknown: np.ndarray | None = None) -> dict[str, dict]:
+def score_marginals(scene: CalibrationScene, q: np.ndarray, unknown: np.ndarray | None = None) -> dict[str, dict]:
     """The scores of marginals ``q`` (``(K,)``, ``q_k = p(m_k = 1 | z)``) against the scene's truth on each
     mask of :data:`MASKS`: :func:`~ogm_ppl.metrics.prediction_scores` (NLL in bits per cell
     ``-1/|M| sum_k log2 q_k^{m_k} (1 - q_k)^{1 - m_k}``, ECE, Brier, ROC AUC, best F1, IoU; ``unknown`` cells
