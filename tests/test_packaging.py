@@ -153,20 +153,8 @@ def test_the_workflows_run_from_the_installed_wheel(installed, tmp_path):
     plans = write_plan_folder(work)
     env = _outside_env()
 
-    _run(
-        ogm,
-        "fit-prior",
-        "tables",
-        "--plans",
-        plans,
-        "--pixel-size",
-        "0.025",
-        "--out",
-        "tables",
-        "--quiet",
-        cwd=work,
-        env=env,
-    )
+    _run(ogm, "fit-prior", "tables", "--plan-files", plans, "--pixel-size", "0.025", "--out", "tables", "--quiet",
+         cwd=work, env=env)  # fmt: skip
     assert {p.name for p in (work / "tables").iterdir()} == {"prior_plans.npz", "prior_plans.json"}
     record = json.loads((work / "tables" / "prior_plans.json").read_text())
     assert record["provenance"]["command"].startswith("ogm-ppl fit-prior tables")

@@ -2,7 +2,7 @@
 or on plan files, or the update terms Delta of traditional OGM against exact 1D posteriors.
 
     ogm-ppl fit-prior tables --corpus ipa --out DIR             # prior_ipa.npz + .json (count tables)
-    ogm-ppl fit-prior backoff --plans my_plans/ --pixel-size 0.025 --out DIR   # backoff_plans.json
+    ogm-ppl fit-prior backoff --plan-files my_plans/ --pixel-size 0.025 --out DIR   # backoff_plans.json
     ogm-ppl fit-prior field --corpus dungeon --limit 20 --out DIR              # field_dungeon.npz + .json
     ogm-ppl fit-prior deltas --out DIR             # delta_<name>.json per term + delta_cv.json (the shipped fit)
     ogm-ppl fit-prior delta-setting --family p21 --sigma 1 --F 400 --out DIR   # one's own sensor (cells)
@@ -52,7 +52,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         k = kinds.add_parser(kind, help=helps[kind], description=helps[kind])
         src = k.add_mutually_exclusive_group(required=True)
         src.add_argument("--corpus", choices=CORPORA, help="fit on this corpus's training plans")
-        src.add_argument("--plans", nargs="+", type=Path, metavar="PATH", help="plan files or folders of them")
+        src.add_argument("--plan-files", nargs="+", type=Path, metavar="PATH", help="plan files or folders of them")
         k.add_argument("--out", type=Path, required=True, help="the folder the fitted files go to")
         k.add_argument("--limit", type=int, default=None, help="the first N training plans (default: the corpus's)")
         k.add_argument("--pixel-size", type=float, default=None, help="metres per pixel of plan images")
@@ -150,7 +150,7 @@ def run(args: argparse.Namespace) -> int:
             reuse=args.reuse,
         )
         return _done(args.kind, r)
-    source = args.corpus if args.corpus is not None else list(args.plans)
+    source = args.corpus if args.corpus is not None else list(args.plan_files)
     common = dict(limit=args.limit, pixel_size=args.pixel_size, resolution=args.resolution, name=args.name)
     if args.kind == "tables":
         r = fit_tables(source, args.out, min_count_5x5=args.min_count_5x5, progress=not args.quiet, **common)

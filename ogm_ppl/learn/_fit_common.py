@@ -152,9 +152,9 @@ class TrainingPlans:
             yield from fp.iter_plans(self.corpus, [self.names[i] for i in idx])
 
     def command_args(self) -> list[str]:
-        """The command-line options that give these plans (``--corpus C`` or ``--plans ...``)."""
+        """The command-line options that give these plans (``--corpus C`` or ``--plan-files ...``)."""
         if self.files:
-            args = ["--plans", *(str(f) for f in self.files)]
+            args = ["--plan-files", *(str(f) for f in self.files)]
             if self.pixel_size is not None:
                 args += ["--pixel-size", f"{self.pixel_size:g}"]
             if self.resolution is not None and self.resolution != 0.05:

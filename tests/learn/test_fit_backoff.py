@@ -32,7 +32,7 @@ def test_weights_of_own_plans_equal_the_library_fit_on_the_same_split_and_load(t
     doc = json.loads(r.files[0].read_text())
     assert doc["validation"]["patch3_mean_log_lik"] == want.provenance["validation_mean_log_lik"]["patch3"]
     prov = got.provenance
-    assert prov["command"].startswith("ogm-ppl fit-prior backoff --plans ")
+    assert prov["command"].startswith("ogm-ppl fit-prior backoff --plan-files ")
     assert "--validation-every 2" in prov["command"]
     assert prov["fit_plans"] == 1 and prov["validation_plans"] == 1 and prov["corpus"] == "files"
     prior = backed_off_prior("border_bo", (12, 12), fit, params=got)
@@ -73,7 +73,7 @@ def test_bad_options_are_named_with_their_limit_and_nothing_is_written(tmp_path,
 
 def test_the_command_fits_weights(tmp_path, capsys):
     plans = plan_folder(tmp_path)
-    argv = ["fit-prior", "backoff", "--plans", str(plans), "--pixel-size", "0.025", "--out", str(tmp_path / "o")]
+    argv = ["fit-prior", "backoff", "--plan-files", str(plans), "--pixel-size", "0.025", "--out", str(tmp_path / "o")]
     assert ogm_ppl([*argv, "--validation-every", "2", "--quiet"]) == 0
     assert "backoff_plans.json" in capsys.readouterr().out
     assert load_backoff_params("plans", path=tmp_path / "o" / "backoff_plans.json").kappa_border > 0

@@ -59,7 +59,11 @@ def test_field_of_own_plans_equals_the_stages_by_hand_and_loads(tmp_path):
     info = json.loads(r.files[1].read_text())
     assert info["settings"]["betas"] == [0.5, 0.7] and info["train_maps"] == 1 and info["validation_maps"] == 1
     cmd = info["provenance"]["command"]
-    assert cmd.startswith("ogm-ppl fit-prior field --plans ") and "--betas 0.5 0.7" in cmd and "--check-size 24" in cmd
+    assert (
+        cmd.startswith("ogm-ppl fit-prior field --plan-files ")
+        and "--betas 0.5 0.7" in cmd
+        and "--check-size 24" in cmd
+    )
     assert set(info["sampler_check"]) == {"validation_window_centre_occupied_share", "scales1", "scales2"}
 
 
@@ -109,7 +113,7 @@ def test_bad_options_are_named_with_their_limit_and_nothing_is_written(tmp_path,
 def test_the_command_fits_a_field(tmp_path, capsys):
     plans = plan_folder(tmp_path)
     out = tmp_path / "o"
-    argv = ["fit-prior", "field", "--plans", str(plans), "--pixel-size", "0.025", "--out", str(out), "--quiet"]
+    argv = ["fit-prior", "field", "--plan-files", str(plans), "--pixel-size", "0.025", "--out", str(out), "--quiet"]
     argv += ["--validation-every", "2", "--betas", "0.5", "0.7", "--bias-steps", "1", "--pl-max-iter", "15"]
     argv += ["--check-size", "24", "--check-chains", "2", "--check-sweeps", "20"]
     argv += ["--report-sizes", "24", "--report-sweeps", "20"]

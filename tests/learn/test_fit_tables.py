@@ -34,7 +34,9 @@ def test_tables_of_own_plans_equal_counting_them_and_load_through_the_readers(tm
     tables = load_tables(r.files[0])
     assert _same_arrays(tables, direct)
     prov = tables.provenance
-    assert prov["command"].startswith("ogm-ppl fit-prior tables --plans ") and "--pixel-size 0.025" in prov["command"]
+    assert (
+        prov["command"].startswith("ogm-ppl fit-prior tables --plan-files ") and "--pixel-size 0.025" in prov["command"]
+    )
     assert prov["corpus"] == "files" and prov["plans"] == 2 and prov["resolution"] == 0.05
     assert {"commit", "date", "machine", "plan_names_sha256", "sample"} <= set(prov)
     info = json.loads(r.files[1].read_text())
@@ -85,7 +87,7 @@ def test_an_out_that_is_a_file_is_refused(tmp_path):
 def test_the_command_fits_tables_and_refuses_a_bad_option(tmp_path, capsys):
     plans = plan_folder(tmp_path)
     out = tmp_path / "cmd"
-    argv = ["fit-prior", "tables", "--plans", str(plans), "--pixel-size", "0.025", "--out", str(out), "--quiet"]
+    argv = ["fit-prior", "tables", "--plan-files", str(plans), "--pixel-size", "0.025", "--out", str(out), "--quiet"]
     assert ogm_ppl([*argv, "--name", "mine"]) == 0
     assert "prior_mine.npz" in capsys.readouterr().out
     direct = count_tables(read_plans(plans), symmetries=True, min_count_5x5=2, progress=False)
