@@ -50,7 +50,8 @@ from ogm_ppl import GaussianRange, OccupancyModel, raycast
 from ogm_ppl.datasets.carmen import read_carmen
 from ogm_ppl.inference.mcmc.gibbs import CellGibbs
 from ogm_ppl.inference.mcmc.kernel import initial_map
-from ogm_ppl.inference.online import OnlineMap, _one
+from ogm_ppl.inference.online import OnlineMap
+from ogm_ppl.inference.online._replay import _one
 from ogm_ppl.metrics import best_f1
 from ogm_ppl.priors import IndependentPrior
 from ogm_ppl.scans import Scans

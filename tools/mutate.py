@@ -16,7 +16,7 @@ script decides which mutants to run, where, and against which tests:
 * **numba's cache.** Kernels are ``@njit(cache=True)``. Numba keys a cached function on the sha256 of
   its own source file only, so a mutant in one kernel file does reach that file's functions, but the
   cached machine code of kernels in *other* files that call it (``log_odds.py`` calls ``trace_ray`` of
-  ``_raycast_kernels.py``; ``gibbs.py`` calls ``cells.py``; ``patches.py`` calls ``gibbs.py``) still
+  ``_raycast_kernels.py``; ``patch_state.py`` calls ``cells.py``; ``patches.py`` calls ``patch_rays.py``) still
   holds the unmutated callee, and the mutant would pass for a survivor. Each mutant therefore runs with
   its own ``NUMBA_CACHE_DIR``: a copy of the cache the baseline warmed, without the entries of the
   mutated file and of every numba module that imports it (transitively), which are compiled again.
@@ -151,10 +151,40 @@ MODULES: dict[str, Module] = {
         sites=6,
         max_test_s=5,
     ),
-    "gibbs_kernels": Module(
-        "ogm_ppl/inference/_kernels/gibbs.py",
+    "patch_state_kernels": Module(
+        "ogm_ppl/inference/_kernels/patch_state.py",
         ("tests/inference/patch_map/test_patch_map.py", *_GIBBS_TESTS),
-        sites=8,
+        sites=1,
+        max_test_s=5,
+    ),
+    "patch_rays_kernels": Module(
+        "ogm_ppl/inference/_kernels/patch_rays.py",
+        ("tests/inference/patch_map/test_patch_map.py", *_GIBBS_TESTS),
+        sites=2,
+        max_test_s=5,
+    ),
+    "patch_lik_kernels": Module(
+        "ogm_ppl/inference/_kernels/patch_lik.py",
+        ("tests/inference/patch_map/test_patch_map.py", *_GIBBS_TESTS),
+        sites=2,
+        max_test_s=5,
+    ),
+    "additive_sweep_kernels": Module(
+        "ogm_ppl/inference/_kernels/additive_sweep.py",
+        ("tests/inference/patch_map/test_patch_map.py", *_GIBBS_TESTS),
+        sites=1,
+        max_test_s=5,
+    ),
+    "candidate_sweep_kernels": Module(
+        "ogm_ppl/inference/_kernels/candidate_sweep.py",
+        ("tests/inference/patch_map/test_patch_map.py", *_GIBBS_TESTS),
+        sites=2,
+        max_test_s=5,
+    ),
+    "patch_sweep_kernels": Module(
+        "ogm_ppl/inference/_kernels/patch_sweep.py",
+        ("tests/inference/patch_map/test_patch_map.py", *_GIBBS_TESTS),
+        sites=1,
         max_test_s=5,
     ),
     "patches_kernels": Module(

@@ -31,7 +31,7 @@ and applied to the full training tables.
 
 **The prior over a map** is the tiling joint of :mod:`ogm_ppl.priors.border`,
 ``p(m) = prod_t p(inner_t | border_t) / Z``, now strictly positive. Patch Gibbs keeps the sparse
-table's speed with an exact two-step update per tile (:mod:`ogm_ppl.inference._kernels.gibbs`): a heat
+table's speed with an exact two-step update per tile (:mod:`ogm_ppl.inference._kernels.candidate_sweep`): a heat
 bath restricted to the counted configurations ``S_b`` when the current one is among them, then with
 probability ``p_escape`` an independence Metropolis-Hastings move proposing from ``p_back``.
 """

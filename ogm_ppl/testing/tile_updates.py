@@ -3,7 +3,7 @@ problems: the restricted heat bath + escape move of backed-off tables, and the t
 
 :func:`~ogm_ppl.testing.kernels.sweep_matrix` knows patch updates that draw from the full conditional.
 :class:`~ogm_ppl.inference.mcmc.PatchGibbs` on a backed-off table (a restricted candidate set, see
-:func:`~ogm_ppl.inference._kernels.gibbs._restricted_update`) and with ``update="thesis"`` (Section 5.2.3:
+:func:`~ogm_ppl.inference._kernels.candidate_sweep._restricted_update`) and with ``update="thesis"`` (Section 5.2.3:
 each tile drawn from ``p(a_k | border_k)`` times the likelihood, the neighbouring tiles' factors ignored)
 do something else; :func:`tile_update_matrix` builds their one-update matrices from the pieces the
 compiled kernel reads (the candidates and the tile's own weights of
@@ -18,7 +18,7 @@ from __future__ import annotations
 import numpy as np
 import torch
 
-from ogm_ppl.inference._kernels.gibbs import patch_log_lik
+from ogm_ppl.inference._kernels.patch_lik import patch_log_lik
 from ogm_ppl.priors.compiled.registry import patch_candidates, restricted
 from ogm_ppl.testing.kernels import _codes, enumerate_maps
 

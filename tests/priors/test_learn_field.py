@@ -11,8 +11,6 @@ from ogm_ppl.inference._kernels.cell_sweep import prior_log_odds
 from ogm_ppl.priors.compiled import prior_gibbs_sweeps
 from ogm_ppl.priors.compiled.field import pattern_field
 from ogm_ppl.priors.learn_field import (
-    _PL,
-    _nbhd_keys,
     backoff_potentials,
     data_crops,
     field_stats,
@@ -22,6 +20,8 @@ from ogm_ppl.priors.learn_field import (
     sampler_check,
     unary_orbits,
 )
+from ogm_ppl.priors.learn_field._pl import _PL
+from ogm_ppl.priors.learn_field._stats import _nbhd_keys
 from ogm_ppl.priors.pattern_field import PatternFieldPrior, orbits_to_table, symmetry_orbits
 
 W = 2

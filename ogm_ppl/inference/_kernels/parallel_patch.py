@@ -37,7 +37,8 @@ import numpy as np
 
 from ogm_ppl.inference._kernels import cell_sweep as cs
 from ogm_ppl.inference._kernels import parallel as par
-from ogm_ppl.inference._kernels.gibbs import _next_stamp, patch_pass
+from ogm_ppl.inference._kernels.patch_state import _next_stamp
+from ogm_ppl.inference._kernels.patch_sweep import patch_pass
 
 __all__ = ["PatchTileLayout", "chromatic_patch_sweep", "patch_draws", "patch_tile_layout"]
 

@@ -21,11 +21,8 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from ogm_ppl.inference._kernels.gibbs import (
-    add_patch_prior,
-    additive_patch_log_weights,
-    collect_patch_rays,
-)
+from ogm_ppl.inference._kernels.additive_sweep import add_patch_prior, additive_patch_log_weights
+from ogm_ppl.inference._kernels.patch_rays import collect_patch_rays
 
 OFFLINE, ONLINE, INVERSE = 0, 1, 2
 
@@ -56,7 +53,7 @@ def _logaddexp(a, b):
 @nb.njit(cache=True)
 def patch_log_weights_mode(mode, ps, patch, prior, sensor, out):
     """``out[w]``: unnormalised log posterior of configuration ``w`` (prior included), with the reference
-    map and its first hits in the :class:`~ogm_ppl.inference._kernels.gibbs.PatchState` ``ps``. Returns ``W``."""
+    map and its first hits in the :class:`~ogm_ppl.inference._kernels.patch_state.PatchState` ``ps``. Returns ``W``."""
     if mode == OFFLINE:
         return additive_patch_log_weights(ps, patch, prior, out)
     in_patch, offsets, cells, ll = ps.in_patch, ps.offsets, ps.cells, ps.ll

@@ -49,17 +49,16 @@ import torch
 
 from ogm_ppl.inference._kernels import cell_sweep as cs
 from ogm_ppl.inference._kernels.choice import accept_random, choose
-from ogm_ppl.inference._kernels.gibbs import (
+from ogm_ppl.inference._kernels.patch_lik import patch_log_lik
+from ogm_ppl.inference._kernels.patch_state import (
     PatchGeometry,
     PatchRule,
     build_patch_at,
     patch_config,
-    patch_log_lik,
-    patch_log_weights,
     patch_state,
-    patch_sweep,
     set_patch,
 )
+from ogm_ppl.inference._kernels.patch_sweep import patch_log_weights, patch_sweep
 from ogm_ppl.inference.mcmc.kernel import KernelStateError, MapKernel, initial_map
 from ogm_ppl.inference.tiling import patch_cells, patch_shape, tiling_starts
 from ogm_ppl.models.occupancy import OccupancyModel
@@ -260,7 +259,7 @@ class PatchGibbs(MapKernel):
         p_escape: for backed-off tables (strictly positive, e.g. ``border_bo``), the probability per patch
             update of the escape move (an independence Metropolis-Hastings proposal from the back-off
             table after the heat bath on the counted configurations; see
-            :func:`~ogm_ppl.inference._kernels.gibbs._restricted_update`); it makes the chain irreducible.
+            :func:`~ogm_ppl.inference._kernels.candidate_sweep._restricted_update`); it makes the chain irreducible.
             Unused by other priors.
         region: ``None`` (the whole map) or cells (boolean mask of ``K`` cells or of the grid's shape, or
             cell indices): the systematic / permutation scans visit only the fixed patches that hold a

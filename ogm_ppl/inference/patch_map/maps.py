@@ -28,7 +28,7 @@ import torch
 
 from ogm_ppl._validate import as_binary_maps
 from ogm_ppl.inference._kernels.cells import first_hits
-from ogm_ppl.inference._kernels.gibbs import patch_state
+from ogm_ppl.inference._kernels.patch_state import patch_state
 from ogm_ppl.inference._kernels.patches import INVERSE, OFFLINE, ONLINE, PatchSensor, patch_map_all
 from ogm_ppl.inference.tiling import centred_patches, tile_patches
 from ogm_ppl.models.occupancy import OccupancyModel

@@ -10,14 +10,9 @@ import numpy as np
 import pytest
 
 from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
-from ogm_ppl.inference._kernels.gibbs import (
-    build_patch_at,
-    collect_rays,
-    lik_grouped,
-    lik_list,
-    ray_scratch,
-    set_patch,
-)
+from ogm_ppl.inference._kernels.patch_lik import lik_grouped, lik_list
+from ogm_ppl.inference._kernels.patch_rays import collect_rays, ray_scratch
+from ogm_ppl.inference._kernels.patch_state import build_patch_at, set_patch
 from ogm_ppl.inference.mcmc.gibbs import PatchGibbs
 from ogm_ppl.priors import IndependentPrior
 

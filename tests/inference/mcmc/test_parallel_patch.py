@@ -11,10 +11,11 @@ import numpy as np
 import pytest
 import torch
 
-from ogm_ppl.inference._kernels import gibbs as kg
 from ogm_ppl.inference._kernels import parallel as par
 from ogm_ppl.inference._kernels import parallel_patch as pp
 from ogm_ppl.inference._kernels.cells import first_hits
+from ogm_ppl.inference._kernels.patch_state import patch_state
+from ogm_ppl.inference._kernels.patch_sweep import patch_sweep
 from ogm_ppl.inference.mcmc import PatchGibbs
 from ogm_ppl.inference.mcmc.gibbs import _SCAN_CODES
 from ogm_ppl.inference.mcmc.parallel import ChromaticPatchGibbs
@@ -41,14 +42,14 @@ def reference_sweep(k, start: np.ndarray, seed: np.uint64) -> np.ndarray:
     state of its own, through the serial patch kernel."""
     m = start.copy()
     f = first_hits(m, k._offsets, k._cells)
-    ps = kg.patch_state(m, f, k._index)
+    ps = patch_state(m, f, k._index)
     lay = k.layout
     rows = 5 if k._escapes() else 3
     groups = [(int(t), lay.anchors[lay.tile_off[t] : lay.tile_off[t + 1]]) for t in lay.col_tiles]
     groups.append((lay.n_tiles, lay.long_anchors))
     for t, anchors in groups:
         a, u = pp.patch_draws(anchors, _SCAN_CODES[k.scan], np.uint64(par.tile_seed(seed, t)), rows)
-        kg.patch_sweep(ps, k._geometry(), a, k._compiled, u, k._patch_rule())
+        patch_sweep(ps, k._geometry(), a, k._compiled, u, k._patch_rule())
     return m
 
 

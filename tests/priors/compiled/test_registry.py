@@ -5,7 +5,7 @@ from __future__ import annotations
 import numba
 import numpy as np
 
-from ogm_ppl.inference._kernels import gibbs
+from ogm_ppl.inference._kernels.candidate_sweep import _candidate_loop_lean, _candidate_loop_rt, candidate_loop_of
 from ogm_ppl.methods import RunContext, get_method
 from ogm_ppl.priors import BorderPatchPrior, IndependentPrior, PatternFieldPrior
 from ogm_ppl.priors.compiled import registry
@@ -45,8 +45,8 @@ def test_register_defaults_to_the_runtime():
 def test_a_patch_sweep_runs_the_loop_its_kind_declares(room):  # noqa: F811
     """The tile table's patch sweep runs the runtime-free loop; the stencil kind's keeps the runtime (and both
     sweep)."""
-    assert gibbs.candidate_loop_of(numba.typeof(_border().compiled())) is gibbs._candidate_loop_lean
-    assert gibbs.candidate_loop_of(numba.typeof(CheckerboardPrior((6, 6)).compiled())) is gibbs._candidate_loop_rt
+    assert candidate_loop_of(numba.typeof(_border().compiled())) is _candidate_loop_lean
+    assert candidate_loop_of(numba.typeof(CheckerboardPrior((6, 6)).compiled())) is _candidate_loop_rt
     method = get_method("gibbs")
     for prior in (KIND, "border:generated"):
         params = method.parse({"prior": prior, "sweeps": 2, "burn_in": 1, "patch": [3, 3]})
