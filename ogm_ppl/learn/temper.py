@@ -118,7 +118,7 @@ class TemperSettings:
             check_float(b, "betas", 0.0, 1.0, lo_open=False)
         check_int(self.plans, "plans", 1, 1000)
         check_int(self.window, "window", 8, 4096)
-        check_int(self.generated_shape, "generated_shape", self.window, 4096)
+        check_int(self.generated_shape, "generated_shape", max(80, self.window), 4096)  # a 20-cell border
         check_int(self.poses, "poses", 1, 1000)
         check_int(self.beams, "beams", 1, 100_000)
         check_float(self.range_cells, "range_cells", 0.0, 1e5)
