@@ -136,16 +136,18 @@ def occupancy_trace(name: str, settings: BiasSettings, bias: float = 0.0, starts
     }
 
 
-def bias_by_bisection(name: str, target: float, settings: BiasSettings) -> dict:
+def bias_by_bisection(name: str, target: float, settings: BiasSettings, progress: bool = False) -> dict:
     """The bias ``h`` whose prior fills ``target`` of an empty window: ``settings.bias_steps`` bisection steps
     of the two-chain share (all-free, all-occupied starts) on ``[-R, R]``, then the three-chain trace at ``h``:
-    ``{"bias", "steps": [[h, share], ...], **occupancy_trace(name, settings, h)}``."""
+    ``{"bias", "steps": [[h, share], ...], **occupancy_trace(name, settings, h)}``; ``progress``: a line a step."""
     lo, hi = -settings.bias_range, settings.bias_range
     steps = []
     for _ in range(settings.bias_steps):
         h = 0.5 * (lo + hi)
         share = occupancy_trace(name, settings, h, starts=("free", "occupied"))["share"]
         steps.append([h, share])
+        if progress:
+            print(f"  {name} step {len(steps)}/{settings.bias_steps}: h {h:+.4f} -> share {share:.3f}", flush=True)
         lo, hi = (h, hi) if share < target else (lo, h)
     h = 0.5 * (lo + hi)
     return {"bias": h, "steps": steps, **occupancy_trace(name, settings, h)}
@@ -201,7 +203,7 @@ def fit_bias(
         out_dir: the folder the file goes to (created if missing).
         train: the corpora whose shipped priors are biased (target: their tables' ``lambda``).
         settings: :class:`BiasSettings` (the chains and the bisection).
-        progress: a line per prior.
+        progress: a line per prior and bisection step.
 
     Raises:
         FitOptionError: an option out of range (the message names it and the limit).
@@ -219,7 +221,7 @@ def fit_bias(
     fits: dict[str, dict] = {}
     for name, kind, corpus in targets:
         lam = float(tables_by_name(corpus).lam)
-        f = bias_by_bisection(name, lam, s)
+        f = bias_by_bisection(name, lam, s, progress)
         fits[name] = {"kind": kind, "train": corpus, "corpus_share": lam, **f}
         if progress:
             chains = " ".join(f"{v:.3f}" for v in f["chain_shares"])
