@@ -17,10 +17,9 @@ corpus's is ``lambda`` of its tables (the learned independent prior: the occupie
     python experiments/prior_occupancy.py --train dungeon houseexpo       # a few minutes
 
 ``--fit-bias`` also fits, per prior, the bias ``h`` of :class:`~ogm_ppl.priors.BiasedPrior` (the prior times
-``exp(h sum_k m_k)``) whose share is the corpus's: ``--bias-steps`` bisection steps on ``[-R, R]``
-(``--bias-range``) of the share of two chains (all-free and all-occupied starts), then the three-chain trace at
-the chosen ``h``. Only the training tables enter (the target is their ``lambda``). It writes ``OUT/bias.json``,
-which ``ogm-ppl calibrate --bias-file`` reads.
+``exp(h sum_k m_k)``) whose share is the corpus's, and writes ``OUT/bias.json``, which ``ogm-ppl calibrate
+--bias-file`` reads: :func:`ogm_ppl.learn.fit_bias` (``ogm-ppl fit-prior bias``; the bisection is in
+:mod:`ogm_ppl.learn.bias`).
 
 Writes ``OUT/prior_occupancy.json`` (settings, provenance, one row per prior with each chain's trace) and prints
 a table.
@@ -34,81 +33,18 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-import torch
-
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ogm_ppl import GaussianRange, Grid, OccupancyModel, Scans, raycast
-from ogm_ppl.calibration import BIAS_FORMAT, default_patch, prior_names
-from ogm_ppl.inference.mcmc import mixing_cycle
+from ogm_ppl.calibration import prior_names
 from ogm_ppl.io import atomic_write_text
-from ogm_ppl.priors import BiasedPrior
-from ogm_ppl.priors.named import load_temper_params, prior_by_name, split_prior_name
+from ogm_ppl.learn.bias import STARTS, BiasSettings, empty_model, fit_bias, occupancy_trace
+from ogm_ppl.priors.named import load_temper_params, split_prior_name
 from ogm_ppl.priors.tables import tables_by_name
+
+__all__ = ["PRIORS", "STARTS", "TRAIN", "empty_model", "main"]
 
 TRAIN = ("generated", "houseexpo", "ipa", "dungeon")
 PRIORS = ("border_bo", "border_bo@cal", "border1_bo", "border1_bo@cal", "patch3")
-STARTS = ("free", "occupied", "prior")
-
-
-def empty_model(prior, window: int) -> tuple[OccupancyModel, np.ndarray]:
-    """A ``window x window`` model whose only reading is one short ray at the centre, and the cells it does not
-    touch (the ones counted)."""
-    grid = Grid((window, window), resolution=1.0)
-    c = window / 2 + 0.5
-    scans = Scans(np.array([[c, c, 0.0]]), np.array([0.0]), np.array([[0.5]]), max_range=float(window))
-    rays = raycast(grid, scans)
-    counted = ~rays.reached()
-    return OccupancyModel(grid, rays, GaussianRange(1.0), prior), counted
-
-
-def occupancy_trace(name: str, args: argparse.Namespace, bias: float = 0.0, starts=STARTS) -> dict:
-    """Chains under the prior ``name`` (times ``exp(bias sum_k m_k)``: :class:`~ogm_ppl.priors.BiasedPrior`) on an
-    empty window, one from each of ``starts``: the occupied share every ``args.every`` sweeps."""
-    prior = prior_by_name(name, (args.window, args.window))
-    patch = default_patch(prior)
-    if bias:
-        prior = BiasedPrior(prior, bias)
-    model, counted = empty_model(prior, args.window)
-    traces, secs = [], []
-    for j, start in enumerate(starts):
-        init = torch.ones(model.num_cells, dtype=torch.float64) if start == "occupied" else start
-        kernel = mixing_cycle(model, patch, init=init)
-        torch.manual_seed(args.seed + 1000 * j)
-        kernel.setup()
-        params = kernel.current_params()
-        t0 = time.perf_counter()
-        tr = []
-        for i in range(args.sweeps):
-            params = kernel.sample(params)
-            if (i + 1) % args.every == 0:
-                tr.append(float(kernel.state[counted].mean()))
-        traces.append(tr)
-        secs.append(time.perf_counter() - t0)
-    half = np.array([t[len(t) // 2 :] for t in traces])
-    return {
-        "traces": traces,
-        "share": float(half.mean()),
-        "chain_shares": [float(v) for v in half.mean(1)],
-        "seconds": float(sum(secs)),
-        "patch": None if patch is None else list(patch),
-    }
-
-
-def fit_bias(name: str, target: float, args: argparse.Namespace) -> dict:
-    """The bias ``h`` whose prior fills ``target`` of an empty window: ``args.bias_steps`` bisection steps on
-    ``[-args.bias_range, args.bias_range]`` of the occupied share of two chains (from the all-free and the
-    all-occupied map; the share rises with ``h``), then the three-chain trace at the chosen ``h``."""
-    lo, hi = -args.bias_range, args.bias_range
-    steps = []
-    for _ in range(args.bias_steps):
-        h = 0.5 * (lo + hi)
-        share = occupancy_trace(name, args, h, starts=("free", "occupied"))["share"]
-        steps.append([h, share])
-        lo, hi = (h, hi) if share < target else (lo, h)
-    h = 0.5 * (lo + hi)
-    return {"bias": h, "steps": steps, **occupancy_trace(name, args, h)}
 
 
 def main(argv=None) -> dict:
@@ -136,11 +72,15 @@ def main(argv=None) -> dict:
         kind, corpus, _, _ = split_prior_name(k)
         if corpus:
             raise SystemExit(f"--priors takes kinds (the corpora are --train), got {k!r}")
-    from benchmarks._common import provenance
+    from ogm_ppl.provenance import provenance
 
+    settings = BiasSettings(args.window, args.sweeps, args.every, args.seed, args.bias_range, args.bias_steps)
+    fits = {}
+    if args.fit_bias:
+        r = fit_bias(args.priors, args.out, train=args.train, settings=settings, progress=False)
+        fits = json.loads(r.files[0].read_text())["fits"]
     t0 = time.perf_counter()
     rows: list[dict] = []
-    biases: dict[str, float] = {}
     print(f"occupied share of an empty {args.window} x {args.window} window, second half of 3 chains")
     print(f"{'prior':28s} {'corpus':>7s} {'prior':>6s}  chains (free, occupied, prior start)")
     for corpus in args.train:
@@ -151,14 +91,13 @@ def main(argv=None) -> dict:
             if mod == "cal" and base not in load_temper_params(corpus).beta:
                 print(f"{name:28s} skipped: no tempering exponent fitted")
                 continue
-            r = occupancy_trace(name, args)
+            r = occupancy_trace(name, settings)
             rows.append({"prior": name, "kind": kind, "train": corpus, "corpus_share": lam, **r})
             chains = " ".join(f"{v:.3f}" for v in r["chain_shares"])
             print(f"{name:28s} {lam:7.3f} {r['share']:6.3f}  {chains}  ({r['seconds']:.0f} s)", flush=True)
             if args.fit_bias:
-                f = fit_bias(name, lam, args)
+                f = {k: v for k, v in fits[name].items() if k not in ("kind", "train", "corpus_share")}
                 rows[-1]["fit"] = f
-                biases[name] = f["bias"]
                 chains = " ".join(f"{v:.3f}" for v in f["chain_shares"])
                 print(
                     f"{'  biased, h = ' + format(f['bias'], '+.3f'):28s} {lam:7.3f} {f['share']:6.3f}  {chains}",
@@ -177,14 +116,6 @@ def main(argv=None) -> dict:
     args.out.mkdir(parents=True, exist_ok=True)
     path = args.out / "prior_occupancy.json"
     atomic_write_text(path, json.dumps(doc, indent=1, allow_nan=False))
-    if args.fit_bias:
-        bias_doc = {
-            "format": BIAS_FORMAT,
-            "provenance": doc["provenance"],
-            "settings": doc["settings"],
-            "bias": biases,
-        }
-        atomic_write_text(args.out / "bias.json", json.dumps(bias_doc, indent=1, allow_nan=False))
     print(f"wrote {path} ({doc['seconds']:.0f} s)")
     return doc
 

@@ -1,25 +1,26 @@
-"""``experiments/fit_temper.py --quick`` writes a file :func:`load_temper_params` accepts, whose exponent per
-kind is the grid's lowest mean validation NLL."""
+"""experiments/fit_temper.py is a front of ogm_ppl.learn.fit_temper: ``--quick`` gives the library its small
+settings and the folder, and no ``--out`` ships."""
 
 import sys
-from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "experiments"))
-
-import fit_temper
-
-from ogm_ppl.priors.named import load_temper_params
+from ogm_ppl.learn import FitResult
+from tests._scripts import load_experiment
 
 
-def test_quick_fit_round_trips(tmp_path):
-    (doc,) = fit_temper.main(["--quick", "--out", str(tmp_path)])
-    p = load_temper_params("dungeon", path=tmp_path / "temper_dungeon.json")
-    assert p.beta == doc["beta"] and set(p.beta) == {"mrf", "mrf8"}
-    for kind, v in p.validation.items():
-        scores = dict(zip(v["betas"], v["mean_nll_bits"]))
-        assert p.beta[kind] == min(scores, key=lambda b: (scores[b], -b))
-    assert doc["provenance"]["fit_names_sha256"] and doc["provenance"]["validation_plans_scored"]
-
-
-def test_choose_prefers_the_larger_beta_on_ties():
-    assert fit_temper.choose({1.0: [0.5, 0.7], 0.5: [0.6, 0.6], 0.25: [0.9]}) == 1.0
+def test_quick_passes_its_settings_to_the_library(tmp_path, monkeypatch):
+    mod = load_experiment("fit_temper_script", "fit_temper.py")
+    try:
+        calls = []
+        monkeypatch.setattr(
+            mod, "fit_temper", lambda *a, **kw: calls.append((a, kw)) or FitResult("temper", (), {}, {}, 0)
+        )
+        assert mod.main(["--quick", "--out", str(tmp_path)]) == []
+        mod.main(["--corpus", "ipa", "--kinds", "border_bo"])
+        (args, kw), (args2, kw2) = calls
+        s = kw["settings"]
+        assert args == (["dungeon"], tmp_path) and not kw["ship"] and not kw["update"]
+        assert (s.plans, s.window, s.sweeps, s.burn, s.fit_limit) == (2, 48, 10, 4, 10)
+        assert s.kinds == mod.KINDS[:2] and s.betas == mod.BETAS[:2]
+        assert args2 == (["ipa"], None) and kw2["ship"] and kw2["settings"].kinds == ("border_bo",)
+    finally:
+        sys.modules.pop("fit_temper_script", None)

@@ -179,7 +179,7 @@ def run_chains(
     name, biased = unbiased_name(name)
     kind, corpus, _, mod = split_prior_name(name)
     if mod == "cal" and tables is None and kind not in load_temper_params(corpus).beta:
-        return {"skipped": f"no tempering exponent fitted for {kind} on {corpus} (experiments/fit_temper.py)"}
+        return {"skipped": f"no tempering exponent fitted for {kind} on {corpus} (ogm-ppl fit-prior temper)"}
     prior = prior_by_name(name, scene.grid.shape, tables=tables)
     patch = patch_override[kind] if patch_override and kind in patch_override else default_patch(prior)
     if biased:

@@ -45,7 +45,7 @@ OWN = "own"
 #: (:class:`~ogm_ppl.priors.BiasedPrior`)
 BIAS_SUFFIX = "+bias"
 #: the format tag of a bias file (``{"format", "provenance", "settings", "bias": {prior name: h}}``), which
-#: ``experiments/prior_occupancy.py --fit-bias`` writes
+#: ``ogm-ppl fit-prior bias`` (:func:`ogm_ppl.learn.fit_bias`) writes
 BIAS_FORMAT = "ogm_ppl.prior_bias"
 
 
@@ -115,8 +115,9 @@ def name_digest(name: str, bias: Mapping[str, float], guides: Mapping[str, Amort
 
 
 def load_bias_file(path: str | Path | None) -> dict[str, float]:
-    """The biases ``{prior name: h}`` of a bias file (``experiments/prior_occupancy.py --fit-bias`` writes one;
-    ``{}`` for no file), validated. Raises :class:`~ogm_ppl.calibration.errors.BiasFileError` naming the file."""
+    """The biases ``{prior name: h}`` of a bias file (``ogm-ppl fit-prior bias``, :func:`ogm_ppl.learn.fit_bias`,
+    writes one; ``{}`` for no file), validated. Raises :class:`~ogm_ppl.calibration.errors.BiasFileError` naming
+    the file."""
     if path is None:
         return {}
     try:

@@ -8,13 +8,13 @@ estimated with every prior (``--priors``) learned on every training corpus (``--
 sampling (``--kernel``, ``--sweeps`` after ``--burn``; patch Gibbs over the tile of a prior whose compiled
 bundle weighs a sparse support, skipped over ``--max-support`` configurations). Traditional OGM with the fitted
 ``p21`` update is the baseline row. ``KIND@cal`` is a kind raised to the tempering exponent that
-``experiments/fit_temper.py`` fitted; ``--diagonal`` scores each test corpus with the priors learned on it
-only.
+``ogm-ppl fit-prior temper`` (:func:`ogm_ppl.learn.fit_temper`) fitted; ``--diagonal`` scores each test corpus
+with the priors learned on it only.
 
 ``--guides C ...`` adds a ``guide:C`` row, the one-pass marginals of the amortised guide learned on corpus
 ``C`` (``houseexpo+ipa``: on both; ``@sym``: averaged over the 8 turns and flips of the window), checked
 against the training set of each corpus it was learned on. ``--bias-file bias.json``
-(``experiments/prior_occupancy.py --fit-bias``) also runs every prior it names as ``NAME+bias``.
+(``ogm-ppl fit-prior bias``, :func:`ogm_ppl.learn.fit_bias`) also runs every prior it names as ``NAME+bias``.
 
 ``--plan-files PATH ...`` (ROS map YAMLs, HouseExpo layouts, images with ``--pixel-size``, or folders of them)
 adds one more test set, labelled ``--plan-set``, scored with every prior of every ``--train`` corpus and every
@@ -169,7 +169,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
         "--bias-file",
         type=Path,
         default=None,
-        help="bias.json of prior_occupancy.py --fit-bias: each prior it names also runs biased (NAME+bias)",
+        help="bias.json of ogm-ppl fit-prior bias: each prior it names also runs biased (NAME+bias)",
     )
     ap.add_argument(
         "--max-support",

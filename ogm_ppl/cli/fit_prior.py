@@ -1,15 +1,21 @@
-"""``ogm-ppl fit-prior tables|backoff|field|deltas|delta-setting``: fit a learned prior's artefacts on a corpus
-or on plan files, or the update terms Delta of traditional OGM against exact 1D posteriors.
+"""``ogm-ppl fit-prior tables|backoff|field|deltas|delta-setting|temper|headline|bias``: fit a learned prior's
+artefacts on a corpus or on plan files, the update terms Delta of traditional OGM against exact 1D posteriors,
+or what the calibration protocol chooses on validation plans (tempering exponents, the headline's prior, biases).
 
     ogm-ppl fit-prior tables --corpus ipa --out DIR             # prior_ipa.npz + .json (count tables)
     ogm-ppl fit-prior backoff --plan-files my_plans/ --pixel-size 0.025 --out DIR   # backoff_plans.json
     ogm-ppl fit-prior field --corpus dungeon --limit 20 --out DIR              # field_dungeon.npz + .json
     ogm-ppl fit-prior deltas --out DIR             # delta_<name>.json per term + delta_cv.json (the shipped fit)
     ogm-ppl fit-prior delta-setting --family p21 --sigma 1 --F 400 --out DIR   # one's own sensor (cells)
+    ogm-ppl fit-prior temper --corpus ipa --out DIR            # temper_ipa.json (the @cal exponents)
+    ogm-ppl fit-prior headline --out DIR                       # headline_prior.json (make run's prior)
+    ogm-ppl fit-prior bias --priors border1_bo --train ipa --out DIR   # bias.json (calibrate --bias-file)
 
 A subcommand of :mod:`ogm_ppl.cli`: :func:`add_parser` adds it, :func:`run` runs it
 (:func:`ogm_ppl.learn.fit_tables`, :func:`~ogm_ppl.learn.fit_backoff`, :func:`~ogm_ppl.learn.fit_field`,
-:func:`~ogm_ppl.learn.fit_deltas`, :func:`~ogm_ppl.learn.fit_delta_setting`).
+:func:`~ogm_ppl.learn.fit_deltas`, :func:`~ogm_ppl.learn.fit_delta_setting`; the last three kinds:
+:mod:`ogm_ppl.cli._fit_kinds`, :func:`~ogm_ppl.learn.fit_temper`, :func:`~ogm_ppl.learn.select_headline_prior`,
+:func:`~ogm_ppl.learn.fit_bias`).
 """
 
 from __future__ import annotations
@@ -18,9 +24,11 @@ import argparse
 import sys
 from pathlib import Path
 
+from ogm_ppl.cli._fit_kinds import KINDS as PROTOCOL_KINDS
+
 NAME = "fit-prior"
 PLAN_KINDS = ("tables", "backoff", "field")
-KINDS = (*PLAN_KINDS, "deltas", "delta-setting")
+KINDS = (*PLAN_KINDS, "deltas", "delta-setting", *PROTOCOL_KINDS)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -31,7 +39,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     p = sub.add_parser(
         NAME,
         help="fit a learned prior (count tables, back-off weights, pattern field) on a corpus or your plans, "
-        "or the update terms Delta",
+        "the update terms Delta, or tempering exponents, the headline's prior and biases on validation plans",
         description=__doc__.splitlines()[0],
     )
     kinds = p.add_subparsers(
@@ -83,6 +91,10 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
     _add_delta_setting(
         kinds.add_parser("delta-setting", help=helps["delta-setting"], description=helps["delta-setting"])
     )
+    from ogm_ppl.cli._fit_kinds import add_kind
+
+    for kind in PROTOCOL_KINDS:
+        add_kind(kinds, kind)
 
 
 def _add_deltas(k: argparse.ArgumentParser) -> None:
@@ -122,6 +134,10 @@ def run(args: argparse.Namespace) -> int:
     (a ``ValueError``: the command line reports it in one line naming the option and exits 2)."""
     from ogm_ppl.learn import FieldSettings, fit_backoff, fit_delta_setting, fit_deltas, fit_field, fit_tables
 
+    if args.kind in PROTOCOL_KINDS:
+        from ogm_ppl.cli._fit_kinds import run_kind
+
+        return _done(args.kind, run_kind(args))
     if args.kind == "deltas":
         r = fit_deltas(
             args.out,

@@ -8,7 +8,8 @@ thesis's benchmark (traditional OGM from all readings, thresholded at p > 0.20) 
 (Hähnel), log-odds OGM with the p21 update term refitted for this sensor setting (Table 2.2 form, Section
 2.5: the shipped p21 was fitted for 3-cell noise and a 75-cell range) and Gibbs sampling at L = 9 with the
 learned prior that :func:`headline_prior` names: the one that mapped sparse simulated scans of held-out
-*training* plans best (``experiments/select_headline_prior.py`` writes ``ogm_ppl/fitted/headline_prior.json``;
+*training* plans best (:func:`ogm_ppl.learn.select_headline_prior`, ``ogm-ppl fit-prior headline --ship``, writes
+``ogm_ppl/fitted/headline_prior.json``;
 the choice never looks at the Intel log, and the corpus holds no plan of the Intel building); and the one-pass
 map of the amortised guide learned on the HouseExpo and IPA training plans (:data:`HEADLINE_GUIDE`, shipped,
 trained for another sensor setting, so it warns), its logits averaged over the 8 turns and flips of the grid.
@@ -30,8 +31,11 @@ import numpy as np
 
 from ogm_ppl.experiment.simple2d import run_simple2d
 from ogm_ppl.io import atomic_write_text
+from ogm_ppl.learn.headline import HEADLINE_PRIOR_FORMAT, UPDATES
 
 __all__ = [
+    "CHOSEN_BY",
+    "HEADLINE_PRIOR_FORMAT",
     "INTEL_LOG",
     "HeadlinePrior",
     "find_shared_file",
@@ -43,10 +47,10 @@ __all__ = [
 
 #: the Intel Lab log, relative to the shared data folder
 INTEL_LOG = "intel-lab/intel-corrected.log.gz"
-#: the ``format`` field of ``headline_prior.json``
-HEADLINE_PRIOR_FORMAT = "ogm_ppl.headline_prior"
 _HEADLINE_PRIOR = Path(__file__).resolve().parents[1] / "fitted" / "headline_prior.json"
-_UPDATES = ("gibbs", "thesis")
+_UPDATES = UPDATES
+#: what the report names as the prior's chooser
+CHOSEN_BY = "ogm-ppl fit-prior headline"
 #: the corpus guide of the headline's one-pass row (:func:`~ogm_ppl.inference.variational.corpus_guide`)
 HEADLINE_GUIDE = "houseexpo+ipa"
 
@@ -72,7 +76,8 @@ class HeadlinePrior:
 
 
 def headline_prior(path: str | os.PathLike | None = None) -> HeadlinePrior:
-    """Read and validate the selection that ``experiments/select_headline_prior.py`` wrote (default: the
+    """Read and validate the selection that :func:`ogm_ppl.learn.select_headline_prior` (``ogm-ppl fit-prior
+    headline``) wrote (default: the
     shipped ``ogm_ppl/fitted/headline_prior.json``). Raises ``ValueError`` naming the file and the field that
     is wrong (not JSON, another format, an unknown prior kind or corpus, an unknown update)."""
     from ogm_ppl.priors.named import prior_kinds
@@ -284,7 +289,7 @@ def run_intel_headline(
         "10 cells of a benchmark-mapped cell (Fig. 6.16b) and over the cells the experiment's readings touched. "
         f"Gibbs: {gib['sweeps']} sweeps after {gib['burn_in']} burn-in from the thresholded OGM map, "
         f"sigma {p['sigma_cells']:g} cell(s). Prior: {prior.name} (update {prior.update}), chosen by "
-        "`experiments/select_headline_prior.py` on sparse simulated scans of held-out training plans "
+        f"`{CHOSEN_BY}` (`ogm_ppl.learn.select_headline_prior`) on sparse simulated scans of held-out training plans "
         "(never on this log; the corpus holds no plan of the Intel building).",
         "",
         *_table(result, prior),
@@ -302,7 +307,7 @@ def run_intel_headline(
             for r in result.pooled
         ],
         "figure": str(fig),
-        "prior": {"name": prior.name, "update": prior.update, "chosen_by": "experiments/select_headline_prior.py"},
+        "prior": {"name": prior.name, "update": prior.update, "chosen_by": CHOSEN_BY},
     }
     atomic_write_text(out / "intel_headline.json", json.dumps(doc, indent=1, default=str, allow_nan=True))
     return {"markdown": md, "json": doc}

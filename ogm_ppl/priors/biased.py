@@ -2,10 +2,11 @@ r"""A prior with a unary bias: ``p~(m) exp(h sum_k m_k)``, a log-odds shift ``h`
 
 Far from any reading a prior's marginals are its own, and a prior whose tables are products of conditionals
 (the border prior of Section 5.2.3, the 1-given-8 table) is not fitted to its corpus as a joint: the occupied
-share of its own draws need not be the corpus's (``experiments/prior_occupancy.py`` measures it). The bias is
+share of its own draws need not be the corpus's (:func:`ogm_ppl.learn.bias.occupancy_trace` measures it). The bias is
 the one-parameter maximum-entropy correction: among the priors ``p~(m) exp(h sum_k m_k)`` the one whose draws fill
 the share ``lambda`` of the corpus satisfies the moment condition ``E_h[mean_k m_k] = lambda``, which the fitted
-pattern field's unary bias already meets (:func:`~ogm_ppl.priors.learn_field.fit_tempered`).
+pattern field's unary bias already meets (:func:`~ogm_ppl.priors.learn_field.fit_tempered`); ``ogm-ppl fit-prior bias``
+(:func:`ogm_ppl.learn.fit_bias`) fits ``h`` for the other priors.
 
 Every log-potential changes by ``h`` per occupied cell: ``log_prob`` gains ``h sum_k m_k``, ``log_prob_patch``
 ``h sum_{k in C} c_k``, the cell log-odds ``h``, and the compiled bundle is ``bundle.biased(h)`` (the same bundle

@@ -27,8 +27,8 @@ statistics are closest to the thesis's):
 ``beta`` (:class:`~ogm_ppl.priors.TemperedPrior`: every log-potential times ``beta``; ``beta < 1`` weakens the
 coupling, towards the uniform distribution over the prior's support). ``@cal`` reads the exponent fitted for
 the kind and corpus in ``ogm_ppl/fitted/temper_CORPUS.json`` (:func:`load_temper_params`; written by
-``experiments/fit_temper.py``, which chooses it on validation plans of the corpus's training split by the
-NLL of the cells no ray reached). ``border_bo:ipa@cal``, ``mrf:houseexpo@0.5``.
+``ogm-ppl fit-prior temper``, :func:`ogm_ppl.learn.fit_temper`, which chooses it on validation plans of the
+corpus's training split by the NLL of the cells no ray reached). ``border_bo:ipa@cal``, ``mrf:houseexpo@0.5``.
 
 The tables were learned on the corpus's *training* plans only, with the buildings of the real logs
 excluded (:data:`~ogm_ppl.datasets.floorplans.REAL_LOG_BUILDINGS`): evaluate on held-out plans or logs.

@@ -1,0 +1,175 @@
+"""The kinds of ``ogm-ppl fit-prior`` scored on validation plans by the calibration protocol: ``temper``
+(:func:`ogm_ppl.learn.fit_temper`), ``headline`` (:func:`~ogm_ppl.learn.select_headline_prior`) and ``bias``
+(:func:`~ogm_ppl.learn.fit_bias`): each one's options (``add_KIND``) and run (``run_KIND``).
+
+    ogm-ppl fit-prior temper --corpus dungeon --out DIR       # temper_dungeon.json (the @cal exponents)
+    ogm-ppl fit-prior headline --out DIR                      # headline_prior.json (the headline's prior)
+    ogm-ppl fit-prior bias --priors border1_bo --train ipa --out DIR   # bias.json (calibrate --bias-file)
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Callable
+from pathlib import Path
+from typing import Any
+
+__all__ = ["HELPS", "KINDS", "add_kind", "run_kind"]
+
+KINDS = ("temper", "headline", "bias")
+HELPS = {
+    "temper": "tempering exponents beta of p~(m)^beta on validation plans by unseen-cell NLL (temper_CORPUS.json)",
+    "headline": "the headline experiment's prior, by best F1 on sparse scans of validation plans (headline_prior.json)",
+    "bias": "a bias h per prior so that it fills an empty window as its corpus is filled (bias.json)",
+}
+
+
+def _out(k: argparse.ArgumentParser, ship: str | None) -> None:
+    where = k.add_mutually_exclusive_group(required=True)
+    where.add_argument("--out", type=Path, default=None, help="the folder the fitted files go to")
+    if ship:
+        where.add_argument("--ship", action="store_true", help=f"maintainers: replace the package's {ship}")
+    k.add_argument("--quiet", action="store_true", help="no progress output")
+
+
+def _scan(k: argparse.ArgumentParser, d: Any) -> None:
+    k.add_argument("--plans", type=int, default=d.plans, help="validation plans scored (%(default)s)")
+    k.add_argument("--window", type=int, default=d.window, help="cells a side of each plan's window (%(default)s)")
+    k.add_argument("--poses", type=int, default=d.poses, help="stops of the simulated scan (%(default)s)")
+    k.add_argument("--beams", type=int, default=d.beams, help="beams a scan (%(default)s)")
+    k.add_argument("--range-cells", type=float, default=d.range_cells, help="maximum range, cells (%(default)s)")
+    k.add_argument("--sigma", type=float, default=d.sigma, help="range noise, cells (%(default)s)")
+    k.add_argument("--sweeps", type=int, default=d.sweeps, help="sweeps kept per chain (%(default)s)")
+    k.add_argument("--burn", type=int, default=d.burn, help="burn-in sweeps (%(default)s)")
+    k.add_argument("--seed", type=int, default=d.seed, help="seed of the scans and chains (%(default)s)")
+    k.add_argument("--fit-limit", type=int, default=None, help="count tables on the first N fit plans only (all)")
+
+
+def add_temper(k: argparse.ArgumentParser) -> None:
+    from ogm_ppl.learn._fit_common import CORPORA
+    from ogm_ppl.learn.temper import TemperSettings
+
+    d = TemperSettings()
+    k.add_argument("--corpus", nargs="+", choices=CORPORA, required=True, help="the corpora (one file each)")
+    k.add_argument("--kinds", nargs="+", default=list(d.kinds), metavar="KIND", help="prior kinds (the tables')")
+    k.add_argument("--betas", nargs="+", type=float, default=list(d.betas), help="exponents tried, in [0, 1]")
+    _scan(k, d)
+    k.add_argument("--generated-shape", type=int, default=d.generated_shape, help="generated maps' side (160)")
+    k.add_argument("--max-support", type=int, default=d.max_support, help="skip kinds whose update weighs more")
+    k.add_argument("--kernel", default=d.kernel, help="the chains' sampler (gibbs, cycle, shifted-cycle, ...)")
+    k.add_argument("--update", action="store_true", help="keep the other kinds of the file there; refit --kinds")
+    _out(k, "ogm_ppl/fitted/temper_CORPUS.json")
+
+
+def run_temper(args: argparse.Namespace) -> Any:
+    from ogm_ppl.learn.temper import TemperSettings, fit_temper
+
+    s = TemperSettings(
+        kinds=tuple(args.kinds),
+        betas=tuple(args.betas),
+        plans=args.plans,
+        window=args.window,
+        generated_shape=args.generated_shape,
+        poses=args.poses,
+        beams=args.beams,
+        range_cells=args.range_cells,
+        sigma=args.sigma,
+        sweeps=args.sweeps,
+        burn=args.burn,
+        seed=args.seed,
+        max_support=args.max_support,
+        kernel=args.kernel,
+        fit_limit=args.fit_limit,
+    )
+    out = None if args.ship else args.out
+    return fit_temper(args.corpus, out, settings=s, update=args.update, ship=args.ship, progress=not args.quiet)
+
+
+def add_headline(k: argparse.ArgumentParser) -> None:
+    from ogm_ppl.learn.headline import HEADLINE_CORPORA, HeadlineSettings
+
+    d = HeadlineSettings()
+    k.add_argument("--corpus", default=d.corpus, choices=HEADLINE_CORPORA, help="the corpus (%(default)s)")
+    k.add_argument(
+        "--candidates",
+        nargs="+",
+        default=[f"{a}/{b}" for a, b in d.candidates],
+        metavar="KIND/UPDATE",
+        help="prior kind and patch-Gibbs update (gibbs, thesis) of each candidate (the shipped six)",
+    )
+    _scan(k, d)
+    k.add_argument("--name", default="headline_prior", help="the file's name part (headline_prior)")
+    _out(k, "ogm_ppl/fitted/headline_prior.json")
+
+
+def run_headline(args: argparse.Namespace) -> Any:
+    from ogm_ppl.learn.headline import HeadlineSettings, candidates_from, select_headline_prior
+
+    s = HeadlineSettings(
+        corpus=args.corpus,
+        plans=args.plans,
+        window=args.window,
+        poses=args.poses,
+        beams=args.beams,
+        range_cells=args.range_cells,
+        sigma=args.sigma,
+        sweeps=args.sweeps,
+        burn=args.burn,
+        seed=args.seed,
+        candidates=candidates_from(args.candidates),
+        fit_limit=args.fit_limit,
+    )
+    out = None if args.ship else args.out
+    return select_headline_prior(out, settings=s, name=args.name, ship=args.ship, progress=not args.quiet)
+
+
+def add_bias(k: argparse.ArgumentParser) -> None:
+    from ogm_ppl.learn._fit_common import CORPORA
+    from ogm_ppl.learn.bias import PRIORS, BiasSettings
+
+    d = BiasSettings()
+    k.add_argument("--priors", nargs="+", default=list(PRIORS), metavar="KIND", help="prior kinds (KIND[@cal])")
+    k.add_argument("--train", nargs="+", default=list(CORPORA), choices=CORPORA, help="corpora the priors learned on")
+    k.add_argument("--window", type=int, default=d.window, help="cells a side of the empty window (%(default)s)")
+    k.add_argument("--sweeps", type=int, default=d.sweeps, help="sweeps per chain (%(default)s)")
+    k.add_argument("--every", type=int, default=d.every, help="record the occupied share every N sweeps (50)")
+    k.add_argument("--seed", type=int, default=d.seed, help="seed of the chains (%(default)s)")
+    k.add_argument("--bias-range", type=float, default=d.bias_range, help="bisection interval [-R, R] of h (2)")
+    k.add_argument("--bias-steps", type=int, default=d.bias_steps, help="bisection steps (%(default)s)")
+    _out(k, None)
+
+
+def run_bias(args: argparse.Namespace) -> Any:
+    from ogm_ppl.learn.bias import BiasSettings, fit_bias
+
+    s = BiasSettings(
+        window=args.window,
+        sweeps=args.sweeps,
+        every=args.every,
+        seed=args.seed,
+        bias_range=args.bias_range,
+        bias_steps=args.bias_steps,
+    )
+    return fit_bias(args.priors, args.out, train=args.train, settings=s, progress=not args.quiet)
+
+
+_ADD: dict[str, Callable[[argparse.ArgumentParser], None]] = {
+    "temper": add_temper,
+    "headline": add_headline,
+    "bias": add_bias,
+}
+_RUN: dict[str, Callable[[argparse.Namespace], Any]] = {
+    "temper": run_temper,
+    "headline": run_headline,
+    "bias": run_bias,
+}
+
+
+def add_kind(kinds: argparse._SubParsersAction, kind: str) -> None:
+    """Add the sub-subcommand ``kind`` (one of :data:`KINDS`) with its options."""
+    _ADD[kind](kinds.add_parser(kind, help=HELPS[kind], description=HELPS[kind]))
+
+
+def run_kind(args: argparse.Namespace) -> Any:
+    """Run ``args.kind``; the :class:`~ogm_ppl.learn.FitResult`."""
+    return _RUN[args.kind](args)
