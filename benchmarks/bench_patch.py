@@ -17,7 +17,8 @@ sys.path.insert(0, os.path.dirname(__file__))
 from _common import peak_rss_mb, sparse_scene, write_json
 
 from ogm_ppl import GaussianRange, OccupancyModel, raycast
-from ogm_ppl.inference import evidence_grid, map_estimate
+from ogm_ppl.inference import evidence_grid
+from ogm_ppl.inference.exact import map_estimate
 from ogm_ppl.inference.patch_map import offline_patch_map, online_patch_map, reference_map
 from ogm_ppl.models import delta_by_name
 from ogm_ppl.priors import IndependentPrior

@@ -1,6 +1,7 @@
 """The global random streams a seeded library call leaves as it found them.
 
-A function that takes a ``seed`` (:func:`~ogm_ppl.inference.run_gibbs`, :func:`~ogm_ppl.inference.fit_guide`, ...)
+A function that takes a ``seed`` (:func:`~ogm_ppl.inference.run_gibbs`,
+:func:`~ogm_ppl.inference.variational.fit_guide`, ...)
 seeds the global generators to be reproducible; without care that also resets the caller's streams, so that
 ``pyro.set_rng_seed(1)`` then replicates of ``fit_guide(...); MCMC(...).run()`` come out identical. Such functions
 run under :func:`keeps_global_rng`: torch's CPU generator, NumPy's global generator and Python's ``random`` are

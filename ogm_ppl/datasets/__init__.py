@@ -13,7 +13,7 @@ from ogm_ppl.datasets.floorplans import (
     training_plans,
 )
 from ogm_ppl.datasets.mapgen import generate_corpus, generate_map
-from ogm_ppl.datasets.rosbag import BagFormatError, BagLog, read_bag
+from ogm_ppl.datasets.rosbag import read_bag
 from ogm_ppl.datasets.simple2d import SimpleExample2D, simple_2d_example
 from ogm_ppl.datasets.simulate import first_hit, simulate_scans
 from ogm_ppl.datasets.stop_and_scan import StopAndScan, drive_route, plan_route, route_coverage, stop_and_scan
@@ -23,8 +23,6 @@ from ogm_ppl.datasets.walls1d import WallDatasets, wall_datasets
 __all__ = [
     "REAL_LOG_BUILDINGS",
     "THESIS_TOY_READINGS",
-    "BagFormatError",
-    "BagLog",
     "CarmenFormatError",
     "CarmenLog",
     "Dataset",

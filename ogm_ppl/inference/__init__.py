@@ -9,59 +9,26 @@
 They share the patch geometry in :mod:`~ogm_ppl.inference.tiling` and the compiled kernels in
 ``_kernels``; imports point down (roles use kernels and models, never each other's internals, except that
 MCMC starts from a log-odds map).
+
+The names of the quick start (:func:`~ogm_ppl.inference.log_odds.evidence_grid`, ``evidence_grid_from_scans``,
+``CellGibbs``, ``PatchGibbs``, ``RunningStats``, ``run_gibbs``) are importable from here too; every other name
+from its role's package.
 """
 
 from ogm_ppl.inference import exact, log_odds, mcmc, patch_map, variational
-from ogm_ppl.inference.exact import MapEstimate, map_estimate
-from ogm_ppl.inference.log_odds import LogOddsMap, evidence_grid, evidence_grid_from_scans
-from ogm_ppl.inference.mcmc import (
-    CellGibbs,
-    CheckpointError,
-    GibbsRun,
-    KernelCycle,
-    KernelMixture,
-    MetropolisCell,
-    ParallelTempering,
-    PatchGibbs,
-    RunningStats,
-    geometric_ladder,
-    run_gibbs,
-    tempered_model,
-)
-from ogm_ppl.inference.variational import (
-    ExactELBO,
-    FirstHitGuide,
-    MeanFieldGuide,
-    PatchGuide,
-    fit_guide,
-)
+from ogm_ppl.inference.log_odds import evidence_grid, evidence_grid_from_scans
+from ogm_ppl.inference.mcmc import CellGibbs, PatchGibbs, RunningStats, run_gibbs
 
 __all__ = [
     "CellGibbs",
-    "CheckpointError",
-    "ExactELBO",
-    "FirstHitGuide",
-    "GibbsRun",
-    "KernelCycle",
-    "KernelMixture",
-    "LogOddsMap",
-    "MapEstimate",
-    "MeanFieldGuide",
-    "MetropolisCell",
-    "ParallelTempering",
     "PatchGibbs",
-    "PatchGuide",
     "RunningStats",
     "evidence_grid",
     "evidence_grid_from_scans",
     "exact",
-    "fit_guide",
-    "geometric_ladder",
     "log_odds",
-    "map_estimate",
     "mcmc",
     "patch_map",
     "run_gibbs",
-    "tempered_model",
     "variational",
 ]

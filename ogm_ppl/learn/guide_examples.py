@@ -1,7 +1,7 @@
 r"""Training windows for a corpus guide: maps of a corpus or of plan files, scanned by the simulator.
 
 A training example is a ``window x window`` crop of a map ``m`` with the guide's input for simulated readings
-``z ~ p(z | m)`` (:func:`~ogm_ppl.inference.variational.amortised.evidence_features`, ``C x H x W``), the truth
+``z ~ p(z | m)`` (:func:`~ogm_ppl.inference.variational.amortised_features.evidence_features`, ``C x H x W``), the truth
 ``m`` and two masks: the scored cells ``S(m)`` (known and not pinned free by the scans) and the unseen
 near-mapped cells (known, within 10 cells of a reached cell, not reached; the cells the validation loss and the
 temperature are measured on, thesis Section 5.2.3). Three ways to scan:

@@ -93,7 +93,7 @@ class GuideTrainingSettings:
     one drawn per map) scans while driving that route, ``fov`` degrees ahead.
 
     Network and optimisation: ``channels`` and ``dilations`` of the guide's network
-    (:class:`~ogm_ppl.inference.variational.amortised.AmortisedGuide`), ``steps`` Adam steps of ``batch``
+    (:class:`~ogm_ppl.inference.variational.amortised_guide.AmortisedGuide`), ``steps`` Adam steps of ``batch``
     windows at learning rate ``lr`` (cosine schedule), validation every ``eval_every`` steps, a checkpoint
     every ``checkpoint_every`` steps, ``seed``; ``temperature``: fit a temperature on the validation windows.
 

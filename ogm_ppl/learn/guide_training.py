@@ -4,7 +4,7 @@ the maps themselves as the prior (thesis Section 5.2.3; ``ogm-ppl train-guide``)
 Windows of the maps (:mod:`~ogm_ppl.learn.guide_examples`), scanned by the simulator with the sensor of the
 settings (:class:`~ogm_ppl.learn.guide_settings.GuideTrainingSettings`: by default the calibration protocol's 3
 stops, 90 beams, 75-cell range, Gaussian range noise of 1 cell), train the guide's network
-(:class:`~ogm_ppl.inference.variational.amortised.AmortisedGuide`, no tile phase) by minimising
+(:class:`~ogm_ppl.inference.variational.amortised_guide.AmortisedGuide`, no tile phase) by minimising
 
 .. math::
     \mathcal{L}(\phi) = \mathbb{E}_{m \sim \text{corpus},\, z \sim p(z \mid m)}

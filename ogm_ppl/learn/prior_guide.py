@@ -3,9 +3,9 @@ Section 2.6): the shipped ``guide_amortised.npz``.
 
 Every step draws one random scene (a grid of ``min_size..max_size`` cells a side, ``1..max_poses`` poses of
 ``beams``-beam 360 degree scans, maximum range ``range_cells``, ``GaussianRange(sigma)``;
-:func:`~ogm_ppl.inference.variational.amortised.random_scene`), then a batch of maps from the prior given that
+:func:`~ogm_ppl.inference.variational.amortised_scenes.random_scene`), then a batch of maps from the prior given that
 the pose cells are free and readings from the forward sensor model: ``(m, z) ~ p(m) p(z | m)``, the model's own
-joint. The loss, :meth:`~ogm_ppl.inference.variational.amortised.AmortisedGuide.csis_loss` per latent cell,
+joint. The loss, :meth:`~ogm_ppl.inference.variational.amortised_guide.AmortisedGuide.csis_loss` per latent cell,
 
 .. math::
     \mathcal{L}(\phi) = \mathbb{E}_{p(m, z)}\bigl[-\log q_\phi(m \mid z)\bigr],

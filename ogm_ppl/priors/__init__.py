@@ -8,7 +8,6 @@ from ogm_ppl.priors.backoff import BackoffBorderPrior
 from ogm_ppl.priors.base import MapPrior
 from ogm_ppl.priors.biased import BiasedPrior
 from ogm_ppl.priors.border import BorderPatchPrior
-from ogm_ppl.priors.compiled import CompiledPrior
 from ogm_ppl.priors.data_driven_1d import DataDriven1DPrior
 from ogm_ppl.priors.independent import IndependentPrior
 from ogm_ppl.priors.local import LocalMapPrior
@@ -29,7 +28,6 @@ __all__ = [
     "BiasedPrior",
     "BackoffBorderPrior",
     "BorderPatchPrior",
-    "CompiledPrior",
     "DataDriven1DPrior",
     "IndependentPrior",
     "LocalMapPrior",

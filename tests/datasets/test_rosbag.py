@@ -9,12 +9,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from ogm_ppl.datasets import BagFormatError, read_bag, read_carmen
+from ogm_ppl.datasets import read_bag, read_carmen
 from ogm_ppl.datasets.rosbag import (
     LASER_SCAN,
     POSE_COV_STAMPED,
     POSE_STAMPED,
     TF_MESSAGE,
+    BagFormatError,
     bag_kind,
     bag_topics,
     typestore,

@@ -18,7 +18,7 @@ from ogm_ppl.inference.mcmc.guided import GuidedGibbs
 from ogm_ppl.inference.mcmc.kernel import KernelStateError, MapKernel, MasslessStartWarning, initial_map
 from ogm_ppl.inference.mcmc.parallel import ChromaticCellGibbs, ChromaticPatchGibbs
 from ogm_ppl.inference.mcmc.runner import CheckpointError, GibbsRun, RunningStats, run_gibbs
-from ogm_ppl.inference.mcmc.tempering import ParallelTempering, TemperedPrior, geometric_ladder, tempered_model
+from ogm_ppl.inference.mcmc.tempering import ParallelTempering, geometric_ladder, tempered_model
 
 __all__ = [
     "CellGibbs",
@@ -38,7 +38,6 @@ __all__ = [
     "ParallelTempering",
     "PatchGibbs",
     "RunningStats",
-    "TemperedPrior",
     "ess",
     "geometric_ladder",
     "initial_map",

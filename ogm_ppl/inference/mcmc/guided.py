@@ -51,7 +51,7 @@ class GuidedGibbs(MapKernel):
             :class:`~ogm_ppl.inference.mcmc.gibbs.CellGibbs`, ``PatchGibbs``, ``MetropolisCell``), kept
             in step with this kernel's state through its public protocol; its checkpoint entries are
             this kernel's ``base.*`` entries.
-        guide: an :class:`~ogm_ppl.inference.variational.amortised.AmortisedGuide` (anything with
+        guide: an :class:`~ogm_ppl.inference.variational.amortised_guide.AmortisedGuide` (anything with
             ``cell_logits(model)``: ``K`` logits of ``q(m_k = 1 | z)``).
         block: the proposal block: ``(h, w)`` windows of a tiling (an int ``w``: ``(1, w)``), or ``"all"``
             (every latent cell at once: an independence sampler, for small maps).

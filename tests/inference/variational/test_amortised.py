@@ -418,7 +418,7 @@ def test_the_generated_corpus_guide_records_the_tables_maps_and_the_table_6_4_se
 def test_symmetrised_logits_turn_with_the_scene_and_refuse_a_tiled_guide():
     """``symmetrize``: the mean over the 8 turns and flips commutes with every one of them (a plain guide's
     logits do not), and equals ``cell_logits`` of the guide; a guide with tile-phase channels refuses it."""
-    from ogm_ppl.inference.variational.amortised import _symmetrised
+    from ogm_ppl.inference.variational.amortised_net import _symmetrised
 
     _, model, _, _ = small_model(3, shape=(9, 13), poses=2)
     g = AmortisedGuide(model, phase=(0, 0), channels=6, dilations=(1, 2), seed=4)

@@ -1,0 +1,117 @@
+r"""Features of the evidence: the readings rasterised per cell, the input ``x(z)`` of the amortised guide's
+network (:mod:`~ogm_ppl.inference.variational.amortised_net`).
+
+Cell ``k`` of ``x(z)`` holds its pass-through and hit counts, the hit share, the evidence grid of Section
+2.4/2.5 with a fitted update term (by default p21),
+
+.. math:: l_k = \sum_n \Delta(\kappa_{n,k};\ z_n),
+
+the observed and pinned masks, an all-ones channel (the zero padding of the convolutions then marks the grid
+edge) and the tile phase ``(row mod h, col mod w)`` of a patch prior (Section 5.2.2).
+"""
+
+from __future__ import annotations
+
+from functools import lru_cache
+
+import torch
+
+from ogm_ppl.models.occupancy import OccupancyModel
+
+__all__ = ["FEATURE_VERSION", "evidence_features", "feature_names"]
+
+#: feature set of :func:`evidence_features` (bumped when a channel changes meaning)
+FEATURE_VERSION = 1
+_BASE_FEATURES = ("pass_count", "hit_count", "hit_share", "log_odds", "observed", "pinned", "inside")
+_LOGODDS_CLIP = 12.0
+
+
+@lru_cache(maxsize=8)
+def _delta(name: str):
+    from ogm_ppl.models.delta import delta_by_name
+
+    d = delta_by_name(name)
+    if d is None:
+        raise ValueError(f"unknown Delta {name!r} for the log-odds feature")
+    return d
+
+
+def feature_names(phase: tuple[int, int] = (3, 3)) -> list[str]:
+    """Channel names of :func:`evidence_features` for a tile phase ``(h, w)`` (``(0, 0)``: none)."""
+    h, w = phase
+    return list(_BASE_FEATURES) + [f"row_mod_{h}={i}" for i in range(h)] + [f"col_mod_{w}={j}" for j in range(w)]
+
+
+def evidence_features(
+    model: OccupancyModel, readings: torch.Tensor | None = None, delta: str = "p21", phase: tuple[int, int] = (3, 3)
+) -> torch.Tensor:
+    r"""The readings rasterised per cell: ``C x rows x cols`` float32 (``... x C x rows x cols`` for a
+    batch of readings ``... x R``; default the model's own readings).
+
+    With ``kappa(z_n)`` the reading's kappa on its ray (:meth:`OccupancyModel.range_to_kappa`, the range
+    convention of :mod:`ogm_ppl.raycast`), cell ``k`` gets
+
+    * ``log(1 + #pass)``: rays entering ``k`` before their reading (every cell of a max-range ray);
+    * ``log(1 + #hit)``: rays whose reading falls in ``k``; the hit share ``#hit / (#hit + #pass)``;
+    * the evidence grid of Eq. (2.10) with update term ``delta`` (default the fitted p21, Section 2.5),
+      ``l_k = sum_n Delta(kappa_{n,k}; z_n)``, clipped to +-12 and divided by 4;
+    * observed (any ray entered ``k``), pinned (``model.known_free``) and inside (all ones: zero padding
+      of the convolutions then marks the grid edge);
+    * the tile phase ``(row mod h, col mod w)`` one-hot (``phase = (0, 0)``: none), so that a guide can
+      learn the tiling of a patch-table prior (Section 5.2.2), whose tiles start at the grid origin.
+
+    1D grids are one row.
+    """
+    r = model.rays
+    R, K = r.num_rays, model.num_cells
+    z = model.readings if readings is None else torch.as_tensor(readings, dtype=torch.float64)
+    if z.dim() == 0 or z.shape[-1] != R:
+        raise ValueError(f"readings must hold one range per ray ({R}), got shape {tuple(z.shape)}")
+    if torch.isnan(z).any():
+        raise ValueError("readings hold NaN")
+    batch = z.shape[:-1]
+    z = z.reshape(-1, R)
+    B = z.shape[0]
+    F = torch.from_numpy(r.max_range_cells()).to(torch.float64)
+    is_max = z >= F
+    kz = model.range_to_kappa(z)  # B x R
+    ray = torch.from_numpy(r.ray_of_entry)
+    kap = torch.from_numpy(r.kappa)
+    cells = torch.from_numpy(r.cells)
+    kze, mx = kz[:, ray], is_max[:, ray]  # B x nnz
+    passed = ((kap[None] < kze) | mx).to(torch.float64)
+    hit = ((kap[None] == kze) & ~mx).to(torch.float64)
+    n_pass = torch.zeros(B, K, dtype=torch.float64).index_add_(1, cells, passed)
+    n_hit = torch.zeros(B, K, dtype=torch.float64).index_add_(1, cells, hit)
+    # the evidence grid, as ogm_ppl.inference.log_odds.evidence_grid builds it (delta_table_for)
+    n_kappa = int(r.lengths.max())
+    hz = kz[~is_max]
+    n_z = max(int(hz.max()) + 1 if hz.numel() else 0, n_kappa)
+    with torch.no_grad():
+        table = _delta(delta).table(n_kappa, n_z).to(torch.float64)
+    col = torch.where(mx, n_z, kze)
+    lo = torch.zeros(B, K, dtype=torch.float64).index_add_(1, cells, table[kap[None].expand_as(col), col])
+    seen = (n_pass + n_hit) > 0
+    share = torch.where(seen, n_hit / (n_hit + n_pass).clamp(min=1), 0.0)
+    pinned = model.known_free.to(torch.float64).expand(B, K)
+    chans = [
+        torch.log1p(n_pass),
+        torch.log1p(n_hit),
+        share,
+        lo.clamp(-_LOGODDS_CLIP, _LOGODDS_CLIP) / 4,
+        seen.to(torch.float64),
+        pinned,
+        torch.ones(B, K, dtype=torch.float64),
+    ]
+    g = model.grid
+    rows, cols = (g.rows, g.cols) if g.ndim == 2 else (1, g.num_cells)
+    x = torch.stack(chans, 1).reshape(B, len(chans), rows, cols)
+    h, w = (int(v) for v in phase)
+    if h and w:
+        ri = torch.arange(rows) % h
+        ci = torch.arange(cols) % w
+        oh_r = (ri[None, :, None] == torch.arange(h)[:, None, None]).expand(h, rows, cols)
+        oh_c = (ci[None, None, :] == torch.arange(w)[:, None, None]).expand(w, rows, cols)
+        ph = torch.cat([oh_r, oh_c]).to(torch.float64)
+        x = torch.cat([x, ph[None].expand(B, -1, -1, -1)], 1)
+    return x.to(torch.float32).reshape(*batch, x.shape[1], rows, cols)
