@@ -27,6 +27,14 @@ kappa values. In 2D this keeps ``p(z | f)`` centred where the beam meets the wal
 A discrete sensor (``continuous_range = False``, ``PatternMatch``) compares the reading's kappa
 ``rays.z`` with the first hit's kappa ``f``.
 
+**The compiled face.** The exploration kernels (:mod:`ogm_ppl.exploration.information`) read a sensor through
+:meth:`SensorModel.compiled`: a ``typing.NamedTuple`` bundle of its parameters whose kind registers the reading
+model as numba functions (:mod:`ogm_ppl.sensors_compiled`: :class:`GaussianRange` gives a
+:class:`~ogm_ppl.sensors_compiled.GaussianReading`, :class:`PatternMatch` a
+:class:`~ogm_ppl.sensors_compiled.PatternReading`). A sensor of your own returns a bundle of a kind it registers
+with :func:`ogm_ppl.sensors_compiled.register`, and :class:`~ogm_ppl.testing.SensorContract` checks the compiled
+model against ``log_prob``; without one (``compiled()`` returns ``None``) it maps but does not explore.
+
 **Sensors by name.** The map methods, the command line (``--sensor``) and experiment specs build their
 sensor with :func:`sensor_by_name` from a kind, the range noise ``sigma_cells`` and the share of random
 readings ``p_rand``. The library ships ``gaussian`` (:class:`GaussianRange`); a sensor of your own registers a
@@ -53,10 +61,14 @@ from __future__ import annotations
 import inspect
 import math
 from collections.abc import Callable
+from typing import TYPE_CHECKING, NamedTuple
 
 import torch
 
 from ogm_ppl._registry import Registry
+
+if TYPE_CHECKING:
+    from ogm_ppl.sensors_compiled import GaussianReading, PatternReading
 
 __all__ = [
     "SENSOR_KINDS",
@@ -115,6 +127,21 @@ class SensorModel:
     def sample(self, f, F, generator: torch.Generator | None = None):
         """Draw readings given first-occupied cells: returns ``(z, is_max)``."""
         raise NotImplementedError  # pragma: no cover - interface
+
+    def compiled(self, bin_width: float | None = None) -> NamedTuple | None:
+        """The sensor's compiled face: a reading bundle of a kind registered with
+        :func:`ogm_ppl.sensors_compiled.register` (its reading model as numba functions), which the
+        exploration kernels read, or ``None`` (the default): no compiled reading model, and
+        :func:`~ogm_ppl.exploration.information.beam_information` and its kin refuse the sensor.
+
+        Args:
+            bin_width: a continuous sensor's range bins, in cells (``None``: one cell), for the outcomes the
+                information gain sums over; a discrete sensor's outcomes are its cells and it may ignore it.
+
+        Raises:
+            ValueError: parameters the compiled model cannot take (say, a different noise per beam).
+        """
+        return None
 
 
 class GaussianRange(SensorModel):
@@ -185,6 +212,23 @@ class GaussianRange(SensorModel):
         is_max = none | (y > F + 0.5)
         return torch.where(is_max, F + 1.0, y), is_max
 
+    def compiled(self, bin_width: float | None = None) -> GaussianReading:
+        """:class:`~ogm_ppl.sensors_compiled.GaussianReading` ``(sigma, p_rand, width)``: ranges in bins of
+        ``bin_width`` cells (default 1). ``ValueError`` if ``sigma`` is not one number for every beam or
+        ``bin_width`` is not a positive finite number."""
+        from ogm_ppl.sensors_compiled import GaussianReading
+
+        sigma = torch.as_tensor(self.sigma)
+        if sigma.numel() != 1:
+            raise ValueError(
+                f"the compiled reading model needs one GaussianRange.sigma for every beam (got a tensor of "
+                f"{sigma.numel()})"
+            )
+        w = 1.0 if bin_width is None else float(bin_width)
+        if not (math.isfinite(w) and w > 0):
+            raise ValueError(f"bin_width must be a positive number of cells, got {bin_width!r}")
+        return GaussianReading(sigma=float(sigma), p_rand=float(self.p_rand), width=w)
+
 
 class PatternMatch(SensorModel):
     r"""The pattern-matching (piecewise-constant) sensor model of Section 2.6.
@@ -231,6 +275,13 @@ class PatternMatch(SensorModel):
         out = torch.where(keep, truth, other)
         is_max = out > F
         return torch.where(is_max, F + 1.0, out), is_max
+
+    def compiled(self, bin_width: float | None = None) -> PatternReading:
+        """:class:`~ogm_ppl.sensors_compiled.PatternReading` ``(p_occ)`` (the outcomes are the cells:
+        ``bin_width`` is ignored)."""
+        from ogm_ppl.sensors_compiled import PatternReading
+
+        return PatternReading(p_occ=float(self.p_occ))
 
 
 #: the kinds the library ships: ``gaussian`` is ``GaussianRange(sigma_cells, p_rand)``

@@ -6,6 +6,7 @@ import pytest
 import torch
 
 from ogm_ppl import GaussianRange, PatternMatch
+from ogm_ppl.sensors_compiled import PatternReading
 from ogm_ppl.testing import SensorContract
 
 
@@ -67,6 +68,20 @@ class _RandomDensityOfOneRayLength(GaussianRange):
         return out + shift
 
 
+class _CompiledDropsRandom(GaussianRange):
+    """A compiled face without the share of random readings its ``log_prob`` has."""
+
+    def compiled(self, bin_width=None):
+        return super().compiled(bin_width)._replace(p_rand=0.0)
+
+
+class _CompiledOtherMatch(PatternMatch):
+    """A compiled face whose matching outcome is a little less likely than ``log_prob``'s."""
+
+    def compiled(self, bin_width=None):
+        return PatternReading(p_occ=self.p_occ - 0.01)
+
+
 class _CannotSample(GaussianRange):
     def sample(self, f, F, generator=None):
         raise NotImplementedError
@@ -81,6 +96,8 @@ class _CannotSample(GaussianRange):
         (_PastLastCellIsNone(1.5, p_rand=0.1), "test_samples_follow_log_prob"),
         (_RandomDensityOfOneRayLength(1.5, p_rand=0.1), "test_log_prob_normalises"),
         (_CannotSample(1.5), "test_samples_follow_log_prob"),
+        (_CompiledDropsRandom(1.5, p_rand=0.01), "test_compiled_reading_model_matches_log_prob"),
+        (_CompiledOtherMatch(0.8), "test_compiled_reading_model_matches_log_prob"),
     ],
     ids=[
         "sample-drops-a-component",
@@ -89,10 +106,14 @@ class _CannotSample(GaussianRange):
         "past-last-cell-none",
         "normalised-on-one-ray-length",
         "cannot-sample-undeclared",
+        "compiled-drops-random-readings",
+        "compiled-other-constant",
     ],
 )
 def test_the_contract_fails_a_buggy_sensor(sensor, check):
     class Contract(SensorContract):
+        discrete = isinstance(sensor, PatternMatch)
+
         def make_sensor(self):
             return sensor
 

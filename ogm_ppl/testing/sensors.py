@@ -19,7 +19,21 @@ On a ray of ``F`` cells (:mod:`ogm_ppl.sensors`: a hit ``z`` in kappa units, the
   cell (hits) plus the max-range reading, against the probabilities ``log_prob`` gives those bins
   (chi-square, bins of expected count below 5 pooled, p-value above ``1e-3``; fixed seed). ``Predictive``
   and :meth:`~ogm_ppl.models.OccupancyModel.simulate_readings` draw readings through it; a sensor that cannot
-  draw (``sample`` raises ``NotImplementedError``) fails unless its contract class sets ``can_sample = False``.
+  draw (``sample`` raises ``NotImplementedError``) fails unless its contract class sets ``can_sample = False``;
+* **its compiled face agrees** (a sensor whose ``compiled()`` returns a reading bundle,
+  :mod:`ogm_ppl.sensors_compiled`; skipped for one that returns ``None``): the kind is continuous exactly when
+  the sensor is; on every ray length, for the first hits above, the possible readings (a discrete sensor's
+  cells; ranges spread over ``[-3, F + 1/2]``) and max range, the compiled ``log_reading`` gives the sensor's
+  ``log_prob`` to ``1e-12`` relative (absolute below ``|log p| = 1``; where ``log_prob`` is below ``-600`` the
+  compiled value only has to be too, its tails underflowing there). Both sides evaluate one closed form in
+  float64 with a few tens of roundings and special functions good to a few ulps, so they differ by ``~1e-14``
+  where they agree; a wrong constant (a share ``p_rand = 0.01`` left out: ``1e-2``) is far above the
+  tolerance. The outcome probabilities (``bin_prob``, range bins of each of ``bin_widths`` cells for a
+  continuous sensor) sum to one and ``fill_row`` gives them (to ``1e-12``), the max-range outcome's is
+  ``exp(log_prob)`` of max range, and a continuous sensor's bins hold the mass of its density (quadrature, to
+  ``1e-7``);
+* **its compiled draws follow** the outcome probabilities: ``num_samples`` outcomes from the kind's ``draw``
+  per first hit (fixed seed), chi-square against ``bin_prob`` as above.
 """
 
 from __future__ import annotations
@@ -33,6 +47,8 @@ import torch
 
 from ogm_ppl.testing._stats import check_draws
 
+_UNDERFLOW = -600.0  # log-probabilities below this may underflow in one evaluation and not in another
+
 __all__ = ["SensorContract"]
 
 
@@ -44,6 +60,7 @@ class SensorContract:
     discrete = False  # True for sensors whose hits are whole cells (PatternMatch)
     can_sample = True  #: False: ``sample`` is not implemented (Predictive cannot draw the sensor's readings)
     num_samples = 20000  #: draws per first hit in the sampling check
+    bin_widths: tuple[float, ...] = (1.0, 0.35)  #: a continuous sensor's range bins in the compiled checks
 
     def make_sensor(self):  # pragma: no cover - to be provided
         raise NotImplementedError
@@ -151,3 +168,89 @@ class SensorContract:
             p = torch.tensor([p_max, *probs], dtype=torch.float64)
             c = torch.tensor([int(is_max.sum()), *counts.tolist()], dtype=torch.float64)
             check_draws(p, c, f"first hit {f}: sample() against log_prob (max range, then hits by cell)")
+
+    def _readings(self):
+        """``(sensor, [reading bundles])``: the compiled faces to check (one per bin width if continuous)."""
+        s = self.make_sensor()
+        face = getattr(s, "compiled", None)
+        if not callable(face) or face() is None:
+            pytest.skip(f"{type(s).__name__} has no compiled reading model (compiled() returns None)")
+        from ogm_ppl.sensors_compiled import is_continuous
+
+        reading = face()
+        assert is_continuous(reading) == (not self.discrete), (
+            f"{type(s).__name__}.compiled() returns {type(reading).__name__}, registered with continuous="
+            f"{is_continuous(reading)}, but the contract's discrete = {self.discrete}"
+        )
+        return s, [(None, reading)] if self.discrete else [(w, face(w)) for w in self.bin_widths]
+
+    def test_compiled_reading_model_matches_log_prob(self):
+        from ogm_ppl.testing._compiled_readings import compiled_log_readings, compiled_rows
+
+        s, readings = self._readings()
+        for F in self.ray_lengths:
+            if self.discrete:
+                ys = np.zeros(F + 2)
+                outcomes = np.arange(F + 2)
+            else:
+                ys = np.concatenate([np.linspace(-3.0, F + 0.5, 4 * F + 7), [0.0]])  # hits, then max range
+                outcomes = np.zeros(ys.shape[0], np.int64)
+            maxes = np.zeros(ys.shape[0], np.bool_)
+            maxes[-1] = True
+            for f in self._first_hits(F):
+                none = f > (F if self.discrete else F + 0.5)
+                z = torch.from_numpy(outcomes.astype(np.float64) if self.discrete else ys)
+                ref = s.log_prob(z, float(f), float(F), is_max=torch.from_numpy(maxes)).double().numpy()
+                fc = 0.0 if none else float(f)
+                for width, reading in readings:
+                    got = compiled_log_readings(reading, self.discrete, ys, outcomes, maxes, fc, none, float(F))
+                    for i in range(ys.shape[0]):
+                        a, b = float(got[i]), float(ref[i])
+                        ok = (a == b) or abs(a - b) <= 1e-12 * max(1.0, abs(b)) or (b < _UNDERFLOW and a < _UNDERFLOW)
+                        assert ok, (
+                            f"{type(reading).__name__} on a ray of {F} cells, first hit {f}, reading "
+                            f"{'max range' if maxes[i] else (outcomes[i] if self.discrete else ys[i])}: "
+                            f"compiled log p {a}, log_prob {b}"
+                        )
+                    by_bin, filled = compiled_rows(reading, fc, none, float(F))
+                    what = f"{type(reading).__name__} {reading} on a ray of {F} cells, first hit {f}"
+                    assert abs(by_bin.sum() - 1.0) < 1e-12, f"{what}: outcome probabilities sum to {by_bin.sum()}"
+                    assert np.abs(filled - by_bin).max() <= 1e-12, f"{what}: fill_row differs from bin_prob"
+                    p_max = math.exp(float(s.log_prob(torch.tensor(0.0), float(f), float(F), is_max=True)))
+                    assert abs(by_bin[-1] - p_max) <= 1e-12 * max(p_max, 1e-300) or p_max < 1e-250, (
+                        f"{what}: max-range outcome {by_bin[-1]}, log_prob's {p_max}"
+                    )
+                    if not self.discrete and F == self.F:
+                        self._check_bins(s, float(width), by_bin, float(f), F, what)
+
+    def _check_bins(self, s, w: float, by_bin, f: float, F: int, what: str) -> None:
+        """A continuous sensor's range bins (edges ``-1/2 + j w``, the first open below, the last ending at
+        ``F + 1/2``) hold the mass of its density."""
+        J = len(by_bin) - 1
+        edges = [-math.inf, *(-0.5 + j * w for j in range(1, J)), F + 0.5]
+        for j in range(J):
+            mass = self._hit_mass(s, f, edges[j], edges[j + 1], F)
+            if j == 0:
+                mass = self._hit_mass(s, f, -math.inf, -0.5, F) + self._hit_mass(s, f, -0.5, edges[1], F)
+            assert abs(by_bin[j] - mass) < 1e-7, f"{what}: bin {j} holds {by_bin[j]}, the density {mass}"
+
+    def test_compiled_draws_follow_the_reading_model(self):
+        from ogm_ppl.testing._compiled_readings import compiled_draws, compiled_rows
+
+        _, readings = self._readings()
+        F, n = self.F, int(self.num_samples)
+        rng = np.random.default_rng(2)
+        for _, reading in readings:
+            for f in self._first_hits():
+                none = f > (F if self.discrete else F + 0.5)
+                fc = 0.0 if none else float(f)
+                u_a, u_b, e = rng.random(n), rng.random(n), rng.standard_normal(n)
+                jbs, _ = compiled_draws(reading, fc, none, float(F), u_a, u_b, e)
+                by_bin, _ = compiled_rows(reading, fc, none, float(F))
+                assert ((jbs >= 0) & (jbs < len(by_bin))).all(), f"first hit {f}: an outcome outside 0..J"
+                counts = np.bincount(jbs, minlength=len(by_bin))
+                check_draws(
+                    torch.from_numpy(by_bin),
+                    torch.from_numpy(counts.astype(np.float64)),
+                    f"{type(reading).__name__} {reading}, first hit {f}: compiled draw against bin_prob",
+                )

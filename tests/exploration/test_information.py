@@ -426,11 +426,11 @@ def test_bad_input_is_refused_with_what_is_wrong(problem):
 
 
 def test_tabulated_normal_tail_matches_erfc():
-    from ogm_ppl.exploration.information import _tail
+    from ogm_ppl.sensors_compiled.normal import tail
 
     for x in np.concatenate([np.linspace(0, 12, 20011), np.random.default_rng(0).uniform(0, 10, 5000)]):
         exact = 0.5 * math.erfc(x / math.sqrt(2))
-        assert abs(_tail(x) / exact - 1) < 1e-13, x
+        assert abs(tail(x) / exact - 1) < 1e-13, x
 
 
 def test_beam_information_survives_max_range_terms_that_underflow():
@@ -438,11 +438,14 @@ def test_beam_information_survives_max_range_terms_that_underflow():
     max-range probability is 5e-324, and times its first-hit probability it rounds to 0, so that outcome's
     total probability is 0 while its terms are not. The beam's information is still finite and at most the
     entropy of the first hit, log 2."""
-    from ogm_ppl.exploration import information as inf
+    from ogm_ppl.exploration.beam_mi import beam_mi_kernel
+    from ogm_ppl.exploration.rays import RayTable
+    from ogm_ppl.sensors_compiled import GaussianReading
 
     F = 10.0
     sigma = F / (27.2 * math.sqrt(2.0))
     assert 0.0 < 0.5 * math.erfc(F / (sigma * math.sqrt(2.0))) < 1e-323
     pf = np.array([[0.5, 0.5, 0.0]])  # hits at kappa 0 and 1, never none
-    mi = inf._beam_mi_kernel(pf, np.array([0, 2]), np.array([0.0, 0.001]), np.array([F]), 0, sigma, 0.0, 1.0, 0.5)
+    rays = RayTable(np.array([0, 2]), np.zeros(2, np.int64), np.array([0.0, 0.001]), np.zeros(1, np.int64), 1)
+    mi = beam_mi_kernel(pf, rays, np.array([F]), GaussianReading(sigma=sigma, p_rand=0.0, width=1.0))
     assert np.isfinite(mi).all() and 0.0 <= mi[0] <= math.log(2.0)

@@ -13,7 +13,10 @@ PKG = Path(__file__).resolve().parents[2] / "ogm_ppl"
 # online maps run the MCMC sweeps on a growing model)
 RANK = {"_kernels": 0, "tiling": 1, "log_odds": 2, "exact": 2, "patch_map": 3, "variational": 4, "mcmc": 5, "online": 6}
 # below inference: may not import ogm_ppl.inference, datasets, experiment or the CLI
-LOWER = ("models", "priors", "grid", "raycast", "scans", "sensors", "posterior", "metrics", "_raycast_kernels")
+LOWER = (
+    "models", "priors", "grid", "raycast", "scans", "sensors", "sensors_compiled", "posterior", "metrics",
+    "_raycast_kernels",
+)  # fmt: skip
 
 
 def _imports(path: Path) -> set[str]:
@@ -129,3 +132,10 @@ def test_learning_sits_above_inference_and_calibration_and_below_the_experiments
         for path in sorted(root.rglob("*.py")) if root.is_dir() else [root.with_suffix(".py")]:
             for mod in _imports(path):
                 assert not mod.startswith("ogm_ppl.learn"), f"{path.relative_to(PKG)} imports {mod}"
+
+
+def test_compiled_sensors_are_self_contained():
+    """``ogm_ppl.sensors_compiled`` imports nothing of the library outside itself, so kernels may use it."""
+    for path in sorted((PKG / "sensors_compiled").rglob("*.py")):
+        for mod in _imports(path):
+            assert mod.startswith("ogm_ppl.sensors_compiled"), f"{path.relative_to(PKG)} imports {mod}"
