@@ -15,7 +15,7 @@ import torch
 
 from ogm_ppl.exploration import beam_information, candidate_rays, independent_information, scan_information
 from ogm_ppl.inference.exact import brute_force
-from ogm_ppl.sensors import SensorModel
+from ogm_ppl.sensors import GaussianRange, SensorModel
 from ogm_ppl.sensors_compiled import register
 from ogm_ppl.testing import SensorContract
 from ogm_ppl.testing.kernels import enumerable_2d, enumerate_maps
@@ -221,3 +221,23 @@ def test_a_sensor_without_a_compiled_face_does_not_explore(problem):
         scan_information(model.grid, Foreign(0.5), samples, cr, 4)
     with pytest.raises(TypeError, match=r"SensorModel\.compiled"):
         independent_information(model.grid, SensorModel(), torch.full((model.grid.num_cells,), 0.5), cr)
+
+
+def test_a_reading_kind_of_ones_own_stays_out_of_the_disk_cache(problem):
+    """Numba's on-disk cache index pickles the type of every specialisation: a bundle class of a test module or a
+    notebook in it made every process that cannot import that module fail to load the kernel (a notebook run after
+    this file failed with "No module named 'tests'"). The kernels compile a kind of one's own per process only."""
+    from ogm_ppl.exploration import beam_mi, scan_mi
+
+    model, maps, pi, cr = problem
+    sensor = LaplaceRange(0.6)
+    beam_information(model.grid, sensor, maps.to(torch.uint8), cr, weights=pi, bin_width=0.5)
+    scan_information(model.grid, sensor, maps.to(torch.uint8), cr, 20, torch.Generator().manual_seed(0), weights=pi)
+    beam_information(model.grid, GaussianRange(0.6), maps.to(torch.uint8), cr, weights=pi)
+    for cached, own in (
+        (beam_mi._beam_mi_cached, beam_mi._beam_mi_own),
+        (scan_mi._scan_mi_cached, scan_mi._scan_mi_own),
+    ):
+        assert not any("LaplaceReading" in str(sig) for sig in cached.signatures), cached.signatures
+        assert any("LaplaceReading" in str(sig) for sig in own.signatures), own.signatures
+    assert any("GaussianReading" in str(sig) for sig in beam_mi._beam_mi_cached.signatures)
