@@ -310,13 +310,12 @@ def test_chains_diagnostics():
 def test_table_3_1_setup_subsample():
     """Table 3.1's Gibbs entry on a subsample: the mean summed KL is of Monte Carlo size. With n nearly
     independent sweeps each uncertain cell adds about 1 / (2n); we allow an autocorrelation time of 2."""
-    import importlib.util
-    from pathlib import Path
+    import sys
 
-    path = Path(__file__).resolve().parents[3] / "experiments" / "table_3_1.py"
-    spec = importlib.util.spec_from_file_location("table_3_1", path)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
+    from tests._scripts import load_experiment
+
+    mod = load_experiment("table_3_1", "table_3_1.py")
+    sys.modules.pop("table_3_1", None)
     n, K = 20_000, 30
     rows = mod.run(num_datasets=12, gibbs_sweeps=n, cells=K, progress=False)["rows"]
     gibbs = rows["Gibbs"]["mean"]
