@@ -90,9 +90,9 @@ def guide_limits(
         log: called with one line per map (its name and every guide's NLL).
 
     Returns:
-        ``{"provenance", "settings", "rows": [per map], "summary": {guide: {"nll", "nll_oracle_temperature",
-        "oracle_temperature", "nll_oracle_affine", "oracle_affine": [T, b]}, "ensemble": {"nll", "of"}},
-        "seconds"}``, as written.
+        The document as written, with ``"provenance"``, ``"settings"``, ``"rows"`` (one per map), ``"seconds"``
+        and ``"summary"``, which holds per guide ``{"nll", "nll_oracle_temperature", "oracle_temperature",
+        "nll_oracle_affine", "oracle_affine": [T, b]}`` and ``"ensemble": {"nll", "of"}``.
 
     Raises:
         SettingsError: ``out`` not writable, ``plans`` below 1 or ``test`` not a test corpus (``option`` names

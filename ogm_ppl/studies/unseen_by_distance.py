@@ -312,8 +312,8 @@ def unseen_by_distance(
     ``out/unseen_by_distance.json``.
 
     Returns:
-        ``{"provenance", "settings", "rows", "seconds"}``, as written: the rows of :func:`guide_by_distance` or
-        :func:`chains_by_distance` for each test set in turn.
+        The document as written, ``{"provenance", "settings", "rows", "seconds"}``, with the rows of
+        :func:`guide_by_distance` or :func:`chains_by_distance` for each test set in turn.
 
     Raises:
         SettingsError: a prior without a corpus on a plan set.

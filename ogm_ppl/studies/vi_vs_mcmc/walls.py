@@ -12,7 +12,7 @@ fit on the other folds, never on itself. Held-out cross-entropy, in nats per dat
 
 .. math::
 
-    H(p, q) = -rac{1}{D} \sum_{d} \sum_{k=1}^{F} p_{dk} \log q_{dk} + (1 - p_{dk}) \log (1 - q_{dk}),
+    H(p, q) = -\frac{1}{D} \sum_{d=1}^{D} \sum_{k=1}^{F} \big[ p_{dk} \log q_{dk} + (1 - p_{dk}) \log (1 - q_{dk}) \big]
 
 for the same out-of-fold fits, and for the shipped artefacts (fitted on all 1000) on fresh datasets (seed 1);
 its excess over the exact entropy ``H(p, p)`` is the summed KL.
