@@ -51,6 +51,7 @@ def main(argv=None) -> dict:
         pass
     res = run(cfg, args.seed, log=lambda s: print(s, file=sys.stderr, flush=True))
     res["quick"] = bool(args.quick)
+    res["command"] = "python experiments/vi_vs_mcmc.py" + (" --quick" if args.quick else "")
     print(write_results(res, args.out))
     return res
 

@@ -134,7 +134,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
         nargs="*",
         default=None,
         help="also score the amortised guide learned on each of these corpora (guide:CORPUS rows; "
-        "experiments/train_corpus_guide.py); CORPUS@sym: the guide symmetrised (default: none, or with "
+        "ogm-ppl train-guide); CORPUS@sym: the guide symmetrised (default: none, or with "
         f"--plan-files the floor-plan guide {PLAN_FILES_GUIDE})",
     )
     ap.add_argument(

@@ -97,8 +97,7 @@ def log_plans(
     found = log_maps(maps, exclude)
     if not found:
         raise LogPlanError(
-            f"no <log>/ros/map.yaml under {maps}: map the logs first (ogm-ppl map, or experiments/map_all_logs.py "
-            f"--out {maps})"
+            f"no <log>/ros/map.yaml under {maps}: map each log first (ogm-ppl map LOG --out {maps}/<log>)"
         )
     out = Path(out)
     plans = []

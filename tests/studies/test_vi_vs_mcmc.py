@@ -125,7 +125,8 @@ def test_toy_and_2d(toy_and_2d, tmp_path):
     # the outputs
     text = table_md({**res, "quick": True})
     assert "VI first hit, exact ELBO" in text and "## 2d:independent" in text
-    assert "`python experiments/vi_vs_mcmc.py --quick` (seed 0)" in text
+    assert "`ogm_ppl.studies.vi_vs_mcmc.run` (seed 0)" in text  # no command recorded: the function
+    assert "`python x.py --quick` (seed 0)" in table_md({**res, "command": "python x.py --quick"})
     back = json.loads(to_json(res))
     assert back["problems"]["toy"]["records"][0]["method"] == "exact"
     plot(res, tmp_path / "kl.png")

@@ -54,7 +54,7 @@ def table_md(res: dict) -> str:
     lines = [
         "# Summed KL to the exact posterior against wall-clock time",
         "",
-        f"`python experiments/vi_vs_mcmc.py{' --quick' if res.get('quick') else ''}` (seed {res['seed']}), "
+        f"`{res.get('command') or 'ogm_ppl.studies.vi_vs_mcmc.run'}` (seed {res['seed']}), "
         f"{res['seconds']:.0f} s in all, one thread. Summed KL(exact || q) of the cell marginals over the latent "
         f"cells (estimates clamped to [{EPS:g}, 1 - {EPS:g}]); seconds: wall clock of the method (set-up "
         "included, scoring excluded; one-pass methods timed warm). OGM starts from the prior's lambda "
