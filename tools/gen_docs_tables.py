@@ -15,9 +15,13 @@ Commands (from the repository root)::
     python tools/gen_docs_tables.py readme           # rewrite the README's generated blocks
     python tools/gen_docs_tables.py readme --check   # exit 1 if they differ from the snapshots
     python tools/gen_docs_tables.py show NAME        # one table as Markdown
+    python tools/gen_docs_tables.py list             # every table's name and its snapshot's
+
+``--results DIR`` reads and writes the snapshots of another folder (``readme --readme PATH``: another README).
 
 The Sphinx extension ``docs/_ext/ogm_tables.py`` renders the same :class:`Table` objects into the pages
-(``{ogm-table} NAME``); ``tests/test_docs.py`` checks that the README blocks equal :func:`readme_block`.
+(``{ogm-table} NAME``); ``tests/test_docs.py`` runs these commands (``readme --check``, ``list``, ``show``, and
+``snapshot`` and ``merge`` into a folder of its own).
 """
 
 from __future__ import annotations
@@ -1241,19 +1245,29 @@ def main(argv: list[str] | None = None) -> int:
     mg.add_argument("--drop-curves", action="store_true", help="leave out the per-dataset P-R curves")
     r = sub.add_parser("readme", help="rewrite the README's generated blocks")
     r.add_argument("--check", action="store_true", help="only report blocks that differ; exit 1 if any")
+    r.add_argument("--readme", type=Path, default=README, help="the README to rewrite (the checkout's)")
     sh = sub.add_parser("show", help="print one table as Markdown")
     sh.add_argument("name", choices=sorted(TABLES))
+    sub.add_parser("list", help="print each table's name and its snapshot's, one table a line")
+    for p in (s, mg, r, sh):
+        p.add_argument("--results", type=Path, default=RESULTS, help="the snapshots' folder (docs/results)")
     args = ap.parse_args(argv)
-    if args.cmd == "snapshot":
-        print("wrote", snapshot(args.src, args.name, args.command, drop_curves=args.drop_curves))
-    elif args.cmd == "merge":
-        print("wrote", merge(args.src, args.into, args.command, drop_curves=args.drop_curves))
-    elif args.cmd == "readme":
-        stale = update_readme(check=args.check)
-        print(("stale: " if args.check else "updated: ") + (", ".join(stale) or "none"))
-        return 1 if (args.check and stale) else 0
-    else:
-        print(to_markdown(table(args.name)))
+    try:
+        if args.cmd == "snapshot":
+            print("wrote", snapshot(args.src, args.name, args.command, args.results, drop_curves=args.drop_curves))
+        elif args.cmd == "merge":
+            print("wrote", merge(args.src, args.into, args.command, args.results, drop_curves=args.drop_curves))
+        elif args.cmd == "readme":
+            stale = update_readme(args.readme, args.results, check=args.check)
+            print(("stale: " if args.check else "updated: ") + (", ".join(stale) or "none"))
+            return 1 if (args.check and stale) else 0
+        elif args.cmd == "list":
+            print("\n".join(f"{name} {snap}" for name, (snap, _) in sorted(TABLES.items())))
+        else:
+            print(to_markdown(table(args.name, args.results)))
+    except ValueError as e:
+        print(f"gen_docs_tables.py: error: {e}", file=sys.stderr)
+        return 2
     return 0
 
 

@@ -494,7 +494,7 @@ def test_a_simulated_dataset_on_a_plan_of_your_own(tmp_path):
     from PIL import Image
 
     from ogm_ppl.datasets.plan_files import load_plan_file
-    from tests._scripts import write_plan_folder
+    from tests._plan_folder import write_plan_folder
 
     plans = write_plan_folder(tmp_path)
     d = tiny()

@@ -86,7 +86,7 @@ def test_bad_chain_settings_are_refused(kwargs, match):
 
 
 def test_plan_files_are_binned_as_calibration_scores_them(tmp_path):
-    from tests._scripts import write_plan_folder
+    from tests._plan_folder import write_plan_folder
 
     d = write_plan_folder(tmp_path)
     s = DistanceSettings(guide="houseexpo", plan_files=(d,), plan_set="mine", pixel_size=0.025, plans=1)
