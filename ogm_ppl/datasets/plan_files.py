@@ -400,11 +400,11 @@ def _plan_free(path: Path) -> np.ndarray:
 def corpus_copy(path: str | os.PathLike, root=None) -> str | None:
     """What makes a plan file a plan of the floor-plan corpora (so that scoring a prior learned on them on it would
     be leakage), or ``None``: it lies under the corpora's folder; its bytes (for a ROS map, its image's too) are those
-    of a HouseExpo or IPA plan file; it is a HouseExpo layout named by a ``houseexpo`` plan's id; or its free pixels,
-    in any of the 8 turns and flips, overlap those of a HouseExpo or IPA plan image of the same size with an
-    intersection over union of at least :data:`NEAR_COPY` (re-saved, touched up, turned, or a variant of the
-    building). A copy at another scale is not caught, and
-    DungeonMaps (synthetic, inside one archive) are not compared."""
+    of a HouseExpo or IPA plan file; it is a HouseExpo layout named by the id of a ``houseexpo`` or ``houseexpo-full``
+    plan; or its free pixels, in any of the 8 turns and flips, overlap those of a HouseExpo or IPA plan image of the
+    same size with an intersection over union of at least :data:`NEAR_COPY` (re-saved, touched up, turned, or a
+    variant of the building). A copy at another scale is not caught, and DungeonMaps (synthetic, inside one archive),
+    R2V and school plans (vector drawings) are not compared."""
     p = Path(path)
     base = fp.floorplan_root(root).resolve()
     if not base.is_dir():  # no corpora here: nothing to copy
@@ -415,8 +415,14 @@ def corpus_copy(path: str | os.PathLike, root=None) -> str | None:
         same = _corpus_digests(base).get(hashlib.sha256(piece.read_bytes()).hexdigest())
         if same is not None:
             return f"the same bytes as the corpus plan {same}"
-    if p.suffix.lower() in LAYOUT_SUFFIXES and p.stem in set(fp.list_plans("houseexpo", base)):
-        return f"the layout of the houseexpo corpus's plan {p.stem}"
+    if p.suffix.lower() in LAYOUT_SUFFIXES:
+        for corpus in ("houseexpo", "houseexpo-full"):
+            try:
+                ids = fp.list_plans(corpus, base)
+            except fp.CorpusNotFoundError:
+                continue
+            if p.stem in set(ids):
+                return f"the layout of the {corpus} corpus's plan {p.stem}"
     free = _plan_free(p)
     sizes = _corpus_sizes(base)
     for k in range(8):

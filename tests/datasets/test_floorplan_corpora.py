@@ -17,10 +17,11 @@ NEW = ("houseexpo-full", "r2v", "schools")
 
 @pytest.fixture
 def corpora(tmp_path, monkeypatch):
-    """The three synthetic corpora under ``$OGM_PPL_FLOORPLANS``."""
-    write_houseexpo(tmp_path), write_r2v(tmp_path), write_schools(tmp_path)
-    monkeypatch.setenv("OGM_PPL_FLOORPLANS", str(tmp_path))
-    return tmp_path
+    """The three synthetic corpora under ``$OGM_PPL_FLOORPLANS`` (``tmp_path/corpora``)."""
+    root = tmp_path / "corpora"
+    write_houseexpo(root), write_r2v(root), write_schools(root)
+    monkeypatch.setenv("OGM_PPL_FLOORPLANS", str(root))
+    return root
 
 
 def test_wall_runs_measure_walls_between_free_cells():
@@ -155,3 +156,16 @@ def test_real_r2v_scale_consistency():
     c = r2v.scale_consistency(plans)
     assert c["plans"] > 1100 and 0.10 < c["sd_log_openings"] < 0.17
     assert 0.7 < c["median_toilet_m"] < 0.9 and 1.1 < c["median_bathtub_m"] < 1.5
+
+
+def test_a_layout_named_by_a_houseexpo_full_id_is_a_corpus_plan(corpora, tmp_path):
+    from ogm_ppl.datasets.plan_files import corpus_copy
+
+    for d in ("houseexpo-subset100/png", "ipa-room-segmentation-maps/test_maps"):
+        (corpora / d).mkdir(parents=True)
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    for name in ("0a1b", "zzzz"):
+        (mine / f"{name}.json").write_text(json.dumps({"verts": [[0, 0], [3, 0], [3, 2], [0, 2]]}))
+    assert corpus_copy(mine / "0a1b.json") == "the layout of the houseexpo-full corpus's plan 0a1b"
+    assert corpus_copy(mine / "zzzz.json") is None
