@@ -114,14 +114,30 @@ def hash_split(salt: str, building: str) -> str:
 
 
 # -- from classified cells to the grid ---------------------------------------------------------------------------
+def _block_any(a: np.ndarray, f: int) -> np.ndarray:
+    """``a`` (``h f x w f`` bool) -> ``h x w``: whether any element of each ``f x f`` block is set (an OR of the
+    blocks' ``f`` rows, then of their ``f`` columns: ``2 f`` array operations, several times faster than
+    ``reshape(h, f, w, f).any((1, 3))``)."""
+    H, W = a.shape
+    rows = a.reshape(H // f, f, W)
+    r = rows[:, 0].copy()
+    for i in range(1, f):
+        r |= rows[:, i]
+    cols = r.reshape(H // f, W // f, f)
+    out = cols[..., 0].copy()
+    for i in range(1, f):
+        out |= cols[..., i]
+    return out
+
+
 def _downsample(occ: np.ndarray, free: np.ndarray, f: int) -> tuple[np.ndarray, np.ndarray]:
     if f == 1:
         return occ, free
     H, W = occ.shape
     h, w = -(-H // f), -(-W // f)
     pad = ((0, h * f - H), (0, w * f - W))
-    o = np.asarray(np.pad(occ, pad).reshape(h, f, w, f).any((1, 3)))
-    fr = np.asarray(np.pad(free, pad).reshape(h, f, w, f).any((1, 3)))
+    o = _block_any(np.pad(occ, pad), f)
+    fr = _block_any(np.pad(free, pad), f)
     return o, fr & ~o
 
 
