@@ -33,6 +33,7 @@ from ogm_ppl.calibration.errors import (
     SettingsMismatchError,
 )
 from ogm_ppl.calibration.heldout import (
+    DEFAULT_TEST_CORPORA,
     GENERATED_HELDOUT_SEED,
     PLAN_FILES_GUIDE,
     PLAN_FILES_PRIORS,
@@ -94,6 +95,7 @@ __all__ = [
     "RHAT_THRESHOLD",
     "RUN_KEYS",
     "STARTS",
+    "DEFAULT_TEST_CORPORA",
     "TEST_CORPORA",
     "USER_ERRORS",
     "BiasFileError",

@@ -169,12 +169,14 @@ def run_headline(args: argparse.Namespace) -> Any:
 
 
 def add_bias(k: argparse.ArgumentParser) -> None:
-    from ogm_ppl.learn._fit_common import CORPORA
+    from ogm_ppl.learn._fit_common import CORPORA, SHIPPED_CORPORA
     from ogm_ppl.learn.bias import PRIORS, BiasSettings
 
     d = BiasSettings()
     k.add_argument("--priors", nargs="+", default=list(PRIORS), metavar="KIND", help="prior kinds (KIND[@cal])")
-    k.add_argument("--train", nargs="+", default=list(CORPORA), choices=CORPORA, help="corpora the priors learned on")
+    k.add_argument(
+        "--train", nargs="+", default=list(SHIPPED_CORPORA), choices=CORPORA, help="corpora the priors learned on"
+    )
     k.add_argument("--window", type=int, default=d.window, help="cells a side of the empty window (%(default)s)")
     k.add_argument("--sweeps", type=int, default=d.sweeps, help="sweeps per chain (%(default)s)")
     k.add_argument("--every", type=int, default=d.every, help="record the occupied share every N sweeps (50)")

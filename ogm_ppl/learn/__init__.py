@@ -13,8 +13,8 @@ This package sits above the datasets, inference, priors and :mod:`ogm_ppl.calibr
 
 >>> from ogm_ppl.learn import fit_tables, fit_backoff, fit_field, fit_deltas, fit_delta_setting, train_corpus_guide
 >>> from ogm_ppl.learn import fit_temper, select_headline_prior, fit_bias
->>> sorted(CORPORA)
-['dungeon', 'generated', 'houseexpo', 'ipa']
+>>> CORPORA
+('generated', 'houseexpo', 'ipa', 'dungeon', 'houseexpo-full', 'r2v', 'schools')
 """
 
 from ogm_ppl.learn._fit_common import CORPORA, FitOptionError, FitResult, TrainingPlans, training_plans
