@@ -781,6 +781,47 @@ def _guide_limits(doc: dict) -> Table:
     )
 
 
+def _corpus_stats(doc: dict) -> Table:
+    """``ogm-ppl corpus-stats`` of each floor-plan corpus: plans, cells, known and occupied share, walls."""
+    rows = []
+    for name, c in doc["corpora"].items():
+        size = c["size"]
+        rows.append(
+            [
+                f"`{name}`",
+                f"{c['plans']:,}",
+                f"{c['buildings']:,}",
+                f"{c['cells'] / 1e6:,.1f} M",
+                _f(c["known_share"]),
+                _f(c["occupied_share"]),
+                f"{c['wall_thickness_cells']['percentiles']['p50']:g}",
+                f"{size['width']['p50']:.1f} x {size['height']['p50']:.1f}",
+                _f(c["seconds_per_plan"]),
+            ]
+        )
+    first = next(iter(doc["corpora"].values()))
+    return Table(
+        caption=(
+            f"The floor-plan corpora as rasterised at {first['resolution_m']:g} m cells with the exterior unknown (known "
+            f"share: of the grid with its {first['margin_cells']}-cell margin; occupied share: of the known cells; "
+            "walls: the median run of occupied cells between two free cells; sizes: median, margins included)"
+        ),
+        header=[
+            "corpus",
+            "plans",
+            "buildings",
+            "cells",
+            "known share",
+            "occupied share",
+            "walls (cells)",
+            "median size (m)",
+            "seconds a plan",
+        ],
+        rows=rows,
+        provenance=doc["provenance"],
+    )
+
+
 def _prior_occupancy(doc: dict) -> Table:
     """``experiments/prior_occupancy.py``: each prior's occupied share on a window with no readings (the second
     half of three chains, and each chain's) against its training corpus's ``lambda``."""
@@ -1155,6 +1196,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "unseen_by_distance_logs": ("unseen_by_distance_logs", _unseen_by_distance),
     "unseen_by_distance_logs_occupied": ("unseen_by_distance_logs_occupied", _unseen_by_distance),
     "prior_occupancy": ("prior_occupancy", _prior_occupancy),
+    "corpus_stats": ("corpus_stats", _corpus_stats),
     "calibration_bias": ("calibration_bias", _calibration_bias),
     "calibration_bias10": ("calibration_bias10", _calibration_bias),
     "prior_bias": ("prior_bias", _prior_occupancy),
