@@ -112,7 +112,7 @@ class InputKind:
 
 
 @dataclass
-class InputData(ScanLog):
+class InputData:
     """An input as read: its scans, and what else it holds.
 
     Attributes:
@@ -135,6 +135,15 @@ class InputData(ScanLog):
     settings: dict = field(default_factory=dict)
     record: Any = None
     resume_key: dict = field(default_factory=dict)
+
+    def extent(self) -> tuple[float, float, float, float]:
+        """``(xmin, xmax, ymin, ymax)`` in metres of the poses and the end points of all hits."""
+        return self.scans.extent()
+
+    def covering_grid(self, resolution: float, margin: float = 1.0) -> Grid:
+        """A 2D grid of ``resolution`` metres a cell covering :meth:`extent` plus ``margin`` metres on every side
+        (as a log's, :meth:`~ogm_ppl.datasets.carmen.ScanLog.grid`)."""
+        return ScanLog.grid(self, resolution, margin)  # type: ignore[arg-type]
 
 
 def _read_function(kind: InputKind) -> Callable:
