@@ -60,7 +60,7 @@ def cmd_convert(args) -> dict:
     rec = data.record
     bad = getattr(rec, "bad_messages", None)
     what, bad = ("bad messages", bad) if bad is not None else ("bad lines", getattr(rec, "bad_lines", []))
-    provenance = {
+    provenance: dict = {
         "tool": "ogm-ppl convert",
         "source": str(args.log),
         "reader": _READERS.get(kind.name, f"ogm_ppl.inputs kind {kind.name!r}"),

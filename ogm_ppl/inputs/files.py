@@ -7,7 +7,7 @@ from __future__ import annotations
 import dataclasses
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import Any, cast
 
 from ogm_ppl.inputs.kinds import InputData, InputKind, image_kind, register_input_kind
 from ogm_ppl.options import Bool, Choice, Float, Int, Kind, Numbers, Optional, ParamError, Text, _Bad, param
@@ -140,7 +140,7 @@ class LogOptions(_RangeRules):
 def _read_log(path: Path, o: LogOptions) -> InputData:
     from ogm_ppl.datasets.carmen import read_carmen
 
-    messages = o.messages if isinstance(o.messages, str) else tuple(o.messages)  # type: ignore[call-overload]
+    messages = o.messages if isinstance(o.messages, str) else tuple(cast("list[str]", o.messages))
     log = read_carmen(path, **o.rules(), **o.thinning(), messages=messages, apply_laser_offset=o.apply_laser_offset)
     return InputData("log", path, log.scans, settings=log.settings, record=log)
 
@@ -200,7 +200,7 @@ def _read_bag(path: Path, o: BagOptions) -> InputData:
         o.pose_topic,
         tf=o.tf,
         map_frame=o.map_frame or "map",
-        laser_offset=tuple(o.laser_offset or (0.0, 0.0, 0.0)),  # type: ignore[call-overload]
+        laser_offset=cast("tuple[float, float, float]", tuple(cast("list[float]", o.laser_offset or [0.0, 0.0, 0.0]))),
         pose_tolerance=o.pose_tolerance,
         widen=o.widen,
         **o.rules(),
