@@ -154,7 +154,7 @@ def test_a_dataset_file_is_an_experiments_dataset(tmp_path):
     }
     r = run_experiment(parse_spec(spec, "npz.toml"), tmp_path / "exp", scheduler="serial", progress=False)
     assert not r.failed and sorted(s["dataset"] for s in r.scores) == ["file-bs1", "file-bs2"]
-    with pytest.raises(ValueError, match=r"reader\.strict: unknown key \(known here: \)"):
+    with pytest.raises(ValueError, match=r"reader\.strict: unknown key \(a dataset file takes no reader options\)"):
         parse_spec({**spec, "datasets": [{**spec["datasets"][0], "reader": {"strict": False}}]}, "npz.toml")
 
 
@@ -209,3 +209,20 @@ def test_messages_name_options_as_each_surface_does():
     assert e.value.message == "applies to pose_topic; with tf = true the mounting comes from /tf_static"
     flag = e.value.message_naming(lambda k: "--" + k.replace("_", "-"))
     assert flag == "applies to --pose-topic; with --tf the mounting comes from /tf_static"
+
+
+def test_reader_flags_are_the_kinds_options(tmp_path, capsys):
+    """A flag is refused for an input whose kind lacks its option, and the rules between options are the kind's,
+    named by their flags."""
+    bag, _ = TestBag().make_input(tmp_path)
+    log = tmp_path / "tiny.log"
+    cases = [
+        (["map", bag, "--pose-topic", "/odom", "--map-frame", "world"], "--map-frame applies to --tf"),
+        (["map", log, "--tf"], f"--tf applies to ROS bags; {log} is a CARMEN log"),
+        (["info", log, "--pose-tolerance", "0.5"], "--pose-tolerance applies to ROS bags"),
+    ]
+    for argv, expected in cases:
+        argv = [*map(str, argv), *(["--out", str(tmp_path / "o")] if argv[0] == "map" else [])]
+        assert main(argv) == 2
+        err = capsys.readouterr().err
+        assert err.startswith("ogm-ppl: error: ") and expected in err, (argv, err)

@@ -300,7 +300,7 @@ def _scene_keys(t: Table, kind, name: str, seed: int, base_dir: Path, max_cells:
     values = {k: t.raw(k) for k in names if t.has(k)}
     t.used.update(names)
     values.setdefault("seed", derive_seed(seed, "dataset", name, bits=32))
-    if "plan" in values:  # a floor plan of your own, relative to the spec file
+    if values.get("plan") is not None:  # a floor plan of your own, relative to the spec file
         raw = _parse_options(kind, {"plan": values["plan"]}, lambda k: t).plan
         path = _resolve(raw, base_dir)
         if not path.is_file():
@@ -343,7 +343,8 @@ def _file_keys(t: Table, kind, source: str, base_dir: Path, max_cells: int) -> t
     rt = Table(source, f"{t.where}.reader", t.raw("reader", default_reader))
     for k in rt.table:
         if k not in read:
-            rt.fail(k, f"unknown key (known here: {', '.join(sorted(read))})")
+            known = f"known here: {', '.join(sorted(read))}" if read else f"a {kind.noun} takes no reader options"
+            rt.fail(k, f"unknown key ({known})")
     options = _parse_options(kind, values | rt.table, lambda k: rt if k in read else t)
     if own:
         p[kind.name] = {k: getattr(options, k) for k in values}
