@@ -112,6 +112,9 @@ def test_extending_page_examples_run_and_build_what_their_contracts_test():
         from ogm_ppl.sensors import unregister_sensor
 
         unregister_sensor("my_sensor")
+        from ogm_ppl.inputs import unregister_input_kind
+
+        unregister_input_kind("csv_scans")
 
 
 @pytest.mark.parametrize("name", MODULES)

@@ -26,7 +26,7 @@ from ogm_ppl.cli._common import (
     _steps,
     _version,
 )
-from ogm_ppl.cli._input import _check_input
+from ogm_ppl.inputs import check_readable
 
 
 def add_parser(sub) -> None:
@@ -88,7 +88,7 @@ def _truth_from_spec(spec: list[str], size: int, seed: int) -> tuple[np.ndarray,
         return truth, {"map": "generated", "kind": words[0], "size": size, "border": border}
     if len(words) == 1 and spec[0] != "generated" and (words[0].lower().endswith(".png") or Path(words[0]).exists()):
         path = Path(words[0])
-        _check_input(path)
+        check_readable(path)
         from PIL import Image, UnidentifiedImageError
 
         try:
