@@ -802,9 +802,10 @@ def _corpus_stats(doc: dict) -> Table:
     first = next(iter(doc["corpora"].values()))
     return Table(
         caption=(
-            f"The floor-plan corpora as rasterised at {first['resolution_m']:g} m cells with the exterior unknown (known "
-            f"share: of the grid with its {first['margin_cells']}-cell margin; occupied share: of the known cells; "
-            "walls: the median run of occupied cells between two free cells; sizes: median, margins included)"
+            f"The floor-plan corpora as rasterised at {first['resolution_m']:g} m cells with the exterior "
+            f"unknown (known share: of the grid with its {first['margin_cells']}-cell margin; "
+            "occupied share: of the known cells; walls: the median run of occupied cells between two free cells; "
+            "sizes: median, margins included)"
         ),
         header=[
             "corpus",

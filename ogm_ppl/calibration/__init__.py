@@ -17,10 +17,10 @@ from ogm_ppl.calibration.chains import (
     STARTS,
     agreeing,
     default_patch,
-    run_chains,
     run_guide,
     run_ogm,
     run_prior,
+    run_prior_chains,
     support,
 )
 from ogm_ppl.calibration.errors import (
@@ -134,7 +134,7 @@ __all__ = [
     "plan_file_maps",
     "plan_set_maps",
     "prior_names",
-    "run_chains",
+    "run_prior_chains",
     "run_guide",
     "run_ogm",
     "run_prior",

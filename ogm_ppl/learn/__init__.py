@@ -17,7 +17,7 @@ This package sits above the datasets, inference, priors and :mod:`ogm_ppl.calibr
 ('generated', 'houseexpo', 'ipa', 'dungeon', 'houseexpo-full', 'r2v', 'schools')
 """
 
-from ogm_ppl.learn._fit_common import CORPORA, FitOptionError, FitResult, TrainingPlans, training_plans
+from ogm_ppl.learn._fit_common import CORPORA, FitOptionError, FitResult, TrainingPlans, load_training_plans
 from ogm_ppl.learn.backoff import fit_backoff
 from ogm_ppl.learn.bias import BiasSettings, fit_bias
 from ogm_ppl.learn.delta_setting import fit_delta_setting
@@ -57,5 +57,5 @@ __all__ = [
     "select_headline_prior",
     "train_corpus_guide",
     "train_prior_guide",
-    "training_plans",
+    "load_training_plans",
 ]

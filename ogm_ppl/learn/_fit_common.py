@@ -35,7 +35,7 @@ __all__ = [
     "FitOptionError",
     "FitResult",
     "TrainingPlans",
-    "training_plans",
+    "load_training_plans",
     "validation_split",
 ]
 
@@ -174,7 +174,7 @@ class TrainingPlans:
         return args
 
 
-def training_plans(
+def load_training_plans(
     source: str | PlanPaths | TrainingPlans,
     *,
     limit: int | None = None,

@@ -121,7 +121,7 @@ def _makers() -> dict[str, Callable[[Any], Any]]:
 
 def fit_families(data: Any, names: Sequence[str] = FAMILIES, *, pn_upto: int = 0) -> dict[str, Any]:
     """Fit the uniform-prior terms ``names`` (of :data:`FAMILIES`; the ``*_dd`` ones are skipped) on ``data``
-    (:class:`~ogm_ppl.inference.variational.delta_fit.FitData`): ``name -> FitResult`` of
+    (:class:`~ogm_ppl.inference.variational.delta_fit.FitData`): ``name -> DeltaFitResult`` of
     :mod:`~ogm_ppl.inference.variational.delta_fit`, in :data:`FAMILIES` order. pN is fitted from p(N-1), so
     the chain p1 .. pM runs for the largest M named (or ``pn_upto``) and every link of it is returned."""
     from ogm_ppl.inference.variational.delta_fit import fit_delta, warm_start_pn

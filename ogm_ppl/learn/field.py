@@ -48,8 +48,8 @@ from ogm_ppl.learn._fit_common import (
     check_label,
     check_out_dir,
     command,
+    load_training_plans,
     run_provenance,
-    training_plans,
     validation_split,
 )
 
@@ -155,7 +155,7 @@ def fit_field(
     out = check_out_dir(out_dir)
     label = check_label(name) if name is not None else None
     every = check_int(validation_every, "validation_every", 2)
-    plans = training_plans(source, limit=limit, pixel_size=pixel_size, resolution=resolution)
+    plans = load_training_plans(source, limit=limit, pixel_size=pixel_size, resolution=resolution)
     label = label or ("plans" if plans.files else plans.corpus)
     tr_idx, va_idx = validation_split(len(plans), every)
     cmd = command("field", plans, out, _options(s, every, name))
@@ -357,7 +357,7 @@ def recheck_field(corpus: str, out_dir: str | os.PathLike, *, progress: bool = T
     path = out / f"field_{corpus}.json"
     info = json.loads(path.read_text())
     d = load_field(out / f"field_{corpus}.npz")
-    plans = training_plans(corpus)
+    plans = load_training_plans(corpus)
     _, val = validation_split(len(plans), VALIDATION_EVERY)
     va = field_stats(list(plans.maps(val)), d["w"], 2)
     info["sampler_check"] = sampler_report(d, va, progress=progress)

@@ -75,7 +75,7 @@ def fit_corpus_tables(
     out_dir: str | Path, limits: Mapping[str, int] | None = None, *, progress: bool = True
 ) -> dict[str, Any]:
     """:func:`ogm_ppl.learn.fit_tables` of every corpus into ``out_dir`` (``limits``: the first plans of each
-    corpus only, e.g. :data:`QUICK_LIMITS`): ``{corpus: FitResult}``."""
+    corpus only, e.g. :data:`QUICK_LIMITS`): ``{corpus: FitResult}`` (:class:`~ogm_ppl.learn.FitResult`)."""
     from ogm_ppl.learn import CORPORA, fit_tables
 
     return {

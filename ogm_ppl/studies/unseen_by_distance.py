@@ -17,7 +17,7 @@ share and the method's NLL in bits per cell,
 the pooled NLL over the corpus's unseen cells (``ogm-ppl calibrate`` reports the mean over maps instead; for
 one map the two agree).
 
-A prior runs the calibration protocol's ``C = 3`` chains (:func:`~ogm_ppl.calibration.run_chains`; ``q``
+A prior runs the calibration protocol's ``C = 3`` chains (:func:`~ogm_ppl.calibration.run_prior_chains`; ``q``
 their pooled marginals), and each bin also gets the share of its cells whose chains agree (split R-hat below
 :data:`~ogm_ppl.calibration.RHAT_THRESHOLD`) and each chain's mean occupancy there. Several chain lengths
 give one run each, from the same seeds, so agreement can be followed as the chains grow longer.
@@ -259,7 +259,7 @@ def chains_by_distance(test: str, settings: DistanceSettings, log: Callable[[str
         bins = _bins(_distance(scene), unseen_2d)
         idx = np.flatnonzero(unseen_2d.ravel())  # the order of run["rhat"]
         for S in settings.sweeps:
-            run = calibration.run_chains(scene, name, settings.protocol(S))
+            run = calibration.run_prior_chains(scene, name, settings.protocol(S))
             if "skipped" in run:
                 raise PriorSkippedError(f"{name} on {t.name}: {run['skipped']}")
             marg = run["marginals"].reshape(C, *t.truth.shape)

@@ -67,7 +67,7 @@ def test_the_fit_and_calibrate_commands_take_the_new_corpora(corpora):
     from ogm_ppl.calibration import CalibrationSettings
     from ogm_ppl.calibration.heldout import DEFAULT_TEST_CORPORA, TEST_CORPORA
     from ogm_ppl.cli import build_parser
-    from ogm_ppl.learn import CORPORA, training_plans
+    from ogm_ppl.learn import CORPORA, load_training_plans
 
     assert set(NEW) <= set(CORPORA) and set(NEW) <= set(TEST_CORPORA)
     assert DEFAULT_TEST_CORPORA == ("generated", "houseexpo", "ipa", "dungeon")  # what runs by default is unchanged
@@ -76,7 +76,7 @@ def test_the_fit_and_calibrate_commands_take_the_new_corpora(corpora):
     args = build_parser().parse_args(["fit-prior", "tables", "--corpus", "houseexpo-full", "--out", "x"])
     assert args.corpus == "houseexpo-full"
     assert build_parser().parse_args(["calibrate", "--test", "schools", "r2v"]).test == ["schools", "r2v"]
-    plans = training_plans("r2v")
+    plans = load_training_plans("r2v")
     assert (
         plans.names
         == tuple(fp.training_plans("r2v"))
