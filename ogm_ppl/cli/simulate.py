@@ -98,11 +98,22 @@ def _truth_from_spec(spec: list[str], size: int, seed: int) -> tuple[np.ndarray,
             raise CLIError(f"{path}: not a readable image ({e})") from None
         occ = grey < 128
         occ[[0, -1], :] = occ[:, [0, -1]] = True  # a closed outer wall: beams end inside the map
+        if occ.all():
+            raise CLIError(
+                f"argument --map: {path} has no free cell: each of its {occ.shape[1]} x {occ.shape[0]} pixels is "
+                "darker than 128 (occupied) or on the one-pixel outer wall the simulation adds; a floor plan needs "
+                "light (>= 128) free space for the robot"
+            )
         return occ[::-1].copy(), {"map": "png", "path": str(path)}  # image row 0 is the top (largest y)
     raise CLIError(
         f"argument --map: expected 'generated KIND' with KIND one of {', '.join(KINDS)}, "
         f"or a PNG file; got {' '.join(spec)!r}"
     )
+
+
+def _source_name(source: dict) -> str:
+    """The ground truth as ``--map`` gave it: the PNG's path or ``generated KIND``."""
+    return source["path"] if source["map"] == "png" else f"generated {source['kind']}"
 
 
 def cmd_simulate(args) -> dict:
@@ -118,15 +129,20 @@ def cmd_simulate(args) -> dict:
         bar.update()
         bar.set_postfix_str("route and scans")
         t0 = time.perf_counter()
-        data = stop_and_scan(
-            truth,
-            grid,
-            num_poses=args.poses,
-            beams=args.beams,
-            max_range_cells=args.max_range_cells,
-            sigma_cells=args.sigma,
-            seed=args.seed,
-        )
+        try:
+            data = stop_and_scan(
+                truth,
+                grid,
+                num_poses=args.poses,
+                beams=args.beams,
+                max_range_cells=args.max_range_cells,
+                sigma_cells=args.sigma,
+                seed=args.seed,
+            )
+        except ValueError as e:
+            if str(e).startswith(("truth ", "no free cell")):  # the ground truth's fault: name where it came from
+                raise CLIError(f"argument --map: {_source_name(source)}: {e}") from None
+            raise
         seconds = time.perf_counter() - t0
         bar.update()
         bar.set_postfix_str("writing")
