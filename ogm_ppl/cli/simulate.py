@@ -23,6 +23,7 @@ from ogm_ppl.cli._common import (
     _pos_float,
     _pos_int,
     _prepare_out_file,
+    _refuse_out_over_inputs,
     _steps,
     _version,
 )
@@ -121,6 +122,7 @@ def cmd_simulate(args) -> dict:
     from ogm_ppl.datasets import save_dataset
     from ogm_ppl.datasets.stop_and_scan import stop_and_scan
 
+    _refuse_out_over_inputs(args.out, [Path(w) for w in args.map if Path(w).exists()])  # a PNG plan
     _prepare_out_file(args.out)
     with _steps(3, "ogm-ppl simulate") as bar:
         bar.set_postfix_str("ground truth")
