@@ -259,7 +259,10 @@ def test_ray_cast_size_bounds_the_cast_before_it_runs(max_range):
     angles = np.where(rng.random((S, B)) < 0.1, 0.0, rng.uniform(-np.pi, np.pi, (S, B)))  # some along an axis
     scans = Scans(poses, angles, rng.uniform(0, 1.2 * max_range, (S, B)), max_range=max_range, over_range="max")
     line = Grid.line(50)
-    for g, sc in ((grid, scans), (line, Scans.one_d(rng.uniform(0, max_range * 5, 40).tolist(), max_range=max_range * 5))):
+    for g, sc in (
+        (grid, scans),
+        (line, Scans.one_d(rng.uniform(0, max_range * 5, 40).tolist(), max_range=max_range * 5)),
+    ):
         size = ray_cast_size(g, sc)
         rays = raycast(g, sc)
         assert size.rays == rays.num_rays
