@@ -71,6 +71,8 @@ _nonneg_int = _number(int, 0)
 _fraction = _number(float, 0, True, 1)
 _probability = _number(float, 0, True, 1, True)
 _finite = _number(float)
+#: a random seed: chain c of a run is seeded seed + c, and checkpoints store it as an int64
+_seed = _number(int, 0, hi=2**62)
 
 
 # --------------------------------------------------------------------------------------- helpers

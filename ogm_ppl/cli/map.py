@@ -47,6 +47,7 @@ from ogm_ppl.cli._common import (
     _prepare_out_dir,
     _probability,
     _refuse_out_over_inputs,
+    _seed,
     _size,
     _steps,
     _version,
@@ -239,7 +240,7 @@ def add_parser(sub) -> None:
         help="parameter patch: of gibbs (PatchGibbs instead of CellGibbs) and patch "
         "(default 3x3): HxW, an int L (a run of L cells), 'plus' or 'square'",
     )
-    m.add_argument("--seed", type=_nonneg_int, default=0, metavar="S", help="random seed (>= 0, default 0)")
+    m.add_argument("--seed", type=_seed, default=0, metavar="S", help="random seed (0 to 2^62, default 0)")
     m.add_argument(
         "--online",
         action="store_true",

@@ -18,12 +18,12 @@ from ogm_ppl.cli._common import (
     CLIError,
     _jsonable,
     _nonneg_float,
-    _nonneg_int,
     _number,
     _pos_float,
     _pos_int,
     _prepare_out_file,
     _refuse_out_over_inputs,
+    _seed,
     _steps,
     _version,
 )
@@ -74,7 +74,7 @@ def add_parser(sub) -> None:
     s.add_argument(
         "--sigma", type=_nonneg_float, default=3.0, metavar="CELLS", help="Gaussian range noise in cells (default 3)"
     )
-    s.add_argument("--seed", type=_nonneg_int, default=0, metavar="S", help="random seed (>= 0, default 0)")
+    s.add_argument("--seed", type=_seed, default=0, metavar="S", help="random seed (0 to 2^62, default 0)")
 
 
 def _truth_from_spec(spec: list[str], size: int, seed: int) -> tuple[np.ndarray, dict]:

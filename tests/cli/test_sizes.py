@@ -60,6 +60,7 @@ def test_a_map_too_fine_for_the_memory_is_refused_before_the_ray_cast(tmp_path, 
         (["--method", "gibbs", "--sweeps", "9" * 23], "argument --sweeps: must be <= 1000000000 (ogm_ppl.methods"),
         (["--method", "vi", "--param", "loss=rws", "--param", "num_particles=1000000000"], "num_particles: "),
         (["--method", "tempering", "--param", "rungs=10000000"], "rungs: 10,000,000 rungs of parallel tempering"),
+        (["--seed", "9" * 20], "argument --seed: must be <= 4611686018427387904, got 99999999999999999999"),
     ],
 )
 def test_parameters_past_their_limits_are_one_error_line(tmp_path, simulated_dataset, capsys, argv, message):
