@@ -190,8 +190,8 @@ def _set(i, v):
 )
 def test_a_checkpoint_with_impossible_statistics_is_refused_naming_the_field(tmp_path, fields, message):
     """Running sums that hold NaN or infinity, counts outside ``[0, n]``, fields of another shape or a negative
-    count cannot come from a run: resuming is refused naming the file and the field (before, a NaN in the sums
-    resumed and spread into the map)."""
+    count cannot come from a run: resuming is refused naming the file and the field (a NaN resumed would spread
+    into the map)."""
     model = _model()
     ck = tmp_path / "ck.npz"
     run_gibbs(
