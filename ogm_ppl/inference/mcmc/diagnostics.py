@@ -249,7 +249,7 @@ def run_chains(
             f"got {mp_context!r}"
         )
     ctx = multiprocessing.get_context(mp_context)
-    shipped = make_kernel
+    shipped: Callable[[], Any] | bytes = make_kernel
     if mp_context != "fork":
         # a plain pickle, made once: multiprocessing's own pickler would move the model's tensors into shared
         # memory, which leaves the NumPy views of them (the compiled kernels' ray index) pointing at freed memory
