@@ -22,6 +22,20 @@ def little_memory(monkeypatch):
     monkeypatch.setattr(importlib.import_module("ogm_ppl.raycast"), "traverse_all", never)
 
 
+def test_an_update_term_whose_table_grows_with_its_cube_is_refused_before_it_is_built(tmp_path, capsys):
+    """Elfes's term sums over every first hit for each table entry: at 1 cm its table would take far more than
+    the memory (the test pretends 1 GiB is free); refused with the term named, not a raw allocator error."""
+    import ogm_ppl._memory
+
+    log = write_log(tmp_path / "tiny.log")
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(ogm_ppl._memory, "available_memory", lambda: 1 << 30)
+        assert main(["map", str(log), "--resolution", "0.01", "--method", "elfes", "--out", str(tmp_path / "o")]) == 2
+    err = capsys.readouterr().err.strip().splitlines()[-1]
+    table = r"building the update term's table \(Elfes\) of 747 x 748 float64 entries"
+    assert re.search(table + r".* needs about [\d.]+ GiB, more than the 1\.0 GiB", err), err
+
+
 @pytest.mark.parametrize(
     "method, message",
     [
@@ -34,9 +48,10 @@ def little_memory(monkeypatch):
         ),
         (
             "ogm",
-            r"traditional OGM on a 2501 x 3001 grid \(the update term's table of [\d,]+ x [\d,]+ float64 entries, a "
-            r"ray's most cells up to the sensor's maximum range of [\d.]+ m, 5 times while it is built, and 9 bytes a "
-            r"cell\) needs about [\d.]+ MiB, more than the 64\.0 MiB",
+            r"traditional OGM on a 2501 x 3001 grid \(building the update term's table \(Moravec\) of [\d,]+ x "
+            r"[\d,]+ float64 entries, a ray's most cells up to the sensor's maximum range of [\d.]+ m, and a copy "
+            r"of it; 9 bytes a cell\) "
+            r"needs about [\d.]+ MiB, more than the 64\.0 MiB",
         ),
     ],
 )

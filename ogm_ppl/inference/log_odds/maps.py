@@ -36,10 +36,6 @@ __all__ = [
     "OCTOMAP_CLAMP",
 ]
 
-#: float64 copies of the update term's table that building it for :func:`evidence_grid_from_scans` holds at its
-#: peak (measured: 3.1 for haehnel, 4.1 for p21 inside ``DeltaFamily.table``, and the contiguous copy)
-TABLE_COPIES = 5
-
 #: OctoMap's default clamping thresholds in log-odds (probabilities 0.1192 and 0.971).
 OCTOMAP_CLAMP = (-2.0, 3.5)
 
@@ -228,10 +224,11 @@ def evidence_grid_from_scans(
     ri = ray_inputs(grid, scans)
     cap = ri.capacity()
     check_fits(
-        TABLE_COPIES * 8 * cap * (cap + 1) + 9 * grid.num_cells,
-        f"traditional OGM on a {' x '.join(map(str, grid.shape))} grid (the update term's table of {cap:,} x "
-        f"{cap + 1:,} float64 entries, a ray's most cells up to the sensor's maximum range of "
-        f"{float(scans.max_range):g} m, {TABLE_COPIES} times while it is built, and 9 bytes a cell)",
+        delta.table_bytes(cap, cap) + 8 * cap * (cap + 1) + 9 * grid.num_cells,
+        f"traditional OGM on a {' x '.join(map(str, grid.shape))} grid (building the update term's table "
+        f"({type(delta).__name__}) "
+        f"of {cap:,} x {cap + 1:,} float64 entries, a ray's most cells up to the sensor's maximum range of "
+        f"{float(scans.max_range):g} m, and a copy of it; 9 bytes a cell)",
         "use a coarser resolution or a shorter usable range",
     )
     with torch.no_grad():
