@@ -138,7 +138,7 @@ def run_kernel(kernel, params: SamplingParams, problem: MapProblem, ctx: RunCont
         trace_path.unlink()
     start = _ckpt_sweep(ckpt) if ckpt.exists() else 0
     total = warm + n
-    k = params.record
+    k = min(params.record, n)  # more marks than counted sweeps are the same marks: one a sweep
     marks = sorted({warm + math.ceil(i * n / k) for i in range(1, k + 1)} | {total}) if k else [total]
     if start > total:  # a longer run's checkpoint (fewer sweeps asked for since): a chain cannot go back
         ckpt.unlink()

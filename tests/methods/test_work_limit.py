@@ -129,3 +129,11 @@ def test_sweeps_beyond_any_run_are_refused_when_parsed():
         assert getattr(m.parse({key: MAX_SWEEPS, **patch}), key) == MAX_SWEEPS
     with pytest.raises(ParamError, match=r"offset: must be at most 2\^63 - 1 = 9223372036854775807 in magnitude"):
         m.parse({"offset": INT_LIMIT + 1})
+
+
+def test_more_records_than_sweeps_are_one_a_sweep(problem, tmp_path):
+    """``record`` past the sweeps asked for records every counted sweep once (a record count of 10^12 does not
+    loop 10^12 times)."""
+    m = get_method("gibbs")
+    r = m.run(m.parse({"sweeps": 4, "record": 10**12}), problem, RunContext(seed=0, checkpoint_dir=tmp_path))
+    assert [t["sweep"] for t in r.details["trace"]] == [1, 2, 3, 4]
