@@ -39,6 +39,7 @@ from collections.abc import Callable, Collection, Mapping
 from typing import Any
 
 __all__ = [
+    "INT_LIMIT",
     "Bool",
     "Choice",
     "Float",
@@ -108,17 +109,29 @@ def _bounds(lo, hi, lo_open, hi_open) -> str:
     return f" in {a or '(-inf'}, {b or 'inf)'}" if a or b else ""
 
 
+#: the largest magnitude an integer parameter may have whatever its own range: the int64 that checkpoints,
+#: records and arrays hold it in (a larger one would overflow there, hours into a run)
+INT_LIMIT = 2**63 - 1
+
+
 @dataclasses.dataclass(frozen=True)
 class Int(Kind):
-    """An integer (not a bool) in ``[lo, hi]``."""
+    """An integer (not a bool) in ``[lo, hi]``, and never beyond :data:`INT_LIMIT` in magnitude."""
 
     lo: int | None = None
     hi: int | None = None
+    #: what the upper bound ``hi`` stands for, said when a value exceeds it
+    why: str = ""
 
     def value(self, v):
         if isinstance(v, bool) or not isinstance(v, int):
             raise _Bad(f"must be an integer, got {v!r}")
-        return _range(v, self.lo, self.hi, False, False)
+        if self.hi is not None and self.why and v > self.hi:
+            raise _Bad(f"must be <= {self.hi} ({self.why}), got {v!r}")
+        _range(v, self.lo, self.hi, False, False)
+        if abs(v) > INT_LIMIT:
+            raise _Bad(f"must be at most 2^63 - 1 = {INT_LIMIT} in magnitude (an int64), got {v}")
+        return v
 
     def text(self, s):
         try:

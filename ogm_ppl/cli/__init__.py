@@ -51,7 +51,7 @@ import argparse
 import importlib
 import sys
 
-from ogm_ppl.cli._common import CLIError, _one_line, _Parser, _version
+from ogm_ppl.cli._common import CLIError, _inputs_of, _one_line, _Parser, _refuse_out_over_inputs, _version
 from ogm_ppl.cli._map_files import load_map, save_map_png
 from ogm_ppl.methods import MethodModuleError
 
@@ -112,6 +112,7 @@ def main(argv: list[str] | None = None) -> int:
             args = build_parser().parse_args(argv)
         except SystemExit as e:  # --help, --version
             return int(e.code or 0) if not isinstance(e.code, str) else 2
+        _refuse_out_over_inputs(getattr(args, "out", None), _inputs_of(args))
         return int(_command(args.command).run(args))
     except (
         CLIError,

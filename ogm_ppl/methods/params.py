@@ -20,6 +20,7 @@ import os
 from pathlib import Path
 
 from ogm_ppl.options import (
+    INT_LIMIT,
     Bool,
     Choice,
     Float,
@@ -36,6 +37,7 @@ from ogm_ppl.options import (
 )
 
 __all__ = [
+    "INT_LIMIT",
     "Block",
     "Bool",
     "Choice",

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ogm_ppl._memory import check_fits
 from ogm_ppl.grid import Grid
 from ogm_ppl.inference._kernels.log_odds import evidence_from_scans, evidence_update
 from ogm_ppl.models.delta import DeltaFamily
@@ -222,6 +223,14 @@ def evidence_grid_from_scans(
         _check_range(delta, float(scans.max_range) / float(grid.resolution), "evidence_grid_from_scans")
     ri = ray_inputs(grid, scans)
     cap = ri.capacity()
+    check_fits(
+        delta.table_bytes(cap, cap) + 8 * cap * (cap + 1) + 9 * grid.num_cells,
+        f"traditional OGM on a {' x '.join(map(str, grid.shape))} grid (building the update term's table "
+        f"({type(delta).__name__}) "
+        f"of {cap:,} x {cap + 1:,} float64 entries, a ray's most cells up to the sensor's maximum range of "
+        f"{float(scans.max_range):g} m, and a copy of it; 9 bytes a cell)",
+        "use a coarser resolution or a shorter usable range",
+    )
     with torch.no_grad():
         table = np.ascontiguousarray(_checked(delta.table(cap, cap), delta).detach().numpy())
     ev = np.full(grid.num_cells, l0, dtype=np.float64)
