@@ -92,10 +92,8 @@ class ChromaticCellGibbs(CellGibbs):
     def threads(self, n: int | None) -> None:
         _set_threads(self, n)
 
-    def _prepare(self) -> None:
-        if self._ready:
-            return
-        super()._prepare()
+    def _set_up(self) -> None:
+        super()._set_up()
         if self._compiled is None:
             raise ValueError("ChromaticCellGibbs needs a prior with a compiled face (prior.compiled())")
         g = self.model.grid
@@ -133,7 +131,7 @@ class ChromaticCellGibbs(CellGibbs):
 
     def _sweep(self) -> int:
         seed = np.uint64(int(torch.randint(0, 2**63 - 1, (), dtype=torch.int64)))
-        self._updates += len(self._visit)
+        self.chain.updates += len(self._visit)
         before = numba.get_num_threads()
         numba.set_num_threads(self.threads)
         try:
@@ -159,7 +157,7 @@ class ChromaticCellGibbs(CellGibbs):
     def state_equals_scratch(self) -> bool:
         """Whether the kept first / second hits and likelihood sums equal those computed from scratch
         for the current map (the check that concurrent writes lost nothing)."""
-        ref = cs.cell_state_of(self._m, self._index, self._bits)
+        ref = cs.cell_state_of(self.state, self._index, self._bits)
         return bool(
             np.array_equal(ref.rays, self._st.rays)
             and np.array_equal(ref.d, self._st.d)
@@ -208,10 +206,8 @@ class ChromaticPatchGibbs(PatchGibbs):
 
     threads = ChromaticCellGibbs.threads
 
-    def _prepare(self) -> None:
-        if self._ready:
-            return
-        super()._prepare()
+    def _set_up(self) -> None:
+        super()._set_up()
         if self._compiled is None:
             raise ValueError("ChromaticPatchGibbs needs a prior with a compiled face (prior.compiled())")
         g = self.model.grid
@@ -244,7 +240,7 @@ class ChromaticPatchGibbs(PatchGibbs):
     def _sweep(self) -> int:
         seed = np.uint64(int(torch.randint(0, 2**63 - 1, (), dtype=torch.int64)))
         lay = self._layout
-        self._updates += len(lay.anchors) + len(lay.long_anchors)
+        self.chain.updates += len(lay.anchors) + len(lay.long_anchors)
         rows = 5 if self._escapes() else 3
         before = numba.get_num_threads()
         numba.set_num_threads(self.threads)
