@@ -40,19 +40,30 @@ from ogm_ppl.priors.compiled import kind_of
 __all__ = ["ChromaticCellGibbs", "ChromaticPatchGibbs", "max_threads"]
 
 
-def _set_threads(kernel, n: int | None) -> None:
-    most = max_threads()
-    if n is not None and not 1 <= int(n) <= most:
-        raise ValueError(f"threads must lie in 1..{most}, got {n}")
-    kernel._threads = None if n is None else int(n)
-
-
 def max_threads() -> int:
     """The most threads numba can run (``NUMBA_NUM_THREADS``, fixed when numba starts)."""
     return int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
 
 
-class ChromaticCellGibbs(CellGibbs):
+class _Threaded:
+    """The ``threads`` setting of the chromatic kernels: how many of numba's threads a sweep uses."""
+
+    _threads: int | None = None
+
+    @property
+    def threads(self) -> int:
+        """The numba threads a sweep uses."""
+        return numba.get_num_threads() if self._threads is None else self._threads
+
+    @threads.setter
+    def threads(self, n: int | None) -> None:
+        most = max_threads()
+        if n is not None and not 1 <= int(n) <= most:
+            raise ValueError(f"threads must lie in 1..{most}, got {n}")
+        self._threads = None if n is None else int(n)
+
+
+class ChromaticCellGibbs(_Threaded, CellGibbs):
     """Single-cell Gibbs in chromatic tile sweeps (module docstring), on ``threads`` of numba's threads.
 
     Args:
@@ -82,15 +93,6 @@ class ChromaticCellGibbs(CellGibbs):
             raise ValueError(f"tile must be a positive number of cells, got {tile}")
         self.tile = None if tile is None else int(tile)
         self.threads = threads
-
-    @property
-    def threads(self) -> int:
-        """The numba threads a sweep uses."""
-        return numba.get_num_threads() if self._threads is None else self._threads
-
-    @threads.setter
-    def threads(self, n: int | None) -> None:
-        _set_threads(self, n)
 
     def _set_up(self) -> None:
         super()._set_up()
@@ -165,7 +167,7 @@ class ChromaticCellGibbs(CellGibbs):
         )
 
 
-class ChromaticPatchGibbs(PatchGibbs):
+class ChromaticPatchGibbs(_Threaded, PatchGibbs):
     """Patch Gibbs in chromatic tile sweeps (module docstring), on ``threads`` of numba's threads.
 
     Args:
@@ -202,9 +204,7 @@ class ChromaticPatchGibbs(PatchGibbs):
         if tile is not None and int(tile) < 1:
             raise ValueError(f"tile must be a positive number of cells, got {tile}")
         self.tile = None if tile is None else int(tile)
-        _set_threads(self, threads)
-
-    threads = ChromaticCellGibbs.threads
+        self.threads = threads
 
     def _set_up(self) -> None:
         super()._set_up()
