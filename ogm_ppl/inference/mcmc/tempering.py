@@ -70,8 +70,7 @@ def tempered_model(model: OccupancyModel, beta_prior: float = 1.0, beta_lik: flo
         out.prior = TemperedPrior(model.prior, bp)
     if bl != 1.0:
         out.loglik_table = _scale_log(model.loglik_table, bl)
-    out._ray_index = None  # rebuilt from the new table on first use
-    return out
+    return out  # its ray index is its own table's: OccupancyModel.ray_index keeps one per table
 
 
 def geometric_ladder(num_rungs: int, beta_min: float) -> tuple[float, ...]:
