@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from ogm_ppl._rng import keeps_global_rng
+from ogm_ppl.exceptions import CheckpointError
 from ogm_ppl.inference.mcmc.fingerprint import fingerprint
 from ogm_ppl.io import atomic_write
 from ogm_ppl.posterior import mutual_information_from_joint
@@ -35,10 +36,6 @@ from ogm_ppl.progress import Progress, progress_over
 __all__ = ["CheckpointError", "GibbsRun", "RunningStats", "run_gibbs"]
 
 _FORMAT = 4  # the kernel's entries follow MapKernel.state_dict (its own format: kernel_format)
-
-
-class CheckpointError(ValueError):
-    """A checkpoint that cannot be resumed here: unreadable, foreign, or of another run."""
 
 
 class RunningStats:
