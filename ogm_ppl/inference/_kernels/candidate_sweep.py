@@ -8,10 +8,10 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 from numba.extending import overload
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.inference._kernels.choice import accept_random, categorical, categorical_table, choose, pick_from_table
 from ogm_ppl.inference._kernels.patch_lik import _add_lik, lik_list
 from ogm_ppl.inference._kernels.patch_rays import collect_rays, max_slots, patch_slots, ray_scratch
@@ -27,7 +27,7 @@ from ogm_ppl.priors.compiled.registry import (
 from ogm_ppl.priors.compiled.scratch import tile_scratch, tile_scratch_on
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def candidate_log_weights(ps, patch, prior, cands, n, logw):
     """``logw[j]``: unnormalised log conditional of ``cands[j]`` (prior first; the likelihood only for
     candidates the prior allows)."""
@@ -38,7 +38,7 @@ def candidate_log_weights(ps, patch, prior, cands, n, logw):
     lik_list(sc, ns, ps.ll, cands, n, logw)
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def _restricted_update(ps, patch, prior, u, i, rule, stamp, cands, n, t, cand_lp, logw, pair, pw, sc, ts):
     r"""One exact update of a patch whose candidates ``cands[:n]`` (a set ``S`` fixed by the cells outside
     the patch, e.g. the configurations a backed-off table counted after the tile's border) are only part
@@ -95,7 +95,7 @@ def _restricted_update(ps, patch, prior, u, i, rule, stamp, cands, n, t, cand_lp
     return new != cur
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def _candidate_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     """Patch updates that weigh only the configurations the prior allows given the rest
     (:func:`~ogm_ppl.priors.compiled.patch_candidates`: a tile's sparse support for table priors whose
@@ -168,7 +168,7 @@ def _candidate_loop_for(ps, geo, anchors, prior, u, rule, stamp0, scratch):
     )
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def _candidate_loop_body(ps, geo, anchors, prior, u, rule, stamp0, scratch):
     """The loop of :func:`_candidate_sweep` over its scratch (inlined into :func:`_candidate_loop_rt` and
     :func:`_candidate_loop_lean`)."""
@@ -288,13 +288,13 @@ def _candidate_loop_body(ps, geo, anchors, prior, u, rule, stamp0, scratch):
     return changed, skipped
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def _candidate_loop_rt(ps, geo, anchors, prior, u, rule, stamp0, scratch):
     """:func:`_candidate_loop_body` with numba's runtime (for patch conditionals that allocate)."""
     return _candidate_loop_body(ps, geo, anchors, prior, u, rule, stamp0, scratch)
 
 
-@nb.njit(cache=True, _nrt=False)
+@njit_shipped(_nrt=False)
 def _candidate_loop_lean(ps, geo, anchors, prior, u, rule, stamp0, scratch):
     """:func:`_candidate_loop_body` without numba's runtime, which counts the references of every bundle
     array at each inlined call (the prior, the patch state, the scratch), a share of each patch update (as

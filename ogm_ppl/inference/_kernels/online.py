@@ -31,6 +31,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.inference._kernels import cell_sweep as cs
 from ogm_ppl.inference._kernels.cells import _next_occupied
 from ogm_ppl.priors.compiled import cell_log_odds
@@ -286,7 +287,7 @@ def log_lik_ratio(st, k):
     return cs._lik_ratio(st, k)
 
 
-@nb.njit(cache=True, _nrt=False)
+@njit_shipped(_nrt=False)
 def sweep(st, order, prior, uniforms, update):
     """One pass of single-cell updates over ``order`` with the compiled prior bundle ``prior`` (heat bath
     or metropolised, :func:`~ogm_ppl.inference._kernels.cell_sweep.new_value`). Returns the flips."""
@@ -304,7 +305,7 @@ def sweep(st, order, prior, uniforms, update):
     return flips
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def sweep_accumulate(st, order, prior, uniforms, update, acc):
     """:func:`sweep`, then ``acc += m`` (the running sum of the marginals). Returns the flips."""
     flips = sweep(st, order, prior, uniforms, update)

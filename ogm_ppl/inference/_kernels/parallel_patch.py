@@ -35,6 +35,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.inference._kernels import cell_sweep as cs
 from ogm_ppl.inference._kernels import parallel as par
 from ogm_ppl.inference._kernels.patch_state import _next_stamp
@@ -130,14 +131,14 @@ def patch_draws(anchors, scan, seed, rows):
     return out, u
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def _tile_patches(ps, geo, lay, prior, seed, scan, rule, rows, bit_of, t, base):
     lo, hi = lay.tile_off[t], lay.tile_off[t + 1]
     anchors, u = patch_draws(lay.anchors[lo:hi], scan, par.tile_seed(seed, t), rows)
     return patch_pass(ps, geo, anchors, prior, u, rule, base + lo, bit_of)
 
 
-@nb.njit(cache=True, parallel=True)
+@njit_shipped(parallel=True)
 def chromatic_patch_sweep(ps, geo, lay, prior, seed, scan, rule, rows, bit_of, threads):
     """One chromatic patch sweep (module docstring): for each colour its tiles' patches (``numba.prange``
     over ``threads`` workers: pass ``numba.get_num_threads()``; see :func:`.parallel.chromatic_sweep`), then

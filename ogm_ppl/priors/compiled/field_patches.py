@@ -7,6 +7,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
+
 __all__ = ["field_patch_weights"]
 
 
@@ -243,7 +245,7 @@ def _full_range(cands, n, nl):
     return True
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def field_patch_weights(lp, patch, m, cands, n, out, ts):
     """``out[j] = log p~(patch = cands[j], rest)`` up to a constant in ``j``: the windows (and, at two
     scales, the pooled windows) holding a live patch cell, read once, then scored per candidate. All

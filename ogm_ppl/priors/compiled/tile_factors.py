@@ -7,6 +7,8 @@ from __future__ import annotations
 import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
+
 __all__ = [
     "border_index",
     "border_range",
@@ -34,7 +36,7 @@ def border_index(keys: np.ndarray, seg_off: np.ndarray, n_inner: int, B: int) ->
 # Speed: the hot helpers are inlined (``inline="always"``; a call that passes the bundle costs about
 # 130 ns in reference counts of its arrays, more than a lookup itself), and each binds the bundle's arrays
 # to locals once (numba counts a reference at every ``lp.array`` read: in a loop that costs 5x).
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def tile_key(lp, t, m):
     """The window key of tile ``t`` in map ``m``."""
     w_dr, w_dc = lp.w_dr, lp.w_dc
@@ -130,13 +132,13 @@ def _factor(dense, dense_bits, keys, logp, seg_off, backoff, bseg, n_inner, b_st
     return _sparse_factor(keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, s, key)
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def _backoff(lp):
     """The fallback segment when keys have a border to back off from, else ``-1``."""
     return lp.fallback if lp.w_dr.shape[0] > lp.n_inner else -1
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def sparse_key_log_factor(lp, s, key):
     """``log phi(key)`` in segment ``s`` from the sorted keys (fallback for an unseen border; ``-inf`` if
     absent)."""
@@ -144,7 +146,7 @@ def sparse_key_log_factor(lp, s, key):
     return _factor(lp.dense, -1, lp.keys, lp.logp, lp.seg_off, bo, bseg, lp.n_inner, lp.b_start, lp.b_bits, s, key)
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def key_log_factor(lp, s, key):
     """``log phi(key)`` in segment ``s``: one load from the dense table when there is one, else
     :func:`sparse_key_log_factor`."""
@@ -164,7 +166,7 @@ def key_log_factor(lp, s, key):
     )
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def dense_factor_table(lp):
     """``S * 2^Lw`` float64: :func:`sparse_key_log_factor` of every key of every segment."""
     S = lp.seg_off.shape[0] - 1
