@@ -43,7 +43,7 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ogm_ppl._raycast_kernels import entries_beyond, entry_positions, transpose_csr, traverse_all
+from ogm_ppl._raycast_kernels import RayArrays, entries_beyond, entry_positions, transpose_csr, traverse_all
 from ogm_ppl.grid import Grid
 from ogm_ppl.scans import Scans
 
@@ -197,6 +197,10 @@ class RayInputs:
         L = self.length.max(initial=0.0)
         return int(np.floor(L * np.abs(self.du)).max(initial=0) + np.floor(L * np.abs(self.dv)).max(initial=0)) + 3
 
+    def arrays(self) -> RayArrays:
+        """The rays as the traversal kernels take them (``t_hit``: ``range_cells``)."""
+        return RayArrays(self.u0, self.v0, self.du, self.dv, self.length, self.range_cells, self.is_max)
+
 
 def ray_inputs(grid: Grid, scans: Scans) -> RayInputs:
     """Check the poses against ``grid`` and express every reading's ray in cell units.
@@ -300,9 +304,7 @@ def raycast(grid: Grid, scans: Scans) -> Rays:
     ([0, 1, 2, 3, 4, 5], 3, True)
     """
     ri = ray_inputs(grid, scans)
-    offsets, cells, t_enter, z, in_grid, range_len = traverse_all(
-        ri.u0, ri.v0, ri.du, ri.dv, ri.length, ri.range_cells, ri.is_max, grid.rows, grid.cols
-    )
+    offsets, cells, t_enter, z, in_grid, range_len = traverse_all(ri.arrays(), grid.rows, grid.cols)
     return Rays(
         grid=grid,
         offsets=offsets,

@@ -4,6 +4,8 @@ dense tables built from the sparse ones. Compiled functions that take the bundle
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
 
@@ -123,12 +125,33 @@ _sparse_factor = nb.njit(cache=True)(_sparse_factor_py)
 _sparse_factor_inline = nb.njit(cache=True, inline="always")(_sparse_factor_py)
 
 
+class SparseTable(NamedTuple):
+    """The sorted-key lookup of :func:`_sparse_factor`, bound once before a loop of :func:`_factor` (one numba
+    argument; the fields of the bundle ``lp`` it reads, with its back-off)."""
+
+    keys: np.ndarray  # int64: each segment's sorted keys
+    logp: np.ndarray  # float64: log phi of each key
+    seg_off: np.ndarray  # S + 1 int64: where each segment's keys start
+    backoff: int  # the fallback segment of an unseen border, or -1 (:func:`_backoff`)
+    bseg: int  # the border-weight segment of a backed-off table, or -1
+    n_inner: int  # a key's inner bits (below its border code)
+    b_start: np.ndarray  # int64: the border index (:func:`border_index`)
+    b_bits: int  # border bits of that index, or -1 if none
+
+
 @nb.njit(cache=True, inline="always")
-def _factor(dense, dense_bits, keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, s, key):
+def sparse_table(lp):
+    """The :class:`SparseTable` of the bundle ``lp``."""
+    return SparseTable(lp.keys, lp.logp, lp.seg_off, _backoff(lp), lp.border_seg, lp.n_inner, lp.b_start, lp.b_bits)
+
+
+@nb.njit(cache=True, inline="always")
+def _factor(dense, dense_bits, sp, s, key):
     """``log phi(key)`` in segment ``s`` from arrays already bound to locals: one load from the dense table
-    if ``dense_bits >= 0``, else :func:`_sparse_factor`."""
+    if ``dense_bits >= 0``, else :func:`_sparse_factor` of ``sp`` (:class:`SparseTable`)."""
     if dense_bits >= 0:
         return dense[(s << dense_bits) | key]
+    keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits = sp
     return _sparse_factor(keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, s, key)
 
 
@@ -142,28 +165,14 @@ def _backoff(lp):
 def sparse_key_log_factor(lp, s, key):
     """``log phi(key)`` in segment ``s`` from the sorted keys (fallback for an unseen border; ``-inf`` if
     absent)."""
-    bo, bseg = _backoff(lp), lp.border_seg
-    return _factor(lp.dense, -1, lp.keys, lp.logp, lp.seg_off, bo, bseg, lp.n_inner, lp.b_start, lp.b_bits, s, key)
+    return _factor(lp.dense, -1, sparse_table(lp), s, key)
 
 
 @njit_shipped(inline="always")
 def key_log_factor(lp, s, key):
     """``log phi(key)`` in segment ``s``: one load from the dense table when there is one, else
     :func:`sparse_key_log_factor`."""
-    return _factor(
-        lp.dense,
-        lp.dense_bits,
-        lp.keys,
-        lp.logp,
-        lp.seg_off,
-        _backoff(lp),
-        lp.border_seg,
-        lp.n_inner,
-        lp.b_start,
-        lp.b_bits,
-        s,
-        key,
-    )
+    return _factor(lp.dense, lp.dense_bits, sparse_table(lp), s, key)
 
 
 @njit_shipped

@@ -17,6 +17,7 @@ from ogm_ppl.priors.compiled.tile_factors import (
     border_range,
     key_log_factor,
     sparse_key_log_factor,
+    sparse_table,
     tile_key,
 )
 
@@ -153,8 +154,7 @@ def tile_patch_factors(lp, nt, ts, cands, n, out):
     neighbour, 1 of a corner one), so it is memoised per such sub-configuration: a neighbour costs at
     most ``2^shared`` lookups per update, however many candidates there are."""
     _bit_of, _touch, base, seg, pr_off, pr_pb, pr_wb, memo_off, memo = ts
-    dense, db, keys, logp, seg_off = lp.dense, lp.dense_bits, lp.keys, lp.logp, lp.seg_off
-    backoff, bseg, n_inner, b_start, b_bits = _backoff(lp), lp.border_seg, lp.n_inner, lp.b_start, lp.b_bits
+    dense, db, sp = lp.dense, lp.dense_bits, sparse_table(lp)
     for j in range(n):
         s = out[j]
         if s == -np.inf:
@@ -172,10 +172,10 @@ def tile_patch_factors(lp, nt, ts, cands, n, out):
             if mo >= 0:
                 v = memo[mo + sub]
                 if v != v:
-                    v = _factor(dense, db, keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, seg[q], key)
+                    v = _factor(dense, db, sp, seg[q], key)
                     memo[mo + sub] = v
             else:
-                v = _factor(dense, db, keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, seg[q], key)
+                v = _factor(dense, db, sp, seg[q], key)
             s += v
             if s == -np.inf:
                 break
