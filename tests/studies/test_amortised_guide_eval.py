@@ -31,7 +31,13 @@ SAMPLERS = ["gibbs_default_init", "gibbs_guide_init", "gibbs_guide_tile_init", "
 
 @pytest.fixture(scope="module")
 def result():
+    # the script's numeric context, whatever earlier tests of this process left: one thread, float32 default,
+    # an empty parameter store
+    import pyro
+
     torch.set_num_threads(1)
+    torch.set_default_dtype(torch.float32)
+    pyro.clear_param_store()
     return guide_eval(TINY, progress=False)
 
 

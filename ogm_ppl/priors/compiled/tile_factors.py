@@ -139,7 +139,7 @@ class SparseTable(NamedTuple):
     b_bits: int  # border bits of that index, or -1 if none
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def sparse_table(lp):
     """The :class:`SparseTable` of the bundle ``lp``."""
     return SparseTable(lp.keys, lp.logp, lp.seg_off, _backoff(lp), lp.border_seg, lp.n_inner, lp.b_start, lp.b_bits)
