@@ -4,7 +4,7 @@ output folder, so that the same call gives the same files in this process or on 
 =========  ============================================================== ==================================
 task       does                                                           done when (resume)
 =========  ============================================================== ==================================
-base       simulated: ground-truth map + planned route; a file (log,  ``datasets/_base/B.json``
+base       simulated: ground-truth map + planned route; a file (log,      ``datasets/_base/B.json``
            bag, ...): its scans read (:mod:`ogm_ppl.inputs`), the
            benchmark map (traditional OGM > thr)
 dataset    the readings of one dataset (``save_dataset``) + what it is    ``datasets/D.json``

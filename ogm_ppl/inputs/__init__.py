@@ -4,18 +4,18 @@ The command line (``ogm-ppl map``, ``convert``, ``info``) and experiment specs (
 their inputs here, and nothing else decides how an input is told apart, which options it takes, how they are
 checked, how it is read and what identifies it. The library ships four kinds (:data:`SHIPPED_INPUT_KINDS`):
 
-=============  ==============================================================  =================================
-kind           reads                                                           told apart by
-=============  ==============================================================  =================================
-``log``        a CARMEN log, plain or gzip (:func:`~ogm_ppl.datasets.read_carmen`)  anything no other kind claims
-``bag``        a ROS 1 bag, a ROS 2 bag folder or its ``.db3`` / ``.mcap``        magic bytes (``bag_kind``)
+=============  ======================================================================  ==============================
+kind           reads                                                                   told apart by
+=============  ======================================================================  ==============================
+``log``        a CARMEN log, plain or gzip (:func:`~ogm_ppl.datasets.read_carmen`)     anything no other kind claims
+``bag``        a ROS 1 bag, a ROS 2 bag folder or its ``.db3`` / ``.mcap``             magic bytes (``bag_kind``)
                (:func:`~ogm_ppl.datasets.read_bag`): a LaserScan topic and its
                poses from a pose topic or ``/tf``
-``npz``        an ogm_ppl dataset file (:func:`~ogm_ppl.datasets.load_dataset`):  a zip archive's magic bytes
+``npz``        an ogm_ppl dataset file (:func:`~ogm_ppl.datasets.load_dataset`):       a zip archive's magic bytes
                scans, and its grid and truth
-``simulated``  no file: a stop-and-scan dataset on a generated map or a floor   (named only)
+``simulated``  no file: a stop-and-scan dataset on a generated map or a floor          (named only)
                plan of one's own (:mod:`~ogm_ppl.inputs.simulated`)
-=============  ==============================================================  =================================
+=============  ======================================================================  ==============================
 
 **Options.** A kind's options are a frozen dataclass of :func:`ogm_ppl.options.param` fields (name, kind,
 default, doc), the same option system as a map method's parameters, and one check serves every surface: a

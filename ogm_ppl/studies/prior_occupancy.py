@@ -66,8 +66,9 @@ def prior_occupancy(
         progress: a progress line per prior (:class:`~ogm_ppl.progress.Progress`).
 
     Returns:
-        ``{"provenance", "settings", "starts", "rows": [{"prior", "kind", "train", "corpus_share", "share",
-        "chain_shares", "traces", "seconds", "patch"[, "fit"]}], "skipped": {prior: reason}, "seconds"}``.
+        ``{"provenance", "settings", "starts", "rows", "skipped", "seconds"}``: ``rows`` one dict a prior
+        (``prior``, ``kind``, ``train``, ``corpus_share``, ``share``, ``chain_shares``, ``traces``, ``seconds``,
+        ``patch``, and ``fit`` when fitted), ``skipped`` maps a prior to the reason.
 
     Raises:
         FitOptionError: a setting out of range, a name that is not a prior kind or that names a corpus.
