@@ -18,7 +18,7 @@ offline patch maps with overlap ``L = 3, 5`` (Chapter 3), and single-cell Gibbs
 before cell 1, as in the thesis.
 
 The study sits here, not beside the Gibbs code: it compares eleven algorithms of three chapters, Gibbs being
-one row. :func:`table_3_1` runs it; ``python experiments/table_3_1.py`` is its command line.
+one row. :func:`table_3_1` runs it.
 """
 
 from __future__ import annotations

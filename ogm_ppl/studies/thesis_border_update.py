@@ -100,7 +100,7 @@ def thesis_border_update(
         "worst_thesis": worst,
         "seconds": round(time.perf_counter() - t0, 1),
         "python": platform.python_version(),
-        "script": "experiments/thesis_border_update.py",
+        "function": "ogm_ppl.studies.thesis_border_update.thesis_border_update",
     }
     if out_dir is not None:
         from ogm_ppl.io import atomic_write_text

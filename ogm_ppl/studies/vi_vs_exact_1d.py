@@ -111,8 +111,8 @@ def vi_vs_exact_1d_markdown(rows: list[tuple[str, str, int, float, float]], quic
         "# VI vs exact on the thesis 1D toy",
         "",
         "`toy_1d(num_cells=21, readings=THESIS_TOY_READINGS)`, `GaussianRange(3.0, p_rand=1e-3)`, "
-        f"`IndependentPrior(0.5)`; seed {seed}; `python experiments/vi_vs_exact_1d.py"
-        f"{' --quick' if quick else ''}`.",
+        f"`IndependentPrior(0.5)`; seed {seed}; `ogm_ppl.studies.vi_vs_exact_1d.vi_vs_exact_1d("
+        f"quick={quick}, seed={seed})`.",
         "Summed KL(exact || q) of the cell marginals over the 20 latent cells; time: wall clock of the fit.",
         "",
         "| guide | objective | steps | summed KL | time (s) |",

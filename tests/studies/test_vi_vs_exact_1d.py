@@ -16,7 +16,10 @@ def test_every_fit_is_scored_and_the_closed_form_objective_fits_best(tmp_path):
     assert all(k >= 0 for k in kl.values())
     assert kl[("first hit", "exact")] <= kl[("first hit", "tracegraph")]
     text = (tmp_path / "vi_vs_exact_1d.md").read_text()
-    assert text == vi_vs_exact_1d_markdown(rows, True, 0) and "`python experiments/vi_vs_exact_1d.py --quick`" in text
+    assert (
+        text == vi_vs_exact_1d_markdown(rows, True, 0)
+        and "`ogm_ppl.studies.vi_vs_exact_1d.vi_vs_exact_1d(quick=True, seed=0)`" in text
+    )
     with pytest.raises(StudyOptionError, match="seed"):
         vi_vs_exact_1d(seed=-1, progress=False)
 

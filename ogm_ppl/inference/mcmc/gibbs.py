@@ -253,7 +253,7 @@ class PatchGibbs(MapKernel):
             each tile drawn from ``p(a_k | border_k) p(z | a_k, rest)`` over the table's support, the
             factors of the neighbouring tiles (whose borders the tile forms) ignored. That is not a Gibbs
             sampler of the tiled joint, nor of any joint in general: its stationary distribution differs
-            from the posterior (``experiments/thesis_border_update.py`` measures by how much).
+            from the posterior (:func:`ogm_ppl.studies.thesis_border_update.thesis_border_update` measures by how much).
         p_escape: for backed-off tables (strictly positive, e.g. ``border_bo``), the probability per patch
             update of the escape move (an independence Metropolis-Hastings proposal from the back-off
             table after the heat bath on the counted configurations; see
