@@ -8,14 +8,13 @@ An experiment folder is what ``ogm-ppl experiment SPEC --out DIR`` writes with `
 
 from __future__ import annotations
 
-import contextlib
 import math
-from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ogm_ppl._dtype import float64
 from ogm_ppl.studies.errors import StudyInputError, StudyOptionError
 
 __all__ = ["check_int", "check_positive", "float64", "maps_folders", "npz_array"]
@@ -64,16 +63,3 @@ def maps_folders(out_dir: Path) -> list[Path]:
     if not folders:
         raise FileNotFoundError(f"{maps}: no dataset folders")
     return folders
-
-
-@contextlib.contextmanager
-def float64() -> Iterator[None]:
-    """torch's default dtype float64 inside, the caller's restored after."""
-    import torch
-
-    old = torch.get_default_dtype()
-    torch.set_default_dtype(torch.float64)
-    try:
-        yield
-    finally:
-        torch.set_default_dtype(old)

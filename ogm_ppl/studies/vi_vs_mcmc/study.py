@@ -8,8 +8,7 @@ from collections.abc import Callable
 from dataclasses import asdict
 from functools import partial
 
-import torch
-
+from ogm_ppl._dtype import float64
 from ogm_ppl.inference.mcmc import CellGibbs, PatchGibbs
 from ogm_ppl.inference.variational.guides import MeanFieldGuide, PatchGuide, fit_guide
 from ogm_ppl.inference.variational.structured_guides import FirstHitGuide
@@ -54,12 +53,8 @@ def run(cfg: Settings, seed: int = 0, log: Callable[[str], None] | None = None) 
     ``{"seed", "settings", "problems": {name: {"latent", "records": [Record], "seconds", ...}}, "seconds",
     "headlines"}``. ``log`` gets a line per problem and per method (none by default). Times are wall clock;
     the caller sets the threads (one, for the numbers of the docs)."""
-    old = torch.get_default_dtype()
-    torch.set_default_dtype(torch.float64)
-    try:
+    with float64():
         return _run(cfg, seed, log or (lambda line: None))
-    finally:
-        torch.set_default_dtype(old)
 
 
 def _run(cfg: Settings, seed: int, log: Callable[[str], None]) -> dict:
