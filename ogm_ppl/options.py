@@ -38,6 +38,8 @@ import math
 from collections.abc import Callable, Collection, Mapping
 from typing import Any
 
+import numpy as np
+
 __all__ = [
     "INT_LIMIT",
     "Bool",
@@ -50,6 +52,8 @@ __all__ = [
     "Pair",
     "ParamError",
     "Text",
+    "check_float",
+    "check_int",
     "param",
     "param_fields",
     "param_groups",
@@ -330,3 +334,45 @@ def parse_params(
     if check is not None:
         check()
     return obj
+
+
+def check_int(
+    value: Any, option: str, lo: int, hi: int | None = None, *, error: Callable[[str, str], Exception] = ParamError
+) -> int:
+    """``value`` (a Python or numpy integer, not a bool) as an int in ``lo..hi`` (``hi`` None: no upper limit),
+    else ``error(option, message)``: the scalar check of a keyword argument given in Python, whose caller
+    names its own error type (a fit's :class:`~ogm_ppl.learn.FitOptionError`, a study's
+    :class:`~ogm_ppl.studies.StudyOptionError`)."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise error(option, f"must be a whole number, got {value!r}")
+    v = int(value)
+    if v < lo or (hi is not None and v > hi):
+        limit = f"at least {lo}" if hi is None else f"between {lo} and {hi}"
+        raise error(option, f"must be {limit}, got {v}")
+    if abs(v) > INT_LIMIT:
+        raise error(option, f"must be at most 2^63 - 1 = {INT_LIMIT} in magnitude (an int64), got {v}")
+    return v
+
+
+def check_float(
+    value: Any,
+    option: str,
+    lo: float,
+    hi: float | None = None,
+    *,
+    lo_open: bool = True,
+    hi_open: bool = False,
+    error: Callable[[str, str], Exception] = ParamError,
+) -> float:
+    """``value`` as a finite float in the interval from ``lo`` to ``hi`` (open or closed ends; by default
+    ``(lo, hi]``), else ``error(option, message)`` naming the interval."""
+    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
+        raise error(option, f"must be a number, got {value!r}")
+    v = float(value)
+    ok = math.isfinite(v) and (v > lo if lo_open else v >= lo)
+    if hi is not None:
+        ok = ok and (v < hi if hi_open else v <= hi)
+    if not ok:
+        left, right = "(" if lo_open else "[", ")" if hi_open or hi is None else "]"
+        raise error(option, f"must lie in {left}{lo:g}, {'inf' if hi is None else f'{hi:g}'}{right}, got {v!r}")
+    return v

@@ -16,7 +16,6 @@ pixel size, folders of them) are read by :func:`~ogm_ppl.datasets.plan_files.loa
 from __future__ import annotations
 
 import hashlib
-import math
 import os
 import re
 import shlex
@@ -25,8 +24,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
+from ogm_ppl import options
 from ogm_ppl.datasets.floorplans import CORPORA as FLOORPLAN_CORPORA
 
 __all__ = [
@@ -62,33 +60,17 @@ class FitOptionError(ValueError):
 
 
 def check_int(value: Any, option: str, lo: int, hi: int | None = None) -> int:
-    """``value`` as an int in ``lo..hi`` (``hi`` None: no upper limit), else :class:`FitOptionError`."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise FitOptionError(option, f"must be a whole number, got {value!r}")
-    v = int(value)
-    if v < lo or (hi is not None and v > hi):
-        limit = f"at least {lo}" if hi is None else f"between {lo} and {hi}"
-        raise FitOptionError(option, f"must be {limit}, got {v}")
-    return v
+    """``value`` as an int in ``lo..hi`` (``hi`` None: no upper limit), else :class:`FitOptionError`
+    (:func:`ogm_ppl.options.check_int`)."""
+    return options.check_int(value, option, lo, hi, error=FitOptionError)
 
 
 def check_float(
     value: Any, option: str, lo: float, hi: float | None = None, *, lo_open: bool = True, hi_open: bool = False
 ) -> float:
     """``value`` as a finite float in the interval from ``lo`` to ``hi`` (open or closed ends), else
-    :class:`FitOptionError` naming the interval."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise FitOptionError(option, f"must be a number, got {value!r}")
-    v = float(value)
-    ok = math.isfinite(v) and (v > lo if lo_open else v >= lo)
-    if hi is not None:
-        ok = ok and (v < hi if hi_open else v <= hi)
-    if not ok:
-        left, right = "(" if lo_open else "[", ")" if hi_open or hi is None else "]"
-        raise FitOptionError(
-            option, f"must lie in {left}{lo:g}, {'inf' if hi is None else f'{hi:g}'}{right}, got {v!r}"
-        )
-    return v
+    :class:`FitOptionError` naming the interval (:func:`ogm_ppl.options.check_float`)."""
+    return options.check_float(value, option, lo, hi, lo_open=lo_open, hi_open=hi_open, error=FitOptionError)
 
 
 def check_label(value: Any, option: str = "name") -> str:

@@ -8,12 +8,12 @@ An experiment folder is what ``ogm-ppl experiment SPEC --out DIR`` writes with `
 
 from __future__ import annotations
 
-import math
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from ogm_ppl import options
 from ogm_ppl._dtype import float64
 from ogm_ppl.studies.errors import StudyInputError, StudyOptionError
 
@@ -21,24 +21,15 @@ __all__ = ["check_int", "check_positive", "float64", "maps_folders", "npz_array"
 
 
 def check_int(value: Any, option: str, lo: int, hi: int | None = None) -> int:
-    """``value`` as an int in ``lo..hi`` (``hi`` None: no upper limit), else :class:`StudyOptionError`."""
-    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
-        raise StudyOptionError(option, f"must be a whole number, got {value!r}")
-    v = int(value)
-    if v < lo or (hi is not None and v > hi):
-        limit = f"at least {lo}" if hi is None else f"between {lo} and {hi}"
-        raise StudyOptionError(option, f"must be {limit}, got {v}")
-    return v
+    """``value`` as an int in ``lo..hi`` (``hi`` None: no upper limit), else :class:`StudyOptionError`
+    (:func:`ogm_ppl.options.check_int`)."""
+    return options.check_int(value, option, lo, hi, error=StudyOptionError)
 
 
 def check_positive(value: Any, option: str) -> float:
-    """``value`` as a finite float above 0, else :class:`StudyOptionError`."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise StudyOptionError(option, f"must be a number, got {value!r}")
-    v = float(value)
-    if not (math.isfinite(v) and v > 0):
-        raise StudyOptionError(option, f"must be positive and finite, got {v}")
-    return v
+    """``value`` as a finite float above 0, else :class:`StudyOptionError`
+    (:func:`ogm_ppl.options.check_float`)."""
+    return options.check_float(value, option, 0.0, error=StudyOptionError)
 
 
 def npz_array(path: Path, key: str, kind: str) -> np.ndarray:

@@ -17,7 +17,7 @@ SPEC = Path(__file__).resolve().parents[2] / "experiments" / "specs" / "active_s
     [
         ({"methods": ["patch3-ig"]}, "methods: .*'patch3-ig' is not a per-metre method"),
         ({"methods": ["nothing"]}, "'nothing' is not a per-metre method"),
-        ({"methods": ["indep-cov-per-m"], "offsets": [1.0, 0.0]}, "offsets: must be positive"),
+        ({"methods": ["indep-cov-per-m"], "offsets": [1.0, 0.0]}, r"offsets: must lie in \(0, inf\)"),
         ({"methods": ["indep-cov-per-m"], "plans": 0}, "plans: must be at least 1"),
     ],
 )
