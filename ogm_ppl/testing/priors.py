@@ -48,7 +48,9 @@ class PriorContract:
     def _log_prob(self, prior, maps):
         lp = prior.log_prob(maps)
         if getattr(prior, "normalised", True) is False:
-            lp = lp - torch.logsumexp(prior.log_prob(self._all_maps()), 0)
+            # normalised in float64: in a float32 prior's own dtype the normalisation would add float32
+            # roundings that one CPU's logsumexp leaves and another's rounds to 0
+            lp = lp.to(torch.float64) - torch.logsumexp(prior.log_prob(self._all_maps()).to(torch.float64), 0)
         return lp
 
     def test_normalised_over_all_maps(self):
@@ -59,10 +61,13 @@ class PriorContract:
                 f"{name}: log_prob of {2**self.num_cells} maps has shape {lp.shape}"
             )
             assert not torch.isnan(lp).any(), f"{name}: log_prob is NaN for {int(torch.isnan(lp).sum())} maps"
-            total = torch.logsumexp(lp, 0).item()
+            # summed in float64 (2**num_cells terms: off by under 2**num_cells * eps64, far below 1e-10), so the
+            # verdict is the prior's own values' and not the rounding of a float32 logsumexp on this CPU
+            total = torch.logsumexp(lp.to(torch.float64), 0).item()
+            dtype = prior.log_prob(self._all_maps()[:1]).dtype
             assert abs(total) < 1e-10, (
                 f"{name}: log of the sum of p over all {2**self.num_cells} maps is {total:.3g}, not 0 (within 1e-10); "
-                f"log_prob dtype {lp.dtype} (float32 arithmetic, e.g. torch.where of Python floats, is off by ~1e-8)"
+                f"log_prob dtype {dtype} (float32 arithmetic, e.g. torch.where of Python floats, is off by ~1e-8)"
             )
 
     def test_outside_occupancy_is_the_priors_own(self):
