@@ -136,7 +136,8 @@ def test_a_prior_laid_out_on_another_shape_is_refused():
 @pytest.mark.parametrize("sensor", [GaussianRange(1.5, 1e-3), PatternMatch(0.8)])
 def test_likelihood_table_built_in_blocks_equals_one_block(monkeypatch, sensor):
     """The table is built in blocks of rays (bounded memory on 2 cm Intel); any block size gives the same
-    table, cut rays and max-range readings included."""
+    table (to the last bits torch's vector and scalar loops may round apart), cut rays and max-range readings
+    included."""
     import ogm_ppl.models.occupancy as occ
 
     grid = Grid((30, 40), resolution=0.1, origin=(0.0, 0.0))
@@ -154,7 +155,12 @@ def test_likelihood_table_built_in_blocks_equals_one_block(monkeypatch, sensor):
     blocked = OccupancyModel(grid, rays, sensor, IndependentPrior(0.3, grid.num_cells)).loglik_table
     assert torch.equal(torch.isinf(whole), torch.isinf(blocked))
     fin = torch.isfinite(whole)
-    assert torch.equal(whole[fin], blocked[fin])
+    # each entry is the same formula of the same numbers, but torch runs an elementwise op on a tensor's SIMD
+    # vectors and on its tail in scalar code, which may round exp and log1p (inside logaddexp, p_rand > 0) one
+    # ulp apart; which entries fall in a tail depends on the block's size and the CPU's vector width. The
+    # log1p term lies in [0, log 2], so an entry moves by at most 2 eps64 there and 1 ulp in the final addition
+    w, b = whole[fin].numpy(), blocked[fin].numpy()
+    assert (np.abs(w - b) <= 2 * np.spacing(np.abs(w)) + 2 * np.finfo(np.float64).eps).all()
 
 
 def test_several_rays_marginalise_the_outside_cells_each_on_their_own():
