@@ -55,17 +55,17 @@ def _part(scans: Scans, a: int, b: int) -> Scans:
 
 
 def _assert_same_as_rebuilt(om: OnlineMap, grid, scans, sensor, prior) -> None:
-    """The online kept state equals the from-scratch state of the same map on all scans (same S)."""
+    """The online kept state equals the from-scratch state of the same map on all scans (same S): the fixed-point
+    sums up to the rebuilt table's last-bit differences, and exactly on the kept table itself."""
     model = OccupancyModel(grid, raycast(grid, scans), sensor, prior)
     st = cs.cell_state_of(om.state.numpy(), model.ray_index(), om.bits)
     ks = om.kept_state()
     assert np.array_equal(om.pinned.numpy(), model.known_free.numpy())
     assert np.array_equal(ks["f"], st.rays["f"]) and np.array_equal(ks["s"], st.rays["s"])
-    assert np.array_equal(ks["d"], st.d)
     assert np.array_equal(ks["inf_pos"], st.inf["pos"]) and np.array_equal(ks["inf_neg"], st.inf["neg"])
     # the rows of the new rays come from the offline code on the new rays alone: torch's vectorised and
-    # scalar loops may round the last bit differently, so the table agrees to 2 ulp (the sums above are
-    # equal all the same: the fixed-point rounding absorbs it)
+    # scalar loops may round the last bit differently (which entries, depends on the tensors' sizes and the
+    # CPU's vector width), so the table agrees to 2 ulp
     lengths = model.rays.lengths
     rows = np.repeat(np.arange(len(lengths)), lengths + 1)
     cols = np.arange(int((lengths + 1).sum())) - np.repeat(np.cumsum(lengths + 1) - lengths - 1, lengths + 1)
@@ -74,6 +74,11 @@ def _assert_same_as_rebuilt(om: OnlineMap, grid, scans, sensor, prior) -> None:
     fin = np.isfinite(offline)
     assert (np.abs(ks["ll"][fin] - offline[fin]) <= 2 * np.spacing(np.abs(offline[fin]))).all()
     assert om._st.any_inf == st.any_inf
+    # so the fixed-point sums over the rebuilt table may differ: an entry 2 ulp off moves rint(x 2^S) by up to
+    # 2 ulp 2^S + 1 units, and each crossing of a cell adds a difference of two entries
+    one_term = 2 * np.spacing(np.abs(offline[fin])).max() * 2.0**om.bits + 1
+    crossings = np.diff(model.ray_index().c_off)
+    assert (np.abs(ks["d"] - st.d) <= crossings * 2 * one_term).all()
     # and exactly the state a rebuild gives on the online table itself
     own = np.full_like(model.loglik_table.numpy(), -np.inf)
     own[rows, cols] = ks["ll"]
