@@ -1,4 +1,5 @@
-"""torch's default dtype for a block of work: float64 for exact inference and the fits that compare with it.
+"""torch's numeric settings for a block of work: the default dtype (float64 for exact inference and the fits that
+compare with it) and the thread count (float32 sums, a guide's convolutions, depend on it).
 
 >>> import torch
 >>> before = torch.get_default_dtype()
@@ -16,7 +17,7 @@ from collections.abc import Iterator
 
 import torch
 
-__all__ = ["float64"]
+__all__ = ["float64", "torch_threads"]
 
 
 @contextlib.contextmanager
@@ -28,3 +29,15 @@ def float64() -> Iterator[None]:
         yield
     finally:
         torch.set_default_dtype(old)
+
+
+@contextlib.contextmanager
+def torch_threads(n: int) -> Iterator[None]:
+    """torch on ``n`` threads inside (a float32 sum's order, hence its rounding, depends on the count), the
+    caller's count restored after (also when the block raises)."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(n)
+    try:
+        yield
+    finally:
+        torch.set_num_threads(before)

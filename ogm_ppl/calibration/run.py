@@ -39,6 +39,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+from ogm_ppl._dtype import torch_threads
 from ogm_ppl.calibration.chains import run_guide, run_ogm, run_prior
 from ogm_ppl.calibration.errors import PriorNameError, SettingsError
 from ogm_ppl.calibration.heldout import TEST_CORPORA, TestMap, heldout_maps, plan_digests
@@ -125,7 +126,8 @@ def _say(progress: bool, line: str) -> None:
 def calibrate(
     settings: CalibrationSettings, out: str | Path, *, progress: bool = True, command: str | None = None
 ) -> CalibrationResult:
-    """Score every method of ``settings`` on every test map and write the results under ``out``.
+    """Score every method of ``settings`` on every test map and write the results under ``out``, on one torch
+    thread (a guide's float32 sums then do not depend on the machine's cores; the caller's count is restored).
 
     ``settings`` is resolved first (:meth:`~ogm_ppl.calibration.settings.CalibrationSettings.resolved`). Before
     any work: the bias file is read, every prior and guide built (:func:`~ogm_ppl.calibration.names.name_digest`)
@@ -142,12 +144,17 @@ def calibrate(
     :class:`~ogm_ppl.calibration.leakage.GuideNameError`, :class:`~ogm_ppl.calibration.leakage.LeakageError`
     and :class:`~ogm_ppl.datasets.plan_files.PlanFileError`; all are ``ValueError``.
     """
-    import torch
+    with torch_threads(1):
+        return _calibrate(settings, out, progress=progress, command=command)
 
+
+def _calibrate(
+    settings: CalibrationSettings, out: str | Path, *, progress: bool, command: str | None
+) -> CalibrationResult:
+    """The work of :func:`calibrate` (its docstring), on the thread count the caller set."""
     from ogm_ppl.provenance import provenance
 
     s = settings.resolved()
-    torch.set_num_threads(1)
     out = Path(out)
     path = out / "calibration.json"
     bias = load_bias_file(s.bias_file)

@@ -10,10 +10,10 @@ import numpy as np
 import pytest
 
 import ogm_ppl.calibration as cal
+from ogm_ppl._dtype import torch_threads
 from ogm_ppl.calibration import SettingsError
 from ogm_ppl.metrics import nll_bits
 from ogm_ppl.studies.guide_limits import SHIFTS, TEMPERATURES, guide_limits, recalibrated
-from tests._threads import torch_threads
 
 SCRIPT = Path(__file__).resolve().parents[2] / "experiments" / "guide_limits.py"
 

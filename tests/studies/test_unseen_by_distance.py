@@ -11,9 +11,9 @@ from pathlib import Path
 import pytest
 
 import ogm_ppl.calibration as cal
+from ogm_ppl._dtype import torch_threads
 from ogm_ppl.calibration import SettingsError
 from ogm_ppl.studies.unseen_by_distance import DistanceSettings, rows_table, unseen_by_distance
-from tests._threads import torch_threads
 
 SCRIPT = Path(__file__).resolve().parents[2] / "experiments" / "unseen_by_distance.py"
 
