@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 from ogm_ppl.cli import main
-from ogm_ppl.cli._studies import STUDIES, get_study
+from ogm_ppl.cli._studies import STUDIES, build_parser, get_study
 
 #: per study, options its parser refuses (a bad value, a missing argument) before the study runs
 BAD_OPTIONS: dict[str, list[str]] = {
@@ -73,6 +73,7 @@ def test_each_study_has_help_and_refuses_a_bad_option(name, capsys):
     assert main(["study", name, "--help"]) == 0
     out = capsys.readouterr().out
     assert out.startswith(f"usage: ogm-ppl study {name}") and get_study(name).description.split()[0] in out
+    assert all(a.help for a in build_parser(name, name)._actions), name  # every option says what it is
     _one_line_error(capsys, main(["study", name, *BAD_OPTIONS[name]]))
 
 

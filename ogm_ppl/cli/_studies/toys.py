@@ -76,7 +76,7 @@ summed KL of marginals and wall-clock time. Writes --out (Markdown, atomically) 
 # ----------------------------------------------------------------------------------------------- vi_vs_mcmc
 def _vi_vs_mcmc_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--quick", action="store_true", help="small settings (under a minute)")
-    ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--seed", type=int, default=0, help="seed of the problems and the methods (0)")
     ap.add_argument(
         "--problems", default=None, help="comma-separated subset of toy,walls,2d:independent,2d:mrf8,2d:patch3"
     )
