@@ -101,17 +101,21 @@ def run_study(name: str, parser: argparse.ArgumentParser, argv: list[str] | None
     """Parse ``argv`` with ``parser`` (from :func:`build_parser`) and run study ``name``; a setting refused by the
     study (:class:`StudyUsageError`, a study's or a fit's option error, a calibration setting) goes to
     ``parser.error``. Returns what the study's ``run`` returns."""
-    from ogm_ppl.calibration import SettingsError
-    from ogm_ppl.learn import FitOptionError
-    from ogm_ppl.studies.errors import StudyOptionError
-
     args = parser.parse_args(argv)
     try:
         return get_study(name).run(args)
-    except SettingsError as e:
-        parser.error(f"{e.flag}: {e.reason}")
-    except (StudyUsageError, StudyOptionError, FitOptionError) as e:
+    except StudyUsageError as e:
         parser.error(str(e))
+    except ValueError as e:
+        from ogm_ppl.calibration import SettingsError
+        from ogm_ppl.learn import FitOptionError
+        from ogm_ppl.studies.errors import StudyOptionError
+
+        if isinstance(e, SettingsError):
+            parser.error(f"{e.flag}: {e.reason}")
+        if isinstance(e, (StudyOptionError, FitOptionError)):
+            parser.error(str(e))
+        raise
 
 
 def script_main(name: str, argv: list[str] | None, prog: str, **defaults: Any) -> Any:
