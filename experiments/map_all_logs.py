@@ -1,6 +1,6 @@
 """Map every shipped CARMEN log with the ``ogm-ppl map`` command and summarise times and sizes.
 
-``ogm-ppl study map_all_logs`` as a script of the checkout (its output paths relative to the checkout): the same
+``ogm-ppl study map_all_logs`` as a script of the checkout (its default paths in the checkout): the same
 options, output and files, defined once in :mod:`ogm_ppl.cli._studies.maps` (``--help`` lists them).
 """
 

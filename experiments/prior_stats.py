@@ -1,6 +1,6 @@
 """Report the thesis's patch statistics of the prior tables per corpus (Section 5.2.2-5.2.3).
 
-``ogm-ppl study prior_stats`` as a script of the checkout (its output paths relative to the checkout): the same
+``ogm-ppl study prior_stats`` as a script of the checkout (its default paths in the checkout): the same
 options, output and files, defined once in :mod:`ogm_ppl.cli._studies.priors` (``--help`` lists them).
 """
 

@@ -1,6 +1,6 @@
 """Table 3.1: average summed KL between each mapping algorithm and the exact posterior, 1000 1D datasets.
 
-``ogm-ppl study table_3_1`` as a script of the checkout (its output paths relative to the checkout): the same
+``ogm-ppl study table_3_1`` as a script of the checkout (its default paths in the checkout): the same
 options, output and files, defined once in :mod:`ogm_ppl.cli._studies.toys` (``--help`` lists them).
 """
 

@@ -1,6 +1,6 @@
 """How far the thesis's border update (Section 5.2.3) is from the posterior it is meant to sample.
 
-``ogm-ppl study thesis_border_update`` as a script of the checkout (its output paths relative to the checkout): the
+``ogm-ppl study thesis_border_update`` as a script of the checkout (its default paths in the checkout): the
 same options, output and files, defined once in :mod:`ogm_ppl.cli._studies.toys` (``--help`` lists them).
 """
 

@@ -1,7 +1,7 @@
 """One comparison harness: summed KL to the exact posterior against wall-clock time for
 every method, on the 1D toy, on the 1000 wall datasets and on small 2D problems solved by brute force.
 
-``ogm-ppl study vi_vs_mcmc`` as a script of the checkout (its output paths relative to the checkout): the same
+``ogm-ppl study vi_vs_mcmc`` as a script of the checkout (its default paths in the checkout): the same
 options, output and files, defined once in :mod:`ogm_ppl.cli._studies.toys` (``--help`` lists them).
 """
 
