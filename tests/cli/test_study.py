@@ -25,6 +25,7 @@ BAD_OPTIONS: dict[str, list[str]] = {
     "prior_stats": ["--quick=yes"],
     "prior_occupancy": ["--train", "nowhere"],
     "border_chain_probe": ["folder", "dataset", "--sweeps", "x"],
+    "path_free": ["--range-cells", "far"],
     "amortised_guide_eval": ["--sweeps", "x"],
     "guide_limits": ["--test", "nowhere", "--guides", "ipa"],
     "unseen_by_distance": ["--kernel", "nowhere"],
@@ -44,6 +45,7 @@ BAD_SETTINGS = [
     ("amortised_guide_eval", ["--sweeps", "0"], "--sweeps: must be at least 1"),
     ("vi_vs_mcmc", ["--problems", "toy,3d"], "--problems: "),
     ("log_plans", ["--min-free-cells", "0"], "--min-free-cells must be at least 1"),
+    ("path_free", ["--rows", "5", "--cols", "5"], "rows: rows x cols = 25 cells"),
 ]
 
 
@@ -121,3 +123,17 @@ def test_a_run_writes_what_the_function_returns(tmp_path):
     assert r.returncode == 0 and json.loads(r.stdout) == unobserved_means(tmp_path / "run"), r.stderr
     r = _command("unobserved_marginals", tmp_path / "nowhere")
     assert r.returncode == 2 and r.stderr.startswith("ogm-ppl: error: ") and len(r.stderr.splitlines()) == 1
+
+
+def test_a_computing_study_writes_what_its_function_returns(tmp_path):
+    from ogm_ppl.studies.path_free import PathFreeSettings, path_free, path_free_lines
+
+    r = _command("path_free", "--scenes", 2, "--plans", 2, "--priors", "independent:houseexpo", "--out", tmp_path)
+    assert r.returncode == 0, r.stderr
+    got = json.loads((tmp_path / "path_free.json").read_text())
+    settings = PathFreeSettings(scenes=2, plans=2, priors=("independent:houseexpo",))
+    want = json.loads(json.dumps(path_free(settings, progress=False)))
+    same = ("settings", "scenes", "summary", "by_length", "paths")
+    assert {k: got[k] for k in same} == {k: want[k] for k in same}
+    assert got["provenance"]["command"].startswith("python -m ogm_ppl study path_free")
+    assert "\n".join(path_free_lines(got)) in r.stdout

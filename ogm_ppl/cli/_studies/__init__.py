@@ -49,6 +49,7 @@ STUDIES: dict[str, tuple[str, str]] = {
     "prior_stats": ("priors", "the patch statistics of the prior tables per corpus (5.2.2-5.2.3)"),
     "prior_occupancy": ("priors", "each prior's own occupied share in a region with no readings, vs its corpus's"),
     "border_chain_probe": ("priors", "prior mass and likelihood of a border-prior Gibbs chain, sweep by sweep"),
+    "path_free": ("priors", "P(path free): the exact joint answer against the product of marginals, by prior"),
     "amortised_guide_eval": ("guides", "the amortised guide against Gibbs with the same prior and against p21 OGM"),
     "guide_limits": ("guides", "what limits a corpus guide on unseen cells: its calibration or what it tells apart"),
     "unseen_by_distance": ("guides", "a method's NLL on unseen cells by distance to the nearest reached cell"),

@@ -1,4 +1,4 @@
-"""The studies of the priors: ``prior_stats``, ``prior_occupancy`` and ``border_chain_probe``
+"""The studies of the priors: ``prior_stats``, ``prior_occupancy``, ``border_chain_probe`` and ``path_free``
 (:mod:`ogm_ppl.cli._studies`)."""
 
 from __future__ import annotations
@@ -123,4 +123,64 @@ map's; and the true map's tiles whose (border, inner) pair the tables never coun
     _border_chain_probe_run,
 )
 
-STUDIES = {"prior_stats": PRIOR_STATS, "prior_occupancy": PRIOR_OCCUPANCY, "border_chain_probe": BORDER_CHAIN_PROBE}
+
+# ------------------------------------------------------------------------------------------------ path_free
+def _path_free_arguments(ap: argparse.ArgumentParser) -> None:
+    from ogm_ppl.studies.path_free import PathFreeSettings
+
+    d = PathFreeSettings()
+    ap.add_argument(
+        "--corpus", default=d.corpus, help=f"the corpus whose held-out plans the scenes come from ({d.corpus})"
+    )
+    ap.add_argument(
+        "--priors", nargs="+", default=list(d.priors), help="prior names (default: " + " ".join(d.priors) + ")"
+    )
+    ap.add_argument("--scenes", type=int, default=d.scenes, help=f"scenes ({d.scenes})")
+    ap.add_argument("--rows", type=int, default=d.rows, help=f"rows of a scene's window ({d.rows}; rows x cols <= 24)")
+    ap.add_argument("--cols", type=int, default=d.cols, help=f"columns of a scene's window ({d.cols})")
+    ap.add_argument("--beams", type=int, default=d.beams, help=f"beams of the robot's scan ({d.beams})")
+    ap.add_argument("--range-cells", type=float, default=d.range_cells, help=f"beam range, cells ({d.range_cells:g})")
+    ap.add_argument("--sigma", type=float, default=d.sigma, help=f"range noise, cells ({d.sigma:g})")
+    ap.add_argument("--seed", type=int, default=d.seed, help=f"seed of the scenes and scans ({d.seed})")
+    ap.add_argument("--plans", type=int, default=d.plans, help=f"held-out plans the scenes are cut from ({d.plans})")
+    ap.add_argument(
+        "--scenes-per-plan", type=int, default=d.scenes_per_plan, help=f"scenes at most per plan ({d.scenes_per_plan})"
+    )
+    ap.add_argument("--out", type=Path, default=Path("out/path_free"), help="the output folder (out/path_free)")
+    ap.add_argument("--quiet", action="store_true", help="no progress lines")
+
+
+def _path_free_run(args: argparse.Namespace) -> dict:
+    from ogm_ppl.provenance import command_line
+    from ogm_ppl.studies.path_free import FILE_NAME, PathFreeSettings, path_free, path_free_lines
+
+    settings = PathFreeSettings(
+        corpus=args.corpus, priors=tuple(args.priors), scenes=args.scenes, rows=args.rows, cols=args.cols,
+        beams=args.beams, range_cells=args.range_cells, sigma=args.sigma, seed=args.seed, plans=args.plans,
+        scenes_per_plan=args.scenes_per_plan,
+    )  # fmt: skip
+    doc = path_free(settings, args.out, command=command_line(), progress=not args.quiet)
+    print("\n".join(path_free_lines(doc)))
+    print(f"wrote {args.out / FILE_NAME} ({doc['seconds']:.0f} s)")
+    return doc
+
+
+PATH_FREE = Study(
+    """Is a path free? The exact joint answer against the product of marginals, and both against the truth. The
+command line of :func:`ogm_ppl.studies.path_free.path_free` (the scenes, the paths and the scores are in
+:mod:`ogm_ppl.studies.path_free`): on enumerable windows cut from held-out plans, with a robot's scan, every
+straight path holding an unseen cell gets the posterior's exact P(path free) and the product of its marginals,
+per prior, scored against the plan. Writes OUT/path_free.json and prints one line per prior.
+
+    ogm-ppl study path_free                                   # 60 scenes of 4 x 4 cells, three priors
+    ogm-ppl study path_free --scenes 4 --priors independent:houseexpo patch3:houseexpo --out /tmp/pf""",
+    _path_free_arguments,
+    _path_free_run,
+)
+
+STUDIES = {
+    "prior_stats": PRIOR_STATS,
+    "prior_occupancy": PRIOR_OCCUPANCY,
+    "border_chain_probe": BORDER_CHAIN_PROBE,
+    "path_free": PATH_FREE,
+}
