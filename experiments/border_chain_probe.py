@@ -2,33 +2,24 @@
 3 x 3 patch Gibbs chain with ``border:generated`` from the thresholded OGM start, sweep by sweep, beside the
 true map's; and the true map's tiles whose (border, inner) pair the tables never counted.
 
-The command line of :func:`ogm_ppl.studies.border_chain_probe.border_chain_probe`.
-
-    python experiments/border_chain_probe.py out/experiments/table_6_4_small sim-m1000 [--sweeps 12]
+``ogm-ppl study border_chain_probe`` as a script of the checkout: the same options, output and files, defined once
+in :mod:`ogm_ppl.cli._studies.priors` (``--help`` lists them).
 """
 
 from __future__ import annotations
 
-import argparse
+import sys
 from pathlib import Path
 
-from ogm_ppl.studies.border_chain_probe import border_chain_probe, border_chain_probe_lines
-from ogm_ppl.studies.errors import STUDY_ERRORS
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from ogm_ppl.cli._studies import script_main  # noqa: E402
 
 
-def main(argv: list[str] | None = None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("folder", type=Path, help="an experiment's output folder (ogm-ppl experiment --out)")
-    ap.add_argument("dataset", help="a dataset of the experiment")
-    ap.add_argument("--sweeps", type=int, default=12, help="sweeps of the chain (12)")
-    ap.add_argument("--sigma", type=float, default=3.0, help="range noise, cells (3)")
-    args = ap.parse_args(argv)
-    try:
-        doc = border_chain_probe(args.folder, args.dataset, args.sweeps, args.sigma)
-    except STUDY_ERRORS as e:
-        ap.error(str(e))
-    print("\n".join(border_chain_probe_lines(doc)))
-    return doc
+def main(argv: list[str] | None = None) -> object:
+    """``ogm-ppl study border_chain_probe`` on ``argv``; returns the study's result."""
+    return script_main("border_chain_probe", argv, "border_chain_probe.py")
 
 
 if __name__ == "__main__":

@@ -1,50 +1,24 @@
 """Fit update terms Delta for one sensor setting (Section 2.5 at sigma, F in cells) and compare them with
 the shipped ones (fitted at sigma 3, F 75, wall 60) on held-out data of that setting.
 
-The command line of :func:`ogm_ppl.studies.fit_delta_setting.delta_setting_heldout` (the fit is
-:func:`ogm_ppl.learn.fit_delta_setting`, ``ogm-ppl fit-prior delta-setting``).
-
-    python experiments/fit_delta_setting.py --sigma 1 --F 400 [--out DIR] [--names p21 moravec_opt]
-
-Intel at 5 cm: F = 20 m / 0.05 m = 400 cells; sigma in cells = sigma_m / 0.05. Prints, per term: data and
-fit seconds, train and held-out cross-entropy (mean over datasets of the summed cell cross-entropy, nats)
-of the fit and of the shipped term on the same held-out data. ``--out``: write (or reuse) the fitted
-terms there. ``--compare-full``: also time the fit without the near-wall reduction.
+``ogm-ppl study fit_delta_setting`` as a script of the checkout: the same options, output and files, defined once in
+:mod:`ogm_ppl.cli._studies.toys` (``--help`` lists them).
 """
 
 from __future__ import annotations
 
-import argparse
+import sys
+from pathlib import Path
 
-import torch
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
 
-from ogm_ppl.learn import FitOptionError
-from ogm_ppl.studies.fit_delta_setting import delta_setting_heldout, delta_setting_lines
+from ogm_ppl.cli._studies import script_main  # noqa: E402
 
 
-def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--sigma", type=float, required=True, help="sensor noise in cells")
-    ap.add_argument("--F", type=int, required=True, help="max range in cells")
-    ap.add_argument("--wall", type=int, default=None, help="wall cell (default round(0.8 F))")
-    ap.add_argument("--num", type=int, default=1000, help="training datasets")
-    ap.add_argument("--heldout", type=int, default=500, help="held-out datasets (seed + 1)")
-    ap.add_argument("--seed", type=int, default=0, help="seed of the training datasets (0)")
-    ap.add_argument("--names", nargs="+", default=["p21", "moravec_opt"], help="the terms fitted")
-    ap.add_argument("--out", default=None, help="folder for the fitted terms (reused when there)")
-    ap.add_argument("--threads", type=int, default=1, help="torch threads (small matrices: 1 is fastest)")
-    ap.add_argument("--compare-full", action="store_true", help="also time the unreduced fit")
-    args = ap.parse_args(argv)
-    torch.set_num_threads(args.threads)
-    try:
-        doc = delta_setting_heldout(
-            args.sigma, args.F, wall=args.wall, num=args.num, heldout=args.heldout, seed=args.seed,
-            names=args.names, out_dir=args.out, compare_full=args.compare_full,
-        )  # fmt: skip
-    except FitOptionError as e:
-        ap.error(str(e))
-    print("\n".join(delta_setting_lines(doc)))
-    return doc
+def main(argv: list[str] | None = None) -> object:
+    """``ogm-ppl study fit_delta_setting`` on ``argv``; returns the study's result."""
+    return script_main("fit_delta_setting", argv, "fit_delta_setting.py")
 
 
 if __name__ == "__main__":

@@ -143,8 +143,10 @@ prior = "patch3:houseexpo"
 
 def test_the_workflows_run_from_the_installed_wheel(installed, tmp_path):
     """With no source tree: a prior fitted and a guide trained on plan files of one's own, priors and guides scored
-    on them (``calibrate``, with its leakage checks), and an active-mapping spec; each writes what the docs say."""
+    on them (``calibrate``, with its leakage checks), a study (``study``) and an active-mapping spec; each writes
+    what the docs say."""
     from tests._plan_folder import write_plan_folder
+    from tests.cli.test_study import _maps
 
     venv = installed[0]
     ogm = venv / "bin" / "ogm-ppl"
@@ -170,6 +172,12 @@ def test_the_workflows_run_from_the_installed_wheel(installed, tmp_path):
          cwd=work, env=env)  # fmt: skip
     summary = json.loads((work / "cal" / "calibration_summary.json").read_text())
     assert {"independent:houseexpo", "patch3:houseexpo"} <= {r["prior_name"] for r in summary["summary"]}
+
+    listing = _run(ogm, "study", "--help", cwd=work, env=env)
+    assert "table_3_1" in listing and "unobserved_marginals" in listing
+    _maps(work / "run")
+    means = json.loads(_run(ogm, "study", "unobserved_marginals", "run", "--json", cwd=work, env=env))
+    assert set(means) == {"ogm", "gibbs"}
 
     (work / "tiny.toml").write_text(ACTIVE_SPEC)
     _run(ogm, "experiment", "tiny.toml", "--scheduler", "serial", "--quiet", "--out", "active", cwd=work, env=env)

@@ -138,7 +138,7 @@ def snapshot(
 
 
 def _is_error_split(doc: dict) -> bool:
-    """Whether ``doc`` is ``experiments/table_6_4_errors.py``'s output (algorithms keyed by name)."""
+    """Whether ``doc`` is ``ogm-ppl study table_6_4_errors``'s output (algorithms keyed by name)."""
     return isinstance(doc.get("algorithms"), dict) and "oracles" in doc
 
 
@@ -178,7 +178,7 @@ def _count(x: list | int) -> int:
 
 def merge(src: Path, into: str, command: str, results: Path = RESULTS, drop_curves: bool = False) -> Path:
     """Add the algorithms of a later run's result ``src`` (an experiment's summary run into another folder,
-    ``experiments/table_6_4_errors.py``'s split of it, or an ``active`` experiment's ``metrics.json``) to the
+    ``ogm-ppl study table_6_4_errors``'s split of it, or an ``active`` experiment's ``metrics.json``) to the
     snapshot ``results/INTO.json`` of the same experiment.
 
     Refused unless both are of the same kind, experiment, seed and datasets (every dataset's figures equal
@@ -710,7 +710,7 @@ def _calibration_guides(doc: dict) -> Table:
 
 
 def _unseen_by_distance(doc: dict) -> Table:
-    """``experiments/unseen_by_distance.py``: per test corpus and distance bin (cells to the nearest reached
+    """``ogm-ppl study unseen_by_distance``: per test corpus and distance bin (cells to the nearest reached
     cell), the unseen cells' share, occupied share and the method's NLL; for a prior's chains also the chain
     length, the share of the bin's cells whose chains agree (split R-hat < 1.05) and each chain's mean
     occupancy there."""
@@ -752,7 +752,7 @@ def _unseen_by_distance(doc: dict) -> Table:
 
 
 def _guide_limits(doc: dict) -> Table:
-    """``experiments/guide_limits.py``: per guide, its NLL on the unseen cells of a test corpus's held-out maps,
+    """``ogm-ppl study guide_limits``: per guide, its NLL on the unseen cells of a test corpus's held-out maps,
     and the NLL after the temperature (and shift) that is best on those very maps; the guides' ensemble."""
     st = doc["settings"]
     rows = []
@@ -824,7 +824,7 @@ def _corpus_stats(doc: dict) -> Table:
 
 
 def _prior_occupancy(doc: dict) -> Table:
-    """``experiments/prior_occupancy.py``: each prior's occupied share on a window with no readings (the second
+    """``ogm-ppl study prior_occupancy``: each prior's occupied share on a window with no readings (the second
     half of three chains, and each chain's) against its training corpus's ``lambda``."""
     st = doc["settings"]
     fitted = bool(st.get("fit_bias"))
@@ -987,7 +987,7 @@ def _experiment_pooled(doc: dict) -> Table:
 
 
 def _error_split(doc: dict) -> Table:
-    """``experiments/table_6_4_errors.py``: each algorithm's pooled best F1 with its false positives and
+    """``ogm-ppl study table_6_4_errors``: each algorithm's pooled best F1 with its false positives and
     negatives among touched and never-touched cells, then the two oracle maps that know every touched cell."""
     rows = [
         [
@@ -1015,7 +1015,7 @@ def _error_split(doc: dict) -> Table:
 
 
 def _touched_errors(doc: dict) -> Table:
-    """``experiments/touched_errors.py``: per dataset and map, the touched best F1, the walls missed and the
+    """``ogm-ppl study touched_errors``: per dataset and map, the touched best F1, the walls missed and the
     false positives by distance to the nearest benchmark wall, the wall cells called occupied by depth."""
     rows = []
     for ds, algs in doc["datasets"].items():
@@ -1107,7 +1107,7 @@ def _active(doc: dict) -> Table:
 
 def _active_d0(doc: dict) -> Table:
     """The distance offset ``d_0`` of the per-metre exploration rules chosen on validation plans
-    (``experiments/tune_distance_offset.py``): per rule and offset, the median path length to 90 % coverage
+    (``ogm-ppl study tune_distance_offset``): per rule and offset, the median path length to 90 % coverage
     over the plans and the mean over the runs that reach it."""
 
     def path(x: float) -> str:

@@ -37,6 +37,9 @@ Subcommands (``ogm-ppl SUBCOMMAND --help`` lists every option):
     Statistics of a floor-plan corpus as rasterised (plans, buildings, splits, cells, known and occupied share,
     wall thickness in cells) as JSON, and a figure of a few plans beside their sources
     (:mod:`ogm_ppl.datasets.floorplans.stats`).
+``study NAME [options]``
+    A study of :mod:`ogm_ppl.studies` (the computations behind the thesis's tables, e.g. ``table_3_1``), with its
+    own options (``ogm-ppl study --help`` lists the studies; :mod:`ogm_ppl.cli.study`).
 
 Each subcommand is a module of this package (:data:`COMMANDS`) with ``add_parser(sub)`` and ``run(args)``;
 a new workflow adds a module and one entry.
@@ -71,6 +74,7 @@ COMMANDS: dict[str, str] = {
     "calibrate": "calibrate",
     "train-guide": "train_guide",
     "corpus-stats": "corpus_stats",
+    "study": "study",
 }
 
 

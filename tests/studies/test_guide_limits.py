@@ -74,8 +74,8 @@ def test_bad_arguments_are_refused(tmp_path):
 def test_the_script_refuses_bad_options_through_the_library(tmp_path):
     (tmp_path / "f").write_text("x")
     for argv, message in (
-        (["--plans", "0", "--out", str(tmp_path)], "guide_limits.py: --plans must be at least 1"),
-        (["--out", str(tmp_path / "f")], "guide_limits.py: --out [Errno 20] exists and is not a folder"),
+        (["--plans", "0", "--out", str(tmp_path)], "guide_limits.py: error: --plans: must be at least 1"),
+        (["--out", str(tmp_path / "f")], "guide_limits.py: error: --out: [Errno 20] exists and is not a folder"),
     ):
         r = subprocess.run(
             [sys.executable, str(SCRIPT), "--test", "ipa", "--guides", "ipa", *argv],
@@ -83,4 +83,4 @@ def test_the_script_refuses_bad_options_through_the_library(tmp_path):
             text=True,
             timeout=300,
         )
-        assert r.returncode == 1 and message in r.stderr, r.stderr
+        assert r.returncode == 2 and message in r.stderr, r.stderr
