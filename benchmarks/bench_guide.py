@@ -8,7 +8,8 @@ corpus guide (``houseexpo+ipa``: 6 dilated 3 x 3 convolutions of 24 channels, 27
 Compared in the same run, on ``--threads`` threads (default 2):
   baseline   the reference network, ``GuideNet.forward`` and ``_symmetrised`` (NCHW, the grid turned 8 times)
   fast       :func:`~ogm_ppl.inference.variational.amortised_fast.fast_logits` (channels-last, fused
-             convolution + ReLU, the symmetries as turned kernels), what ``AmortisedGuide.marginals`` runs
+             convolution + ReLU, the symmetries as turned kernels, side by side on one thread each), what
+             ``AmortisedGuide.marginals`` runs; and its symmetrised map with the 8 passes one after another
 
 Printed: seconds per million cells for one pass and the symmetrised map, the ratios, the maximum difference of
 the logits, the GFLOP/s (2 x multiply-adds / s) against the machine's measured rates in the same run (a plain
@@ -128,6 +129,7 @@ def main() -> dict:
         fast8, t_fast8 = timed(lambda: fast_logits(net, x, True))
         if a.repeat > 1:
             t_fast8 = min(t_fast8, best_time(lambda: fast_logits(net, x, True), a.repeat - 1, 0))
+        t_serial8 = best_time(lambda: fast_logits(net, x, True, parallel=False), 1, 0)
     peaks = peak_rates(min(a.side, 512), a.repeat + 1)
     layers = layer_times(net, x)
     res = {
@@ -156,6 +158,7 @@ def main() -> dict:
             "speedup": t_base8 / t_fast8,
             "baseline_gflops": 8 * flop / t_base8 / 1e9,
             "fast_gflops": 8 * flop / t_fast8 / 1e9,
+            "fast_serial_s": t_serial8,
             "max_abs_diff": float((base8 - fast8).abs().max()),
         },
         "measured_rates": peaks,

@@ -101,8 +101,8 @@ def test_the_fast_map_equals_the_reference_to_float32_rounding(symmetrize):
         with torch.no_grad():
             ref = _symmetrised(net, inp) if symmetrize else net(inp)
         assert ((ref.double() - exact).abs() <= bound).all()
-        for fused in (None, False):
-            fast = fast_logits(net, inp, symmetrize, fused=fused)
+        for fused, parallel in ((None, True), (False, True), (None, False)):
+            fast = fast_logits(net, inp, symmetrize, fused=fused, parallel=parallel)
             assert fast.dtype == torch.float32 and fast.shape == ref.shape
             assert ((fast.double() - exact).abs() <= bound).all()
         assert bound.max() < 1e-2  # a tolerance, not a blank cheque: logits are O(10)
