@@ -173,6 +173,10 @@ def main() -> dict:
             f"{r['fast_gflops']:.1f} GFLOP/s)  {r['speedup']:.2f}x  max |diff| {r['max_abs_diff']:.1e}"
         )
     print(
+        f"symmetrised, the 8 passes one after another on all threads: {t_serial8:.2f} s "
+        f"(side by side, one thread each: {t_fast8:.2f} s, {t_serial8 / t_fast8:.2f}x)"
+    )
+    print(
         f"measured rates: plain 256->256 3x3 conv {peaks['plain_conv_256x256_3x3_gflops']:.1f} GFLOP/s, "
         f"24->24 3x3 conv+ReLU {peaks['conv_24x24_3x3_relu_gflops']:.1f} GFLOP/s; fast one pass at "
         f"{res['one_pass']['fast_gflops'] / peaks['plain_conv_256x256_3x3_gflops']:.0%} of the plain conv's"
