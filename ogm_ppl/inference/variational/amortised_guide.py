@@ -33,6 +33,7 @@ import torch
 from pyro.nn import PyroModule
 from pyro.nn.module import to_pyro_module_
 
+from ogm_ppl.inference.variational.amortised_fast import fast_logits
 from ogm_ppl.inference.variational.amortised_features import evidence_features
 from ogm_ppl.inference.variational.amortised_files import GuideFileError, read_guide_file, write_guide_file
 from ogm_ppl.inference.variational.amortised_net import GuideArchitecture, GuideNet, _symmetrised
@@ -130,14 +131,20 @@ class AmortisedGuide(PyroModule):
 
     def cell_logits(self, model: OccupancyModel | None = None, readings: torch.Tensor | None = None) -> torch.Tensor:
         """Logits of every cell, ``K`` float64 (``... x K`` for a batch of readings); differentiable in
-        the weights. Pinned cells hold their (unused) network output."""
+        the weights. Pinned cells hold their (unused) network output. With gradients off (``torch.no_grad``,
+        as :meth:`marginals`) the map comes from
+        :func:`~ogm_ppl.inference.variational.amortised_fast.fast_logits`: the same sums in another order
+        (equal to float32 rounding), several times faster."""
         model = self._model(model)
         if self._checked is not model:
             self.check_setting(model)
         x = self.features(model, readings)
         batch = x.shape[:-3]
         x = x.reshape(-1, *x.shape[-3:])
-        out = _symmetrised(self.net, x) if self._symmetrize else self.net(x)
+        if not torch.is_grad_enabled():
+            out = fast_logits(self.net, x, self._symmetrize)
+        else:
+            out = _symmetrised(self.net, x) if self._symmetrize else self.net(x)
         return out.reshape(*batch, model.num_cells).to(torch.float64)
 
     def check_setting(self, model: OccupancyModel, *, noise_known: bool = True) -> bool:
