@@ -63,6 +63,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         src.add_argument("--plan-files", nargs="+", type=Path, metavar="PATH", help="plan files or folders of them")
         k.add_argument("--out", type=Path, required=True, help="the folder the fitted files go to")
         k.add_argument("--limit", type=int, default=None, help="the first N training plans (default: the corpus's)")
+        k.add_argument("--sample", type=int, default=None, help="a random N of the corpus's training plans")
+        k.add_argument("--sample-seed", type=int, default=0, help="the seed of --sample (0)")
         k.add_argument("--pixel-size", type=float, default=None, help="metres per pixel of plan images")
         k.add_argument("--resolution", type=float, default=0.05, help="metres per cell of plan files (0.05)")
         k.add_argument("--name", default=None, help="the files' name part (default the corpus, or 'plans')")
@@ -166,8 +168,17 @@ def run(args: argparse.Namespace) -> int:
             reuse=args.reuse,
         )
         return _done(args.kind, r)
+    from ogm_ppl.learn import load_training_plans
+
     source = args.corpus if args.corpus is not None else list(args.plan_files)
-    common = dict(limit=args.limit, pixel_size=args.pixel_size, resolution=args.resolution, name=args.name)
+    if args.sample is not None:
+        source = load_training_plans(source, limit=args.limit, sample=args.sample, sample_seed=args.sample_seed)
+    common = dict(
+        limit=None if args.sample is not None else args.limit,
+        pixel_size=args.pixel_size,
+        resolution=args.resolution,
+        name=args.name,
+    )
     if args.kind == "tables":
         r = fit_tables(source, args.out, min_count_5x5=args.min_count_5x5, progress=not args.quiet, **common)
     elif args.kind == "backoff":
