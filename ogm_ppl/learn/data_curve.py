@@ -95,8 +95,13 @@ def field_data_curve(
     val_idx = sorted(int(i) for i in perm[ns[-1] : ns[-1] + n_val])
     say = print if progress else (lambda *a, **k: None)
 
+    from ogm_ppl.io import atomic_write_text
+    from ogm_ppl.learn._fit_common import run_provenance
     from ogm_ppl.priors.learn_field import backoff_potentials, fit_pl, validation_pll
 
+    sizes_arg = ["--sizes", *map(str, ns), "--validation", str(n_val), "--seed", str(seed)]
+    cmd = " ".join(["ogm-ppl", "fit-prior", "data-curve", "--corpus", corpus, "--out", str(out), *sizes_arg])
+    prov = run_provenance(cmd, full)  # the commit and date of the run's start
     t0 = time.perf_counter()
     _, va = _stats(full, val_idx, s.backoff_w, s.w)
     val_seconds = time.perf_counter() - t0
@@ -136,12 +141,7 @@ def field_data_curve(
             f"{row['validation_windows_unseen_share']:.2e}, {row['minutes_from_scratch']:.2f} min",
             flush=True,
         )
-    from ogm_ppl.io import atomic_write_text
-    from ogm_ppl.learn._fit_common import run_provenance
-
-    sizes_arg = ["--sizes", *map(str, ns), "--validation", str(n_val), "--seed", str(seed)]
-    cmd = " ".join(["ogm-ppl", "fit-prior", "data-curve", "--corpus", corpus, "--out", str(out), *sizes_arg])
-    prov = run_provenance(cmd, full, seconds=round(time.perf_counter() - t0, 1))
+    prov["seconds"] = round(time.perf_counter() - t0, 1)
     doc = {
         "format": DATA_CURVE_FORMAT,
         "format_version": 1,
