@@ -287,12 +287,13 @@ def _corpus_plans(corpus: str, limit: int | None) -> TrainingPlans:
 
 
 def sample_indices(n: int, k: int, seed: int) -> list[int]:
-    """``k`` of ``range(n)`` drawn without replacement, ascending: the first ``k`` of the permutation
-    ``numpy.random.default_rng(seed).permutation(n)``, so that a smaller sample of the same seed is a subset of a
-    larger one."""
+    """:func:`ogm_ppl.datasets.floorplans.sample_indices` (the first ``k`` of a seeded permutation of ``n``,
+    ascending; nested across ``k``), refusing ``k > n`` with a :class:`FitOptionError` on ``sample``."""
     if k > n:
         raise FitOptionError("sample", f"must be at most the {n} training plans, got {k}")
-    return sorted(int(i) for i in np.random.default_rng(seed).permutation(n)[:k])
+    from ogm_ppl.datasets.floorplans import sample_indices as draw
+
+    return draw(n, k, seed)
 
 
 def _sampled_plans(corpus: str, k: int, seed: int) -> TrainingPlans:
