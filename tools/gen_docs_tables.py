@@ -684,8 +684,8 @@ def _calibration_corpora(doc: dict) -> Table:
     maps = sorted({s["maps"] for s in summ})
     return Table(
         caption=(
-            f"Priors learned on each corpus, on the unseen cells of held-out maps of each corpus "
-            f"({'-'.join(map(str, maps))} maps each, {st['window']} x {st['window']} cells, {st['poses']} stops x "
+            f"Priors learned on each corpus (rows), on the unseen cells of the held-out maps of each test set "
+            f"(columns; {'-'.join(map(str, maps))} maps each, {st['window']} x {st['window']} cells, {st['poses']} stops x "
             f"{st['beams']} beams, {st['sweeps']} sweeps after {st['burn']}, kernel {st['kernel']}): NLL in bits/cell, "
             "mean over the maps (min-max over the maps) / ROC AUC"
         ),
