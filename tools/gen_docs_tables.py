@@ -685,9 +685,9 @@ def _calibration_corpora(doc: dict) -> Table:
     return Table(
         caption=(
             f"Priors learned on each corpus (rows), on the unseen cells of the held-out maps of each test set "
-            f"(columns; {'-'.join(map(str, maps))} maps each, {st['window']} x {st['window']} cells, {st['poses']} stops x "
-            f"{st['beams']} beams, {st['sweeps']} sweeps after {st['burn']}, kernel {st['kernel']}): NLL in bits/cell, "
-            "mean over the maps (min-max over the maps) / ROC AUC"
+            f"(columns; {'-'.join(map(str, maps))} maps each, {st['window']} x {st['window']} cells, "
+            f"{st['poses']} stops x {st['beams']} beams, {st['sweeps']} sweeps after {st['burn']}, kernel "
+            f"{st['kernel']}): NLL in bits/cell, mean over the maps (min-max over the maps) / ROC AUC"
         ),
         header=["prior", *tests],
         rows=rows,
