@@ -670,6 +670,61 @@ def _calibration_cross(doc: dict) -> Table:
     )
 
 
+def _calibration_corpora(doc: dict) -> Table:
+    """Each prior learned on each corpus, scored on the held-out maps of every test corpus (and on plan files),
+    unseen cells: NLL mean with its spread over the maps (min-max), and ROC AUC."""
+    tests, summ = _calibration_rows(doc, "unseen")
+
+    def cell(s: dict) -> str:
+        sp = s.get("spread", {}).get("nll_bits", {})
+        return f"{_f(s['nll_bits'])} ({_f(sp.get('min'))}-{_f(sp.get('max'))}) / {_f(s['auc'])}"
+
+    rows = _method_by_test(summ, tests, lambda s: True, cell)
+    st = doc["settings"]
+    maps = sorted({s["maps"] for s in summ})
+    return Table(
+        caption=(
+            f"Priors learned on each corpus (rows), on the unseen cells of the held-out maps of each test set "
+            f"(columns; {'-'.join(map(str, maps))} maps each, {st['window']} x {st['window']} cells, "
+            f"{st['poses']} stops x {st['beams']} beams, {st['sweeps']} sweeps after {st['burn']}, kernel "
+            f"{st['kernel']}): NLL in bits/cell, mean over the maps (min-max over the maps) / ROC AUC"
+        ),
+        header=["prior", *tests],
+        rows=rows,
+        provenance=doc["provenance"],
+        note="a prior is never scored on a building of its training split (the leakage check runs first)",
+    )
+
+
+def _data_curve(doc: dict) -> Table:
+    """``ogm-ppl fit-prior data-curve``: the PL pattern field's held-out score against the training plans."""
+    rows = [
+        [
+            f"{r['plans']:,}",
+            f"{r['validation_pll_bits']:.6f}",
+            f"{r['train_pll_bits']:.6f}",
+            _g(r["validation_windows_unseen_share"], 2),
+            f"{r['distinct_neighbourhoods']:,}",
+            f"{r['minutes_from_scratch']:.1f}",
+        ]
+        for r in doc["rows"]
+    ]
+    st = doc["settings"]
+    return Table(
+        caption=(
+            f"The {st['w']} x {st['w']} pattern field (pseudo-likelihood, before tempering) fitted on a random "
+            f"N of the {doc['provenance']['plans']:,} {doc['corpus']} training plans (nested samples, seed "
+            f"{st['seed']}), scored on the same {st['validation']} other training plans: held-out and training "
+            "pseudo-log-likelihood (bits/cell), the share of held-out 3 x 3 windows no training window showed, "
+            "the distinct training neighbourhoods, and the minutes a fit of that size takes on 2 cores (reading "
+            "the plans and fitting)"
+        ),
+        header=["plans", "held-out PLL", "training PLL", "unseen windows", "neighbourhoods", "minutes"],
+        rows=rows,
+        provenance=doc["provenance"],
+    )
+
+
 def _calibration_guides(doc: dict) -> Table:
     """Each amortised guide (by the corpora it was learned on) on each test corpus, unseen cells: NLL, pooled
     ECE, ROC AUC and best F1."""
@@ -1254,6 +1309,9 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "prior_occupancy": ("prior_occupancy", _prior_occupancy),
     "corpus_stats": ("corpus_stats", _corpus_stats),
     "path_free": ("path_free", _path_free),
+    "data_curve": ("data_curve", _data_curve),
+    "calibration_corpora": ("calibration_corpora", _calibration_corpora),
+    "calibration_corpora_logs": ("calibration_corpora_logs", _calibration_corpora),
     "calibration_bias": ("calibration_bias", _calibration_bias),
     "calibration_bias10": ("calibration_bias10", _calibration_bias),
     "prior_bias": ("prior_bias", _prior_occupancy),

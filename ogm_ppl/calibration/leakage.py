@@ -61,8 +61,10 @@ def _tables_provenance(corpus: str) -> dict:
 def training_set(corpus: str) -> set[str]:
     """Names of the maps the shipped tables of ``corpus`` were learned from, rebuilt from their provenance
     (``ogm_ppl/fitted/prior_<corpus>.json``). Floor plans: ``training_plans(corpus, excluded_buildings,
-    limit=plans)``, checked against the recorded SHA-256 of the names; ``generated``: ``"seedstream:E/K"``
-    for each spawned child (entropy ``E``, spawn key ``K``) of the recorded seed."""
+    limit=plans)``, or its random subset where the provenance records one (``sample``: ``random``, ``seed``;
+    :func:`~ogm_ppl.datasets.floorplans.sample_indices`), checked against the recorded SHA-256 of the names;
+    ``generated``: ``"seedstream:E/K"`` for each spawned child (entropy ``E``, spawn key ``K``) of the recorded
+    seed."""
     prov = _tables_provenance(corpus)
     path = FITTED_DIR / f"prior_{corpus}.json"
     if corpus == "generated":
@@ -72,7 +74,13 @@ def training_set(corpus: str) -> set[str]:
             raise LeakageError(f"{path}: provenance lacks the generator's seed and n ({e})") from None
         return {f"seedstream:{c.entropy}/{tuple(c.spawn_key)}" for c in children}
     try:
-        names = fp.training_plans(corpus, exclude_buildings=tuple(prov["excluded_buildings"]), limit=int(prov["plans"]))
+        excl = tuple(prov["excluded_buildings"])
+        sample = prov.get("sample")
+        if isinstance(sample, dict) and sample.get("random") is not None:  # a random subset (``--sample``)
+            names = fp.training_plans(corpus, exclude_buildings=excl)
+            names = [names[i] for i in fp.sample_indices(len(names), int(sample["random"]), int(sample["seed"]))]
+        else:
+            names = fp.training_plans(corpus, exclude_buildings=excl, limit=int(prov["plans"]))
         want = prov["plan_names_sha256"]
     except (KeyError, TypeError, ValueError) as e:
         raise LeakageError(f"{path}: provenance lacks plans / excluded_buildings / plan_names_sha256 ({e})") from None

@@ -123,10 +123,18 @@ def _mean(rows: list[dict], key: str) -> float:
     return float(np.mean(v)) if v else float("nan")
 
 
+def _spread(rows: list[dict], key: str) -> dict:
+    """``sd`` (population standard deviation), ``min`` and ``max`` of ``key`` over the maps (NaNs left out)."""
+    v = [r[key] for r in rows if r.get(key) is not None and not (isinstance(r[key], float) and math.isnan(r[key]))]
+    if not v:
+        return {"sd": float("nan"), "min": float("nan"), "max": float("nan")}
+    return {"sd": float(np.std(v)), "min": float(np.min(v)), "max": float(np.max(v))}
+
+
 def summary(rows: list[dict]) -> list[dict]:
     """Means over maps per (test, train, prior name, mask): the tables' and the figures' numbers (the
-    :data:`METRICS`, seconds and R-hat share, NaNs left out), with the reliability diagram pooled over the maps
-    and its ECE (``ece_pooled``)."""
+    :data:`METRICS`, seconds and R-hat share, NaNs left out), their spread over the maps (``spread[metric]``:
+    ``sd``, ``min``, ``max``), with the reliability diagram pooled over the maps and its ECE (``ece_pooled``)."""
     groups: dict[tuple, list[dict]] = {}
     for r in rows:
         groups.setdefault((r["test"], r["train"], r["prior_name"], r["mask"]), []).append(r)
@@ -142,6 +150,7 @@ def summary(rows: list[dict]) -> list[dict]:
                 "mask": mask,
                 "maps": len(g),
                 **{k: _mean(g, k) for k in (*METRICS, "seconds", "rhat_below")},
+                "spread": {k: _spread(g, k) for k in METRICS},
                 "ece_pooled": rel.ece,
                 "reliability": rel.to_dict(),
             }

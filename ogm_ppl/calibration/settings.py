@@ -46,7 +46,8 @@ class CalibrationSettings:
     :data:`~ogm_ppl.calibration.heldout.DEFAULT_TEST_CORPORA`, or none with ``plan_files``), the priors
     ``priors`` (kinds or names ``KIND[:CORPUS][@MOD]``; default every kind and ``KIND@cal`` where fitted, or
     :data:`~ogm_ppl.calibration.heldout.PLAN_FILES_PRIORS` with plan files alone) learned on each ``train``
-    corpus (default: every shipped table set), the corpus guides ``guides`` (``C``, ``C1+C2``, ``C@sym``;
+    corpus (default: the shipped table sets of the default test corpora; those of ``houseexpo-full``, ``r2v`` and
+    ``schools`` run where named), the corpus guides ``guides`` (``C``, ``C1+C2``, ``C@sym``;
     default none, or :data:`~ogm_ppl.calibration.heldout.PLAN_FILES_GUIDE` with plan files) read from
     ``guide_dir`` (default the shipped ones), ``diagonal`` (each test corpus scored with the priors learned on
     it only), ``plans`` held-out maps per test corpus (default 2; every plan of the plan files).
@@ -170,8 +171,8 @@ class CalibrationSettings:
 
     def resolved(self) -> CalibrationSettings:
         """These settings with the defaults that depend on others filled in: ``quick``'s sizes (over those
-        given) and its priors and training corpus (where none are given), every shipped training corpus, every
-        test corpus (none with plan files), the default priors
+        given) and its priors and training corpus (where none are given), the shipped training corpora of the
+        default test corpora, every test corpus (none with plan files), the default priors
         (:func:`~ogm_ppl.calibration.names.default_priors`, or :data:`PLAN_FILES_PRIORS` with plan files alone)
         and guides (:data:`PLAN_FILES_GUIDE` with plan files)."""
         s = self
@@ -180,7 +181,7 @@ class CalibrationSettings:
                 s, plans=1, window=48, sweeps=40, burn=10, generated_shape=96
             )
             s = dataclasses.replace(s, priors=s.priors or QUICK_PRIORS, train=s.train or QUICK_TRAIN)
-        train = s.train or tuple(available_tables())
+        train = s.train or tuple(c for c in available_tables() if c in DEFAULT_TEST_CORPORA)
         test = s.test if s.test is not None else (() if s.plan_files else DEFAULT_TEST_CORPORA)
         priors = s.priors
         if priors is None:  # plan files alone: the priors of the results page's buildings in no corpus

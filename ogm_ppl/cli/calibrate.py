@@ -122,7 +122,12 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
         help="test corpora (default: generated houseexpo ipa dungeon, or none where --plan-files is given)",
     )
     add_plan_file_arguments(ap)
-    ap.add_argument("--train", nargs="+", default=None, help="training corpora of the tables (default: all shipped)")
+    ap.add_argument(
+        "--train",
+        nargs="+",
+        default=None,
+        help="training corpora of the tables (default: the shipped tables of the default --test corpora)",
+    )
     ap.add_argument(
         "--priors",
         nargs="+",

@@ -1,10 +1,12 @@
-"""``ogm-ppl fit-prior tables|backoff|field|deltas|delta-setting|temper|headline|bias``: fit a learned prior's
-artefacts on a corpus or on plan files, the update terms Delta of traditional OGM against exact 1D posteriors,
-or what the calibration protocol chooses on validation plans (tempering exponents, the headline's prior, biases).
+"""``ogm-ppl fit-prior tables|backoff|field|data-curve|deltas|delta-setting|temper|headline|bias``: fit a
+learned prior's artefacts on a corpus or on plan files (and how their held-out score moves with the number of
+plans), the update terms Delta of traditional OGM against exact 1D posteriors, or what the calibration protocol
+chooses on validation plans (tempering exponents, the headline's prior, biases).
 
     ogm-ppl fit-prior tables --corpus ipa --out DIR             # prior_ipa.npz + .json (count tables)
     ogm-ppl fit-prior backoff --plan-files my_plans/ --pixel-size 0.025 --out DIR   # backoff_plans.json
     ogm-ppl fit-prior field --corpus dungeon --limit 20 --out DIR              # field_dungeon.npz + .json
+    ogm-ppl fit-prior data-curve --corpus houseexpo-full --sizes 60 600 6000 --out DIR  # data_curve_houseexpo-full.json
     ogm-ppl fit-prior deltas --out DIR             # delta_<name>.json per term + delta_cv.json (the shipped fit)
     ogm-ppl fit-prior delta-setting --family p21 --sigma 1 --F 400 --out DIR   # one's own sensor (cells)
     ogm-ppl fit-prior temper --corpus ipa --out DIR            # temper_ipa.json (the @cal exponents)
@@ -28,7 +30,7 @@ from ogm_ppl.cli._fit_kinds import KINDS as PROTOCOL_KINDS
 
 NAME = "fit-prior"
 PLAN_KINDS = ("tables", "backoff", "field")
-KINDS = (*PLAN_KINDS, "deltas", "delta-setting", *PROTOCOL_KINDS)
+KINDS = (*PLAN_KINDS, "data-curve", "deltas", "delta-setting", *PROTOCOL_KINDS)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:
@@ -63,6 +65,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         src.add_argument("--plan-files", nargs="+", type=Path, metavar="PATH", help="plan files or folders of them")
         k.add_argument("--out", type=Path, required=True, help="the folder the fitted files go to")
         k.add_argument("--limit", type=int, default=None, help="the first N training plans (default: the corpus's)")
+        k.add_argument("--sample", type=int, default=None, help="a random N of the corpus's training plans")
+        k.add_argument("--sample-seed", type=int, default=0, help="the seed of --sample (0)")
         k.add_argument("--pixel-size", type=float, default=None, help="metres per pixel of plan images")
         k.add_argument("--resolution", type=float, default=0.05, help="metres per cell of plan files (0.05)")
         k.add_argument("--name", default=None, help="the files' name part (default the corpus, or 'plans')")
@@ -87,6 +91,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
             k.add_argument("--report-sweeps", type=int, default=d.report_sweeps, help="sweeps of the final check")
             k.add_argument("--seed", type=int, default=d.seed, help="seed of every sampler (0)")
             k.add_argument("--no-resume", action="store_true", help="ignore a checkpoint in --out, start afresh")
+    curve = "held-out score of the pattern field against the number of training plans (data_curve_CORPUS.json)"
+    _add_data_curve(kinds.add_parser("data-curve", help=curve, description=curve), CORPORA)
     _add_deltas(kinds.add_parser("deltas", help=helps["deltas"], description=helps["deltas"]))
     _add_delta_setting(
         kinds.add_parser("delta-setting", help=helps["delta-setting"], description=helps["delta-setting"])
@@ -95,6 +101,15 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     for kind in PROTOCOL_KINDS:
         add_kind(kinds, kind)
+
+
+def _add_data_curve(k: argparse.ArgumentParser, corpora) -> None:
+    k.add_argument("--corpus", required=True, choices=[c for c in corpora if c != "generated"], help="the corpus")
+    k.add_argument("--out", type=Path, required=True, help="the folder the file goes to")
+    k.add_argument("--sizes", type=int, nargs="+", default=[60, 600, 6000], help="training plans per fit")
+    k.add_argument("--validation", type=int, default=300, help="validation plans scored (300)")
+    k.add_argument("--seed", type=int, default=0, help="the permutation's seed (0)")
+    k.add_argument("--quiet", action="store_true", help="no progress output")
 
 
 def _add_deltas(k: argparse.ArgumentParser) -> None:
@@ -138,6 +153,18 @@ def run(args: argparse.Namespace) -> int:
         from ogm_ppl.cli._fit_kinds import run_kind
 
         return _done(args.kind, run_kind(args))
+    if args.kind == "data-curve":
+        from ogm_ppl.learn.data_curve import field_data_curve
+
+        r = field_data_curve(
+            args.corpus,
+            args.out,
+            sizes=args.sizes,
+            validation=args.validation,
+            seed=args.seed,
+            progress=not args.quiet,
+        )
+        return _done(args.kind, r)
     if args.kind == "deltas":
         r = fit_deltas(
             args.out,
@@ -166,8 +193,17 @@ def run(args: argparse.Namespace) -> int:
             reuse=args.reuse,
         )
         return _done(args.kind, r)
+    from ogm_ppl.learn import load_training_plans
+
     source = args.corpus if args.corpus is not None else list(args.plan_files)
-    common = dict(limit=args.limit, pixel_size=args.pixel_size, resolution=args.resolution, name=args.name)
+    if args.sample is not None:
+        source = load_training_plans(source, limit=args.limit, sample=args.sample, sample_seed=args.sample_seed)
+    common = dict(
+        limit=None if args.sample is not None else args.limit,
+        pixel_size=args.pixel_size,
+        resolution=args.resolution,
+        name=args.name,
+    )
     if args.kind == "tables":
         r = fit_tables(source, args.out, min_count_5x5=args.min_count_5x5, progress=not args.quiet, **common)
     elif args.kind == "backoff":

@@ -7,7 +7,8 @@ The training plans of a corpus are those the shipped priors were fitted on (thes
 (:func:`~ogm_ppl.datasets.floorplans.training_plans`), ``dungeon`` = the first 300 of its training split; each
 rasterised by :func:`~ogm_ppl.datasets.floorplans.load_plan`'s defaults (outside = occupied, 20-cell margin).
 The other floor-plan corpora (``houseexpo-full``, ``r2v``, ``schools``; no shipped priors) likewise: their
-training split, at 0.05 m (``--limit`` keeps the first plans: ``houseexpo-full`` has 26,899).
+training split, at 0.05 m (``--limit`` keeps the first plans, ``--sample N --sample-seed S`` a random subset of
+``N`` kept in their natural order: ``houseexpo-full`` has 26,899; :func:`sample_indices`).
 Plan files (:func:`~ogm_ppl.datasets.plan_files.plan_files`: ROS map YAMLs, HouseExpo layouts, images with a
 pixel size, folders of them) are read by :func:`~ogm_ppl.datasets.plan_files.load_plan_file` at
 ``resolution`` metres per cell, in the order :func:`~ogm_ppl.datasets.plan_files.plan_files` lists them.
@@ -34,6 +35,7 @@ __all__ = [
     "FitResult",
     "TrainingPlans",
     "load_training_plans",
+    "sample_indices",
     "validation_split",
 ]
 
@@ -153,6 +155,8 @@ class TrainingPlans:
             args = ["--corpus", self.corpus]
         if self._extra.get("limit") is not None:
             args += ["--limit", str(self._extra["limit"])]
+        if self._extra.get("sample") is not None:
+            args += ["--sample", str(self._extra["sample"]), "--sample-seed", str(self._extra["sample_seed"])]
         return args
 
 
@@ -162,17 +166,27 @@ def load_training_plans(
     limit: int | None = None,
     pixel_size: float | None = None,
     resolution: float = 0.05,
+    sample: int | None = None,
+    sample_seed: int = 0,
 ) -> TrainingPlans:
     """The training plans of ``source``: a corpus name (:data:`CORPORA`), plan files or folders of them, or a
     :class:`TrainingPlans` (returned as it is). ``limit`` keeps the first ``limit`` (default: 100 generated
-    maps, 300 DungeonMaps plans, every plan else); ``pixel_size`` (metres per pixel of an image) and
-    ``resolution`` (metres per cell) apply to plan files only (a corpus is read at its own resolution).
+    maps, 300 DungeonMaps plans, every plan else); ``sample`` (a floor-plan corpus only, not with ``limit``)
+    keeps a random subset of ``sample`` of its training plans, :func:`sample_indices` with ``sample_seed``, in
+    their natural order; ``pixel_size`` (metres per pixel of an image) and ``resolution`` (metres per cell)
+    apply to plan files only (a corpus is read at its own resolution).
 
     Raises :class:`FitOptionError` naming the option for a bad one, and
     :class:`~ogm_ppl.datasets.plan_files.PlanFileError` for a missing or unreadable path."""
     if isinstance(source, TrainingPlans):
         return source
     lim = None if limit is None else check_int(limit, "limit", 1)
+    if sample is not None:
+        if not (isinstance(source, str) and source in CORPORA and source != "generated"):
+            raise FitOptionError("sample", "applies to a floor-plan corpus by name only")
+        if lim is not None:
+            raise FitOptionError("sample", "give --limit or --sample, not both")
+        return _sampled_plans(source, check_int(sample, "sample", 1), check_int(sample_seed, "sample_seed", 0))
     if isinstance(source, str) and source in CORPORA:
         if pixel_size is not None:
             raise FitOptionError("pixel_size", "applies to plan files only; a corpus is read at its own scale")
@@ -252,6 +266,30 @@ def _corpus_plans(corpus: str, limit: int | None) -> TrainingPlans:
         }
     src["plan_names_sha256"] = hashlib.sha256("\n".join(names).encode()).hexdigest()
     return TrainingPlans(corpus, names, src, _extra={"limit": limit})
+
+
+def sample_indices(n: int, k: int, seed: int) -> list[int]:
+    """:func:`ogm_ppl.datasets.floorplans.sample_indices` (the first ``k`` of a seeded permutation of ``n``,
+    ascending; nested across ``k``), refusing ``k > n`` with a :class:`FitOptionError` on ``sample``."""
+    if k > n:
+        raise FitOptionError("sample", f"must be at most the {n} training plans, got {k}")
+    from ogm_ppl.datasets.floorplans import sample_indices as draw
+
+    return draw(n, k, seed)
+
+
+def _sampled_plans(corpus: str, k: int, seed: int) -> TrainingPlans:
+    """A random subset of ``k`` of ``corpus``'s training plans (:func:`sample_indices`), in natural order."""
+    full = _corpus_plans(corpus, None)
+    idx = sample_indices(len(full), k, seed)
+    names = tuple(full.names[i] for i in idx)
+    src = {
+        **full.source,
+        "plans": len(names),
+        "sample": {"random": k, "seed": seed, "of": len(full), "rule": "sample_indices", "order": "natural"},
+        "plan_names_sha256": hashlib.sha256("\n".join(names).encode()).hexdigest(),
+    }
+    return TrainingPlans(corpus, names, src, _extra={"limit": None, "sample": k, "sample_seed": seed})
 
 
 def validation_split(n: int, every: int, option: str = "validation_every") -> tuple[list[int], list[int]]:

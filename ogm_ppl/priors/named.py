@@ -1,8 +1,12 @@
 r"""Priors by name, built from the learned tables shipped in ``ogm_ppl/fitted`` (Chapter 5).
 
 A name is ``KIND`` or ``KIND:CORPUS``; ``CORPUS`` is one of :func:`~ogm_ppl.priors.tables.available_tables`
-(``generated``, ``houseexpo``, ``ipa``, ``dungeon``; default ``houseexpo``, the real floor plans whose
-statistics are closest to the thesis's):
+(``generated``, ``houseexpo``, ``ipa``, ``dungeon``, and ``houseexpo-full``, ``r2v``, ``schools``, whose count
+tables, back-off weights and pattern fields are shipped without tempering exponents; default ``houseexpo``, the
+real floor plans whose statistics are closest to the thesis's). A corpus is registered by its files in
+``ogm_ppl/fitted``: ``prior_CORPUS.npz`` (the tables), ``backoff_CORPUS.json`` (the ``*_bo`` kinds),
+``field_CORPUS.npz`` (``field``, ``field2``) and ``temper_CORPUS.json`` (``@cal``), each written by
+``ogm-ppl fit-prior`` with its provenance:
 
 ========================  ==========================================================================
 ``independent``           cells independent, ``lambda = 0.5`` (the uniform prior of Chapters 2-4)

@@ -28,3 +28,18 @@ def test_a_map_in_the_training_set_is_refused():
     check_heldout("generated", [f"office/seed{generated_seed(i)}" for i in range(4)], "generated")
     with pytest.raises(LeakageError, match="generated"):
         check_heldout("generated", ["hall/seed7"], "generated", train={leakage._identity("generated", "hall/seed7")})
+
+
+def test_no_shipped_prior_was_trained_on_a_held_out_building_of_any_corpus():
+    """Every shipped table set of a floor-plan corpus (a random sample included) against the whole held-out split
+    of every floor-plan corpus: the check that runs before any scoring passes (skipped where the data is absent)."""
+    from ogm_ppl.datasets import floorplans as fp
+    from ogm_ppl.priors.tables import available_tables
+
+    for test in fp.CORPORA:
+        try:
+            held = fp.heldout_plans(test, exclude_buildings=tuple(fp.REAL_LOG_BUILDINGS))
+        except fp.CorpusNotFoundError:
+            continue
+        for train in (c for c in available_tables() if c != "generated"):
+            check_heldout(test, held, train)

@@ -55,6 +55,8 @@ def test_tiny_matrix_writes_rows_tables_figures_and_resumes(tmp_path, monkeypatc
     doc = json.loads((tmp_path / "calibration.json").read_text())
     brief = json.loads((tmp_path / "calibration_summary.json").read_text())
     assert len(brief["summary"]) == 2 * 2 * len(names) and "reliability" not in brief["summary"][0]
+    spread = brief["summary"][0]["spread"]["nll_bits"]  # the per-map spread beside each mean
+    assert spread["min"] <= brief["summary"][0]["nll_bits"] <= spread["max"] and spread["sd"] >= 0
     assert {"command", "commit", "machine"} <= set(doc["provenance"]) and doc["settings"]["sweeps"] == 16
     assert doc["provenance"]["command"] == "ogm-ppl calibrate (tiny)" and doc["settings"] == res.settings
     assert res.path == tmp_path / "calibration.json" and len(res.summary) == len(brief["summary"])

@@ -106,3 +106,37 @@ def test_the_fits_import_neither_the_experiments_nor_the_command_line_and_nothin
     for part in ("priors", "models", "inference", "datasets", "io.py", "provenance.py", "progress.py"):
         for path in sorted((PKG / part).rglob("*.py")) if not part.endswith(".py") else [PKG / part]:
             assert not [m for m in _imports(path) if m.startswith("ogm_ppl.learn")], f"{path} imports ogm_ppl.learn"
+
+
+def test_a_random_sample_of_a_corpus_is_nested_recorded_and_refused_where_it_does_not_apply(tmp_path, monkeypatch):
+    from ogm_ppl.datasets import floorplans as fp
+    from ogm_ppl.learn import load_training_plans
+    from ogm_ppl.learn._fit_common import sample_indices
+    from tests.datasets._corpus_fixtures import write_houseexpo
+
+    small, big = sample_indices(50, 5, 3), sample_indices(50, 20, 3)
+    assert set(small) <= set(big) and small == sorted(small) and len(set(big)) == 20
+    assert sample_indices(50, 5, 4) != small
+    root = tmp_path / "corpora"
+    write_houseexpo(root)
+    monkeypatch.setenv("OGM_PPL_FLOORPLANS", str(root))
+    train = fp.training_plans("houseexpo-full")
+    plans = load_training_plans("houseexpo-full", sample=1, sample_seed=0)
+    assert plans.names == (train[sample_indices(len(train), 1, 0)[0]],)
+    assert plans.source["sample"] == {
+        "random": 1,
+        "seed": 0,
+        "of": len(train),
+        "rule": "sample_indices",
+        "order": "natural",
+    }
+    r = fit_tables(plans, tmp_path / "out", progress=False)
+    assert "--sample 1 --sample-seed 0" in r.provenance["command"] and r.provenance["plans"] == 1
+    for source, kwargs in (("generated", {}), ("houseexpo-full", {"limit": 1})):
+        with pytest.raises(FitOptionError, match="sample"):
+            load_training_plans(source, sample=1, **kwargs)
+    with pytest.raises(FitOptionError, match="at most"):
+        load_training_plans("houseexpo-full", sample=len(train) + 1)
+    argv = ["fit-prior", "tables", "--corpus", "houseexpo-full", "--sample", "1", "--out", str(tmp_path / "cmd")]
+    assert ogm_ppl([*argv, "--quiet"]) == 0
+    assert load_tables(tmp_path / "cmd" / "prior_houseexpo-full.npz").provenance["sample"]["random"] == 1

@@ -111,6 +111,7 @@ __all__ = [
     "split_rule",
     "excluded",
     "training_plans",
+    "sample_indices",
     "heldout_plans",
     "validation_plans",
     "load_plan",
@@ -243,6 +244,17 @@ def training_plans(
     """Names of the training plans, without the buildings of real evaluation logs (all of them by default);
     ``limit`` keeps the first ``limit`` in natural order."""
     return _plans(corpus, "train", tuple(exclude_buildings), limit, root)
+
+
+def sample_indices(n: int, k: int, seed: int) -> list[int]:
+    """``k`` of ``range(n)`` drawn without replacement, ascending: the first ``k`` of the permutation
+    ``numpy.random.default_rng(seed).permutation(n)``, so that a smaller sample of the same seed is a subset of a
+    larger one (the random subsets of training plans that priors are fitted on, ``--sample``)."""
+    import numpy as np
+
+    if not 0 <= k <= n:
+        raise ValueError(f"a sample of {k} from {n} plans: it must be at most {n}")
+    return sorted(int(i) for i in np.random.default_rng(seed).permutation(n)[:k])
 
 
 def heldout_plans(corpus: str, exclude_buildings: Iterable[str] = (), limit: int | None = None, root=None) -> list[str]:
