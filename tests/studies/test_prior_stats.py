@@ -45,6 +45,9 @@ def test_the_script_reports_the_shipped_tables(tmp_path):
     r = run_script("prior_stats.py", "--out", tmp_path / "ps")
     assert r.returncode == 0, r.stderr
     doc = json.loads((tmp_path / "ps.json").read_text())
-    assert list(doc["corpora"]) == ["generated", "houseexpo", "ipa", "dungeon"] and doc["timings"] is None
+    assert (
+        list(doc["corpora"]) == ["generated", "houseexpo", "ipa", "dungeon", "houseexpo-full", "r2v", "schools"]
+        and doc["timings"] is None
+    )
     assert r.stdout == (tmp_path / "ps.md").read_text()
     assert doc["corpora"] == json.loads(json.dumps(prior_stats(FITTED_DIR)["corpora"]))
