@@ -156,6 +156,27 @@ def run_bias(args: argparse.Namespace) -> Any:
     return fit_bias(args.priors, args.out, train=args.train, settings=s, progress=not args.quiet)
 
 
+_NET_HELP = {
+    "w": "window side, cells",
+    "hidden": "filters, each used in its 8 orientations (8 units each)",
+    "activation": "the units' nonlinearity: relu or softplus",
+    "pad": "the value a cell past the grid's edge reads as, in [0, 1]",
+    "lambda_": "L2 penalty on the filters, biases and output weights",
+    "pl_steps": "pseudo-likelihood Adam steps",
+    "pl_batch": "training cells a pseudo-likelihood step",
+    "pl_lr": "pseudo-likelihood step size (falls to a 20th on a half cosine)",
+    "pcd_steps": "persistent contrastive divergence steps after pseudo-likelihood",
+    "pcd_chains": "persistent chains (and training crops a step)",
+    "pcd_size": "side of the chains' and crops' grids, cells",
+    "pcd_sweeps": "compiled Gibbs sweeps of the chains a step",
+    "pcd_lr": "PCD step size",
+    "eval_every": "steps between held-out scores and checkpoints",
+    "check_size": "grid side of the final sampler check",
+    "check_sweeps": "sweeps of the final sampler check",
+    "seed": "seed of the initial weights, batches, crops and chains",
+}
+
+
 def add_net_field(k: argparse.ArgumentParser) -> None:
     from dataclasses import fields
 
@@ -174,7 +195,8 @@ def add_net_field(k: argparse.ArgumentParser) -> None:
     for f in fields(NetFieldSettings):
         flag = "--" + f.name.replace("_", "-").rstrip("-")
         kind = f.type if callable(f.type) else {"int": int, "float": float, "str": str}[str(f.type)]
-        k.add_argument(flag, dest=f"s_{f.name}", type=kind, default=f.default, help="(%(default)s)")
+        help = _NET_HELP[f.name] + " (%(default)s)"
+        k.add_argument(flag, dest=f"s_{f.name}", type=kind, default=f.default, metavar=f.name.upper(), help=help)
     _out(k, "ogm_ppl/fitted/net_CORPUS.npz + .json (with --corpus)")
 
 
