@@ -193,26 +193,26 @@ def _baseline():
     class BaselineCellGibbs(CellGibbs):
         """:class:`CellGibbs` (heat bath, independent prior) running the sweep before the kept-sum rewrite."""
 
-        def _prepare(self) -> None:
-            if self._ready:
-                return
-            super()._prepare()
+        def _set_up(self) -> None:
+            super()._set_up()
             pairs = np.empty(len(self._c_ray), _BASE_PAIR)
             pairs["ll"], pairs["ray"], pairs["kappa"] = self._ll[self._c_ray, self._c_kappa], self._c_ray, self._c_kappa
             self._base_pairs = pairs
 
         def _set_state(self, m) -> None:
-            MapKernel._set_state(self, m)  # the map and every ray's first hit self._f, not CellGibbs's state
-            rays = np.empty(len(self._f), _BASE_RAY)
-            rays["f"], rays["ll_hit"] = self._f, self._ll[np.arange(len(self._f)), self._f]
-            self._base = _BaseState(self._m, rays, self._offsets, self._cells, self._c_off, self._base_pairs, self._ll)
-            self._f = rays["f"]
+            MapKernel._set_state(self, m)  # the map and every ray's first hit
+            f = self.first_hit_state
+            rays = np.empty(len(f), _BASE_RAY)
+            rays["f"], rays["ll_hit"] = f, self._ll[np.arange(len(f)), f]
+            arrays = (self._offsets, self._cells, self._c_off, self._base_pairs, self._ll)
+            self._base = _BaseState(self.state, rays, *arrays)
+            self.chain.f = rays["f"]
 
         def _sweep(self) -> int:
             assert self._prior_lo is not None and self.update == "gibbs"
             order = self._order(self._visit)  # torch's generator, as before
             u = self._uniforms(len(order))
-            self._updates += len(order)
+            self.chain.updates += len(order)
             return _base_sweep(self._base, order, self._prior_lo, u)
 
     return BaselineCellGibbs

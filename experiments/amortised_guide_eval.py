@@ -1,22 +1,7 @@
 """The amortised guide against Gibbs with the same prior and against p21 OGM.
 
-Held-out simulated 2D maps, never trained on: (A) maps drawn from the guide's prior (``patch3:generated``)
-given the pose cells are free, from a seed stream the training never used; (B) 32 x 32 windows of
-``mapgen`` maps of held-out seeds (the corpus the prior's tables were counted on used seed 0), poses in
-their free cells. Readings come from the forward model (``GaussianRange(1.0)``, 120-beam 360 degree scans,
-range 12 cells), as in training.
-
-For every map: the guide's one-pass marginals, 3 x 3 patch Gibbs (the tile prior's sampler, Section 5.2.2)
-run long from two chains as the reference posterior marginals, and p21 OGM (Section 2.5, unknown = 0.5),
-scored against the true map over the latent cells (best F1, ROC AUC, NLL in bits per cell, ECE) with
-their wall times. Then sweeps (and seconds) until the running marginals of 8 chains, pooled, come within a
-mean absolute difference ``d`` of the reference and stay there, and burn-in (mean log joint of
-independent chains against its stationary mean; ensemble marginals against what exact draws give), for
-3 x 3 patch Gibbs from the default start (thresholded Hähnel OGM), from the guide's mean-field mode, from
-the guide's tile mode (each tile's most likely configuration under its table tilted by the guide), and
-Gibbs mixed (``p_guide = 0.5``) with guide block proposals
-(:class:`~ogm_ppl.inference.mcmc.guided.GuidedGibbs`): 6 x 6 blocks of tilted tile tables, and 3 x 3
-windows of the guide's independent Bernoullis. Last, the acceptance rate of guide moves by block size.
+A thin front of :func:`ogm_ppl.studies.amortised_guide_eval.guide_eval` (the held-out maps, the reference and
+the convergence measures are described in :mod:`ogm_ppl.studies.amortised_guide_eval`).
 
     python experiments/amortised_guide_eval.py            # ~8 min on 2 cores; writes out/amortised/
     python experiments/amortised_guide_eval.py --maps-a 1 --maps-b 1 --ref-sweeps 300 --chains 2 --sweeps 30
@@ -27,387 +12,46 @@ from __future__ import annotations
 import argparse
 import json
 import sys
-import time
+from dataclasses import fields
 from pathlib import Path
 
-import numpy as np
 import torch
-from scipy.stats import binom
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from ogm_ppl import GaussianRange
-from ogm_ppl.datasets.mapgen import KINDS, generate_map
-from ogm_ppl.inference.log_odds import evidence_grid
-from ogm_ppl.inference.mcmc import PatchGibbs
-from ogm_ppl.inference.mcmc.guided import GuidedGibbs
-from ogm_ppl.inference.variational.amortised import (
-    SHIPPED_GUIDE,
-    AmortisedGuide,
-    guide_initial_map,
-    random_scene,
-)
 from ogm_ppl.io import atomic_write_text
-from ogm_ppl.metrics import best_f1, expected_calibration_error, nll_bits, roc_auc
-from ogm_ppl.models.delta import delta_by_name
-from ogm_ppl.priors.named import prior_by_name
-
-THRESHOLDS = (0.05, 0.03, 0.02)
-
-
-def scores(q: torch.Tensor, truth: np.ndarray, mask: np.ndarray) -> dict:
-    q = q.numpy() if isinstance(q, torch.Tensor) else q
-    t = truth.ravel().astype(bool)
-    return {
-        "best_f1": best_f1(q, t, mask=mask)[0],
-        "auc": roc_auc(q, t, mask=mask),
-        "nll_bits": nll_bits(q, t, mask=mask),
-        "ece": expected_calibration_error(q, t, mask=mask),
-    }
-
-
-def make_maps(args) -> list[dict]:
-    """Held-out (truth, model) pairs of sets A and B."""
-    out = []
-    shape = (args.size, args.size)
-    prior = prior_by_name(args.prior, shape)
-    sensor = GaussianRange(args.sigma)
-    ss_a, ss_b = np.random.SeedSequence(args.seed).spawn(2)
-    rng = np.random.default_rng(ss_a)
-    for i in range(args.maps_a):
-        scene = random_scene(prior, shape, args.poses, args.beams, args.range_cells, sensor, rng)
-        m0 = scene.model()
-        gen = torch.Generator().manual_seed(int(rng.integers(2**62)))
-        truth = m0.prior.sample_given_free(m0.known_free, (), generator=gen)
-        z = m0.simulate_readings(truth, generator=gen)
-        out.append(
-            {"set": "A:prior", "name": f"prior_{i}", "truth": truth.numpy().reshape(shape), "model": scene.model(z)}
-        )
-    rng = np.random.default_rng(ss_b)
-    for i in range(args.maps_b):
-        kind = KINDS[i % len(KINDS)]
-        big = generate_map(kind, (120, 120), np.random.default_rng(rng.integers(2**62)), border=20)
-        for _ in range(100):  # a window with some wall and some free space
-            r0, c0 = rng.integers(12, 120 - 12 - args.size, 2)
-            win = big[r0 : r0 + args.size, c0 : c0 + args.size]
-            if 0.1 < win.mean() < 0.6:
-                break
-        scene = random_scene(prior, shape, args.poses, args.beams, args.range_cells, sensor, rng, free=~win)
-        m0 = scene.model()
-        truth = torch.from_numpy(win.ravel().astype(np.float64))
-        gen = torch.Generator().manual_seed(int(rng.integers(2**62)))
-        z = m0.simulate_readings(truth, generator=gen)
-        out.append({"set": "B:mapgen", "name": f"{kind}_{i}", "truth": win.copy(), "model": scene.model(z)})
-    return out
-
-
-def run_chain(kernel, sweeps: int, seed: int, latent: np.ndarray) -> tuple[np.ndarray, float]:
-    """Per-sweep states of one chain (``sweeps x L`` uint8) and its seconds."""
-    torch.manual_seed(seed)
-    t0 = time.perf_counter()
-    kernel.setup()
-    params = kernel.initial_params
-    out = np.empty((sweeps, len(latent)), np.uint8)
-    for t in range(sweeps):
-        params = kernel.sample(params)
-        v = params["m"]
-        out[t] = (v.numpy() if v.shape[-1] == len(latent) else v.numpy()[latent]).astype(np.uint8)
-    return out, time.perf_counter() - t0
-
-
-def _full(model, latent_states: np.ndarray) -> torch.Tensor:
-    maps = torch.zeros(len(latent_states), model.num_cells, dtype=torch.float64)
-    maps[:, model.latent] = torch.from_numpy(latent_states.astype(np.float64))
-    return maps
-
-
-def sweeps_to(dist: np.ndarray, d: float) -> int | None:
-    """First sweep (1-based) from which the distance stays <= d, or None within the horizon."""
-    above = np.flatnonzero(dist > d)
-    if len(above) == 0:
-        return 1
-    t = int(above[-1]) + 2
-    return t if t <= len(dist) else None
-
-
-def evaluate(item: dict, guide: AmortisedGuide, args) -> dict:
-    model, truth = item["model"], item["truth"]
-    latent = model.latent.numpy()
-    mask = np.zeros(model.num_cells, bool)
-    mask[latent] = True
-    res = {
-        "set": item["set"],
-        "name": item["name"],
-        "cells": int(mask.sum()),
-        "occupied_share": float(truth.ravel()[mask].mean()),
-    }
-    # (a) the guide, one pass
-    t0 = time.perf_counter()
-    q_guide = guide.marginals(model)
-    t_guide = time.perf_counter() - t0
-    t0 = time.perf_counter()
-    q_p21 = evidence_grid(model.rays, delta_by_name("p21")).probabilities
-    t_p21 = time.perf_counter() - t0
-    # the reference: long 3 x 3 patch Gibbs, two chains
-    refs, t_ref, kept = [], 0.0, []
-    for c in range(2):
-        states, sec = run_chain(PatchGibbs(model, (3, 3)), args.ref_warmup + args.ref_sweeps, 1000 + c, latent)
-        refs.append(states[args.ref_warmup :].mean(0))
-        kept.append(states[args.ref_warmup :])
-        t_ref += sec
-    ref_states = np.concatenate(kept)
-    ref = np.zeros(model.num_cells)
-    ref[latent] = (refs[0] + refs[1]) / 2
-    res["ref_chain_gap"] = float(np.abs(refs[0] - refs[1]).mean())
-    res["methods"] = {
-        "guide": {**scores(q_guide, truth, mask), "seconds": t_guide},
-        "gibbs_long": {**scores(ref, truth, mask), "seconds": t_ref, "sweeps": 2 * (args.ref_warmup + args.ref_sweeps)},
-        "p21_ogm": {**scores(q_p21, truth, mask), "seconds": t_p21},
-    }
-    res["guide_vs_ref_mean_abs"] = float(np.abs(q_guide.numpy()[latent] - ref[latent]).mean())
-    res["p21_vs_ref_mean_abs"] = float(np.abs(q_p21.numpy()[latent] - ref[latent]).mean())
-    # (b, c) sweeps to the long-run marginals
-    tile_mode = model.full_map(
-        GuidedGibbs(PatchGibbs(model, (3, 3)), guide, block=(3, 3), proposal="tiles").initial_params["m"]
-    )
-    variants = {
-        "gibbs_default_init": lambda: PatchGibbs(model, (3, 3)),
-        "gibbs_guide_init": lambda: PatchGibbs(model, (3, 3), init=guide_initial_map(guide, model)),
-        "gibbs_guide_tile_init": lambda: PatchGibbs(model, (3, 3), init=tile_mode),
-        "guided_tiles": lambda: GuidedGibbs(
-            PatchGibbs(model, (3, 3)),
-            guide,
-            block=tuple(args.block),
-            p_guide=args.p_guide,
-            init="guide",
-            proposal="tiles",
-        ),
-        "guided_bernoulli": lambda: GuidedGibbs(
-            PatchGibbs(model, (3, 3)), guide, block=(3, 3), p_guide=args.p_guide, init="guide"
-        ),
-    }
-    ref_l = ref[latent]
-    C = args.chains
-    # E|Binomial(C, p)/C - p| per cell: the distance C exact independent draws have from p
-    j = np.arange(C + 1)
-    floor = float((binom.pmf(j[None, :], C, ref_l[:, None]) * np.abs(j[None, :] / C - ref_l[:, None])).sum(1).mean())
-    lj_ref = model.log_joint(_full(model, ref_states[:: max(1, len(ref_states) // 400)]))
-    lj_ref = lj_ref[torch.isfinite(lj_ref)]
-    res["ref_log_joint"] = {"mean": float(lj_ref.mean()), "median": float(lj_ref.median()), "sd": float(lj_ref.std())}
-    res["ensemble_noise_floor"] = floor
-    conv = {}
-    for name, make in variants.items():
-        runs, secs, acc = [], 0.0, []
-        for c in range(C):
-            k = make()
-            states, sec = run_chain(k, args.sweeps, 2000 + c, latent)
-            runs.append(states)
-            secs += sec
-            if isinstance(k, GuidedGibbs):
-                acc.append(k.acceptance_rate)
-        runs = np.stack(runs)  # C x T x L
-        total = runs.sum(0)
-        running = np.cumsum(total, 0) / (np.arange(1, args.sweeps + 1)[:, None] * C)
-        dist = np.abs(running - ref_l).mean(1)
-        excess = np.abs(total / C - ref_l).mean(1) - floor
-        lj = model.log_joint(_full(model, runs.reshape(-1, len(latent)))).reshape(C, args.sweeps)
-        gap = (lj.median(0).values - res["ref_log_joint"]["median"]).numpy()  # medians: a chain may sit at -inf
-        se = 1.25 * res["ref_log_joint"]["sd"] / np.sqrt(C)  # of a median of C draws
-        conv[name] = {
-            "seconds_per_sweep": secs / (C * args.sweeps),
-            "running_dist": dist.tolist(),
-            "ensemble_excess": excess.tolist(),
-            "log_joint_gap": gap.tolist(),
-            "chains_at_zero_mass": (~torch.isfinite(lj)).sum(0).tolist(),
-            "sweeps_to": {str(d): sweeps_to(dist, d) for d in THRESHOLDS},
-            "sweeps_to_excess_0.01": sweeps_to(excess, 0.01),
-            "sweeps_to_log_joint_2se": sweeps_to(np.abs(gap), 2 * se),
-        }
-        if acc:
-            conv[name]["guide_acceptance"] = float(np.mean(acc))
-    res["convergence"] = conv
-    # acceptance of guide moves by block size, from a state of the reference chain (near stationarity)
-    start = _full(model, ref_states[-1:])[0]
-    acc = {}
-    for prop, blocks in (("bernoulli", [(1, 1), (3, 3), (6, 6)]), ("tiles", [(3, 3), (6, 6), (9, 9)])):
-        for b in blocks:
-            k = GuidedGibbs(PatchGibbs(model, (3, 3)), guide, block=b, p_guide=1.0, proposal=prop, init="base")
-            torch.manual_seed(7)
-            k.initial_params = {"m": start[model.latent]}
-            k.setup()
-            for _ in range(args.acc_passes):
-                k.mh_pass()
-            acc[f"{prop}_{b[0]}x{b[1]}"] = k.acceptance_rate
-    res["acceptance_by_block"] = acc
-    return res
-
-
-def summarise(results: list[dict], args) -> dict:
-    summary = {}
-    for s in sorted({r["set"] for r in results}) + ["all"]:
-        rows = [r for r in results if s in ("all", r["set"])]
-        table = {}
-        for meth in ("guide", "gibbs_long", "p21_ogm"):
-            table[meth] = {
-                k: float(np.mean([r["methods"][meth][k] for r in rows]))
-                for k in ("best_f1", "auc", "nll_bits", "ece", "seconds")
-            }
-        conv = {}
-        for v in rows[0]["convergence"]:
-            c = {}
-            for d in THRESHOLDS:
-                vals = [r["convergence"][v]["sweeps_to"][str(d)] for r in rows]
-                reached = [x for x in vals if x is not None]
-                c[f"sweeps_to_{d}_median"] = float(np.median([x if x is not None else np.inf for x in vals]))
-                c[f"reached_{d}"] = f"{len(reached)}/{len(vals)}"
-            for key in ("sweeps_to_excess_0.01", "sweeps_to_log_joint_2se"):
-                vals = [r["convergence"][v][key] for r in rows]
-                c[f"{key}_median"] = float(np.median([x if x is not None else np.inf for x in vals]))
-                c[f"{key}_reached"] = f"{sum(x is not None for x in vals)}/{len(vals)}"
-            for t in (1, 2, 5, 10):
-                t = min(t, args.sweeps)
-                c[f"log_joint_gap_at_{t}"] = float(
-                    np.median([r["convergence"][v]["log_joint_gap"][t - 1] for r in rows])
-                )
-                c[f"excess_at_{t}"] = float(np.mean([r["convergence"][v]["ensemble_excess"][t - 1] for r in rows]))
-            spw = float(np.mean([r["convergence"][v]["seconds_per_sweep"] for r in rows]))
-            c["seconds_per_sweep"] = spw
-            for t in sorted({min(t, args.sweeps) for t in (1, 10, 50)} | {args.sweeps}):
-                c[f"running_dist_at_{t}"] = float(np.mean([r["convergence"][v]["running_dist"][t - 1] for r in rows]))
-            if "guide_acceptance" in rows[0]["convergence"][v]:
-                c["guide_acceptance"] = float(np.mean([r["convergence"][v]["guide_acceptance"] for r in rows]))
-            conv[v] = c
-        acc = {k: float(np.mean([r["acceptance_by_block"][k] for r in rows])) for k in rows[0]["acceptance_by_block"]}
-        summary[s] = {
-            "maps": len(rows),
-            "scores": table,
-            "convergence": conv,
-            "acceptance_by_block": acc,
-            "guide_vs_ref_mean_abs": float(np.mean([r["guide_vs_ref_mean_abs"] for r in rows])),
-            "p21_vs_ref_mean_abs": float(np.mean([r["p21_vs_ref_mean_abs"] for r in rows])),
-            "ref_chain_gap": float(np.mean([r["ref_chain_gap"] for r in rows])),
-            "speedup_guide_vs_gibbs_long": table["gibbs_long"]["seconds"] / table["guide"]["seconds"],
-        }
-    return summary
-
-
-def markdown(summary: dict, args, meta: dict) -> str:
-    lines = [
-        "# Amortised guide vs Gibbs with the same prior vs p21 OGM",
-        "",
-        f"Guide: `{args.guide}` (trained for {meta}). Prior `{args.prior}`; maps {args.size} x {args.size}, "
-        f"{args.poses} poses x {args.beams} beams, range {args.range_cells} cells, GaussianRange({args.sigma}). "
-        f"Reference: 3 x 3 patch Gibbs, 2 chains x ({args.ref_warmup} warm-up + {args.ref_sweeps}) sweeps. "
-        f"Scores over the latent cells against the true map; wall times on this machine (1 thread). "
-        "Chain c of every sampler uses the same seed (common random numbers), so the samplers' differences "
-        "are paired; once chains from different starts coalesce they make the same moves.",
-        "",
-    ]
-    for s, v in summary.items():
-        lines += [
-            f"## Set {s} ({v['maps']} maps)",
-            "",
-            "| method | best F1 | AUC | NLL bits/cell | ECE | seconds |",
-            "|---|---|---|---|---|---|",
-        ]
-        for meth, t in v["scores"].items():
-            lines.append(
-                f"| {meth} | {t['best_f1']:.3f} | {t['auc']:.3f} | {t['nll_bits']:.3f} | {t['ece']:.3f} | "
-                f"{t['seconds']:.3g} |"
-            )
-        lines += [
-            "",
-            f"Speed-up of the guide over the long Gibbs run: {v['speedup_guide_vs_gibbs_long']:.0f}x. "
-            f"Mean |marginal - reference|: guide {v['guide_vs_ref_mean_abs']:.4f}, p21 {v['p21_vs_ref_mean_abs']:.4f}; "
-            f"the two reference chains differ by {v['ref_chain_gap']:.4f}.",
-            "",
-            f"Sweeps until the pooled running marginals of {args.chains} chains stay within mean |diff| <= d of the "
-            "reference (median over maps; reached / maps):",
-            "",
-            "| sampler | " + " | ".join(f"d={d}" for d in THRESHOLDS) + " | dist@1 | dist@10 | dist@50 | "
-            f"dist@{args.sweeps} | s/sweep | guide accept |",
-            "|---|" + "---|" * (len(THRESHOLDS) + 6),
-        ]
-        for name, c in v["convergence"].items():
-            cells = [f"{c[f'sweeps_to_{d}_median']:.0f} ({c[f'reached_{d}']})" for d in THRESHOLDS]
-            acc = f"{c['guide_acceptance']:.3f}" if "guide_acceptance" in c else "-"
-            at = [c.get(f"running_dist_at_{min(t, args.sweeps)}") for t in (1, 10, 50, args.sweeps)]
-            lines.append(
-                f"| {name} | " + " | ".join(cells) + " | " + " | ".join(f"{x:.4f}" for x in at) + " | "
-                f"{c['seconds_per_sweep'] * 1e3:.2f} ms | {acc} |"
-            )
-        lines += [
-            "",
-            f"Burn-in, from {args.chains} independent chains at each sweep: the chains' median log joint minus "
-            "the stationary median (nats; median over maps), and the excess of the chains' ensemble marginals over "
-            "the distance "
-            f"{args.chains} exact draws would have (mean |diff| - its binomial expectation):",
-            "",
-            "| sampler | lj gap@1 | @2 | @5 | @10 | sweeps to |gap| < 2 se | excess@1 | @2 | @5 | @10 | sweeps to "
-            "excess < 0.01 |",
-            "|---|---|---|---|---|---|---|---|---|---|---|",
-        ]
-        for name, c in v["convergence"].items():
-            g = [c[f"log_joint_gap_at_{min(t, args.sweeps)}"] for t in (1, 2, 5, 10)]
-            e = [c[f"excess_at_{min(t, args.sweeps)}"] for t in (1, 2, 5, 10)]
-            lines.append(
-                f"| {name} | "
-                + " | ".join(f"{x:.1f}" for x in g)
-                + f" | {c['sweeps_to_log_joint_2se_median']:.0f} ({c['sweeps_to_log_joint_2se_reached']}) | "
-                + " | ".join(f"{x:.4f}" for x in e)
-                + f" | {c['sweeps_to_excess_0.01_median']:.0f} ({c['sweeps_to_excess_0.01_reached']}) |"
-            )
-        lines += [
-            "",
-            f"Acceptance of guide moves by block ({args.acc_passes} passes from a reference-chain state): "
-            + ", ".join(f"{k} {a:.3f}" for k, a in v["acceptance_by_block"].items()),
-            "",
-        ]
-    return "\n".join(lines) + "\n"
+from ogm_ppl.studies.amortised_guide_eval import (
+    GuideEvalSettings,
+    GuideEvalSettingsError,
+    guide_eval,
+    markdown,
+)
 
 
 def main(argv=None) -> None:
+    d = GuideEvalSettings()
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--guide", default=str(SHIPPED_GUIDE))
-    ap.add_argument("--prior", default="patch3:generated")
-    ap.add_argument("--maps-a", type=int, default=6)
-    ap.add_argument("--maps-b", type=int, default=4)
-    ap.add_argument("--size", type=int, default=32)
-    ap.add_argument("--poses", type=int, default=3)
-    ap.add_argument("--beams", type=int, default=120)
-    ap.add_argument("--range-cells", type=float, default=12.0)
-    ap.add_argument("--sigma", type=float, default=1.0)
-    ap.add_argument("--ref-warmup", type=int, default=200)
-    ap.add_argument("--ref-sweeps", type=int, default=1500)
-    ap.add_argument("--chains", type=int, default=10)
-    ap.add_argument("--sweeps", type=int, default=60)
-    ap.add_argument("--block", type=int, nargs=2, default=(6, 6))
-    ap.add_argument("--p-guide", type=float, default=0.5)
-    ap.add_argument("--acc-passes", type=int, default=3)
-    ap.add_argument("--seed", type=int, default=2024)
+    for f in fields(GuideEvalSettings):  # one option per setting, with its default
+        flag, default = "--" + f.name.replace("_", "-"), getattr(d, f.name)
+        if f.name == "block":
+            ap.add_argument(flag, type=int, nargs=2, default=default)
+        else:
+            ap.add_argument(flag, type=type(default), default=default)
     ap.add_argument("--out", default="out/amortised")
     args = ap.parse_args(argv)
-    from tqdm.auto import tqdm
-
+    try:
+        settings = GuideEvalSettings(**{f.name: getattr(args, f.name) for f in fields(GuideEvalSettings)})
+    except GuideEvalSettingsError as e:
+        ap.error(f"--{e.option.replace('_', '-')}: {e.reason}")
     torch.set_num_threads(1)
-    guide = AmortisedGuide.load(args.guide)
-    t0 = time.perf_counter()
-    items = make_maps(args)
-    results = [evaluate(it, guide, args) for it in tqdm(items, desc="maps", mininterval=5.0)]
-    summary = summarise(results, args)
+    r = guide_eval(settings)
     out = Path(args.out)
-    record = {
-        "settings": vars(args),
-        "trained_for": guide.trained_for,
-        "summary": summary,
-        "per_map": results,
-        "seconds": time.perf_counter() - t0,
-    }
-    atomic_write_text(out / "results.json", json.dumps(record, indent=1) + "\n")
-    md = markdown(summary, args, guide.trained_for)
+    record = {"settings": vars(args), "trained_for": r.trained_for, "summary": r.summary, "per_map": r.per_map}
+    atomic_write_text(out / "results.json", json.dumps({**record, "seconds": r.seconds}, indent=1) + "\n")
+    md = markdown(r.summary, settings, r.trained_for)
     atomic_write_text(out / "results.md", md)
     print(md)
-    print(f"{time.perf_counter() - t0:.0f} s; wrote {out}/results.json and results.md")
+    print(f"{r.seconds:.0f} s; wrote {out}/results.json and results.md")
 
 
 if __name__ == "__main__":

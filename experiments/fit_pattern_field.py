@@ -7,39 +7,21 @@
 
 Each corpus is ``ogm_ppl.learn.fit_field`` (``ogm-ppl fit-prior field --corpus C --out DIR``; the recipe, the
 training maps and the validation split are in the module docstring of ``ogm_ppl.learn.field``). ``--quick``:
-10 maps per corpus and every third power ``beta``.
+10 maps per corpus and every third power ``beta``. ``--check-only`` is ``ogm_ppl.learn.field.recheck_field``.
 """
 
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
 
-from ogm_ppl.io import atomic_write_text  # noqa: E402
-from ogm_ppl.learn import CORPORA, FieldSettings, fit_field, training_plans  # noqa: E402
-from ogm_ppl.learn._fit_common import validation_split  # noqa: E402
-from ogm_ppl.learn.field import VALIDATION_EVERY, sampler_report  # noqa: E402
-from ogm_ppl.priors.learn_field import field_stats  # noqa: E402
-from ogm_ppl.priors.pattern_field import FITTED_DIR, load_field  # noqa: E402
-
-
-def check_only(corpus: str, out_dir: Path) -> None:
-    """Recompute the sampler check (``ogm_ppl.learn.field.sampler_report``) of an existing fit in ``out_dir``
-    and store it in its JSON."""
-    path = out_dir / f"field_{corpus}.json"
-    info = json.loads(path.read_text())
-    d = load_field(out_dir / f"field_{corpus}.npz")
-    plans = training_plans(corpus)
-    _, val = validation_split(len(plans), VALIDATION_EVERY)
-    va = field_stats(list(plans.maps(val)), d["w"], 2)
-    print(f"{corpus}:", flush=True)
-    info["sampler_check"] = sampler_report(d, va)
-    atomic_write_text(path, json.dumps(info, indent=1) + "\n")
+from ogm_ppl.learn import CORPORA, FieldSettings, fit_field  # noqa: E402
+from ogm_ppl.learn.field import recheck_field  # noqa: E402
+from ogm_ppl.priors.pattern_field import FITTED_DIR  # noqa: E402
 
 
 def main(argv=None) -> None:
@@ -53,7 +35,8 @@ def main(argv=None) -> None:
     settings = FieldSettings(betas=FieldSettings().betas[::3]) if args.quick else FieldSettings()
     for corpus in args.corpus or CORPORA:
         if args.check_only:
-            check_only(corpus, out)
+            print(f"{corpus}:", flush=True)
+            recheck_field(corpus, out)
         else:
             fit_field(corpus, out, settings=settings, limit=10 if args.quick else None)
 

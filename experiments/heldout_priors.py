@@ -14,19 +14,25 @@ import argparse
 import sys
 from pathlib import Path
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-import calibration  # experiments/calibration.py, the script form of ogm-ppl calibrate
-
-from ogm_ppl.calibration import TEST_CORPORA, CalibrationResult
+from ogm_ppl.calibration import TEST_CORPORA, USER_ERRORS, CalibrationResult, SettingsError, calibrate
+from ogm_ppl.cli.calibrate import build_parser, settings_from_args
 
 
 def main(argv=None) -> CalibrationResult:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--corpus", default="houseexpo", choices=TEST_CORPORA)
-    ap.add_argument("--out", default="out/heldout")
+    ap.add_argument("--corpus", default="houseexpo", choices=TEST_CORPORA, help="the test and training corpus")
+    ap.add_argument("--out", default="out/heldout", help="output folder (out/heldout)")
     args, rest = ap.parse_known_args(argv)
-    return calibration.main(["--test", args.corpus, "--train", args.corpus, "--out", args.out, *rest])
+    cal = build_parser(prog="heldout_priors.py")
+    cal_args = cal.parse_args(["--test", args.corpus, "--train", args.corpus, "--out", args.out, *rest])
+    try:
+        return calibrate(settings_from_args(cal_args), cal_args.out)
+    except SettingsError as e:
+        cal.error(f"{e.flag}: {e.reason}")
+    except USER_ERRORS as e:
+        raise SystemExit(f"heldout_priors.py: {e}") from None
 
 
 if __name__ == "__main__":

@@ -13,10 +13,24 @@ and the fused traditional-OGM kernel in :mod:`ogm_ppl.inference._kernels.log_odd
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
 
 _INF = np.inf
+
+
+class RayArrays(NamedTuple):
+    """The rays a traversal walks, as 1D arrays over the ``R`` rays (one numba argument)."""
+
+    u0: np.ndarray  # R float64: start column, continuous cell coordinates (inside the grid)
+    v0: np.ndarray  # R float64: start row
+    du: np.ndarray  # R float64: unit direction, along columns
+    dv: np.ndarray  # R float64: unit direction, along rows
+    length: np.ndarray  # R float64: max range in cells; a ray keeps the cells it enters at t < length
+    t_hit: np.ndarray  # R float64: the reading in cells (ignored where is_max)
+    is_max: np.ndarray  # R bool: max-range reading
 
 
 @nb.njit(cache=True, inline="always")
@@ -44,10 +58,11 @@ def ray_capacity(length: float, du: float, dv: float) -> int:
 
 
 @nb.njit(cache=True, inline="always")
-def trace_ray(u0, v0, du, dv, L, th, mx, rows, cols, out_cells, out_t, base, count_all):
-    """Walk one ray, writing its in-grid cells and entry distances at ``out_*[base:]``.
+def trace_ray(rays, r, rows, cols, out_cells, out_t, base, count_all):
+    """Walk ray ``r`` of ``rays`` (:class:`RayArrays`), writing its in-grid cells and entry distances at
+    ``out_*[base:]``.
 
-    The reading ``th`` (cells) belongs to the cell whose entry distance is nearest to it (the range
+    The reading ``th = rays.t_hit[r]`` (cells) belongs to the cell whose entry distance is nearest to it (the range
     convention of :mod:`ogm_ppl.raycast`; ties go to the nearer cell); past the grid edge the kappa is
     counted on. With ``count_all`` the walk also counts the cells beyond the edge up to max range.
 
@@ -55,6 +70,8 @@ def trace_ray(u0, v0, du, dv, L, th, mx, rows, cols, out_cells, out_t, base, cou
     max-range reading) and, with ``count_all``, the cells the ray enters before max range on an unbounded
     grid (else a lower bound).
     """
+    u0, v0, du, dv = rays.u0[r], rays.v0[r], rays.du[r], rays.dv[r]
+    L, th, mx = rays.length[r], rays.t_hit[r], rays.is_max[r]
     col, sx, bx = _axis_setup(u0, du)
     row, sy, by = _axis_setup(v0, dv)
     tx = _t_cross(bx, u0, du, sx)
@@ -96,20 +113,15 @@ def trace_ray(u0, v0, du, dv, L, th, mx, rows, cols, out_cells, out_t, base, cou
 
 
 @nb.njit(cache=True)
-def traverse_all(u0, v0, du, dv, length, t_hit, is_max, rows, cols):
-    """Traverse every ray; return the CSR arrays.
-
-    Args (1D arrays over the R rays, except ``rows``/``cols``):
-        u0, v0: start in continuous cell coordinates (inside the grid).
-        du, dv: unit direction.
-        length: max range in cells; a ray keeps the cells it enters at ``t < length``.
-        t_hit: reading in cells (ignored where ``is_max``).
+def traverse_all(rays, rows, cols):
+    """Traverse every ray of ``rays`` (:class:`RayArrays`) on a ``rows x cols`` grid; return the CSR arrays.
 
     Returns:
         offsets (R+1 int64), cells (int64), t_enter (float32), z (int64), endpoint_in_grid (bool),
         range_len (int64: cells before max range on an unbounded grid).
     """
-    R = u0.shape[0]
+    R = rays.u0.shape[0]
+    length, du, dv, is_max = rays.length, rays.du, rays.dv, rays.is_max
     total = 0
     cap_max = 1
     for r in range(R):
@@ -124,9 +136,7 @@ def traverse_all(u0, v0, du, dv, length, t_hit, is_max, rows, cols):
     range_len = np.empty(R, np.int64)
     offsets[0] = 0
     for r in range(R):
-        n, zr, nr = trace_ray(
-            u0[r], v0[r], du[r], dv[r], length[r], t_hit[r], is_max[r], rows, cols, cells, t_enter, offsets[r], True
-        )
+        n, zr, nr = trace_ray(rays, r, rows, cols, cells, t_enter, offsets[r], True)
         offsets[r + 1] = offsets[r] + n
         z[r] = zr
         in_grid[r] = (not is_max[r]) and zr < n

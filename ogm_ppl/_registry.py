@@ -1,4 +1,4 @@
-"""Factories registered by name: the one mechanism behind prior kinds and sensor kinds."""
+"""Factories registered by name: the one mechanism behind prior kinds, sensor kinds and input kinds."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ from typing import Generic, TypeVar
 
 from ogm_ppl.extensions import load_extensions
 
-F = TypeVar("F", bound=Callable)
+F = TypeVar("F")
 
 __all__ = ["Registry"]
 
@@ -23,17 +23,23 @@ def _where(factory) -> tuple[str, str]:
 
 
 class Registry(Generic[F]):
-    """Kinds of one role (``"prior"``, ``"sensor"``) and their factories.
+    """Kinds of one role (``"prior"``, ``"sensor"``, ``"input"``) and their factories.
 
     ``shipped`` kinds cannot be unregistered. A kind is a non-empty name without ``:``; registering a name
     another factory took is refused; a factory defined at the same place (module, qualified name, and a
-    lambda's line: a module reloaded, a notebook cell run again) replaces the old one.
+    lambda's line: a module reloaded, a notebook cell run again) replaces the old one. ``origin(entry)``: the
+    function an entry that is no function itself is placed by (an input kind: its ``read``); by default the
+    entry.
     """
 
-    def __init__(self, role: str, shipped: tuple[str, ...]) -> None:
+    def __init__(self, role: str, shipped: tuple[str, ...], origin: Callable[[F], Callable] | None = None) -> None:
         self.role = role
         self.shipped = shipped
         self.factories: dict[str, F] = {}
+        self._origin = origin
+
+    def _function(self, entry: F) -> Callable:
+        return self._origin(entry) if self._origin is not None else entry  # type: ignore[return-value]
 
     def check_kind(self, kind: str) -> None:
         """Refuse a kind that is not a non-empty name without ``:`` (``ValueError``)."""
@@ -42,11 +48,13 @@ class Registry(Generic[F]):
 
     def register(self, kind: str, factory: F) -> None:
         self.check_kind(kind)
-        if not callable(factory):
-            raise TypeError(f"the factory of {self.role} kind {kind!r} must be callable, got {type(factory).__name__}")
+        function = self._function(factory)
+        if not callable(function):
+            raise TypeError(f"the factory of {self.role} kind {kind!r} must be callable, got {type(function).__name__}")
         old = self.factories.get(kind)
-        if old is not None and _where(old) != _where(factory):  # the same place again: a module reloaded
-            raise ValueError(f"{self.role} kind {kind!r} is already registered ({_where(old)[0]}.{_where(old)[1]})")
+        if old is not None and _where(self._function(old)) != _where(function):  # the same place: a module reloaded
+            where = _where(self._function(old))
+            raise ValueError(f"{self.role} kind {kind!r} is already registered ({where[0]}.{where[1]})")
         self.factories[kind] = factory
 
     def unregister(self, kind: str) -> None:

@@ -29,12 +29,13 @@ _loaded = False
 
 class MethodModuleError(ImportError):
     """A module named in ``$OGM_PPL_METHODS``, or an entry point of the group ``ogm_ppl.methods``, that cannot be
-    imported (the message names it and the import's own error)."""
+    imported, or that calls ``sys.exit`` on import (the message names it and what it did)."""
 
 
 def load_extensions() -> None:
     """Import the modules of ``$OGM_PPL_METHODS`` and the entry points of the group ``ogm_ppl.methods`` (once per
-    process; again after a failed import). :class:`MethodModuleError` names a module that cannot be imported."""
+    process; again after a failed import). :class:`MethodModuleError` names a module that cannot be imported or
+    that calls ``sys.exit`` on import (the exit is not let through: the caller's process goes on)."""
     global _loaded
     if _loaded:
         return
@@ -52,6 +53,9 @@ def load_extensions() -> None:
     for load, said in where:
         try:
             load()
+        except SystemExit as e:  # sys.exit() at import: a library call must not end the caller's process
+            _loaded = False
+            raise MethodModuleError(f"{said}, which called sys.exit({e.code!r}) on import") from e
         except Exception as e:
             _loaded = False  # no half-filled registry: the next call tries again and says why again
             raise MethodModuleError(f"{said}, which cannot be imported: {type(e).__name__}: {e}") from e

@@ -35,7 +35,9 @@ __all__ = ["StagedFolder", "atomic_write", "atomic_write_bytes", "atomic_write_t
 def atomic_write(path: str | os.PathLike, mode: str = "wb", **open_kwargs: Any) -> Iterator[IO[Any]]:
     """Open a temporary file beside ``path`` (``mode``: ``"wb"`` or ``"w"``); on leaving the block without
     an exception it is flushed, fsynced and renamed to ``path``; otherwise it is deleted and ``path`` is
-    untouched. The parent folder is created if missing.
+    untouched. The parent folder is created if missing. A write that fails (a full disk, a quota, an I/O error:
+    an ``OSError`` naming no file) is raised naming ``path``: ``[Errno 28] cannot write it (No space left on
+    device): 'PATH'``.
 
     Anything that writes to a file object works inside the block: ``np.savez(f, ...)``,
     ``fig.savefig(f, format="png")``, ``json.dump(obj, f)`` (text mode), ``img.save(f, format="PNG")``.
@@ -52,10 +54,15 @@ def atomic_write(path: str | os.PathLike, mode: str = "wb", **open_kwargs: Any) 
         raise _named(e, path) from None
     try:
         os.chmod(tmp, _mode_for(path))  # mkstemp makes 0600: give the file the mode open() would
-        with os.fdopen(fd, mode, **open_kwargs) as f:
-            yield f
-            f.flush()
-            os.fsync(f.fileno())
+        try:
+            with os.fdopen(fd, mode, **open_kwargs) as f:
+                yield f
+                f.flush()
+                os.fsync(f.fileno())
+        except OSError as e:
+            if e.errno is None or e.filename is not None:  # not a failed write of this file (or one that names its own)
+                raise
+            raise _named(e, path) from None  # a full disk, a quota, an I/O error: name the file, not "[Errno 28]"
         try:
             os.replace(tmp, path)
         except OSError as e:
@@ -170,9 +177,19 @@ class StagedFolder:
     the user's own files) are then moved across, and the old folder is deleted: an old entry with an
     output's name (file or folder) is replaced by the output. The folder keeps the old one's permissions (a
     new one gets ``0o777`` less the umask). An interruption before the first rename leaves
-    ``target`` untouched (the staging folder is removed when this object is collected or at exit); one
-    between the two renames (two system calls) leaves the old outputs whole in ``.NAME.old-XXXX``, which the
-    next :class:`StagedFolder` for ``target`` puts back.
+    ``target`` untouched (the staging folder is removed by :meth:`discard`, when this object is collected, or
+    at exit); one between the two renames (two system calls) leaves the old outputs whole in
+    ``.NAME.old-XXXX``, which the next :class:`StagedFolder` for ``target`` puts back.
+
+    A folder that must not be swapped is written **in place** (:attr:`in_place`): a symbolic link (written
+    through to the folder it names, the link left as it is), the working directory or a folder holding it
+    (``--out .``), a mount point, or a folder whose parent takes no new entry. The outputs are then staged in
+    ``TARGET/.staging-XXXX`` and :meth:`commit` moves each one over its old version (each output is replaced
+    atomically, one after another; the old and new sets can mix for the moment that takes); nothing outside the
+    folder is written, moved or replaced.
+
+    As a context manager it commits on leaving the block without an exception, else discards the staged
+    outputs; an ``OSError`` naming a staged file is raised naming the file in ``target`` instead.
 
     >>> import tempfile, pathlib
     >>> d = pathlib.Path(tempfile.mkdtemp()) / "out"
@@ -183,20 +200,52 @@ class StagedFolder:
 
     def __init__(self, target: str | os.PathLike) -> None:
         self.target = Path(target)
+        if self.target.is_symlink() and not self.target.is_dir():
+            raise NotADirectoryError(
+                errno.ENOTDIR, f"a symbolic link to {os.readlink(self.target)}, which is not a folder", str(self.target)
+            )
         parent = self.target.parent
-        parent.mkdir(parents=True, exist_ok=True)
-        if not self.target.exists():  # a swap interrupted between its two renames: put the old folder back
-            olds = sorted(parent.glob(f".{self.target.name}.old-*"))
-            if olds:
-                os.replace(olds[-1], self.target)
-        self.path = Path(tempfile.mkdtemp(dir=parent, prefix=f".{self.target.name}.staging-"))
+        self.in_place = _write_in_place(self.target)
+        if self.in_place:
+            self.path = Path(tempfile.mkdtemp(dir=self.target, prefix=".staging-"))
+        else:
+            parent.mkdir(parents=True, exist_ok=True)
+            if not self.target.exists():  # a swap interrupted between its two renames: put the old folder back
+                olds = sorted(parent.glob(f".{self.target.name}.old-*"))
+                if olds:
+                    os.replace(olds[-1], self.target)
+            self.path = Path(tempfile.mkdtemp(dir=parent, prefix=f".{self.target.name}.staging-"))
         self._done = False
         self._finalizer = weakref.finalize(self, shutil.rmtree, str(self.path), True)
 
+    def __enter__(self) -> StagedFolder:
+        return self
+
+    def __exit__(self, kind, error, tb) -> None:
+        if kind is None:
+            self.commit()
+            return
+        self.discard()
+        if isinstance(error, OSError) and error.filename is not None:
+            try:
+                inside = Path(error.filename).relative_to(self.path)
+            except ValueError:
+                return
+            raise type(error)(error.errno, error.strerror, str(self.target / inside)) from None
+
+    def discard(self) -> None:
+        """Remove the staged outputs now (the target is left as it was)."""
+        if not self._done:
+            self._done = True
+            self._finalizer()
+
     def commit(self) -> Path:
-        """Swap the staged outputs in (see the class docstring); returns ``target``."""
+        """Swap the staged outputs in, or move them in one by one (see the class docstring); returns ``target``."""
         if self._done:
-            raise RuntimeError(f"{self.target}: staged outputs already committed")
+            raise RuntimeError(f"{self.target}: staged outputs already committed or discarded")
+        if self.in_place:
+            self._commit_in_place()
+            return self.target
         # the folder keeps the target's permissions (a new one gets those of mkdir), not mkdtemp's private 0o700
         os.chmod(self.path, _dir_mode_for(self.target))
         old = None
@@ -213,3 +262,35 @@ class StagedFolder:
                     os.replace(entry, self.target / entry.name)
             shutil.rmtree(old, ignore_errors=True)
         return self.target
+
+    def _commit_in_place(self) -> None:
+        """Each staged entry over its namesake in the target (a folder: the old one moved aside into the staging
+        folder, then removed with it)."""
+        for entry in sorted(self.path.iterdir()):
+            dst = self.target / entry.name
+            if dst.is_dir() and not dst.is_symlink():
+                aside = self.path / f".old-{entry.name}"
+                os.replace(dst, aside)
+            elif entry.is_dir() and (dst.exists() or dst.is_symlink()):
+                dst.unlink()  # a file (or a link) where a folder goes
+            os.replace(entry, dst)
+        self.discard()
+
+
+def _write_in_place(target: Path) -> bool:
+    """Whether :class:`StagedFolder` must write ``target`` in place rather than swap it (see its docstring): a
+    symbolic link, the working directory or a folder above it, a mount point, or a folder whose parent takes no
+    new entry (checked by making and removing one)."""
+    if target.is_symlink():
+        return True
+    if not target.exists():
+        return False
+    real = target.resolve()
+    if Path.cwd().resolve().is_relative_to(real) or os.path.ismount(real) or real.parent == real:
+        return True
+    try:
+        probe = tempfile.mkdtemp(dir=real.parent, prefix=f".{real.name}.probe-")
+    except OSError:
+        return True
+    os.rmdir(probe)
+    return False

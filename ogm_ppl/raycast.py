@@ -43,11 +43,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ogm_ppl._raycast_kernels import entries_beyond, entry_positions, transpose_csr, traverse_all
+from ogm_ppl._raycast_kernels import RayArrays, entries_beyond, entry_positions, transpose_csr, traverse_all
 from ogm_ppl.grid import Grid
 from ogm_ppl.scans import Scans
 
-__all__ = ["CellIndex", "RayIndex", "RayInputs", "Rays", "ray_inputs", "raycast"]
+__all__ = ["CellIndex", "RayCastSize", "RayIndex", "RayInputs", "Rays", "ray_cast_size", "ray_inputs", "raycast"]
 
 
 @dataclass(frozen=True)
@@ -197,6 +197,10 @@ class RayInputs:
         L = self.length.max(initial=0.0)
         return int(np.floor(L * np.abs(self.du)).max(initial=0) + np.floor(L * np.abs(self.dv)).max(initial=0)) + 3
 
+    def arrays(self) -> RayArrays:
+        """The rays as the traversal kernels take them (``t_hit``: ``range_cells``)."""
+        return RayArrays(self.u0, self.v0, self.du, self.dv, self.length, self.range_cells, self.is_max)
+
 
 def ray_inputs(grid: Grid, scans: Scans) -> RayInputs:
     """Check the poses against ``grid`` and express every reading's ray in cell units.
@@ -243,6 +247,47 @@ def ray_inputs(grid: Grid, scans: Scans) -> RayInputs:
     )
 
 
+#: bytes :func:`raycast` allocates for each cell a ray may enter (its cell index, int64, and entry distance,
+#: float32), and for each ray (offsets, reading, flags, range length and the ``R x 5`` float64 geometry)
+CAST_BYTES_PER_CELL, CAST_BYTES_PER_RAY = 12, 8 + 8 + 1 + 8 + 8 + 40
+
+
+class RayCastSize(NamedTuple):
+    """What a ray cast of some scans on a grid will hold, known before it runs (:func:`ray_cast_size`)."""
+
+    rays: int  # R: the valid readings
+    capacity: int  # the cells :func:`raycast` makes room for: every ray up to the sensor's maximum range
+    crossings: int  # an upper bound on the ray-cell entries it finds (each ray cut at the grid edge)
+    longest: int  # an upper bound on the cells of one ray
+
+    @property
+    def cast_bytes(self) -> int:
+        """Bytes the ray cast allocates (its buffers stay allocated while the :class:`Rays` live)."""
+        return self.capacity * CAST_BYTES_PER_CELL + self.rays * CAST_BYTES_PER_RAY
+
+
+def ray_cast_size(grid: Grid, scans: Scans) -> RayCastSize:
+    """The sizes of ``raycast(grid, scans)`` without casting (a pass of NumPy over the rays): the capacity the
+    cast allocates (:func:`~ogm_ppl._raycast_kernels.ray_capacity` of each ray's maximum range) and a bound on
+    the ray-cell entries (the same bound on each ray's segment inside the grid). Raises as :func:`raycast` does
+    for a pose off the grid."""
+    ri = ray_inputs(grid, scans)
+    adu, adv = np.abs(ri.du), np.abs(ri.dv)
+    cap = np.floor(ri.length * adu) + np.floor(ri.length * adv) + 3
+    rows = grid.rows if grid.ndim == 2 else 1
+    with np.errstate(divide="ignore", invalid="ignore"):
+        tu = np.where(ri.du > 0, (grid.cols - ri.u0) / ri.du, np.where(ri.du < 0, ri.u0 / -ri.du, np.inf))
+        tv = np.where(ri.dv > 0, (rows - ri.v0) / ri.dv, np.where(ri.dv < 0, ri.v0 / -ri.dv, np.inf))
+    inside = np.minimum(ri.length, np.minimum(tu, tv))
+    cut = np.minimum(np.floor(inside * adu) + np.floor(inside * adv) + 3, cap)
+    return RayCastSize(
+        rays=int(ri.length.shape[0]),
+        capacity=int(cap.sum()),
+        crossings=int(cut.sum()),
+        longest=int(cut.max(initial=0)),
+    )
+
+
 def raycast(grid: Grid, scans: Scans) -> Rays:
     """Traverse every reading of ``scans`` through ``grid`` (Amanatides-Woo, exact).
 
@@ -259,9 +304,7 @@ def raycast(grid: Grid, scans: Scans) -> Rays:
     ([0, 1, 2, 3, 4, 5], 3, True)
     """
     ri = ray_inputs(grid, scans)
-    offsets, cells, t_enter, z, in_grid, range_len = traverse_all(
-        ri.u0, ri.v0, ri.du, ri.dv, ri.length, ri.range_cells, ri.is_max, grid.rows, grid.cols
-    )
+    offsets, cells, t_enter, z, in_grid, range_len = traverse_all(ri.arrays(), grid.rows, grid.cols)
     return Rays(
         grid=grid,
         offsets=offsets,

@@ -1,26 +1,15 @@
-"""experiments/fit_temper.py is a front of ogm_ppl.learn.fit_temper: ``--quick`` gives the library its small
-settings and the folder, and no ``--out`` ships."""
+"""experiments/fit_temper.py is ``ogm-ppl fit-prior temper`` with its options, every corpus by default and the
+package's file replaced without ``--out``; ``--quick``'s settings are tested in tests/learn/test_fit_temper.py."""
 
-import sys
-
-from ogm_ppl.learn import FitResult
-from tests._scripts import load_experiment
+from tests._experiments import run_script
 
 
-def test_quick_passes_its_settings_to_the_library(tmp_path, monkeypatch):
-    mod = load_experiment("fit_temper_script", "fit_temper.py")
-    try:
-        calls = []
-        monkeypatch.setattr(
-            mod, "fit_temper", lambda *a, **kw: calls.append((a, kw)) or FitResult("temper", (), {}, {}, 0)
-        )
-        assert mod.main(["--quick", "--out", str(tmp_path)]) == []
-        mod.main(["--corpus", "ipa", "--kinds", "border_bo"])
-        (args, kw), (args2, kw2) = calls
-        s = kw["settings"]
-        assert args == (["dungeon"], tmp_path) and not kw["ship"] and not kw["update"]
-        assert (s.plans, s.window, s.sweeps, s.burn, s.fit_limit) == (2, 48, 10, 4, 10)
-        assert s.kinds == mod.KINDS[:2] and s.betas == mod.BETAS[:2]
-        assert args2 == (["ipa"], None) and kw2["ship"] and kw2["settings"].kinds == ("border_bo",)
-    finally:
-        sys.modules.pop("fit_temper_script", None)
+def test_the_script_offers_the_commands_options():
+    r = run_script("fit_temper.py", "--help")
+    assert r.returncode == 0, r.stderr
+    text = " ".join(r.stdout.split())
+    for option in ("--corpus", "--kinds", "--betas", "--fit-limit", "--max-support", "--quick", "--ship", "--out"):
+        assert option in text, option
+    assert "(the default without --out)" in text
+    bad = run_script("fit_temper.py", "--betas", "2", "--out", "/nonexistent/never")
+    assert bad.returncode == 2 and "error: betas" in bad.stderr

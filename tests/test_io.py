@@ -1,5 +1,6 @@
 """ogm_ppl.io: atomic writes leave the old file or the new one, never a mix, and no temporary file behind."""
 
+import errno
 import os
 
 import numpy as np
@@ -124,3 +125,73 @@ def test_writable_folder_creates_it_or_says_why_not(tmp_path):
     with pytest.raises(OSError, match="cannot write there") as e:
         writable_folder(tmp_path / "f" / "sub")
     assert e.value.filename == str(tmp_path / "f" / "sub")
+
+
+def test_a_full_disk_names_the_file_and_keeps_the_old_one(tmp_path, monkeypatch):
+    """A write that fails for want of space (``OSError`` ENOSPC naming no file) is raised naming the file asked
+    for; the previous file is left whole and no temporary file stays behind."""
+    from tests._faults import full_disk
+
+    p = atomic_write_text(tmp_path / "report.json", "old")
+    full_disk(monkeypatch)
+    for write in (lambda: atomic_write_text(p, "new" * 10_000), lambda: atomic_write_bytes(p, b"x" * 100_000)):
+        with pytest.raises(OSError, match=r"No space left on device") as e:
+            write()
+        assert e.value.errno == errno.ENOSPC and e.value.filename == str(p)
+    with pytest.raises(OSError) as e, atomic_write(tmp_path / "m.npz") as f:
+        np.savez(f, x=np.zeros(100_000))
+    assert e.value.filename == str(tmp_path / "m.npz")
+    assert p.read_text() == "old" and sorted(q.name for q in tmp_path.iterdir()) == ["report.json"]
+
+
+def test_staged_folder_writes_a_linked_folder_in_place_and_leaves_the_link(tmp_path):
+    """A symbolic link to a folder is written through: the outputs land in the folder it names, the user's own
+    files there stay, the link stays a link, and nothing is written, moved or left beside either of them."""
+    real = tmp_path / "real"
+    real.mkdir()
+    (real / "keep.txt").write_text("mine")
+    (real / "ros").mkdir()
+    (real / "ros" / "old.pgm").write_text("old ros")
+    link = tmp_path / "link"
+    link.symlink_to(real)
+    for text in ("first", "second"):
+        s = StagedFolder(link)
+        assert s.in_place and s.path.parent == link
+        atomic_write_text(s.path / "map.npz", text)
+        atomic_write_text(s.path / "ros" / "map.yaml", text)
+        assert (real / "map.npz").exists() == (text == "second")  # nothing replaced before commit
+        s.commit()
+    assert link.is_symlink() and os.readlink(link) == str(real)
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["link", "real"]
+    assert sorted(p.name for p in real.iterdir()) == ["keep.txt", "map.npz", "ros"]
+    assert (real / "keep.txt").read_text() == "mine" and (real / "map.npz").read_text() == "second"
+    assert [p.name for p in (real / "ros").iterdir()] == ["map.yaml"]  # an output folder replaces its namesake
+
+
+def test_staged_folder_of_the_working_directory_is_written_in_place(tmp_path, monkeypatch):
+    """``.`` (or a folder holding the working directory) cannot be renamed away: it is written in place, and the
+    working directory stays the same folder."""
+    work = tmp_path / "work"
+    (work / "sub").mkdir(parents=True)
+    (work / "map.npz").write_text("old")
+    monkeypatch.chdir(work / "sub")
+    inode = os.stat(work).st_ino
+    for target in ("..", str(work)):
+        with StagedFolder(target) as s:
+            assert s.in_place
+            atomic_write_text(s.path / "map.npz", target)
+        assert (work / "map.npz").read_text() == target and os.stat(work).st_ino == inode
+    assert sorted(p.name for p in work.iterdir()) == ["map.npz", "sub"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["work"]
+
+
+def test_staged_folder_as_a_context_discards_on_error_and_names_the_target(tmp_path):
+    """Leaving the block with an error discards the staged outputs (the old folder as it was, no staging folder
+    left); an ``OSError`` naming a staged file names the file in the target instead."""
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "map.npz").write_text("old")
+    with pytest.raises(OSError) as e, StagedFolder(out) as s:
+        raise OSError(errno.ENOSPC, "No space left on device", str(s.path / "ros" / "map.pgm"))
+    assert e.value.filename == str(out / "ros" / "map.pgm")
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out"] and (out / "map.npz").read_text() == "old"

@@ -144,7 +144,7 @@ prior = "patch3:houseexpo"
 def test_the_workflows_run_from_the_installed_wheel(installed, tmp_path):
     """With no source tree: a prior fitted and a guide trained on plan files of one's own, priors and guides scored
     on them (``calibrate``, with its leakage checks), and an active-mapping spec; each writes what the docs say."""
-    from tests._scripts import write_plan_folder
+    from tests._plan_folder import write_plan_folder
 
     venv = installed[0]
     ogm = venv / "bin" / "ogm-ppl"

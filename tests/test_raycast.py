@@ -241,3 +241,31 @@ def test_error_names_the_first_pose_outside_the_grid():
     scans = Scans([[1.0, 1.0, 0.0], [9.0, 1.0, 0.0], [1.0, 9.0, 0.0]], [0.0], [[1.0]] * 3, max_range=3.0)
     with pytest.raises(ValueError, match=r"poses\[1\]"):
         raycast(grid, scans)
+
+
+@pytest.mark.parametrize("max_range", [0.3, 3.0, 8.0, 40.0])
+def test_ray_cast_size_bounds_the_cast_before_it_runs(max_range):
+    """What :func:`ray_cast_size` says before a cast: the rays exactly, an upper bound on the ray-cell entries
+    within 3 a ray, on the longest ray, and the capacity the cast allocates (at least the entries), for random
+    rays on a 2D grid and on a line."""
+    from ogm_ppl.raycast import CAST_BYTES_PER_CELL, CAST_BYTES_PER_RAY, ray_cast_size
+
+    rng = np.random.default_rng(7)
+    S, B = 30, 60
+    grid = Grid((ROWS, COLS), resolution=0.25, origin=(-2.0, 1.0))
+    poses = np.c_[
+        rng.uniform(-2, -2 + COLS * 0.25, S), rng.uniform(1, 1 + ROWS * 0.25, S), rng.uniform(-np.pi, np.pi, S)
+    ]
+    angles = np.where(rng.random((S, B)) < 0.1, 0.0, rng.uniform(-np.pi, np.pi, (S, B)))  # some along an axis
+    scans = Scans(poses, angles, rng.uniform(0, 1.2 * max_range, (S, B)), max_range=max_range, over_range="max")
+    line = Grid.line(50)
+    for g, sc in (
+        (grid, scans),
+        (line, Scans.one_d(rng.uniform(0, max_range * 5, 40).tolist(), max_range=max_range * 5)),
+    ):
+        size = ray_cast_size(g, sc)
+        rays = raycast(g, sc)
+        assert size.rays == rays.num_rays
+        assert rays.nnz <= size.crossings <= rays.nnz + 3 * rays.num_rays
+        assert size.longest >= rays.lengths.max() and size.capacity >= size.crossings
+        assert size.cast_bytes == size.capacity * CAST_BYTES_PER_CELL + size.rays * CAST_BYTES_PER_RAY

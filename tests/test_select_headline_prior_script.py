@@ -1,31 +1,15 @@
-"""experiments/select_headline_prior.py is a front of ogm_ppl.learn.select_headline_prior: ``--quick`` gives
-the library its small settings, ``--out FILE`` the folder and name, and no ``--out`` ships."""
+"""experiments/select_headline_prior.py is ``ogm-ppl fit-prior headline`` with its options and the package's
+file replaced without ``--out``; ``--quick``'s settings are tested in tests/learn/test_select_headline.py."""
 
-import sys
-
-from ogm_ppl.learn import FitResult
-from tests._scripts import load_experiment
+from tests._experiments import run_script
 
 
-def test_quick_passes_its_settings_to_the_library(tmp_path, monkeypatch):
-    mod = load_experiment("select_headline_prior_script", "select_headline_prior.py")
-    try:
-        calls = []
-        out = tmp_path / "sel.json"
-        out.write_text("{}")
-
-        def fake(*a, **kw):
-            calls.append((a, kw))
-            return FitResult("headline", (out,), {}, {}, 0)
-
-        monkeypatch.setattr(mod, "select_headline_prior", fake)
-        assert mod.main(["--quick", "--out", str(out)]) == {}
-        mod.main(["--corpus", "ipa"])
-        (args, kw), (args2, kw2) = calls
-        s = kw["settings"]
-        assert args == (tmp_path,) and kw["name"] == "sel" and not kw.get("ship")
-        assert (s.plans, s.window, s.sweeps, s.burn, s.fit_limit) == (2, 64, 6, 2, 10)
-        assert s.candidates == mod.CANDIDATES[:2]
-        assert args2 == () and kw2["ship"] and kw2["settings"].corpus == "ipa" and kw2["settings"].fit_limit is None
-    finally:
-        sys.modules.pop("select_headline_prior_script", None)
+def test_the_script_offers_the_commands_options():
+    r = run_script("select_headline_prior.py", "--help")
+    assert r.returncode == 0, r.stderr
+    text = " ".join(r.stdout.split())
+    for option in ("--corpus", "--candidates", "--plans", "--fit-limit", "--name", "--quick", "--ship", "--out"):
+        assert option in text, option
+    assert "(the default without --out)" in text
+    bad = run_script("select_headline_prior.py", "--candidates", "border", "--out", "/nonexistent/never")
+    assert bad.returncode == 2 and "error: candidates" in bad.stderr

@@ -15,9 +15,13 @@ Commands (from the repository root)::
     python tools/gen_docs_tables.py readme           # rewrite the README's generated blocks
     python tools/gen_docs_tables.py readme --check   # exit 1 if they differ from the snapshots
     python tools/gen_docs_tables.py show NAME        # one table as Markdown
+    python tools/gen_docs_tables.py list             # every table's name and its snapshot's
+
+``--results DIR`` reads and writes the snapshots of another folder (``readme --readme PATH``: another README).
 
 The Sphinx extension ``docs/_ext/ogm_tables.py`` renders the same :class:`Table` objects into the pages
-(``{ogm-table} NAME``); ``tests/test_docs.py`` checks that the README blocks equal :func:`readme_block`.
+(``{ogm-table} NAME``); ``tests/test_docs.py`` runs these commands (``readme --check``, ``list``, ``show``, and
+``snapshot`` and ``merge`` into a folder of its own).
 """
 
 from __future__ import annotations
@@ -777,6 +781,48 @@ def _guide_limits(doc: dict) -> Table:
     )
 
 
+def _corpus_stats(doc: dict) -> Table:
+    """``ogm-ppl corpus-stats`` of each floor-plan corpus: plans, cells, known and occupied share, walls."""
+    rows = []
+    for name, c in doc["corpora"].items():
+        size = c["size"]
+        rows.append(
+            [
+                f"`{name}`",
+                f"{c['plans']:,}",
+                f"{c['buildings']:,}",
+                f"{c['cells'] / 1e6:,.1f} M",
+                _f(c["known_share"]),
+                _f(c["occupied_share"]),
+                f"{c['wall_thickness_cells']['percentiles']['p50']:g}",
+                f"{size['width']['p50']:.1f} x {size['height']['p50']:.1f}",
+                _f(c["seconds_per_plan"]),
+            ]
+        )
+    first = next(iter(doc["corpora"].values()))
+    return Table(
+        caption=(
+            f"The floor-plan corpora as rasterised at {first['resolution_m']:g} m cells with the exterior "
+            f"unknown (known share: of the grid with its {first['margin_cells']}-cell margin; "
+            "occupied share: of the known cells; walls: the median run of occupied cells between two free cells; "
+            "sizes: median, margins included)"
+        ),
+        header=[
+            "corpus",
+            "plans",
+            "buildings",
+            "cells",
+            "known share",
+            "occupied share",
+            "walls (cells)",
+            "median size (m)",
+            "seconds a plan",
+        ],
+        rows=rows,
+        provenance=doc["provenance"],
+    )
+
+
 def _prior_occupancy(doc: dict) -> Table:
     """``experiments/prior_occupancy.py``: each prior's occupied share on a window with no readings (the second
     half of three chains, and each chain's) against its training corpus's ``lambda``."""
@@ -1151,6 +1197,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "unseen_by_distance_logs": ("unseen_by_distance_logs", _unseen_by_distance),
     "unseen_by_distance_logs_occupied": ("unseen_by_distance_logs_occupied", _unseen_by_distance),
     "prior_occupancy": ("prior_occupancy", _prior_occupancy),
+    "corpus_stats": ("corpus_stats", _corpus_stats),
     "calibration_bias": ("calibration_bias", _calibration_bias),
     "calibration_bias10": ("calibration_bias10", _calibration_bias),
     "prior_bias": ("prior_bias", _prior_occupancy),
@@ -1241,19 +1288,29 @@ def main(argv: list[str] | None = None) -> int:
     mg.add_argument("--drop-curves", action="store_true", help="leave out the per-dataset P-R curves")
     r = sub.add_parser("readme", help="rewrite the README's generated blocks")
     r.add_argument("--check", action="store_true", help="only report blocks that differ; exit 1 if any")
+    r.add_argument("--readme", type=Path, default=README, help="the README to rewrite (the checkout's)")
     sh = sub.add_parser("show", help="print one table as Markdown")
     sh.add_argument("name", choices=sorted(TABLES))
+    sub.add_parser("list", help="print each table's name and its snapshot's, one table a line")
+    for p in (s, mg, r, sh):
+        p.add_argument("--results", type=Path, default=RESULTS, help="the snapshots' folder (docs/results)")
     args = ap.parse_args(argv)
-    if args.cmd == "snapshot":
-        print("wrote", snapshot(args.src, args.name, args.command, drop_curves=args.drop_curves))
-    elif args.cmd == "merge":
-        print("wrote", merge(args.src, args.into, args.command, drop_curves=args.drop_curves))
-    elif args.cmd == "readme":
-        stale = update_readme(check=args.check)
-        print(("stale: " if args.check else "updated: ") + (", ".join(stale) or "none"))
-        return 1 if (args.check and stale) else 0
-    else:
-        print(to_markdown(table(args.name)))
+    try:
+        if args.cmd == "snapshot":
+            print("wrote", snapshot(args.src, args.name, args.command, args.results, drop_curves=args.drop_curves))
+        elif args.cmd == "merge":
+            print("wrote", merge(args.src, args.into, args.command, args.results, drop_curves=args.drop_curves))
+        elif args.cmd == "readme":
+            stale = update_readme(args.readme, args.results, check=args.check)
+            print(("stale: " if args.check else "updated: ") + (", ".join(stale) or "none"))
+            return 1 if (args.check and stale) else 0
+        elif args.cmd == "list":
+            print("\n".join(f"{name} {snap}" for name, (snap, _) in sorted(TABLES.items())))
+        else:
+            print(to_markdown(table(args.name, args.results)))
+    except ValueError as e:
+        print(f"gen_docs_tables.py: error: {e}", file=sys.stderr)
+        return 2
     return 0
 
 

@@ -17,10 +17,10 @@ from ogm_ppl.calibration.chains import (
     STARTS,
     agreeing,
     default_patch,
-    run_chains,
     run_guide,
     run_ogm,
     run_prior,
+    run_prior_chains,
     support,
 )
 from ogm_ppl.calibration.errors import (
@@ -33,6 +33,7 @@ from ogm_ppl.calibration.errors import (
     SettingsMismatchError,
 )
 from ogm_ppl.calibration.heldout import (
+    DEFAULT_TEST_CORPORA,
     GENERATED_HELDOUT_SEED,
     PLAN_FILES_GUIDE,
     PLAN_FILES_PRIORS,
@@ -94,6 +95,7 @@ __all__ = [
     "RHAT_THRESHOLD",
     "RUN_KEYS",
     "STARTS",
+    "DEFAULT_TEST_CORPORA",
     "TEST_CORPORA",
     "USER_ERRORS",
     "BiasFileError",
@@ -132,7 +134,7 @@ __all__ = [
     "plan_file_maps",
     "plan_set_maps",
     "prior_names",
-    "run_chains",
+    "run_prior_chains",
     "run_guide",
     "run_ogm",
     "run_prior",

@@ -49,7 +49,7 @@ __all__ = [
     "cycle_kernel",
     "default_patch",
     "gibbs_kernel",
-    "run_chains",
+    "run_prior_chains",
     "run_guide",
     "run_ogm",
     "run_prior",
@@ -71,7 +71,7 @@ KernelFactory = Callable[[OccupancyModel, Patch, str, Any], "MapKernel"]
 
 
 class ChainOptions(Protocol):
-    """What :func:`run_chains` reads of the settings (:class:`~ogm_ppl.calibration.settings.CalibrationSettings`
+    """What :func:`run_prior_chains` reads of the settings (:class:`~ogm_ppl.calibration.settings.CalibrationSettings`
     has these, and so does any object with the same attributes)."""
 
     @property
@@ -162,7 +162,7 @@ def support(prior, patch: tuple[int, int] | None) -> int:
     return min(cap, 1 << L)
 
 
-def run_chains(
+def run_prior_chains(
     scene: CalibrationScene,
     name: str,
     options: ChainOptions,
@@ -224,11 +224,11 @@ def run_prior(
     tables: PriorTables | None = None,
     bias: Mapping[str, float] | None = None,
 ) -> dict:
-    """:func:`run_chains`, scored: the chains' pooled marginals ``q = (1/C) sum_c q^(c)`` on every mask
+    """:func:`run_prior_chains`, scored: the chains' pooled marginals ``q = (1/C) sum_c q^(c)`` on every mask
     (:func:`~ogm_ppl.calibration.scenes.score_marginals`), and the split R-hat of the unseen cells. Returns
     ``{"scores": {mask: ...}, "seconds", "seconds_per_chain", "patch", "rhat_below", "rhat_below_varying",
     "rhat_max", "rhat_cells"}``, or ``{"skipped": reason}``."""
-    run = run_chains(scene, name, options, patch_override, tables, bias)
+    run = run_prior_chains(scene, name, options, patch_override, tables, bias)
     if "skipped" in run:
         return run
     q = np.clip(run["marginals"].mean(axis=0), 0.0, 1.0)

@@ -30,6 +30,7 @@ __all__ = [
     "PLAN_FILES_GUIDE",
     "PLAN_FILES_PRIORS",
     "TEST_CORPORA",
+    "DEFAULT_TEST_CORPORA",
     "TestMap",
     "check_plan_files",
     "choose_window",
@@ -42,7 +43,9 @@ __all__ = [
 ]
 
 #: the test corpora of the calibration protocol: generated maps and the held-out plans of each floor-plan corpus
-TEST_CORPORA: tuple[str, ...] = ("generated", "houseexpo", "ipa", "dungeon")
+TEST_CORPORA: tuple[str, ...] = ("generated", *fp.CORPORA)
+#: the test corpora a run scores when none are named (the thesis's; the others are named with ``--test``)
+DEFAULT_TEST_CORPORA: tuple[str, ...] = ("generated", "houseexpo", "ipa", "dungeon")
 #: held-out generated map ``i`` is ``generate_map(KINDS[i % 4], seed=GENERATED_HELDOUT_SEED + i)``: a root seed
 #: stream, never one of the spawned children ``SeedSequence(seed).spawn(n)`` the tables counted
 GENERATED_HELDOUT_SEED = 50_000
@@ -116,13 +119,15 @@ def usable_windows(corpus: str, names: Sequence[str], n: int, window: int) -> li
     """The first ``n`` plans of ``names`` (in order) whose chosen ``window`` holds at least 200 known free
     cells, each cropped to it (:func:`choose_window`); fewer when the names run out."""
     out: list[TestMap] = []
-    for name in names:
-        if len(out) == n:
-            break
-        p = fp.load_plan(corpus, name)
+    if n <= 0:
+        return out
+    for p in fp.iter_plans(corpus, list(names)):  # one pass (houseexpo-full: over its file), stopped when enough
+        name = p.name
         t = _crop(corpus, name, p.occupancy, p.known, p.resolution or 0.05, window)
         if (t.known & ~t.truth).sum() >= MIN_FREE_CELLS:
             out.append(t)
+            if len(out) == n:
+                break
     return out
 
 

@@ -2,7 +2,8 @@
 
 :func:`training_set` rebuilds the training set of the shipped tables of a corpus from their recorded provenance
 (plan names checked against the stored SHA-256; the generated corpus's seed streams); :func:`check_heldout`
-refuses test maps in it, of a building in it, or of a real log's building; :func:`load_corpus_guide` refuses a
+refuses test maps in it, of a building in it (also across two corpora of the same buildings: ``houseexpo`` and
+``houseexpo-full`` share their house ids), or of a real log's building; :func:`load_corpus_guide` refuses a
 corpus guide whose record is not that very training set, so the same check covers it.
 """
 
@@ -93,21 +94,28 @@ def _identity(corpus: str, plan: str) -> str:
     return plan
 
 
+def _namespace(corpus: str) -> str:
+    """The corpus whose buildings ``corpus``'s plans show (:func:`~ogm_ppl.datasets.floorplans.building_namespace`;
+    ``generated`` is its own)."""
+    return corpus if corpus == "generated" else fp.building_namespace(corpus)
+
+
 def check_heldout(test_corpus: str, plans: Sequence[str], train_corpus: str | None, train: set[str] | None = None):
     """Refuse (:class:`LeakageError`) to score a prior learned on ``train_corpus`` on ``plans`` of
-    ``test_corpus`` if one of them is a plan of a real-log building, or (same corpus) one of the training
-    maps (``train``, default :func:`training_set`) or of the same building as one of them. ``train_corpus``
-    ``None``: a prior learned from nothing (the uniform prior); only the real-log check applies."""
+    ``test_corpus`` if one of them is a plan of a real-log building, or (same corpus, or two corpora of one
+    building namespace: ``houseexpo`` and ``houseexpo-full``, :data:`~ogm_ppl.datasets.floorplans.BUILDING_NAMESPACE`)
+    one of the training maps (``train``, default :func:`training_set`) or of the same building as one of them.
+    ``train_corpus`` ``None``: a prior learned from nothing (the uniform prior); only the real-log check applies."""
     for p in plans:
         if test_corpus != "generated" and fp.excluded(p):
             raise LeakageError(f"{test_corpus} plan {p!r} is of a real-log building; it is excluded everywhere")
-    if train_corpus is None or train_corpus != test_corpus:
+    if train_corpus is None or _namespace(train_corpus) != _namespace(test_corpus):
         return
     train = training_set(train_corpus) if train is None else train
     ids = {_identity(test_corpus, p): p for p in plans}
     clash = sorted(ids[i] for i in set(ids) & train)
     if test_corpus != "generated":
-        buildings = {fp.building_of(test_corpus, t) for t in train}
+        buildings = {fp.building_of(train_corpus, t) for t in train}
         clash += sorted(p for p in plans if p not in clash and fp.building_of(test_corpus, p) in buildings)
     if clash:
         raise LeakageError(

@@ -16,7 +16,7 @@ from pathlib import Path
 
 from ogm_ppl.calibration.chains import KERNELS
 from ogm_ppl.calibration.errors import SettingsError
-from ogm_ppl.calibration.heldout import PLAN_FILES_GUIDE, PLAN_FILES_PRIORS, TEST_CORPORA
+from ogm_ppl.calibration.heldout import DEFAULT_TEST_CORPORA, PLAN_FILES_GUIDE, PLAN_FILES_PRIORS, TEST_CORPORA
 from ogm_ppl.calibration.names import default_priors
 from ogm_ppl.inference.mcmc.tempering import TEMPERS, geometric_ladder
 from ogm_ppl.priors.tables import available_tables
@@ -42,14 +42,14 @@ def _names(v: Sequence[str] | str | None) -> tuple[str, ...] | None:
 class CalibrationSettings:
     """The options of a calibration run (:func:`~ogm_ppl.calibration.run.calibrate`).
 
-    What runs: ``test`` corpora (of :data:`~ogm_ppl.calibration.heldout.TEST_CORPORA`; default all, or none
-    with ``plan_files``), the priors ``priors`` (kinds or names ``KIND[:CORPUS][@MOD]``; default every kind and
-    ``KIND@cal`` where fitted, or :data:`~ogm_ppl.calibration.heldout.PLAN_FILES_PRIORS` with plan files
-    alone) learned on each ``train`` corpus (default: every shipped table set), the corpus guides ``guides``
-    (``C``, ``C1+C2``, ``C@sym``; default none, or :data:`~ogm_ppl.calibration.heldout.PLAN_FILES_GUIDE` with
-    plan files) read from ``guide_dir`` (default the shipped ones), ``diagonal`` (each test corpus scored with
-    the priors learned on it only), ``plans`` held-out maps per test corpus (default 2; every plan of the plan
-    files).
+    What runs: ``test`` corpora (of :data:`~ogm_ppl.calibration.heldout.TEST_CORPORA`; default
+    :data:`~ogm_ppl.calibration.heldout.DEFAULT_TEST_CORPORA`, or none with ``plan_files``), the priors
+    ``priors`` (kinds or names ``KIND[:CORPUS][@MOD]``; default every kind and ``KIND@cal`` where fitted, or
+    :data:`~ogm_ppl.calibration.heldout.PLAN_FILES_PRIORS` with plan files alone) learned on each ``train``
+    corpus (default: every shipped table set), the corpus guides ``guides`` (``C``, ``C1+C2``, ``C@sym``;
+    default none, or :data:`~ogm_ppl.calibration.heldout.PLAN_FILES_GUIDE` with plan files) read from
+    ``guide_dir`` (default the shipped ones), ``diagonal`` (each test corpus scored with the priors learned on
+    it only), ``plans`` held-out maps per test corpus (default 2; every plan of the plan files).
 
     The maps and the sensor: ``window`` cells a side, held-out generated maps of ``generated_shape`` cells, a
     route of ``poses`` stops of ``beams`` beams per scan, ranges up to ``range_cells`` with noise ``sigma``
@@ -181,7 +181,7 @@ class CalibrationSettings:
             )
             s = dataclasses.replace(s, priors=s.priors or QUICK_PRIORS, train=s.train or QUICK_TRAIN)
         train = s.train or tuple(available_tables())
-        test = s.test if s.test is not None else (() if s.plan_files else TEST_CORPORA)
+        test = s.test if s.test is not None else (() if s.plan_files else DEFAULT_TEST_CORPORA)
         priors = s.priors
         if priors is None:  # plan files alone: the priors of the results page's buildings in no corpus
             priors = PLAN_FILES_PRIORS if s.plan_files and not test else tuple(default_priors(train))

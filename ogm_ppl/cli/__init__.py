@@ -33,6 +33,10 @@ Subcommands (``ogm-ppl SUBCOMMAND --help`` lists every option):
 ``train-guide --corpus C ... | --plan-files PATH ... --out FILE.npz``
     An amortised corpus guide for one's own sensor, trained on corpora's training plans or plan files of
     one's own (:func:`ogm_ppl.learn.train_corpus_guide`); checkpoints, and the same command resumes.
+``corpus-stats NAME [--out DIR]``
+    Statistics of a floor-plan corpus as rasterised (plans, buildings, splits, cells, known and occupied share,
+    wall thickness in cells) as JSON, and a figure of a few plans beside their sources
+    (:mod:`ogm_ppl.datasets.floorplans.stats`).
 
 Each subcommand is a module of this package (:data:`COMMANDS`) with ``add_parser(sub)`` and ``run(args)``;
 a new workflow adds a module and one entry.
@@ -47,7 +51,7 @@ import argparse
 import importlib
 import sys
 
-from ogm_ppl.cli._common import CLIError, _one_line, _Parser, _version
+from ogm_ppl.cli._common import CLIError, _inputs_of, _one_line, _Parser, _refuse_out_over_inputs, _version
 from ogm_ppl.cli._map_files import load_map, save_map_png
 from ogm_ppl.methods import MethodModuleError
 
@@ -66,6 +70,7 @@ COMMANDS: dict[str, str] = {
     "run": "run",
     "calibrate": "calibrate",
     "train-guide": "train_guide",
+    "corpus-stats": "corpus_stats",
 }
 
 
@@ -107,6 +112,7 @@ def main(argv: list[str] | None = None) -> int:
             args = build_parser().parse_args(argv)
         except SystemExit as e:  # --help, --version
             return int(e.code or 0) if not isinstance(e.code, str) else 2
+        _refuse_out_over_inputs(getattr(args, "out", None), _inputs_of(args))
         return int(_command(args.command).run(args))
     except (
         CLIError,

@@ -48,8 +48,9 @@ def _prior_digest(params) -> str | None:
 
 def _checkpoint_root(args, params, inp: _Input, grid: Grid) -> Path | None:
     """``DIR/.checkpoints/METHOD-KEY`` for a sampling method (``None`` for the others): ``KEY`` digests the
-    command's settings, the prior's content (:func:`_prior_digest`), the input file's size and modification
-    time and the grid, so that only the same command on the same input under the same prior resumes a chain
+    command's settings, the prior's content (:func:`_prior_digest`), the input's resume key
+    (:func:`ogm_ppl.inputs.resume_key`: its kind, the file's size and modification time, the reader's options)
+    and the grid, so that only the same command on the same input under the same prior resumes a chain
     (each chain in ``chain-C``; its checkpoint's fingerprint checks the model too,
     :func:`~ogm_ppl.inference.mcmc.run_gibbs`)."""
     import hashlib
@@ -58,13 +59,12 @@ def _checkpoint_root(args, params, inp: _Input, grid: Grid) -> Path | None:
 
     if not isinstance(params, SamplingParams) or getattr(args, "online", False):
         return None
-    st = Path(args.input).stat()
     ignore = ("out", "traceback", "input", "unobserved", "thresholds")  # how the map is written, not computed
     key = {
         "settings": _jsonable({k: v for k, v in sorted(vars(args).items()) if k not in ignore}),
         "params": _jsonable(dataclasses.asdict(params)),
         "prior": _prior_digest(params),
-        "input": [str(Path(args.input).resolve()), st.st_size, st.st_mtime_ns],
+        "input": inp.resume_key,
         "grid": [grid.rows, grid.cols, grid.resolution, *grid.origin],
     }
     digest = hashlib.sha256(json.dumps(key, sort_keys=True).encode()).hexdigest()[:16]

@@ -4,7 +4,9 @@ progress and the one-line messages."""
 from __future__ import annotations
 
 import argparse
+import contextlib
 import math
+import os
 import sys
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -69,6 +71,8 @@ _nonneg_int = _number(int, 0)
 _fraction = _number(float, 0, True, 1)
 _probability = _number(float, 0, True, 1, True)
 _finite = _number(float)
+#: a random seed: chain c of a run is seeded seed + c, and checkpoints store it as an int64
+_seed = _number(int, 0, hi=2**62)
 
 
 # --------------------------------------------------------------------------------------- helpers
@@ -95,10 +99,47 @@ def _check_writable(directory: Path, out: Path) -> None:
 
 
 def _prepare_out_dir(out: Path) -> None:
-    """Create ``out`` and make sure a file can be written there (before any long computation)."""
+    """Create ``out`` and make sure a file can be written there (before any long computation). A symbolic link
+    to a folder is written through (:class:`~ogm_ppl.io.StagedFolder`); one to nothing is refused."""
+    if out.is_symlink() and not out.exists():
+        raise CLIError(f"--out {out}: a symbolic link to {os.readlink(out)}, which does not exist")
     if out.exists() and not out.is_dir():
         raise CLIError(f"--out {out}: exists and is not a directory")
     _check_writable(out, out)
+
+
+def _inputs_of(args) -> list[Path]:
+    """The paths a command reads: every ``Path`` value (or list of them) of ``args`` but ``out``."""
+    found: list[Path] = []
+    for key, value in vars(args).items():
+        if key == "out":
+            continue
+        for v in value if isinstance(value, (list, tuple)) else [value]:
+            if isinstance(v, Path):
+                found.append(v)
+    return found
+
+
+def _refuse_out_over_inputs(out: Path | None, inputs, writes: tuple[str, ...] = ()) -> None:
+    """Refuse (before any work) an ``--out`` that would replace or write into what the command reads: ``out``
+    is an input (the same path, through links, or the same file), lies inside one (a bag folder, a folder of
+    plan files), or, a folder writing the entries ``writes``, would put one of them over an input inside it."""
+    if out is None:
+        return
+    o = Path(os.path.realpath(out))
+    for given in inputs:
+        i = Path(os.path.realpath(given))
+        same = o == i
+        if not same and out.exists() and given.exists():
+            with contextlib.suppress(OSError):
+                same = os.path.samefile(out, given)
+        if same:
+            raise CLIError(f"--out {out} is the input {given}: writing it would replace what it is read from")
+        if o.is_relative_to(i):
+            raise CLIError(f"--out {out} lies inside the input {given}: give a path outside it")
+        if writes and i.is_relative_to(o) and i != o and i.relative_to(o).parts[0] in writes:
+            entry = i.relative_to(o).parts[0]
+            raise CLIError(f"--out {out}: its {entry} would replace the input {given}; give another folder")
 
 
 def _prepare_out_file(out: Path) -> None:

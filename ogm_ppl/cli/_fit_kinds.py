@@ -16,7 +16,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
-__all__ = ["HELPS", "KINDS", "add_kind", "run_kind"]
+__all__ = ["HELPS", "KINDS", "add_headline", "add_kind", "add_temper", "run_headline", "run_kind", "run_temper"]
 
 KINDS = ("temper", "headline", "bias", "net-field")
 HELPS = {
@@ -27,11 +27,15 @@ HELPS = {
 }
 
 
-def _out(k: argparse.ArgumentParser, ship: str | None) -> None:
-    where = k.add_mutually_exclusive_group(required=True)
+def _out(k: argparse.ArgumentParser, ship: str | None, required: bool = True) -> None:
+    where = k.add_mutually_exclusive_group(required=required)
     where.add_argument("--out", type=Path, default=None, help="the folder the fitted files go to")
     if ship:
-        where.add_argument("--ship", action="store_true", help=f"maintainers: replace the package's {ship}")
+        where.add_argument(
+            "--ship",
+            action="store_true",
+            help=f"maintainers: replace the package's {ship}" + ("" if required else " (the default without --out)"),
+        )
     k.add_argument("--quiet", action="store_true", help="no progress output")
 
 
@@ -48,12 +52,17 @@ def _scan(k: argparse.ArgumentParser, d: Any) -> None:
     k.add_argument("--fit-limit", type=int, default=None, help="count tables on the first N fit plans only (all)")
 
 
-def add_temper(k: argparse.ArgumentParser) -> None:
+def add_temper(k: argparse.ArgumentParser, *, ship_by_default: bool = False) -> None:
+    """The options of ``fit-prior temper``; ``ship_by_default`` (``experiments/fit_temper.py``): ``--corpus``
+    defaults to every corpus and neither ``--out`` nor ``--ship`` is required (the caller ships without one)."""
     from ogm_ppl.learn._fit_common import CORPORA
     from ogm_ppl.learn.temper import TemperSettings
 
     d = TemperSettings()
-    k.add_argument("--corpus", nargs="+", choices=CORPORA, required=True, help="the corpora (one file each)")
+    if ship_by_default:
+        k.add_argument("--corpus", nargs="+", choices=CORPORA, default=list(CORPORA), help="the corpora (all)")
+    else:
+        k.add_argument("--corpus", nargs="+", choices=CORPORA, required=True, help="the corpora (one file each)")
     k.add_argument("--kinds", nargs="+", default=list(d.kinds), metavar="KIND", help="prior kinds (the tables')")
     k.add_argument("--betas", nargs="+", type=float, default=list(d.betas), help="exponents tried, in [0, 1]")
     _scan(k, d)
@@ -61,12 +70,31 @@ def add_temper(k: argparse.ArgumentParser) -> None:
     k.add_argument("--max-support", type=int, default=d.max_support, help="skip kinds whose update weighs more")
     k.add_argument("--kernel", default=d.kernel, help="the chains' sampler (gibbs, cycle, shifted-cycle, ...)")
     k.add_argument("--update", action="store_true", help="keep the other kinds of the file there; refit --kinds")
-    _out(k, "ogm_ppl/fitted/temper_CORPUS.json")
+    k.add_argument(
+        "--quick",
+        action="store_true",
+        help="smoke run: the first corpus given (dungeon if all), 2 plans of 48 cells, 10 + 4 sweeps, the first 2 "
+        "kinds and betas, tables of 10 fit plans",
+    )
+    _out(k, "ogm_ppl/fitted/temper_CORPUS.json", required=not ship_by_default)
+
+
+def quick_temper(args: argparse.Namespace) -> argparse.Namespace:
+    """``args`` with ``--quick``'s settings in place of the scan's, the kinds', the betas' and the corpora's."""
+    from ogm_ppl.learn._fit_common import CORPORA
+
+    if args.quick:
+        args.plans, args.window, args.sweeps, args.burn = 2, 48, 10, 4
+        args.betas, args.kinds = args.betas[:2], args.kinds[:2]
+        args.corpus = args.corpus[:1] if len(args.corpus) < len(CORPORA) else ["dungeon"]
+        args.fit_limit = 10 if args.fit_limit is None else args.fit_limit
+    return args
 
 
 def run_temper(args: argparse.Namespace) -> Any:
     from ogm_ppl.learn.temper import TemperSettings, fit_temper
 
+    args = quick_temper(args)
     s = TemperSettings(
         kinds=tuple(args.kinds),
         betas=tuple(args.betas),
@@ -88,7 +116,9 @@ def run_temper(args: argparse.Namespace) -> Any:
     return fit_temper(args.corpus, out, settings=s, update=args.update, ship=args.ship, progress=not args.quiet)
 
 
-def add_headline(k: argparse.ArgumentParser) -> None:
+def add_headline(k: argparse.ArgumentParser, *, ship_by_default: bool = False) -> None:
+    """The options of ``fit-prior headline``; ``ship_by_default`` (``experiments/select_headline_prior.py``):
+    neither ``--out`` nor ``--ship`` is required (the caller ships without one)."""
     from ogm_ppl.learn.headline import HEADLINE_CORPORA, HeadlineSettings
 
     d = HeadlineSettings()
@@ -102,12 +132,27 @@ def add_headline(k: argparse.ArgumentParser) -> None:
     )
     _scan(k, d)
     k.add_argument("--name", default="headline_prior", help="the file's name part (headline_prior)")
-    _out(k, "ogm_ppl/fitted/headline_prior.json")
+    k.add_argument(
+        "--quick",
+        action="store_true",
+        help="smoke run: 2 plans of 64 cells, 6 + 2 sweeps, the first 2 candidates, tables of 10 fit plans",
+    )
+    _out(k, "ogm_ppl/fitted/headline_prior.json", required=not ship_by_default)
+
+
+def quick_headline(args: argparse.Namespace) -> argparse.Namespace:
+    """``args`` with ``--quick``'s settings in place of the scan's and the candidates'."""
+    if args.quick:
+        args.plans, args.window, args.sweeps, args.burn = 2, 64, 6, 2
+        args.candidates = args.candidates[:2]
+        args.fit_limit = 10 if args.fit_limit is None else args.fit_limit
+    return args
 
 
 def run_headline(args: argparse.Namespace) -> Any:
     from ogm_ppl.learn.headline import HeadlineSettings, candidates_from, select_headline_prior
 
+    args = quick_headline(args)
     s = HeadlineSettings(
         corpus=args.corpus,
         plans=args.plans,
@@ -127,12 +172,14 @@ def run_headline(args: argparse.Namespace) -> Any:
 
 
 def add_bias(k: argparse.ArgumentParser) -> None:
-    from ogm_ppl.learn._fit_common import CORPORA
+    from ogm_ppl.learn._fit_common import CORPORA, SHIPPED_CORPORA
     from ogm_ppl.learn.bias import PRIORS, BiasSettings
 
     d = BiasSettings()
     k.add_argument("--priors", nargs="+", default=list(PRIORS), metavar="KIND", help="prior kinds (KIND[@cal])")
-    k.add_argument("--train", nargs="+", default=list(CORPORA), choices=CORPORA, help="corpora the priors learned on")
+    k.add_argument(
+        "--train", nargs="+", default=list(SHIPPED_CORPORA), choices=CORPORA, help="corpora the priors learned on"
+    )
     k.add_argument("--window", type=int, default=d.window, help="cells a side of the empty window (%(default)s)")
     k.add_argument("--sweeps", type=int, default=d.sweeps, help="sweeps per chain (%(default)s)")
     k.add_argument("--every", type=int, default=d.every, help="record the occupied share every N sweeps (50)")

@@ -1,5 +1,7 @@
-"""The input of ``ogm-ppl map``, ``convert`` and ``info``: a CARMEN log, a ROS bag or a dataset file, told
-apart by magic bytes, read with the reader options, its scans selected and laid on a grid."""
+"""The input of ``ogm-ppl map``, ``convert`` and ``info`` on the command line: the reader flags and what the
+command line adds to :mod:`ogm_ppl.inputs` (which tells the input apart, checks the options and reads it): the
+flags mapped onto the input kind's options, a bag's topics found in the bag, ``--scans``, the grid and
+``--crop``."""
 
 from __future__ import annotations
 
@@ -8,11 +10,13 @@ import dataclasses
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from ogm_ppl.grid import Grid
+from ogm_ppl.inputs import InputData, InputKind, detect_input_kind, get_input_kind, input_kinds, read_input
+from ogm_ppl.options import ParamError
 
 if TYPE_CHECKING:
     from ogm_ppl.datasets.carmen import CarmenLog
@@ -103,55 +107,108 @@ def _add_bag_options(p: argparse.ArgumentParser, required_pose: bool = True) -> 
     )
 
 
-_BAG_FLAGS = {
-    "--scan-topic": "scan_topic",
-    "--pose-topic": "pose_topic",
-    "--tf": "tf",
-    "--laser-offset": "laser_offset",
+#: the reader flags: flag -> (argparse dest, the input kinds' option it sets); a flag left at its default sets
+#: nothing, and a flag given for an input whose kind has no such option is refused naming the kinds that have it
+_FLAGS: dict[str, tuple[str, str]] = {
+    "--lenient": ("lenient", "strict"),
+    "--max-usable-range": ("max_usable_range", "max_usable_range"),
+    "--no-return": ("no_return", "no_return"),
+    "--pose-step": ("pose_step", "pose_step"),
+    "--pose-fraction": ("pose_fraction", "pose_fraction"),
+    "--beam-step": ("beam_step", "beam_step"),
+    "--scan-topic": ("scan_topic", "scan_topic"),
+    "--pose-topic": ("pose_topic", "pose_topic"),
+    "--tf": ("tf", "tf"),
+    "--map-frame": ("map_frame", "map_frame"),
+    "--laser-offset": ("laser_offset", "laser_offset"),
+    "--pose-tolerance": ("pose_tolerance", "pose_tolerance"),
 }
+_FLAG_OF = {option: flag for flag, (_, option) in _FLAGS.items()}
+_DEFAULTS: dict[str, Any] = {"pose_step": 1, "beam_step": 1, "map_frame": "map", "pose_tolerance": 0.1}
 
 
-def _check_input(path: Path) -> bytes:
-    """The first bytes of ``path``; a clear error if it cannot be read."""
-    if not path.exists():
-        raise CLIError(f"{path}: no such file")
-    if path.is_dir():
-        raise CLIError(f"{path}: is a directory, not a log or dataset file")
+def _kinds_having(option: str) -> str:
+    """``"CARMEN logs and ROS bags"``: the kinds that read a file and take ``option``."""
+    kinds = [get_input_kind(n) for n in input_kinds()]
+    nouns = [k.noun + "s" for k in kinds if k.reads_file and option in k.option_names()]
+    return " and ".join([", ".join(nouns[:-1]), nouns[-1]] if len(nouns) > 2 else nouns)
+
+
+def _flag_values(args, kind: InputKind, path: Path) -> dict:
+    """The options the reader flags given set (``--lenient``: ``strict = false``); a flag the input's kind has
+    no option for is refused. With ``--scans``, the thinning waits for the stretch (:func:`_select_scans`)."""
+    values: dict = {}
+    for flag, (dest, option) in _FLAGS.items():
+        v = getattr(args, dest, None)
+        if v is None or v is False or v == _DEFAULTS.get(dest):
+            continue
+        if option not in kind.option_names():
+            raise CLIError(f"{flag} applies to {_kinds_having(option)}; {path} is a {kind.noun}")
+        values[option] = False if flag == "--lenient" else list(v) if flag == "--laser-offset" else v
+    if getattr(args, "scans", None) is not None:  # thinned after the stretch is cut
+        values.pop("pose_step", None)
+        values.pop("pose_fraction", None)
+    return values
+
+
+def _bag_sources(path: Path, values: dict, pose_required: bool) -> dict:
+    """The bag options with the scan topic (by default the bag's only LaserScan topic) and, where none is given
+    and ``pose_required`` is false, the pose source the bag has (its only pose topic, else /tf); a clear error
+    naming the flag otherwise. Without a pose source the values hold none (``ogm-ppl info`` reads the scan
+    messages alone)."""
+    from ogm_ppl.datasets.rosbag import bag_info
+
+    info = None
+    if "scan_topic" not in values or ("pose_topic" not in values and not values.get("tf")):
+        info = bag_info(path, laser=False, strict=values.get("strict", True))
+    if "scan_topic" not in values:
+        assert info is not None
+        lasers = info["laser_topics"]
+        if len(lasers) != 1:
+            raise CLIError(
+                f"{path}: give --scan-topic; the bag has {len(lasers)} LaserScan topics"
+                + (f" ({', '.join(lasers)})" if lasers else "")
+            )
+        values["scan_topic"] = lasers[0]
+    if "pose_topic" not in values and not values.get("tf"):
+        assert info is not None
+        if pose_required:
+            cand = ", ".join(info["pose_topics"]) or "none"
+            raise CLIError(
+                f"{path}: give --pose-topic P (pose topics in the bag: {cand}) or --tf"
+                + (" (the bag has /tf)" if info["tf"] else " (the bag has no /tf)")
+            )
+        if len(info["pose_topics"]) == 1:
+            values["pose_topic"] = info["pose_topics"][0]
+        elif info["tf"]:
+            values["tf"] = True
+    return values
+
+
+def _input_values(args, path: Path, pose_required: bool = True) -> tuple[InputKind, dict]:
+    """The kind of the input ``path`` (:func:`~ogm_ppl.inputs.detect_input_kind`) and the option values its
+    flags give; a bag's topics and pose source completed from the bag (:func:`_bag_sources`)."""
+    kind = get_input_kind(detect_input_kind(path))
+    values = _flag_values(args, kind, path)
+    if kind.name == "bag":  # the command line's own convenience: a spec names its topics
+        values = _bag_sources(path, values, pose_required)
+    return kind, values
+
+
+def _parse_options(kind: InputKind, values: dict, path: Path):
+    """``kind``'s options from ``values``; an error names the flag (``--laser-offset applies to --pose-topic``)."""
     try:
-        with open(path, "rb") as f:
-            return f.read(4)
-    except OSError as e:
-        raise CLIError(f"{path}: cannot read ({e.strerror or e})") from None
+        return kind.parse(values)
+    except ParamError as e:
+        msg = e.message_naming(lambda k: _FLAG_OF.get(k, k))
+        flag = _FLAG_OF.get(e.key)
+        raise CLIError(f"{flag} {msg}" if flag else f"{path}: option {e.key} of a {kind.noun}: {msg}") from None
 
 
-def _image_kind(magic: bytes) -> str | None:
-    """``"PNG"``, ``"JPEG"``, ``"PGM"`` (or another netpbm format), ``"GIF"``, ``"TIFF"`` or ``"BMP"`` from a
-    file's first bytes; ``None`` for anything else."""
-    if magic.startswith(b"\x89PNG"):
-        return "PNG"
-    if magic.startswith(b"\xff\xd8"):
-        return "JPEG"
-    if magic[:1] == b"P" and magic[1:2] in b"123456" and magic[2:3] in b" \t\r\n#":
-        return "PGM" if magic[1:2] in b"25" else "netpbm"
-    if magic.startswith(b"GIF8"):
-        return "GIF"
-    if magic[:4] in (b"II*\x00", b"MM\x00*"):
-        return "TIFF"
-    if magic.startswith(b"BM"):
-        return "BMP"
-    return None
-
-
-def _reader_kwargs(args) -> dict:
-    stretch = getattr(args, "scans", None) is not None  # thinned after the stretch is cut (_select_scans)
-    return dict(
-        strict=not args.lenient,
-        max_usable_range=args.max_usable_range,
-        no_return=args.no_return or "drop",
-        pose_step=1 if stretch else args.pose_step,
-        pose_fraction=None if stretch else args.pose_fraction,
-        beam_step=args.beam_step,
-    )
+def _read(args, path: Path) -> tuple[InputKind, InputData]:
+    """The input ``path`` read as its kind, with the options of the reader flags (``ogm-ppl convert``)."""
+    kind, values = _input_values(args, path)
+    return kind, read_input(kind.name, path, _parse_options(kind, values, path))
 
 
 def _select_scans(args, inp: _Input) -> _Input:
@@ -201,103 +258,37 @@ def _check_cells(rows: int, cols: int, limit: int) -> None:
 
 @dataclass
 class _Input:
-    kind: str  # "carmen", "bag" or "dataset"
+    kind: str  # the input kind's report label: "carmen", "bag", "dataset", ...
     path: Path
     scans: Scans
-    grid: Grid | None = None  # the dataset's own grid
+    grid: Grid | None = None  # the input's own grid (a dataset file's)
     truth: np.ndarray | None = None
     log: CarmenLog | None = None
     settings: dict = field(default_factory=dict)
     bag: BagLog | None = None
     selection: tuple[str, ...] = ()  # what --scans / --crop (and thinning after --scans) kept, step by step
-
-
-def _is_bag(path: Path) -> bool:
-    from ogm_ppl.datasets.rosbag import bag_kind
-
-    return path.exists() and bag_kind(path) is not None
-
-
-def _bag_kwargs(args, path: Path, pose_required: bool = True) -> dict:
-    """read_bag's arguments from the bag options: the scan topic (the only LaserScan topic by default)
-    and one pose source; a clear error naming the flag otherwise."""
-    from ogm_ppl.datasets.rosbag import bag_info
-
-    info = None
-    scan = args.scan_topic
-    if scan is None or (args.pose_topic is None and not args.tf):
-        info = bag_info(path, laser=False, strict=not args.lenient)
-    if scan is None:
-        assert info is not None
-        lasers = info["laser_topics"]
-        if len(lasers) != 1:
-            raise CLIError(
-                f"{path}: give --scan-topic; the bag has {len(lasers)} LaserScan topics"
-                + (f" ({', '.join(lasers)})" if lasers else "")
-            )
-        scan = lasers[0]
-    pose, tf = args.pose_topic, bool(args.tf)
-    if pose is None and not tf:
-        assert info is not None
-        if pose_required:
-            cand = ", ".join(info["pose_topics"]) or "none"
-            raise CLIError(
-                f"{path}: give --pose-topic P (pose topics in the bag: {cand}) or --tf"
-                + (" (the bag has /tf)" if info["tf"] else " (the bag has no /tf)")
-            )
-        if len(info["pose_topics"]) == 1:
-            pose = info["pose_topics"][0]
-        elif info["tf"]:
-            tf = True
-        else:
-            return {"scan_topic": scan}
-    if tf and args.laser_offset is not None:
-        raise CLIError("--laser-offset applies to --pose-topic; with --tf the mounting comes from /tf_static")
-    kw = dict(scan_topic=scan, pose_topic=pose, tf=tf, pose_tolerance=args.pose_tolerance, **_reader_kwargs(args))
-    if tf:
-        kw["map_frame"] = args.map_frame
-    if args.laser_offset is not None:
-        kw["laser_offset"] = tuple(args.laser_offset)
-    return kw
-
-
-def _refuse_bag_flags(args, path: Path) -> None:
-    for flag, dest in _BAG_FLAGS.items():
-        if getattr(args, dest, None):
-            raise CLIError(f"{flag} applies to ROS bags; {path} is not one")
+    resume_key: dict = field(default_factory=dict)  # ogm_ppl.inputs.resume_key of the read
 
 
 def _read_input(args) -> _Input:
-    from ogm_ppl.datasets import load_dataset, read_bag, read_carmen
+    """``ogm-ppl map``'s input: told apart, read with the reader flags (:func:`_read`), then ``--scans``."""
+    from ogm_ppl.datasets.carmen import CarmenLog
+    from ogm_ppl.datasets.rosbag import BagLog
 
-    if _is_bag(args.input):
-        bag = read_bag(args.input, **_bag_kwargs(args, args.input))
-        return _select_scans(args, _Input("bag", args.input, bag.scans, bag=bag))
-    _refuse_bag_flags(args, args.input)
-    magic = _check_input(args.input)
-    image = _image_kind(magic)
-    if image:
-        raise CLIError(
-            f"{args.input}: a {image} image (a floor plan?), not a log, bag or dataset file; ogm-ppl simulate "
-            "--map PLAN.png scans a plan into a dataset that ogm-ppl map reads"
-        )
-    if magic[:2] == b"PK":
-        for flag, value in (
-            ("--lenient", args.lenient),
-            ("--max-usable-range", args.max_usable_range),
-            ("--no-return", args.no_return),
-        ):
-            if value:
-                raise CLIError(f"{flag} applies to CARMEN logs and ROS bags; {args.input} is a dataset file")
-        ds = load_dataset(args.input)
-        scans = ds.scans
-        kw = _reader_kwargs(args)
-        if kw["pose_step"] != 1 or kw["pose_fraction"] is not None or args.beam_step != 1:
-            scans = scans.subsample(kw["pose_step"], args.beam_step, kw["pose_fraction"])
-        inp = _Input("dataset", args.input, scans, ds.grid, ds.truth, settings=ds.settings or {})
-        return _select_scans(args, inp)
-    log = read_carmen(args.input, **_reader_kwargs(args))
-    return _select_scans(args, _Input("carmen", args.input, log.scans, log=log))
+    kind, data = _read(args, args.input)
+    rec = data.record
+    inp = _Input(
+        kind.report_label,
+        args.input,
+        data.scans,
+        data.grid,
+        data.truth,
+        log=rec if isinstance(rec, CarmenLog) else None,
+        settings=dict(data.settings) if not isinstance(rec, (CarmenLog, BagLog)) else {},
+        bag=rec if isinstance(rec, BagLog) else None,
+        resume_key=data.resume_key,
+    )
+    return _select_scans(args, inp)
 
 
 def _make_grid(args, inp: _Input) -> Grid:

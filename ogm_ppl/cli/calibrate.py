@@ -2,7 +2,8 @@ r"""``ogm-ppl calibrate``: priors and guides as predictors of what was not seen,
 (thesis Chapter 5, 5.2.1-5.2.3; :func:`ogm_ppl.calibration.calibrate`).
 
 On held-out maps of each test corpus (``--test``: ``generated`` maps from seeds no shipped table counted; the
-held-out plans of ``houseexpo``, ``ipa``, ``dungeon``, the buildings of the real logs left out) a
+held-out plans of ``houseexpo``, ``ipa``, ``dungeon`` by default, or of ``houseexpo-full``, ``r2v``, ``schools``
+named; the buildings of the real logs left out) a
 ``--window`` crop is scanned sparsely (``--poses`` stops of ``--beams`` beams) and the posterior marginals are
 estimated with every prior (``--priors``) learned on every training corpus (``--train``) by 3 chains of Gibbs
 sampling (``--kernel``, ``--sweeps`` after ``--burn``; patch Gibbs over the tile of a prior whose compiled
@@ -118,7 +119,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
         nargs="+",
         default=None,
         choices=TEST_CORPORA,
-        help="test corpora (default: all of them, or none where --plan-files is given)",
+        help="test corpora (default: generated houseexpo ipa dungeon, or none where --plan-files is given)",
     )
     add_plan_file_arguments(ap)
     ap.add_argument("--train", nargs="+", default=None, help="training corpora of the tables (default: all shipped)")
@@ -134,7 +135,7 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
         nargs="*",
         default=None,
         help="also score the amortised guide learned on each of these corpora (guide:CORPUS rows; "
-        "experiments/train_corpus_guide.py); CORPUS@sym: the guide symmetrised (default: none, or with "
+        "ogm-ppl train-guide); CORPUS@sym: the guide symmetrised (default: none, or with "
         f"--plan-files the floor-plan guide {PLAN_FILES_GUIDE})",
     )
     ap.add_argument(

@@ -4,10 +4,7 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
-from typing import TYPE_CHECKING
 
-if TYPE_CHECKING:
-    pass
 from ogm_ppl.cli._common import (
     _jsonable,
     _pos_float,
@@ -17,12 +14,16 @@ from ogm_ppl.cli._common import (
 from ogm_ppl.cli._input import (
     _add_bag_options,
     _add_reader_options,
-    _bag_kwargs,
-    _check_input,
-    _is_bag,
-    _reader_kwargs,
-    _refuse_bag_flags,
+    _input_values,
+    _parse_options,
 )
+
+#: the function each shipped kind that reads a file is read with, named in the dataset file's provenance
+_READERS = {
+    "log": "ogm_ppl.datasets.read_carmen",
+    "bag": "ogm_ppl.datasets.read_bag",
+    "npz": "ogm_ppl.datasets.load_dataset",
+}
 
 
 def add_parser(sub) -> None:
@@ -45,55 +46,38 @@ def add_parser(sub) -> None:
 
 
 def cmd_convert(args) -> dict:
-    """``ogm-ppl convert``: CARMEN log or ROS bag -> dataset file."""
-    from ogm_ppl.datasets import read_bag, read_carmen, save_dataset
+    """``ogm-ppl convert``: a CARMEN log, a ROS bag (or any input a kind reads) -> dataset file."""
+    from ogm_ppl.datasets import save_dataset
+    from ogm_ppl.inputs import read_input
 
-    if _is_bag(args.log):
-        kw = _bag_kwargs(args, args.log)
-        _prepare_out_file(args.out)
-        t0 = time.perf_counter()
-        bag = read_bag(args.log, **kw)
-        seconds = time.perf_counter() - t0
-        grid = bag.grid(args.resolution) if args.resolution else None
-        provenance = {
-            "tool": "ogm-ppl convert",
-            "source": str(args.log),
-            "reader": "ogm_ppl.datasets.read_bag",
-            "ogm_ppl_version": _version(),
-            "storage": bag.storage,
-            "bad_messages": len(bag.bad_messages),
-            "counts": bag.counts,
-        }
-        save_dataset(args.out, bag.scans, grid=grid, settings=_jsonable(bag.settings), provenance=_jsonable(provenance))
-        return {
-            "scans": bag.scans.num_scans,
-            "beams": bag.scans.beams_per_scan,
-            "bad_lines": len(bag.bad_messages),
-            "what": "bad messages",
-            "seconds": seconds,
-        }
-    _refuse_bag_flags(args, args.log)
-    _check_input(args.log)
+    kind, values = _input_values(args, args.log)
+    options = _parse_options(kind, values, args.log)
     _prepare_out_file(args.out)
     t0 = time.perf_counter()
-    log = read_carmen(args.log, **_reader_kwargs(args))
+    data = read_input(kind.name, args.log, options)
     seconds = time.perf_counter() - t0
-    grid = log.grid(args.resolution) if args.resolution else None
-    provenance = {
+    grid = data.covering_grid(args.resolution) if args.resolution else None
+    rec = data.record
+    bad = getattr(rec, "bad_messages", None)
+    what, bad = ("bad messages", bad) if bad is not None else ("bad lines", getattr(rec, "bad_lines", []))
+    provenance: dict = {
         "tool": "ogm-ppl convert",
         "source": str(args.log),
-        "reader": "ogm_ppl.datasets.read_carmen",
+        "reader": _READERS.get(kind.name, f"ogm_ppl.inputs kind {kind.name!r}"),
         "ogm_ppl_version": _version(),
-        "num_lines": log.num_lines,
-        "bad_lines": len(log.bad_lines),
-        "counts": log.counts,
     }
-    save_dataset(args.out, log.scans, grid=grid, settings=_jsonable(log.settings), provenance=_jsonable(provenance))
+    for k in ("storage", "num_lines"):
+        if hasattr(rec, k):
+            provenance[k] = getattr(rec, k)
+    provenance[what.replace(" ", "_")] = len(bad)
+    if hasattr(rec, "counts"):
+        provenance["counts"] = rec.counts
+    save_dataset(args.out, data.scans, grid=grid, settings=_jsonable(data.settings), provenance=_jsonable(provenance))
     return {
-        "scans": log.scans.num_scans,
-        "beams": log.scans.beams_per_scan,
-        "bad_lines": len(log.bad_lines),
-        "what": "bad lines",
+        "scans": data.scans.num_scans,
+        "beams": data.scans.beams_per_scan,
+        "bad_lines": len(bad),
+        "what": what,
         "seconds": seconds,
     }
 

@@ -24,7 +24,7 @@ def add_parser(sub) -> None:
         description="Run an experiment spec (ogm_ppl.experiment): every dataset x algorithm x "
         "chain is a dask task; writes maps, metrics.json/.md and figures.",
     )
-    e.add_argument("spec", type=Path, help="the spec file (see experiments/specs/*.toml)")
+    e.add_argument("spec", type=Path, help="the spec file (TOML; its keys: docs/guide/experiments.md)")
     e.add_argument("--out", type=Path, default=None, help="output directory (default out/experiments/<name>)")
     e.add_argument(
         "--scheduler",

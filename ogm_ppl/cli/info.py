@@ -17,11 +17,8 @@ from ogm_ppl.cli._common import (
 from ogm_ppl.cli._input import (
     _add_bag_options,
     _add_reader_options,
-    _bag_kwargs,
-    _check_input,
-    _is_bag,
-    _reader_kwargs,
-    _refuse_bag_flags,
+    _input_values,
+    _parse_options,
 )
 
 
@@ -74,13 +71,13 @@ def _rate(n: int, stamps: np.ndarray) -> float | None:
 
 def cmd_info(args) -> dict:
     """``ogm-ppl info``: what a CARMEN log, ROS bag or dataset file holds, read with the reader options."""
-    from ogm_ppl.datasets import load_dataset, read_bag, read_carmen
     from ogm_ppl.datasets.rosbag import bag_info
+    from ogm_ppl.inputs import read_input
 
     path = args.input
-    if _is_bag(path):
-        kw = _bag_kwargs(args, path, pose_required=False)
-        info = bag_info(path, kw["scan_topic"], strict=not args.lenient)
+    kind, values = _input_values(args, path, pose_required=False)
+    if kind.name == "bag":
+        info = bag_info(path, values["scan_topic"], strict=values.get("strict", True))
         r: dict = {"input": str(path), "kind": "bag", "storage": info["storage"], "topics": info["topics"]}
         r["scan_topic"] = info.get("scan_topic")
         r["laser_frames"] = info.get("frames")
@@ -90,7 +87,7 @@ def cmd_info(args) -> dict:
             f", or >= {args.no_return_threshold} m" if getattr(args, "no_return_threshold", None) else ""
         )
         r["no_return_beams_in_bag"] = info.get("no_return_beams")
-        if "pose_topic" not in kw:  # the geometry from the scan messages alone
+        if "pose_topic" not in values and not values.get("tf"):  # the geometry from the scan messages alone
             if info.get("scans"):
                 r["scans"] = info["scans"]
                 r["beams_per_scan"] = info["beams_per_scan"]
@@ -100,7 +97,7 @@ def cmd_info(args) -> dict:
                 r["duration_s"], r["scan_rate_hz"] = info["duration"], info["scan_rate_hz"]
             r["poses"] = "none found: give --pose-topic or --tf for the extent and the pose rate"
             return r
-        bag = read_bag(path, **kw)
+        bag = read_input("bag", path, _parse_options(kind, values, path)).record
         r.update(_scan_stats(bag.scans))
         r["counts"] = bag.counts
         r["poses"] = bag.pose_source
@@ -109,16 +106,16 @@ def cmd_info(args) -> dict:
         r["pose_rate_hz"] = _rate(len(bag.pose_timestamps), bag.pose_timestamps)
         r["bad_messages"] = len(bag.bad_messages)
         return r
-    _refuse_bag_flags(args, path)
-    magic = _check_input(path)
-    if magic[:2] == b"PK":
-        ds = load_dataset(path)
-        r = {"input": str(path), "kind": "dataset", **_scan_stats(ds.scans)}
-        r["grid"] = None if ds.grid is None else {"shape": list(ds.grid.shape), "resolution_m": ds.grid.resolution}
-        r["truth"] = ds.truth is not None
+    data = read_input(kind.name, path, _parse_options(kind, values, path))
+    if kind.name != "log":  # a dataset file, or a kind of one's own: what its scans show
+        r = {"input": str(path), "kind": kind.report_label, **_scan_stats(data.scans)}
+        if kind.name == "npz":
+            grid = data.grid
+            r["grid"] = None if grid is None else {"shape": list(grid.shape), "resolution_m": grid.resolution}
+            r["truth"] = data.truth is not None
         r["duration_s"] = r["scan_rate_hz"] = r["pose_rate_hz"] = None  # a dataset file keeps no stamps
         return r
-    log = read_carmen(path, **_reader_kwargs(args))
+    log = data.record
     st = log.settings
     if st.get("no_return_threshold") is not None:
         rule = f">= {st['no_return_threshold']} m (given)"

@@ -28,6 +28,7 @@ from ogm_ppl.methods import (
 if TYPE_CHECKING:
     from ogm_ppl.methods import MapMethod
 from ogm_ppl.cli._checkpoints import (
+    CHECKPOINTS,
     _checkpoint_root,
     _drop_own_checkpoints,
     _online_map,
@@ -45,6 +46,8 @@ from ogm_ppl.cli._common import (
     _pos_int,
     _prepare_out_dir,
     _probability,
+    _refuse_out_over_inputs,
+    _seed,
     _size,
     _steps,
     _version,
@@ -78,6 +81,8 @@ METHOD_FLAGS = {
     "--patch": ("patch", "patch"),
     "--threads": ("threads", "threads"),
 }
+#: the entries ``ogm-ppl map`` writes in its folder (an input there under one of these names is refused)
+MAP_OUTPUTS = ("map.npz", "map.png", "snapshots.npz", "ros", "report.json", "report.md", CHECKPOINTS)
 #: the command line's own defaults (``--help`` states them): sweeps, burn-in = sweeps // 10, and the
 #: thesis's cell prior 0.234 for the prior "independent"
 CLI_SWEEPS, CLI_LAMBDA = 200, 0.234
@@ -235,7 +240,7 @@ def add_parser(sub) -> None:
         help="parameter patch: of gibbs (PatchGibbs instead of CellGibbs) and patch "
         "(default 3x3): HxW, an int L (a run of L cells), 'plus' or 'square'",
     )
-    m.add_argument("--seed", type=_nonneg_int, default=0, metavar="S", help="random seed (>= 0, default 0)")
+    m.add_argument("--seed", type=_seed, default=0, metavar="S", help="random seed (0 to 2^62, default 0)")
     m.add_argument(
         "--online",
         action="store_true",
@@ -412,6 +417,7 @@ def _scores(probs, observed, inp: _Input, grid: Grid) -> dict | None:
 def cmd_map(args) -> dict:
     """``ogm-ppl map``: read, grid, map, write; returns the report."""
     method, params = _method_params(args)
+    _refuse_out_over_inputs(args.out, [args.input], writes=MAP_OUTPUTS)
     created = not args.out.exists()
     _prepare_out_dir(args.out)
     try:
@@ -423,8 +429,6 @@ def cmd_map(args) -> dict:
 
 
 def _map(args, method, params) -> dict:
-    from ogm_ppl.rosmap import save_ros_map
-
     times: dict = {}
     with _steps(4, f"ogm-ppl map ({args.method})") as bar:
         bar.set_postfix_str("reading")
@@ -446,31 +450,49 @@ def _map(args, method, params) -> dict:
         t0 = time.perf_counter()
         settings = _jsonable({k: v for k, v in vars(args).items() if k not in ("traceback",)})
         settings["method_details"] = _jsonable(details)
-        stage = StagedFolder(args.out)  # the folder is all old or all new outputs, whatever interrupts this
-        out = stage.path
+        # the folder is all old or all new outputs, whatever interrupts this; a failed write names the file in it
+        with StagedFolder(args.out) as stage:
+            ros = _write_map(args, stage.path, probs, observed, grid, settings, snapshots)
+            times["write_s"] = time.perf_counter() - t0
+            bar.update()
+            report = _report(args, method, inp, grid, probs, observed, details, times, ros, snapshots, settings)
+            atomic_write_text(stage.path / "report.json", json.dumps(_jsonable(report), indent=2))
+            atomic_write_text(stage.path / "report.md", _report_md(report))
+    _drop_own_checkpoints(args, _checkpoint_root(args, params, inp, grid))
+    return report
+
+
+def _write_map(args, out: Path, probs, observed, grid: Grid, settings: dict, snapshots):
+    """``map.npz``, ``snapshots.npz`` (``--online --snapshots``), ``map.png`` and the ROS map in ``out``; returns
+    the ROS map's files."""
+    from ogm_ppl.rosmap import save_ros_map
+
+    _atomic_savez(
+        out / "map.npz",
+        format=np.array(MAP_FORMAT),
+        format_version=np.int64(MAP_FORMAT_VERSION),
+        probabilities=probs.reshape(grid.shape),
+        observed=observed.reshape(grid.shape),
+        grid=np.array([grid.rows, grid.cols, grid.resolution, *grid.origin], dtype=float),
+        method=np.array(args.method),
+        settings=np.array(json.dumps(settings)),
+    )
+    if snapshots:
         _atomic_savez(
-            out / "map.npz",
-            format=np.array(MAP_FORMAT),
-            format_version=np.int64(MAP_FORMAT_VERSION),
-            probabilities=probs.reshape(grid.shape),
-            observed=observed.reshape(grid.shape),
-            grid=np.array([grid.rows, grid.cols, grid.resolution, *grid.origin], dtype=float),
-            method=np.array(args.method),
-            settings=np.array(json.dumps(settings)),
+            out / "snapshots.npz",
+            scans=np.array([n for n, _ in snapshots], dtype=np.int64),
+            probabilities=np.stack([p.reshape(grid.shape) for _, p in snapshots]),
         )
-        if snapshots:
-            _atomic_savez(
-                out / "snapshots.npz",
-                scans=np.array([n for n, _ in snapshots], dtype=np.int64),
-                probabilities=np.stack([p.reshape(grid.shape) for _, p in snapshots]),
-            )
-        shown = observed if args.unobserved == "unknown" else np.ones_like(observed)
-        save_map_png(out / "map.png", probs, shown, grid)
-        (out / "ros").mkdir(exist_ok=True)
-        ros = save_ros_map(out / "ros" / "map.yaml", probs, grid, unknown=~shown, thresholds=args.thresholds)
-        assert ros.sidecar is not None  # save_ros_map writes one by default (sidecar=True)
-        times["write_s"] = time.perf_counter() - t0
-        bar.update()
+    shown = observed if args.unobserved == "unknown" else np.ones_like(observed)
+    save_map_png(out / "map.png", probs, shown, grid)
+    (out / "ros").mkdir(exist_ok=True)
+    ros = save_ros_map(out / "ros" / "map.yaml", probs, grid, unknown=~shown, thresholds=args.thresholds)
+    assert ros.sidecar is not None  # save_ros_map writes one by default (sidecar=True)
+    return ros
+
+
+def _report(args, method, inp: _Input, grid: Grid, probs, observed, details, times, ros, snapshots, settings) -> dict:
+    """What ``report.json`` holds."""
     report = {
         "ogm_ppl_version": _version(),
         "input": {"path": str(inp.path), "kind": inp.kind, "size_bytes": _size(inp.path)},
@@ -512,10 +534,6 @@ def _map(args, method, params) -> dict:
             report["bad_messages"] = [
                 {"topic": t, "message": i, "reason": r} for t, i, r in inp.bag.bad_messages[:1000]
             ]
-    atomic_write_text(out / "report.json", json.dumps(_jsonable(report), indent=2))
-    atomic_write_text(out / "report.md", _report_md(report))
-    stage.commit()
-    _drop_own_checkpoints(args, _checkpoint_root(args, params, inp, grid))
     return report
 
 

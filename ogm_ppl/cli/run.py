@@ -8,9 +8,9 @@ from typing import TYPE_CHECKING
 if TYPE_CHECKING:
     pass
 from ogm_ppl.cli._common import (
-    _nonneg_int,
     _pos_int,
     _prepare_out_dir,
+    _seed,
 )
 
 
@@ -18,7 +18,7 @@ def add_parser(sub) -> None:
     """The ``run`` subcommand's options."""
     p = sub.add_parser("run", help="the headline experiment: maps, figures and a report")
     p.add_argument("--out", type=Path, default=Path("out"), help="output directory (default out)")
-    p.add_argument("--seed", type=_nonneg_int, default=0, help="random seed of the simulated part (default 0)")
+    p.add_argument("--seed", type=_seed, default=0, help="random seed of the simulated part (default 0)")
     p.add_argument(
         "--log",
         type=Path,

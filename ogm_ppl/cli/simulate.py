@@ -18,15 +18,16 @@ from ogm_ppl.cli._common import (
     CLIError,
     _jsonable,
     _nonneg_float,
-    _nonneg_int,
     _number,
     _pos_float,
     _pos_int,
     _prepare_out_file,
+    _refuse_out_over_inputs,
+    _seed,
     _steps,
     _version,
 )
-from ogm_ppl.cli._input import _check_input
+from ogm_ppl.inputs import check_readable
 
 
 def add_parser(sub) -> None:
@@ -73,7 +74,7 @@ def add_parser(sub) -> None:
     s.add_argument(
         "--sigma", type=_nonneg_float, default=3.0, metavar="CELLS", help="Gaussian range noise in cells (default 3)"
     )
-    s.add_argument("--seed", type=_nonneg_int, default=0, metavar="S", help="random seed (>= 0, default 0)")
+    s.add_argument("--seed", type=_seed, default=0, metavar="S", help="random seed (0 to 2^62, default 0)")
 
 
 def _truth_from_spec(spec: list[str], size: int, seed: int) -> tuple[np.ndarray, dict]:
@@ -88,7 +89,7 @@ def _truth_from_spec(spec: list[str], size: int, seed: int) -> tuple[np.ndarray,
         return truth, {"map": "generated", "kind": words[0], "size": size, "border": border}
     if len(words) == 1 and spec[0] != "generated" and (words[0].lower().endswith(".png") or Path(words[0]).exists()):
         path = Path(words[0])
-        _check_input(path)
+        check_readable(path)
         from PIL import Image, UnidentifiedImageError
 
         try:
@@ -98,6 +99,12 @@ def _truth_from_spec(spec: list[str], size: int, seed: int) -> tuple[np.ndarray,
             raise CLIError(f"{path}: not a readable image ({e})") from None
         occ = grey < 128
         occ[[0, -1], :] = occ[:, [0, -1]] = True  # a closed outer wall: beams end inside the map
+        if occ.all():
+            raise CLIError(
+                f"argument --map: {path} has no free cell: each of its {occ.shape[1]} x {occ.shape[0]} pixels is "
+                "darker than 128 (occupied) or on the one-pixel outer wall the simulation adds; a floor plan needs "
+                "light (>= 128) free space for the robot"
+            )
         return occ[::-1].copy(), {"map": "png", "path": str(path)}  # image row 0 is the top (largest y)
     raise CLIError(
         f"argument --map: expected 'generated KIND' with KIND one of {', '.join(KINDS)}, "
@@ -105,11 +112,17 @@ def _truth_from_spec(spec: list[str], size: int, seed: int) -> tuple[np.ndarray,
     )
 
 
+def _source_name(source: dict) -> str:
+    """The ground truth as ``--map`` gave it: the PNG's path or ``generated KIND``."""
+    return source["path"] if source["map"] == "png" else f"generated {source['kind']}"
+
+
 def cmd_simulate(args) -> dict:
     """``ogm-ppl simulate``: stop-and-scan dataset on a generated map or PNG, saved with its truth."""
     from ogm_ppl.datasets import save_dataset
     from ogm_ppl.datasets.stop_and_scan import stop_and_scan
 
+    _refuse_out_over_inputs(args.out, [Path(w) for w in args.map if Path(w).exists()])  # a PNG plan
     _prepare_out_file(args.out)
     with _steps(3, "ogm-ppl simulate") as bar:
         bar.set_postfix_str("ground truth")
@@ -118,15 +131,20 @@ def cmd_simulate(args) -> dict:
         bar.update()
         bar.set_postfix_str("route and scans")
         t0 = time.perf_counter()
-        data = stop_and_scan(
-            truth,
-            grid,
-            num_poses=args.poses,
-            beams=args.beams,
-            max_range_cells=args.max_range_cells,
-            sigma_cells=args.sigma,
-            seed=args.seed,
-        )
+        try:
+            data = stop_and_scan(
+                truth,
+                grid,
+                num_poses=args.poses,
+                beams=args.beams,
+                max_range_cells=args.max_range_cells,
+                sigma_cells=args.sigma,
+                seed=args.seed,
+            )
+        except ValueError as e:
+            if str(e).startswith(("truth ", "no free cell")):  # the ground truth's fault: name where it came from
+                raise CLIError(f"argument --map: {_source_name(source)}: {e}") from None
+            raise
         seconds = time.perf_counter() - t0
         bar.update()
         bar.set_postfix_str("writing")

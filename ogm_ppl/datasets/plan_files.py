@@ -53,7 +53,17 @@ from pathlib import Path
 import numpy as np
 
 from ogm_ppl.datasets import floorplans as fp
-from ogm_ppl.datasets.floorplans import FloorPlan, _classify_ipa, _natural_key, _open_image, rasterise
+from ogm_ppl.datasets.floorplans import FloorPlan, rasterise
+from ogm_ppl.datasets.floorplans._core import natural_key as _natural_key
+from ogm_ppl.datasets.floorplans.houseexpo_full import (
+    HOUSEEXPO_PX_PER_M,
+    MAX_LAYOUT_PIXELS,
+    layout_pixels,
+    layout_size,
+)
+from ogm_ppl.datasets.floorplans.images import classify_ipa as _classify_ipa
+from ogm_ppl.datasets.floorplans.images import open_image as _open_image
+from ogm_ppl.datasets.floorplans.images import plan_pixels
 
 __all__ = [
     "PLAN_SUFFIXES",
@@ -72,14 +82,10 @@ IMAGE_SUFFIXES: tuple[str, ...] = (".png", ".pgm", ".bmp")
 YAML_SUFFIXES: tuple[str, ...] = (".yaml", ".yml")
 LAYOUT_SUFFIXES: tuple[str, ...] = (".json",)
 PLAN_SUFFIXES: tuple[str, ...] = YAML_SUFFIXES + LAYOUT_SUFFIXES + IMAGE_SUFFIXES
-#: HouseExpo's rendering: pixels per metre and exterior pixels around the outline
-HOUSEEXPO_PX_PER_M, HOUSEEXPO_PAD = 100, 25
 _MAX_LAYOUT_BYTES = 16 * 2**20
 _MAX_LAYOUT_VERTS = 100_000
 #: Largest plan grid built (cells, after resampling); a larger one is refused with this limit in the message.
 MAX_PLAN_CELLS = 50_000_000
-#: Largest HouseExpo rendering (1 cm pixels: a 140 m x 140 m outline)
-MAX_LAYOUT_PIXELS = 200_000_000
 
 
 class PlanFileError(ValueError):
@@ -143,27 +149,6 @@ def _layout_verts(path: Path) -> np.ndarray:
     if not ok:
         raise PlanFileError(path, f"'verts' must be 3 to {_MAX_LAYOUT_VERTS:,} pairs of finite numbers [x, y]")
     return np.asarray(verts, dtype=np.float64)
-
-
-def _layout_size(verts: np.ndarray) -> tuple[int, int]:
-    px = (verts * HOUSEEXPO_PX_PER_M).astype(np.int64)
-    return (
-        int(px[:, 1].max() - px[:, 1].min()) + 2 * HOUSEEXPO_PAD,
-        int(px[:, 0].max() - px[:, 0].min()) + 2 * HOUSEEXPO_PAD,
-    )
-
-
-def _pixels_of_layout(verts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """HouseExpo's rendering of ``verts``: the filled outline free, the rest occupied (wall or outside)."""
-    from PIL import Image, ImageDraw
-
-    px = (verts * HOUSEEXPO_PX_PER_M).astype(np.int64)  # truncated, as the reference renderer does
-    px = px - px.min(0) + HOUSEEXPO_PAD
-    h, w = _layout_size(verts)
-    im = Image.new("L", (w, h), 0)
-    ImageDraw.Draw(im).polygon([(int(x), int(y)) for x, y in px], fill=255, outline=255)
-    free = np.asarray(im) >= 128
-    return ~free, free
 
 
 def _grey8(im, path: Path):
@@ -258,12 +243,12 @@ def load_plan_file(
     elif suffix in LAYOUT_SUFFIXES:
         verts = _layout_verts(p)
         px = 1.0 / HOUSEEXPO_PX_PER_M
-        h, w = _layout_size(verts)
+        h, w = layout_size(verts)
         if h * w > MAX_LAYOUT_PIXELS:
             raise PlanFileError(
                 p, f"an outline of {w} x {h} pixels of 1 cm, over the limit of {MAX_LAYOUT_PIXELS:,} pixels"
             )
-        occ, free = _pixels_of_layout(verts)
+        occ, free = layout_pixels(verts)
     else:
         if pixel_size is None:
             raise PlanFileError(p, "an image has no scale: give its pixel size in metres (pixel_size, --pixel-size)")
@@ -364,7 +349,7 @@ def render_layout(path: str | os.PathLike) -> np.ndarray:
     """A HouseExpo layout rendered as HouseExpo renders it: ``H x W`` uint8, 255 free (inside the outline), 0
     wall or outside, 1 cm pixels (the ``houseexpo`` corpus's PNGs are such renderings)."""
     p = Path(path)
-    occ, _ = _pixels_of_layout(_layout_verts(p))
+    occ, _ = layout_pixels(_layout_verts(p))
     return np.where(occ, 0, 255).astype(np.uint8)
 
 
@@ -399,7 +384,7 @@ def _corpus_sizes(root: Path) -> dict[tuple[int, int], list[tuple[str, str]]]:
 
 @lru_cache(maxsize=16)
 def _corpus_free(root: Path, corpus: str, name: str) -> np.ndarray:
-    return fp._pixels(corpus, name, root)[1]
+    return plan_pixels(corpus, name, root)[1]
 
 
 def _plan_free(path: Path) -> np.ndarray:
@@ -408,18 +393,18 @@ def _plan_free(path: Path) -> np.ndarray:
     if suffix in YAML_SUFFIXES:
         return _pixels_of_yaml(path)[1]
     if suffix in LAYOUT_SUFFIXES:
-        return _pixels_of_layout(_layout_verts(path))[1]
+        return layout_pixels(_layout_verts(path))[1]
     return _pixels_of_image(path)[1]
 
 
 def corpus_copy(path: str | os.PathLike, root=None) -> str | None:
     """What makes a plan file a plan of the floor-plan corpora (so that scoring a prior learned on them on it would
     be leakage), or ``None``: it lies under the corpora's folder; its bytes (for a ROS map, its image's too) are those
-    of a HouseExpo or IPA plan file; it is a HouseExpo layout named by a ``houseexpo`` plan's id; or its free pixels,
-    in any of the 8 turns and flips, overlap those of a HouseExpo or IPA plan image of the same size with an
-    intersection over union of at least :data:`NEAR_COPY` (re-saved, touched up, turned, or a variant of the
-    building). A copy at another scale is not caught, and
-    DungeonMaps (synthetic, inside one archive) are not compared."""
+    of a HouseExpo or IPA plan file; it is a HouseExpo layout named by the id of a ``houseexpo`` or ``houseexpo-full``
+    plan; or its free pixels, in any of the 8 turns and flips, overlap those of a HouseExpo or IPA plan image of the
+    same size with an intersection over union of at least :data:`NEAR_COPY` (re-saved, touched up, turned, or a
+    variant of the building). A copy at another scale is not caught, and DungeonMaps (synthetic, inside one archive),
+    R2V and school plans (vector drawings) are not compared."""
     p = Path(path)
     base = fp.floorplan_root(root).resolve()
     if not base.is_dir():  # no corpora here: nothing to copy
@@ -430,8 +415,14 @@ def corpus_copy(path: str | os.PathLike, root=None) -> str | None:
         same = _corpus_digests(base).get(hashlib.sha256(piece.read_bytes()).hexdigest())
         if same is not None:
             return f"the same bytes as the corpus plan {same}"
-    if p.suffix.lower() in LAYOUT_SUFFIXES and p.stem in set(fp.list_plans("houseexpo", base)):
-        return f"the layout of the houseexpo corpus's plan {p.stem}"
+    if p.suffix.lower() in LAYOUT_SUFFIXES:
+        for corpus in ("houseexpo", "houseexpo-full"):
+            try:
+                ids = fp.list_plans(corpus, base)
+            except fp.CorpusNotFoundError:
+                continue
+            if p.stem in set(ids):
+                return f"the layout of the {corpus} corpus's plan {p.stem}"
     free = _plan_free(p)
     sizes = _corpus_sizes(base)
     for k in range(8):

@@ -5,7 +5,7 @@ algorithm is any registered map method (:mod:`ogm_ppl.methods`) with its paramet
 are drivers built on them.
 
 >>> from ogm_ppl.experiment import load_spec, run_experiment      # doctest: +SKIP
->>> result = run_experiment("experiments/specs/smoke.toml", "out/smoke", scheduler="serial")  # doctest: +SKIP
+>>> result = run_experiment("my_spec.toml", "out/smoke", scheduler="serial")  # doctest: +SKIP
 >>> print(result.table())                                         # doctest: +SKIP
 """
 

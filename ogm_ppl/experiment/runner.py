@@ -102,7 +102,7 @@ def plan_tasks(spec: ExperimentSpec, out: Path, resume: bool = True, progress: b
     for ds in spec.datasets:
         if ds.base not in base_h:
             plan_version = [T.PLAN_BASE_VERSION] if "plan" in ds.base_params else []
-            h = T.task_hash("base", ds.base_params, *plan_version)
+            h = T.task_hash("base", ds.base_params, *plan_version, *T.base_source(ds))
             base_h[ds.base] = h
             tasks.append(
                 Task(

@@ -11,7 +11,9 @@ Tables (every key optional unless marked *required*; defaults in brackets)::
                         spec, its own tables: ogm_ppl.experiment.active], max_cells [50,000,000: a dataset
                         whose grid has more cells is refused: when the spec is read, or for a log without an
                         extent when its base task has read the log, before any map is built]
-    [[datasets]]        kind = "simulated" | "log" | "bag" (*required*), name (*required*, [A-Za-z0-9_.-]+)
+    [[datasets]]        kind = an input kind (*required*; ogm_ppl.inputs: "simulated", "log", "bag", "npz", or a
+                        kind of one's own that reads a file), name (*required*, [A-Za-z0-9_.-]+); the kind's
+                        options are checked by its options dataclass, each error naming the key
       simulated:        map ["office"; a mapgen kind or "mixed" = kinds in turn by map_seed],
                         size [500] (int or [rows, cols]), border [20], resolution [0.05] (m/cell),
                         map_seed [0], seed [derived], poses [route until coverage], beams [720],
@@ -22,17 +24,24 @@ Tables (every key optional unless marked *required*; defaults in brackets)::
                         the grid's origin is (0, 0) at the bottom-left corner of the cropped plan, the image's
                         top row at the top (largest y)
       log:              path (*required*; relative to the spec file; ~ and $VARS expanded),
-                        reader [{max_usable_range = 20.0}] (read_carmen options), resolution [0.05],
+                        reader [{max_usable_range = 20.0}] (the kind's reader options, ogm_ppl.inputs.LogOptions:
+                        strict, max_usable_range, usable_range_rule, no_return, no_return_threshold, min_range,
+                        max_range, messages, apply_laser_offset), resolution [0.05],
                         extent [x0, y0, width, height] metres (else the log's extent + margin [1.0]),
                         sigma_cells [3.0] (the models' range noise), pose_fraction [1.0], beam_step [1]
                         or beam_increment_deg (the same as a multiple of the log's increment),
                         benchmark [{delta = "haehnel", threshold = 0.20, prior = 0.5}]
       bag:              a ROS bag (ogm_ppl.datasets.read_bag): path (*required*; a .bag file or a ROS 2 bag
                         folder / .db3 / .mcap), scan_topic (*required*), pose_topic or tf = true (one is
-                        *required*), map_frame ["map"], laser_offset [[0, 0, 0]] (x, y, yaw of the laser in
-                        the robot frame; pose_topic only), pose_tolerance [0.1] (s), reader [{max_usable_range
-                        = 20.0}] (read_bag options: strict, max_usable_range, usable_range_rule, no_return,
-                        no_return_threshold, min_range, max_range, widen; checked here), and the keys of log
+                        *required*), map_frame ["map"; tf only], laser_offset [[0, 0, 0]] (x, y, yaw of the
+                        laser in the robot frame; pose_topic only), pose_tolerance [0.1] (s), reader
+                        [{max_usable_range = 20.0}] (ogm_ppl.inputs.BagOptions: strict, max_usable_range,
+                        usable_range_rule, no_return, no_return_threshold, min_range, max_range, widen), and the
+                        keys of log
+      npz:              an ogm_ppl dataset file: path (*required*) and the keys of log but reader (a dataset
+                        file's scans are read already); scored, as a log, against its benchmark map
+      a kind of one's own that reads a file: its options at the entry (those of group "reader" in its
+                        reader table) and the keys of log
     [[algorithms]]      kind = a map method (*required*; ``ogm-ppl methods`` lists them with their
                         parameters), name (*required*), and the method's parameters (ogm_ppl.methods):
       ogm:              delta ["haehnel"], prior [0.5], clamp [none: [lo, hi] log-odds],
@@ -53,7 +62,8 @@ Tables (every key optional unless marked *required*; defaults in brackets)::
       every model-based method (gibbs, patch_map, metropolis, vi, guided_gibbs, tempering) also takes
                         sensor ["gaussian"; see ogm_ppl.sensors.sensor_by_name] and p_rand [0.0; vi 0.001]
                         (the sensor model's share of random readings)
-    [metrics]           mask ["auto": "known" for simulated, "near_mapped" for logs; "all": every cell;
+    [metrics]           mask ["auto": "known" for simulated, "near_mapped" for data read from a file; "all":
+                        every cell;
                         "known": a plan's walls and free space, not its exterior nor the crop's margin (every
                         cell of a generated map)], near_mapped_distance
                         [10.0] (cells), touched_only [true], thresholds [99: 0.01..0.99, or a list],
@@ -75,10 +85,8 @@ not on its position in the spec, so adding an algorithm or a dataset changes no 
 
 from __future__ import annotations
 
-import hashlib
 import itertools
 import json
-import math
 import os
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -97,31 +105,8 @@ __all__ = [
     "parse_map_spec",
 ]
 
-MAP_KINDS = ("office", "corridor", "cluttered", "hall", "mixed")
 SWEEP_KEYS = {"map_seed": "m", "seed": "s", "pose_fraction": "pf", "beam_step": "bs"}
 REPEAT_KEYS = ("map_seed", "seed")
-READER_KEYS = (
-    "strict",
-    "max_usable_range",
-    "usable_range_rule",
-    "no_return",
-    "no_return_threshold",
-    "min_range",
-    "max_range",
-    "messages",
-    "apply_laser_offset",
-)
-#: read_bag options a bag entry's reader table may set: (kind, lower bound, lower bound open, choices)
-BAG_READER_KEYS: dict[str, tuple] = {
-    "strict": ("bool", None, False, None),
-    "max_usable_range": ("float", 0, True, None),
-    "usable_range_rule": ("str", None, False, ("drop", "max")),
-    "no_return": ("str", None, False, ("drop", "max")),
-    "no_return_threshold": ("float", 0, True, None),
-    "min_range": ("float", 0, False, None),
-    "max_range": ("float", 0, True, None),
-    "widen": ("str", None, False, ("decimal", "binary")),
-}
 SCORES = ("f1", "auc", "max_precision", "nll_bits", "brier", "ece")
 
 
@@ -178,11 +163,14 @@ class MetricsSpec:
     scores: tuple = ("f1", "auc", "max_precision")
 
     def mask_for(self, dataset_kind: str) -> str:
-        """The mask scored on a dataset of ``dataset_kind``: :attr:`mask`, ``"auto"`` read as
-        ``"near_mapped"`` for logs and bags and ``"known"`` for simulated data."""
+        """The mask scored on a dataset of the input kind ``dataset_kind``: :attr:`mask`, ``"auto"`` read as
+        ``"near_mapped"`` for data read from a file (a log, a bag: scored on their benchmark map) and ``"known"``
+        for simulated data."""
         if self.mask != "auto":
             return self.mask
-        return "near_mapped" if dataset_kind in ("log", "bag") else "known"
+        from ogm_ppl.inputs import get_input_kind
+
+        return "near_mapped" if get_input_kind(dataset_kind).reads_file else "known"
 
 
 @dataclass(frozen=True)
@@ -247,42 +235,6 @@ def _check_delta(t: Table, key: str, default: str) -> str:
     return name
 
 
-def _generated_keys(t: Table) -> dict:
-    """``map``, ``size``, ``border`` and ``map_seed`` of a simulated dataset on a generated map."""
-    p: dict = {"map": t.get("map", "str", "office", choices=MAP_KINDS)}
-    size = t.raw("size", 500)
-    if isinstance(size, int) and not isinstance(size, bool):
-        size = [size, size]
-    if not (
-        isinstance(size, list) and len(size) == 2 and all(isinstance(s, int) and not isinstance(s, bool) for s in size)
-    ):
-        t.fail("size", f"must be an int or [rows, cols], got {size!r}")
-    if min(size) < 60:
-        t.fail("size", f"generated maps need at least 60 x 60 cells, got {size}")
-    p["size"] = [int(s) for s in size]
-    p["border"] = t.get("border", "int", 20, lo=1, hi=min(size) // 4)
-    p["map_seed"] = t.get("map_seed", "int", 0, sweep=True, lo=0)
-    return p
-
-
-def _plan_keys(t: Table, base_dir: Path) -> dict:
-    """``plan`` (resolved like a log's path), the SHA-256 of its files (a changed plan is a new dataset) and
-    ``pixel_size`` of a simulated dataset on a floor plan of your own."""
-    from ogm_ppl.datasets.plan_files import plan_file_pieces
-
-    raw = t.get("plan", "str")
-    path = Path(os.path.expandvars(os.path.expanduser(raw)))
-    if not path.is_absolute():
-        path = (base_dir / path).resolve()
-    if not path.is_file():
-        t.fail("plan", f"no such plan file: {path}")
-    h = hashlib.sha256()
-    for piece in plan_file_pieces(path):
-        h.update(piece.read_bytes())
-    pixel = t.get("pixel_size", "float", None, lo=0, lo_open=True)
-    return {"plan": str(path), "plan_sha256": h.hexdigest(), "pixel_size": pixel}
-
-
 def _check_plan(t: Table, p: dict, max_cells: int) -> None:
     """Read the plan once as :func:`~ogm_ppl.experiment.tasks.run_base` will, so a bad file fails here."""
     from ogm_ppl.datasets.plan_files import PlanFileError, load_plan_file
@@ -304,105 +256,152 @@ def _too_many(t: Table, key: str, rows: int, cols: int, max_cells: int, what: st
         )
 
 
-def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int, max_cells: int = MAX_CELLS) -> list[DatasetSpec]:
-    t, name = named_entry(source, "datasets", i, d)
-    kind = t.get("kind", "str", required=True, choices=("simulated", "log", "bag"))
-    p: dict = {}
-    if kind == "simulated":
-        if t.has("plan"):  # scanned on a floor plan of your own
-            for k in ("map", "size", "border", "map_seed"):
-                if t.has(k):
-                    t.fail(k, "applies to generated maps, not to a plan")
-            p.update(_plan_keys(t, base_dir))
-        else:
-            p.update(_generated_keys(t))
-            rows, cols = p["size"]
-            _too_many(t, "size", rows, cols, max_cells, f"size = {p['size']}")
-        p["resolution"] = t.get("resolution", "float", 0.05, lo=0, lo_open=True)
-        if "plan" in p:
-            _check_plan(t, p, max_cells)
-        p["seed"] = t.get("seed", "int", derive_seed(seed, "dataset", name, bits=32), sweep=True, lo=0)
-        p["poses"] = t.get("poses", "int", None, lo=1)
-        p["beams"] = t.get("beams", "int", 720, lo=1)
-        p["max_range_cells"] = t.get("max_range_cells", "float", 75.0, lo=0, lo_open=True)
-        p["sigma_cells"] = t.get("sigma_cells", "float", 3.0, lo=0, lo_open=True)
-        p["pose_fraction"] = t.get("pose_fraction", "float", 1.0, sweep=True, lo=0, lo_open=True, hi=1)
-        p["beam_step"] = t.get("beam_step", "int", 1, sweep=True, lo=1)
-        for bs in np.atleast_1d(p["beam_step"]):
-            if bs > p["beams"]:
-                t.fail("beam_step", f"{bs} exceeds beams = {p['beams']}")
-        shared = ("resolution", "seed", "poses", "max_range_cells")
-        if "plan" in p:
-            base_keys: tuple[str, ...] = ("plan", "plan_sha256", "pixel_size", *shared)
-        else:
-            base_keys = ("map", "size", "border", "map_seed", *shared)
+def _resolve(raw: str, base_dir: Path) -> Path:
+    """A spec's path: ``~`` and ``$VARS`` expanded, relative to the spec file's folder."""
+    path = Path(os.path.expandvars(os.path.expanduser(raw)))
+    return path if path.is_absolute() else (base_dir / path).resolve()
+
+
+def _parse_options(kind, values: dict, table_of):
+    """``kind``'s options from ``values``; an error names the key in the table ``table_of(key)`` holds it."""
+    from ogm_ppl.options import ParamError
+
+    try:
+        return kind.parse(values)
+    except ParamError as e:
+        table_of(e.key).fail(e.key, e.message)
+
+
+def _sweep(t: Table, kind, key: str, values: list) -> list:
+    """The values of a swept option, each checked by the option's kind (an error names ``key[i]``)."""
+    from ogm_ppl.options import _Bad, param_fields
+
+    if not values:
+        t.fail(key, "an empty list sweeps over nothing")
+    check = {name: k for name, k, _, _ in param_fields(kind.options)}[key]
+    out = []
+    for i, v in enumerate(values):
+        try:
+            out.append(check.value(v))
+        except _Bad as e:
+            t.fail(f"{key}[{i}]", str(e))
+    if len(set(out)) != len(out):
+        t.fail(key, f"lists a value twice: {values!r}")
+    return out
+
+
+def _scene_keys(t: Table, kind, name: str, seed: int, base_dir: Path, max_cells: int) -> tuple[dict, tuple[str, ...]]:
+    """The parameters of a simulated dataset: the kind's options (:class:`~ogm_ppl.inputs.SimulatedOptions`) as
+    used, sweeps as lists, a plan's path resolved and its digest; and the keys its base (scene and route)
+    depends on."""
+    from ogm_ppl.inputs.simulated import plan_digest
+
+    names = kind.option_names()
+    values = {k: t.raw(k) for k in names if t.has(k)}
+    t.used.update(names)
+    values.setdefault("seed", derive_seed(seed, "dataset", name, bits=32))
+    if values.get("plan") is not None:  # a floor plan of your own, relative to the spec file
+        raw = _parse_options(kind, {"plan": values["plan"]}, lambda k: t).plan
+        path = _resolve(raw, base_dir)
+        if not path.is_file():
+            t.fail("plan", f"no such plan file: {path}")
+        values["plan"] = str(path)
+    sweeps = {k: _sweep(t, kind, k, values[k]) for k in SWEEP_KEYS if isinstance(values.get(k), list)}
+    for combo in itertools.product(*sweeps.values()):  # every combination obeys the rules between options
+        options = _parse_options(kind, values | dict(zip(sweeps, combo)), lambda k: t)
+    p = options.effective() | sweeps
+    if "plan" in p:
+        p["plan_sha256"] = plan_digest(p["plan"])  # a changed plan is a new dataset
+        _check_plan(t, p, max_cells)
+        return p, ("plan", "plan_sha256", "pixel_size", "resolution", "seed", "poses", "max_range_cells")
+    rows, cols = p["size"]
+    _too_many(t, "size", rows, cols, max_cells, f"size = {p['size']}")
+    return p, ("map", "size", "border", "map_seed", "resolution", "seed", "poses", "max_range_cells")
+
+
+def _file_keys(t: Table, kind, source: str, base_dir: Path, max_cells: int) -> tuple[dict, tuple[str, ...]]:
+    """The parameters of a dataset read from a file: ``path`` (resolved, of the entry's kind), the kind's own
+    options given at the entry (under the kind's name: a bag's topics and pose source) and in its ``reader``
+    table, the grid, the sparsity and the benchmark map; and the keys its base (the read log) depends on."""
+    from ogm_ppl.inputs import InputError, check_readable
+
+    path = _resolve(t.get("path", "str", required=True), base_dir)
+    if not path.exists():
+        t.fail("path", f"no such {kind.noun}: {path}")
+    if kind.detect is not None and not kind.detect_last:
+        try:
+            head = b"" if path.is_dir() else check_readable(path)
+        except InputError as e:
+            t.fail("path", str(e))
+        if not kind.detect(path, head):
+            t.fail("path", f"not a {kind.noun} ({kind.what}): {path}")
+    p: dict = {"path": str(path)}
+    own, read = kind.option_names(""), kind.option_names("reader")
+    values = {k: t.raw(k) for k in own if t.has(k)}
+    t.used.update(own)
+    default_reader = {"max_usable_range": 20.0} if "max_usable_range" in read else {}
+    rt = Table(source, f"{t.where}.reader", t.raw("reader", default_reader))
+    for k in rt.table:
+        if k not in read:
+            known = f"known here: {', '.join(sorted(read))}" if read else f"a {kind.noun} takes no reader options"
+            rt.fail(k, f"unknown key ({known})")
+    options = _parse_options(kind, values | rt.table, lambda k: rt if k in read else t)
+    if own:
+        p[kind.name] = {k: getattr(options, k) for k in values}
+    p["reader"] = {k: getattr(options, k) for k in rt.table}
+    p["resolution"] = t.get("resolution", "float", 0.05, lo=0, lo_open=True)
+    ext = t.raw("extent", None)
+    if ext is not None:
+        if not (
+            isinstance(ext, list)
+            and len(ext) == 4
+            and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in ext)
+        ):
+            t.fail("extent", f"must be [x0, y0, width, height] in metres, got {ext!r}")
+        if ext[2] <= 0 or ext[3] <= 0:
+            t.fail("extent", f"width and height must be > 0, got {ext!r}")
+        ext = [float(x) for x in ext]
+        res = p["resolution"]
+        _too_many(t, "extent", round(ext[3] / res), round(ext[2] / res), max_cells, f"{ext} at {res} m a cell")
+    p["extent"] = ext
+    p["margin"] = t.get("margin", "float", 1.0, lo=0)
+    p["sigma_cells"] = t.get("sigma_cells", "float", 3.0, lo=0, lo_open=True)
+    p["pose_fraction"] = t.get("pose_fraction", "float", 1.0, sweep=True, lo=0, lo_open=True, hi=1)
+    if t.has("beam_increment_deg"):
+        if t.has("beam_step"):
+            t.fail("beam_increment_deg", "give beam_step or beam_increment_deg, not both")
+        p["beam_step"] = _steps_for_increment(t, kind, path, options)
     else:
-        raw_path = t.get("path", "str", required=True)
-        path = Path(os.path.expandvars(os.path.expanduser(raw_path)))
-        if not path.is_absolute():
-            path = (base_dir / path).resolve()
-        if not path.exists():
-            t.fail("path", f"no such {'log file' if kind == 'log' else 'bag'}: {path}")
-        p["path"] = str(path)
-        reader = t.raw("reader", {"max_usable_range": 20.0})
-        rt = Table(source, f"{t.where}.reader", reader)
-        r = {}
-        if kind == "bag":
-            p["bag"] = _bag_keys(t, path)
-            for k, (vk, lo, lo_open, choices) in BAG_READER_KEYS.items():
-                if rt.has(k):
-                    r[k] = rt.get(k, vk, lo=lo, lo_open=lo_open, choices=choices)
-        else:
-            for k in READER_KEYS:
-                if rt.has(k):
-                    r[k] = rt.raw(k)
-            for k in ("max_usable_range", "no_return_threshold", "max_range"):
-                if k in r:
-                    r[k] = rt.get(k, "float", lo=0, lo_open=True)
-            if "min_range" in r:
-                r["min_range"] = rt.get("min_range", "float", lo=0)
-            for k in ("strict", "apply_laser_offset"):
-                if k in r:
-                    rt.get(k, "bool")
-            for k in ("usable_range_rule", "no_return"):
-                if k in r:
-                    rt.get(k, "str", choices=("drop", "max"))
-        rt.finish(optional=BAG_READER_KEYS if kind == "bag" else READER_KEYS)
-        p["reader"] = r
-        p["resolution"] = t.get("resolution", "float", 0.05, lo=0, lo_open=True)
-        ext = t.raw("extent", None)
-        if ext is not None:
-            if not (
-                isinstance(ext, list)
-                and len(ext) == 4
-                and all(isinstance(x, (int, float)) and not isinstance(x, bool) for x in ext)
-            ):
-                t.fail("extent", f"must be [x0, y0, width, height] in metres, got {ext!r}")
-            if ext[2] <= 0 or ext[3] <= 0:
-                t.fail("extent", f"width and height must be > 0, got {ext!r}")
-            ext = [float(x) for x in ext]
-            res = p["resolution"]
-            _too_many(t, "extent", round(ext[3] / res), round(ext[2] / res), max_cells, f"{ext} at {res} m a cell")
-        p["extent"] = ext
-        p["margin"] = t.get("margin", "float", 1.0, lo=0)
-        p["sigma_cells"] = t.get("sigma_cells", "float", 3.0, lo=0, lo_open=True)
-        p["pose_fraction"] = t.get("pose_fraction", "float", 1.0, sweep=True, lo=0, lo_open=True, hi=1)
-        if t.has("beam_increment_deg"):
-            if t.has("beam_step"):
-                t.fail("beam_increment_deg", "give beam_step or beam_increment_deg, not both")
-            p["beam_step"] = _steps_for_increment(t, kind, p)
-        else:
-            p["beam_step"] = t.get("beam_step", "int", 1, sweep=True, lo=1)
-        bt = Table(source, f"{t.where}.benchmark", t.raw("benchmark", {}))
-        p["benchmark"] = {
-            "delta": _check_delta(bt, "delta", "haehnel"),
-            "threshold": bt.get("threshold", "float", 0.20, lo=0, lo_open=True, hi=1),
-            "prior": bt.get("prior", "float", 0.5, lo=0, lo_open=True, hi=1),
-        }
-        bt.finish()
-        base_keys = ("path", "reader", "resolution", "extent", "margin", "benchmark")
-        if kind == "bag":
-            base_keys += ("bag",)
+        p["beam_step"] = t.get("beam_step", "int", 1, sweep=True, lo=1)
+    bt = Table(source, f"{t.where}.benchmark", t.raw("benchmark", {}))
+    p["benchmark"] = {
+        "delta": _check_delta(bt, "delta", "haehnel"),
+        "threshold": bt.get("threshold", "float", 0.20, lo=0, lo_open=True, hi=1),
+        "prior": bt.get("prior", "float", 0.5, lo=0, lo_open=True, hi=1),
+    }
+    bt.finish()
+    return p, ("path", "reader", "resolution", "extent", "margin", "benchmark", *((kind.name,) if own else ()))
+
+
+def dataset_kinds() -> tuple[str, ...]:
+    """The input kinds a ``[[datasets]]`` entry may name: ``simulated`` and every kind that reads a file
+    (:mod:`ogm_ppl.inputs`; kinds of one's own included, once their modules are imported)."""
+    from ogm_ppl.extensions import load_extensions
+    from ogm_ppl.inputs import get_input_kind, input_kinds
+
+    load_extensions()
+    return ("simulated", *[k for k in input_kinds() if get_input_kind(k).reads_file])
+
+
+def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int, max_cells: int = MAX_CELLS) -> list[DatasetSpec]:
+    from ogm_ppl.inputs import get_input_kind
+
+    t, name = named_entry(source, "datasets", i, d)
+    kind = get_input_kind(t.get("kind", "str", required=True, choices=dataset_kinds()))
+    if kind.reads_file:
+        p, base_keys = _file_keys(t, kind, source, base_dir, max_cells)
+    else:
+        p, base_keys = _scene_keys(t, kind, name, seed, base_dir, max_cells)
     t.finish()
     swept = [k for k in SWEEP_KEYS if isinstance(p.get(k), list)]
     out = []
@@ -416,31 +415,25 @@ def _dataset_entry(source: str, base_dir: Path, i: int, d, seed: int, max_cells:
             DatasetSpec(
                 name=name + suffix,
                 entry=name,
-                kind=kind,
+                kind=kind.name,
                 params=q,
                 condition=name + cond,
                 base=name + base_sfx,
-                base_params={"kind": kind, **{k: q[k] for k in base_keys}},
+                base_params={"kind": kind.name, **{k: q[k] for k in base_keys}},
                 measurement_fraction=float(q["pose_fraction"]) / int(q["beam_step"]),
             )
         )
     return out
 
 
-def _log_increment_deg(t: Table, kind: str, p: dict) -> float:
-    """The angular increment (degrees) between neighbouring beams of the log or bag of a dataset entry, read
-    with the entry's reader options; refused (naming ``path``) if the scans have no single increment."""
+def _log_increment_deg(t: Table, kind, path: Path, options) -> float:
+    """The angular increment (degrees) between neighbouring beams of the scans of a dataset entry, read with
+    the entry's options; refused (naming ``path``) if the scans have no single increment."""
+    from ogm_ppl.inputs import read_input
+
     try:
-        if kind == "bag":
-            from ogm_ppl.datasets.rosbag import bag_info
-
-            info = bag_info(p["path"], p["bag"]["scan_topic"])
-            incs = np.abs(np.degrees(np.asarray(info["angle_increment"], dtype=np.float64)))
-        else:
-            from ogm_ppl.datasets import read_carmen
-
-            a = read_carmen(p["path"], **p["reader"]).scans.angles
-            incs = np.abs(np.degrees(np.diff(np.atleast_2d(a), axis=1))).ravel()
+        a = read_input(kind.name, path, options).scans.angles
+        incs = np.abs(np.degrees(np.diff(np.atleast_2d(a), axis=1))).ravel()
     except (OSError, ValueError) as e:
         t.fail("path", f"cannot read the beam increment for beam_increment_deg ({type(e).__name__}: {e})")
     if incs.size == 0:
@@ -451,11 +444,11 @@ def _log_increment_deg(t: Table, kind: str, p: dict) -> float:
     return inc
 
 
-def _steps_for_increment(t: Table, kind: str, p: dict):
-    """``beam_step`` for ``beam_increment_deg`` (a number or a sweep): the multiple of the log's increment,
-    within 1 %; refused naming the nearest increment the log allows otherwise."""
+def _steps_for_increment(t: Table, kind, path: Path, options):
+    """``beam_step`` for ``beam_increment_deg`` (a number or a sweep): the multiple of the scans' increment,
+    within 1 %; refused naming the nearest increment the scans allow otherwise."""
     wanted = t.get("beam_increment_deg", "float", sweep=True, lo=0, lo_open=True)
-    inc = _log_increment_deg(t, kind, p)
+    inc = _log_increment_deg(t, kind, path, options)
     steps = []
     for v in np.atleast_1d(wanted):
         k = round(float(v) / inc)
@@ -467,35 +460,6 @@ def _steps_for_increment(t: Table, kind: str, p: dict):
             )
         steps.append(k)
     return steps if isinstance(wanted, list) else steps[0]
-
-
-def _bag_keys(t: Table, path: Path) -> dict:
-    """The topics and pose options of a ``kind = "bag"`` entry (module docstring), checked here."""
-    from ogm_ppl.datasets.rosbag import bag_kind
-
-    if bag_kind(path) is None:
-        t.fail("path", f"not a ROS bag (a ROS 1 .bag file, or a ROS 2 bag folder or its .db3 / .mcap): {path}")
-    b: dict = {"scan_topic": t.get("scan_topic", "str", required=True)}
-    pose = t.get("pose_topic", "str", None)
-    tf = t.get("tf", "bool", False)
-    if (pose is None) == (not tf):
-        t.fail("pose_topic" if pose is not None else "tf", "give pose_topic or tf = true, one of them")
-    b["pose_topic"], b["tf"] = pose, tf
-    if t.has("map_frame") and not tf:
-        t.fail("map_frame", "applies to tf = true")
-    b["map_frame"] = t.get("map_frame", "str", "map")
-    off = t.raw("laser_offset", [0.0, 0.0, 0.0])
-    if not (
-        isinstance(off, list)
-        and len(off) == 3
-        and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in off)
-    ):
-        t.fail("laser_offset", f"must be [x, y, yaw] (metres, radians), got {off!r}")
-    if tf and any(off):
-        t.fail("laser_offset", "applies to pose_topic; with tf = true the mounting comes from /tf_static")
-    b["laser_offset"] = [float(x) for x in off]
-    b["pose_tolerance"] = t.get("pose_tolerance", "float", 0.1, lo=0)
-    return b
 
 
 def _algorithm(source: str, i: int, a) -> AlgorithmSpec:

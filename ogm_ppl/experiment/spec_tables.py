@@ -8,7 +8,6 @@ these, so its errors read as the shipped kinds' do.
 
 from __future__ import annotations
 
-import math
 import os
 import re
 import sys
@@ -16,6 +15,8 @@ import zlib
 from pathlib import Path
 
 import numpy as np
+
+from ogm_ppl.options import Bool, Choice, Float, Int, Kind, Text, _Bad
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -45,13 +46,26 @@ def derive_seed(root: int, *parts, bits: int = 63) -> int:
     return int(int(state[0]) >> (64 - bits))
 
 
+def _option_kind(kind: str, lo, hi, lo_open: bool) -> Kind:
+    """The option kind that checks a table's ``"int"``, ``"float"``, ``"bool"`` or ``"str"`` value."""
+    if kind == "int":
+        return Int(None if lo is None else lo + 1 if lo_open else lo, hi)
+    if kind == "float":
+        return Float(lo, hi, lo_open)
+    if kind in ("bool", "str") and lo is None and hi is None:
+        return Bool() if kind == "bool" else Text()
+    raise ValueError(f"a table value is 'int', 'float', 'bool' or 'str' (bounds for numbers only), got {kind!r}")
+
+
 class Table:
     """Reads the keys of one TOML table; every error names the source, the table and the key.
 
     ``get(key, kind, default, required=..., sweep=..., lo=, hi=, lo_open=, choices=)`` reads a value of
     ``kind`` (``"int"``, ``"float"``, ``"bool"``, ``"str"``) within its bounds (a list of values where
-    ``sweep``); ``raw(key)`` reads anything; ``finish()`` refuses a key nothing read; ``fail(key, msg)``
-    raises :class:`SpecError` naming the source, the table and the key."""
+    ``sweep``), checked by the library's one option system (:mod:`ogm_ppl.options`: :class:`Int`,
+    :class:`Float`, :class:`Bool`, :class:`Text`, :class:`Choice`); ``raw(key)`` reads anything; ``finish()``
+    refuses a key nothing read; ``fail(key, msg)`` raises :class:`SpecError` naming the source, the table and
+    the key."""
 
     def __init__(self, source: str, where: str, table) -> None:
         self.source, self.where = source, where
@@ -72,26 +86,12 @@ class Table:
         return self.table.get(key, default)
 
     def _one(self, key, v, kind, lo=None, hi=None, lo_open=False, choices=None):
-        if kind == "int":
-            if isinstance(v, bool) or not isinstance(v, int):
-                self.fail(key, f"must be an integer, got {v!r}")
-        elif kind == "float":
-            if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-                self.fail(key, f"must be a finite number, got {v!r}")
-            v = float(v)
-        elif kind == "bool":
-            if not isinstance(v, bool):
-                self.fail(key, f"must be true or false, got {v!r}")
-        elif kind == "str":
-            if not isinstance(v, str) or not v:
-                self.fail(key, f"must be a non-empty string, got {v!r}")
-        if choices is not None and v not in choices:
-            self.fail(key, f"must be one of {', '.join(map(repr, choices))}, got {v!r}")
-        if lo is not None and (v <= lo if lo_open else v < lo):
-            self.fail(key, f"must be {'>' if lo_open else '>='} {lo}, got {v!r}")
-        if hi is not None and v > hi:
-            self.fail(key, f"must be <= {hi}, got {v!r}")
-        return v
+        """``v`` checked by the option kind (:mod:`ogm_ppl.options`) of ``kind`` within its bounds and choices."""
+        try:
+            v = _option_kind(kind, lo, hi, lo_open).value(v)
+            return v if choices is None else Choice(*choices).value(v)
+        except _Bad as e:
+            self.fail(key, str(e))
 
     def get(self, key, kind, default=None, required=False, sweep=False, **check):
         if key not in self.table:

@@ -4,8 +4,9 @@ output folder, so that the same call gives the same files in this process or on 
 =========  ============================================================== ==================================
 task       does                                                           done when (resume)
 =========  ============================================================== ==================================
-base       simulated: ground-truth map + planned route; log, bag: the     ``datasets/_base/B.json``
-           read log or bag, the benchmark map (traditional OGM > thr)
+base       simulated: ground-truth map + planned route; a file (log,      ``datasets/_base/B.json``
+           bag, ...): its scans read (:mod:`ogm_ppl.inputs`), the
+           benchmark map (traditional OGM > thr)
 dataset    the readings of one dataset (``save_dataset``) + what it is    ``datasets/D.json``
            scored on (truth, mapped and touched cells: ``D.eval.npz``)
 run        one algorithm on one dataset (one chain): marginals            ``tasks/D/A/cN/result.json``
@@ -48,6 +49,7 @@ __all__ = [
     "score_path",
     "task_env",
     "algorithm_prior_digest",
+    "base_source",
     "task_hash",
 ]
 
@@ -164,12 +166,26 @@ def _png(path: Path, probs, grid, title: str, dpi: int) -> None:
 
 
 # ------------------------------------------------------------------------------------------ base
+def base_source(ds) -> list:
+    """What identifies the file a dataset's base reads, as it is now (the source of the input's
+    :func:`~ogm_ppl.inputs.resume_key`: path, size, modification time), in the base task's hash so that a base
+    is rebuilt when its log changes; ``[]`` for a simulated scene (its plan's digest is in its parameters)."""
+    from ogm_ppl.inputs import get_input_kind, resume_key
+
+    kind = get_input_kind(ds.kind)
+    if not kind.reads_file:
+        return []
+    p = ds.base_params
+    return [resume_key(kind, p["path"], kind.parse({**p.get(ds.kind, {}), **p["reader"]}))["source"]]
+
+
 def run_base(ds, out: str | Path, h: str, max_cells: int = MAX_CELLS) -> dict:
     """Build the shared part of a dataset (see the module docstring); returns its done-record. A log whose
     grid would exceed ``max_cells`` cells is refused (``ValueError`` naming the log and the limit)."""
     from ogm_ppl.datasets.dataset_file import save_dataset
     from ogm_ppl.grid import Grid
     from ogm_ppl.inference import evidence_grid_from_scans
+    from ogm_ppl.inputs import get_input_kind, read_input
     from ogm_ppl.models import delta_by_name
 
     out = Path(out)
@@ -177,56 +193,30 @@ def run_base(ds, out: str | Path, h: str, max_cells: int = MAX_CELLS) -> dict:
     t0 = time.perf_counter()
     npz = base_dir(out) / f"{ds.base}.npz"
     with task_env():
-        if ds.kind == "simulated":
-            from ogm_ppl.datasets.mapgen import KINDS, generate_map
-            from ogm_ppl.datasets.stop_and_scan import plan_route
+        if not get_input_kind(ds.kind).reads_file:  # a simulated scene: its truth and route
+            from ogm_ppl.inputs.simulated import simulated_route, simulated_scene
 
-            if "plan" in p:  # a floor plan of your own: its unknown cells (outside, unseen) are walls
-                from ogm_ppl.datasets.plan_files import load_plan_file
-
-                with warnings.catch_warnings():  # parse_spec read the plan and showed its warnings once
-                    warnings.filterwarnings("ignore", message=r".*origin yaw .* ignored", category=UserWarning)
-                    plan = load_plan_file(
-                        p["plan"], pixel_size=p["pixel_size"], resolution=p["resolution"], outside="unknown"
-                    )
-                kind = "plan"
-                # a plan's row 0 is the image's top; a grid's row 0 is its bottom (smallest y)
-                known = np.flipud(np.asarray(plan.known, bool))
-                truth = np.flipud(np.asarray(plan.occupancy, bool)) | ~known
-            else:
-                kind = KINDS[p["map_seed"] % len(KINDS)] if p["map"] == "mixed" else p["map"]
-                truth = generate_map(kind, tuple(p["size"]), seed=p["map_seed"], border=p["border"])
-                known = np.ones_like(truth)
-            grid = Grid(truth.shape, resolution=p["resolution"])
-            route = plan_route(
-                truth,
-                grid,
-                num_poses=p["poses"],
-                max_range_cells=p["max_range_cells"],
-                seed=p["seed"],
-            )
-            _savez(npz, grid=_grid_array(grid), truth=truth, known=known, route=route)
+            scene_keys = ("map", "size", "border", "map_seed", "plan", "pixel_size", "resolution")
+            with warnings.catch_warnings():  # parse_spec read the plan and showed its warnings once
+                warnings.filterwarnings("ignore", message=r".*origin yaw .* ignored", category=UserWarning)
+                scene = simulated_scene(**{k: p[k] for k in scene_keys if k in p})
+            route = simulated_route(scene, poses=p["poses"], max_range_cells=p["max_range_cells"], seed=p["seed"])
+            grid = scene.grid
+            _savez(npz, grid=_grid_array(grid), truth=scene.truth, known=scene.known, route=route)
             info = {
-                "map_kind": kind,
-                "known_share": float(known.mean()),
+                "map_kind": scene.map_kind,
+                "known_share": float(scene.known.mean()),
                 "route_poses": len(route),
-                "occupied_share": float(truth.mean()),
+                "occupied_share": float(scene.truth.mean()),
             }
         else:
-            from ogm_ppl.datasets.carmen import CarmenLog, read_carmen
-            from ogm_ppl.datasets.rosbag import BagLog, read_bag
-
-            log: CarmenLog | BagLog
-            if ds.kind == "bag":
-                log = read_bag(p["path"], **p["bag"], **p["reader"])
-            else:
-                log = read_carmen(p["path"], **p["reader"])
+            log = read_input(ds.kind, p["path"], {**p.get(ds.kind, {}), **p["reader"]})
             if p["extent"] is not None:
                 x0, y0, w, hgt = p["extent"]
                 res = p["resolution"]
                 grid = Grid((round(hgt / res), round(w / res)), res, (x0, y0))
             else:
-                grid = log.grid(p["resolution"], p["margin"])
+                grid = log.covering_grid(p["resolution"], p["margin"])
             if grid.num_cells > max_cells:
                 raise ValueError(
                     f"{p['path']}: the log's grid at {p['resolution']} m a cell is {grid.rows:,} x {grid.cols:,} = "
@@ -251,7 +241,7 @@ def run_base(ds, out: str | Path, h: str, max_cells: int = MAX_CELLS) -> dict:
                 "valid_readings": int(log.scans.num_valid),
                 "benchmark_occupied": int(truth.sum()),
                 "mapped_share": float(mapped.mean()),
-                "log_counts": {k: int(v) for k, v in log.counts.items()},
+                "log_counts": {k: int(v) for k, v in getattr(log.record, "counts", {}).items()},
             }
     rec = {
         "hash": h,
@@ -280,13 +270,13 @@ def run_dataset(ds, out: str | Path, h: str, _base=None) -> dict:
             route = z["route"] if "route" in z.files else None
             mapped = z["mapped"].astype(bool) if "mapped" in z.files else None
             known = z["known"].astype(bool) if "known" in z.files else np.ones_like(truth)
-        if ds.kind == "simulated":
-            from ogm_ppl.datasets.stop_and_scan import stop_and_scan
+        if route is not None:  # a simulated scene: scanned at its route's stops
+            from ogm_ppl.inputs.simulated import simulated_scans
 
-            data = stop_and_scan(
+            data = simulated_scans(
                 truth,
                 grid,
-                route=route,
+                route,
                 beams=p["beams"],
                 max_range_cells=p["max_range_cells"],
                 sigma_cells=p["sigma_cells"],

@@ -69,6 +69,7 @@ from ogm_ppl.scans import Scans
 
 __all__ = [
     "RULES",
+    "Choice",
     "ExplorationRun",
     "Mapper",
     "Method",
@@ -413,6 +414,25 @@ class ExplorationRun:
         return path_to(self.records, key, level)
 
 
+@dataclass(frozen=True)
+class Choice:
+    """What a rule chose from at a stop of :func:`explore` (its ``on_choice`` hook): the ``chosen`` index of
+    ``candidates`` (None: none worth driving to), the posterior ``samples`` (sample rules, else None), the cells
+    ``observed`` so far, and what the rule scored with (the ``sensor``, the beams ``info_angles`` scored for
+    information, the scan's beams ``scan_angles``, ``max_range`` in metres, the distance offset ``d0``)."""
+
+    stop: int
+    chosen: int | None
+    candidates: Candidates
+    samples: Any
+    observed: np.ndarray
+    sensor: Any
+    info_angles: np.ndarray
+    scan_angles: np.ndarray
+    max_range: float
+    d0: float
+
+
 def choose_start(truth: np.ndarray, clearance_cells: float, seed: int) -> tuple[int, int]:
     """A seeded random cell of the largest 8-connected region of cells farther than ``clearance_cells`` from
     every occupied cell and the grid edge (``plan_route``'s default start)."""
@@ -446,6 +466,7 @@ def explore(
     mask=None,
     mapper_factory: Callable | None = None,
     prior=None,
+    on_choice: Callable[[Choice], None] | None = None,
 ) -> ExplorationRun:
     r"""Explore ``truth`` (``rows x cols`` bool, True = occupied) with ``method`` for at most ``stops`` scans.
 
@@ -456,6 +477,7 @@ def explore(
         mapper_factory: ``factory(grid, sensor, prior, robot, seed, patch) -> Mapper`` for rule
             ``sample_info`` and ``sample_coverage`` (default :func:`default_mapper`).
         prior: a :class:`~ogm_ppl.priors.MapPrior` to use instead of ``prior_by_name(method.prior)``.
+        on_choice: called with the :class:`Choice` of each stop after the rule chose (a probe of the rule).
 
     The run is a function of ``seed``: the start, the range noise of stop ``i`` (its own stream
     ``SeedSequence(seed).spawn``) and the chain (torch's generator is seeded here and restored afterwards).
@@ -538,6 +560,8 @@ def explore(
                 method, robot, planner, grid, cell, q, q_ogm, samples, ogm.observed, stops_done, sensor,
                 info_angles, max_range, d0, np.random.default_rng(streams[i].spawn(1)[0]), scan_angles=angles,
             )  # fmt: skip
+            if on_choice is not None:
+                on_choice(Choice(i, goal, cand, samples, ogm.observed, sensor, info_angles, angles, max_range, d0))
             if goal is None:
                 stopped = "no candidate"
                 break

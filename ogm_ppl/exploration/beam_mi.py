@@ -17,18 +17,21 @@ from __future__ import annotations
 
 import math
 
-import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.exploration.rays import RayTable
-from ogm_ppl.sensors_compiled import SHIPPED_READINGS, coord, fill_row, num_outcomes
+from ogm_ppl.sensors_compiled import coord, fill_row, num_outcomes
 
 __all__ = ["NEGLIGIBLE", "beam_mi_kernel"]
 
 NEGLIGIBLE = 1e-15  # first hits of smaller probability are left out of the per-beam sum (< 1e-13 bits)
 
 
-def _beam_mi(pf, rays: RayTable, Fray, reading):
+# cached on disk for the shipped reading kinds only: a kind of one's own compiles once per process (numba's cache
+# index pickles every bundle type; ogm_ppl._numba_cache)
+@njit_shipped
+def beam_mi_kernel(pf, rays: RayTable, Fray, reading):
     """``I(f_r; z_r)`` in nats for every ray ``r`` (``R`` float64) from its first-hit distribution
     ``pf[r, :len_r + 1]`` (``R x (Lmax + 1)``), on rays whose last kappa is ``Fray[r]``, under the reading
     model of the bundle ``reading``."""
@@ -71,18 +74,3 @@ def _beam_mi(pf, rays: RayTable, Fray, reading):
                     mi += pv * math.log(rows[i, j] / q[j])
         out[r] = max(mi, 0.0)
     return out
-
-
-# Numba's on-disk cache keeps one index per function, pickling the type of every specialisation; a reading kind of
-# one's own (a bundle class in a notebook or a script) in that index would make every other process that cannot
-# import its module fail to load the function at all. Shipped kinds compile once and stay on disk; others compile
-# once per process.
-_beam_mi_cached = nb.njit(cache=True)(_beam_mi)
-_beam_mi_own = nb.njit(cache=False)(_beam_mi)
-
-
-def beam_mi_kernel(pf, rays: RayTable, Fray, reading):
-    """``I(f_r; z_r)`` in nats for every ray (:func:`_beam_mi`), compiled for the bundle type of ``reading``: cached
-    on disk for the shipped reading kinds, in this process only for a kind of one's own."""
-    kernel = _beam_mi_cached if type(reading) in SHIPPED_READINGS else _beam_mi_own
-    return kernel(pf, rays, Fray, reading)

@@ -133,9 +133,7 @@ def candidate_rays(
     except ValueError as e:  # a 1D grid with a beam off the row: name the candidate and beam
         B = A.shape[0]
         raise ValueError(f"candidate beams (reading i is candidate i // {B}, beam i % {B}): {e}") from e
-    offsets, cells, t_enter, _, _, range_len = traverse_all(
-        ri.u0, ri.v0, ri.du, ri.dv, ri.length, ri.range_cells, ri.is_max, grid.rows, grid.cols
-    )
+    offsets, cells, t_enter, _, _, range_len = traverse_all(ri.arrays(), grid.rows, grid.cols)
     return CandidateRays(grid, P, A, mr, offsets, cells, t_enter, range_len, pose_cells)
 
 

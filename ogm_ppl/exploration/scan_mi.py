@@ -22,9 +22,10 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.exploration.first_hits import PackedSamples, ctz
 from ogm_ppl.exploration.rays import RayTable
-from ogm_ppl.sensors_compiled import SHIPPED_READINGS, coord, draw, log_reading, num_outcomes
+from ogm_ppl.sensors_compiled import coord, draw, log_reading, num_outcomes
 
 __all__ = ["Draws", "first_hit_groups", "kept_samples", "sample_first_hits", "scan_mi_kernel"]
 
@@ -138,7 +139,9 @@ def first_hit_groups(fh, rays: RayTable, c):
     return gid, gval, gnum
 
 
-def _scan_mi(samples: PackedSamples, rays: RayTable, Fray, reading, binned, draws: Draws):
+# cached on disk for the shipped reading kinds only (see beam_mi)
+@njit_shipped
+def scan_mi_kernel(samples: PackedSamples, rays: RayTable, Fray, reading, binned, draws: Draws):
     """Nested Monte-Carlo ``I(m; Z)`` in nats per candidate (module docstring): ``(mean, variance of the
     terms)``, ``C`` float64 each; a candidate whose cell is occupied in every sample gets ``nan``. ``Fray``:
     the last kappa of every ray; ``reading``: the sensor's reading bundle; ``binned``: score continuous ranges
@@ -196,15 +199,3 @@ def _scan_mi(samples: PackedSamples, rays: RayTable, Fray, reading, binned, draw
         mean[c] = m1
         var[c] = m2 / (N - 1) if N > 1 else 0.0
     return mean, var
-
-
-# cached on disk for the shipped reading kinds only (see beam_mi: numba's cache index pickles every bundle type)
-_scan_mi_cached = nb.njit(cache=True)(_scan_mi)
-_scan_mi_own = nb.njit(cache=False)(_scan_mi)
-
-
-def scan_mi_kernel(samples: PackedSamples, rays: RayTable, Fray, reading, binned, draws: Draws):
-    """Nested Monte-Carlo ``I(m; Z)`` per candidate (:func:`_scan_mi`), compiled for the bundle type of
-    ``reading``: cached on disk for the shipped reading kinds, in this process only for a kind of one's own."""
-    kernel = _scan_mi_cached if type(reading) in SHIPPED_READINGS else _scan_mi_own
-    return kernel(samples, rays, Fray, reading, binned, draws)

@@ -13,11 +13,11 @@ This package sits above the datasets, inference, priors and :mod:`ogm_ppl.calibr
 
 >>> from ogm_ppl.learn import fit_tables, fit_backoff, fit_field, fit_deltas, fit_delta_setting, train_corpus_guide
 >>> from ogm_ppl.learn import fit_temper, select_headline_prior, fit_bias
->>> sorted(CORPORA)
-['dungeon', 'generated', 'houseexpo', 'ipa']
+>>> CORPORA
+('generated', 'houseexpo', 'ipa', 'dungeon', 'houseexpo-full', 'r2v', 'schools')
 """
 
-from ogm_ppl.learn._fit_common import CORPORA, FitOptionError, FitResult, TrainingPlans, training_plans
+from ogm_ppl.learn._fit_common import CORPORA, FitOptionError, FitResult, TrainingPlans, load_training_plans
 from ogm_ppl.learn.backoff import fit_backoff
 from ogm_ppl.learn.bias import BiasSettings, fit_bias
 from ogm_ppl.learn.delta_setting import fit_delta_setting
@@ -60,5 +60,5 @@ __all__ = [
     "select_headline_prior",
     "train_corpus_guide",
     "train_prior_guide",
-    "training_plans",
+    "load_training_plans",
 ]

@@ -6,6 +6,8 @@ The training plans of a corpus are those the shipped priors were fitted on (thes
 100); ``houseexpo`` and ``ipa`` = their training split without the buildings of the real logs
 (:func:`~ogm_ppl.datasets.floorplans.training_plans`), ``dungeon`` = the first 300 of its training split; each
 rasterised by :func:`~ogm_ppl.datasets.floorplans.load_plan`'s defaults (outside = occupied, 20-cell margin).
+The other floor-plan corpora (``houseexpo-full``, ``r2v``, ``schools``; no shipped priors) likewise: their
+training split, at 0.05 m (``--limit`` keeps the first plans: ``houseexpo-full`` has 26,899).
 Plan files (:func:`~ogm_ppl.datasets.plan_files.plan_files`: ROS map YAMLs, HouseExpo layouts, images with a
 pixel size, folders of them) are read by :func:`~ogm_ppl.datasets.plan_files.load_plan_file` at
 ``resolution`` metres per cell, in the order :func:`~ogm_ppl.datasets.plan_files.plan_files` lists them.
@@ -25,17 +27,23 @@ from typing import Any
 
 import numpy as np
 
+from ogm_ppl.datasets.floorplans import CORPORA as FLOORPLAN_CORPORA
+
 __all__ = [
     "CORPORA",
+    "SHIPPED_CORPORA",
     "FitOptionError",
     "FitResult",
     "TrainingPlans",
-    "training_plans",
+    "load_training_plans",
     "validation_split",
 ]
 
-#: the corpora whose training plans a prior can be fitted on by name
-CORPORA: tuple[str, ...] = ("generated", "houseexpo", "ipa", "dungeon")
+#: the corpora the shipped priors were fitted on (the defaults of the fits that adjust shipped priors)
+SHIPPED_CORPORA: tuple[str, ...] = ("generated", "houseexpo", "ipa", "dungeon")
+#: the corpora whose training plans a prior can be fitted on by name: the generated maps and every floor-plan
+#: corpus (:data:`ogm_ppl.datasets.floorplans.CORPORA`)
+CORPORA: tuple[str, ...] = ("generated", *FLOORPLAN_CORPORA)
 #: how many training plans of a corpus are taken by default (the others: all of them)
 DEFAULT_LIMITS: dict[str, int] = {"generated": 100, "dungeon": 300}
 #: the generated corpus: map shape, seed and frame
@@ -166,7 +174,7 @@ class TrainingPlans:
         return args
 
 
-def training_plans(
+def load_training_plans(
     source: str | PlanPaths | TrainingPlans,
     *,
     limit: int | None = None,
@@ -253,6 +261,7 @@ def _corpus_plans(corpus: str, limit: int | None) -> TrainingPlans:
             "split": "train",
             "plans": len(names),
             "excluded_buildings": list(fp.REAL_LOG_BUILDINGS),
+            "split_rule": fp.split_rule(corpus),
             "resolution": fp.DEFAULT_RESOLUTION[corpus],
             "outside": "occupied",
             "margin": 20,

@@ -3,7 +3,7 @@ fit part, its usable validation windows, and the output folder (``out_dir``, or 
 when shipping).
 
 The split is :func:`~ogm_ppl.learn.fit_backoff`'s: the corpus's training plans
-(:func:`~ogm_ppl.learn.training_plans`, the real logs' buildings left out) in their natural order, every fifth
+(:func:`~ogm_ppl.learn.load_training_plans`, the real logs' buildings left out) in their natural order, every fifth
 (``index % 5 == 4``) *validation*, the rest *fit* (the shipped Witten-Bell ``kappa`` were chosen on exactly
 this split, so the backed-off kinds may use them). Tables are counted on the fit part only, with the 8
 symmetries and the shipped ``min_count_5x5 = 2`` (thesis Sections 5.2.2-5.2.3).
@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
-from ogm_ppl.learn._fit_common import FitOptionError, check_out_dir, training_plans, validation_split
+from ogm_ppl.learn._fit_common import FitOptionError, check_out_dir, load_training_plans, validation_split
 
 __all__ = [
     "VALIDATION_EVERY",
@@ -36,7 +36,7 @@ VALIDATION_EVERY = 5
 
 def split_names(corpus: str) -> tuple[list[str], list[str]]:
     """``(fit, validation)`` plan names of a floor-plan corpus: every fifth training plan is validation."""
-    plans = training_plans(corpus)
+    plans = load_training_plans(corpus)
     fit_idx, val_idx = validation_split(len(plans), VALIDATION_EVERY)
     return [plans.names[i] for i in fit_idx], [plans.names[i] for i in val_idx]
 

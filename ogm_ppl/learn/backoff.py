@@ -40,8 +40,8 @@ from ogm_ppl.learn._fit_common import (
     check_label,
     check_out_dir,
     command,
+    load_training_plans,
     run_provenance,
-    training_plans,
     validation_split,
 )
 
@@ -80,7 +80,7 @@ def fit_backoff(
     out = check_out_dir(out_dir)
     label = check_label(name) if name is not None else None
     every = check_int(validation_every, "validation_every", 2)
-    plans = training_plans(source, limit=limit, pixel_size=pixel_size, resolution=resolution)
+    plans = load_training_plans(source, limit=limit, pixel_size=pixel_size, resolution=resolution)
     label = label or ("plans" if plans.files else plans.corpus)
     fit_idx, val_idx = validation_split(len(plans), every)
     options = [] if every == VALIDATION_EVERY else ["--validation-every", str(every)]

@@ -35,7 +35,15 @@ from typing import Any
 
 import numpy as np
 
-from ogm_ppl.learn._fit_common import CORPORA, FitOptionError, FitResult, check_float, check_int, check_out_dir
+from ogm_ppl.learn._fit_common import (
+    CORPORA,
+    SHIPPED_CORPORA,
+    FitOptionError,
+    FitResult,
+    check_float,
+    check_int,
+    check_out_dir,
+)
 from ogm_ppl.learn._heldout import shell_command
 
 __all__ = ["PRIORS", "STARTS", "BiasSettings", "bias_by_bisection", "empty_model", "fit_bias", "occupancy_trace"]
@@ -191,7 +199,7 @@ def fit_bias(
     priors: Sequence[str],
     out_dir: str | os.PathLike,
     *,
-    train: Sequence[str] = CORPORA,
+    train: Sequence[str] = SHIPPED_CORPORA,
     settings: BiasSettings | None = None,
     progress: bool = True,
 ) -> FitResult:

@@ -39,10 +39,10 @@ import json
 import os
 import shlex
 import time
-from collections.abc import Callable, Iterator, Sequence
-from contextlib import contextmanager
+from collections.abc import Callable, Sequence
 from typing import Any
 
+from ogm_ppl._dtype import float64
 from ogm_ppl.learn._fit_common import FitOptionError, FitResult, check_float, check_int, check_out_dir
 
 __all__ = [
@@ -82,19 +82,6 @@ MAX_F, MAX_DATASETS = 10_000, 1_000_000
 _OPTIMIZER = "torch.optim.LBFGS(line_search_fn='strong_wolfe')"
 
 
-@contextmanager
-def _float64() -> Iterator[None]:
-    """torch's default dtype float64 while fitting (the network's initial weights are drawn in it), restored."""
-    import torch
-
-    old = torch.get_default_dtype()
-    torch.set_default_dtype(torch.float64)
-    try:
-        yield
-    finally:
-        torch.set_default_dtype(old)
-
-
 def _makers() -> dict[str, Callable[[Any], Any]]:
     """Each Table 2.1 family and the network: ``name -> data -> fit result``, from the start values
     (Hähnel's ``log 4`` for the log-odds, Stachniss ``alpha = 3``, Elfes ``sigma = 3, l_min = -10``)."""
@@ -121,13 +108,13 @@ def _makers() -> dict[str, Callable[[Any], Any]]:
 
 def fit_families(data: Any, names: Sequence[str] = FAMILIES, *, pn_upto: int = 0) -> dict[str, Any]:
     """Fit the uniform-prior terms ``names`` (of :data:`FAMILIES`; the ``*_dd`` ones are skipped) on ``data``
-    (:class:`~ogm_ppl.inference.variational.delta_fit.FitData`): ``name -> FitResult`` of
+    (:class:`~ogm_ppl.inference.variational.delta_fit.FitData`): ``name -> DeltaFitResult`` of
     :mod:`~ogm_ppl.inference.variational.delta_fit`, in :data:`FAMILIES` order. pN is fitted from p(N-1), so
     the chain p1 .. pM runs for the largest M named (or ``pn_upto``) and every link of it is returned."""
     from ogm_ppl.inference.variational.delta_fit import fit_delta, warm_start_pn
 
     makers = _makers()
-    with _float64():
+    with float64():
         out = {name: makers[name](data) for name in LITERATURE if name in names}
         upto = max([pn_upto, *(int(n[1:]) for n in names if n in FAMILIES[len(LITERATURE) : -len(DATA_DRIVEN)])])
         prev = None
@@ -232,7 +219,7 @@ def fit_deltas(
     settings = {"num": D, "F": FF, "wall": wl, "sigma": sg, "num_readings": SETTING["num_readings"], "seed": sd}
     t0 = time.perf_counter()
     uniform = [n for n in names if n not in DATA_DRIVEN]
-    with _float64(), Progress(K + 1, "fit-prior deltas", unit="fit", enabled=progress) as bar:
+    with float64(), Progress(K + 1, "fit-prior deltas", unit="fit", enabled=progress) as bar:
         data = wall_datasets(**settings)
         data_dd = wall_datasets(**settings, prior="data_driven") if set(names) & set(DATA_DRIVEN) else None
         t_data = time.perf_counter() - t0
@@ -298,7 +285,7 @@ def _data_driven(names: Sequence[str], full: dict, data_dd: Any) -> tuple[dict, 
     from ogm_ppl.models.delta import NeuralDelta
 
     dd: dict[str, Any] = {}
-    with _float64():
+    with float64():
         if "p21_dd" in names:
             dd["p21_dd"] = fit_delta(warm_start_pn(full["p20"].family, 21), data_dd, **FIT)
         if "neural_dd" in names:

@@ -48,12 +48,12 @@ from ogm_ppl.learn._fit_common import (
     check_label,
     check_out_dir,
     command,
+    load_training_plans,
     run_provenance,
-    training_plans,
     validation_split,
 )
 
-__all__ = ["FieldSettings", "fit_field", "sampler_report"]
+__all__ = ["FieldSettings", "fit_field", "recheck_field", "sampler_report"]
 
 #: the shipped fields: maps 9, 19, ... are validation
 VALIDATION_EVERY = 10
@@ -155,7 +155,7 @@ def fit_field(
     out = check_out_dir(out_dir)
     label = check_label(name) if name is not None else None
     every = check_int(validation_every, "validation_every", 2)
-    plans = training_plans(source, limit=limit, pixel_size=pixel_size, resolution=resolution)
+    plans = load_training_plans(source, limit=limit, pixel_size=pixel_size, resolution=resolution)
     label = label or ("plans" if plans.files else plans.corpus)
     tr_idx, va_idx = validation_split(len(plans), every)
     cmd = command("field", plans, out, _options(s, every, name))
@@ -343,3 +343,22 @@ def sampler_report(
                 flush=True,
             )
     return out
+
+
+def recheck_field(corpus: str, out_dir: str | os.PathLike, *, progress: bool = True) -> Path:
+    """Recompute :func:`sampler_report` of the fit ``field_<corpus>.npz`` in ``out_dir`` against the corpus's
+    validation plans (every :data:`VALIDATION_EVERY`-th training plan) and store it in ``field_<corpus>.json``
+    there (atomically); returns that path."""
+    from ogm_ppl.io import atomic_write_text
+    from ogm_ppl.priors.learn_field import field_stats
+    from ogm_ppl.priors.pattern_field import load_field
+
+    out = Path(out_dir)
+    path = out / f"field_{corpus}.json"
+    info = json.loads(path.read_text())
+    d = load_field(out / f"field_{corpus}.npz")
+    plans = load_training_plans(corpus)
+    _, val = validation_split(len(plans), VALIDATION_EVERY)
+    va = field_stats(list(plans.maps(val)), d["w"], 2)
+    info["sampler_check"] = sampler_report(d, va, progress=progress)
+    return atomic_write_text(path, json.dumps(info, indent=1) + "\n")

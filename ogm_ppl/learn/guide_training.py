@@ -44,6 +44,7 @@ import numpy as np
 import torch
 
 from ogm_ppl.calibration.leakage import GUIDE_JOIN, names_digest
+from ogm_ppl.exceptions import CheckpointError
 from ogm_ppl.inference.variational.amortised import AmortisedGuide
 from ogm_ppl.io import atomic_write, atomic_write_text
 from ogm_ppl.learn.guide_examples import (
@@ -76,10 +77,6 @@ GUIDE_KIND = "ogm_ppl.corpus_guide"
 #: the checkpoint format this module writes and reads
 CHECKPOINT_FORMAT = 1
 _OBJECTIVE = "E_{m ~ corpus, z ~ p(z|m)}[-mean_k log q(m_k|z)] over known unpinned cells"
-
-
-class CheckpointError(ValueError):
-    """A checkpoint that cannot be read, or of a training with other settings."""
 
 
 @dataclass(frozen=True)

@@ -40,8 +40,8 @@ from ogm_ppl.learn._fit_common import (
     check_label,
     check_out_dir,
     command,
+    load_training_plans,
     run_provenance,
-    training_plans,
 )
 
 __all__ = ["MIN_COUNT_5X5", "fit_tables"]
@@ -109,5 +109,5 @@ def _check(source, out_dir, limit, pixel_size, resolution, name, min_count_5x5):
     out = check_out_dir(out_dir)
     min5 = check_int(min_count_5x5, "min_count_5x5", 1)
     label = check_label(name) if name is not None else None
-    plans = training_plans(source, limit=limit, pixel_size=pixel_size, resolution=resolution)
+    plans = load_training_plans(source, limit=limit, pixel_size=pixel_size, resolution=resolution)
     return plans, out, label or ("plans" if plans.files else plans.corpus), min5

@@ -17,21 +17,29 @@ from dataclasses import dataclass
 from typing import Any
 
 from ogm_ppl.io import atomic_write_text
-from ogm_ppl.methods._model import ModelParams
-from ogm_ppl.methods.params import DeltaName, Int, StartMap, param
+from ogm_ppl.methods._model import ModelParams, check_patch_work
+from ogm_ppl.methods.params import DeltaName, Int, ParamError, StartMap, param
 from ogm_ppl.methods.problem import MapProblem, MapResult, RunContext
 
-__all__ = ["INITS", "SamplingParams", "run_kernel"]
+__all__ = ["INITS", "MAX_CELL_UPDATES", "MAX_SWEEPS", "SamplingParams", "run_kernel"]
 
 INITS = ("ogm", "prior", "occupied", "free")
+
+#: the most sweeps (burn-in or counted) a sampling run may ask for: a billion sweeps are days of sampling on the
+#: smallest real map, and the running sums stay exact counts in float64 far beyond
+MAX_SWEEPS = 10**9
+#: the most single-cell updates a sampling run may ask for (``(burn-in + sweeps) x chains x maps swept x cells``):
+#: at the 0.1 to 3 microseconds one costs (a 64 x 64 map, one core), 2^40 are 30 hours or more
+MAX_CELL_UPDATES = 1 << 40
+_WHY_SWEEPS = "ogm_ppl.methods._sampling.MAX_SWEEPS: days of sampling on the smallest real map"
 
 
 @dataclass(frozen=True)
 class SamplingParams(ModelParams):
     """The model's parameters and the length, chains, checkpoints and records of the run."""
 
-    sweeps: int = param(100, Int(lo=1), "sweeps counted in the marginals")
-    burn_in: int = param(0, Int(lo=0), "sweeps run before counting")
+    sweeps: int = param(100, Int(lo=1, hi=MAX_SWEEPS, why=_WHY_SWEEPS), "sweeps counted in the marginals")
+    burn_in: int = param(0, Int(lo=0, hi=MAX_SWEEPS, why=_WHY_SWEEPS), "sweeps run before counting")
     chains: int = param(
         1,
         Int(lo=1),
@@ -43,6 +51,35 @@ class SamplingParams(ModelParams):
     init_delta: str = param("haehnel", DeltaName(), "update term of the 'ogm' starting map")
     checkpoint_every: int = param(10, Int(lo=1), "sweeps between checkpoints (with a checkpoint folder)")
     record: int = param(5, Int(lo=0), "scores of the running marginals recorded after burn-in")
+
+    def sweeps_run(self) -> int:
+        """Sweeps of one chain, whatever counts them (burn-in and counted sweeps)."""
+        return self.burn_in + self.sweeps
+
+    def maps_swept(self) -> int:
+        """Maps a sweep updates (one; a rung each for parallel tempering)."""
+        return 1
+
+    def check_size(self, problem: MapProblem) -> None:
+        """Refuse (:class:`ParamError`, before any work) a run of more than :data:`MAX_CELL_UPDATES` single-cell
+        updates, or a patch kernel enumerating more than
+        :data:`~ogm_ppl.methods._model.MAX_PATCH_CONFIGURATIONS` configurations."""
+        K = problem.grid.num_cells
+        sweeps, copies = self.sweeps_run(), self.maps_swept()
+        updates = sweeps * self.chains * copies * K
+        if updates > MAX_CELL_UPDATES:
+            rungs = f" x {copies:,} maps swept (rungs)" if copies > 1 else ""
+            raise ParamError(
+                "sweeps",
+                f"{sweeps:,} sweeps (burn-in {self.burn_in:,} + {self.sweeps:,}) x {self.chains:,} chains{rungs} x "
+                f"{K:,} cells = {updates:.3g} single-cell updates, over the limit of 2^40 = {MAX_CELL_UPDATES:.3g} "
+                "(ogm_ppl.methods._sampling.MAX_CELL_UPDATES: at 0.1 to 3 microseconds an update, 30 hours or more); "
+                "use fewer sweeps or chains, or a smaller map",
+            )
+        patch = getattr(self, "patch", 1)
+        if patch != 1:
+            what = f"{type(self).__name__.removesuffix('Params')}'s patch kernel"
+            check_patch_work(patch, problem.grid.ndim, K, sweeps * self.chains * copies, False, what)
 
 
 def _read_json(path):
@@ -101,7 +138,7 @@ def run_kernel(kernel, params: SamplingParams, problem: MapProblem, ctx: RunCont
         trace_path.unlink()
     start = _ckpt_sweep(ckpt) if ckpt.exists() else 0
     total = warm + n
-    k = params.record
+    k = min(params.record, n)  # more marks than counted sweeps are the same marks: one a sweep
     marks = sorted({warm + math.ceil(i * n / k) for i in range(1, k + 1)} | {total}) if k else [total]
     if start > total:  # a longer run's checkpoint (fewer sweeps asked for since): a chain cannot go back
         ckpt.unlink()

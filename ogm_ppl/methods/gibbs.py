@@ -19,7 +19,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 from ogm_ppl.methods._model import check_patch_work, patch_arg
-from ogm_ppl.methods._sampling import SamplingParams, run_kernel
+from ogm_ppl.methods._sampling import _WHY_SWEEPS, MAX_SWEEPS, SamplingParams, run_kernel
 from ogm_ppl.methods.params import Bool, Choice, Float, Int, Optional, ParamError, Patch, param
 from ogm_ppl.methods.problem import MapProblem, MapResult, RunContext
 from ogm_ppl.methods.registry import register_method
@@ -50,7 +50,7 @@ class GibbsParams(SamplingParams):
     )
     warm_thesis: int = param(
         0,
-        Int(lo=0),
+        Int(lo=0, hi=MAX_SWEEPS, why=_WHY_SWEEPS),
         "PatchGibbs, table priors: sweeps of the thesis's border update from the starting map; the chain "
         "starts where they end (a starting map: not counted, not part of the chain)",
     )
@@ -67,6 +67,9 @@ class GibbsParams(SamplingParams):
         "sweep on this many of numba's threads (ChromaticCellGibbs / ChromaticPatchGibbs: chromatic tile sweeps, "
         "exact, priors with a compiled face; one chain whatever the number, not the serial kernel's)",
     )
+
+    def sweeps_run(self) -> int:
+        return self.burn_in + self.sweeps + self.warm_thesis
 
     def check(self) -> None:
         super().check()

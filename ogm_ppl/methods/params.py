@@ -1,33 +1,43 @@
 r"""Parameters of a map method: a frozen dataclass whose fields declare their kind, range and meaning.
 
-A field is made with :func:`param`; its *kind* (:class:`Int`, :class:`Float`, :class:`Choice`, ...) checks a
-value read from TOML or Python (:meth:`Kind.value`) and parses one typed on the command line
-(:meth:`Kind.text`). :func:`parse_params` builds the dataclass from a mapping, refusing unknown keys, and
-then calls the dataclass's optional ``check()`` for rules between fields. Every error is a
-:class:`ParamError` naming the key.
+The fields are options of the library's one option system (:mod:`ogm_ppl.options`: :func:`param`, the
+kinds :class:`Int`, :class:`Float`, :class:`Choice`, ..., :func:`parse_params` and :class:`ParamError`, all
+re-exported here); this module adds the kinds only map methods take: a patch shape (:class:`Patch`), a
+proposal block (:class:`Block`), a starting map (:class:`StartMap`) and the names of a prior, a sensor
+model, an update term and an amortised guide.
 
 >>> from dataclasses import dataclass
 >>> @dataclass(frozen=True)
 ... class P:
-...     sweeps: int = param(100, Int(lo=1), "sweeps counted in the marginals")
->>> parse_params(P, {"sweeps": "20"}, text=True)
-P(sweeps=20)
->>> parse_params(P, {"sweeps": 0})
-Traceback (most recent call last):
-...
-ogm_ppl.methods.params.ParamError: sweeps: must be >= 1, got 0
+...     patch: object = param([3, 3], Patch(), "patch shape")
+>>> parse_params(P, {"patch": "2x4"}, text=True)
+P(patch=[2, 4])
 """
 
 from __future__ import annotations
 
-import dataclasses
-import math
 import os
-from collections.abc import Mapping
 from pathlib import Path
-from typing import Any
+
+from ogm_ppl.options import (
+    INT_LIMIT,
+    Bool,
+    Choice,
+    Float,
+    Int,
+    Kind,
+    Optional,
+    Pair,
+    ParamError,
+    Text,
+    _Bad,
+    param,
+    param_fields,
+    parse_params,
+)
 
 __all__ = [
+    "INT_LIMIT",
     "Block",
     "Bool",
     "Choice",
@@ -47,127 +57,6 @@ __all__ = [
     "param_fields",
     "parse_params",
 ]
-
-
-class ParamError(ValueError):
-    """A bad parameter value: ``key`` names the parameter, ``message`` says what is wrong."""
-
-    def __init__(self, key: str, message: str) -> None:
-        self.key, self.message = key, message
-        super().__init__(f"{key}: {message}")
-
-
-class _Bad(Exception):
-    """Raised by a kind; :func:`parse_params` turns it into a :class:`ParamError` naming the key."""
-
-
-class Kind:
-    """What values a parameter takes: :meth:`value` checks (and normalises) a TOML / Python value,
-    :meth:`text` parses a command-line string; both raise on a bad value with a message."""
-
-    def value(self, v: Any) -> Any:
-        return v
-
-    def text(self, s: str) -> Any:
-        return self.value(s)
-
-    def describe(self) -> str:
-        return type(self).__name__.lower()
-
-
-def _range(v, lo, hi, lo_open, hi_open):
-    if lo is not None and (v <= lo if lo_open else v < lo):
-        raise _Bad(f"must be {'>' if lo_open else '>='} {lo}, got {v!r}")
-    if hi is not None and (v >= hi if hi_open else v > hi):
-        raise _Bad(f"must be {'<' if hi_open else '<='} {hi}, got {v!r}")
-    return v
-
-
-def _bounds(lo, hi, lo_open, hi_open) -> str:
-    a = "" if lo is None else f"{'(' if lo_open else '['}{lo}"
-    b = "" if hi is None else f"{hi}{')' if hi_open else ']'}"
-    return f" in {a or '(-inf'}, {b or 'inf)'}" if a or b else ""
-
-
-@dataclasses.dataclass(frozen=True)
-class Int(Kind):
-    """An integer (not a bool) in ``[lo, hi]``."""
-
-    lo: int | None = None
-    hi: int | None = None
-
-    def value(self, v):
-        if isinstance(v, bool) or not isinstance(v, int):
-            raise _Bad(f"must be an integer, got {v!r}")
-        return _range(v, self.lo, self.hi, False, False)
-
-    def text(self, s):
-        try:
-            return self.value(int(s))
-        except ValueError:
-            raise _Bad(f"expected a whole number, got {s!r}") from None
-
-    def describe(self):
-        return "int" + _bounds(self.lo, self.hi, False, False)
-
-
-@dataclasses.dataclass(frozen=True)
-class Float(Kind):
-    """A finite number within ``lo`` / ``hi`` (ends open as flagged)."""
-
-    lo: float | None = None
-    hi: float | None = None
-    lo_open: bool = False
-    hi_open: bool = False
-
-    def value(self, v):
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            raise _Bad(f"must be a finite number, got {v!r}")
-        return _range(float(v), self.lo, self.hi, self.lo_open, self.hi_open)
-
-    def text(self, s):
-        try:
-            return self.value(float(s))
-        except ValueError:
-            raise _Bad(f"expected a number, got {s!r}") from None
-
-    def describe(self):
-        return "float" + _bounds(self.lo, self.hi, self.lo_open, self.hi_open)
-
-
-class Bool(Kind):
-    """``true`` / ``false`` (on the command line also ``yes`` / ``no``, ``1`` / ``0``)."""
-
-    def value(self, v):
-        if not isinstance(v, bool):
-            raise _Bad(f"must be true or false, got {v!r}")
-        return v
-
-    def text(self, s):
-        t = s.strip().lower()
-        if t in ("true", "yes", "1"):
-            return True
-        if t in ("false", "no", "0"):
-            return False
-        raise _Bad(f"must be true or false, got {s!r}")
-
-    def describe(self):
-        return "bool"
-
-
-class Choice(Kind):
-    """One of a few strings."""
-
-    def __init__(self, *options: str) -> None:
-        self.options = tuple(options)
-
-    def value(self, v):
-        if v not in self.options:
-            raise _Bad(f"must be one of {', '.join(map(repr, self.options))}, got {v!r}")
-        return v
-
-    def describe(self):
-        return " | ".join(self.options)
 
 
 class StartMap(Kind):
@@ -190,34 +79,6 @@ class StartMap(Kind):
 
     def describe(self):
         return " | ".join(self.options) + " | guide:CORPUS"
-
-
-class Text(Kind):
-    """A non-empty string."""
-
-    def value(self, v):
-        if not isinstance(v, str) or not v:
-            raise _Bad(f"must be a non-empty string, got {v!r}")
-        return v
-
-    def describe(self):
-        return "str"
-
-
-class Optional(Kind):
-    """``kind`` or nothing (``None``; ``none`` on the command line)."""
-
-    def __init__(self, kind: Kind) -> None:
-        self.kind = kind
-
-    def value(self, v):
-        return None if v is None else self.kind.value(v)
-
-    def text(self, s):
-        return None if s.strip().lower() == "none" else self.kind.text(s)
-
-    def describe(self):
-        return f"{self.kind.describe()} or none"
 
 
 def _pos_int(x) -> bool:
@@ -293,29 +154,6 @@ class Block(Kind):
 
     def describe(self):
         return "block ([h, w] / HxW, w, all)"
-
-
-class Pair(Kind):
-    """Two numbers ``[lo, hi]`` with ``lo < hi`` (``lo,hi`` on the command line)."""
-
-    def __init__(self, what: str = "") -> None:
-        self.what = what
-
-    def value(self, v):
-        ok = isinstance(v, (list, tuple)) and len(v) == 2
-        ok = ok and all(isinstance(x, (int, float)) and not isinstance(x, bool) and math.isfinite(x) for x in v)
-        if not ok or not v[0] < v[1]:
-            raise _Bad(f"must be [lo, hi]{' ' + self.what if self.what else ''} with lo < hi, got {v!r}")
-        return [float(v[0]), float(v[1])]
-
-    def text(self, s):
-        try:
-            return self.value([float(x) for x in s.split(",")])
-        except ValueError:
-            raise _Bad(f"expected two numbers LO,HI, got {s!r}") from None
-
-    def describe(self):
-        return f"[lo, hi]{' ' + self.what if self.what else ''}"
 
 
 class PriorName(Kind):
@@ -410,42 +248,3 @@ class GuideFile(Kind):
 
     def describe(self):
         return "'shipped', 'corpus:CORPUS' or the path of a guide .npz"
-
-
-def param(default: Any, kind: Kind, doc: str) -> Any:
-    """A parameter field of a method's dataclass: its ``default``, its :class:`Kind` and a one-line doc."""
-    if isinstance(default, list):
-        return dataclasses.field(default_factory=lambda: list(default), metadata={"kind": kind, "doc": doc})
-    return dataclasses.field(default=default, metadata={"kind": kind, "doc": doc})
-
-
-def param_fields(cls) -> list[tuple[str, Kind, Any, str]]:
-    """``(name, kind, default, doc)`` of every parameter of the dataclass ``cls``."""
-    out = []
-    for f in dataclasses.fields(cls):
-        if "kind" not in f.metadata:
-            raise TypeError(f"{cls.__name__}.{f.name}: make parameter fields with param(default, kind, doc)")
-        default = f.default if f.default is not dataclasses.MISSING else f.default_factory()  # type: ignore[misc,operator]
-        out.append((f.name, f.metadata["kind"], default, f.metadata["doc"]))
-    return out
-
-
-def parse_params(cls, values: Mapping[str, Any], *, text: bool = False, defaults: Mapping[str, Any] | None = None):
-    """The dataclass ``cls`` from ``values`` (``text``: command-line strings), over ``defaults`` (values
-    replacing the fields' own defaults, already valid). Unknown keys and bad values raise
-    :class:`ParamError` naming the key; then ``cls.check(self)``, if defined, checks rules between fields."""
-    fields = {name: kind for name, kind, _, _ in param_fields(cls)}
-    kw: dict[str, Any] = dict(defaults or {})
-    for key, v in values.items():
-        if key not in fields:
-            raise ParamError(key, f"unknown key (known here: {', '.join(sorted(fields))})")
-        kind = fields[key]
-        try:
-            kw[key] = kind.text(v) if text and isinstance(v, str) else kind.value(v)
-        except _Bad as e:
-            raise ParamError(key, str(e)) from None
-    obj = cls(**kw)
-    check = getattr(obj, "check", None)
-    if check is not None:
-        check()
-    return obj

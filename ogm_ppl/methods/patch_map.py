@@ -36,10 +36,11 @@ def patch_map(params: PatchMapParams, problem: MapProblem, ctx: RunContext) -> M
 
     check_patch_work(params.patch, problem.grid.ndim, problem.grid.num_cells, 1, params.overlap, "the patch map")
     model = params.model(problem)
+    # progress over the patches: a bar on a terminal, plain lines with the time left once past 10 s
     if params.mode == "offline":
-        pm = offline_patch_map(model, patch_arg(params.patch), overlap=params.overlap)
+        pm = offline_patch_map(model, patch_arg(params.patch), overlap=params.overlap, progress=ctx.progress)
     else:
-        pm = online_patch_map(model, patch_arg(params.patch))
+        pm = online_patch_map(model, patch_arg(params.patch), progress=ctx.progress)
     details = {
         **params.model_details(problem, model),
         "reference": "MAP map" if params.mode == "offline" else "online",

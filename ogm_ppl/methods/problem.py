@@ -52,10 +52,13 @@ class MapProblem:
 
     @property
     def rays(self) -> Rays:
-        """The beams' traversals (:func:`~ogm_ppl.raycast.raycast`), traced on first use."""
+        """The beams' traversals (:func:`~ogm_ppl.raycast.raycast`), traced on first use; a cast that would not
+        fit in the free memory is refused before it runs (``MemoryError`` stating the estimate)."""
         if self._rays is None:
+            from ogm_ppl.models.occupancy import check_ray_cast_memory
             from ogm_ppl.raycast import raycast
 
+            check_ray_cast_memory(self.grid, self.scans)  # before the cast: its buffers, estimated
             t0 = time.perf_counter()
             self._rays = raycast(self.grid, self.scans)
             self.ray_cast_seconds = time.perf_counter() - t0
@@ -100,8 +103,10 @@ class MapProblem:
     ) -> OccupancyModel:
         """The occupancy model of :meth:`prior` ``(prior, lam)`` and :meth:`sensor` ``(sensor, sigma_cells,
         p_rand)``."""
-        from ogm_ppl.models.occupancy import OccupancyModel
+        from ogm_ppl.models.occupancy import OccupancyModel, check_ray_cast_memory
 
+        if self._rays is None:  # the cast and the model together, before the cast
+            check_ray_cast_memory(self.grid, self.scans, model=True)
         return OccupancyModel(self.grid, self.rays, self.sensor(sensor, sigma_cells, p_rand), self.prior(prior, lam))
 
 

@@ -107,6 +107,9 @@ class MapMethod:
         if not isinstance(params, self.params):
             raise TypeError(f"method {self.name!r} takes {self.params.__name__}, not {type(params).__name__}")
         ctx = RunContext() if ctx is None else ctx
+        check_size = getattr(params, "check_size", None)
+        if check_size is not None:  # work that would not fit (memory, time) refused before any of it is done
+            check_size(problem)
         before = problem.ray_cast_seconds
         t0 = time.perf_counter()
         result = self.function(params, problem, ctx)
@@ -163,6 +166,11 @@ def register_method(
     ``aliases``: more names, each presetting some parameters (``{"p21": {"delta": "p21"}}``).
     ``stochastic``, ``sampler``: see :class:`MapMethod`. ``doc``: the one-line description (default: the
     first line of the function's docstring). Registering a taken name is an error.
+
+    The dataclass may define ``check()`` (rules between its fields, run when it is parsed) and
+    ``check_size(problem)``: run by :meth:`MapMethod.run` before the method, it refuses work that would not fit
+    (the free memory, hours of time) with a :class:`~.params.ParamError` naming the parameter, the estimate and
+    its limit.
     """
     if not dataclasses.is_dataclass(params):
         raise TypeError(f"params of method {name!r} must be a dataclass, got {params!r}")

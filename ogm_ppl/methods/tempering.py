@@ -13,11 +13,15 @@ from dataclasses import dataclass
 
 from ogm_ppl.methods._model import patch_arg
 from ogm_ppl.methods._sampling import SamplingParams, run_kernel
-from ogm_ppl.methods.params import Choice, Float, Int, Patch, param
+from ogm_ppl.methods.params import Choice, Float, Int, ParamError, Patch, param
 from ogm_ppl.methods.problem import MapProblem, MapResult, RunContext
 from ogm_ppl.methods.registry import register_method
 
 __all__ = ["TemperingParams", "tempering"]
+
+
+#: bytes a rung's kernel holds for each cell beside its likelihood table (measured on a 64 x 64 map: 58)
+RUNG_BYTES_PER_CELL = 64
 
 
 @dataclass(frozen=True)
@@ -29,6 +33,35 @@ class TemperingParams(SamplingParams):
     patch: object = param(1, Patch(), "1: CellGibbs rungs; a larger patch: PatchGibbs rungs")
     scan: str = param("systematic", Choice("systematic", "permutation", "random"), "order within a sweep")
     update: str = param("gibbs", Choice("gibbs", "metropolised"), "heat bath or metropolised update")
+
+    def maps_swept(self) -> int:
+        return self.rungs
+
+    def check_size(self, problem: MapProblem) -> None:
+        """Refuse (:class:`ParamError` on ``rungs``) a ladder whose rungs would not fit in the free memory, before
+        the model is built: each rung holds its own likelihood table (``8 R W`` bytes, ``R`` rays of at most ``W``
+        cells, unless only the prior is tempered) and its kernel's state (:data:`RUNG_BYTES_PER_CELL` a cell);
+        then the sampling limits of every run (:meth:`SamplingParams.check_size`)."""
+        from ogm_ppl._memory import check_fits, in_units
+        from ogm_ppl.raycast import ray_cast_size
+
+        K = problem.grid.num_cells
+        size = ray_cast_size(problem.grid, problem.scans)
+        table = 0 if self.temper == "prior" else 8 * size.rays * (size.longest + 1)
+        per_rung = table + RUNG_BYTES_PER_CELL * K
+        tables = (
+            f"a likelihood table of {size.rays:,} rays x {size.longest + 1:,} float64 ({in_units(table)}) and "
+            if table
+            else ""
+        )
+        check_fits(
+            self.rungs * per_rung,
+            f"{self.rungs:,} rungs of parallel tempering (each {tables}{RUNG_BYTES_PER_CELL} bytes a cell "
+            f"for its kernel's state, {K:,} cells: {in_units(per_rung)} a rung)",
+            "use fewer rungs (4 to 16 are usual)",
+            error=lambda message: ParamError("rungs", message),
+        )
+        super().check_size(problem)
 
 
 @register_method("tempering", TemperingParams, stochastic=True, sampler=True)

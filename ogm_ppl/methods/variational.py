@@ -20,6 +20,14 @@ from ogm_ppl.methods.registry import register_method
 __all__ = ["VIParams", "vi"]
 
 
+#: bytes a particle of the tracegraph or rws loss holds for each cell and each reading at the peak of a step
+#: (measured, two steps on a 64 x 64 map: 43 a cell with the mean-field guide, 80 with the patch guide, 70 a
+#: reading)
+PARTICLE_BYTES = 96
+#: the most ``steps x particles x (cells + readings)`` a fit may ask for (0.3 to 1.6 microseconds each measured)
+MAX_PARTICLE_WORK = 1 << 36
+
+
 @dataclass(frozen=True)
 class VIParams(ModelParams):
     guide: str = param("mean_field", Choice("mean_field", "patch", "first_hit"), "the guide's family")
@@ -31,6 +39,33 @@ class VIParams(ModelParams):
     p_rand: float = param(
         1e-3, Float(0, 1, hi_open=True), "sensor model's share of random readings (reverse KL needs > 0)"
     )
+
+    def check_size(self, problem: MapProblem) -> None:
+        """Refuse (:class:`ParamError` on ``num_particles`` or ``steps``, before the model is built) a fit whose
+        particles would not fit in the free memory (:data:`PARTICLE_BYTES` a cell and a reading each, with the
+        ``tracegraph`` and ``rws`` losses: the exact ELBO draws none), or that would take more than
+        :data:`MAX_PARTICLE_WORK` ``steps x particles x (cells + readings)``."""
+        if self.loss == "exact":
+            return
+        from ogm_ppl._memory import check_fits, in_units
+
+        K, R = problem.grid.num_cells, int(problem.scans.num_valid)
+        per = PARTICLE_BYTES * (K + R)
+        check_fits(
+            self.num_particles * per,
+            f"{self.num_particles:,} particles of {self.loss} (each {PARTICLE_BYTES} bytes a cell and a reading: "
+            f"{K:,} cells + {R:,} readings, {in_units(per)} a particle)",
+            "use fewer particles",
+            error=lambda message: ParamError("num_particles", message),
+        )
+        work = self.steps * self.num_particles * (K + R)
+        if work > MAX_PARTICLE_WORK:
+            raise ParamError(
+                "steps",
+                f"{self.steps:,} steps x {self.num_particles:,} particles x ({K:,} cells + {R:,} readings) = "
+                f"{work:.3g}, over the limit of 2^36 = {MAX_PARTICLE_WORK:.3g} (ogm_ppl.methods.variational."
+                "MAX_PARTICLE_WORK: at 0.3 to 1.6 microseconds each, 6 hours or more); use fewer steps or particles",
+            )
 
     def check(self) -> None:
         super().check()

@@ -57,9 +57,10 @@ import torch
 from pyro.distributions.torch_distribution import TorchDistribution
 from torch.distributions import constraints
 
+from ogm_ppl._memory import available_memory, check_fits
 from ogm_ppl._validate import as_binary_maps, check_binary
 from ogm_ppl.priors.base import MapPrior
-from ogm_ppl.raycast import Rays
+from ogm_ppl.raycast import CAST_BYTES_PER_CELL, CAST_BYTES_PER_RAY, Rays, ray_cast_size
 from ogm_ppl.sensors import SensorModel
 
 _TABLE_BLOCK = 1 << 22  # table entries per block of rays in OccupancyModel._loglik_table (32 MB of float64)
@@ -202,18 +203,6 @@ BYTES_PER_CROSSING = 64
 TABLE_TEMPORARIES = 18
 
 
-def available_memory() -> int | None:
-    """Bytes this machine can still give (``MemAvailable`` of ``/proc/meminfo``); ``None`` where unknown."""
-    try:
-        with open("/proc/meminfo", encoding="ascii") as f:
-            for line in f:
-                if line.startswith("MemAvailable:"):
-                    return int(line.split()[1]) * 1024
-    except (OSError, ValueError, IndexError):
-        return None
-    return None
-
-
 def memory_needed(rays: Rays) -> int:
     """Bytes a model over ``rays`` and a Gibbs kernel may need at their peak (an upper bound, measured by
     ``benchmarks/bench_memory.py``): :data:`BYTES_PER_CROSSING` per
@@ -221,6 +210,34 @@ def memory_needed(rays: Rays) -> int:
     ``W`` the longest ray plus one, at most ``_TABLE_BLOCK`` a block)."""
     entries = int(rays.num_rays) * (int(rays.lengths.max(initial=0)) + 1)
     return int(rays.cells.size) * BYTES_PER_CROSSING + TABLE_TEMPORARIES * 8 * min(entries, _TABLE_BLOCK)
+
+
+def check_ray_cast_memory(grid, scans, model: bool = False) -> None:
+    """Refuse (``MemoryError``, with the numbers) a ray cast of ``scans`` on ``grid`` that would not fit in this
+    machine's free memory, before it runs (:func:`~ogm_ppl.raycast.ray_cast_size`): the cast's buffers alone, or
+    (``model``) with a model and a sampler over its rays (:func:`memory_needed` of the crossings it will find,
+    less the 12 bytes a crossing the buffers already hold)."""
+    size = ray_cast_size(grid, scans)
+    need = size.cast_bytes
+    basis = (
+        f"{CAST_BYTES_PER_CELL} bytes for each of the {size.capacity:,} cells it makes room for, all "
+        f"{size.rays:,} rays up to the sensor's maximum range, and {CAST_BYTES_PER_RAY} a ray"
+    )
+    what = f"the ray cast on a {' x '.join(map(str, grid.shape))} grid"
+    if model:
+        entries = size.rays * (size.longest + 1)
+        need += size.crossings * (BYTES_PER_CROSSING - CAST_BYTES_PER_CELL)
+        need += TABLE_TEMPORARIES * 8 * min(entries, _TABLE_BLOCK)
+        what = f"{what} and a model and sampler over its rays"
+        basis += (
+            f", then {BYTES_PER_CROSSING - CAST_BYTES_PER_CELL} more bytes for each of the up to "
+            f"{size.crossings:,} cells the rays cross inside the grid and the likelihood table's working blocks"
+        )
+    check_fits(
+        need,
+        f"{what} ({basis})",
+        "use a coarser resolution, fewer scans or beams, or a shorter usable range",
+    )
 
 
 def check_memory(rays: Rays) -> None:

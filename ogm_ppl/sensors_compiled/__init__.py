@@ -50,12 +50,7 @@ from ogm_ppl.sensors_compiled.registry import (
     registered,
 )
 
-#: the reading kinds shipped with the library: kernels that take a reading bundle keep their numba cache on disk for
-#: these only (a kind of one's own compiles once per process: numba's cache index pickles every bundle type)
-SHIPPED_READINGS: tuple[type, ...] = (GaussianReading, PatternReading)
-
 __all__ = [
-    "SHIPPED_READINGS",
     "CompiledReading",
     "GaussianReading",
     "PatternReading",

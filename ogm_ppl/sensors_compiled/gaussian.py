@@ -24,9 +24,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.sensors_compiled.normal import LOG_SQRT_2PI, SQRT2, phi_diff, tail
 from ogm_ppl.sensors_compiled.registry import register
 
@@ -53,13 +53,13 @@ class GaussianReading(NamedTuple):
     width: float
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def gaussian_num_outcomes(reading, F):
     """``J = ceil((F + 1) / width)`` range bins (to ``1e-12``, so a whole number of bins is not rounded up)."""
     return math.ceil((F + 1.0) / reading.width - 1e-12)
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def gaussian_bin_prob(reading, j, J, f, none, F):
     """``P(outcome j | f)``: bin ``j < J`` or max range ``j = J`` (module docstring)."""
     sigma, p_rand, width = reading.sigma, reading.p_rand, reading.width
@@ -79,7 +79,7 @@ def gaussian_bin_prob(reading, j, J, f, none, F):
     return (1.0 - p_rand) * phi_diff(lo, hi) + unif
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def gaussian_fill_row(reading, row, J, f, none, F, tails):
     """``row[j] = P(outcome j | f)`` for ``j = 0..J``, the normal part on the bins within 8.5 standard
     deviations of ``f`` only, one tabulated tail per bin edge (``tails``: scratch of ``J + 2``)."""
@@ -118,7 +118,7 @@ def gaussian_fill_row(reading, row, J, f, none, F, tails):
         row[j] += (1.0 - p_rand) * max(g, 0.0)
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def gaussian_log_reading(reading, binned, y, jb, is_max, J, f, none, F):
     """``log p(reading | f)``: the log density of the range ``y`` (or the log max-range probability), or the
     log-probability of bin ``jb`` when ``binned``."""
@@ -143,13 +143,13 @@ def gaussian_log_reading(reading, binned, y, jb, is_max, J, f, none, F):
     return lg
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def gaussian_coord(reading, t_enter, off, kap):
     """The continuous kappa ``t + 1/2`` of the cell at ``kap``."""
     return t_enter[off + kap] + 0.5
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def gaussian_draw(reading, J, f, none, F, u_a, u_b, e):
     """A reading as :meth:`GaussianRange.sample <ogm_ppl.sensors.GaussianRange.sample>` draws it: uniform on
     ``[-1/2, F + 1/2]`` if ``u_a < p_rand``, else max range (``none``) or ``f + sigma e``, max range beyond

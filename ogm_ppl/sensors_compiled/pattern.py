@@ -12,9 +12,9 @@ from __future__ import annotations
 import math
 from typing import NamedTuple
 
-import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.sensors_compiled.registry import register
 
 __all__ = [
@@ -33,13 +33,13 @@ class PatternReading(NamedTuple):
     p_occ: float
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def pattern_num_outcomes(reading, F):
     """``J = F + 1`` hit outcomes (kappa ``0..F``)."""
     return int(F) + 1
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def pattern_bin_prob(reading, j, J, f, none, F):
     """``P(outcome j | f)``: ``p_occ`` for the matching outcome, ``(1 - p_occ) / (F + 1)`` for the others."""
     p_occ = reading.p_occ
@@ -51,20 +51,20 @@ def pattern_bin_prob(reading, j, J, f, none, F):
     return other
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def pattern_log_reading(reading, binned, y, jb, is_max, J, f, none, F):
     """``log P(outcome jb | f)`` (a discrete sensor's readings are outcomes, binned or not)."""
     v = pattern_bin_prob(reading, jb, J, f, none, F)
     return math.log(v) if v > 0.0 else -np.inf
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def pattern_coord(reading, t_enter, off, kap):
     """The cell's kappa."""
     return float(kap)
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def pattern_draw(reading, J, f, none, F, u_a, u_b, e):
     """An outcome as :meth:`PatternMatch.sample <ogm_ppl.sensors.PatternMatch.sample>` draws it: the matching
     one if ``u_a < p_occ``, else one of the ``F + 1`` others, uniform by ``u_b``; ``(0.0, False, outcome)``."""

@@ -83,7 +83,7 @@ def tile_update_matrix(kernel, index: int, rows=None) -> torch.Tensor:
     for i in rows:
         s = S[i]
         kernel.set_state(s)
-        m = kernel._m
+        m = kernel.state
         cur = int(sum(int(s[c]) << j for j, c in enumerate(live)))
         cands, clp, t = _candidates(kernel, anchor, patch, m)
         row = np.zeros(W)

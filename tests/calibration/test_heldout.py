@@ -5,7 +5,7 @@ import pytest
 
 from ogm_ppl.calibration import LeakageError, check_plan_files, heldout, plan_file_maps
 from ogm_ppl.datasets.plan_files import PlanFileError
-from tests._scripts import write_plan_folder
+from tests._plan_folder import write_plan_folder
 
 
 def test_plan_files_are_cropped_as_the_corpora_are(tmp_path):

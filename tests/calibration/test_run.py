@@ -19,7 +19,7 @@ from ogm_ppl.calibration import (
 )
 from ogm_ppl.calibration import run as run_module
 from ogm_ppl.datasets.plan_files import PlanFileError
-from tests._scripts import write_plan_folder
+from tests._plan_folder import write_plan_folder
 from tests.calibration._tiny import tiny
 
 OGM = "traditional OGM (p21)"

@@ -4,6 +4,7 @@ SettingsError that names the option."""
 import pytest
 
 from ogm_ppl.calibration import (
+    DEFAULT_TEST_CORPORA,
     PLAN_FILES_GUIDE,
     PLAN_FILES_PRIORS,
     TEST_CORPORA,
@@ -16,7 +17,8 @@ from ogm_ppl.calibration.settings import parse_patch_overrides
 
 def test_defaults_follow_the_plan_files():
     assert CalibrationSettings(plan_files=("x",)).resolved().test == ()
-    assert CalibrationSettings().resolved().test == TEST_CORPORA
+    assert CalibrationSettings().resolved().test == DEFAULT_TEST_CORPORA  # the thesis's; the others by name
+    assert set(DEFAULT_TEST_CORPORA) < set(TEST_CORPORA)
     s = CalibrationSettings(plan_files=("x",))  # no plans: 2 maps a corpus, every plan of the plan set
     assert (s.maps_per_corpus, s.plans) == (2, None)
     r = s.resolved()

@@ -102,7 +102,7 @@ def test_smoke_spec_loads_and_expands():
         (lambda d: d.update(datasets=[]), "datasets: at least one"),
         (
             lambda d: d["datasets"].append({"name": "x", "kind": "log", "path": "missing.log.gz"}),
-            "datasets[1] ('x').path: no such log file",
+            "datasets[1] ('x').path: no such CARMEN log",
         ),
         # grids over the limit are refused when the spec is read
         (lambda d: d["datasets"][0].update(size=200_000), "('office').size: size = [200000, 200000] gives a grid of"),
@@ -424,6 +424,22 @@ def test_reader_options_checked_at_validation(reader, message):
     assert "datasets[1] ('x')." + message in str(e.value), str(e.value)
 
 
+def test_a_reader_option_of_the_wrong_type_fails_when_the_spec_is_loaded(tmp_path):
+    """``reader = {messages = 5}``: refused by load_spec naming the file, ``reader.messages`` and what it takes
+    (the log kind's options, :mod:`ogm_ppl.inputs`), not by a TypeError once the log is read."""
+    spec = tmp_path / "messages.toml"
+    spec.write_text(
+        SMOKE.read_text()
+        + f'\n[[datasets]]\nname = "x"\nkind = "log"\npath = "{SMOKE.as_posix()}"\nreader = {{messages = 5}}\n'
+    )
+    with pytest.raises(SpecError) as e:
+        load_spec(spec)
+    assert str(e.value) == (
+        f"{spec}: datasets[1] ('x').reader.messages: must be 'auto', a laser message type (FLASER, ROBOTLASER1) "
+        "or a list of them, got 5"
+    )
+
+
 def test_unreachable_scheduler_fails_within_seconds(tmp_path):
     """A scheduler address nobody listens on: a ConnectionError naming it, within a few seconds."""
     import socket
@@ -494,7 +510,7 @@ def test_a_simulated_dataset_on_a_plan_of_your_own(tmp_path):
     from PIL import Image
 
     from ogm_ppl.datasets.plan_files import load_plan_file
-    from tests._scripts import write_plan_folder
+    from tests._plan_folder import write_plan_folder
 
     plans = write_plan_folder(tmp_path)
     d = tiny()

@@ -3,7 +3,7 @@ files a fit may leave behind."""
 
 from pathlib import Path
 
-from tests._scripts import write_plan_folder
+from tests._plan_folder import write_plan_folder
 
 PIXEL_SIZE = 0.025  # write_plan_folder's PNG; its ROS map states its own 0.05 m
 

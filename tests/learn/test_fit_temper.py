@@ -122,3 +122,32 @@ def test_the_command_refuses_a_bad_option_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("ogm-ppl: error: betas") and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()
+
+
+def test_quick_passes_its_settings_to_the_library(tmp_path, monkeypatch):
+    """``fit-prior temper --quick``: two small plans, two betas and kinds, ten fit plans, the first corpus given
+    (dungeon when all are); the script form defaults to every corpus and needs neither --out nor --ship."""
+    import argparse
+
+    import ogm_ppl.learn.temper as temper
+    from ogm_ppl.cli._fit_kinds import add_temper, quick_temper
+    from ogm_ppl.learn import FitResult
+    from ogm_ppl.learn._fit_common import CORPORA
+
+    calls = []
+    monkeypatch.setattr(
+        temper, "fit_temper", lambda *a, **kw: calls.append((a, kw)) or FitResult("temper", (), {}, {}, 0)
+    )
+    assert ogm_ppl(["fit-prior", "temper", "--quick", "--corpus", "ipa", "dungeon", "--out", str(tmp_path)]) == 0
+    assert ogm_ppl(["fit-prior", "temper", "--corpus", "ipa", "--kinds", "border_bo", "--ship", "--quiet"]) == 0
+    (args, kw), (args2, kw2) = calls
+    s = kw["settings"]
+    assert args == (["ipa"], tmp_path) and not kw["ship"] and not kw["update"]
+    assert (s.plans, s.window, s.sweeps, s.burn, s.fit_limit) == (2, 48, 10, 4, 10)
+    assert s.kinds == temper.KINDS[:2] and s.betas == temper.BETAS[:2]
+    assert args2 == (["ipa"], None) and kw2["ship"] and kw2["settings"].kinds == ("border_bo",) and not kw2["progress"]
+    ap = argparse.ArgumentParser()
+    add_temper(ap, ship_by_default=True)
+    a = ap.parse_args([])
+    assert a.corpus == list(CORPORA) and a.out is None and not a.ship
+    assert quick_temper(ap.parse_args(["--quick"])).corpus == ["dungeon"]

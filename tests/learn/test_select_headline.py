@@ -163,3 +163,35 @@ def test_the_command_refuses_a_bad_option_in_one_line(tmp_path, capsys):
     err = capsys.readouterr().err
     assert err.startswith("ogm-ppl: error: candidates") and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()
+
+
+def test_quick_passes_its_settings_to_the_library(tmp_path, monkeypatch):
+    """``fit-prior headline --quick``: two small plans, the first two candidates, ten fit plans; the script form
+    needs neither --out nor --ship."""
+    import argparse
+
+    import ogm_ppl.learn.headline as headline
+    from ogm_ppl.cli._fit_kinds import add_headline
+    from ogm_ppl.learn import FitResult
+
+    calls = []
+    out = tmp_path / "sel.json"
+    out.write_text("{}")
+
+    def fake(*a, **kw):
+        calls.append((a, kw))
+        return FitResult("headline", (out,), {}, {}, 0)
+
+    monkeypatch.setattr(headline, "select_headline_prior", fake)
+    assert ogm_ppl(["fit-prior", "headline", "--quick", "--out", str(tmp_path), "--name", "sel"]) == 0
+    assert ogm_ppl(["fit-prior", "headline", "--corpus", "ipa", "--ship", "--quiet"]) == 0
+    (args, kw), (args2, kw2) = calls
+    s = kw["settings"]
+    assert args == (tmp_path,) and kw["name"] == "sel" and not kw["ship"]
+    assert (s.plans, s.window, s.sweeps, s.burn, s.fit_limit) == (2, 64, 6, 2, 10)
+    assert s.candidates == headline.CANDIDATES[:2]
+    assert args2 == (None,) and kw2["ship"] and kw2["settings"].corpus == "ipa" and kw2["settings"].fit_limit is None
+    ap = argparse.ArgumentParser()
+    add_headline(ap, ship_by_default=True)
+    a = ap.parse_args([])
+    assert a.out is None and not a.ship and a.corpus == "houseexpo"

@@ -40,3 +40,100 @@ def test_limit_arithmetic():
     with pytest.raises(ParamError, match=rf"x {passes} ="):
         check_patch_work([4, 5], 2, K, passes, False, "x")
     check_patch_work([4, 5], 2, K, passes - 2, False, "x")
+
+
+@pytest.fixture
+def no_cast(problem, monkeypatch):
+    """The ray cast and the model's building fail the test if reached: a refusal must come before them."""
+    import importlib
+
+    def never(*a, **k):
+        raise AssertionError("the ray cast ran before the size check")
+
+    monkeypatch.setattr(importlib.import_module("ogm_ppl.raycast"), "traverse_all", never)
+    monkeypatch.setattr(problem, "_rays", None)
+    return problem
+
+
+@pytest.fixture
+def memory(monkeypatch):
+    """Pretend the machine has 8 GiB free."""
+    import ogm_ppl._memory
+
+    monkeypatch.setattr(ogm_ppl._memory, "available_memory", lambda: 8 << 30)
+
+
+@pytest.mark.parametrize(
+    "method, params, key, message",
+    [
+        (
+            "vi",
+            {"loss": "tracegraph", "num_particles": 1_000_000_000},
+            "num_particles",
+            r"1,000,000,000 particles of tracegraph \(each 96 bytes a cell and a reading: 4,096 cells \+ 135 "
+            r"readings, 396\.7 KiB a particle\) needs about 378,280\.9 GiB, more than the 8\.0 GiB this machine "
+            r"has free",
+        ),
+        (
+            "vi",
+            {"loss": "rws", "num_particles": 10_000, "steps": 10_000},
+            "steps",
+            r"10,000 steps x 10,000 particles x \(4,096 cells \+ 135 readings\) = 4\.23e\+11, over the limit of "
+            r"2\^36",
+        ),
+        (
+            "tempering",
+            {"rungs": 10_000_000},
+            "rungs",
+            r"10,000,000 rungs of parallel tempering \(each a likelihood table of 135 rays x 59 float64 "
+            r"\(62\.2 KiB\) and 64 bytes a cell for its kernel's state, 4,096 cells: 318\.2 KiB a rung\) needs "
+            r"about 3,034\.8 GiB, more than the 8\.0 GiB",
+        ),
+        (
+            "tempering",
+            {"rungs": 1000, "sweeps": 1_000_000},
+            "sweeps",
+            r"1,000,000 sweeps \(burn-in 0 \+ 1,000,000\) x 1 chains x 1,000 maps swept \(rungs\) x 4,096 cells = "
+            r"4\.1e\+12 single-cell updates, over the limit of 2\^40",
+        ),
+        (
+            "gibbs",
+            {"sweeps": 1_000_000_000, "chains": 1000},
+            "sweeps",
+            r"x 1,000 chains x 4,096 cells = 4\.1e\+15 single-cell updates, over the limit of 2\^40",
+        ),
+        ("tempering", {"rungs": 4, "patch": [5, 5], "sweeps": 100}, "patch", r"configurations, over the limit"),
+    ],
+)
+def test_work_that_would_not_fit_is_refused_before_the_ray_cast(no_cast, memory, method, params, key, message):
+    """Parameters that scale memory (particles, rungs) or time (sweeps, chains, rungs, steps): a run past the
+    free memory or the time limit is refused at once, naming the parameter, the estimate with its basis, and the
+    limit, before the ray cast or any allocation."""
+    m = get_method(method)
+    with pytest.raises(ParamError, match=message) as e:
+        m.run(m.parse(params), no_cast, RunContext(seed=0))
+    assert e.value.key == key
+
+
+def test_sweeps_beyond_any_run_are_refused_when_parsed():
+    """A sweep count past MAX_SWEEPS (or any integer past int64) is refused when the parameters are parsed, with
+    the limit, not as an OverflowError at the first checkpoint."""
+    from ogm_ppl.methods._sampling import MAX_SWEEPS
+    from ogm_ppl.methods.params import INT_LIMIT
+
+    m = get_method("gibbs")
+    for key in ("sweeps", "burn_in", "warm_thesis"):
+        with pytest.raises(ParamError, match=rf"{key}: must be <= 1000000000 \(.*MAX_SWEEPS.*\), got 9{{23}}"):
+            m.parse({key: "9" * 23}, text=True)
+        patch = {"patch": [3, 3]} if key == "warm_thesis" else {}
+        assert getattr(m.parse({key: MAX_SWEEPS, **patch}), key) == MAX_SWEEPS
+    with pytest.raises(ParamError, match=r"offset: must be at most 2\^63 - 1 = 9223372036854775807 in magnitude"):
+        m.parse({"offset": INT_LIMIT + 1})
+
+
+def test_more_records_than_sweeps_are_one_a_sweep(problem, tmp_path):
+    """``record`` past the sweeps asked for records every counted sweep once (a record count of 10^12 does not
+    loop 10^12 times)."""
+    m = get_method("gibbs")
+    r = m.run(m.parse({"sweeps": 4, "record": 10**12}), problem, RunContext(seed=0, checkpoint_dir=tmp_path))
+    assert [t["sweep"] for t in r.details["trace"]] == [1, 2, 3, 4]

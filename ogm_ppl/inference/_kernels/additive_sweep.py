@@ -6,9 +6,9 @@ cell's log-odds).
 
 from __future__ import annotations
 
-import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.inference._kernels.choice import accept_random, choose
 from ogm_ppl.inference._kernels.patch_lik import GROUP_MIN_CANDS, lik_all, lik_grouped, patch_log_lik
 from ogm_ppl.inference._kernels.patch_rays import collect_rays, max_slots, ray_scratch
@@ -16,7 +16,7 @@ from ogm_ppl.inference._kernels.patch_state import build_patch, patch_config, se
 from ogm_ppl.priors.compiled import cell_log_odds
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def add_patch_prior(patch, prior, m, logw, W):
     """Add the cell prior (log-odds of the occupied cells) of an additive prior to every configuration."""
     for w in range(W):
@@ -30,7 +30,7 @@ def add_patch_prior(patch, prior, m, logw, W):
             bit += 1
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def _add_patch_prior_ws(patch, prior, m, logw, W, sc):
     """:func:`add_patch_prior` in ``O(W)``: the prior of ``w`` is that of ``w & (w - 1)`` plus the
     log-odds of its lowest bit's cell."""
@@ -48,7 +48,7 @@ def _add_patch_prior_ws(patch, prior, m, logw, W, sc):
         logw[w] += v
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def additive_patch_log_weights(ps, patch, prior, logw):
     """Unnormalised log conditional of every configuration of ``patch`` under an additive prior
     (likelihood first, then the cells' log-odds). Returns ``W``."""
@@ -57,7 +57,7 @@ def additive_patch_log_weights(ps, patch, prior, logw):
     return W
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def _additive_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     """Patch updates that weigh all ``W = 2^L`` configurations: the likelihood through the rays of the
     patch (:func:`collect_rays`; :func:`lik_grouped` over all ``W`` codes, else :func:`lik_all`: ``O(W)``

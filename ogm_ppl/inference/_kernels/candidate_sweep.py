@@ -7,14 +7,15 @@ once per prior bundle type (:mod:`ogm_ppl.priors.compiled`), without numba's run
 from __future__ import annotations
 
 import math
+from typing import NamedTuple
 
-import numba as nb
 import numpy as np
 from numba.extending import overload
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.inference._kernels.choice import accept_random, categorical, categorical_table, choose, pick_from_table
 from ogm_ppl.inference._kernels.patch_lik import _add_lik, lik_list
-from ogm_ppl.inference._kernels.patch_rays import collect_rays, max_slots, patch_slots, ray_scratch
+from ogm_ppl.inference._kernels.patch_rays import RayScratch, collect_rays, max_slots, patch_slots, ray_scratch
 from ogm_ppl.inference._kernels.patch_state import _next_stamp, build_patch, patch_config, set_patch
 from ogm_ppl.priors.compiled import candidate_weights, patch_candidates, scratch_capacity
 from ogm_ppl.priors.compiled.registry import (
@@ -24,10 +25,22 @@ from ogm_ppl.priors.compiled.registry import (
     shared_weights,
     shared_weights_key,
 )
-from ogm_ppl.priors.compiled.scratch import tile_scratch, tile_scratch_on
+from ogm_ppl.priors.compiled.scratch import TileScratch, tile_scratch, tile_scratch_on
 
 
-@nb.njit(cache=True)
+class UpdateScratch(NamedTuple):
+    """The buffers one patch update fills (one numba argument; :func:`_candidate_sweep` allocates them once)."""
+
+    cands: np.ndarray  # capacity int64: the candidate configurations
+    cand_lp: np.ndarray  # capacity float64: the tile's own log factor of each candidate
+    logw: np.ndarray  # capacity float64: each candidate's unnormalised log conditional
+    pair: np.ndarray  # 2 int64: the current and the proposed configuration of a Metropolis-Hastings move
+    pw: np.ndarray  # 2 float64: their log weights
+    sc: RayScratch  # the ray collection's scratch
+    ts: TileScratch  # the prior's scratch
+
+
+@njit_shipped
 def candidate_log_weights(ps, patch, prior, cands, n, logw):
     """``logw[j]``: unnormalised log conditional of ``cands[j]`` (prior first; the likelihood only for
     candidates the prior allows)."""
@@ -38,11 +51,13 @@ def candidate_log_weights(ps, patch, prior, cands, n, logw):
     lik_list(sc, ns, ps.ll, cands, n, logw)
 
 
-@nb.njit(cache=True)
-def _restricted_update(ps, patch, prior, u, i, rule, stamp, cands, n, t, cand_lp, logw, pair, pw, sc, ts):
-    r"""One exact update of a patch whose candidates ``cands[:n]`` (a set ``S`` fixed by the cells outside
+@njit_shipped
+def _restricted_update(ps, patch, prior, u, i, rule, stamp, n, t, work):
+    r"""One exact update of a patch whose candidates ``work.cands[:n]`` (a set ``S`` fixed by the cells outside
     the patch, e.g. the configurations a backed-off table counted after the tile's border) are only part
-    of the configurations with mass (:func:`~ogm_ppl.priors.compiled.restricted`). Two steps, each
+    of the configurations with mass (:func:`~ogm_ppl.priors.compiled.restricted`); ``t`` and
+    ``work.cand_lp[:n]`` as :func:`~ogm_ppl.priors.compiled.patch_candidates` gives them, ``u[:, i]`` the
+    update's uniforms, ``work`` its :class:`UpdateScratch`. Two steps, each
     leaving the full conditional ``pi(c) = p(c | rest, z)`` invariant:
 
     (A) if the current ``c`` is in ``S``: heat bath (or metropolised Gibbs) on ``S``,
@@ -60,6 +75,7 @@ def _restricted_update(ps, patch, prior, u, i, rule, stamp, cands, n, t, cand_lp
     ``pair_lp`` plus its neighbours', :func:`~ogm_ppl.priors.compiled.candidate_weights`) plus the
     likelihood of the rays through the patch, collected once for both steps. Returns whether the patch
     changed."""
+    cands, cand_lp, logw, pair, pw, sc, ts = work
     m, ll = ps.m, ps.ll
     cur = patch_config(patch, m)
     new = cur
@@ -95,7 +111,7 @@ def _restricted_update(ps, patch, prior, u, i, rule, stamp, cands, n, t, cand_lp
     return new != cur
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def _candidate_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     """Patch updates that weigh only the configurations the prior allows given the rest
     (:func:`~ogm_ppl.priors.compiled.patch_candidates`: a tile's sparse support for table priors whose
@@ -168,13 +184,14 @@ def _candidate_loop_for(ps, geo, anchors, prior, u, rule, stamp0, scratch):
     )
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def _candidate_loop_body(ps, geo, anchors, prior, u, rule, stamp0, scratch):
     """The loop of :func:`_candidate_sweep` over its scratch (inlined into :func:`_candidate_loop_rt` and
     :func:`_candidate_loop_lean`)."""
     cands, cand_lp, logw, patch, pair, pw, sc, ts, n_keys, key_n, key_total, key_last, key_acc, key_cands, key_lw = (
         scratch
     )
+    work = UpdateScratch(cands, cand_lp, logw, pair, pw, sc, ts)
     p_rand, thesis, metro = rule.p_rand_patch, rule.thesis_random, rule.metropolised
     ll = ps.ll
     m = ps.m
@@ -243,9 +260,7 @@ def _candidate_loop_body(ps, geo, anchors, prior, u, rule, stamp0, scratch):
                     skipped += 1
                     continue
                 if restricted(prior, t) and not rule.own_factor:
-                    if _restricted_update(
-                        ps, patch, prior, u, i, rule, stamp, cands, n, t, cand_lp, logw, pair, pw, sc, ts
-                    ):
+                    if _restricted_update(ps, patch, prior, u, i, rule, stamp, n, t, work):
                         changed += 1
                     continue
                 if n == 0:
@@ -288,13 +303,13 @@ def _candidate_loop_body(ps, geo, anchors, prior, u, rule, stamp0, scratch):
     return changed, skipped
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def _candidate_loop_rt(ps, geo, anchors, prior, u, rule, stamp0, scratch):
     """:func:`_candidate_loop_body` with numba's runtime (for patch conditionals that allocate)."""
     return _candidate_loop_body(ps, geo, anchors, prior, u, rule, stamp0, scratch)
 
 
-@nb.njit(cache=True, _nrt=False)
+@njit_shipped(_nrt=False)
 def _candidate_loop_lean(ps, geo, anchors, prior, u, rule, stamp0, scratch):
     """:func:`_candidate_loop_body` without numba's runtime, which counts the references of every bundle
     array at each inlined call (the prior, the patch state, the scratch), a share of each patch update (as

@@ -48,6 +48,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.inference._kernels.cells import _next_occupied
 from ogm_ppl.priors.compiled import cell_log_odds
 
@@ -359,7 +360,7 @@ def draws(cells, scan, seed):
 # atomic add and subtract per array per cell that numba's pruning leaves in these branching loops, and
 # that cost more than a pattern field's conditional itself. They allocate nothing, so they need no runtime
 # (``benchmarks/bench_priors.py --overhead`` times them).
-@nb.njit(cache=True, _nrt=False)
+@njit_shipped(_nrt=False)
 def sweep(st, order, prior, uniforms, update):
     """One pass of single-cell updates over ``order`` with the prior bundle ``prior``
     (:mod:`ogm_ppl.priors.compiled`; numba compiles one loop per bundle type, inlining its conditional
@@ -378,13 +379,13 @@ def sweep(st, order, prior, uniforms, update):
     return flips
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def prior_log_odds(prior, k, m):
     """``l(m_k | m_-k)`` of the prior bundle at the map ``m`` (callable from Python)."""
     return cell_log_odds(prior, k, m)
 
 
-@nb.njit(cache=True, _nrt=False)
+@njit_shipped(_nrt=False)
 def icm_sweeps(st, order, prior, max_sweeps):
     """Iterated conditional modes (the EM hill-climbing of Section 2.2) over ``order``: each cell takes
     the value with the larger conditional posterior (ties, and ``nan``, keep the current value), until a
@@ -409,7 +410,7 @@ def icm_sweeps(st, order, prior, max_sweeps):
     return max_sweeps
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def marginals(st, order, prior, num_sweeps, seed, update):
     """``num_sweeps`` passes over ``order`` in one compiled call with numba's generator seeded by
     ``seed``; returns the running sum of the sampled maps (``K`` float64): for long runs of small problems
@@ -420,7 +421,7 @@ def marginals(st, order, prior, num_sweeps, seed, update):
     return acc
 
 
-@nb.njit(cache=True, _nrt=False)
+@njit_shipped(_nrt=False)
 def _marginal_passes(st, order, prior, num_sweeps, update, acc):
     """The passes of :func:`marginals`, adding each sampled map into ``acc`` (without numba's runtime)."""
     m = st.m

@@ -31,6 +31,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.inference._kernels import cell_sweep as cs
 from ogm_ppl.inference._kernels.cells import _next_occupied
 from ogm_ppl.priors.compiled import cell_log_odds
@@ -135,12 +136,15 @@ def _retarget(st, r, f1, s1):
 
 
 @nb.njit(cache=True)
-def add_cell_entries(c_start, c_len, c_cap, c_ray, c_kappa, used, offsets, cells, r0, r1, need):
-    """Append the (ray, kappa) entries of rays ``r0..r1-1`` to the pool (module docstring), growing blocks
-    and, when full, compacting the pool. Updates ``c_start``, ``c_len``, ``c_cap`` in place; returns the
-    (possibly new) ``c_ray``, ``c_kappa`` and the pool's used length. ``need`` (``K`` int64, all zero) is
-    scratch, left all zero: the work is in the new entries and the blocks they grow (the whole grid only
-    when the pool is compacted), blocks moved in increasing cell order."""
+def add_cell_entries(st, used, offsets, cells, r0, r1, need):
+    """Append the (ray, kappa) entries of rays ``r0..r1-1`` of the ray CSR ``offsets`` / ``cells`` to the
+    pool of the :class:`OnlineState` ``st`` (its ``c_start``, ``c_len``, ``c_cap``, ``c_ray``, ``c_kappa``;
+    ``used`` of its slots taken; module docstring), growing blocks and, when full, compacting the pool.
+    Updates ``st.c_start``, ``st.c_len``, ``st.c_cap`` in place; returns the (possibly new) ``c_ray``,
+    ``c_kappa`` and the pool's used length. ``need`` (``K`` int64, all zero) is scratch, left all zero: the
+    work is in the new entries and the blocks they grow (the whole grid only when the pool is compacted),
+    blocks moved in increasing cell order."""
+    c_start, c_len, c_cap, c_ray, c_kappa = st.c_start, st.c_len, st.c_cap, st.c_ray, st.c_kappa
     K = c_start.shape[0]
     e0, e1 = offsets[r0], offsets[r1]
     touched = np.empty(e1 - e0, np.int64)
@@ -286,7 +290,7 @@ def log_lik_ratio(st, k):
     return cs._lik_ratio(st, k)
 
 
-@nb.njit(cache=True, _nrt=False)
+@njit_shipped(_nrt=False)
 def sweep(st, order, prior, uniforms, update):
     """One pass of single-cell updates over ``order`` with the compiled prior bundle ``prior`` (heat bath
     or metropolised, :func:`~ogm_ppl.inference._kernels.cell_sweep.new_value`). Returns the flips."""
@@ -304,7 +308,7 @@ def sweep(st, order, prior, uniforms, update):
     return flips
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def sweep_accumulate(st, order, prior, uniforms, update, acc):
     """:func:`sweep`, then ``acc += m`` (the running sum of the marginals). Returns the flips."""
     flips = sweep(st, order, prior, uniforms, update)

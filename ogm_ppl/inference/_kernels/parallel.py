@@ -60,6 +60,7 @@ import numpy as np
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.inference._kernels import cell_sweep as cs
 from ogm_ppl.inference._kernels.cells import _next_occupied
 from ogm_ppl.priors.compiled import cell_log_odds
@@ -460,7 +461,7 @@ def _set_cell(st, inf32, k, v, geo):
         _retarget(st, inf32, r, f1, s1, geo)
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def tile_pass(st, inf32, prior, lay, t, seed, scan, update):
     """The updates of tile ``t``'s short cells in one sweep of seed ``seed``: its order and uniforms from
     the stream :func:`tile_seed` (``scan``: a code of :func:`~ogm_ppl.inference._kernels.cell_sweep.draws`),
@@ -481,7 +482,7 @@ def tile_pass(st, inf32, prior, lay, t, seed, scan, update):
     return _tile_loop(st, inf32, prior, order, u, geo, update)
 
 
-@nb.njit(cache=True, _nrt=False)
+@njit_shipped(_nrt=False)
 def _tile_loop(st, inf32, prior, order, u, geo, update):
     """The loop of :func:`tile_pass` (without numba's runtime, as
     :func:`~ogm_ppl.inference._kernels.cell_sweep.sweep`: it allocates nothing)."""
@@ -498,7 +499,7 @@ def _tile_loop(st, inf32, prior, order, u, geo, update):
     return flips
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def long_pass(st, prior, lay, seed, scan, update):
     """The updates of the long cells, one after another (the stream of ``t = n_tiles``). Returns the flips."""
     order, u = cs.draws(lay.long_cells, scan, tile_seed(seed, lay.n_tr * lay.n_tc))
@@ -515,7 +516,7 @@ def take_tile(taken, n):
     return fetch_add(taken, 0, np.int64(1)) if n > 0 else n
 
 
-@nb.njit(cache=True, parallel=True)
+@njit_shipped(parallel=True)
 def chromatic_sweep(st, inf32, prior, lay, seed, scan, update, threads):
     """One chromatic sweep (module docstring): for each colour, its tiles' :func:`tile_pass` in parallel
     (``numba.prange`` over ``threads`` workers, numba's threads: pass ``numba.get_num_threads()``), then

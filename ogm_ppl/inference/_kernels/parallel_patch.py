@@ -35,6 +35,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.inference._kernels import cell_sweep as cs
 from ogm_ppl.inference._kernels import parallel as par
 from ogm_ppl.inference._kernels.patch_state import _next_stamp
@@ -130,14 +131,24 @@ def patch_draws(anchors, scan, seed, rows):
     return out, u
 
 
-@nb.njit(cache=True)
-def _tile_patches(ps, geo, lay, prior, seed, scan, rule, rows, bit_of, t, base):
+class SweepDraws(NamedTuple):
+    """How a chromatic patch sweep draws its patch orders and uniforms (one numba argument)."""
+
+    seed: int  # the sweep's stream; tile t draws from par.tile_seed(seed, t)
+    scan: int  # the patch order within a group (systematic or permutation: cell_sweep.draws)
+    rows: int  # uniforms per patch (3, or 5 with the escape move)
+
+
+@njit_shipped
+def _tile_patches(ps, geo, lay, prior, dr, rule, bit_of, t, base):
+    """The patch pass of tile ``t`` of ``lay``, its patches ordered and its uniforms drawn by ``dr``
+    (:class:`SweepDraws`), stamps from ``base`` on."""
     lo, hi = lay.tile_off[t], lay.tile_off[t + 1]
-    anchors, u = patch_draws(lay.anchors[lo:hi], scan, par.tile_seed(seed, t), rows)
+    anchors, u = patch_draws(lay.anchors[lo:hi], dr.scan, par.tile_seed(dr.seed, t), dr.rows)
     return patch_pass(ps, geo, anchors, prior, u, rule, base + lo, bit_of)
 
 
-@nb.njit(cache=True, parallel=True)
+@njit_shipped(parallel=True)
 def chromatic_patch_sweep(ps, geo, lay, prior, seed, scan, rule, rows, bit_of, threads):
     """One chromatic patch sweep (module docstring): for each colour its tiles' patches (``numba.prange``
     over ``threads`` workers: pass ``numba.get_num_threads()``; see :func:`.parallel.chromatic_sweep`), then
@@ -148,6 +159,7 @@ def chromatic_patch_sweep(ps, geo, lay, prior, seed, scan, rule, rows, bit_of, t
     changed = 0
     skipped = 0
     P = max(threads, 1)
+    dr = SweepDraws(seed, scan, rows)
     for colour in range(par.COLOURS):
         a = lay.col_off[colour]
         n = lay.col_off[colour + 1] - a
@@ -157,7 +169,7 @@ def chromatic_patch_sweep(ps, geo, lay, prior, seed, scan, rule, rows, bit_of, t
         for _ in nb.prange(P):  # each thread takes the costliest tile left until none is (par.take_tile)
             j = par.take_tile(taken, n)
             while j < n:
-                c, s = _tile_patches(ps, geo, lay, prior, seed, scan, rule, rows, bit_of, lay.col_tiles[a + j], base)
+                c, s = _tile_patches(ps, geo, lay, prior, dr, rule, bit_of, lay.col_tiles[a + j], base)
                 ch[j] = c
                 sk[j] = s
                 j = par.take_tile(taken, n)

@@ -17,10 +17,10 @@ step of :mod:`~ogm_ppl.inference._kernels.choice`. Sweeps allocate their scratch
 
 from __future__ import annotations
 
-import numba as nb
 import numpy as np
 from numba.extending import overload
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.inference._kernels.additive_sweep import _additive_sweep, additive_patch_log_weights
 from ogm_ppl.inference._kernels.candidate_sweep import _candidate_sweep, candidate_log_weights
 from ogm_ppl.inference._kernels.patch_state import _next_stamp
@@ -44,7 +44,7 @@ def _patch_pass_for(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     )
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def patch_pass(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     """:func:`patch_sweep` with its stamps (``stamp0 .. stamp0 + len(anchors) - 1``, reserved by the caller)
     and the prior scratch's ``bit_of`` (``K`` int64, all -1) given: the building block of the chromatic
@@ -53,7 +53,7 @@ def patch_pass(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     return _patch_pass(ps, geo, anchors, prior, u, rule, stamp0, bit_of)
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def patch_sweep(ps, geo, anchors, prior, u, rule):
     """One pass of patch updates at ``anchors`` (``n x 2``; Algorithm 1, Algorithm 2 when
     ``rule.p_rand_patch > 0``) with the uniforms ``u`` (``3 x n``: choice, random-patch, acceptance), the
@@ -80,7 +80,7 @@ def _patch_log_weights_for(ps, patch, prior, logw):
     return impl
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def patch_log_weights(ps, patch, prior, logw):
     """``logw[w]``: unnormalised log conditional of every configuration of ``patch`` (``logw``: at least
     ``2^L`` for additive priors, exactly ``2^L`` for the others). Returns ``W``."""

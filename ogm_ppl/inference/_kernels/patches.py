@@ -21,6 +21,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.inference._kernels.additive_sweep import add_patch_prior, additive_patch_log_weights
 from ogm_ppl.inference._kernels.patch_rays import collect_patch_rays
 
@@ -50,7 +51,7 @@ def _logaddexp(a, b):
     return b + math.log1p(math.exp(a - b))
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def patch_log_weights_mode(mode, ps, patch, prior, sensor, out):
     """``out[w]``: unnormalised log posterior of configuration ``w`` (prior included), with the reference
     map and its first hits in the :class:`~ogm_ppl.inference._kernels.patch_state.PatchState` ``ps``. Returns ``W``."""
@@ -130,7 +131,7 @@ def patch_log_weights_mode(mode, ps, patch, prior, sensor, out):
     return W
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def patch_map_all(mode, patches, centre, ps, prior, sensor, keep_weights):
     """Weigh every patch. Returns (marginals ``P x L`` of each patch cell, normalised log weights
     ``P x W`` if ``keep_weights`` else an empty array). ``centre >= 0`` fills only that column."""

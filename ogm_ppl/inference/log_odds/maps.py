@@ -20,8 +20,9 @@ from dataclasses import dataclass
 import numpy as np
 import torch
 
+from ogm_ppl._memory import check_fits
 from ogm_ppl.grid import Grid
-from ogm_ppl.inference._kernels.log_odds import evidence_from_scans, evidence_update
+from ogm_ppl.inference._kernels.log_odds import EvidenceRule, evidence_from_scans, evidence_update
 from ogm_ppl.models.delta import DeltaFamily
 from ogm_ppl.raycast import Rays, ray_inputs
 from ogm_ppl.scans import Scans
@@ -187,19 +188,8 @@ def add_evidence(
         return
     with torch.no_grad():
         table, max_col = delta_table_for(rays, delta)
-    evidence_update(
-        evidence,
-        touched,
-        rays.offsets,
-        rays.cells,
-        rays.z,
-        rays.is_max,
-        np.ascontiguousarray(table.numpy()),
-        max_col,
-        lo,
-        hi,
-        clamp is not None,
-    )
+    rule = EvidenceRule(np.ascontiguousarray(table.numpy()), max_col, lo, hi, clamp is not None)
+    evidence_update(evidence, touched, rays.offsets, rays.cells, rays.z, rays.is_max, rule)
 
 
 def evidence_grid_from_scans(
@@ -222,26 +212,18 @@ def evidence_grid_from_scans(
         _check_range(delta, float(scans.max_range) / float(grid.resolution), "evidence_grid_from_scans")
     ri = ray_inputs(grid, scans)
     cap = ri.capacity()
+    check_fits(
+        delta.table_bytes(cap, cap) + 8 * cap * (cap + 1) + 9 * grid.num_cells,
+        f"traditional OGM on a {' x '.join(map(str, grid.shape))} grid (building the update term's table "
+        f"({type(delta).__name__}) "
+        f"of {cap:,} x {cap + 1:,} float64 entries, a ray's most cells up to the sensor's maximum range of "
+        f"{float(scans.max_range):g} m, and a copy of it; 9 bytes a cell)",
+        "use a coarser resolution or a shorter usable range",
+    )
     with torch.no_grad():
         table = np.ascontiguousarray(_checked(delta.table(cap, cap), delta).detach().numpy())
     ev = np.full(grid.num_cells, l0, dtype=np.float64)
     touched = np.zeros(grid.num_cells, dtype=np.bool_)
-    evidence_from_scans(
-        ri.u0,
-        ri.v0,
-        ri.du,
-        ri.dv,
-        ri.length,
-        ri.range_cells,
-        ri.is_max,
-        grid.rows,
-        grid.cols,
-        ev,
-        touched,
-        table,
-        cap,
-        lo,
-        hi,
-        clamp is not None,
-    )
+    rule = EvidenceRule(table, cap, lo, hi, clamp is not None)
+    evidence_from_scans(ri.arrays(), grid.rows, grid.cols, ev, touched, rule)
     return LogOddsMap(grid, torch.from_numpy(ev), torch.from_numpy(touched))

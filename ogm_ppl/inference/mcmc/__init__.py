@@ -1,6 +1,7 @@
 """MCMC over whole maps (Chapter 4): the map-kernel base, Gibbs kernels for ``pyro.infer.MCMC``, guided
 Gibbs, parallel tempering, cycles of kernels, the streaming runner with checkpoints, and convergence diagnostics."""
 
+from ogm_ppl.inference.mcmc.chain_state import ChainState
 from ogm_ppl.inference.mcmc.cycle import KernelCycle, KernelMixture, mixing_cycle
 from ogm_ppl.inference.mcmc.dask_tiles import DaskTileGibbs
 from ogm_ppl.inference.mcmc.diagnostics import (
@@ -22,6 +23,7 @@ from ogm_ppl.inference.mcmc.tempering import ParallelTempering, geometric_ladder
 
 __all__ = [
     "CellGibbs",
+    "ChainState",
     "ChainsResult",
     "CheckpointError",
     "ChromaticCellGibbs",

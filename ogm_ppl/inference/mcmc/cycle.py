@@ -65,11 +65,8 @@ class _Parts(MapKernel):
         self._stale = [True] * len(kernels)
 
     # ------------------------------------------------------------------ the MapKernel hooks
-    def _prepare(self) -> None:
-        if not self._ready:
-            self._latent = self.model.latent.numpy().astype(np.int64)
-            self._pinned = self.model.known_free.numpy().astype(bool)
-            self._ready = True
+    def _set_up(self) -> None:
+        """Nothing to set up: each part sets up its own sweeps."""
 
     def _initial_map(self) -> torch.Tensor:
         if self._own_init:
@@ -77,8 +74,7 @@ class _Parts(MapKernel):
         return self.model.full_map(self.kernels[0].initial_params[self.site]).to(torch.float64)
 
     def _load_map(self, m: np.ndarray) -> None:
-        self._m = m  # each part loads it before its next sweep
-        self._last = None
+        self.chain.bind(m)  # each part loads it before its next sweep (and keeps its own first hits)
         self._stale = [True] * len(self.kernels)
 
     @property
@@ -88,7 +84,7 @@ class _Parts(MapKernel):
             if not self._stale[i]:
                 return self.kernels[i].first_hit_state
         k = self.kernels[0]
-        k._adopt_map(self._m)
+        k._adopt_map(self.state)
         self._stale[0] = False
         return k.first_hit_state
 
@@ -106,13 +102,13 @@ class _Parts(MapKernel):
         it); the cells it changed."""
         k = self.kernels[i]
         if self._stale[i]:
-            k._adopt_map(self._m)
+            k._adopt_map(self.state)
         changes, updates = k.changes, k.updates
         k.sample(k.current_params())
-        self._updates += k.updates - updates
+        self.chain.updates += k.updates - updates
         moved = k.changes - changes
         if moved:
-            self._m[:] = k.state
+            self.state[:] = k.state
             self._stale = [j != i for j in range(len(self.kernels))]
         else:
             self._stale[i] = False
@@ -125,7 +121,7 @@ class _Parts(MapKernel):
     def diagnostics(self):
         return {
             "sweeps": self.sweeps,
-            "change rate": self._changes / max(self._updates, 1),
+            "change rate": self.changes / max(self.updates, 1),
             "parts": [{"kind": type(k).__qualname__, **k.diagnostics()} for k in self.kernels],
         }
 
@@ -134,7 +130,7 @@ class _Parts(MapKernel):
         d: dict[str, np.ndarray] = {"parts": np.asarray(len(self.kernels), np.int64)}
         for i, k in enumerate(self.kernels):
             if self._stale[i]:  # a part that has not swept since the map changed (or at all) takes it now
-                k._adopt_map(self._m)
+                k._adopt_map(self.state)
                 self._stale[i] = False
             d.update({f"k{i}.{key}": v for key, v in k.state_dict().items()})
         return d

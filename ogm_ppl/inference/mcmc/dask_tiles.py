@@ -345,12 +345,13 @@ class DaskTileGibbs(ChromaticCellGibbs):
 
     def _sweep(self) -> int:
         seed = int(torch.randint(0, 2**63 - 1, (), dtype=torch.int64))
-        self._updates += len(self._visit)
+        self.chain.updates += len(self._visit)
         futures = self._scatter()
         problems, visits = self.problems, self._visits
         assert visits is not None  # set with the problems
         lay = self.layout
-        grid = self._m.reshape(lay.rows, lay.cols)
+        m = self.state
+        grid = m.reshape(lay.rows, lay.cols)
         sent = received = flips = 0
         phases = []
         f = 0
@@ -367,7 +368,7 @@ class DaskTileGibbs(ChromaticCellGibbs):
                     received += values.nbytes
                     flips += n
                     cells = visits[j]
-                    changed = np.nonzero(values != self._m[cells])[0]
+                    changed = np.nonzero(values != m[cells])[0]
                     _apply(self._st, cells[changed], values[changed])
             phases.append(time.perf_counter() - t0)
         self.last_sweep = {"bytes_sent": sent, "bytes_received": received, "phase_s": phases, "flips": flips}

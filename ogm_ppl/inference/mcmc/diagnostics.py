@@ -29,6 +29,7 @@ from ogm_ppl.progress import Progress
 __all__ = [
     "STARTS",
     "ChainsResult",
+    "default_start_method",
     "effective_sample_size",
     "ess",
     "kl_trace",
@@ -171,11 +172,19 @@ class ChainsResult:
 _WORKER: dict = {}
 
 
+def default_start_method() -> str:
+    """How :func:`run_chains` starts its worker processes unless told: ``"forkserver"`` where the platform has it
+    (workers forked from a clean server process that has imported the library once), else ``"spawn"``. Never
+    ``"fork"`` of the calling process: a process that has started thread pools (torch's, numba's, JAX's, as a
+    notebook has) can crash in a forked copy."""
+    return "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+
+
 def _init_worker(make_kernel) -> None:
     """Runs once per worker process: the kernel factory (and the model in it) crosses over once, not
-    once per chain."""
+    once per chain: inherited (fork) or as the bytes of a plain pickle."""
     torch.set_num_threads(1)
-    _WORKER["make_kernel"] = make_kernel
+    _WORKER["make_kernel"] = pickle.loads(make_kernel) if isinstance(make_kernel, bytes) else make_kernel
 
 
 def _run_chain(num_sweeps, trace_cells, warmup, seed) -> dict:
@@ -207,15 +216,18 @@ def run_chains(
     chains far apart: :func:`run_from_starts` with :func:`start_maps` (thresholded OGM, all free, a prior
     draw) and :func:`rhat_agreement`.
 
-    With ``processes > 1``, forked workers inherit ``make_kernel`` (no copy is made in this process); with
-    ``mp_context="spawn"`` it must be picklable: a class or ``functools.partial``, e.g.
-    ``partial(CellGibbs, model, update="metropolised")``, not a lambda; it is sent once to each worker.
-    Workers start with ``mp_context``: ``"fork"`` where the platform has it (as ``pyro.infer.MCMC`` does;
-    workers inherit the model and run torch on one thread), else ``"spawn"`` (each worker pays the imports
-    and the model's transfer once: about 9 s for the 500 x 500 reference scene here). A sweep is
-    memory-bound, so chains sharing a machine's memory bandwidth speed up less than the core count (4
-    chains of 100 sweeps on that scene: 1.74x on 2 cores with fork, 1.07x with spawn;
-    ``benchmarks/bench_mixing.py``).
+    With ``processes > 1`` the workers start with ``mp_context``: by default :func:`default_start_method`
+    (``"forkserver"``, else ``"spawn"``), for which ``make_kernel`` must be picklable (a class or
+    ``functools.partial``, e.g. ``partial(CellGibbs, model, update="metropolised")``, not a lambda): it is sent
+    once to each worker (its initializer), not once a chain, and a worker runs torch on one thread. ``"fork"``
+    only when asked: workers inherit ``make_kernel`` (no copy, a lambda will do), but a forked copy of a process
+    that has started thread pools (torch's, numba's, JAX's: a notebook) can crash. A script that runs chains in
+    processes needs the ``if __name__ == "__main__":`` guard (the workers import the main module). Start-up:
+    forkserver and spawn workers import the library and load the compiled kernels afresh (measured on 2
+    busy cores: about 0.3 s for fork, 2-6 s for forkserver or spawn per pool, so use them for long chains), and
+    a sweep is memory-bound, so chains sharing a machine's memory bandwidth speed up less than the core count (4
+    chains of 100 sweeps on the 500 x 500 reference scene: 1.74x on 2 cores with fork, 1.07x with spawn, whose
+    model transfer took about 9 s; ``benchmarks/bench_mixing.py``).
     """
     if num_chains < 1:
         raise ValueError("num_chains must be >= 1")
@@ -230,19 +242,28 @@ def run_chains(
             run_gibbs(kernel, num_sweeps, stats, warmup=warmup, seed=seed + c, progress=progress)
             out.append(stats)
         return ChainsResult(out)
-    if mp_context is None:
-        mp_context = "fork" if "fork" in multiprocessing.get_all_start_methods() else "spawn"
-    if mp_context != "fork":  # forked workers inherit make_kernel; a pickled copy of a big model costs its size
+    mp_context = default_start_method() if mp_context is None else mp_context
+    if mp_context not in multiprocessing.get_all_start_methods():
+        raise ValueError(
+            f"mp_context must be one of this platform's start methods {multiprocessing.get_all_start_methods()}, "
+            f"got {mp_context!r}"
+        )
+    ctx = multiprocessing.get_context(mp_context)
+    shipped: Callable[[], Any] | bytes = make_kernel
+    if mp_context != "fork":
+        # a plain pickle, made once: multiprocessing's own pickler would move the model's tensors into shared
+        # memory, which leaves the NumPy views of them (the compiled kernels' ray index) pointing at freed memory
         try:
-            pickle.dumps(make_kernel)
+            shipped = pickle.dumps(make_kernel, protocol=pickle.HIGHEST_PROTOCOL)
         except Exception as e:
             raise ValueError(
-                "make_kernel must be picklable to run chains in processes (use a class or "
-                f"functools.partial, not a lambda): {e}"
+                f"make_kernel must be picklable to run chains in {mp_context} processes (use a class or "
+                f"functools.partial, not a lambda; or mp_context='fork'): {e}"
             ) from None
-    ctx = multiprocessing.get_context(mp_context)
+    if mp_context == "forkserver":  # the server imports the library once; each worker is a fork of it
+        ctx.set_forkserver_preload([__name__])
     with ProcessPoolExecutor(
-        max_workers=min(processes, num_chains), mp_context=ctx, initializer=_init_worker, initargs=(make_kernel,)
+        max_workers=min(processes, num_chains), mp_context=ctx, initializer=_init_worker, initargs=(shipped,)
     ) as pool:
         futures = [pool.submit(_run_chain, num_sweeps, trace_cells, warmup, seed + c) for c in range(num_chains)]
         states = []

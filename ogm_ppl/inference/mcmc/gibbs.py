@@ -115,16 +115,14 @@ class CellGibbs(MapKernel):
         self.update = update
         self._rule = _UPDATES[update]
 
-    def _prepare(self) -> None:
-        if self._ready:
-            return
-        super()._prepare()
+    def _set_up(self) -> None:
+        super()._set_up()
         self._bits = cs.fixed_point_bits(self._ll, self._c_off)
 
     def _load_map(self, m: np.ndarray) -> None:
         super()._load_map(m)
-        self._st = cs.cell_state_of(self._m, self._index, self._bits)
-        self._f = self._st.rays["f"]  # a view: the compiled sweeps keep it in step with the map
+        self._st = cs.cell_state_of(m, self._index, self._bits)
+        self.chain.f = self._st.rays["f"]  # a view: the compiled sweeps keep it in step with the map
 
     def _sweep_order(self) -> np.ndarray | None:
         """The cells to visit this sweep, in order, if drawn here; ``None``: by ``scan``, in compiled code."""
@@ -139,7 +137,7 @@ class CellGibbs(MapKernel):
             order, u = cs.draws(self._visit, _SCAN_CODES[self.scan], seed)
         else:
             u = cs.draws(order, cs.SYSTEMATIC, seed)[1]
-        self._updates += len(order)
+        self.chain.updates += len(order)
         if self._compiled is not None:
             return cs.sweep(self._st, order, self._compiled, u, self._rule)
         return self._generic_sweep(order, u)
@@ -151,11 +149,10 @@ class CellGibbs(MapKernel):
         self._prepare()
         if self._compiled is None:
             raise ValueError("run_marginals needs a prior with a compiled face (prior.compiled())")
-        if not hasattr(self, "_m"):
+        if not self.chain.loaded:
             self.setup()
         acc = cs.marginals(self._st, self._visit, self._compiled, int(num_sweeps), int(seed), self._rule)
-        self.sweeps += int(num_sweeps)
-        self._last = None
+        self.chain.swept(0, int(num_sweeps))  # the changes are not counted here
         return torch.from_numpy(acc / max(int(num_sweeps), 1))
 
     def cell_log_odds(self, k: int) -> float:
@@ -163,8 +160,8 @@ class CellGibbs(MapKernel):
         self._prepare()
         lik = cs.log_lik_ratio(self._st, int(k))
         if self._compiled is not None:
-            return float(cs.prior_log_odds(self._compiled, int(k), self._m) + lik)
-        cur = torch.from_numpy(self._m.astype(np.float64))
+            return float(cs.prior_log_odds(self._compiled, int(k), self.state) + lik)
+        cur = torch.from_numpy(self.state.astype(np.float64))
         lp = self.model.prior.log_prob_patch(cur, torch.tensor([int(k)]), torch.tensor([[0.0], [1.0]]))
         if not torch.isfinite(lp).any():
             return float("nan")
@@ -174,9 +171,10 @@ class CellGibbs(MapKernel):
 
     def _generic_sweep(self, order, u) -> int:
         changes = 0
+        m = self.state
         for k, uk in zip(order.tolist(), u.tolist()):
-            v = cs.new_value(self.cell_log_odds(k), uk, int(self._m[k]), self._rule)
-            if v != self._m[k]:
+            v = cs.new_value(self.cell_log_odds(k), uk, int(m[k]), self._rule)
+            if v != m[k]:
                 cs.set_cell(self._st, k, v)
                 changes += 1
         return changes
@@ -255,7 +253,7 @@ class PatchGibbs(MapKernel):
             each tile drawn from ``p(a_k | border_k) p(z | a_k, rest)`` over the table's support, the
             factors of the neighbouring tiles (whose borders the tile forms) ignored. That is not a Gibbs
             sampler of the tiled joint, nor of any joint in general: its stationary distribution differs
-            from the posterior (``experiments/thesis_border_update.py`` measures by how much).
+            from the posterior (:func:`ogm_ppl.studies.thesis_border_update.thesis_border_update` measures by how much).
         p_escape: for backed-off tables (strictly positive, e.g. ``border_bo``), the probability per patch
             update of the escape move (an independence Metropolis-Hastings proposal from the back-off
             table after the heat bath on the counted configurations; see
@@ -387,7 +385,7 @@ class PatchGibbs(MapKernel):
         n = len(anchors)
         rows = 5 if self._escapes() else 3  # choice, random patch, accept (, escape: proposal, accept)
         u = np.stack([self._uniforms(n) for _ in range(rows)])
-        self._updates += n
+        self.chain.updates += n
         if self._compiled is None:
             return self._python_sweep(anchors, u[0], u[1], u[2])
         changed, skipped = patch_sweep(self._ps, self._geometry(), anchors, self._compiled, u, self._patch_rule())
@@ -397,7 +395,7 @@ class PatchGibbs(MapKernel):
 
     def _load_map(self, m: np.ndarray) -> None:
         super()._load_map(m)
-        self._ps = patch_state(self._m, self._f, self._index)  # views: the sweeps keep them in step
+        self._ps = patch_state(m, self.first_hit_state, self._index)  # views: the sweeps keep them in step
 
     def _geometry(self) -> PatchGeometry:
         g = self.model.grid
@@ -442,7 +440,7 @@ class PatchGibbs(MapKernel):
         W = patch_log_lik(self._ps, patch, logw)
         live = patch[patch >= 0]
         configs = ((torch.arange(W)[:, None] >> torch.arange(len(live))) & 1).to(torch.float64)
-        cur = torch.from_numpy(self._m.astype(np.float64))
+        cur = torch.from_numpy(self.state.astype(np.float64))
         prior = self.model.prior.log_prob_patch(cur, torch.from_numpy(live), configs).numpy()
         return logw[:W] + prior
 
@@ -451,13 +449,14 @@ class PatchGibbs(MapKernel):
         choice step as the compiled sweeps."""
         geo = self._geometry()
         p = np.empty(self.L, np.int64)
+        m = self.state
         changed = 0
         for i, a in enumerate(anchors):
             if build_patch_at(geo, int(a[0]), int(a[1]), p) == 0:
                 continue
             logw = np.ascontiguousarray(self.patch_log_weights(p))
             W = len(logw)
-            cur = patch_config(p, self._m)
+            cur = patch_config(p, m)
             if self.p_rand_patch > 0 and u_rand[i] < self.p_rand_patch:
                 prop = min(int(u_choice[i] * W), W - 1)
                 new = prop if (self.thesis_random or accept_random(logw[cur], logw[prop], u_accept[i])) else cur

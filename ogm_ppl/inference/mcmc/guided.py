@@ -116,11 +116,11 @@ class GuidedGibbs(MapKernel):
         dense = np.full((r.num_rays, int(r.lengths.max())), self.model.num_cells, dtype=np.int64)
         dense[r.ray_of_entry, r.kappa] = r.cells  # padded with K: a cell that is always free
         self._dense, self._lengths = dense, r.lengths.astype(np.int64)
-        self._ll = np.ascontiguousarray(self.model.loglik_table.numpy())
-        self._pinned = self.model.known_free.numpy()
+        self._loglik = np.ascontiguousarray(self.model.loglik_table.numpy())
+        self._known_free = self.model.known_free.numpy()
         self._K = int(self.model.num_cells)
         lo = self.model.prior.cell_log_odds()
-        self._prior_lo = None if lo is None else torch.as_tensor(lo, dtype=torch.float64).numpy()
+        self._cell_prior_lo = None if lo is None else torch.as_tensor(lo, dtype=torch.float64).numpy()
         self._tiles: dict = {}  # block cells (bytes) -> tile proposals, for proposal="tiles"
         if proposal == "tiles":
             self._check_tiles()
@@ -223,7 +223,7 @@ class GuidedGibbs(MapKernel):
                     if 0 <= r < g.rows and 0 <= c < g.cols:
                         in_mask |= 1 << i
                         k = r * g.cols + c
-                        if self._pinned[k]:
+                        if self._known_free[k]:
                             pin_mask |= 1 << i
                         else:
                             bits.append(i)
@@ -291,7 +291,7 @@ class GuidedGibbs(MapKernel):
         """``sum_{n in rays} log p(z_n | f_n(m))`` of maps ``W x (K + 1)`` (a trailing 0 column) -> ``W``."""
         occ = maps[:, self._dense[rays]] != 0  # W x |rays| x Lmax
         first = np.where(occ.any(2), occ.argmax(2), self._lengths[rays][None, :])
-        return self._ll[rays[None, :], first].sum(1)
+        return self._loglik[rays[None, :], first].sum(1)
 
     def log_ratio(self, m, cells, new, rays=None) -> float:
         r"""``log [p(m') p(z | m') q_B(m_B)] - log [p(m) p(z | m) q_B(m'_B)]`` for ``m' = m`` with
@@ -317,8 +317,8 @@ class GuidedGibbs(MapKernel):
         maps = np.zeros((W + 1, K + 1))
         maps[:, :K] = m
         maps[1:, cells] = news
-        if self._prior_lo is not None:  # independent cells: the prior ratio is local and exact
-            lp = np.concatenate([[0.0], ((news - old) * self._prior_lo[cells]).sum(1)])
+        if self._cell_prior_lo is not None:  # independent cells: the prior ratio is local and exact
+            lp = np.concatenate([[0.0], ((news - old) * self._cell_prior_lo[cells]).sum(1)])
         elif len(cells) <= _MAX_PATCH_PRIOR:  # exact differences between configurations of the block
             configs = torch.from_numpy(np.concatenate([old[None, :], news]))
             lp = torch.as_tensor(
@@ -339,14 +339,12 @@ class GuidedGibbs(MapKernel):
             out = lj[1:] - lj[0] + lq[0] - lq[1:]
         # q(old) = 0 (the move could not be undone): never taken; a state of zero mass: always left
         out = np.where((lj[1:] == -np.inf) | (lq[0] == -np.inf), -np.inf, np.where(lj[0] == -np.inf, np.inf, out))
-        pinned = (news[:, self._pinned[cells]] != 0).any(1)
+        pinned = (news[:, self._known_free[cells]] != 0).any(1)
         return np.where(pinned, -np.inf, out)
 
     # ------------------------------------------------------------------ the MapKernel hooks
-    def _prepare(self) -> None:
-        if not self._ready:
-            self._latent = self.model.latent.numpy().astype(np.int64)
-            self._ready = True
+    def _set_up(self) -> None:
+        """Nothing to set up: the base kernel sets up its own sweeps, and the guide's moves were set up when built."""
 
     def _initial_map(self) -> torch.Tensor:
         if self.init == "base":
@@ -366,8 +364,7 @@ class GuidedGibbs(MapKernel):
         return m
 
     def _load_map(self, m: np.ndarray) -> None:
-        self._m = m  # the base kernel loads it when it next sweeps
-        self._last = None
+        self.chain.bind(m)  # the base kernel loads it when it next sweeps (and keeps its own first hits)
         self._base_stale = True
 
     def sampled_cells(self) -> np.ndarray:
@@ -384,30 +381,30 @@ class GuidedGibbs(MapKernel):
         if self.p_guide >= 1.0 or (self.p_guide > 0.0 and float(torch.rand(())) < self.p_guide):
             before = self._proposed
             moved = self.mh_pass()
-            self._updates += self._proposed - before
+            self.chain.updates += self._proposed - before
             self._base_stale |= moved > 0
             self.guide_sweeps += 1
             return moved
         base = self.base
         if self._base_stale:
-            base._adopt_map(self._m)
+            base._adopt_map(self.state)
             self._base_stale = False
         changes, updates = base.changes, base.updates
         base.sample(base.current_params())
-        self._m[:] = base.state
-        self._updates += base.updates - updates
+        self.state[:] = base.state
+        self.chain.updates += base.updates - updates
         return base.changes - changes
 
     def mh_pass(self, offset: tuple[int, int] | None = None) -> int:
         """One pass of guide moves over the blocks of a tiling (offset drawn uniformly unless given), on
         the current state; returns the number of blocks that changed."""
-        if not hasattr(self, "_m"):
+        if not self.chain.loaded:
             self.setup()
         offs = self.offsets()
         if offset is None:
             offset = offs[int(torch.randint(len(offs), ()))] if len(offs) > 1 else offs[0]
         moved = 0
-        mn = self._m  # moves write into the state
+        mn = self.state  # moves write into the state
         for cells, rays in self.blocks(offset):
             new = self._propose(cells)
             self._proposed += 1

@@ -7,8 +7,10 @@ r"""The map-kernel base: the protocol every MCMC kernel over whole maps follows 
 * **Site** ``"m"``: the latent (not pinned) cells of the map, float64 0/1, shape ``(L,)`` in
   ``model.latent`` order (``model.full_map`` restores the ``K`` cells).
 * **State** (:attr:`MapKernel.state`): the current full map, a live ``(K,)`` uint8 0/1 array with the
-  pinned cells 0 (copy it to keep it). Random numbers come from torch's global generator only, so the
-  state, the counters and ``torch.get_rng_state()`` determine the rest of the chain.
+  pinned cells 0 (copy it to keep it). It lives, with every ray's first hit, the counters and the value
+  returned last, in the kernel's :class:`~ogm_ppl.inference.mcmc.chain_state.ChainState`
+  (:attr:`MapKernel.chain`). Random numbers come from torch's global generator only, so the state, the
+  counters and ``torch.get_rng_state()`` determine the rest of the chain.
 * **Params in step**: ``sample(params)`` re-reads ``params["m"]`` unless it is the very tensor the kernel
   returned last; a runner that holds no params asks :meth:`MapKernel.current_params` for them (a set-up
   or restored kernel), and :meth:`MapKernel.set_state` loads any map.
@@ -19,16 +21,19 @@ r"""The map-kernel base: the protocol every MCMC kernel over whole maps follows 
   and raises :class:`KernelStateError` naming what is wrong; a kernel built with the same arguments that
   loads it continues the chain bit for bit.
 
-A subclass implements ``_sweep()`` (one sweep from the current state ``self._m``, drawing from torch's
-generator; adds its number of updates to ``self._updates`` and returns the number that changed the map; a
-sweep that changes ``self._m`` keeps every ray's first occupied cell ``self._f`` in step, or calls
-``self._load_map(self._m)`` at its end, which recomputes it) and may
-extend ``_prepare()`` (one-time set-up), ``_load_map(m)`` (rebuild state derived from the map, a checked
-``(K,)`` uint8 array; call ``super()``: composite kernels hand maps over through it without re-checking
-them), ``_extra_state()`` / ``_load_extra_state(state)`` (more checkpoint entries) and ``_initial_map()`` (a
-``K`` starting map). Public attributes are settings (the checkpoint's fingerprint reads them once, as the
-kernel was built): counters a sweep updates are private, checkpointed through ``_extra_state``. The model's
-ray index (``model.ray_index()``) and ``model.log_joint`` give what a sweep needs to score a change.
+A subclass implements ``_sweep()`` (one sweep from the current state ``self.state``, drawing from torch's
+generator; adds its number of updates to ``self.chain.updates`` and returns the number that changed the map;
+a sweep that changes the map keeps every ray's first occupied cell ``self.chain.f`` in step, or calls
+``self._load_map(self.state)`` at its end, which recomputes it) and may
+extend ``_set_up()`` (one-time set-up, run once by ``_prepare()``), ``_load_map(m)`` (rebuild state derived
+from the map, a checked ``(K,)`` uint8 array; call ``super()``, which binds ``m`` and its first hits to the
+chain: composite kernels hand maps over through it without re-checking them), ``_extra_state()`` /
+``_load_extra_state(state)`` (more checkpoint entries) and ``_initial_map()`` (a ``K`` starting map). A
+composite kernel drives its parts through their public methods (:meth:`MapKernel.step`,
+:meth:`MapKernel.set_state`, :attr:`MapKernel.state`) and hands maps between them with
+:meth:`MapKernel._adopt_map`. Public attributes are settings (the checkpoint's fingerprint reads them once, as
+the kernel was built): counters a sweep updates are private, checkpointed through ``_extra_state``. The
+model's ray index (``model.ray_index()``) and ``model.log_joint`` give what a sweep needs to score a change.
 ``ogm_ppl.testing.KernelContract`` checks a kernel against this protocol and the exact posterior.
 """
 
@@ -43,6 +48,7 @@ import torch
 from pyro.infer.mcmc.mcmc_kernel import MCMCKernel
 
 from ogm_ppl.inference._kernels.cells import first_hits, gather_as_float
+from ogm_ppl.inference.mcmc.chain_state import ChainState
 from ogm_ppl.inference.mcmc.fingerprint import digest
 from ogm_ppl.models.occupancy import OccupancyModel
 
@@ -156,7 +162,7 @@ class KernelStateError(ValueError):
 
 
 _STATE_KEYS = ("format", "kind", "m", "sweeps", "changes", "updates")
-_DYNAMIC = {"sweeps", "model", "transforms"}
+_DYNAMIC = {"model", "transforms"}
 
 
 class MapKernel(MCMCKernel):
@@ -194,16 +200,22 @@ class MapKernel(MCMCKernel):
         self._initial_params: dict[str, torch.Tensor] | None = None
         self._ready = False
         self._start_checked = False
-        self._last = None
-        self.sweeps = 0
-        self._changes = 0
-        self._updates = 0
+        self._chain = ChainState()
         super().__init__()
 
     # --------------------------------------------------------------- set-up
     def _prepare(self) -> None:
+        """Set the kernel up, once: the latent and pinned cells, then :meth:`_set_up`."""
         if self._ready:
             return
+        self._latent = self.model.latent.numpy().astype(np.int64)
+        self._pinned = self.model.known_free.numpy().astype(np.uint8)
+        self._set_up()
+        self._ready = True
+
+    def _set_up(self) -> None:
+        """Hook: the one-time set-up of what the sweeps read (extend it with ``super()``): here the model's ray
+        index and its prior's compiled face."""
         model = self.model
         # the ray index and the prior's compiled face (None: the generic path), read by the compiled sweeps
         self._index = index = model.ray_index()
@@ -214,9 +226,6 @@ class MapKernel(MCMCKernel):
         lo = model.prior.cell_log_odds()
         self._prior_lo = None if lo is None else np.ascontiguousarray(lo.numpy(), dtype=np.float64)
         self._local = self._compiled if lo is None else None
-        self._latent = model.latent.numpy().astype(np.int64)
-        self._pinned = model.known_free.numpy().astype(np.uint8)
-        self._ready = True
 
     def _initial_map(self) -> torch.Tensor:
         """Hook: the ``K`` starting map (float 0/1) when no ``initial_params`` are given."""
@@ -236,7 +245,7 @@ class MapKernel(MCMCKernel):
                 f"MCMC.run() takes no model arguments; got {len(args)} positional and {sorted(kwargs)} keyword. "
                 "For other readings build an OccupancyModel of them (raycast of their Scans) and a kernel of it."
             )
-        self.sweeps, self._changes, self._updates = 0, 0, 0
+        self._chain.restart()
         self._prepare()
         m = self.initial_params[self.site]
         self._set_state(m)
@@ -281,10 +290,8 @@ class MapKernel(MCMCKernel):
 
     def _load_map(self, m: np.ndarray) -> None:
         """Hook: make the checked map ``m`` (``(K,)`` uint8 0/1, pinned cells 0; owned by the kernel from now on)
-        the state; extend to rebuild derived state."""
-        self._m = m
-        self._f = first_hits(self._m, self._offsets, self._cells)
-        self._last = None
+        the state (bound to :attr:`chain` with its first hits); extend to rebuild derived state."""
+        self._chain.bind(m, first_hits(m, self._offsets, self._cells))
 
     def _adopt_map(self, m: np.ndarray) -> None:
         """Load the state another kernel of the same model holds (``(K,)`` uint8 0/1, pinned cells 0; copied),
@@ -302,26 +309,39 @@ class MapKernel(MCMCKernel):
         self._set_state(m)
 
     @property
+    def chain(self) -> ChainState:
+        """The chain's state (:class:`~ogm_ppl.inference.mcmc.chain_state.ChainState`): the map, the first hits,
+        the counters and the value returned last. The kernel owns it: a subclass's sweep writes the map in place
+        and adds its updates to ``chain.updates``; loading maps and counting sweeps are the base's."""
+        return self._chain
+
+    @property
     def state(self) -> np.ndarray:
         """The current full map (live ``(K,)`` uint8 array; site ``"m"`` carries its latent cells)."""
-        if not hasattr(self, "_m"):
+        m = self._chain.m
+        if m is None:
             raise RuntimeError(
                 f"{type(self).__name__} has no state yet: call setup(), set_state() or load_state_dict() first"
             )
-        return self._m
+        return m
 
     def current_params(self) -> dict[str, torch.Tensor]:
         """``{"m": (L,) float64}`` of the current state, recognised by the next :meth:`sample` as the
         kernel's own (no re-read): how a runner starts a chain from a set-up or restored kernel."""
         self._prepare()
         out = torch.from_numpy(gather_as_float(self.state, self._latent))
-        self._last = out
+        self._chain.last = out
         return {self.site: out}
 
     @property
     def first_hit_state(self) -> np.ndarray:
         """Every ray's current first-occupied kappa (``R``)."""
-        return self._f
+        f = self._chain.f
+        if f is None:
+            raise RuntimeError(
+                f"{type(self).__name__} keeps no first hits: it has no state yet, or its parts sweep and keep them"
+            )
+        return f
 
     def sampled_cells(self) -> np.ndarray:
         """The cells ``R'`` the kernel can change (sorted): with ``region``, the chain samples
@@ -329,14 +349,19 @@ class MapKernel(MCMCKernel):
         return self._visit
 
     @property
+    def sweeps(self) -> int:
+        """Sweeps since the start of the chain."""
+        return self._chain.sweeps
+
+    @property
     def changes(self) -> int:
         """Updates that changed the map, since the start of the chain."""
-        return self._changes
+        return self._chain.changes
 
     @property
     def updates(self) -> int:
         """Updates made (cell or patch updates, proposals), since the start of the chain."""
-        return self._updates
+        return self._chain.updates
 
     def settings(self) -> dict:
         """The public settings (simple values; arrays as digests) that a checkpoint's fingerprint sees.
@@ -364,11 +389,18 @@ class MapKernel(MCMCKernel):
         """One sweep from ``params["m"]`` (or from the state, if ``params`` are the kernel's own)."""
         self._prepare()
         m = params[self.site]
-        if m is not self._last:
+        if m is not self._chain.last:
             self._set_state(m)
-        self._changes += self._sweep()
-        self.sweeps += 1
+        self.step()
         return self.current_params()
+
+    def step(self) -> int:
+        """One sweep from the current state, counted; returns the number of updates that changed the map. What
+        :meth:`sample` does once its params are loaded: a composite kernel sweeps its parts through it."""
+        self._prepare()
+        changes = self._sweep()
+        self._chain.swept(changes)
+        return changes
 
     def _sweep(self) -> int:
         """Hook: one sweep from the current state (module docstring); returns the number of changes."""
@@ -386,11 +418,12 @@ class MapKernel(MCMCKernel):
         return torch.rand(n, dtype=torch.float64).numpy()
 
     def logging(self):
-        rate = self._changes / max(self._updates, 1)
-        return OrderedDict([("sweeps", self.sweeps), ("change rate", f"{rate:.3f}")])
+        c = self._chain
+        return OrderedDict([("sweeps", c.sweeps), ("change rate", f"{c.changes / max(c.updates, 1):.3f}")])
 
     def diagnostics(self):
-        return {"sweeps": self.sweeps, "change rate": self._changes / max(self._updates, 1)}
+        c = self._chain
+        return {"sweeps": c.sweeps, "change rate": c.changes / max(c.updates, 1)}
 
     # --------------------------------------------------------------- checkpoints
     def state_dict(self) -> dict[str, np.ndarray]:
@@ -399,9 +432,9 @@ class MapKernel(MCMCKernel):
             "format": np.asarray(self.STATE_FORMAT, np.int64),
             "kind": np.asarray(type(self).__qualname__),
             "m": self.state.copy(),
-            "sweeps": np.asarray(self.sweeps, np.int64),
-            "changes": np.asarray(self._changes, np.int64),
-            "updates": np.asarray(self._updates, np.int64),
+            "sweeps": np.asarray(self._chain.sweeps, np.int64),
+            "changes": np.asarray(self._chain.changes, np.int64),
+            "updates": np.asarray(self._chain.updates, np.int64),
         }
         extra = self._extra_state()
         clash = sorted(set(extra) & set(d))
@@ -444,7 +477,7 @@ class MapKernel(MCMCKernel):
         self._prepare()
         self._load_extra_state(state)
         self._set_state(torch.from_numpy(m.astype(np.float64)))
-        self.sweeps, self._changes, self._updates = counts["sweeps"], counts["changes"], counts["updates"]
+        self._chain.restart(**counts)
 
 
 def _count(state: Mapping, key: str) -> int:

@@ -40,19 +40,30 @@ from ogm_ppl.priors.compiled import kind_of
 __all__ = ["ChromaticCellGibbs", "ChromaticPatchGibbs", "max_threads"]
 
 
-def _set_threads(kernel, n: int | None) -> None:
-    most = max_threads()
-    if n is not None and not 1 <= int(n) <= most:
-        raise ValueError(f"threads must lie in 1..{most}, got {n}")
-    kernel._threads = None if n is None else int(n)
-
-
 def max_threads() -> int:
     """The most threads numba can run (``NUMBA_NUM_THREADS``, fixed when numba starts)."""
     return int(numba.config.NUMBA_NUM_THREADS)  # type: ignore[attr-defined]
 
 
-class ChromaticCellGibbs(CellGibbs):
+class _Threaded:
+    """The ``threads`` setting of the chromatic kernels: how many of numba's threads a sweep uses."""
+
+    _threads: int | None = None
+
+    @property
+    def threads(self) -> int:
+        """The numba threads a sweep uses."""
+        return numba.get_num_threads() if self._threads is None else self._threads
+
+    @threads.setter
+    def threads(self, n: int | None) -> None:
+        most = max_threads()
+        if n is not None and not 1 <= int(n) <= most:
+            raise ValueError(f"threads must lie in 1..{most}, got {n}")
+        self._threads = None if n is None else int(n)
+
+
+class ChromaticCellGibbs(_Threaded, CellGibbs):
     """Single-cell Gibbs in chromatic tile sweeps (module docstring), on ``threads`` of numba's threads.
 
     Args:
@@ -83,19 +94,8 @@ class ChromaticCellGibbs(CellGibbs):
         self.tile = None if tile is None else int(tile)
         self.threads = threads
 
-    @property
-    def threads(self) -> int:
-        """The numba threads a sweep uses."""
-        return numba.get_num_threads() if self._threads is None else self._threads
-
-    @threads.setter
-    def threads(self, n: int | None) -> None:
-        _set_threads(self, n)
-
-    def _prepare(self) -> None:
-        if self._ready:
-            return
-        super()._prepare()
+    def _set_up(self) -> None:
+        super()._set_up()
         if self._compiled is None:
             raise ValueError("ChromaticCellGibbs needs a prior with a compiled face (prior.compiled())")
         g = self.model.grid
@@ -133,7 +133,7 @@ class ChromaticCellGibbs(CellGibbs):
 
     def _sweep(self) -> int:
         seed = np.uint64(int(torch.randint(0, 2**63 - 1, (), dtype=torch.int64)))
-        self._updates += len(self._visit)
+        self.chain.updates += len(self._visit)
         before = numba.get_num_threads()
         numba.set_num_threads(self.threads)
         try:
@@ -159,7 +159,7 @@ class ChromaticCellGibbs(CellGibbs):
     def state_equals_scratch(self) -> bool:
         """Whether the kept first / second hits and likelihood sums equal those computed from scratch
         for the current map (the check that concurrent writes lost nothing)."""
-        ref = cs.cell_state_of(self._m, self._index, self._bits)
+        ref = cs.cell_state_of(self.state, self._index, self._bits)
         return bool(
             np.array_equal(ref.rays, self._st.rays)
             and np.array_equal(ref.d, self._st.d)
@@ -167,7 +167,7 @@ class ChromaticCellGibbs(CellGibbs):
         )
 
 
-class ChromaticPatchGibbs(PatchGibbs):
+class ChromaticPatchGibbs(_Threaded, PatchGibbs):
     """Patch Gibbs in chromatic tile sweeps (module docstring), on ``threads`` of numba's threads.
 
     Args:
@@ -204,14 +204,10 @@ class ChromaticPatchGibbs(PatchGibbs):
         if tile is not None and int(tile) < 1:
             raise ValueError(f"tile must be a positive number of cells, got {tile}")
         self.tile = None if tile is None else int(tile)
-        _set_threads(self, threads)
+        self.threads = threads
 
-    threads = ChromaticCellGibbs.threads
-
-    def _prepare(self) -> None:
-        if self._ready:
-            return
-        super()._prepare()
+    def _set_up(self) -> None:
+        super()._set_up()
         if self._compiled is None:
             raise ValueError("ChromaticPatchGibbs needs a prior with a compiled face (prior.compiled())")
         g = self.model.grid
@@ -244,7 +240,7 @@ class ChromaticPatchGibbs(PatchGibbs):
     def _sweep(self) -> int:
         seed = np.uint64(int(torch.randint(0, 2**63 - 1, (), dtype=torch.int64)))
         lay = self._layout
-        self._updates += len(lay.anchors) + len(lay.long_anchors)
+        self.chain.updates += len(lay.anchors) + len(lay.long_anchors)
         rows = 5 if self._escapes() else 3
         before = numba.get_num_threads()
         numba.set_num_threads(self.threads)

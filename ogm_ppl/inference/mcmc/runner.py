@@ -27,6 +27,7 @@ import numpy as np
 import torch
 
 from ogm_ppl._rng import keeps_global_rng
+from ogm_ppl.exceptions import CheckpointError
 from ogm_ppl.inference.mcmc.fingerprint import fingerprint
 from ogm_ppl.io import atomic_write
 from ogm_ppl.posterior import mutual_information_from_joint
@@ -35,10 +36,6 @@ from ogm_ppl.progress import Progress, progress_over
 __all__ = ["CheckpointError", "GibbsRun", "RunningStats", "run_gibbs"]
 
 _FORMAT = 4  # the kernel's entries follow MapKernel.state_dict (its own format: kernel_format)
-
-
-class CheckpointError(ValueError):
-    """A checkpoint that cannot be resumed here: unreadable, foreign, or of another run."""
 
 
 class RunningStats:
@@ -227,6 +224,7 @@ def _load_checkpoint(
                     f"{path}: checkpoint holds {int(z['sweep'])} sweeps (warm-up included), more than the {total} "
                     f"this run asks for; ask for at least as many, or {_HINT}"
                 )
+            _check_fields(path, z, stats)
             kernel.load_state_dict({k[7:]: z[k] for k in z.files if k.startswith("kernel_")})
             stats.load_state_dict({k[6:]: z[k] for k in z.files if k.startswith("stats_")})
             torch.set_rng_state(torch.from_numpy(z["rng"].copy()))
@@ -238,6 +236,55 @@ def _load_checkpoint(
             raise
         except Exception as e:
             raise CheckpointError(f"{path}: damaged checkpoint ({type(e).__name__}: {e}); {_HINT}") from None
+
+
+def _check_fields(path: Path, z, stats: RunningStats) -> None:
+    """Refuse (:class:`CheckpointError` naming ``path`` and the field) a checkpoint whose sweep count or running
+    statistics cannot come from a run: a negative sweep or sample count, a field of another shape than ``stats``
+    keeps, a non-finite entry, a count outside ``[0, n]`` (``n`` samples: the sums of 0/1 values), a first-hit
+    histogram not summing to ``n``, a traced value not 0 or 1, or not one traced row a sample."""
+
+    def bad(field: str, why: str) -> CheckpointError:
+        return CheckpointError(f"{path}: field {field} {why}: not a checkpoint a run writes; {_HINT}")
+
+    for field in ("sweep", "stats_n"):
+        if field not in z.files:
+            raise bad(field, "is missing")
+        v = z[field]
+        if v.shape != () or v.dtype.kind not in "iu" or int(v) < 0:
+            raise bad(field, f"is {v.tolist()!r}, not a count (a whole number >= 0)")
+    n = int(z["stats_n"])
+    own = stats.state_dict()
+    for key, mine in own.items():
+        field = f"stats_{key}"
+        if key == "n":
+            continue
+        if field not in z.files:
+            raise bad(field, "is missing")
+        a = z[field]
+        if key == "trace":
+            if len(stats.trace_cells) and a.shape != (n, len(stats.trace_cells)):
+                raise bad(
+                    field,
+                    f"has shape {a.shape}, not one row of {len(stats.trace_cells)} cells for each of the {n} samples",
+                )
+            if a.size and not np.isin(a, (0, 1)).all():
+                raise bad(field, "holds a value other than 0 and 1")
+            continue
+        if a.shape != np.shape(mine):
+            raise bad(field, f"has shape {a.shape}, this run's statistics {np.shape(mine)}")
+        if a.dtype.kind not in "iuf":
+            raise bad(field, f"holds {a.dtype} values, not counts")
+        finite = np.isfinite(a)
+        if not finite.all():
+            i = int(np.flatnonzero(~finite.ravel())[0])
+            raise bad(f"{field}[{i}]", f"is {a.ravel()[i]}: a running sum must be finite")
+        out = (a < 0) | (a > n) | (a != np.round(a))
+        if out.any():
+            i = int(np.flatnonzero(out.ravel())[0])
+            raise bad(f"{field}[{i}]", f"is {a.ravel()[i]}, outside the whole counts 0..{n} of its {n} samples")
+        if key.startswith("fh") and a.sum() != n:
+            raise bad(field, f"counts {a.sum():g} first hits, not one for each of the {n} samples")
 
 
 @keeps_global_rng

@@ -70,8 +70,7 @@ def tempered_model(model: OccupancyModel, beta_prior: float = 1.0, beta_lik: flo
         out.prior = TemperedPrior(model.prior, bp)
     if bl != 1.0:
         out.loglik_table = _scale_log(model.loglik_table, bl)
-    out._ray_index = None  # rebuilt from the new table on first use
-    return out
+    return out  # its ray index is its own table's: OccupancyModel.ray_index keeps one per table
 
 
 def geometric_ladder(num_rungs: int, beta_min: float) -> tuple[float, ...]:
@@ -186,12 +185,8 @@ class ParallelTempering(MapKernel):
         return {"prior": (b, 1.0), "likelihood": (1.0, b), "both": (b, b)}[self.temper]
 
     # --------------------------------------------------------------- set-up and state
-    def _prepare(self) -> None:
-        if self._ready:
-            return
-        super()._prepare()
-        for k in self.rungs:
-            k._prepare()
+    def _set_up(self) -> None:
+        super()._set_up()  # the untempered model's ray index (the swaps' log-likelihoods); each rung sets up its own
         self._rows = np.arange(self.model.rays.num_rays)
         self._e = np.asarray([self.exponents(i) for i in range(self.num_rungs)], np.float64)  # n x 2
 
@@ -200,16 +195,18 @@ class ParallelTempering(MapKernel):
             self._restored = False
         else:
             for k in self.rungs:
-                k._set_state(m)
-        self._m = self.rungs[0].state
-        self._f = self.rungs[0].first_hit_state
+                k.set_state(m)
+        self._bind_cold()
         self._terms = np.stack([self._log_terms(i) for i in range(self.num_rungs)])
-        self._last = None
+
+    def _bind_cold(self) -> None:
+        """Make the cold rung's map and first hits this kernel's (a swap hands the cold rung another map)."""
+        self.chain.bind(self.rungs[0].state, self.rungs[0].first_hit_state)
 
     @property
     def state(self) -> np.ndarray:
         """The cold chain's current full map (live ``(K,)`` uint8 array)."""
-        if not hasattr(self, "_m"):
+        if not self.chain.loaded:
             raise RuntimeError(
                 "ParallelTempering has no state yet: call setup(), set_state() or load_state_dict() first"
             )
@@ -231,7 +228,7 @@ class ParallelTempering(MapKernel):
         if maps.dim() != 2 or maps.shape[0] != self.num_rungs:
             raise ValueError(f"set_rung_states takes one map per rung ({self.num_rungs}), got {tuple(maps.shape)}")
         for k, m in zip(self.rungs, maps):
-            k._set_state(m)
+            k.set_state(m)
         self._restored = True
         self._set_state(maps[0])
 
@@ -284,14 +281,11 @@ class ParallelTempering(MapKernel):
     def _sweep(self) -> int:
         changes = 0
         for i, k in enumerate(self.rungs):
-            before = k._updates
-            c = k._sweep()
-            k._changes += c
-            k.sweeps += 1
-            k._last = None
+            before = k.updates
+            c = k.step()
             if i == 0:
                 changes = c
-                self._updates += k._updates - before
+                self.chain.updates += k.updates - before
             self._terms[i] = self._log_terms(i)
         for i in self._pairs():
             log_r = self.swap_log_ratio(i)
@@ -306,8 +300,7 @@ class ParallelTempering(MapKernel):
                 self._terms[[i, i + 1]] = self._terms[[i + 1, i]]
                 if i == 0:
                     changes += 1
-        self._m = self.rungs[0].state
-        self._f = self.rungs[0].first_hit_state
+        self._bind_cold()
         return changes
 
     def swap_rates(self) -> np.ndarray:

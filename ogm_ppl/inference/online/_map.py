@@ -257,9 +257,7 @@ class OnlineMap:
         n_cap, b_cap, bits = scale_caps(n_max, big, self._n_cap, self._b_cap)
         self._n_cap, self._b_cap = n_cap, b_cap
         rescale = False
-        c_ray, c_kappa, self._used = ok.add_cell_entries(
-            st.c_start, st.c_len, st.c_cap, st.c_ray, st.c_kappa, self._used, offsets, cells, R0, R1, self._need
-        )
+        c_ray, c_kappa, self._used = ok.add_cell_entries(st, self._used, offsets, cells, R0, R1, self._need)
         if bits != self._bits:
             rescale = R0 > 0
             self._bits = bits

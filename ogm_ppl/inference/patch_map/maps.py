@@ -33,6 +33,7 @@ from ogm_ppl.inference._kernels.patches import INVERSE, OFFLINE, ONLINE, PatchSe
 from ogm_ppl.inference.tiling import centred_patches, tile_patches
 from ogm_ppl.models.occupancy import OccupancyModel
 from ogm_ppl.posterior import MapPosterior
+from ogm_ppl.progress import Progress, progress_over
 
 __all__ = ["PatchMap", "online_patch_map", "offline_patch_map"]
 
@@ -116,7 +117,11 @@ class PatchMap(MapPosterior):
         return float(p)
 
 
-def _run(model, mode, patches, centre, m_ref, keep, log_match=0.0, log_other=0.0):
+#: patch configurations weighed between two progress updates (about a second of work)
+_CONFIGURATIONS_PER_STEP = 1 << 21
+
+
+def _run(model, mode, patches, centre, m_ref, keep, log_match=0.0, log_other=0.0, progress: bool | Progress = False):
     prior = model.prior.compiled()
     lo = model.prior.cell_log_odds()
     if lo is None or prior is None:
@@ -130,7 +135,18 @@ def _run(model, mode, patches, centre, m_ref, keep, log_match=0.0, log_other=0.0
     index = model.ray_index()
     ps = patch_state(m_ref, first_hits(m_ref, index.offsets, index.cells), index)
     sensor = PatchSensor(log_on, log_off, r.z, r.is_max, float(log_match), float(log_other))
-    marg, weights = patch_map_all(mode, np.ascontiguousarray(patches), centre, ps, prior, sensor, keep)
+    patches = np.ascontiguousarray(patches)
+    P, L = patches.shape
+    step = max(1, _CONFIGURATIONS_PER_STEP >> L)  # patches are weighed independently: in blocks, with progress
+    margs, weight_blocks = [], []
+    with progress_over(progress, P, f"patch map ({L}-cell patches)", unit="patch") as bar:
+        for a in range(0, P, step):
+            m, w = patch_map_all(mode, patches[a : a + step], centre, ps, prior, sensor, keep)
+            margs.append(m)
+            weight_blocks.append(w)
+            bar.update(min(step, P - a))
+    marg = np.concatenate(margs) if margs else np.zeros((0, L))
+    weights = np.concatenate(weight_blocks) if weight_blocks else np.zeros((0, 1 << L))
     out = torch.zeros(model.num_cells, dtype=torch.float64)
     cols = range(patches.shape[1]) if centre < 0 else [centre]
     for j in cols:
@@ -140,21 +156,30 @@ def _run(model, mode, patches, centre, m_ref, keep, log_match=0.0, log_other=0.0
 
 
 def online_patch_map(
-    model: OccupancyModel, patch=3, offset=0, sensor: str = "forward", p_match: float = 0.9
+    model: OccupancyModel,
+    patch=3,
+    offset=0,
+    sensor: str = "forward",
+    p_match: float = 0.9,
+    progress: bool | Progress = False,
 ) -> PatchMap:
     """The online patch map (Section 3.1) with non-overlapping patches.
 
     Args:
         sensor: ``"forward"`` (Eq. 3.1) or ``"inverse"`` (Eq. 3.2 with ``p_match``).
+        progress: show progress over the patches (:func:`~ogm_ppl.progress.progress_over`: a bar on a
+            terminal, plain lines with the time left once past 10 s), or a caller's own ``Progress``.
     """
     patches = tile_patches(model, patch, offset)
     m_dummy = np.zeros(model.num_cells, np.uint8)
     if sensor == "forward":
-        marg, w = _run(model, ONLINE, patches, -1, m_dummy, True)
+        marg, w = _run(model, ONLINE, patches, -1, m_dummy, True, progress=progress)
     elif sensor == "inverse":
         if not 0.0 < p_match < 1.0:
             raise ValueError(f"p_match must lie in (0, 1), got {p_match}")
-        marg, w = _run(model, INVERSE, patches, -1, m_dummy, True, math.log(p_match), math.log1p(-p_match))
+        marg, w = _run(
+            model, INVERSE, patches, -1, m_dummy, True, math.log(p_match), math.log1p(-p_match), progress=progress
+        )
     else:
         raise ValueError(f"sensor must be 'forward' or 'inverse', got {sensor!r}")
     return PatchMap(model, patches, marg, w, f"online-{sensor}")
@@ -177,13 +202,21 @@ def reference_map(model: OccupancyModel, reference="map") -> np.ndarray:
     return m
 
 
-def offline_patch_map(model: OccupancyModel, patch=3, offset=0, reference="map", overlap: bool = False) -> PatchMap:
-    """The offline patch map (Section 3.2): non-overlapping, or a patch centred on every cell (``overlap``)."""
+def offline_patch_map(
+    model: OccupancyModel,
+    patch=3,
+    offset=0,
+    reference="map",
+    overlap: bool = False,
+    progress: bool | Progress = False,
+) -> PatchMap:
+    """The offline patch map (Section 3.2): non-overlapping, or a patch centred on every cell (``overlap``);
+    ``progress`` as in :func:`online_patch_map`."""
     m_ref = reference_map(model, reference)
     if overlap:
         patches, centre = centred_patches(model, patch)
-        marg, _ = _run(model, OFFLINE, patches, centre, m_ref, False)
+        marg, _ = _run(model, OFFLINE, patches, centre, m_ref, False, progress=progress)
         return PatchMap(model, patches, marg, None, "offline-overlap")
     patches = tile_patches(model, patch, offset)
-    marg, w = _run(model, OFFLINE, patches, -1, m_ref, True)
+    marg, w = _run(model, OFFLINE, patches, -1, m_ref, True, progress=progress)
     return PatchMap(model, patches, marg, w, "offline")

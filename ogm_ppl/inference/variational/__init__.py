@@ -14,7 +14,7 @@ from ogm_ppl.inference.variational.amortised import (
     shipped_guide,
 )
 from ogm_ppl.inference.variational.delta_fit import (
-    FitResult,
+    DeltaFitResult,
     cross_entropy_loss,
     cross_validate,
     fit_delta,
@@ -42,7 +42,7 @@ __all__ = [
     "AmortisedGuide",
     "ExactELBO",
     "FirstHitGuide",
-    "FitResult",
+    "DeltaFitResult",
     "FittedSettingWarning",
     "GuideFileError",
     "MeanFieldGuide",

@@ -26,7 +26,15 @@ from torch import nn
 
 from ogm_ppl.models.delta import PN, DeltaFamily
 
-__all__ = ["FitData", "cross_entropy_loss", "fit_delta", "FitResult", "cross_validate", "warm_start_pn", "minimise"]
+__all__ = [
+    "FitData",
+    "cross_entropy_loss",
+    "fit_delta",
+    "DeltaFitResult",
+    "cross_validate",
+    "warm_start_pn",
+    "minimise",
+]
 
 
 class FitData(Protocol):
@@ -64,26 +72,26 @@ def cross_entropy_loss(family: DeltaFamily, data: FitData) -> torch.Tensor:
 
 
 @dataclass
-class FitResult:
+class DeltaFitResult:
     family: DeltaFamily
     train_loss: float
     iterations: int
 
 
-def fit_delta(family: DeltaFamily, data: FitData, max_iter: int = 500, tol: float = 1e-10) -> FitResult:
+def fit_delta(family: DeltaFamily, data: FitData, max_iter: int = 500, tol: float = 1e-10) -> DeltaFitResult:
     """Minimise :func:`cross_entropy_loss` over the family's parameters with L-BFGS (deterministic)."""
     return minimise(family, lambda: cross_entropy_loss(family, data), max_iter=max_iter, tol=tol)
 
 
 def minimise(
     family: DeltaFamily, objective: Callable[[], torch.Tensor], max_iter: int = 500, tol: float = 1e-10
-) -> FitResult:
+) -> DeltaFitResult:
     """Minimise ``objective()`` (a scalar of the family's parameters) with the L-BFGS of :func:`fit_delta`:
     strong-Wolfe line search, gradient tolerance ``tol``; ``train_loss`` is ``objective()`` at the end."""
     params = [p for p in family.parameters() if p.requires_grad]
     if not params:
         with torch.no_grad():
-            return FitResult(family, float(objective()), 0)
+            return DeltaFitResult(family, float(objective()), 0)
     opt = torch.optim.LBFGS(
         params,
         lr=1.0,
@@ -105,7 +113,7 @@ def minimise(
     state = opt.state[opt._params[0]]
     with torch.no_grad():
         final = float(objective())
-    return FitResult(family, final, int(state.get("n_iter", 0)))
+    return DeltaFitResult(family, final, int(state.get("n_iter", 0)))
 
 
 def warm_start_pn(previous: PN | None, N: int) -> PN:

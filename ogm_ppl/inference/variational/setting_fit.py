@@ -50,7 +50,7 @@ from pathlib import Path
 import torch
 from torch import nn
 
-from ogm_ppl.inference.variational.delta_fit import FitData, FitResult, cross_entropy_loss, minimise
+from ogm_ppl.inference.variational.delta_fit import DeltaFitResult, FitData, cross_entropy_loss, minimise
 from ogm_ppl.inference.variational.wall_data import wall_datasets
 from ogm_ppl.models.delta import (
     PN,
@@ -187,14 +187,16 @@ def reduced_cross_entropy_loss(family: DeltaFamily, r: ReducedFitData) -> torch.
     return (_ce(r.exact, lw).sum(1) + before + after).mean()
 
 
-def fit_on_data(name: str, data: FitData, *, reduce: bool = True, max_iter: int = 500, tol: float = 1e-10) -> FitResult:
+def fit_on_data(
+    name: str, data: FitData, *, reduce: bool = True, max_iter: int = 500, tol: float = 1e-10
+) -> DeltaFitResult:
     """Fit the family ``name`` (:func:`setting_family_names`) on ``data`` by L-BFGS (Section 2.5).
 
     ``reduce``: minimise the reduced loss (:func:`reduce_fit_data`); the full loss is evaluated at the end
     and must agree to 1e-9 (relative) or a ``RuntimeError`` is raised. ``train_loss`` is the full loss.
     Marshall-Barfoot: ``l_occ`` at each ``beta`` in 1..5, the best on ``data``.
     """
-    best: FitResult | None = None
+    best: DeltaFitResult | None = None
     with _one_thread():
         for family in _starts(name):
             best = _fit_one(name, family, data, best, reduce=reduce, max_iter=max_iter, tol=tol)
@@ -215,8 +217,15 @@ def _one_thread() -> Iterator[None]:
 
 
 def _fit_one(
-    name: str, family: DeltaFamily, data: FitData, best: FitResult | None, *, reduce: bool, max_iter: int, tol: float
-) -> FitResult:
+    name: str,
+    family: DeltaFamily,
+    data: FitData,
+    best: DeltaFitResult | None,
+    *,
+    reduce: bool,
+    max_iter: int,
+    tol: float,
+) -> DeltaFitResult:
     """One start point fitted; the better of it and ``best``."""
     bounds = _offset_bounds(family) if reduce else None
     r = reduce_fit_data(data, *bounds) if bounds is not None else None
@@ -231,7 +240,7 @@ def _fit_one(
                 f"reduced loss {res.train_loss!r} != full loss {full!r} for {name}: "
                 "the reduction does not hold for this family"
             )
-        res = FitResult(family, full, res.iterations)
+        res = DeltaFitResult(family, full, res.iterations)
     return res if best is None or res.train_loss < best.train_loss else best
 
 

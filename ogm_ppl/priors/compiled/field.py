@@ -41,6 +41,7 @@ from llvmlite import ir
 from numba.core import cgutils, types
 from numba.extending import intrinsic
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.priors.compiled.field_patches import _pooled, field_patch_weights
 from ogm_ppl.priors.compiled.registry import register
 
@@ -249,7 +250,7 @@ def _pooled_nbhd3(m, cols, pr, pc):
     )
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def _edge_scale1(lp, r, c, m):
     """Scale-1 log-odds of a cell near the edge (or ``w != 3``). (Not inlined: a large inlined body slows
     the loops around it, and edge cells are few.)"""
@@ -265,7 +266,7 @@ def _edge_scale1(lp, r, c, m):
     return _window_delta(lp.theta, w, rows, cols, r, c, nbhd)
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def _edge_scale2(lp, pr, pc, m):
     """Scale-2 log-odds of a flip that changes the parent ``(pr, pc)`` near the pooled grid's edge."""
     rows, cols, w = lp.rows, lp.cols, lp.w
@@ -280,7 +281,7 @@ def _edge_scale2(lp, pr, pc, m):
     return _window_delta(lp.theta2, w, P, Q, pr, pc, pn)
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def field_cell_log_odds(lp, k, m):
     """``log p~(m_k = 1, m_-k) - log p~(m_k = 0, m_-k)`` of a pattern field (``w = 3`` cells away from
     the edges read their neighbourhood in five word loads and sum three row-block entries; the others
@@ -335,7 +336,7 @@ def field_window_codes(grid, w):
     return out
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def field_log_prob_batch(lp, maps, out):
     """``log p~(m)`` for every row of ``maps`` (``B x K`` uint8)."""
     rows, cols, w = lp.rows, lp.cols, lp.w

@@ -4,10 +4,58 @@ a Gray-code walk over the candidates for large patches and a rectangle fast path
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
+
 __all__ = ["field_patch_weights"]
+
+
+class CellBox(NamedTuple):
+    """Per-cell arrays over a box of a grid (one numba argument): cell ``(i, j)`` at ``(i - o_r) S + j - o_c``
+    (the whole grid: ``o_r = o_c = 0``, ``S`` its columns)."""
+
+    is_live: np.ndarray  # int64: the cell's live index, or -1
+    value: np.ndarray  # 0/1: the cell's value (read where not live)
+    o_r: int  # the box's first row
+    o_c: int  # its first column
+    S: int  # its row stride
+
+
+class WindowPairs(NamedTuple):
+    """The windows holding a live cell, as :func:`_scale_setup` fills them (one numba argument; room for
+    ``n_live w^2`` windows): per window its anchor, its code with the live cells cleared, and its (live index,
+    window bit) pairs (CSR ``pr_off`` over ``pr_pb`` / ``pr_wb``)."""
+
+    anchors: np.ndarray  # int64: the window's top-left cell r0 C + c0
+    base: np.ndarray  # int64: its code with the live cells cleared
+    pr_off: np.ndarray  # int64, one more: where the window's pairs start
+    pr_pb: np.ndarray  # int64: the pair's live index (the candidate's bit)
+    pr_wb: np.ndarray  # int64: the pair's window bit
+
+
+@nb.njit(cache=True, inline="always")
+def _window_pairs(cap):
+    """A :class:`WindowPairs` with room for ``cap`` windows (and pairs)."""
+    return WindowPairs(
+        np.empty(cap, np.int64),
+        np.empty(cap, np.int64),
+        np.empty(cap + 1, np.int64),
+        np.empty(cap, np.int64),
+        np.empty(cap, np.int64),
+    )
+
+
+class PatchRect(NamedTuple):
+    """A full ``ph x pw`` rectangular patch with top-left cell ``(r0, c0)``."""
+
+    r0: int
+    c0: int
+    ph: int
+    pw: int
 
 
 @nb.njit(cache=True, inline="always")
@@ -27,12 +75,14 @@ def _pooled(m, rows, cols, i, j):
 
 
 @nb.njit(cache=True)
-def _scale_setup(w, R, C, cells_r, cells_c, n_live, is_live, value, o_r, o_c, S, anchors, base, pr_off, pr_pb, pr_wb):
-    """The windows of an ``R x C`` grid holding one of the ``n_live`` live cells ``(cells_r, cells_c)``:
-    per window its code with the live cells cleared (``base``; other cells read from the 0/1 array
-    ``value``) and the pairs (live index, window bit). ``is_live``: live index or -1. Both arrays hold cell
-    ``(i, j)`` at ``(i - o_r) S + j - o_c`` (the whole grid: ``0, 0, C``; or a box around the live cells
-    that holds every window's cells). Returns the number of windows."""
+def _scale_setup(w, R, C, cells_r, cells_c, n_live, box, win):
+    """The ``w x w`` windows of an ``R x C`` grid holding one of the ``n_live`` live cells
+    ``(cells_r, cells_c)``, into ``win`` (:class:`WindowPairs`): per window its anchor, its code with the
+    live cells cleared (other cells read from ``box.value``) and the pairs (live index, window bit). ``box``
+    (:class:`CellBox`): the whole grid, or a box around the live cells that holds every window's cells.
+    Returns the number of windows."""
+    is_live, value, o_r, o_c, S = box
+    anchors, base, pr_off, pr_pb, pr_wb = win
     nw = 0
     npair = 0
     pr_off[0] = 0
@@ -69,9 +119,10 @@ def _scale_setup(w, R, C, cells_r, cells_c, n_live, is_live, value, o_r, o_c, S,
 
 
 @nb.njit(cache=True)
-def _window_sums(theta, nw, base, pr_off, pr_pb, pr_wb, cands, n, out, add):
-    """``out[j] = sum_q theta[code_q(cands[j])]`` over the windows of :func:`_scale_setup`, each
-    candidate's bits placed into every window code (``add``: added to ``out[j]``, term by term)."""
+def _window_sums(theta, nw, win, cands, n, out, add):
+    """``out[j] = sum_q theta[code_q(cands[j])]`` over the ``nw`` windows ``win`` of :func:`_scale_setup`,
+    each candidate's bits placed into every window code (``add``: added to ``out[j]``, term by term)."""
+    _, base, pr_off, pr_pb, pr_wb = win
     for jx in range(n):
         cand = cands[jx]
         s = out[jx] if add else 0.0
@@ -91,11 +142,12 @@ GRAY_RESYNC = 64
 
 
 @nb.njit(cache=True)
-def _window_sums_gray(theta, nw, base, pr_off, pr_pb, pr_wb, nl, out):
+def _window_sums_gray(theta, nw, win, nl, out):
     """:func:`_window_sums` for the ``2^nl`` candidates ``0 .. 2^nl - 1`` in order, visited in Gray-code
     order: step ``i`` flips live bit ``ctz(i)``, which changes only the windows holding that cell (9 of the 25
     of a 3 x 3 patch under 3 x 3 windows), so the sum moves by their ``theta`` differences; it is summed afresh
     every :data:`GRAY_RESYNC` steps. Equal to :func:`_window_sums` to rounding (a few ulp of the sums)."""
+    _, base, pr_off, pr_pb, pr_wb = win
     # per live bit: the (window, window-bit mask) pairs it enters
     cnt = np.zeros(nl + 1, np.int64)
     for p in range(pr_off[nw]):
@@ -168,9 +220,10 @@ def _rect_fits(w, ph, pw, room):
 
 
 @nb.njit(cache=True, inline="always")
-def _rect_window_sums(theta, w, m, rows, cols, r0, c0, ph, pw, out, T, P):
+def _rect_window_sums(theta, w, m, rows, cols, rect, out, T, P):
     r"""``out[c] = sum_q theta[code_q(c)]`` for every configuration ``c < 2^(ph pw)`` of the full
-    ``ph x pw`` patch at ``(r0, c0)`` (bit ``a pw + b``: patch cell ``(a, b)``), over the ``w x w`` windows
+    ``ph x pw`` patch at ``(r0, c0)`` (``rect``: a :class:`PatchRect`) of the ``rows x cols`` map ``m`` (bit
+    ``a pw + b``: patch cell ``(a, b)``), over the ``w x w`` windows
     inside the grid that hold a patch cell. A window whose top row is ``a`` rows below the patch's holds the
     patch rows ``max(a, 0) .. min(a + w - 1, ph - 1)``, a contiguous run of ``k`` bits of ``c``: the windows
     of one ``a`` (a row group) are summed into one table ``T`` over the run's ``2^k`` configurations ``s``,
@@ -179,6 +232,7 @@ def _rect_window_sums(theta, w, m, rows, cols, r0, c0, ph, pw, out, T, P):
     (``2^(k - pw)``), two small tables built per window (in ``P``). A ``3 x 3`` patch under ``3 x 3`` windows:
     five groups of five windows, tables of 8, 64, 512, 64 and 8 entries, then five reads per configuration.
     ``T``: room for ``2^k`` of the largest group (float64); ``P``: for ``2^pw + 2^(k - pw)`` codes (int64)."""
+    r0, c0, ph, pw = rect
     n = np.int64(1) << (ph * pw)
     for c in range(n):
         out[c] = 0.0
@@ -243,7 +297,7 @@ def _full_range(cands, n, nl):
     return True
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def field_patch_weights(lp, patch, m, cands, n, out, ts):
     """``out[j] = log p~(patch = cands[j], rest)`` up to a constant in ``j``: the windows (and, at two
     scales, the pooled windows) holding a live patch cell, read once, then scored per candidate. All
@@ -261,9 +315,9 @@ def field_patch_weights(lp, patch, m, cands, n, out, ts):
             r0, c0 = patch[0] // cols, patch[0] % cols
             place = np.empty((1 << pw) + (1 << (min(w, ph) * pw - pw)), np.int64)
             if w == 3 and ph == 3 and pw == 3:  # the common case, with its loop bounds known when compiled
-                _rect_window_sums(theta, 3, m, rows, cols, r0, c0, 3, 3, out, ts.memo, place)
+                _rect_window_sums(theta, 3, m, rows, cols, PatchRect(r0, c0, 3, 3), out, ts.memo, place)
             else:
-                _rect_window_sums(theta, w, m, rows, cols, r0, c0, ph, pw, out, ts.memo, place)
+                _rect_window_sums(theta, w, m, rows, cols, PatchRect(r0, c0, ph, pw), out, ts.memo, place)
             rect = True
             if lp.n_scales != 2:
                 return
@@ -284,16 +338,12 @@ def field_patch_weights(lp, patch, m, cands, n, out, ts):
             b += 1
     cap = max(nl, 1) * w * w
     if not rect:  # scale 1 by the windows' (patch bit, window bit) pairs
-        anchors = np.empty(cap, np.int64)
-        base = np.empty(cap, np.int64)
-        pr_off = np.empty(cap + 1, np.int64)
-        pr_pb = np.empty(cap, np.int64)
-        pr_wb = np.empty(cap, np.int64)
-        nw = _scale_setup(w, rows, cols, cr, cc, nl, bit_of, m, 0, 0, cols, anchors, base, pr_off, pr_pb, pr_wb)
+        win = _window_pairs(cap)
+        nw = _scale_setup(w, rows, cols, cr, cc, nl, CellBox(bit_of, m, 0, 0, cols), win)
         if nl <= 20 and _full_range(cands, n, nl):
-            _window_sums_gray(theta, nw, base, pr_off, pr_pb, pr_wb, nl, out)
+            _window_sums_gray(theta, nw, win, nl, out)
         else:
-            _window_sums(theta, nw, base, pr_off, pr_pb, pr_wb, cands, n, out, False)
+            _window_sums(theta, nw, win, cands, n, out, False)
     for i in range(L):
         if patch[i] >= 0:
             bit_of[patch[i]] = -1
@@ -347,12 +397,8 @@ def field_patch_weights(lp, patch, m, cands, n, out, ts):
             for j in range(max(0, pc_[y] - w + 1), min(Q, pc_[y] + w)):
                 if is_par[(i - i0) * S + j - j0] < 0:
                     pooled[(i - i0) * S + j - j0] = _pooled(m, rows, cols, i, j)
-    base2 = np.empty(cap, np.int64)
-    p2_off = np.empty(cap + 1, np.int64)
-    p2_pb = np.empty(cap, np.int64)
-    p2_wb = np.empty(cap, np.int64)
-    anchors2 = np.empty(cap, np.int64)
-    nw2 = _scale_setup(w, P, Q, pr_, pc_, npar, is_par, pooled, i0, j0, S, anchors2, base2, p2_off, p2_pb, p2_wb)
+    win2 = _window_pairs(cap)
+    nw2 = _scale_setup(w, P, Q, pr_, pc_, npar, CellBox(is_par, pooled, i0, j0, S), win2)
     pcands = np.empty(max(n, 1), np.int64)  # each candidate's parents' pooled values (bit y: parent y)
     for jx in range(n):
         pbits = np.int64(0)
@@ -364,11 +410,11 @@ def field_patch_weights(lp, patch, m, cands, n, out, ts):
         # the pooled scale depends on a candidate through its parents alone: their 2^npar sums, tabled once
         NP = np.int64(1) << npar
         t2 = np.empty(NP, np.float64)
-        _window_sums(theta2, nw2, base2, p2_off, p2_pb, p2_wb, np.arange(NP), NP, t2, False)
+        _window_sums(theta2, nw2, win2, np.arange(NP), NP, t2, False)
         for jx in range(n):
             out[jx] += t2[pcands[jx]]
     else:
-        _window_sums(theta2, nw2, base2, p2_off, p2_pb, p2_wb, pcands, n, out, True)
+        _window_sums(theta2, nw2, win2, pcands, n, out, True)
 
 
 # ------------------------------------------------------------------ whole maps

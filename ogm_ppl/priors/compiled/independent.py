@@ -5,9 +5,9 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.priors.compiled.registry import register
 from ogm_ppl.priors.compiled.transforms import check_beta, check_bias, crop_cells, scaled, shifted
 
@@ -63,7 +63,7 @@ def _cell(prior, k, m):
     return prior.log_odds[k]
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def independent_patch_weights(prior, patch, m, cands, n, out):
     """``out[j] = sum of l_c over the live cells c of patch that cands[j] sets``."""
     lo = prior.log_odds

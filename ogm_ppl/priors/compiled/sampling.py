@@ -4,16 +4,16 @@ held-out negative log conditionals of a map's cells (a pseudo-likelihood score a
 
 from __future__ import annotations
 
-import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.priors.compiled.registry import cell_log_odds, patch_prior_weights, scratch_capacity
 from ogm_ppl.priors.compiled.scratch import tile_scratch
 
 __all__ = ["conditional_nll", "patch_prior_batch", "prior_gibbs_sweeps"]
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def prior_gibbs_sweeps(prior, maps, num_sweeps, seed):
     """Single-cell Gibbs sweeps on the prior alone, for each row of ``maps`` (``B x K`` uint8), in place."""
     np.random.seed(seed)
@@ -32,7 +32,7 @@ def prior_gibbs_sweeps(prior, maps, num_sweeps, seed):
                     m[k] = 1 if u * (1.0 + e) < e else 0
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def patch_prior_batch(prior, maps, patch, cands, out):
     """``out[b, j] = log p(patch = cands[j], rest of maps[b])`` up to a constant in ``j`` (``B x K`` uint8
     maps; bit ``i`` of a candidate = the ``i``-th live cell of ``patch``)."""

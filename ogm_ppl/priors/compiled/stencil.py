@@ -14,9 +14,9 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.priors.compiled.registry import register
 from ogm_ppl.priors.compiled.transforms import check_beta, check_bias, crop_cells, scaled, shifted
 
@@ -84,7 +84,7 @@ def stencil(rows, cols, unary, dr, dc, bias, coupling) -> Stencil:
     )
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def stencil_cell_log_odds(lp, k, m):
     """``l(m_k | m_-k) = h_k + sum_{d in grid} (a_d + J_d m_{k+d})``."""
     s_dr, s_dc, s_bias, s_coup = lp.dr, lp.dc, lp.bias, lp.coupling
@@ -102,7 +102,7 @@ def stencil_cell_log_odds(lp, k, m):
     return lo
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def stencil_patch_weights(lp, patch, m, cands, n, out):
     """``out[j] = log p(patch = cands[j], rest)`` up to a constant in ``j`` for a stencil prior: the
     cells' fields with the patch cleared plus the couplings inside the patch. ``m`` is restored."""

@@ -4,8 +4,12 @@ dense tables built from the sparse ones. Compiled functions that take the bundle
 
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numba as nb
 import numpy as np
+
+from ogm_ppl._numba_cache import njit_shipped
 
 __all__ = [
     "border_index",
@@ -34,7 +38,7 @@ def border_index(keys: np.ndarray, seg_off: np.ndarray, n_inner: int, B: int) ->
 # Speed: the hot helpers are inlined (``inline="always"``; a call that passes the bundle costs about
 # 130 ns in reference counts of its arrays, more than a lookup itself), and each binds the bundle's arrays
 # to locals once (numba counts a reference at every ``lp.array`` read: in a loop that costs 5x).
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def tile_key(lp, t, m):
     """The window key of tile ``t`` in map ``m``."""
     w_dr, w_dc = lp.w_dr, lp.w_dc
@@ -121,50 +125,57 @@ _sparse_factor = nb.njit(cache=True)(_sparse_factor_py)
 _sparse_factor_inline = nb.njit(cache=True, inline="always")(_sparse_factor_py)
 
 
+class SparseTable(NamedTuple):
+    """The sorted-key lookup of :func:`_sparse_factor`, bound once before a loop of :func:`_factor` (one numba
+    argument; the fields of the bundle ``lp`` it reads, with its back-off)."""
+
+    keys: np.ndarray  # int64: each segment's sorted keys
+    logp: np.ndarray  # float64: log phi of each key
+    seg_off: np.ndarray  # S + 1 int64: where each segment's keys start
+    backoff: int  # the fallback segment of an unseen border, or -1 (:func:`_backoff`)
+    bseg: int  # the border-weight segment of a backed-off table, or -1
+    n_inner: int  # a key's inner bits (below its border code)
+    b_start: np.ndarray  # int64: the border index (:func:`border_index`)
+    b_bits: int  # border bits of that index, or -1 if none
+
+
+@njit_shipped(inline="always")
+def sparse_table(lp):
+    """The :class:`SparseTable` of the bundle ``lp``."""
+    return SparseTable(lp.keys, lp.logp, lp.seg_off, _backoff(lp), lp.border_seg, lp.n_inner, lp.b_start, lp.b_bits)
+
+
 @nb.njit(cache=True, inline="always")
-def _factor(dense, dense_bits, keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, s, key):
+def _factor(dense, dense_bits, sp, s, key):
     """``log phi(key)`` in segment ``s`` from arrays already bound to locals: one load from the dense table
-    if ``dense_bits >= 0``, else :func:`_sparse_factor`."""
+    if ``dense_bits >= 0``, else :func:`_sparse_factor` of ``sp`` (:class:`SparseTable`)."""
     if dense_bits >= 0:
         return dense[(s << dense_bits) | key]
+    keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits = sp
     return _sparse_factor(keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, s, key)
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def _backoff(lp):
     """The fallback segment when keys have a border to back off from, else ``-1``."""
     return lp.fallback if lp.w_dr.shape[0] > lp.n_inner else -1
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def sparse_key_log_factor(lp, s, key):
     """``log phi(key)`` in segment ``s`` from the sorted keys (fallback for an unseen border; ``-inf`` if
     absent)."""
-    bo, bseg = _backoff(lp), lp.border_seg
-    return _factor(lp.dense, -1, lp.keys, lp.logp, lp.seg_off, bo, bseg, lp.n_inner, lp.b_start, lp.b_bits, s, key)
+    return _factor(lp.dense, -1, sparse_table(lp), s, key)
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def key_log_factor(lp, s, key):
     """``log phi(key)`` in segment ``s``: one load from the dense table when there is one, else
     :func:`sparse_key_log_factor`."""
-    return _factor(
-        lp.dense,
-        lp.dense_bits,
-        lp.keys,
-        lp.logp,
-        lp.seg_off,
-        _backoff(lp),
-        lp.border_seg,
-        lp.n_inner,
-        lp.b_start,
-        lp.b_bits,
-        s,
-        key,
-    )
+    return _factor(lp.dense, lp.dense_bits, sparse_table(lp), s, key)
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def dense_factor_table(lp):
     """``S * 2^Lw`` float64: :func:`sparse_key_log_factor` of every key of every segment."""
     S = lp.seg_off.shape[0] - 1

@@ -5,9 +5,9 @@ sets (:func:`tile_patch_setup`, :func:`tile_patch_factors`), a tile's candidates
 
 from __future__ import annotations
 
-import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.priors.compiled.scratch import MEMO_BITS
 from ogm_ppl.priors.compiled.tile_factors import (
     _backoff,
@@ -17,6 +17,7 @@ from ogm_ppl.priors.compiled.tile_factors import (
     border_range,
     key_log_factor,
     sparse_key_log_factor,
+    sparse_table,
     tile_key,
 )
 
@@ -34,12 +35,12 @@ __all__ = [
 ]
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def tile_log_factor(lp, t, m):
     return key_log_factor(lp, lp.t_seg[t], tile_key(lp, t, m))
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def tiles_touching(lp, r, c, out, n):
     """Append to ``out[:n]`` the tiles whose window holds cell ``(r, c)`` (no duplicates); new ``n``."""
     # tile i's window rows are [t_r0 + i h - pad_r, t_r0 + i h + h - 1 + pad_r]
@@ -67,7 +68,7 @@ def tiles_touching(lp, r, c, out, n):
     return n
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def _tiles_of_patch(lp, patch, out):
     n = 0
     for i in range(patch.shape[0]):
@@ -78,14 +79,14 @@ def _tiles_of_patch(lp, patch, out):
     return n
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def touch_capacity(lp, L):
     """An upper bound on the tiles an ``L``-cell patch touches (and on its (cell, tile) pairs)."""
     per = ((lp.t_h + 2 * lp.pad_r) // lp.t_h + 2) * ((lp.t_w + 2 * lp.pad_c) // lp.t_w + 2)
     return max(L, 1) * per
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def tile_patch_setup(lp, patch, m, skip, ts):
     """Prepare the factors of the tiles whose window holds a cell of ``patch`` (all but tile ``skip``):
     per tile ``q`` its window key with the patch cells read as free (``ts.base[q]``) and the pairs
@@ -145,7 +146,7 @@ def tile_patch_setup(lp, patch, m, skip, ts):
     return nt
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def tile_patch_factors(lp, nt, ts, cands, n, out):
     """``out[j] += sum_q log phi_q(key_q(cands[j]))`` over the ``nt`` tiles of :func:`tile_patch_setup`
     (entries already ``-inf`` are left alone). A tile's factor depends on a candidate only through the
@@ -153,8 +154,7 @@ def tile_patch_factors(lp, nt, ts, cands, n, out):
     neighbour, 1 of a corner one), so it is memoised per such sub-configuration: a neighbour costs at
     most ``2^shared`` lookups per update, however many candidates there are."""
     _bit_of, _touch, base, seg, pr_off, pr_pb, pr_wb, memo_off, memo = ts
-    dense, db, keys, logp, seg_off = lp.dense, lp.dense_bits, lp.keys, lp.logp, lp.seg_off
-    backoff, bseg, n_inner, b_start, b_bits = _backoff(lp), lp.border_seg, lp.n_inner, lp.b_start, lp.b_bits
+    dense, db, sp = lp.dense, lp.dense_bits, sparse_table(lp)
     for j in range(n):
         s = out[j]
         if s == -np.inf:
@@ -172,17 +172,17 @@ def tile_patch_factors(lp, nt, ts, cands, n, out):
             if mo >= 0:
                 v = memo[mo + sub]
                 if v != v:
-                    v = _factor(dense, db, keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, seg[q], key)
+                    v = _factor(dense, db, sp, seg[q], key)
                     memo[mo + sub] = v
             else:
-                v = _factor(dense, db, keys, logp, seg_off, backoff, bseg, n_inner, b_start, b_bits, seg[q], key)
+                v = _factor(dense, db, sp, seg[q], key)
             s += v
             if s == -np.inf:
                 break
         out[j] = s
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def _tile_cell_terms(lp, k, m, dense_path):
     """``(s1, s0)``: the summed log factors of the tiles whose window holds ``k`` with ``m_k = 1`` and with
     ``m_k = 0``. Each tile's key is read once with ``k`` free; ``k``'s bit is then set for the occupied
@@ -230,13 +230,13 @@ def _tile_cell_terms(lp, k, m, dense_path):
     return s1, s0
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def _tile_cell_log_odds_sparse(lp, k, m):
     s1, s0 = _tile_cell_terms(lp, k, m, False)
     return s1 - s0
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def tile_cell_log_odds(lp, k, m):
     """:func:`cell_log_odds` of a tiles prior: the factors of the tiles whose window holds ``k``."""
     if lp.dense_bits < 0:
@@ -245,7 +245,7 @@ def tile_cell_log_odds(lp, k, m):
     return s1 - s0
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def tile_of_anchor(lp, r0, c0, h, w):
     """The tile whose cells are exactly the ``h x w`` rectangle at ``(r0, c0)``, or ``-1``."""
     if h != lp.t_h or w != lp.t_w:
@@ -261,7 +261,7 @@ def tile_of_anchor(lp, r0, c0, h, w):
     return i * lp.t_cols + j
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def tile_candidates(lp, t, patch, pinned, m, cands, cand_lp):
     """Configurations of tile ``t`` (whose cells, row-major, are ``patch``; ``-1`` off the grid or
     pinned) that its own factor allows given the current border: the sparse support of Section 5.2.2 /
@@ -322,7 +322,7 @@ def tile_candidates(lp, t, patch, pinned, m, cands, cand_lp):
     return n
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def tiles_log_prob_batch(lp, maps, out):
     """``sum_t log phi_t(m)`` for every row of ``maps`` (``B x K`` uint8)."""
     T = lp.t_rows * lp.t_cols
@@ -333,7 +333,7 @@ def tiles_log_prob_batch(lp, maps, out):
         out[b] = s
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def tiles_patch_weights(lp, patch, m, cands, n, out, ts):
     """``out[j] = log p(patch = cands[j], rest)`` up to a constant in ``j``: the factors of the tiles whose
     window holds a patch cell, through the scratch ``ts``."""
@@ -343,7 +343,7 @@ def tiles_patch_weights(lp, patch, m, cands, n, out, ts):
     tile_patch_factors(lp, nt, ts, cands, n, out)
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def _layout_applies(lp, t, patch):
     """Whether the update of tile ``t`` (cells ``patch``) can read the neighbour layout: there is one,
     every tile cell is live, and every neighbour's window lies on the grid."""
@@ -359,7 +359,7 @@ def _layout_applies(lp, t, patch):
     return ar + box[0] >= 0 and ar + box[1] < lp.rows and ac + box[2] >= 0 and ac + box[3] < lp.cols
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def tile_neighbour_factors(lp, t, m, cands, n, out, E):
     """:func:`tile_patch_setup` + :func:`tile_patch_factors` for a tile ``t`` where :func:`_layout_applies`:
     ``out[j] += sum_q log phi_q(key_q(cands[j]))`` over the neighbours ``q`` of the layout, in the same
@@ -430,7 +430,7 @@ def tile_neighbour_factors(lp, t, m, cands, n, out, E):
         out[j] = v
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def tile_candidate_weights(lp, patch, m, cands, n, t, cand_lp, out, ts):
     """The weights of the candidates of a patch: for a tile ``t >= 0``, its own factor (read with the
     candidates, ``cand_lp``) plus those of its neighbours whose windows hold patch cells (none when the
@@ -450,7 +450,7 @@ def tile_candidate_weights(lp, patch, m, cands, n, t, cand_lp, out, ts):
     tile_patch_factors(lp, nt, ts, cands, n, out)
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def tile_escape(lp, t, patch, m, u, pair_lp):
     """The escape proposal of a backed-off table for tile ``t`` (cells ``patch``, row-major, ``-1`` off
     the grid or pinned): an inner code ``i' ~ back`` drawn by inverse CDF with the uniform ``u``

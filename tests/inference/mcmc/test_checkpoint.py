@@ -151,3 +151,97 @@ def test_a_public_counter_does_not_make_the_same_chain_look_like_another(tmp_pat
     run_gibbs(_Counting(model), 60, seed=3, checkpoint=tmp_path / "d.npz", stop_after=5, progress=False)
     with pytest.raises(CheckpointError, match="the kernel or its settings"):
         run_gibbs(other, 60, seed=3, checkpoint=tmp_path / "d.npz", progress=False)
+
+
+def _edited(ck, **fields):
+    """``ck`` rewritten with ``fields`` changed (a function of the stored array, or a new array)."""
+    with np.load(ck, allow_pickle=False) as z:
+        d = {k: z[k] for k in z.files}
+    for k, f in fields.items():
+        d[k] = f(d[k].copy()) if callable(f) else f
+    np.savez(ck, **d)
+
+
+def _set(i, v):
+    def edit(a):
+        a[i] = v
+        return a
+
+    return edit
+
+
+@pytest.mark.parametrize(
+    "fields, message",
+    [
+        ({"stats_sum": _set(3, np.nan)}, r"field stats_sum\[3\] is nan: a running sum must be finite"),
+        ({"stats_sum": _set(5, np.inf)}, r"field stats_sum\[5\] is inf: a running sum must be finite"),
+        ({"stats_sum": _set(2, -1.0)}, r"field stats_sum\[2\] is -1.0, outside the whole counts 0..30"),
+        ({"stats_sum": _set(0, 31.0)}, r"field stats_sum\[0\] is 31.0, outside the whole counts 0..30"),
+        ({"stats_sum": _set(1, 0.5)}, r"field stats_sum\[1\] is 0.5, outside the whole counts"),
+        ({"stats_sum": np.zeros(3)}, r"field stats_sum has shape \(3,\), this run's statistics \(16,\)"),
+        ({"stats_fh0": _set(0, np.nan)}, r"field stats_fh0\[0\] is nan"),
+        ({"stats_fh0": lambda a: a + 1}, r"field stats_fh0 counts \d+ first hits, not one for each of the 30 samples"),
+        ({"stats_trace": _set((0, 0), 2)}, r"field stats_trace holds a value other than 0 and 1"),
+        ({"stats_trace": np.zeros((4, 1), np.uint8)}, r"field stats_trace has shape \(4, 1\), not one row"),
+        ({"stats_n": np.int64(-1)}, r"field stats_n is -1, not a count"),
+        ({"stats_n": np.float64(30.5)}, r"field stats_n is 30.5, not a count"),
+        ({"sweep": np.int64(-5)}, r"field sweep is -5, not a count"),
+    ],
+)
+def test_a_checkpoint_with_impossible_statistics_is_refused_naming_the_field(tmp_path, fields, message):
+    """Running sums that hold NaN or infinity, counts outside ``[0, n]``, fields of another shape or a negative
+    count cannot come from a run: resuming is refused naming the file and the field (a NaN resumed would spread
+    into the map)."""
+    model = _model()
+    ck = tmp_path / "ck.npz"
+    run_gibbs(
+        CellGibbs(model),
+        200,
+        RunningStats(model, rays=[0], trace_cells=[4]),
+        warmup=20,
+        seed=3,
+        checkpoint=ck,
+        stop_after=50,
+        progress=False,
+    )
+    _edited(ck, **fields)
+    with pytest.raises(CheckpointError, match=rf"ck\.npz: {message}") as e:
+        run_gibbs(
+            CellGibbs(model),
+            200,
+            RunningStats(model, rays=[0], trace_cells=[4]),
+            warmup=20,
+            seed=3,
+            checkpoint=ck,
+            progress=False,
+        )
+    assert "start a fresh run" in str(e.value)
+
+
+def test_a_checkpoint_written_to_a_full_disk_names_the_file_and_keeps_the_previous_one(tmp_path, monkeypatch):
+    """Disk full at a checkpoint: the error names the checkpoint (not a bare ``[Errno 28]``); the previous
+    checkpoint is left whole and resumes the chain afterwards, bit for bit."""
+    import errno
+
+    from tests._faults import full_disk
+
+    model = _model()
+    ck = _interrupted(tmp_path, model)
+    before = ck.read_bytes()
+    with monkeypatch.context() as mp:
+        full_disk(mp)
+        with pytest.raises(OSError, match="No space left on device") as e:
+            run_gibbs(
+                CellGibbs(model),
+                200,
+                RunningStats(model, rays=[0]),
+                seed=3,
+                checkpoint=ck,
+                checkpoint_every=20,
+                progress=False,
+            )
+    assert e.value.errno == errno.ENOSPC and e.value.filename == str(ck)
+    assert ck.read_bytes() == before and sorted(p.name for p in tmp_path.iterdir()) == ["ck.npz"]
+    full = run_gibbs(CellGibbs(model), 200, RunningStats(model, rays=[0]), seed=3, progress=False)
+    done = run_gibbs(CellGibbs(model), 200, RunningStats(model, rays=[0]), seed=3, checkpoint=ck, progress=False)
+    assert torch.equal(done.stats.marginals, full.stats.marginals)

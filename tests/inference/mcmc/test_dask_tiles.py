@@ -41,7 +41,7 @@ def chain(kernel, sweeps: int, start: torch.Tensor, seed: int) -> list[np.ndarra
     torch.manual_seed(seed)
     out = []
     for _ in range(sweeps):
-        kernel._sweep()
+        kernel.step()
         out.append(kernel.state.copy())
     return out
 

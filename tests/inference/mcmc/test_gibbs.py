@@ -307,23 +307,6 @@ def test_chains_diagnostics():
     assert torch.isnan(e[0]) and torch.isfinite(e[1])
 
 
-def test_table_3_1_setup_subsample():
-    """Table 3.1's Gibbs entry on a subsample: the mean summed KL is of Monte Carlo size. With n nearly
-    independent sweeps each uncertain cell adds about 1 / (2n); we allow an autocorrelation time of 2."""
-    import sys
-
-    from tests._scripts import load_experiment
-
-    mod = load_experiment("table_3_1", "table_3_1.py")
-    sys.modules.pop("table_3_1", None)
-    n, K = 20_000, 30
-    rows = mod.run(num_datasets=12, gibbs_sweeps=n, cells=K, progress=False)["rows"]
-    gibbs = rows["Gibbs"]["mean"]
-    assert 0 < gibbs < 2 * K / (2 * n)
-    # Gibbs beats every patch method and traditional OGM by orders of magnitude
-    assert all(v["mean"] > 10 * gibbs for k, v in rows.items() if k != "Gibbs")
-
-
 def _lik(kernel, k):
     """The likelihood part of ``l(m_k | z, m_-k)`` at the kernel's state (Eq. 4.2): log-odds less the
     prior's, for an independent prior."""

@@ -125,34 +125,34 @@ class _TableMetropolis(MapKernel):
         super().__init__(model, region=region)
         self.bias, self.pinned_too, self.stuck_cell = bias, pinned_too, stuck_cell
 
-    def _prepare(self) -> None:
-        if not self._ready:
-            super()._prepare()
-            maps = enumerate_maps(self.model)
-            self._table = self.model.log_joint(maps).numpy()
-            self._bit = {int(c): j for j, c in enumerate(self.model.latent.tolist())}
+    def _set_up(self) -> None:
+        super()._set_up()
+        maps = enumerate_maps(self.model)
+        self._table = self.model.log_joint(maps).numpy()
+        self._bit = {int(c): j for j, c in enumerate(self.model.latent.tolist())}
 
     def _code(self) -> int:
-        return sum(int(self._m[c]) << j for c, j in self._bit.items())
+        return sum(int(self.state[c]) << j for c, j in self._bit.items())
 
     def _sweep(self) -> int:
         cells = self._visit if not self.pinned_too else np.union1d(self._visit, np.flatnonzero(self._pinned))
         changed = 0
         u = torch.rand(2 * len(cells), dtype=torch.float64).numpy()
+        m = self.state
         for i in range(len(cells)):
             k = int(cells[int(u[2 * i] * len(cells))])
             if k == self.stuck_cell:
                 continue
             old = self._code()
-            self._m[k] ^= 1
+            m[k] ^= 1
             new = self._code() if k in self._bit else old
-            d = self._table[new] - self._table[old] + self.bias * (1 if self._m[k] else -1)
+            d = self._table[new] - self._table[old] + self.bias * (1 if m[k] else -1)
             if np.log(u[2 * i + 1]) < d:
                 changed += 1
             else:
-                self._m[k] ^= 1
-            self._updates += 1
-        self._load_map(self._m)
+                m[k] ^= 1
+            self.chain.updates += 1
+        self._load_map(m)
         return changed
 
 

@@ -168,33 +168,68 @@ def test_metropolis_cell_takes_any_prior():
     assert (stats.marginals - exact).abs().max() < 4 * 0.5 * math.sqrt(20 / n)
 
 
+class _CountedFactory:
+    """``partial(CellGibbs, model, ...)`` that counts how often it is pickled (in this process)."""
+
+    pickled = 0
+
+    def __init__(self, model) -> None:
+        self.model = model
+
+    def __call__(self):
+        return CellGibbs(self.model, update="metropolised", scan="permutation", init="prior")
+
+    def __reduce__(self):
+        type(self).pickled += 1
+        return (type(self), (self.model,))
+
+
 def test_parallel_chains_equal_serial_chains():
-    """Chain ``c`` is seeded ``seed + c`` in any process: two worker processes give the same statistics
-    as one process, bit for bit, and the pooled marginals match brute force."""
-    from functools import partial
+    """Chain ``c`` is seeded ``seed + c`` in any process: two worker processes started by the default (forkserver,
+    not a fork of this process) give the same statistics as one process, bit for bit, and the pooled marginals
+    match brute force. The model is pickled once and sent to each worker (not once a chain), and the caller's
+    model is left as it was (its compiled kernels' views of its tensors intact)."""
+    import multiprocessing
 
-    from ogm_ppl.inference.mcmc.diagnostics import run_chains
+    from ogm_ppl.inference.mcmc.diagnostics import default_start_method, run_chains
 
+    assert default_start_method() == (
+        "forkserver" if "forkserver" in multiprocessing.get_all_start_methods() else "spawn"
+    )
     model = model_1d(6, readings=(3.0, 4.0, 3.0))
-    make_kernel = partial(CellGibbs, model, update="metropolised", scan="permutation", init="prior")
+    make_kernel = _CountedFactory(model)
     serial = run_chains(make_kernel, num_chains=3, num_sweeps=400, trace_cells=[2, 3], warmup=10, seed=11)
     parallel = run_chains(
         make_kernel, num_chains=3, num_sweeps=400, trace_cells=[2, 3], warmup=10, seed=11, processes=2
     )
-    for a, b in zip(serial.stats, parallel.stats):
-        assert torch.equal(a.marginals, b.marginals)
+    assert _CountedFactory.pickled == 1
+    again = run_chains(make_kernel, num_chains=3, num_sweeps=400, trace_cells=[2, 3], warmup=10, seed=11)
+    for a, b, c in zip(serial.stats, parallel.stats, again.stats):
+        assert torch.equal(a.marginals, b.marginals) and torch.equal(a.marginals, c.marginals)
         assert (a.trace() == b.trace()).all()
     assert (serial.rhat() - 1).abs().max() < 0.05
     exact = brute_force(model).marginals
     assert (parallel.marginals - exact).abs().max() < 4 * 0.5 * math.sqrt(10 / 1200)
-    # forked workers inherit make_kernel (no pickled copy of the model); spawned ones need a picklable one
-    forked = run_chains(lambda: CellGibbs(model), num_chains=2, num_sweeps=5, trace_cells=[2], seed=3, processes=2)
+
+
+def test_chains_fork_only_when_asked_and_then_take_a_lambda():
+    """``mp_context="fork"`` (asked for) inherits ``make_kernel``, a lambda included, with the same numbers; the
+    default start method needs a picklable one and says so before starting any worker."""
+    from ogm_ppl.inference.mcmc.diagnostics import run_chains
+
+    model = model_1d(6, readings=(3.0, 4.0, 3.0))
     alone = run_chains(lambda: CellGibbs(model), num_chains=2, num_sweeps=5, trace_cells=[2], seed=3)
+    forked = run_chains(
+        lambda: CellGibbs(model), num_chains=2, num_sweeps=5, trace_cells=[2], seed=3, processes=2, mp_context="fork"
+    )
     assert all(torch.equal(a.marginals, b.marginals) for a, b in zip(forked.stats, alone.stats))
-    with pytest.raises(ValueError, match="picklable"):
-        run_chains(
-            lambda: CellGibbs(model), num_chains=2, num_sweeps=5, trace_cells=[2], processes=2, mp_context="spawn"
-        )
+    for ctx in (None, "spawn"):
+        with pytest.raises(ValueError, match=r"make_kernel must be picklable .* or mp_context='fork'"):
+            run_chains(
+                lambda: CellGibbs(model), num_chains=2, num_sweeps=5, trace_cells=[2], processes=2, mp_context=ctx
+            )
+    with pytest.raises(ValueError, match="mp_context must be one of"):
+        run_chains(lambda: CellGibbs(model), num_chains=2, num_sweeps=5, trace_cells=[2], processes=2, mp_context="x")
 
 
 def test_pyro_mcmc_runs_several_chains_with_a_summary(capsys):

@@ -88,7 +88,7 @@ def test_threaded_patch_sweep_is_the_serial_composition_for_any_thread_count(
         assert not np.array_equal(k.state, start)
         for _ in range(5):
             p = k.sample(p)
-        assert np.array_equal(k._f, first_hits(k.state, k._offsets, k._cells)), "first hits out of step"
+        assert np.array_equal(k.first_hit_state, first_hits(k.state, k._offsets, k._cells)), "first hits out of step"
         runs.append(k.state.copy())
     assert all(np.array_equal(runs[0], x) for x in runs)
 

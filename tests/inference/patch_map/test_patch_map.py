@@ -130,3 +130,34 @@ def test_bad_arguments():
     )
     with pytest.raises(ValueError, match="at most 16"):
         offline_patch_map(m2, (3, 6))
+
+
+def test_a_long_patch_map_shows_its_progress_and_time_left_and_blocks_change_nothing(monkeypatch):
+    """The patches are weighed in blocks with progress between them (plain lines with the time left off a
+    terminal): the same marginals and weights, bit for bit, as in one block."""
+    import io
+
+    from ogm_ppl.inference.patch_map import maps
+    from ogm_ppl.inference.tiling import centred_patches
+    from ogm_ppl.progress import Progress
+
+    ex = simple_2d_example(num_beams=90)
+    model = OccupancyModel(
+        ex.grid, raycast(ex.grid, ex.scans), GaussianRange(3.0), IndependentPrior(0.5, ex.grid.num_cells)
+    )
+    ref = reference_map(model)
+    whole_overlap = offline_patch_map(model, (2, 2), reference=ref, overlap=True)
+    whole = offline_patch_map(model, (2, 2), reference=ref)
+    online = online_patch_map(model, (2, 2))
+    monkeypatch.setattr(maps, "_CONFIGURATIONS_PER_STEP", 16 * 64)  # 64 patches of 4 cells a block
+    P = len(centred_patches(model, (2, 2))[0])
+    out = io.StringIO()
+    with Progress(P, "patch map", stream=out, every=0.0, bar=False) as bar:
+        blocks = offline_patch_map(model, (2, 2), reference=ref, overlap=True, progress=bar)
+    lines = out.getvalue().splitlines()
+    assert lines[0] == f"patch map: 0/{P} (0 %), 0 s" and lines[-1].startswith(f"patch map: {P}/{P} (100 %)")
+    assert len(lines) >= P // 64 and any(line.endswith(" left") for line in lines)
+    assert torch.equal(blocks.marginals, whole_overlap.marginals)
+    again = offline_patch_map(model, (2, 2), reference=ref)
+    assert torch.equal(again.marginals, whole.marginals) and np.array_equal(again.log_weights, whole.log_weights)
+    assert torch.equal(online_patch_map(model, (2, 2)).marginals, online.marginals)

@@ -1,17 +1,18 @@
-"""experiments/table_6_4_errors.py: pooled best F1 with its errors split into touched and never-touched
-cells, the two oracle maps, and clear errors for missing or mismatched files."""
+"""ogm_ppl.studies.table_6_4_errors: pooled best F1 with its errors split into touched and never-touched
+cells, the two oracle maps, and clear errors for missing or mismatched files; experiments/table_6_4_errors.py
+prints and writes it."""
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 from ogm_ppl.metrics import precision_recall
-from tests._scripts import load_experiment
-
-te = load_experiment("table_6_4_errors", "table_6_4_errors.py")
+from ogm_ppl.studies.table_6_4_errors import ORACLES, error_split, error_split_text
+from tests._experiments import run_script
 
 
 def _dataset(out: Path, name: str, truth, touched, maps: dict) -> None:
@@ -38,7 +39,7 @@ def run(tmp_path):
 
 def test_pooled_scores_and_the_split_equal_a_direct_count(run):
     out, data = run
-    res = te.error_split(out)
+    res = error_split(out)
     truth = np.concatenate([t for t, _, _ in data])
     touched = np.concatenate([m for _, m, _ in data])
     assert res["datasets"] == 2 and res["cells"]["touched"] == touched.sum()
@@ -54,37 +55,41 @@ def test_pooled_scores_and_the_split_equal_a_direct_count(run):
         assert s["fn_touched"] == (~called & truth & touched).sum()
         assert s["fn_untouched"] == (~called & truth & ~touched).sum()
         assert s["fp_touched"] + s["fp_untouched"] == c.fp[i] and s["fn_touched"] + s["fn_untouched"] == c.fn[i]
-    for name, fill in zip(te.ORACLES, (True, False)):
+    for name, fill in zip(ORACLES, (True, False)):
         q = np.where(touched, truth, fill).astype(float)
         assert res["oracles"][name] == pytest.approx(precision_recall(q, truth).f1.max(), abs=1e-12)
 
 
-def test_main_prints_and_writes_json(run, capsys, tmp_path):
+def test_the_script_prints_and_writes_json(run, tmp_path):
     out, _ = run
-    assert te.main([str(out), "--json", str(tmp_path / "e.json")]) == 0
-    text = capsys.readouterr().out
-    assert "touched truth, rest occupied" in text and (tmp_path / "e.json").is_file()
+    r = run_script("table_6_4_errors.py", out, "--json", tmp_path / "e.json")
+    assert r.returncode == 0, r.stderr
+    res = error_split(out)
+    assert r.stdout.startswith(error_split_text(res)) and "touched truth, rest occupied" in r.stdout
+    assert json.loads((tmp_path / "e.json").read_text()) == res
+    bad = run_script("table_6_4_errors.py", tmp_path / "nowhere")
+    assert bad.returncode == 1 and "no maps folder" in bad.stderr
 
 
 def test_bad_folders_are_refused(tmp_path):
     with pytest.raises(FileNotFoundError, match="no maps folder"):
-        te.error_split(tmp_path)
+        error_split(tmp_path)
     (tmp_path / "maps" / "d0").mkdir(parents=True)
     with pytest.raises(FileNotFoundError, match=r"d0\.eval\.npz: missing"):
-        te.error_split(tmp_path)
+        error_split(tmp_path)
     (tmp_path / "datasets").mkdir()
     np.savez(tmp_path / "datasets" / "d0.eval.npz", truth=np.zeros(4, bool), touched=np.zeros(4, bool))
     np.savez(tmp_path / "maps" / "d0" / "x.npz", marginals=np.zeros(3))
     with pytest.raises(ValueError, match=r"x\.npz: 3 cells, the dataset's truth has 4"):
-        te.error_split(tmp_path)
+        error_split(tmp_path)
     np.savez(tmp_path / "maps" / "d0" / "x.npz", other=np.zeros(4))
     with pytest.raises(ValueError, match="no 'marginals' array"):
-        te.error_split(tmp_path)
+        error_split(tmp_path)
 
 
 def test_an_algorithm_missing_from_a_dataset_is_refused_unless_left_out(run):
     out, _ = run
     (out / "maps" / "d1" / "b.npz").unlink()
     with pytest.raises(FileNotFoundError, match=r"d1: no map of b"):
-        te.error_split(out)
-    assert list(te.error_split(out, algorithms=["a"])["algorithms"]) == ["a"]
+        error_split(out)
+    assert list(error_split(out, algorithms=["a"])["algorithms"]) == ["a"]

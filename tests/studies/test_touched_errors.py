@@ -1,5 +1,5 @@
-"""experiments/touched_errors.py: touched-cell errors by distance to the benchmark's walls, counted on a map
-whose errors are placed by hand, and its JSON and figure."""
+"""ogm_ppl.studies.touched_errors: touched-cell errors by distance to the benchmark's walls, counted on a map
+whose errors are placed by hand, and its JSON and figure; experiments/touched_errors.py runs it."""
 
 from __future__ import annotations
 
@@ -8,9 +8,9 @@ import json
 import numpy as np
 import pytest
 
-from tests._scripts import load_experiment
-
-te = load_experiment("touched_errors", "touched_errors.py")
+from ogm_ppl.studies.errors import StudyInputError
+from ogm_ppl.studies.touched_errors import count_touched_errors, touched_errors
+from tests._experiments import run_script
 
 
 @pytest.fixture
@@ -39,7 +39,7 @@ def folder(tmp_path):
 
 
 def test_errors_are_counted_by_distance_and_depth(folder):
-    thick = te.touched_errors(folder, "d", "thick")
+    thick = count_touched_errors(folder, "d", "thick")
     assert thick["fp_binned"] == {"1": 12, "2-3": 0, "4+": 1}
     assert thick["fp_by_distance_1_to_6plus"] == [12, 0, 0, 0, 0, 1]
     assert (thick["true_positives"], thick["false_negatives"], thick["false_positives"]) == (24, 0, 13)
@@ -47,7 +47,7 @@ def test_errors_are_counted_by_distance_and_depth(folder):
         1: {"cells": 12, "called_occupied": 1.0},
         2: {"cells": 12, "called_occupied": 1.0},
     }
-    thin = te.touched_errors(folder, "d", "thin")
+    thin = count_touched_errors(folder, "d", "thin")
     assert thin["walls_by_depth"][2]["called_occupied"] == 0.0 and thin["walls_by_depth"][1]["called_occupied"] == 1.0
     assert (thin["true_positives"], thin["false_negatives"], thin["false_positives"]) == (12, 12, 0)
 
@@ -56,20 +56,40 @@ def test_counts_that_disagree_with_the_experiments_f1_are_refused(folder):
     """A map file whose recorded touched F1 is not what its cells give (another truth, another threshold)."""
     path = folder / "maps" / "d" / "thin.json"
     path.write_text(json.dumps({"touched": {"threshold": 0.5, "best_f1": 0.7}}))
-    with pytest.raises(SystemExit, match=r"give F1 0\.666667 at threshold 0\.5, the experiment recorded 0\.700000"):
-        te.touched_errors(folder, "d", "thin")
+    match = r"give F1 0\.666667 at threshold 0\.5, the experiment recorded 0\.700000"
+    with pytest.raises(StudyInputError, match=match):
+        count_touched_errors(folder, "d", "thin")
 
 
-def test_main_writes_json_and_figure_and_refuses_missing_maps(folder, tmp_path):
+def test_the_study_writes_json_and_figure_and_refuses_missing_maps(folder, tmp_path):
     out = tmp_path / "report"
-    res = te.main([str(folder), "thick", "thin", "--out", str(out)])
+    res = touched_errors(folder, ["thick", "thin"], out_dir=out)
     assert json.loads((out / "touched_errors.json").read_text())["datasets"]["d"]["thick"]["fp_binned"]["1"] == 12
-    assert res["algorithms"] == ["thick", "thin"]
+    assert res["algorithms"] == ["thick", "thin"] and list(res["datasets"]) == ["d"]
     assert (out / "touched_errors.png").read_bytes()[:4] == b"\x89PNG"
-    with pytest.raises(SystemExit, match="no map of algorithm 'other'"):
-        te.main([str(folder), "other"])
+    assert sorted(p.name for p in out.iterdir()) == ["touched_errors.json", "touched_errors.png"]
+    assert touched_errors(folder, ["thin"], datasets=["d"]) == {
+        "experiment": str(folder),
+        "algorithms": ["thin"],
+        "datasets": {"d": {"thin": count_touched_errors(folder, "d", "thin")}},
+    }
+    with pytest.raises(StudyInputError, match="no map of algorithm 'other'"):
+        touched_errors(folder, ["other"])
     (tmp_path / "empty" / "datasets").mkdir(parents=True)
-    with pytest.raises(SystemExit, match="no scored dataset"):
-        te.main([str(tmp_path / "empty"), "thick"])
-    with pytest.raises(SystemExit, match="not an experiment folder"):
-        te.main([str(tmp_path / "nowhere"), "thick"])
+    with pytest.raises(StudyInputError, match="no scored dataset"):
+        touched_errors(tmp_path / "empty", ["thick"])
+    with pytest.raises(StudyInputError, match="not an experiment folder"):
+        touched_errors(tmp_path / "nowhere", ["thick"])
+
+
+def test_the_script_prints_and_writes_the_counts(folder, tmp_path):
+    out = tmp_path / "report"
+    r = run_script("touched_errors.py", folder, "thick", "thin", "--out", out)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.splitlines()[0] == 'd thick {"touched_best_f1": 0.7868852459016393, "false_negatives": 0, ' + (
+        '"fp_binned": {"1": 12, "2-3": 0, "4+": 1}}'
+    )
+    expected = json.loads(json.dumps(touched_errors(folder, ["thick", "thin"])))  # depths as JSON keys
+    assert json.loads((out / "touched_errors.json").read_text()) == expected
+    bad = run_script("touched_errors.py", folder, "other")
+    assert bad.returncode == 1 and bad.stderr.strip().endswith("no map of algorithm 'other' on dataset 'd'")

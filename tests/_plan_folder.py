@@ -1,22 +1,6 @@
-"""Load a script of ``experiments/`` as a module, for the tests of that script."""
+"""A folder of plan files of buildings in no corpus, for the tests of the workflows that read one's own plans."""
 
-import importlib.util
-import sys
 from pathlib import Path
-from types import ModuleType
-
-EXPERIMENTS = Path(__file__).resolve().parents[1] / "experiments"
-
-
-def load_experiment(name: str, file: str) -> ModuleType:
-    """``experiments/<file>`` imported under the module name ``name`` (registered in ``sys.modules``, where
-    dataclasses look their module up; pop it when done)."""
-    spec = importlib.util.spec_from_file_location(name, EXPERIMENTS / file)
-    assert spec is not None and spec.loader is not None
-    mod = importlib.util.module_from_spec(spec)
-    sys.modules[name] = mod
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def write_plan_folder(tmp_path: Path) -> Path:
