@@ -39,7 +39,7 @@ from _common import sparse_scene, write_json
 from ogm_ppl import GaussianRange, OccupancyModel, raycast
 from ogm_ppl.inference.mcmc.gibbs import CellGibbs, PatchGibbs
 from ogm_ppl.learn import NetFieldSettings
-from ogm_ppl.learn._fit_common import training_plans, validation_split
+from ogm_ppl.learn._fit_common import load_training_plans, validation_split
 from ogm_ppl.priors import IndependentPrior, NetFieldPrior, prior_by_name
 from ogm_ppl.priors.compiled import prior_gibbs_sweeps
 from ogm_ppl.priors.compiled.net_field_patches import net_prior_sweeps
@@ -123,7 +123,7 @@ def posterior_sweeps(net, n: int, rounds: int) -> dict:
 
 def scores(net, w: int, field_pl: bool) -> dict:
     """Held-out ``-log p(m_k | m_-k)`` per cell on the houseexpo validation plans (module docstring)."""
-    plans = training_plans("houseexpo")
+    plans = load_training_plans("houseexpo")
     tr_idx, va_idx = validation_split(len(plans), 10)
     val = [(p.occupancy, p.known) for p in plans.maps(va_idx)]
     priors = {"field:houseexpo": lambda s: prior_by_name("field:houseexpo", s).compiled()}
@@ -158,7 +158,7 @@ def main() -> dict:
     n = args.size
     net = net_from_file(args.net, (n, n)) if args.net else random_net((n, n))
     field = prior_by_name("field:houseexpo", (n, n))
-    plans = training_plans("houseexpo")
+    plans = load_training_plans("houseexpo")
     plan = next(plans.maps([9]))  # a validation plan
     occ = plan.occupancy
     r0, c0 = max((occ.shape[0] - n) // 2, 0), max((occ.shape[1] - n) // 2, 0)

@@ -51,7 +51,7 @@ from ogm_ppl.learn._fit_common import (
     check_out_dir,
     command,
     run_provenance,
-    training_plans,
+    load_training_plans,
     validation_split,
 )
 
@@ -171,7 +171,7 @@ def fit_net_field(
     out = check_out_dir(out_dir)
     label = check_label(name) if name is not None else None
     every = check_int(validation_every, "validation_every", 2)
-    plans = training_plans(source, limit=limit, pixel_size=pixel_size, resolution=resolution)
+    plans = load_training_plans(source, limit=limit, pixel_size=pixel_size, resolution=resolution)
     label = label or ("plans" if plans.files else plans.corpus)
     tr_idx, va_idx = validation_split(len(plans), every)
     opts = s.options() + ([] if every == VALIDATION_EVERY else ["--validation-every", str(every)])

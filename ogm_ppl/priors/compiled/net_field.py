@@ -34,11 +34,12 @@ from __future__ import annotations
 
 from typing import NamedTuple
 
-import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.priors.compiled.net_field_patches import net_patch_weights
-from ogm_ppl.priors.compiled.net_ops import ACTIVATIONS, MAX_NET_WINDOW, MAX_UNITS, act_shift, stack_f64, window_pre
+from ogm_ppl.priors.compiled.net_memo import memo_arrays, memo_log_odds
+from ogm_ppl.priors.compiled.net_ops import ACTIVATIONS, MAX_NET_WINDOW, MAX_UNITS
 from ogm_ppl.priors.compiled.registry import register
 from ogm_ppl.priors.compiled.transforms import check_beta, check_bias
 
@@ -66,6 +67,11 @@ class NetField(NamedTuple):
     wt: np.ndarray  # w*w*U float64: wt[p U + u] = W_u[p // w, p % w] (one column of U weights per window cell)
     bias: np.ndarray  # U float64
     out: np.ndarray  # U float64: v_u
+    kw: int  # int64 words of a neighbourhood key (key_words(w))
+    memo_key: np.ndarray  # rows*cols*kw int64: the neighbourhood key of each cell's memoised log-odds (0: none)
+    memo_lo: np.ndarray  # rows*cols float64: each cell's log-odds at its memoised key
+    win_key: np.ndarray  # (rows+w-1)*(cols+w-1) int64: each window anchor's memoised content (w <= 7; else empty)
+    win_delta: np.ndarray  # (rows+w-1)*(cols+w-1)*w*w float64: each window's memoised cell terms
 
     def sparse_patches(self) -> bool:
         return False
@@ -79,11 +85,11 @@ class NetField(NamedTuple):
     def tempered(self, beta: float) -> NetField:
         """The bundle of ``beta log p~``: output weights and unary bias times ``beta``."""
         b = check_beta(beta)
-        return self._replace(out=self.out * b, unary=self.unary * b)
+        return self._replace(out=self.out * b, unary=self.unary * b, **_memo(self.rows, self.cols, self.w))
 
     def biased(self, bias: float) -> NetField:
         """The bundle of ``log p~ + h sum_k m_k``: unary bias plus ``h``."""
-        return self._replace(unary=self.unary + check_bias(bias))
+        return self._replace(unary=self.unary + check_bias(bias), **_memo(self.rows, self.cols, self.w))
 
     def factor_extent(self) -> int:
         """The largest extent of a factor (cells): ``w - 1`` (a window)."""
@@ -92,7 +98,11 @@ class NetField(NamedTuple):
     def window(self, grid_cols: int, r0: int, c0: int, rows: int, cols: int) -> NetField:
         """The bundle on the ``rows x cols`` window at ``(r0, c0)``: a cell whose windows all lie in it (at least
         ``w - 1`` cells from its edges, or at the grid's own edge) has the same conditional."""
-        return self._replace(rows=int(rows), cols=int(cols))
+        return self._replace(rows=int(rows), cols=int(cols), **_memo(rows, cols, self.w))
+
+
+def _memo(rows: int, cols: int, w: int) -> dict:
+    return memo_arrays(rows, cols, w)
 
 
 def net_field(rows: int, cols: int, filters, bias, out, unary: float = 0.0, pad: float = 0.5, activation="relu"):
@@ -125,24 +135,16 @@ def net_field(rows: int, cols: int, filters, bias, out, unary: float = 0.0, pad:
         wt=np.ascontiguousarray(f.reshape(U, w * w).T.reshape(-1)),
         bias=b,
         out=v,
+        **_memo(rows, cols, w),
     )
 
 
 # ------------------------------------------------------------------ single cells
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def net_cell_log_odds(nf, k, m):
-    """``log p~(m_k = 1, m_-k) - log p~(m_k = 0, m_-k)`` of a net field: each of the cell's ``w^2`` windows
-    read afresh from the map (module docstring). Allocates nothing (``U`` floats of stack)."""
-    buf = stack_f64(MAX_UNITS)
-    C, w, U = nf.cols, nf.w, nf.units
-    r = k // C
-    c = k - r * C
-    lo = nf.unary
-    for a in range(w):
-        for b in range(w):
-            window_pre(nf, m, r - a, c - b, k, buf, 0)
-            lo += act_shift(buf, 0, nf.wt, (a * w + b) * U, 1.0, nf.out, U, nf.act)
-    return lo
+    """``log p~(m_k = 1, m_-k) - log p~(m_k = 0, m_-k)`` of a net field, through the bundle's memo
+    (:func:`~ogm_ppl.priors.compiled.net_memo.memo_log_odds`). Allocates nothing."""
+    return memo_log_odds(nf, k, m)
 
 
 def _cell(prior, k, m):

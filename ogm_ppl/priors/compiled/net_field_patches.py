@@ -20,9 +20,9 @@ stateless conditionals by rounding only); the uniforms are drawn as in
 
 from __future__ import annotations
 
-import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.priors.compiled.net_ops import act_shift, act_sum, window_pre
 
 __all__ = ["GRAY_RESYNC", "net_log_prob_batch", "net_patch_weights", "net_prior_sweeps"]
@@ -31,7 +31,7 @@ __all__ = ["GRAY_RESYNC", "net_log_prob_batch", "net_patch_weights", "net_prior_
 GRAY_RESYNC = 64
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def _patch_windows(nf, m, cr, cc, nl, bit_of, base, pr_off, pr_pb, pr_p):
     """The windows holding one of the ``nl`` live cells ``(cr, cc)`` (``bit_of[k]``: the live bit of grid cell
     ``k``, else -1), each once (owned by its first live cell): ``base[q U : (q + 1) U]`` its pre-activation with
@@ -81,7 +81,7 @@ def _patch_windows(nf, m, cr, cc, nl, bit_of, base, pr_off, pr_pb, pr_p):
     return nw
 
 
-@nb.njit(cache=True, inline="always")
+@njit_shipped(inline="always")
 def _config_pre(nf, base, q, pr_off, pr_pb, pr_p, g, cur):
     """``cur[q U : (q + 1) U] = base_q + sum of the columns of q's live bits set in g``."""
     U = nf.units
@@ -95,7 +95,7 @@ def _config_pre(nf, base, q, pr_off, pr_pb, pr_p, g, cur):
                 cur[o + u] += nf.wt[p + u]
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def _gray_walk(nf, nw, nl, base, pr_off, pr_pb, pr_p, out):
     """``out[g]`` for every configuration ``g < 2^nl`` by the Gray-code walk (module docstring)."""
     U = nf.units
@@ -147,7 +147,7 @@ def _gray_walk(nf, nw, nl, base, pr_off, pr_pb, pr_p, out):
         out[g] = s
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def _full_range(cands, n, nl):
     if nl > 20 or n != np.int64(1) << nl:
         return False
@@ -157,7 +157,7 @@ def _full_range(cands, n, nl):
     return True
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def net_patch_weights(nf, patch, m, cands, n, out, ts):
     """``out[j] = log p~(patch = cands[j], rest)`` up to a constant in ``j`` (bit ``b`` of a candidate: the
     ``b``-th live cell of ``patch``; -1 entries are pinned cells): the windows holding a live cell read once, then
@@ -208,7 +208,7 @@ def net_patch_weights(nf, patch, m, cands, n, out, ts):
 
 
 # ------------------------------------------------------------------ whole maps
-@nb.njit(cache=True)
+@njit_shipped
 def _fill(nf, m, pre, F):
     """Every window's pre-activation (``pre``, anchors row-major from ``(-(w - 1), -(w - 1))``) and activation sum
     ``F``; returns ``sum F``."""
@@ -224,7 +224,7 @@ def _fill(nf, m, pre, F):
     return tot
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def net_log_prob_batch(nf, maps, out):
     """``log p~(m)`` for every row of ``maps`` (``B x K`` uint8)."""
     w, U = nf.w, nf.units
@@ -240,7 +240,7 @@ def net_log_prob_batch(nf, maps, out):
         out[bi] = s + nf.unary * ones
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def net_prior_sweeps(nf, maps, num_sweeps, seed):
     """Single-cell Gibbs sweeps on the prior alone for each row of ``maps`` (``B x K`` uint8), in place, with every
     window's pre-activation kept and updated at each flip (module docstring)."""

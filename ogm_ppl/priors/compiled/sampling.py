@@ -41,7 +41,7 @@ def patch_prior_batch(prior, maps, patch, cands, out):
         patch_prior_weights(prior, patch, maps[b], cands, cands.shape[0], out[b], ts)
 
 
-@nb.njit(cache=True)
+@njit_shipped
 def conditional_nll(prior, m, cells):
     """``sum_k -log p(m_k | m_-k)`` over ``cells`` (int64 grid ids) of the map ``m`` (``K`` uint8), by the bundle's
     compiled cell log-odds ``l``: ``softplus(-l)`` for an occupied cell, ``softplus(l)`` for a free one (a cell whose
