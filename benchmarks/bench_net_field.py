@@ -3,9 +3,10 @@
 Timing (every ratio measured in the same run, interleaved rounds, best of each):
 
 * prior-only single-cell sweeps of a ``--size`` square grid (a crop of a houseexpo validation plan), through the
-  generic compiled sweep every kernel uses (``prior_gibbs_sweeps``: the net field's conditionals read afresh from
-  the map, no kept state) for ``field:houseexpo`` and the net field, and the net field's stateful sweep
-  (``net_prior_sweeps``: every window's pre-activation kept and updated by one weight column per flip);
+  generic compiled sweep every kernel uses (``prior_gibbs_sweeps``, a bundle per chain: the net field's
+  conditionals kept by neighbourhood content, :mod:`ogm_ppl.priors.compiled.net_memo`) for ``field:houseexpo`` and
+  the net field, and the net field's stateful sweep (``net_prior_sweeps``: every window's pre-activation kept and
+  updated by one weight column per flip);
 * a posterior single-cell Gibbs sweep and a 3 x 3 patch Gibbs sweep (``CellGibbs``, ``PatchGibbs``) of a simulated
   ``--scene`` square scene under each prior (the independent prior's sweep as the baseline).
 
@@ -71,11 +72,19 @@ def interleaved(fns: dict, rounds: int) -> dict[str, float]:
 
 
 def prior_sweeps(field, net, start: np.ndarray, rounds: int) -> dict:
-    """Seconds per prior-only single-cell sweep of 4 chains from ``start``."""
+    """Seconds per prior-only single-cell sweep of 4 chains from ``start``, each chain with a bundle of its own (the
+    net field's bundle keeps its conditionals by neighbourhood content, as one kernel's chain does)."""
+    n = int(np.sqrt(start.size))
     maps = {k: np.ascontiguousarray(np.repeat(start[None], 4, 0)) for k in ("field", "net", "net_stateful")}
+    bundles = {"field": [field.compiled()] * 4, "net": [net.with_shape((n, n)).compiled() for _ in range(4)]}
+
+    def sweep(kind):
+        for i, b in enumerate(bundles[kind]):
+            prior_gibbs_sweeps(b, maps[kind][i : i + 1], 1, i)
+
     fns = {
-        "field": lambda: prior_gibbs_sweeps(field.compiled(), maps["field"], 1, 0),
-        "net": lambda: prior_gibbs_sweeps(net.compiled(), maps["net"], 1, 0),
+        "field": lambda: sweep("field"),
+        "net": lambda: sweep("net"),
         "net_stateful": lambda: net_prior_sweeps(net.compiled(), maps["net_stateful"], 1, 0),
     }
     t = {k: v / 4 for k, v in interleaved(fns, rounds).items()}
@@ -83,10 +92,9 @@ def prior_sweeps(field, net, start: np.ndarray, rounds: int) -> dict:
     out["net_vs_field"] = t["net"] / t["field"]
     out["net_stateful_vs_field"] = t["net_stateful"] / t["field"]
     out["stateless_vs_stateful"] = t["net"] / t["net_stateful"]
-    n = start.size
-    print(f"prior-only single-cell sweep, {int(np.sqrt(n))}^2 cells (per chain):")
+    print(f"prior-only single-cell sweep, {n}^2 cells (per chain):")
     for k, v in t.items():
-        print(f"  {k:13s} {v * 1e3:9.2f} ms  ({v / n * 1e9:8.1f} ns a cell) = {v / t['field']:7.1f}x field")
+        print(f"  {k:13s} {v * 1e3:9.2f} ms  ({v / start.size * 1e9:8.1f} ns a cell) = {v / t['field']:7.1f}x field")
     return out
 
 

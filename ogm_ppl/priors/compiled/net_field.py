@@ -11,16 +11,19 @@ cell lies in exactly ``w^2`` of them, at the edges too). ``x`` is the map inside
 ``v_u``; ``a`` a unary bias. (:class:`~ogm_ppl.priors.NetFieldPrior` ties the units over the 8 symmetries of the
 square: its ``H`` filters in their 8 orientations, ``U = 8 H``.)
 
-**Cell conditionals, from the neighbourhood.** The single-cell kernels call ``cell_log_odds(prior, k, m)`` on the
-chain's map alone (several chains, tiles and threads share one bundle), so a bundle keeps no per-window state.
-A cell's log-odds is computed afresh: for each of its ``w^2`` windows the pre-activation with the cell cleared,
-``pre = b + sum_{j != k} W[:, j] x_j`` (one column of ``U`` weights per occupied cell of the window, ``pad``
-times the column for a cell past the edge), then
+**Cell conditionals, kept by content.** The single-cell kernels call ``cell_log_odds(prior, k, m)`` with the
+chain's map alone, so the bundle cannot follow a chain's flips. A cell's log-odds is
 
     l_k = a + sum_{windows q holding k} sum_u v_u (sigma(pre_q,u + W_u[k - q]) - sigma(pre_q,u)),
 
-``w^2 (n_occ U + 2 U)`` operations for ``n_occ`` occupied cells a window. The ``U`` floats of ``pre`` live on the
-stack (:func:`stack_f64`): the single-cell sweeps compile without numba's runtime and must not allocate.
+``pre_q = b + sum_{j != k} W[:, j] x_j`` the window's pre-activation with the cell cleared (``pad`` times the
+column for a cell past the edge): ``w^2 (n_occ U + 2 U)`` operations afresh
+(:func:`~ogm_ppl.priors.compiled.net_ops.fresh_log_odds`). The bundle keeps each cell's ``l_k`` with the content
+of its ``(2w - 1)^2`` neighbourhood, and each window's ``w^2`` cell terms with the window's content
+(:mod:`~ogm_ppl.priors.compiled.net_memo`): a visit whose neighbourhood is unchanged reads the kept value after
+``2w - 1`` 8-byte loads, a flip makes the ``(2w - 1)^2`` cells around it and the ``w^2`` windows holding it
+recompute once. Every kept value is a function of its key, so the conditionals do not depend on the chain's
+history. Nothing allocates: the single-cell sweeps compile without numba's runtime.
 
 **Patches** (:mod:`~ogm_ppl.priors.compiled.net_field_patches`): the windows a patch's live cells touch are read
 once (their pre-activation with the patch cleared), and the ``2^L`` configurations are visited in Gray-code order,
@@ -65,6 +68,7 @@ class NetField(NamedTuple):
     pad: float  # the value of a cell past the grid's edge
     unary: float  # a: log-odds added to every cell
     wt: np.ndarray  # w*w*U float64: wt[p U + u] = W_u[p // w, p % w] (one column of U weights per window cell)
+    wt_t: np.ndarray  # U*w*w float64: wt_t[u w^2 + p] = W_u[p // w, p % w] (the weights unit-major)
     bias: np.ndarray  # U float64
     out: np.ndarray  # U float64: v_u
     kw: int  # int64 words of a neighbourhood key (key_words(w))
@@ -133,6 +137,7 @@ def net_field(rows: int, cols: int, filters, bias, out, unary: float = 0.0, pad:
         pad=float(pad),
         unary=float(unary),
         wt=np.ascontiguousarray(f.reshape(U, w * w).T.reshape(-1)),
+        wt_t=np.ascontiguousarray(f.reshape(-1)),
         bias=b,
         out=v,
         **_memo(rows, cols, w),

@@ -14,7 +14,8 @@ flip of cell ``j`` changes the keys of the ``S^2`` cells around it, which miss o
 **Window memo** (``w <= 7``). A miss sums the cell's ``w^2`` windows' terms ``Delta_q(p) = sum_u v_u
 (sigma(base_q,u + W_u[p]) - sigma(base_q,u))``, ``base_q`` the window's pre-activation with its cell ``p``
 cleared. Each window anchor keeps its content (:func:`window_key`, ``w^2`` bits and a marker) and the ``w^2``
-terms of its cells (:func:`window_deltas`: one pre-activation ``pre`` and ``U (w^2 + 1)`` activations,
+terms of its cells (:func:`window_deltas`: one pre-activation ``pre`` and ``U (w^2 + 1)`` activations, vectorised
+over the window's cells,
 ``Delta_q(p) = S(pre + W[p]) - S(pre)`` for a free cell ``p``, ``S(pre) - S(pre - W[p])`` for an occupied one,
 ``S(x) = sum_u v_u sigma(x_u)``); a missed cell reads
 ``w^2`` kept terms, and a flip recomputes the ``w^2`` windows holding the flipped cell once. Wider windows
@@ -37,9 +38,9 @@ from ogm_ppl.priors.compiled.field import _load8
 from ogm_ppl.priors.compiled.net_ops import (
     MAX_NET_WINDOW,
     MAX_UNITS,
-    act_moved,
     act_sum,
     fresh_log_odds,
+    softplus,
     stack_f64,
     stack_i64,
     window_pre,
@@ -65,6 +66,8 @@ _GATHER8 = np.int64(0x0102040810204080)
 MAX_KEY2_WINDOW = 6
 #: the largest window side with a window memo (a window's ``w^2`` cells and a marker in one int64)
 MAX_WINDOW_MEMO = 7
+#: the most cells of a window with a window memo
+MAX_WINDOW_CELLS = MAX_WINDOW_MEMO**2
 
 
 def key_words(w: int) -> int:
@@ -187,10 +190,9 @@ def nbhd_key2(nf, k, m):
 
 
 @njit_shipped(inline="always")
-def window_key(nf, m, r0, c0):
-    """The cells of the window anchored at ``(r0, c0)`` (``w <= 7``) as bits ``i w + j`` (0 past the grid's edge)
-    and a marker bit ``w^2``: one 8-byte load a row inside the grid."""
-    C, R, w = nf.cols, nf.rows, nf.w
+def window_key(m, R, C, w, r0, c0):
+    """The cells of the window anchored at ``(r0, c0)`` (``w <= 7``) of the ``R x C`` map ``m`` as bits ``i w + j``
+    (0 past the grid's edge) and a marker bit ``w^2``: one 8-byte load a row inside the grid."""
     mask = (np.int64(1) << w) - 1
     key = np.int64(1) << (w * w)
     if r0 >= 0 and c0 >= 0 and r0 + w <= R and c0 + w <= C and (r0 + w - 1) * C + c0 + 8 <= R * C:
@@ -207,34 +209,57 @@ def window_key(nf, m, r0, c0):
     return key
 
 
-@njit_shipped
+@njit_shipped(_nrt=False)
 def window_deltas(nf, m, r0, c0, q):
     """``win_delta[q w^2 + p]`` for every grid cell ``p`` of the window anchored at ``(r0, c0)`` (anchor index
     ``q``): ``Delta_q(p)``, the window's change when its cell ``p`` turns occupied, read from ``m`` (module
-    docstring). Allocates nothing (``U`` floats of stack)."""
-    buf = stack_f64(MAX_UNITS)
+    docstring). The inner loop runs over the window's cells (``wt_t``: the weights unit-major), so it
+    vectorises. Allocates nothing (stack scratch)."""
+    pre = stack_f64(MAX_UNITS)
+    moved = stack_f64(MAX_WINDOW_CELLS)
+    sgn = stack_f64(MAX_WINDOW_CELLS)
     C, R, w, U = nf.cols, nf.rows, nf.w, nf.units
-    window_pre(nf, m, r0, c0, -1, buf, 0)
-    here = act_sum(buf, 0, nf.out, U, nf.act)
-    o = q * w * w
-    for i in range(w):
+    w2 = w * w
+    window_pre(nf, m, r0, c0, -1, pre, 0)
+    here = act_sum(pre, 0, nf.out, U, nf.act)
+    for p in range(w2):
+        i = p // w
         rr = r0 + i
-        for j in range(w):
-            cc = c0 + j
-            if 0 <= rr < R and 0 <= cc < C:
-                p = (i * w + j) * U
-                if m[rr * C + cc]:
-                    d = here - act_moved(buf, nf.wt, p, -1.0, nf.out, U, nf.act)
-                else:
-                    d = act_moved(buf, nf.wt, p, 1.0, nf.out, U, nf.act) - here
-                nf.win_delta[o + i * w + j] = d
+        cc = c0 + p - i * w
+        moved[p] = 0.0
+        sgn[p] = 0.0
+        if 0 <= rr < R and 0 <= cc < C:
+            sgn[p] = -1.0 if m[rr * C + cc] else 1.0
+    wt_t, out = nf.wt_t, nf.out
+    if nf.act == 0:
+        for u in range(U):
+            x = pre[u]
+            v = out[u]
+            o = u * w2
+            for p in range(w2):
+                moved[p] += v * max(x + sgn[p] * wt_t[o + p], 0.0)
+    else:
+        for u in range(U):
+            x = pre[u]
+            v = out[u]
+            o = u * w2
+            for p in range(w2):
+                moved[p] += v * softplus(x + sgn[p] * wt_t[o + p])
+    o = q * w2
+    for p in range(w2):
+        if sgn[p] > 0.0:
+            nf.win_delta[o + p] = moved[p] - here
+        elif sgn[p] < 0.0:
+            nf.win_delta[o + p] = here - moved[p]
 
 
-@njit_shipped
+@njit_shipped(_nrt=False)
 def windowed_log_odds(nf, k, m):
     """``l_k`` from the window memo (``w <= 7``): ``a + sum`` of the kept terms of the cell's ``w^2`` windows,
-    each window's terms recomputed where its content changed."""
-    C, w = nf.cols, nf.w
+    each window's terms recomputed where its content changed. (Without numba's runtime, as the sweeps: with it,
+    every inlined use of the bundle would count the references of its arrays.)"""
+    R, C, w = nf.rows, nf.cols, nf.w
+    win_key, win_delta = nf.win_key, nf.win_delta
     AC = C + w - 1
     w2 = w * w
     r = k // C
@@ -245,11 +270,11 @@ def windowed_log_odds(nf, k, m):
             r0 = r - a
             c0 = c - b
             q = (r0 + w - 1) * AC + (c0 + w - 1)
-            key = window_key(nf, m, r0, c0)
-            if nf.win_key[q] != key:
+            key = window_key(m, R, C, w, r0, c0)
+            if win_key[q] != key:
                 window_deltas(nf, m, r0, c0, q)
-                nf.win_key[q] = key
-            lo += nf.win_delta[q * w2 + a * w + b]
+                win_key[q] = key
+            lo += win_delta[q * w2 + a * w + b]
     return lo
 
 

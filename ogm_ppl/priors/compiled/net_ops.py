@@ -15,10 +15,10 @@ __all__ = [
     "ACTIVATIONS",
     "MAX_NET_WINDOW",
     "MAX_UNITS",
-    "act_moved",
     "act_shift",
     "act_sum",
     "fresh_log_odds",
+    "softplus",
     "stack_f64",
     "stack_i64",
     "window_pre",
@@ -63,7 +63,7 @@ def stack_i64(typingctx, n):
 
 
 @njit_shipped(inline="always")
-def _softplus(x):
+def softplus(x):
     """``log(1 + e^x)``, stable for large ``|x|``."""
     return max(x, 0.0) + np.log1p(np.exp(-abs(x)))
 
@@ -77,7 +77,7 @@ def act_sum(pre, o, out, U, act):
             s += out[u] * max(pre[o + u], 0.0)
     else:
         for u in range(U):
-            s += out[u] * _softplus(pre[o + u])
+            s += out[u] * softplus(pre[o + u])
     return s
 
 
@@ -93,21 +93,7 @@ def act_shift(pre, o, wt, p, sign, out, U, act):
     else:
         for u in range(U):
             x = pre[o + u]
-            s += out[u] * (_softplus(x + sign * wt[p + u]) - _softplus(x))
-    return s
-
-
-@njit_shipped(inline="always")
-def act_moved(pre, wt, p, sign, out, U, act):
-    """``sum_u out[u] sigma(pre[u] + sign wt[p + u])``: a window's activation sum with the cell at weight column
-    ``p`` turned occupied (``sign = 1``) or free (``sign = -1``) from ``pre``."""
-    s = 0.0
-    if act == 0:
-        for u in range(U):
-            s += out[u] * max(pre[u] + sign * wt[p + u], 0.0)
-    else:
-        for u in range(U):
-            s += out[u] * _softplus(pre[u] + sign * wt[p + u])
+            s += out[u] * (softplus(x + sign * wt[p + u]) - softplus(x))
     return s
 
 
@@ -145,7 +131,7 @@ def window_pre(nf, m, r0, c0, skip, buf, o):
                     buf[o + u] += pad * wt[p + u]
 
 
-@njit_shipped
+@njit_shipped(_nrt=False)
 def fresh_log_odds(nf, k, m):
     """``log p~(m_k = 1, m_-k) - log p~(m_k = 0, m_-k)`` of a net field, each of the cell's ``w^2`` windows read
     afresh from the map (:mod:`~ogm_ppl.priors.compiled.net_field`). Allocates nothing (``U`` floats of stack)."""
