@@ -286,22 +286,23 @@ def _miss(nf, k, m):
     return fresh_log_odds(nf, k, m)
 
 
-@njit_shipped(inline="always")
-def memo_log_odds(nf, k, m):
-    """``l_k``, the kept value while the cell's neighbourhood key is the kept one, else computed (:func:`_miss`)
-    and kept (module docstring). Allocates nothing."""
+@njit_shipped(_nrt=False)
+def _keep2(nf, k, m, lo_key, hi_key):
+    """A missed cell of a two-word key: its log-odds computed (:func:`_miss`) and kept with the key."""
+    lo = _miss(nf, k, m)
+    o = k * nf.kw
+    nf.memo_lo[k] = lo
+    nf.memo_key[o] = lo_key
+    if nf.kw == 2:
+        nf.memo_key[o + 1] = hi_key
+    return lo
+
+
+@njit_shipped(_nrt=False)
+def _memo_wide(nf, k, m):
+    """:func:`memo_log_odds` of a key of more than two words (``w >= 7``), the key on the stack."""
     kw = nf.kw
     o = k * kw
-    if kw <= 2:
-        lo_key, hi_key = nbhd_key2(nf, k, m)
-        if nf.memo_key[o] == lo_key and (kw == 1 or nf.memo_key[o + 1] == hi_key):
-            return nf.memo_lo[k]
-        lo = _miss(nf, k, m)
-        nf.memo_lo[k] = lo
-        nf.memo_key[o] = lo_key
-        if kw == 2:
-            nf.memo_key[o + 1] = hi_key
-        return lo
     key = stack_i64(KEY_WORDS)
     nbhd_key(nf, k, m, key)
     hit = True
@@ -315,3 +316,18 @@ def memo_log_odds(nf, k, m):
     for i in range(kw):
         nf.memo_key[o + i] = key[i]
     return lo
+
+
+@njit_shipped(inline="always")
+def memo_log_odds(nf, k, m):
+    """``l_k``, the kept value while the cell's neighbourhood key is the kept one, else computed (:func:`_miss`)
+    and kept (module docstring). Only the two-word key's check is inlined into the sweeps; a miss and the longer
+    keys are calls. Allocates nothing."""
+    kw = nf.kw
+    if kw <= 2:
+        lo_key, hi_key = nbhd_key2(nf, k, m)
+        o = k * kw
+        if nf.memo_key[o] == lo_key and (kw == 1 or nf.memo_key[o + 1] == hi_key):
+            return nf.memo_lo[k]
+        return _keep2(nf, k, m, lo_key, hi_key)
+    return _memo_wide(nf, k, m)
