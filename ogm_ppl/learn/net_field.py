@@ -50,8 +50,8 @@ from ogm_ppl.learn._fit_common import (
     check_label,
     check_out_dir,
     command,
-    run_provenance,
     load_training_plans,
+    run_provenance,
     validation_split,
 )
 

@@ -63,6 +63,38 @@ def test_compiled_conditionals_equal_log_prob_differences(shape, w, act):
     """Cell conditionals (through the memo's three paths: two-word keys and window memo for ``w <= 6``, longer
     keys for ``w = 7``, no window memo for ``w >= 8``), whole-map energies and patch weights against ``log_prob``."""
     p = random_net(shape, w, 2, act, 4, scale=0.3, out=0.05)  # |log p~| of order 50: differences exact to ~1e-14
+    K = p.num_cells
+    rng = np.random.default_rng(1)
+    maps = torch.from_numpy((rng.random((8, K)) < rng.uniform(0.2, 0.8, (8, 1))).astype(np.float64))
+    on, off = maps[:, None, :].repeat(1, K, 1), maps[:, None, :].repeat(1, K, 1)
+    idx = torch.arange(K)
+    on[:, idx, idx], off[:, idx, idx] = 1.0, 0.0
+    want = (p.log_prob(on) - p.log_prob(off)).numpy()
+    mm = np.ascontiguousarray(maps.numpy().astype(np.uint8))
+    for i in range(len(maps)):
+        got = np.array([prior_log_odds(p.compiled(), k, mm[i]) for k in range(K)])
+        np.testing.assert_allclose(got, want[i], rtol=0, atol=1e-12)
+    lp = np.empty(len(maps))
+    net_log_prob_batch(p.compiled(), mm, lp)
+    np.testing.assert_allclose(lp, p.log_prob(maps).numpy(), rtol=1e-13, atol=1e-12)
+    R, C = shape
+    patches = []
+    for h, ww in ((3, 3), (2, 2)):
+        for r0, c0 in ((0, 0), (R - h, C - ww)):
+            patches.append(np.array([(r0 + a) * C + c0 + b for a in range(h) for b in range(ww)], np.int64))
+    patches.append(np.array([0, -1, C + 1, 2 * C - 1, -1, K - 1], np.int64))  # pinned / scattered cells
+    for patch in patches:
+        live = patch[patch >= 0]
+        L = len(live)
+        for cands in (np.arange(1 << L, dtype=np.int64), np.array([5, 0, (1 << L) - 1, 2], np.int64)):
+            got = np.empty((len(maps), len(cands)))
+            patch_prior_batch(p.compiled(), mm, patch, cands, got)
+            trial = maps[:, None, :].repeat(1, len(cands), 1)
+            trial[:, :, torch.from_numpy(live)] = ((torch.from_numpy(cands)[:, None] >> torch.arange(L)) & 1).double()
+            d = got - p.log_prob(trial).numpy()
+            assert (d.max(1) - d.min(1)).max() < 1e-12, patch
+
+
 def test_the_field_is_tied_over_the_8_symmetries():
     p = random_net((7, 7), 3, 3, "relu", 5)
     g = (np.random.default_rng(0).random((7, 7)) < 0.4).astype(np.float64)

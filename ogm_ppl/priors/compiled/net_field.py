@@ -1,4 +1,5 @@
-r"""Compiled conditionals of the net-field kind (:class:`NetField`): a small network scored on every window.
+r"""Compiled conditionals of the net-field kind (:class:`NetField`): a small network scored on every window, a
+learned alternative to the patch tables of Section 5.2.2 whose conditionals feed the Gibbs updates of Section 4.1.
 
 .. math:: \log \tilde p(m) = a \sum_k m_k + \sum_{(r_0, c_0)} \sum_{u < U} v_u\,
           \sigma\Big(b_u + \sum_{i, j < w} W_u[i, j]\, x_{r_0 + i,\, c_0 + j}\Big),

@@ -1,6 +1,7 @@
-r"""The memo of a net field's cell conditionals (:class:`~ogm_ppl.priors.compiled.net_field.NetField`): the
-single-cell kernels call ``cell_log_odds(prior, k, m)`` with the chain's map alone, so the bundle keeps what it
-computed keyed by the map content it depends on, never by which chain asked.
+r"""The memo of a net field's cell conditionals (:class:`~ogm_ppl.priors.compiled.net_field.NetField`), the prior
+term of the single-cell Gibbs update (Section 4.1, Eq. 4.2): the single-cell kernels call
+``cell_log_odds(prior, k, m)`` with the chain's map alone, so the bundle keeps what it computed keyed by the map
+content it depends on, never by which chain asked.
 
 **Cell memo.** A cell's conditional ``l_k`` depends on its position and the ``S x S`` cells around it
 (``S = 2w - 1``: every cell of the ``w^2`` windows holding it). :func:`nbhd_key` packs those cells (the cell itself
