@@ -5,8 +5,7 @@ Timing (every ratio measured in the same run, interleaved rounds, best of each):
 * prior-only single-cell sweeps of a ``--size`` square grid (a crop of a houseexpo validation plan), through the
   generic compiled sweep every kernel uses (``prior_gibbs_sweeps``, a bundle per chain: the net field's
   conditionals kept by neighbourhood content, :mod:`ogm_ppl.priors.compiled.net_memo`) for ``field:houseexpo`` and
-  the net field, and the net field's stateful sweep (``net_prior_sweeps``: every window's pre-activation kept and
-  updated by one weight column per flip);
+  the net field;
 * a posterior single-cell Gibbs sweep and a 3 x 3 patch Gibbs sweep (``CellGibbs``, ``PatchGibbs``; one round of
   the patch sweeps, the net field's take seconds) of a simulated ``--scene`` square scene under each prior (the
   independent prior's sweep as the baseline).
@@ -44,7 +43,6 @@ from ogm_ppl.learn import NetFieldSettings
 from ogm_ppl.learn._fit_common import load_training_plans, validation_split
 from ogm_ppl.priors import IndependentPrior, NetFieldPrior, prior_by_name
 from ogm_ppl.priors.compiled import prior_gibbs_sweeps
-from ogm_ppl.priors.compiled.net_field_patches import net_prior_sweeps
 from ogm_ppl.priors.learn_net import heldout_nll
 from ogm_ppl.priors.net_field import net_from_file
 
@@ -76,23 +74,17 @@ def prior_sweeps(field, net, start: np.ndarray, rounds: int) -> dict:
     """Seconds per prior-only single-cell sweep of 4 chains from ``start``, each chain with a bundle of its own (the
     net field's bundle keeps its conditionals by neighbourhood content, as one kernel's chain does)."""
     n = int(np.sqrt(start.size))
-    maps = {k: np.ascontiguousarray(np.repeat(start[None], 4, 0)) for k in ("field", "net", "net_stateful")}
+    maps = {k: np.ascontiguousarray(np.repeat(start[None], 4, 0)) for k in ("field", "net")}
     bundles = {"field": [field.compiled()] * 4, "net": [net.with_shape((n, n)).compiled() for _ in range(4)]}
 
     def sweep(kind):
         for i, b in enumerate(bundles[kind]):
             prior_gibbs_sweeps(b, maps[kind][i : i + 1], 1, i)
 
-    fns = {
-        "field": lambda: sweep("field"),
-        "net": lambda: sweep("net"),
-        "net_stateful": lambda: net_prior_sweeps(net.compiled(), maps["net_stateful"], 1, 0),
-    }
+    fns = {"field": lambda: sweep("field"), "net": lambda: sweep("net")}
     t = {k: v / 4 for k, v in interleaved(fns, rounds).items()}
     out = {f"{k}_seconds": v for k, v in t.items()}
     out["net_vs_field"] = t["net"] / t["field"]
-    out["net_stateful_vs_field"] = t["net_stateful"] / t["field"]
-    out["stateless_vs_stateful"] = t["net"] / t["net_stateful"]
     print(f"prior-only single-cell sweep, {n}^2 cells (per chain):")
     for k, v in t.items():
         print(f"  {k:13s} {v * 1e3:9.2f} ms  ({v / start.size * 1e9:8.1f} ns a cell) = {v / t['field']:7.1f}x field")

@@ -168,8 +168,7 @@ class NetFieldPrior(LocalMapPrior):
         return energy(x, f, b, v, self.unary, self.pad, self.activation).reshape(batch)
 
     def sample(self, sample_shape=(), generator=None, num_sweeps: int = 200):
-        """Maps drawn by ``num_sweeps`` compiled single-cell Gibbs sweeps on the prior alone (from uniform noise; the
-        sweeps keep each window's pre-activation,
+        """Maps drawn by ``num_sweeps`` compiled single-cell Gibbs sweeps on the prior alone (from uniform noise,
         :func:`~ogm_ppl.priors.compiled.net_field_patches.net_prior_sweeps`)."""
         shape = torch.Size(sample_shape)
         B = int(np.prod(shape)) if len(shape) else 1

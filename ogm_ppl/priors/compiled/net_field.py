@@ -28,10 +28,9 @@ history. Nothing allocates: the single-cell sweeps compile without numba's runti
 
 **Patches** (:mod:`~ogm_ppl.priors.compiled.net_field_patches`): the windows a patch's live cells touch are read
 once (their pre-activation with the patch cleared), and the ``2^L`` configurations are visited in Gray-code order,
-each step recomputing only the windows that hold the flipped cell. **Prior sampling with kept state**
-(:func:`~ogm_ppl.priors.compiled.net_field_patches.net_prior_sweeps`, the negative chains of learning): there one
-function owns the chains, so it keeps every window's pre-activation and activation sum and updates them by one
-weight column per flipped window when a cell flips.
+each step recomputing only the windows that hold the flipped cell. Prior sampling
+(:func:`~ogm_ppl.priors.compiled.net_field_patches.net_prior_sweeps`) runs the generic prior sweeps through the
+memo.
 """
 
 from __future__ import annotations

@@ -1,4 +1,4 @@
-r"""The patch conditionals, whole-map energies and stateful prior sweeps of the net-field kind
+r"""The patch conditionals, whole-map energies and prior sweeps of the net-field kind
 (:class:`~ogm_ppl.priors.compiled.net_field.NetField`; the energy and its edge convention: that module).
 
 **Patch weights** (:func:`net_patch_weights`): every window holding a live cell of the patch is read once, its
@@ -9,13 +9,8 @@ bit x of g set} W_u[p])``. All ``2^L`` configurations (a patch Gibbs update) are
 and the running sum by their activation differences; every :data:`GRAY_RESYNC` steps the windows are summed
 afresh from ``base`` (a bound on the rounding). Other candidate lists are scored one by one.
 
-**Prior sweeps with kept state** (:func:`net_prior_sweeps`): single-cell Gibbs on the prior alone over a batch of
-maps, keeping each window's pre-activation (``(rows + w - 1) (cols + w - 1) x U`` floats a chain) and activation
-sum. A cell's log-odds is then ``a + sum_q sign (S_q(pre_q + sign W[:, p_q]) - S_q)`` over its ``w^2`` windows
-(``U`` activations a window instead of rebuilding ``pre`` from the map), and a flip adds ``+-W[:, p_q]`` to those
-windows. The state is recomputed from the map at the start of each call (the kept sums then differ from the
-stateless conditionals by rounding only); the uniforms are drawn as in
-:func:`~ogm_ppl.priors.compiled.prior_gibbs_sweeps`, so the two give the same chains.
+**Prior sweeps** (:func:`net_prior_sweeps`, the negative chains of learning and
+:meth:`~ogm_ppl.priors.NetFieldPrior.sample`): the generic prior sweeps through the bundle's memo of conditionals.
 """
 
 from __future__ import annotations
@@ -23,7 +18,8 @@ from __future__ import annotations
 import numpy as np
 
 from ogm_ppl._numba_cache import njit_shipped
-from ogm_ppl.priors.compiled.net_ops import act_shift, act_sum, window_pre
+from ogm_ppl.priors.compiled.net_ops import act_sum, window_pre
+from ogm_ppl.priors.compiled.sampling import prior_gibbs_sweeps
 
 __all__ = ["GRAY_RESYNC", "net_log_prob_batch", "net_patch_weights", "net_prior_sweeps"]
 
@@ -240,47 +236,9 @@ def net_log_prob_batch(nf, maps, out):
         out[bi] = s + nf.unary * ones
 
 
-@njit_shipped
-def net_prior_sweeps(nf, maps, num_sweeps, seed):
-    """Single-cell Gibbs sweeps on the prior alone for each row of ``maps`` (``B x K`` uint8), in place, with every
-    window's pre-activation kept and updated at each flip (module docstring)."""
-    np.random.seed(seed)
-    R, C, w, U = nf.rows, nf.cols, nf.w, nf.units
-    AC = C + w - 1
-    nA = (R + w - 1) * AC
-    pre = np.empty(nA * U)
-    F = np.empty(nA)
-    Fn = np.empty(w * w)
-    wt = nf.wt
-    for bi in range(maps.shape[0]):
-        m = maps[bi]
-        _fill(nf, m, pre, F)
-        for _ in range(num_sweeps):
-            for k in range(m.shape[0]):
-                r = k // C
-                c = k - r * C
-                cur = m[k]
-                sign = 1.0 - 2.0 * cur  # the flip adds sign * column to each window
-                lo = nf.unary
-                for a in range(w):
-                    for b in range(w):
-                        q = (r - a + w - 1) * AC + (c - b + w - 1)
-                        p = (a * w + b) * U
-                        e = act_shift(pre, q * U, wt, p, sign, nf.out, U, nf.act)
-                        Fn[a * w + b] = F[q] + e
-                        lo += sign * e
-                u01 = np.random.random()
-                if lo >= 0:
-                    new = 1 if u01 * (1.0 + np.exp(-lo)) < 1.0 else 0
-                else:
-                    e = np.exp(lo)
-                    new = 1 if u01 * (1.0 + e) < e else 0
-                if new != cur:
-                    m[k] = new
-                    for a in range(w):
-                        for b in range(w):
-                            q = (r - a + w - 1) * AC + (c - b + w - 1)
-                            p = (a * w + b) * U
-                            for u in range(U):
-                                pre[q * U + u] += sign * wt[p + u]
-                            F[q] = Fn[a * w + b]
+def net_prior_sweeps(nf, maps, num_sweeps: int, seed: int) -> None:
+    """Single-cell Gibbs sweeps on the prior alone for each row of ``maps`` (``B x K`` uint8), in place: the generic
+    :func:`~ogm_ppl.priors.compiled.prior_gibbs_sweeps` through the bundle's memo of conditionals
+    (:mod:`~ogm_ppl.priors.compiled.net_memo`; the chains share it, its values being functions of the map content
+    alone)."""
+    prior_gibbs_sweeps(nf, maps, int(num_sweeps), int(seed))
