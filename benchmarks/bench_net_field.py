@@ -1,6 +1,6 @@
 """The net field next to the pattern field: time per sweep on the same grid and held-out conditional NLL.
 
-Timing (every ratio measured in the same run, interleaved rounds, best of each):
+Timing (every ratio measured in the same run, interleaved rounds, best CPU time of each):
 
 * prior-only single-cell sweeps of a ``--size`` square grid (a crop of a houseexpo validation plan), through the
   generic compiled sweep every kernel uses (``prior_gibbs_sweeps``, a bundle per chain: the net field's
@@ -58,15 +58,16 @@ def random_net(shape) -> NetFieldPrior:
 
 
 def interleaved(fns: dict, rounds: int) -> dict[str, float]:
-    """Best wall time of each function over ``rounds`` rounds that run every function in turn (one untimed call
-    first in each round)."""
+    """Best CPU time of each function over ``rounds`` rounds that run every function in turn (one untimed call
+    first in each round). CPU time of the process (one numba thread), not wall time: on a shared machine a call of a
+    few milliseconds is preempted more often than a shorter one, which skews wall-time ratios."""
     best = dict.fromkeys(fns, float("inf"))
     for _ in range(rounds):
         for name, fn in fns.items():
             fn()
-            t0 = time.perf_counter()
+            t0 = time.process_time()
             fn()
-            best[name] = min(best[name], time.perf_counter() - t0)
+            best[name] = min(best[name], time.process_time() - t0)
     return best
 
 
