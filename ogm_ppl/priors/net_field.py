@@ -32,6 +32,7 @@ from ogm_ppl.priors.compiled.net_field_patches import net_prior_sweeps
 from ogm_ppl.priors.local import LocalMapPrior, grid_shape
 
 __all__ = [
+    "EXACT_SAMPLE_CELLS",
     "NET_FORMAT_VERSION",
     "NET_KIND",
     "NetFieldPrior",
@@ -45,6 +46,8 @@ __all__ = [
 ]
 
 NET_FORMAT_VERSION = 1
+#: grids of at most this many cells are sampled exactly, by enumerating their maps
+EXACT_SAMPLE_CELLS = 12
 #: the ``kind`` string a net-field file holds
 NET_KIND = "net_field"
 FITTED_DIR = Path(__file__).resolve().parent.parent / "fitted"
@@ -168,15 +171,22 @@ class NetFieldPrior(LocalMapPrior):
         return energy(x, f, b, v, self.unary, self.pad, self.activation).reshape(batch)
 
     def sample(self, sample_shape=(), generator=None, num_sweeps: int = 200):
-        """Maps drawn by ``num_sweeps`` compiled single-cell Gibbs sweeps on the prior alone (from uniform noise,
-        :func:`~ogm_ppl.priors.compiled.net_field_patches.net_prior_sweeps`)."""
+        """Maps drawn exactly from the ``2^K`` maps' probabilities on a grid of at most :data:`EXACT_SAMPLE_CELLS`
+        cells, else by ``num_sweeps`` compiled single-cell Gibbs sweeps on the prior alone from uniform noise
+        (:func:`~ogm_ppl.priors.compiled.net_field_patches.net_prior_sweeps`)."""
         shape = torch.Size(sample_shape)
         B = int(np.prod(shape)) if len(shape) else 1
-        u = torch.rand((B, self.num_cells), generator=generator, dtype=torch.float64)
-        maps = np.ascontiguousarray((u < 0.5).numpy(), dtype=np.uint8)
+        K = self.num_cells
+        if K <= EXACT_SAMPLE_CELLS:
+            maps = ((torch.arange(2**K)[:, None] >> torch.arange(K)) & 1).to(torch.float64)
+            lp = self.log_prob(maps)
+            idx = torch.multinomial(torch.softmax(lp, 0), B, replacement=True, generator=generator)
+            return maps[idx].reshape(*shape, K)
+        u = torch.rand((B, K), generator=generator, dtype=torch.float64)
+        grid = np.ascontiguousarray((u < 0.5).numpy(), dtype=np.uint8)
         seed = int(torch.randint(0, 2**31 - 1, (1,), generator=generator))
-        net_prior_sweeps(self._compiled, maps, int(num_sweeps), seed)
-        return torch.from_numpy(maps.astype(np.float64)).reshape(*shape, self.num_cells)
+        net_prior_sweeps(self._compiled, grid, int(num_sweeps), seed)
+        return torch.from_numpy(grid.astype(np.float64)).reshape(*shape, K)
 
     def with_shape(self, shape) -> NetFieldPrior:
         """The same field over a grid of another ``shape``."""
