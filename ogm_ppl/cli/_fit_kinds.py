@@ -1,10 +1,12 @@
-"""The kinds of ``ogm-ppl fit-prior`` scored on validation plans by the calibration protocol: ``temper``
+"""The kinds of ``ogm-ppl fit-prior`` scored on validation plans: by the calibration protocol ``temper``
 (:func:`ogm_ppl.learn.fit_temper`), ``headline`` (:func:`~ogm_ppl.learn.select_headline_prior`) and ``bias``
-(:func:`~ogm_ppl.learn.fit_bias`): each one's options (``add_KIND``) and run (``run_KIND``).
+(:func:`~ogm_ppl.learn.fit_bias`), and by the held-out conditionals ``net-field``
+(:func:`~ogm_ppl.learn.fit_net_field`): each one's options (``add_KIND``) and run (``run_KIND``).
 
     ogm-ppl fit-prior temper --corpus dungeon --out DIR       # temper_dungeon.json (the @cal exponents)
     ogm-ppl fit-prior headline --out DIR                      # headline_prior.json (the headline's prior)
     ogm-ppl fit-prior bias --priors border1_bo --train ipa --out DIR   # bias.json (calibrate --bias-file)
+    ogm-ppl fit-prior net-field --corpus houseexpo --out DIR  # net_houseexpo.npz + .json (a net field)
 """
 
 from __future__ import annotations
@@ -16,11 +18,12 @@ from typing import Any
 
 __all__ = ["HELPS", "KINDS", "add_headline", "add_kind", "add_temper", "run_headline", "run_kind", "run_temper"]
 
-KINDS = ("temper", "headline", "bias")
+KINDS = ("temper", "headline", "bias", "net-field")
 HELPS = {
     "temper": "tempering exponents beta of p~(m)^beta on validation plans by unseen-cell NLL (temper_CORPUS.json)",
     "headline": "the headline experiment's prior, by best F1 on sparse scans of validation plans (headline_prior.json)",
     "bias": "a bias h per prior so that it fills an empty window as its corpus is filled (bias.json)",
+    "net-field": "a net field: a small network on every window, by pseudo-likelihood then PCD (net_NAME.npz + .json)",
 }
 
 
@@ -200,15 +203,89 @@ def run_bias(args: argparse.Namespace) -> Any:
     return fit_bias(args.priors, args.out, train=args.train, settings=s, progress=not args.quiet)
 
 
+_NET_HELP = {
+    "w": "window side, cells",
+    "hidden": "filters, each used in its 8 orientations (8 units each)",
+    "activation": "the units' nonlinearity: relu or softplus",
+    "pad": "the value a cell past the grid's edge reads as, in [0, 1]",
+    "lambda_": "L2 penalty on the filters, biases and output weights",
+    "pl_steps": "pseudo-likelihood Adam steps",
+    "pl_batch": "training cells a pseudo-likelihood step",
+    "pl_lr": "pseudo-likelihood step size (falls to a 20th on a half cosine)",
+    "pcd_steps": "persistent contrastive divergence steps after pseudo-likelihood",
+    "pcd_chains": "persistent chains (and training crops a step)",
+    "pcd_size": "side of the chains' and crops' grids, cells",
+    "pcd_sweeps": "compiled Gibbs sweeps of the chains a step",
+    "pcd_lr": "PCD step size",
+    "eval_every": "steps between held-out scores and checkpoints",
+    "check_size": "grid side of the final sampler check",
+    "check_sweeps": "sweeps of the final sampler check",
+    "seed": "seed of the initial weights, batches, crops and chains",
+}
+
+
+def add_net_field(k: argparse.ArgumentParser) -> None:
+    from dataclasses import fields
+
+    from ogm_ppl.learn._fit_common import CORPORA
+    from ogm_ppl.learn.net_field import NetFieldSettings
+
+    src = k.add_mutually_exclusive_group(required=True)
+    src.add_argument("--corpus", choices=CORPORA, help="fit on this corpus's training plans")
+    src.add_argument("--plan-files", nargs="+", type=Path, metavar="PATH", help="plan files or folders of them")
+    k.add_argument("--limit", type=int, default=None, help="the first N training plans (default: the corpus's)")
+    k.add_argument("--pixel-size", type=float, default=None, help="metres per pixel of plan images")
+    k.add_argument("--resolution", type=float, default=0.05, help="metres per cell of plan files (0.05)")
+    k.add_argument("--name", default=None, help="the files' name part (default the corpus, or 'plans')")
+    k.add_argument("--validation-every", type=int, default=10, help="every N-th plan is validation (%(default)s)")
+    k.add_argument("--no-resume", action="store_true", help="ignore a checkpoint in --out, start afresh")
+    for f in fields(NetFieldSettings):
+        flag = "--" + f.name.replace("_", "-").rstrip("-")
+        kind = f.type if callable(f.type) else {"int": int, "float": float, "str": str}[str(f.type)]
+        help = _NET_HELP[f.name] + " (%(default)s)"
+        k.add_argument(flag, dest=f"s_{f.name}", type=kind, default=f.default, metavar=f.name.upper(), help=help)
+    _out(k, "ogm_ppl/fitted/net_CORPUS.npz + .json (with --corpus)")
+
+
+def run_net_field(args: argparse.Namespace) -> Any:
+    from dataclasses import fields
+
+    from ogm_ppl.learn import FitOptionError
+    from ogm_ppl.learn.net_field import NetFieldSettings, fit_net_field
+
+    s = NetFieldSettings(**{f.name: getattr(args, f"s_{f.name}") for f in fields(NetFieldSettings)})
+    out, name = args.out, args.name
+    if args.ship:
+        from ogm_ppl.priors.net_field import net_path
+
+        if args.corpus is None:
+            raise FitOptionError("ship", "ships a corpus's fit: give --corpus")
+        out, name = net_path(args.corpus).parent, args.corpus
+    return fit_net_field(
+        args.corpus if args.corpus is not None else list(args.plan_files),
+        out,
+        settings=s,
+        limit=args.limit,
+        pixel_size=args.pixel_size,
+        resolution=args.resolution,
+        name=name,
+        validation_every=args.validation_every,
+        resume=not args.no_resume,
+        progress=not args.quiet,
+    )
+
+
 _ADD: dict[str, Callable[[argparse.ArgumentParser], None]] = {
     "temper": add_temper,
     "headline": add_headline,
     "bias": add_bias,
+    "net-field": add_net_field,
 }
 _RUN: dict[str, Callable[[argparse.Namespace], Any]] = {
     "temper": run_temper,
     "headline": run_headline,
     "bias": run_bias,
+    "net-field": run_net_field,
 }
 
 

@@ -1,7 +1,7 @@
-"""``ogm-ppl fit-prior tables|backoff|field|data-curve|deltas|delta-setting|temper|headline|bias``: fit a
-learned prior's artefacts on a corpus or on plan files (and how their held-out score moves with the number of
-plans), the update terms Delta of traditional OGM against exact 1D posteriors, or what the calibration protocol
-chooses on validation plans (tempering exponents, the headline's prior, biases).
+"""``ogm-ppl fit-prior tables|backoff|field|data-curve|deltas|delta-setting|temper|headline|bias|net-field``: fit
+a learned prior's artefacts on a corpus or on plan files (and how their held-out score moves with the number of
+plans), the update terms Delta of traditional OGM against exact 1D posteriors, what the calibration protocol
+chooses on validation plans (tempering exponents, the headline's prior, biases), or a net field.
 
     ogm-ppl fit-prior tables --corpus ipa --out DIR             # prior_ipa.npz + .json (count tables)
     ogm-ppl fit-prior backoff --plan-files my_plans/ --pixel-size 0.025 --out DIR   # backoff_plans.json
@@ -12,12 +12,13 @@ chooses on validation plans (tempering exponents, the headline's prior, biases).
     ogm-ppl fit-prior temper --corpus ipa --out DIR            # temper_ipa.json (the @cal exponents)
     ogm-ppl fit-prior headline --out DIR                       # headline_prior.json (make run's prior)
     ogm-ppl fit-prior bias --priors border1_bo --train ipa --out DIR   # bias.json (calibrate --bias-file)
+    ogm-ppl fit-prior net-field --corpus houseexpo --out DIR   # net_houseexpo.npz + .json (a net field)
 
 A subcommand of :mod:`ogm_ppl.cli`: :func:`add_parser` adds it, :func:`run` runs it
 (:func:`ogm_ppl.learn.fit_tables`, :func:`~ogm_ppl.learn.fit_backoff`, :func:`~ogm_ppl.learn.fit_field`,
-:func:`~ogm_ppl.learn.fit_deltas`, :func:`~ogm_ppl.learn.fit_delta_setting`; the last three kinds:
+:func:`~ogm_ppl.learn.fit_deltas`, :func:`~ogm_ppl.learn.fit_delta_setting`; the last four kinds:
 :mod:`ogm_ppl.cli._fit_kinds`, :func:`~ogm_ppl.learn.fit_temper`, :func:`~ogm_ppl.learn.select_headline_prior`,
-:func:`~ogm_ppl.learn.fit_bias`).
+:func:`~ogm_ppl.learn.fit_bias`, :func:`~ogm_ppl.learn.fit_net_field`).
 """
 
 from __future__ import annotations
@@ -40,8 +41,8 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
 
     p = sub.add_parser(
         NAME,
-        help="fit a learned prior (count tables, back-off weights, pattern field) on a corpus or your plans, "
-        "the update terms Delta, or tempering exponents, the headline's prior and biases on validation plans",
+        help="fit a learned prior (count tables, back-off weights, pattern field, net field) on a corpus or your "
+        "plans, the update terms Delta, or tempering exponents, the headline's prior and biases on validation plans",
         description=__doc__.splitlines()[0],
     )
     kinds = p.add_subparsers(

@@ -1,12 +1,12 @@
-"""Learning artefacts from plan corpora, fitted on a corpus by name or on floor plans of one's own, each written
-with its provenance into a folder one names: the learned priors' count tables, back-off weights and pattern fields,
-and the update terms Delta of traditional OGM fitted against exact 1D posteriors (the shipped setting, or one's
-own sensor's); the priors' tempering exponents (:mod:`~ogm_ppl.learn.temper`) and biases
-(:mod:`~ogm_ppl.learn.bias`), and the headline experiment's prior (:mod:`~ogm_ppl.learn.headline`), each scored
-on validation plans by the calibration protocol (``ogm-ppl fit-prior``); the amortised guide of a corpus
-(:mod:`~ogm_ppl.learn.guide_training`, its windows :mod:`~ogm_ppl.learn.guide_examples` and settings
-:mod:`~ogm_ppl.learn.guide_settings`; ``ogm-ppl train-guide``) and the guide of a learned prior
-(:mod:`~ogm_ppl.learn.prior_guide`).
+"""Learning artefacts from plan corpora, fitted on a corpus by name or on floor plans of one's own, each written with
+its provenance into a folder one names: the learned priors' count tables, back-off weights, pattern fields and net
+fields (:mod:`~ogm_ppl.learn.net_field`), and the update terms Delta of traditional OGM fitted against exact 1D
+posteriors (the shipped setting, or one's own sensor's); the priors' tempering exponents
+(:mod:`~ogm_ppl.learn.temper`) and biases (:mod:`~ogm_ppl.learn.bias`), and the headline experiment's prior
+(:mod:`~ogm_ppl.learn.headline`), each scored on validation plans by the calibration protocol (``ogm-ppl
+fit-prior``); the amortised guide of a corpus (:mod:`~ogm_ppl.learn.guide_training`, its windows
+:mod:`~ogm_ppl.learn.guide_examples` and settings :mod:`~ogm_ppl.learn.guide_settings`; ``ogm-ppl train-guide``) and
+the guide of a learned prior (:mod:`~ogm_ppl.learn.prior_guide`).
 
 This package sits above the datasets, inference, priors and :mod:`ogm_ppl.calibration`, and below
 :mod:`ogm_ppl.experiment` and the command line, which it does not import.
@@ -27,6 +27,7 @@ from ogm_ppl.learn.guide_examples import TooFewWindowsError
 from ogm_ppl.learn.guide_settings import GuideSettingsError, GuideTrainingSettings
 from ogm_ppl.learn.guide_training import CheckpointError, GuideTrainingResult, train_corpus_guide
 from ogm_ppl.learn.headline import HeadlineSettings, select_headline_prior
+from ogm_ppl.learn.net_field import NetFieldSettings, fit_net_field
 from ogm_ppl.learn.prior_guide import PriorGuideResult, PriorGuideSettings, train_prior_guide
 from ogm_ppl.learn.tables import fit_tables
 from ogm_ppl.learn.temper import TemperSettings, fit_temper
@@ -42,6 +43,7 @@ __all__ = [
     "GuideTrainingResult",
     "GuideTrainingSettings",
     "HeadlineSettings",
+    "NetFieldSettings",
     "PriorGuideResult",
     "PriorGuideSettings",
     "TemperSettings",
@@ -52,6 +54,7 @@ __all__ = [
     "fit_delta_setting",
     "fit_deltas",
     "fit_field",
+    "fit_net_field",
     "fit_tables",
     "fit_temper",
     "select_headline_prior",

@@ -1,6 +1,7 @@
 """Priors over binary maps (Chapter 5) behind one interface (:class:`MapPrior`): the independent prior, the 1D
 data-driven prior, pairwise stencil priors and the higher-order MRF (Section 5.2.1), data-driven patch tables
-(5.2.2) and border-conditioned tables (5.2.3), and a learned multiscale field of patterns. Each prior hands
+(5.2.2) and border-conditioned tables (5.2.3), a learned multiscale field of patterns and a learned field of a
+small network on every window. Each prior hands
 the compiled kernels one bundle of arrays (:meth:`MapPrior.compiled`, :mod:`ogm_ppl.priors.compiled`) or none
 (the generic path)."""
 
@@ -19,6 +20,7 @@ from ogm_ppl.priors.named import (
     register_prior,
     unregister_prior,
 )
+from ogm_ppl.priors.net_field import NetFieldPrior
 from ogm_ppl.priors.patch_table import PatchTablePrior
 from ogm_ppl.priors.pattern_field import PatternFieldPrior
 from ogm_ppl.priors.tables import PriorTables, available_tables, load_tables, tables_by_name
@@ -33,6 +35,7 @@ __all__ = [
     "LocalMapPrior",
     "MRFPrior",
     "MapPrior",
+    "NetFieldPrior",
     "PRIOR_KINDS",
     "PatchTablePrior",
     "PatternFieldPrior",

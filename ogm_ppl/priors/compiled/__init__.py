@@ -11,7 +11,9 @@ through :meth:`~ogm_ppl.priors.MapPrior.log_prob_patch`, correct but slow). The 
 * :class:`Tiles` — the factors of a tiling's windows (:class:`~ogm_ppl.priors.PatchTablePrior`,
   :class:`~ogm_ppl.priors.BorderPatchPrior`), :mod:`~ogm_ppl.priors.compiled.tiles`;
 * :class:`PatternField` — a translation-invariant field of ``w x w`` window patterns at one or two scales
-  (:class:`~ogm_ppl.priors.PatternFieldPrior`), :mod:`~ogm_ppl.priors.compiled.field`.
+  (:class:`~ogm_ppl.priors.PatternFieldPrior`), :mod:`~ogm_ppl.priors.compiled.field`;
+* :class:`NetField` — a small network scored on every ``w x w`` window (:class:`~ogm_ppl.priors.NetFieldPrior`),
+  :mod:`~ogm_ppl.priors.compiled.net_field`.
 
 The kernels (``ogm_ppl.inference._kernels``) import this package and nothing else of ``ogm_ppl.priors``;
 they call the generic entry points of :mod:`~ogm_ppl.priors.compiled.registry` (``cell_log_odds``,
@@ -28,11 +30,12 @@ named in :data:`CompiledPrior`, the type the kernels' hints use). A prior then r
 ``compiled()``, and ``ogm_ppl.testing.PriorContract`` checks its conditionals against ``log_prob``.
 """
 
-from ogm_ppl.priors.compiled.bundles import CompiledPrior, IndependentCells, PatternField, Stencil, Tiles
+from ogm_ppl.priors.compiled.bundles import CompiledPrior, IndependentCells, NetField, PatternField, Stencil, Tiles
 
 # the kinds register themselves on import
 from ogm_ppl.priors.compiled.field import pattern_field
 from ogm_ppl.priors.compiled.independent import independent_cells
+from ogm_ppl.priors.compiled.net_field import net_field
 from ogm_ppl.priors.compiled.registry import (
     candidate_weights,
     cell_log_odds,
@@ -51,6 +54,7 @@ from ogm_ppl.priors.compiled.tiles import tiles
 __all__ = [
     "CompiledPrior",
     "IndependentCells",
+    "NetField",
     "PatternField",
     "Stencil",
     "Tiles",
@@ -59,6 +63,7 @@ __all__ = [
     "independent_cells",
     "is_additive",
     "kind_of",
+    "net_field",
     "patch_candidates",
     "patch_prior_batch",
     "patch_prior_weights",

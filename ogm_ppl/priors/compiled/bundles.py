@@ -3,7 +3,8 @@
 Each bundle is a ``typing.NamedTuple`` built by keyword (numba takes it as one argument and compiles one
 specialisation of a kernel per bundle type), defined in its kind's module beside its compiled conditionals
 (:mod:`~ogm_ppl.priors.compiled.independent`, :mod:`~ogm_ppl.priors.compiled.stencil`,
-:mod:`~ogm_ppl.priors.compiled.tiles`, :mod:`~ogm_ppl.priors.compiled.field`); the kernels never look at which
+:mod:`~ogm_ppl.priors.compiled.tiles`, :mod:`~ogm_ppl.priors.compiled.field`,
+:mod:`~ogm_ppl.priors.compiled.net_field`); the kernels never look at which
 kind they hold. The Python methods every bundle has:
 
 * ``sparse_patches()``, ``patch_capacity(L)``, ``tiles_patches(hw, anchors)`` — how many candidate
@@ -18,10 +19,11 @@ from __future__ import annotations
 
 from ogm_ppl.priors.compiled.field import PatternField
 from ogm_ppl.priors.compiled.independent import IndependentCells
+from ogm_ppl.priors.compiled.net_field import NetField
 from ogm_ppl.priors.compiled.stencil import Stencil
 from ogm_ppl.priors.compiled.tiles import Tiles
 
-__all__ = ["CompiledPrior", "IndependentCells", "PatternField", "Stencil", "Tiles"]
+__all__ = ["CompiledPrior", "IndependentCells", "NetField", "PatternField", "Stencil", "Tiles"]
 
 #: any bundle a prior's ``compiled()`` may return (a shipped kind adds its class here)
-CompiledPrior = IndependentCells | Stencil | Tiles | PatternField
+CompiledPrior = IndependentCells | Stencil | Tiles | PatternField | NetField

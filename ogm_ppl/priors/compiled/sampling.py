@@ -1,5 +1,6 @@
 """Compiled batch passes over maps that any bundle kind runs through its registered conditionals: Gibbs
-sweeps on the prior alone (prior sampling) and the patch weights of a batch of maps (``log_prob_patch``)."""
+sweeps on the prior alone (prior sampling), the patch weights of a batch of maps (``log_prob_patch``) and the
+held-out negative log conditionals of a map's cells (a pseudo-likelihood score any kind can be compared by)."""
 
 from __future__ import annotations
 
@@ -9,7 +10,7 @@ from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl.priors.compiled.registry import cell_log_odds, patch_prior_weights, scratch_capacity
 from ogm_ppl.priors.compiled.scratch import tile_scratch
 
-__all__ = ["patch_prior_batch", "prior_gibbs_sweeps"]
+__all__ = ["conditional_nll", "patch_prior_batch", "prior_gibbs_sweeps"]
 
 
 @njit_shipped
@@ -38,3 +39,20 @@ def patch_prior_batch(prior, maps, patch, cands, out):
     ts = tile_scratch(maps.shape[1], scratch_capacity(prior, patch.shape[0]))
     for b in range(maps.shape[0]):
         patch_prior_weights(prior, patch, maps[b], cands, cands.shape[0], out[b], ts)
+
+
+@njit_shipped
+def conditional_nll(prior, m, cells):
+    """``sum_k -log p(m_k | m_-k)`` over ``cells`` (int64 grid ids) of the map ``m`` (``K`` uint8), by the bundle's
+    compiled cell log-odds ``l``: ``softplus(-l)`` for an occupied cell, ``softplus(l)`` for a free one (a cell whose
+    log-odds are ``nan``, a map without mass either way, counts ``log 2``)."""
+    tot = 0.0
+    for i in range(cells.shape[0]):
+        k = cells[i]
+        lo = cell_log_odds(prior, k, m)
+        if lo != lo:
+            tot += np.log(2.0)
+            continue
+        x = -lo if m[k] else lo
+        tot += max(x, 0.0) + np.log1p(np.exp(-abs(x)))
+    return tot

@@ -1,0 +1,116 @@
+"""fit_net_field at tiny settings: writes a net field of one's own plan files that loads and scores its chosen
+step's held-out value, an interrupted fit resumes from its checkpoint to the same file, refused options named,
+nothing written outside the folder named, the command line."""
+
+import json
+
+import numpy as np
+import pytest
+
+import ogm_ppl.priors.learn_net as ln
+from ogm_ppl.cli import main as ogm_ppl
+from ogm_ppl.learn import FitOptionError, NetFieldSettings, fit_net_field
+from ogm_ppl.priors.net_field import NetFieldPrior, load_net_field, net_from_file
+from tests.learn._helpers import PIXEL_SIZE, files_under, fitted_dir_listing, plan_folder, read_plans
+
+TINY = NetFieldSettings(
+    w=3,
+    hidden=1,
+    pl_steps=12,
+    pl_batch=256,
+    pcd_steps=6,
+    pcd_chains=2,
+    pcd_size=16,
+    pcd_sweeps=1,
+    eval_every=6,
+    check_size=20,
+    check_sweeps=5,
+)
+FILES = {"net_plans.npz", "net_plans.json"}
+
+
+def _fit(plans, out, **kw):
+    return fit_net_field(plans, out, settings=TINY, pixel_size=PIXEL_SIZE, validation_every=2, progress=False, **kw)
+
+
+def test_net_field_of_own_plans_loads_and_scores_its_chosen_step(tmp_path):
+    plans = plan_folder(tmp_path)
+    shipped = fitted_dir_listing()
+    r = _fit(plans, tmp_path / "out")
+    assert files_under(tmp_path / "out") == FILES
+    assert {p for p in files_under(tmp_path) if not p.startswith("plans/")} == {f"out/{f}" for f in FILES}
+    assert fitted_dir_listing() == shipped
+    info = json.loads(r.files[1].read_text())
+    assert [row["step"] for row in info["curve"]] == [6, 12, 18]
+    assert [row["phase"] for row in info["curve"]] == ["pl", "pl", "pcd"]
+    assert info["chosen_step"] in (6, 12, 18) and info["heldout_nll"] == min(r["heldout_nll"] for r in info["curve"])
+    d = load_net_field(r.files[0])
+    assert d["w"] == 3 and d["filters"].shape == (1, 3, 3) and d["activation"] == "relu"
+    # the written field's held-out score is the chosen step's, on plan 1 (the validation plan)
+    prior = net_from_file(r.files[0], (16, 16))
+    assert isinstance(prior, NetFieldPrior)
+    val = [(p.occupancy, p.known) for p in read_plans(plans)][1:]
+    nll, _ = ln.heldout_nll(lambda shape: net_from_file(r.files[0], shape).compiled(), val, 3)
+    assert abs(nll - info["heldout_nll"]) < 1e-12
+    cmd = info["provenance"]["command"]
+    assert cmd.startswith("ogm-ppl fit-prior net-field --plan-files ") and "--w 3" in cmd and "--pl-steps 12" in cmd
+    assert [c["start"] for c in info["sampler_check"]] == ["free", "occupied", "noise"]
+
+
+def test_an_interrupted_fit_resumes_from_its_checkpoint_to_the_same_file(tmp_path, monkeypatch):
+    plans = plan_folder(tmp_path)
+    whole = _fit(plans, tmp_path / "whole")
+    real, calls = ln.advance_chains, []
+
+    def interrupted(*a, **k):
+        calls.append(1)
+        if len(calls) == 3:  # in the PCD stage, after the checkpoint at step 12
+            raise KeyboardInterrupt
+        return real(*a, **k)
+
+    monkeypatch.setattr(ln, "advance_chains", interrupted)
+    with pytest.raises(KeyboardInterrupt):
+        _fit(plans, tmp_path / "out")
+    assert files_under(tmp_path / "out") == {"net_plans.checkpoint.npz"}
+    monkeypatch.setattr(ln, "advance_chains", real)
+    resumed = _fit(plans, tmp_path / "out")
+    assert files_under(tmp_path / "out") == FILES  # the checkpoint is gone
+    assert resumed.files[0].read_bytes() == whole.files[0].read_bytes()
+    a, b = (json.loads(f.files[1].read_text())["curve"] for f in (whole, resumed))
+    assert a == b
+
+
+@pytest.mark.parametrize(
+    ("settings", "kwargs", "option", "limit"),
+    [
+        (NetFieldSettings(w=12), {}, "w", "between 2 and 9"),
+        (NetFieldSettings(activation="tanh"), {}, "activation", "relu"),
+        (NetFieldSettings(hidden=0), {}, "hidden", "between 1 and 64"),
+        (NetFieldSettings(w=5, pcd_size=8), {}, "pcd_size", "between 10"),
+        (TINY, {"validation_every": 10}, "validation_every", "at most 2"),
+    ],
+)
+def test_bad_options_are_named_with_their_limit_and_nothing_is_written(tmp_path, settings, kwargs, option, limit):
+    plans = plan_folder(tmp_path)
+    args = {"pixel_size": PIXEL_SIZE, "validation_every": 2, "progress": False, **kwargs}
+    with pytest.raises(FitOptionError) as e:
+        fit_net_field(plans, tmp_path / "out", settings=settings, **args)
+    assert e.value.option == option and limit in str(e.value)
+    assert not (tmp_path / "out").exists()
+
+
+def test_the_command_fits_a_net_field(tmp_path, capsys):
+    plans = plan_folder(tmp_path)
+    out = tmp_path / "o"
+    argv = ["fit-prior", "net-field", "--plan-files", str(plans), "--pixel-size", "0.025", "--out", str(out)]
+    argv += ["--quiet", "--validation-every", "2", "--w", "3", "--hidden", "1", "--pl-steps", "4", "--pl-batch", "64"]
+    argv += ["--pcd-steps", "2", "--pcd-chains", "2", "--pcd-size", "16", "--eval-every", "2", "--check-size", "20"]
+    argv += ["--check-sweeps", "2"]
+    assert ogm_ppl(argv) == 0
+    assert "net_plans.npz" in capsys.readouterr().out
+    assert files_under(out) == FILES
+    assert load_net_field(out / "net_plans.npz")["filters"].shape == (1, 3, 3)
+    shipped = fitted_dir_listing()
+    assert ogm_ppl(["fit-prior", "net-field", "--plan-files", str(plans), "--ship"]) == 2  # --ship needs --corpus
+    assert "--corpus" in capsys.readouterr().err and fitted_dir_listing() == shipped
+    assert np.isfinite(json.loads((out / "net_plans.json").read_text())["heldout_nll"])
