@@ -174,8 +174,9 @@ def path_free(
         command: the command line recorded in the provenance.
 
     Returns:
-        ``{"settings", "provenance", "seconds", "summary": {prior: {...}}, "by_length": {prior: [...]},
-        "paths": [...]}`` (each path: scene, prior, length, exact, independent, truth_free).
+        A dict with ``settings``, ``provenance``, ``seconds``, ``scenes``, ``summary`` (per prior),
+        ``by_length`` (per prior, one row a path length) and ``paths`` (each: ``scene``, ``prior``, ``length``,
+        ``exact``, ``independent``, ``truth_free``).
 
     Raises:
         StudyOptionError: a setting out of range or a prior name that is not one.
