@@ -23,12 +23,14 @@ import shlex
 from collections.abc import Iterator, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, NamedTuple
 
 from ogm_ppl import options
 from ogm_ppl.datasets.floorplans import CORPORA as FLOORPLAN_CORPORA
 
 __all__ = [
+    "FitSetup",
+    "fit_setup",
     "CORPORA",
     "SHIPPED_CORPORA",
     "FitOptionError",
@@ -300,6 +302,38 @@ def validation_split(n: int, every: int, option: str = "validation_every") -> tu
     if not fit or not val:
         raise FitOptionError(option, f"{n} plan(s) give no validation plan every {k}: use at most {max(n, 2)}")
     return fit, val
+
+
+class FitSetup(NamedTuple):
+    """The checked start of a fit validated on held-out plans (:func:`fit_setup`)."""
+
+    out: Path
+    plans: TrainingPlans
+    #: the files' name part: ``name`` as given, else the corpus, else ``plans``
+    label: str
+    every: int
+    fit_idx: list[int]
+    val_idx: list[int]
+
+
+def fit_setup(
+    source: str | PlanPaths | TrainingPlans,
+    out_dir: Any,
+    name: str | None,
+    validation_every: int,
+    *,
+    limit: int | None = None,
+    pixel_size: float | None = None,
+    resolution: float = 0.05,
+) -> FitSetup:
+    """The output folder, the files' name and the validation interval checked before any plan is read, then the
+    training plans (:func:`load_training_plans`) and their split (:func:`validation_split`)."""
+    out = check_out_dir(out_dir)
+    label = check_label(name) if name is not None else None
+    every = check_int(validation_every, "validation_every", 2)
+    plans = load_training_plans(source, limit=limit, pixel_size=pixel_size, resolution=resolution)
+    fit_idx, val_idx = validation_split(len(plans), every)
+    return FitSetup(out, plans, label or ("plans" if plans.files else plans.corpus), every, fit_idx, val_idx)
 
 
 def command(kind: str, plans: TrainingPlans, out_dir: Path, options: Sequence[str] = ()) -> str:

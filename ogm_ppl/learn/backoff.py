@@ -36,13 +36,9 @@ from ogm_ppl.learn._fit_common import (
     FitResult,
     PlanPaths,
     TrainingPlans,
-    check_int,
-    check_label,
-    check_out_dir,
     command,
-    load_training_plans,
+    fit_setup,
     run_provenance,
-    validation_split,
 )
 
 __all__ = ["VALIDATION_EVERY", "fit_backoff"]
@@ -77,12 +73,9 @@ def fit_backoff(
     Raises:
         FitOptionError: an option out of range (the message names it and the limit).
     """
-    out = check_out_dir(out_dir)
-    label = check_label(name) if name is not None else None
-    every = check_int(validation_every, "validation_every", 2)
-    plans = load_training_plans(source, limit=limit, pixel_size=pixel_size, resolution=resolution)
-    label = label or ("plans" if plans.files else plans.corpus)
-    fit_idx, val_idx = validation_split(len(plans), every)
+    out, plans, label, every, fit_idx, val_idx = fit_setup(
+        source, out_dir, name, validation_every, limit=limit, pixel_size=pixel_size, resolution=resolution
+    )
     options = [] if every == VALIDATION_EVERY else ["--validation-every", str(every)]
     options += [] if name is None else ["--name", label]
     cmd = command("backoff", plans, out, options)

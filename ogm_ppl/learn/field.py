@@ -45,9 +45,8 @@ from ogm_ppl.learn._fit_common import (
     TrainingPlans,
     check_float,
     check_int,
-    check_label,
-    check_out_dir,
     command,
+    fit_setup,
     load_training_plans,
     run_provenance,
     validation_split,
@@ -152,12 +151,9 @@ def fit_field(
         FitOptionError: an option out of range (the message names it and the limit).
     """
     s = (settings or FieldSettings()).checked()
-    out = check_out_dir(out_dir)
-    label = check_label(name) if name is not None else None
-    every = check_int(validation_every, "validation_every", 2)
-    plans = load_training_plans(source, limit=limit, pixel_size=pixel_size, resolution=resolution)
-    label = label or ("plans" if plans.files else plans.corpus)
-    tr_idx, va_idx = validation_split(len(plans), every)
+    out, plans, label, every, tr_idx, va_idx = fit_setup(
+        source, out_dir, name, validation_every, limit=limit, pixel_size=pixel_size, resolution=resolution
+    )
     cmd = command("field", plans, out, _options(s, every, name))
 
     from ogm_ppl.io import atomic_write_bytes, atomic_write_text

@@ -47,12 +47,9 @@ from ogm_ppl.learn._fit_common import (
     TrainingPlans,
     check_float,
     check_int,
-    check_label,
-    check_out_dir,
     command,
-    load_training_plans,
+    fit_setup,
     run_provenance,
-    validation_split,
 )
 
 __all__ = ["NetFieldSettings", "fit_net_field"]
@@ -168,12 +165,9 @@ def fit_net_field(
     from ogm_ppl.progress import Progress
 
     s = (settings or NetFieldSettings()).checked()
-    out = check_out_dir(out_dir)
-    label = check_label(name) if name is not None else None
-    every = check_int(validation_every, "validation_every", 2)
-    plans = load_training_plans(source, limit=limit, pixel_size=pixel_size, resolution=resolution)
-    label = label or ("plans" if plans.files else plans.corpus)
-    tr_idx, va_idx = validation_split(len(plans), every)
+    out, plans, label, every, tr_idx, va_idx = fit_setup(
+        source, out_dir, name, validation_every, limit=limit, pixel_size=pixel_size, resolution=resolution
+    )
     opts = s.options() + ([] if every == VALIDATION_EVERY else ["--validation-every", str(every)])
     cmd = command("net-field", plans, out, opts + ([] if name is None else ["--name", name]))
     say = print if progress else (lambda *a, **k: None)
