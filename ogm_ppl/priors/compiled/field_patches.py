@@ -288,8 +288,33 @@ def _rect_window_sums(theta, w, m, rows, cols, rect, out, T, P):
 
 
 @nb.njit(cache=True)
-def _full_range(cands, n, nl):
-    if n != np.int64(1) << nl:
+def live_cells(patch, bit_of, cols):
+    """The live (``>= 0``) cells of ``patch`` numbered by bit: ``bit_of[k] = b`` for the ``b``-th live cell ``k``
+    (the caller resets it to -1 after the update), and their rows and columns on a grid of ``cols`` columns.
+    Returns ``(nl, rows, cols)`` (arrays of ``max(nl, 1)``)."""
+    L = patch.shape[0]
+    nl = 0
+    for i in range(L):
+        if patch[i] >= 0:
+            nl += 1
+    cr = np.empty(max(nl, 1), np.int64)
+    cc = np.empty(max(nl, 1), np.int64)
+    b = 0
+    for i in range(L):
+        k = patch[i]
+        if k >= 0:
+            bit_of[k] = b
+            cr[b] = k // cols
+            cc[b] = k - cr[b] * cols
+            b += 1
+    return nl, cr, cc
+
+
+@nb.njit(cache=True)
+def full_range(cands, n, nl):
+    """Whether the ``n`` candidates are ``0 .. 2^nl - 1`` in order (every configuration of ``nl <= 20`` live
+    cells: the Gray-code walk applies)."""
+    if nl > 20 or n != np.int64(1) << nl:
         return False
     for j in range(n):
         if cands[j] != j:
@@ -309,7 +334,7 @@ def field_patch_weights(lp, patch, m, cands, n, out, ts):
     theta, theta2 = lp.theta, lp.theta2
     L = patch.shape[0]
     rect = False
-    if L <= 20 and n == np.int64(1) << L and _full_range(cands, n, L):
+    if L <= 20 and n == np.int64(1) << L and full_range(cands, n, L):
         ph, pw = _rect_shape(patch, cols)
         if _rect_fits(w, ph, pw, ts.memo.shape[0]):
             r0, c0 = patch[0] // cols, patch[0] % cols
@@ -322,25 +347,12 @@ def field_patch_weights(lp, patch, m, cands, n, out, ts):
             if lp.n_scales != 2:
                 return
     bit_of = ts.bit_of  # K int64, all -1 between updates
-    nl = 0
-    for i in range(L):
-        if patch[i] >= 0:
-            nl += 1
-    cr = np.empty(max(nl, 1), np.int64)
-    cc = np.empty(max(nl, 1), np.int64)
-    b = 0
-    for i in range(L):
-        k = patch[i]
-        if k >= 0:
-            bit_of[k] = b
-            cr[b] = k // cols
-            cc[b] = k - cr[b] * cols
-            b += 1
+    nl, cr, cc = live_cells(patch, bit_of, cols)
     cap = max(nl, 1) * w * w
     if not rect:  # scale 1 by the windows' (patch bit, window bit) pairs
         win = _window_pairs(cap)
         nw = _scale_setup(w, rows, cols, cr, cc, nl, CellBox(bit_of, m, 0, 0, cols), win)
-        if nl <= 20 and _full_range(cands, n, nl):
+        if nl <= 20 and full_range(cands, n, nl):
             _window_sums_gray(theta, nw, win, nl, out)
         else:
             _window_sums(theta, nw, win, cands, n, out, False)

@@ -18,6 +18,7 @@ from __future__ import annotations
 import numpy as np
 
 from ogm_ppl._numba_cache import njit_shipped
+from ogm_ppl.priors.compiled.field_patches import full_range, live_cells
 from ogm_ppl.priors.compiled.net_ops import act_sum, window_pre
 from ogm_ppl.priors.compiled.sampling import prior_gibbs_sweeps
 
@@ -144,16 +145,6 @@ def _gray_walk(nf, nw, nl, base, pr_off, pr_pb, pr_p, out):
 
 
 @njit_shipped
-def _full_range(cands, n, nl):
-    if nl > 20 or n != np.int64(1) << nl:
-        return False
-    for j in range(n):
-        if cands[j] != j:
-            return False
-    return True
-
-
-@njit_shipped
 def net_patch_weights(nf, patch, m, cands, n, out, ts):
     """``out[j] = log p~(patch = cands[j], rest)`` up to a constant in ``j`` (bit ``b`` of a candidate: the
     ``b``-th live cell of ``patch``; -1 entries are pinned cells): the windows holding a live cell read once, then
@@ -161,20 +152,7 @@ def net_patch_weights(nf, patch, m, cands, n, out, ts):
     C, w, U = nf.cols, nf.w, nf.units
     L = patch.shape[0]
     bit_of = ts.bit_of  # K int64, all -1 between updates
-    nl = 0
-    for i in range(L):
-        if patch[i] >= 0:
-            nl += 1
-    cr = np.empty(max(nl, 1), np.int64)
-    cc = np.empty(max(nl, 1), np.int64)
-    b = 0
-    for i in range(L):
-        k = patch[i]
-        if k >= 0:
-            bit_of[k] = b
-            cr[b] = k // C
-            cc[b] = k - cr[b] * C
-            b += 1
+    nl, cr, cc = live_cells(patch, bit_of, C)
     cap = max(nl, 1) * w * w
     base = np.empty(cap * U)
     pr_off = np.empty(cap + 1, np.int64)
@@ -184,7 +162,7 @@ def net_patch_weights(nf, patch, m, cands, n, out, ts):
     for i in range(L):
         if patch[i] >= 0:
             bit_of[patch[i]] = -1
-    if _full_range(cands, n, nl):
+    if full_range(cands, n, nl):
         _gray_walk(nf, nw, nl, base, pr_off, pr_pb, pr_p, out)
     else:
         cur = np.empty(max(nw, 1) * U)
