@@ -44,7 +44,7 @@ from __future__ import annotations
 import json
 import time
 from collections.abc import Sequence
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from pathlib import Path
 
 import numpy as np
@@ -82,7 +82,6 @@ class PathFreeSettings:
     #: held-out plans the scenes are cut from (each plan gives at most ``scenes_per_plan``)
     plans: int = 30
     scenes_per_plan: int = 2
-    extra: dict = field(default_factory=dict)
 
     def check(self) -> PathFreeSettings:
         """These settings, each checked (:class:`StudyOptionError` names the first out of range)."""
