@@ -448,31 +448,14 @@ class OccupancyModel:
         return self._readings
 
     def _entry_table(self) -> torch.Tensor:
-        """``R x W`` entry distances (cells) of every cell of every ray up to max range, past the grid edge
-        included (``+inf`` padding); entry 0 (the sensor's cell) is 0."""
+        """``R x W`` entry distances of the model's rays (:func:`entry_table`), built once."""
         if self._entries is None:
-            r = self.rays
-            assert r.range_len is not None  # Rays.__post_init__ always fills it
-            range_len = np.maximum(r.range_len, r.lengths)
-            T = np.full((r.num_rays, int(range_len.max())), np.inf)
-            T[r.ray_of_entry, r.kappa] = r.t_enter
-            cut = np.flatnonzero(range_len > r.lengths)
-            if len(cut):
-                off, t = r.entries_beyond_edge(cut)
-                n = np.diff(off)
-                T[np.repeat(cut, n), np.repeat(r.lengths[cut], n) + np.arange(len(t)) - np.repeat(off[:-1], n)] = t
-            T[:, 0] = 0.0
-            self._entries = torch.from_numpy(T)
+            self._entries = entry_table(self.rays)
         return self._entries
 
     def range_to_kappa(self, ranges: torch.Tensor) -> torch.Tensor:
-        """The kappa of readings (``... x R`` ranges in cells) on the model's rays, by the range convention
-        of :mod:`ogm_ppl.raycast` (the cell whose entry distance is nearest; a tie goes to the nearer cell,
-        as the ray caster does)."""
-        T = self._entry_table()
-        mid = (T[:, :-1] + T[:, 1:]) / 2  # R x (W - 1), inf padding
-        ranges = torch.as_tensor(ranges, dtype=torch.float64)
-        return (mid < ranges[..., None]).sum(-1)  # as the ray caster: a tie goes to the nearer cell
+        """The kappa of readings (``... x R`` ranges in cells) on the model's rays (:func:`range_to_kappa`)."""
+        return range_to_kappa(self._entry_table(), ranges)
 
     def loglik_table_for(self, readings: torch.Tensor) -> torch.Tensor:
         """The ``R x W`` likelihood table (as :attr:`loglik_table`) of other readings of the same rays
@@ -638,3 +621,30 @@ class OccupancyModel:
         pyro.factor("prior", self.prior.log_prob(maps) + L * math.log(2.0))
         pyro.factor("z", self.log_likelihood(maps))
         return maps
+
+
+def entry_table(rays: Rays) -> torch.Tensor:
+    """``R x W`` float64 entry distances (cells) of every cell of every ray up to max range, past the grid edge
+    included (``+inf`` padding, ``W`` the longest ray's cells); entry 0 (the sensor's cell) is 0."""
+    r = rays
+    assert r.range_len is not None  # Rays.__post_init__ always fills it
+    range_len = np.maximum(r.range_len, r.lengths)
+    T = np.full((r.num_rays, int(range_len.max())), np.inf)
+    T[r.ray_of_entry, r.kappa] = r.t_enter
+    cut = np.flatnonzero(range_len > r.lengths)
+    if len(cut):
+        off, t = r.entries_beyond_edge(cut)
+        n = np.diff(off)
+        T[np.repeat(cut, n), np.repeat(r.lengths[cut], n) + np.arange(len(t)) - np.repeat(off[:-1], n)] = t
+    T[:, 0] = 0.0
+    return torch.from_numpy(T)
+
+
+def range_to_kappa(entries: torch.Tensor, ranges: torch.Tensor) -> torch.Tensor:
+    """The kappa of readings (``... x R`` ranges in cells) on rays with entry distances ``entries``
+    (:func:`entry_table`, ``R x W``), by the range convention of :mod:`ogm_ppl.raycast`: the cell whose entry
+    distance is nearest; a tie goes to the nearer cell, as the ray caster does. A ray's kappa depends on its
+    own row only (the ``+inf`` padding never counts), so rays cast apart get the kappa they get together."""
+    mid = (entries[:, :-1] + entries[:, 1:]) / 2  # R x (W - 1), inf padding
+    ranges = torch.as_tensor(ranges, dtype=torch.float64)
+    return (mid < ranges[..., None]).sum(-1)

@@ -52,12 +52,28 @@ pattern fields), through the compiled single-cell sweep. A tile-table prior is a
 :class:`TilePriorWarning`: single-cell moves under it are exact but leave the chain all but frozen, and such
 priors are mapped with patch Gibbs instead (:class:`~ogm_ppl.exploration.active.RebuildMapper`).
 
+The online *predictive* map, :class:`OnlineGuideMap` (``_guide``), keeps the amortised guide's map instead of a
+chain: each scan adds its terms to the guide's per-cell sums and recomputes only the cells whose receptive field
+its changed cells reach, equal to the guide's map of every scan so far to float32 rounding
+(:func:`replay_guide` replays a log into one).
+
 The parts: ``_map`` (the map and its chain), ``_store`` (the growing ray store and the fixed-point caps),
-``_checks`` (the options and scans a map refuses) and ``_replay`` (a log replayed scan by scan).
+``_checks`` (the options and scans a map refuses), ``_replay`` (a log replayed scan by scan) and ``_guide``
+(the online guide map).
 """
 
 from ogm_ppl.inference.online._checks import TilePriorWarning
+from ogm_ppl.inference.online._guide import GuideReplay, OnlineGuideMap, replay_guide
 from ogm_ppl.inference.online._map import OnlineMap, OnlineStats
 from ogm_ppl.inference.online._replay import Replay, replay
 
-__all__ = ["OnlineMap", "OnlineStats", "Replay", "TilePriorWarning", "replay"]
+__all__ = [
+    "GuideReplay",
+    "OnlineGuideMap",
+    "OnlineMap",
+    "OnlineStats",
+    "Replay",
+    "TilePriorWarning",
+    "replay",
+    "replay_guide",
+]

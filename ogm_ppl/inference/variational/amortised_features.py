@@ -17,8 +17,9 @@ from functools import lru_cache
 import torch
 
 from ogm_ppl.models.occupancy import OccupancyModel
+from ogm_ppl.raycast import Rays
 
-__all__ = ["FEATURE_VERSION", "evidence_features", "feature_names"]
+__all__ = ["FEATURE_VERSION", "base_channels", "evidence_features", "feature_names", "phase_channels", "ray_terms"]
 
 #: feature set of :func:`evidence_features` (bumped when a channel changes meaning)
 FEATURE_VERSION = 1
@@ -74,44 +75,71 @@ def evidence_features(
     B = z.shape[0]
     F = torch.from_numpy(r.max_range_cells()).to(torch.float64)
     is_max = z >= F
-    kz = model.range_to_kappa(z)  # B x R
-    ray = torch.from_numpy(r.ray_of_entry)
-    kap = torch.from_numpy(r.kappa)
+    passed, hit, lo_terms = ray_terms(r, model.range_to_kappa(z), is_max, delta)  # B x nnz
     cells = torch.from_numpy(r.cells)
+    n_pass = torch.zeros(B, K, dtype=torch.float64).index_add_(1, cells, passed)
+    n_hit = torch.zeros(B, K, dtype=torch.float64).index_add_(1, cells, hit)
+    lo = torch.zeros(B, K, dtype=torch.float64).index_add_(1, cells, lo_terms)
+    chans = base_channels(n_pass, n_hit, lo, model.known_free.to(torch.float64).expand(B, K))
+    g = model.grid
+    rows, cols = (g.rows, g.cols) if g.ndim == 2 else (1, g.num_cells)
+    x = torch.stack(chans, 1).reshape(B, len(chans), rows, cols)
+    ph = phase_channels(rows, cols, phase)
+    if ph is not None:
+        x = torch.cat([x, ph[None].expand(B, -1, -1, -1)], 1)
+    return x.to(torch.float32).reshape(*batch, x.shape[1], rows, cols)
+
+
+def ray_terms(
+    rays: Rays, kz: torch.Tensor, is_max: torch.Tensor, delta: str
+) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+    r"""What each ray-cell entry adds to its cell's counts and evidence: ``(passed, hit, lo)``, each
+    ``B x nnz`` float64, for readings of kappa ``kz`` (``B x R``) and max-range flags ``is_max`` (``B x R``).
+    ``passed``: the entry lies before its reading (or on a max-range ray); ``hit``: it holds the reading;
+    ``lo``: ``Delta(kappa, z)`` of the update term ``delta`` (Eq. 2.10). Each entry's terms depend on its
+    own ray only, so the terms of rays cast apart are those of the same rays cast together."""
+    ray = torch.from_numpy(rays.ray_of_entry)
+    kap = torch.from_numpy(rays.kappa)
     kze, mx = kz[:, ray], is_max[:, ray]  # B x nnz
     passed = ((kap[None] < kze) | mx).to(torch.float64)
     hit = ((kap[None] == kze) & ~mx).to(torch.float64)
-    n_pass = torch.zeros(B, K, dtype=torch.float64).index_add_(1, cells, passed)
-    n_hit = torch.zeros(B, K, dtype=torch.float64).index_add_(1, cells, hit)
     # the evidence grid, as ogm_ppl.inference.log_odds.evidence_grid builds it (delta_table_for)
-    n_kappa = int(r.lengths.max())
+    n_kappa = int(rays.lengths.max())
     hz = kz[~is_max]
     n_z = max(int(hz.max()) + 1 if hz.numel() else 0, n_kappa)
     with torch.no_grad():
         table = _delta(delta).table(n_kappa, n_z).to(torch.float64)
     col = torch.where(mx, n_z, kze)
-    lo = torch.zeros(B, K, dtype=torch.float64).index_add_(1, cells, table[kap[None].expand_as(col), col])
+    return passed, hit, table[kap[None].expand_as(col), col]
+
+
+def base_channels(
+    n_pass: torch.Tensor, n_hit: torch.Tensor, lo: torch.Tensor, pinned: torch.Tensor
+) -> list[torch.Tensor]:
+    """The 7 channels of :data:`_BASE_FEATURES` (float64, each of the inputs' shape) from a cell's pass and hit
+    counts, its evidence ``l_k`` and its pinned flag (float64 0/1): elementwise, so any subset of cells gets the
+    values the whole grid gets (to the last bit where torch's vectorised and scalar ``log1p`` agree)."""
     seen = (n_pass + n_hit) > 0
     share = torch.where(seen, n_hit / (n_hit + n_pass).clamp(min=1), 0.0)
-    pinned = model.known_free.to(torch.float64).expand(B, K)
-    chans = [
+    return [
         torch.log1p(n_pass),
         torch.log1p(n_hit),
         share,
         lo.clamp(-_LOGODDS_CLIP, _LOGODDS_CLIP) / 4,
         seen.to(torch.float64),
         pinned,
-        torch.ones(B, K, dtype=torch.float64),
+        torch.ones_like(n_pass),
     ]
-    g = model.grid
-    rows, cols = (g.rows, g.cols) if g.ndim == 2 else (1, g.num_cells)
-    x = torch.stack(chans, 1).reshape(B, len(chans), rows, cols)
+
+
+def phase_channels(rows: int, cols: int, phase: tuple[int, int]) -> torch.Tensor | None:
+    """The tile phase one-hot ``(row mod h, col mod w)``: ``(h + w) x rows x cols`` float64 (``None`` for
+    ``phase = (0, 0)``)."""
     h, w = (int(v) for v in phase)
-    if h and w:
-        ri = torch.arange(rows) % h
-        ci = torch.arange(cols) % w
-        oh_r = (ri[None, :, None] == torch.arange(h)[:, None, None]).expand(h, rows, cols)
-        oh_c = (ci[None, None, :] == torch.arange(w)[:, None, None]).expand(w, rows, cols)
-        ph = torch.cat([oh_r, oh_c]).to(torch.float64)
-        x = torch.cat([x, ph[None].expand(B, -1, -1, -1)], 1)
-    return x.to(torch.float32).reshape(*batch, x.shape[1], rows, cols)
+    if not (h and w):
+        return None
+    ri = torch.arange(rows) % h
+    ci = torch.arange(cols) % w
+    oh_r = (ri[None, :, None] == torch.arange(h)[:, None, None]).expand(h, rows, cols)
+    oh_c = (ci[None, None, :] == torch.arange(w)[:, None, None]).expand(w, rows, cols)
+    return torch.cat([oh_r, oh_c]).to(torch.float64)
