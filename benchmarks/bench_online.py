@@ -26,7 +26,17 @@ from thresholded traditional OGM over the scans so far, the offline chains' star
   reference, from the OGM start against the all-free one), which tells the online schedule from the
   reference's start.
 
-    python benchmarks/bench_online.py [--scans N]   (writes out/bench/bench_online.json)
+The online *predictive* map (``--part guide``): the same log replayed into an
+:class:`~ogm_ppl.inference.online.OnlineGuideMap` of the headline's corpus guide (``houseexpo+ipa``, one pass;
+``--symmetrize``: the 8 turns and flips) on ``--guide-threads`` torch threads. Measured: the time per scan
+(ray casting, the sums and features, the recomputed cells; target median 30 ms, 95th percentile 100 ms), the
+cells recomputed a scan; the *from-scratch baseline* in the same run, what ``ogm-ppl map --method amortised``
+does after each scan (ray-cast every scan so far, the model, the features, a full pass of the network), timed at
+a few points of the log and interpolated linearly over it; and the final map against the full recomputation on
+every scan (features, logits, probabilities; the tests hold the online map to the float32 error bound of the
+float64 network on small grids, where that bound can be computed).
+
+    python benchmarks/bench_online.py [--scans N] [--part chain|guide|all]   (writes out/bench/bench_online.json)
 """
 
 from __future__ import annotations
@@ -50,7 +60,7 @@ from ogm_ppl import GaussianRange, OccupancyModel, raycast
 from ogm_ppl.datasets.carmen import read_carmen
 from ogm_ppl.inference.mcmc.gibbs import CellGibbs
 from ogm_ppl.inference.mcmc.kernel import initial_map
-from ogm_ppl.inference.online import OnlineMap
+from ogm_ppl.inference.online import OnlineGuideMap, OnlineMap
 from ogm_ppl.inference.online._replay import _one
 from ogm_ppl.metrics import best_f1
 from ogm_ppl.priors import IndependentPrior
@@ -58,6 +68,7 @@ from ogm_ppl.scans import Scans
 
 INTEL = Path(__file__).resolve().parents[2] / "shared" / "data" / "intel-lab" / "intel-corrected.log.gz"
 SWEEPS_PER_SCAN, FULL_EVERY, MARGIN, FINAL, REFERENCE = 2, 100, 2, 20, 60
+GUIDE = "houseexpo+ipa"  # the headline's corpus guide (experiments/specs/intel_guide.toml)
 
 
 def _first(scans: Scans, n: int) -> Scans:
@@ -74,11 +85,26 @@ def main(argv: list[str] | None = None) -> int:
         help="OnlineMap's init_new: where the cells the new rays reach restart (default ogm: thresholded OGM "
         "over the scans so far, as the offline chains start)",
     )
+    ap.add_argument("--part", default="all", choices=("chain", "guide", "all"), help="what to measure")
+    ap.add_argument("--symmetrize", action="store_true", help="the guide's map averaged over 8 turns and flips")
+    ap.add_argument("--guide-threads", type=int, default=1, help="torch threads of the guide's map (default 1)")
+    ap.add_argument("--baseline-points", type=int, default=3, help="log points of the from-scratch guide baseline")
     args = ap.parse_args(argv)
     torch.set_num_threads(1)
     log = read_carmen(INTEL, max_usable_range=20.0)
     scans = log.scans if args.scans is None else _first(log.scans, args.scans)
     grid = log.grid(0.05)
+    result: dict = {"scans": scans.num_scans, "beams": scans.beams_per_scan, "grid": list(grid.shape)}
+    if args.part in ("guide", "all"):
+        result["guide"] = guide_part(grid, scans, args)
+    if args.part in ("chain", "all"):
+        result.update(chain_part(grid, scans, args))
+    write_json("bench_online", {**result, "load_1min_end": os.getloadavg()[0], "peak_rss_mib": peak_rss_mb()})
+    return 0
+
+
+def chain_part(grid, scans: Scans, args) -> dict:
+    """The online chain against the rebuild-per-scan baseline and offline chains (module docstring)."""
     sensor, prior = GaussianRange(1.0), IndependentPrior(0.5, grid.num_cells)
     S = scans.num_scans
     print(f"Intel: {S} scans x {scans.beams_per_scan} beams, grid {grid.shape} at 5 cm", flush=True)
@@ -202,63 +228,152 @@ def main(argv: list[str] | None = None) -> int:
         f"rebuild-per-scan / online per scan: {rebuild_mean / t.mean():.0f}x (mean over the log, interpolated)",
         flush=True,
     )
-    write_json(
-        "bench_online",
-        {
-            "scans": S,
-            "beams": scans.beams_per_scan,
-            "grid": list(grid.shape),
-            "settings": {
-                "sweeps_per_scan": SWEEPS_PER_SCAN,
-                "full_every": FULL_EVERY,
-                "margin": MARGIN,
-                "init_new": args.init_new,
-                "final_sweeps": FINAL,
-                "reference_sweeps": REFERENCE,
-            },
-            "online": {
-                "per_scan_ms": {
-                    "median": 1e3 * float(np.median(t)),
-                    "mean": 1e3 * float(t.mean()),
-                    "p95": 1e3 * float(np.percentile(t, 95)),
-                    "max": 1e3 * float(t.max()),
-                },
-                "target_ms": 50.0,
-                "mean_focus_cells": float(focus[1:].mean()),
-                "sweeps": om.sweeps_done,
-                "full_sweeps": om.full_sweeps,
-                "final_sweeps_s": final_s,
-                "peak_rss_mib_after_replay": rss_online,
-                "array_bytes": st.nbytes,
-                "nnz": st.nnz,
-                "rays": st.rays,
-                "bits": st.bits,
-                "rescales": st.rescales,
-            },
-            "rebuild_per_scan_s": {str(k): v for k, v in rebuild.items()},
-            "rebuild_mean_s_interpolated": rebuild_mean,
-            "speedup_vs_rebuild": rebuild_mean / float(t.mean()),
-            "offline": {
-                "model_build_s": build_s,
-                "same_update_sweeps": same,
-                "same_update_s": off_s,
-                "reference_sweeps": REFERENCE + FINAL,
-                "reference_s": ref_s,
-            },
-            "best_f1_vs_reference": {
-                "online": f1_online,
-                "offline_same_updates": f1_off,
-                "offline_same_updates_from_free": f1_free,
-                "ogm_start": f1_start,
-                "offline_4x_updates": f1_long,
-            },
-            "best_f1_vs_reference_from_free": vs_free,
-            "f1_difference": f1_online - f1_off,
-            "f1_difference_start_disjoint": disjoint,
-            "peak_rss_mib": peak_rss_mb(),
+    return {
+        "settings": {
+            "sweeps_per_scan": SWEEPS_PER_SCAN,
+            "full_every": FULL_EVERY,
+            "margin": MARGIN,
+            "init_new": args.init_new,
+            "final_sweeps": FINAL,
+            "reference_sweeps": REFERENCE,
         },
+        "online": {
+            "per_scan_ms": {
+                "median": 1e3 * float(np.median(t)),
+                "mean": 1e3 * float(t.mean()),
+                "p95": 1e3 * float(np.percentile(t, 95)),
+                "max": 1e3 * float(t.max()),
+            },
+            "target_ms": 50.0,
+            "mean_focus_cells": float(focus[1:].mean()),
+            "sweeps": om.sweeps_done,
+            "full_sweeps": om.full_sweeps,
+            "final_sweeps_s": final_s,
+            "peak_rss_mib_after_replay": rss_online,
+            "array_bytes": st.nbytes,
+            "nnz": st.nnz,
+            "rays": st.rays,
+            "bits": st.bits,
+            "rescales": st.rescales,
+        },
+        "rebuild_per_scan_s": {str(k): v for k, v in rebuild.items()},
+        "rebuild_mean_s_interpolated": rebuild_mean,
+        "speedup_vs_rebuild": rebuild_mean / float(t.mean()),
+        "offline": {
+            "model_build_s": build_s,
+            "same_update_sweeps": same,
+            "same_update_s": off_s,
+            "reference_sweeps": REFERENCE + FINAL,
+            "reference_s": ref_s,
+        },
+        "best_f1_vs_reference": {
+            "online": f1_online,
+            "offline_same_updates": f1_off,
+            "offline_same_updates_from_free": f1_free,
+            "ogm_start": f1_start,
+            "offline_4x_updates": f1_long,
+        },
+        "best_f1_vs_reference_from_free": vs_free,
+        "f1_difference": f1_online - f1_off,
+        "f1_difference_start_disjoint": disjoint,
+    }
+
+
+def guide_part(grid, scans: Scans, args) -> dict:
+    """The online guide map against the guide's map from scratch after each scan (module docstring)."""
+    import warnings
+
+    from ogm_ppl.exceptions import FittedSettingWarning
+    from ogm_ppl.inference.variational.amortised_features import evidence_features
+    from ogm_ppl.inference.variational.corpus_guides import corpus_guide
+
+    warnings.simplefilter("ignore", FittedSettingWarning)  # the Intel headline's guide, at its range (the spec's)
+    torch.set_num_threads(args.guide_threads)
+    guide = corpus_guide(GUIDE)
+    guide.symmetrize = args.symmetrize
+    S = scans.num_scans
+    kept = [i for i in range(S) if scans.valid[i].any()]
+    t0 = time.perf_counter()
+    om = OnlineGuideMap(grid, guide)
+    start_s = time.perf_counter() - t0
+    t = np.zeros(len(kept))
+    recomputed = np.zeros(len(kept), np.int64)
+    for j, i in enumerate(kept):
+        t0 = time.perf_counter()
+        om.add_scans(_one(scans, i))
+        t[j] = time.perf_counter() - t0
+        recomputed[j] = om.recomputed
+        if j % 100 == 0:
+            print(f"guide: scan {i}: {1e3 * t[j]:.0f} ms, {om.recomputed:,} cells", flush=True)
+    print(
+        f"online guide map ({'symmetrised' if args.symmetrize else 'one pass'}, {args.guide_threads} threads): "
+        f"start {start_s:.1f} s; per scan median {1e3 * np.median(t):.1f} ms, mean {1e3 * t.mean():.1f} ms, p95 "
+        f"{1e3 * np.percentile(t, 95):.1f} ms (targets 30 / 100); mean recomputed {recomputed.mean():,.0f} cells "
+        f"of {grid.num_cells:,}; load {os.getloadavg()[0]:.2f}",
+        flush=True,
     )
-    return 0
+    sensor, prior = GaussianRange(1.0), IndependentPrior(0.5, grid.num_cells)
+
+    def from_scratch(n: int) -> tuple[OccupancyModel, torch.Tensor]:
+        model = OccupancyModel(grid, raycast(grid, _first(scans, n)), sensor, prior)
+        with torch.no_grad():
+            return model, guide.marginals(model)
+
+    from_scratch(1)  # warm-up, untimed
+    points = sorted({max(1, round(S * (k + 1) / (args.baseline_points + 1))) for k in range(args.baseline_points)})
+    scratch = {}
+    for n in points:
+        t0 = time.perf_counter()
+        from_scratch(n)
+        scratch[n] = time.perf_counter() - t0
+        print(f"guide map from scratch at {n} scans: {scratch[n]:.2f} s", flush=True)
+    xs, ys = np.array(list(scratch)), np.array(list(scratch.values()))
+    slope, icpt = np.polyfit(xs, ys, 1) if len(xs) > 1 else (ys[0] / xs[0], 0.0)
+    scratch_mean = float(icpt + slope * (S + 1) / 2)
+    # the final map against the full recomputation on every scan
+    model, q_full = from_scratch(S)
+    x_full = evidence_features(model, None, guide.arch.delta, guide.arch.phase)
+    x_on = om.features
+    with torch.no_grad():
+        logits_full = guide.cell_logits(model)
+    d_logit = (om.logits - logits_full).abs()
+    d_p = float((om.probabilities - q_full).abs().max())
+    res = {
+        "guide": GUIDE,
+        "symmetrize": args.symmetrize,
+        "threads": args.guide_threads,
+        "scans_added": len(kept),
+        "start_s": start_s,
+        "per_scan_ms": {
+            "median": 1e3 * float(np.median(t)),
+            "mean": 1e3 * float(t.mean()),
+            "p95": 1e3 * float(np.percentile(t, 95)),
+            "max": 1e3 * float(t.max()),
+        },
+        "target_ms": {"median": 30.0, "p95": 100.0},
+        "recomputed_cells_mean": float(recomputed.mean()),
+        "grid_cells": grid.num_cells,
+        "from_scratch_s": {str(k): v for k, v in scratch.items()},
+        "from_scratch_mean_s_interpolated": scratch_mean,
+        "speedup_vs_from_scratch": scratch_mean / float(t.mean()),
+        "final_vs_full": {
+            "features_equal": bool(torch.equal(x_on, x_full)),
+            "features_max_abs_diff": float((x_on - x_full).abs().max()),
+            "logits_max_abs_diff": float(d_logit.max()),
+            "logits_max_abs": float(logits_full.abs().max()),
+            "probabilities_max_abs_diff": d_p,
+        },
+        "load_1min": os.getloadavg()[0],
+    }
+    print(
+        f"from scratch per scan (mean over the log, interpolated): {scratch_mean:.2f} s; online is "
+        f"{res['speedup_vs_from_scratch']:.0f}x faster\nfinal map vs full recomputation: features equal "
+        f"{res['final_vs_full']['features_equal']}, max |logit diff| {d_logit.max():.2e} (logits up to "
+        f"{logits_full.abs().max():.1f}), max |p diff| {d_p:.2e}",
+        flush=True,
+    )
+    torch.set_num_threads(1)
+    return res
 
 
 if __name__ == "__main__":

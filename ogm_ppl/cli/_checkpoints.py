@@ -78,8 +78,13 @@ def _online_map(
     (:func:`~ogm_ppl.inference.online.replay`); the snapshots ride in ``details["_snapshots"]``."""
     from ogm_ppl.inference.online import replay
 
+    if method.name == "amortised":
+        return _online_guide_map(args, params, problem, times)
     if method.name != "gibbs" or params.patch != 1 or params.chains != 1 or params.update == "thesis":
-        raise CLIError("--online runs one single-cell Gibbs chain: use --method gibbs (patch 1, one chain)")
+        raise CLIError(
+            "--online runs one single-cell Gibbs chain (--method gibbs: patch 1, one chain) or keeps the amortised "
+            "guide's map (--method amortised)"
+        )
     if params.threads is not None:
         raise CLIError("--online sweeps around each new scan serially: drop --threads")
     # the offline chain's start, kept as the scans arrive: reached cells restart from thresholded OGM
@@ -121,6 +126,41 @@ def _online_map(
             "sweeps_total": om.sweeps_done,
             "full_sweeps": om.full_sweeps,
             "mean_seconds_per_scan": float(r.seconds_per_scan.mean()),
+        },
+        "_snapshots": r.snapshots,
+    }
+    return r.probabilities, r.observed, details
+
+
+def _online_guide_map(args, params, problem: MapProblem, times: dict) -> tuple[np.ndarray, np.ndarray, dict]:
+    """``--online --method amortised``: the scans replayed one at a time into
+    :class:`~ogm_ppl.inference.online.OnlineGuideMap` (:func:`~ogm_ppl.inference.online.replay_guide`), the guide's
+    setting checked on the first scan's rays; the final map is the guide's map of every scan to float32 rounding."""
+    from ogm_ppl.inference.online import replay_guide
+    from ogm_ppl.inference.online._replay import _one
+    from ogm_ppl.methods.amortised import load_guide
+    from ogm_ppl.models.occupancy import OccupancyModel
+    from ogm_ppl.priors import IndependentPrior
+    from ogm_ppl.raycast import raycast
+
+    scans, grid = problem.scans, problem.grid
+    assert scans.valid is not None  # Scans.__post_init__ always sets the S x B mask
+    first = _one(scans, int(np.flatnonzero(scans.valid.any(1))[0]))
+    model = OccupancyModel(grid, raycast(grid, first), problem.sensor(), IndependentPrior(0.5, grid.num_cells))
+    guide = load_guide(params.guide, model, noise_known=problem.sigma_cells is not None)
+    t0 = time.perf_counter()
+    r = replay_guide(grid, scans, guide, symmetrize=params.symmetrize, snapshot_every=args.snapshots, progress=True)
+    times["ray_cast_s"], times["map_s"] = None, time.perf_counter() - t0
+    s = r.seconds_per_scan[r.seconds_per_scan > 0]
+    details = {
+        **dataclasses.asdict(params),
+        "trained_for": guide.trained_for,
+        "kernel": "OnlineGuideMap",
+        "online": {
+            "scans": r.online.num_scans,
+            "symmetrize": r.online.symmetrize,
+            "mean_seconds_per_scan": float(s.mean()) if s.size else 0.0,
+            "median_seconds_per_scan": float(np.median(s)) if s.size else 0.0,
         },
         "_snapshots": r.snapshots,
     }

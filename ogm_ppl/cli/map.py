@@ -244,8 +244,10 @@ def add_parser(sub) -> None:
     m.add_argument(
         "--online",
         action="store_true",
-        help="replay the scans one at a time into an online single-cell Gibbs chain (--method gibbs; "
-        "ogm_ppl.inference.online): focused sweeps after each scan, then --warmup and --sweeps full sweeps",
+        help="replay the scans one at a time: into an online single-cell Gibbs chain (--method gibbs; "
+        "ogm_ppl.inference.online.OnlineMap): focused sweeps after each scan, then --warmup and --sweeps full "
+        "sweeps; or into the amortised guide's map (--method amortised; OnlineGuideMap): each scan recomputes "
+        "the cells its rays' changes reach, the same map as without --online to float32 rounding",
     )
     m.add_argument(
         "--snapshots",

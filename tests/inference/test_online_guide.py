@@ -121,3 +121,25 @@ def test_bad_input_is_refused():
         om.add_rays(raycast(Grid((14, 17), resolution=0.2), _part(scans, 0, 1)))
     x = om.features  # nothing was added: no evidence, the inside channel, the tile phase
     assert om.num_scans == 0 and (x[:6] == 0).all() and (x[6] == 1).all() and (x[7:].sum(0) == 2).all()
+
+
+def test_cli_map_online_amortised_writes_the_guides_map(tmp_path):
+    """``ogm-ppl map --method amortised --online`` writes the map ``--method amortised`` writes (to float32
+    rounding of logits of a few units: far below 1e-4 in probability), with snapshots and the report's record."""
+    import json
+
+    from ogm_ppl.cli import load_map, main
+    from tests.test_cli import POSES, write_log
+
+    log = write_log(tmp_path / "tiny.log")
+    argv = ["map", str(log), "--resolution", "0.1", "--method", "amortised"]
+    assert main([*argv, "--out", str(tmp_path / "a")]) == 0
+    assert main([*argv, "--online", "--snapshots", "2", "--out", str(tmp_path / "b")]) == 0
+    a, b = load_map(tmp_path / "a" / "map.npz"), load_map(tmp_path / "b" / "map.npz")
+    np.testing.assert_allclose(b["probabilities"], a["probabilities"], rtol=0, atol=1e-4)
+    np.testing.assert_array_equal(b["observed"], a["observed"])
+    report = json.loads((tmp_path / "b" / "report.json").read_text())
+    assert report["method"]["kernel"] == "OnlineGuideMap" and report["method"]["online"]["scans"] == len(POSES)
+    with np.load(tmp_path / "b" / "snapshots.npz", allow_pickle=False) as z:
+        assert z["scans"].tolist() == [2, 4]
+        np.testing.assert_array_equal(z["probabilities"][-1], b["probabilities"])

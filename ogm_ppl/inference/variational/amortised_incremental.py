@@ -58,7 +58,7 @@ class IncrementalLogits:
 
     :attr:`logits` (``H x W`` float32) is the current map's logits; :meth:`update` (a mask and new features)
     and :meth:`update_cells` (flat cell indices and their feature rows) change the features and recompute
-    what depends on them. The first logits come from the same recomputation over every cell.
+    what depends on them. The first logits come from dense convolutions over the whole grid.
     """
 
     def __init__(self, net: nn.Module, x: torch.Tensor, symmetrize: bool = False) -> None:
@@ -99,7 +99,27 @@ class IncrementalLogits:
         self._x[self._flat(torch.arange(H * W))] = x.permute(1, 2, 0).reshape(H * W, C).float()
         self._acts = [[torch.zeros((n, c.out_channels), dtype=torch.float32) for c in convs[:-1]] for _ in syms]
         self.logits = torch.zeros((H, W), dtype=torch.float32)
-        self._recompute_box(torch.ones((H, W), dtype=torch.bool), 0, 0)
+        self._full_pass(convs, syms)
+
+    def _full_pass(self, convs: list, syms) -> None:
+        """Every layer over the whole grid by dense convolutions (the turned kernels, zero padding): the same
+        sums as the gathered rows in another order, so equal to them to float32 rounding."""
+        H, W = self.shape
+        rows = self._flat(torch.arange(H * W))
+        with torch.no_grad():
+            x = self._x[rows].T.reshape(1, -1, H, W)
+            head = torch.zeros((H, W), dtype=torch.float32)
+            for (f, k), acts in zip(syms, self._acts):
+                h = x
+                for layer, (c, b, d) in enumerate(zip(convs, self._bias, self.dilations)):
+                    w = turned_kernels(c.weight.detach().float(), f, k)
+                    h = torch.relu(nn.functional.conv2d(h, w, b, padding=d, dilation=d))
+                    if layer < len(acts):
+                        acts[layer][rows] = h[0].permute(1, 2, 0).reshape(H * W, -1)
+                hw, hb = self._head
+                head += (h[0].permute(1, 2, 0).reshape(H * W, -1) @ hw + hb).reshape(H, W)
+            sw, sb = self._skip
+            self.logits[:] = (x[0].permute(1, 2, 0).reshape(H * W, -1) @ sw + sb).reshape(H, W) + head / len(syms)
 
     @property
     def features(self) -> torch.Tensor:
