@@ -7,7 +7,7 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
-from ogm_ppl._raycast_kernels import ray_capacity, trace_ray
+from ogm_ppl._raycast_kernels import _axis_setup, _t_cross, ray_capacity, trace_ray
 
 
 class EvidenceRule(NamedTuple):
@@ -70,3 +70,89 @@ def evidence_from_scans(rays, rows, cols, evidence, touched, rule):
                     v = min(max(v, lo), hi)
                 evidence[c] = v
                 touched[c] = True
+
+
+class FixedRule(NamedTuple):
+    """The update term of Eq. 2.10 in fixed point, for the threaded fused pass (one numba argument)."""
+
+    table: np.ndarray  # rows x cols x 2 int64: a term as hi 2^-bits + lo 2^-(bits + lo_bits) (log_odds.maps)
+    nonzero: np.ndarray  # rows x cols bool: the float term is not 0 (the cells it marks touched)
+    stop: np.ndarray  # cols int64: rows of a column up to its last non-zero term (the walk stops there)
+    max_col: int  # the column of a max-range reading
+
+
+@nb.njit(cache=True)
+def _walk_apply(rays, r, rows, cols, buf, rule, acc, touched):
+    """Walk ray ``r`` as :func:`~ogm_ppl._raycast_kernels.trace_ray` does (the same cells in the same order and
+    the same reading kappa), stopping once the cells left have no term (past the last non-zero row of the ray's
+    column: a hit ray's cells behind its reading under Hähnel's term), and add its fixed-point terms to ``acc``."""
+    table, nonzero, stop_at, max_col = rule
+    u0, v0, du, dv = rays.u0[r], rays.v0[r], rays.du[r], rays.dv[r]
+    L, th, mx = rays.length[r], rays.t_hit[r], rays.is_max[r]
+    col, sx, bx = _axis_setup(u0, du)
+    row, sy, by = _axis_setup(v0, dv)
+    tx = _t_cross(bx, u0, du, sx)
+    ty = _t_cross(by, v0, dv, sy)
+    n = 0
+    k = 0
+    t = 0.0
+    t_prev = 0.0
+    zr = -1
+    inside = True
+    final = mx  # the ray's column is known (a max-range ray's from the start; a hit's once past its reading)
+    stop = stop_at[max_col] if mx else table.shape[0]
+    while True:
+        if inside:
+            buf[n] = row * cols + col
+            n += 1
+        if not mx and not final:
+            if k == 0 or 0.5 * (t_prev + t) < th:
+                zr = k
+            else:
+                final = True
+                stop = stop_at[zr]
+        if final and n >= stop:
+            break
+        t_prev = t
+        if tx <= ty:
+            t = tx
+            col += sx
+            bx += sx
+            tx = _t_cross(bx, u0, du, sx)
+        else:
+            t = ty
+            row += sy
+            by += sy
+            ty = _t_cross(by, v0, dv, sy)
+        if t >= L:
+            break
+        k += 1
+        if inside and (col < 0 or col >= cols or row < 0 or row >= rows):
+            inside = False
+        if not inside and (mx or 0.5 * (t_prev + t) >= th):
+            break
+    c_ = max_col if mx else zr
+    for j in range(min(n, table.shape[0])):
+        if nonzero[j, c_]:
+            c = buf[j]
+            acc[c, 0] += table[j, c_, 0]
+            acc[c, 1] += table[j, c_, 1]
+            touched[c] = True
+
+
+@nb.njit(cache=True, parallel=True)
+def evidence_fixed_point(rays, rows, cols, acc, touched, rule):
+    """The fused traversal and update in fixed point over ``acc.shape[0]`` contiguous parts of the rays, side by
+    side (``numba.prange``): part ``p`` adds its rays' integer terms to ``acc[p]`` (``P x K x 2`` int64) and marks
+    ``touched[p]``; integer sums do not depend on their order, so ``acc.sum(0)`` is the same for any split and
+    any thread count."""
+    P = acc.shape[0]
+    R = rays.length.shape[0]
+    cap = 1
+    for r in range(R):
+        cap = max(cap, ray_capacity(rays.length[r], rays.du[r], rays.dv[r]))
+    for p in nb.prange(P):
+        buf = np.empty(cap, np.int64)
+        a, b = (R * p) // P, (R * (p + 1)) // P
+        for r in range(a, b):
+            _walk_apply(rays, r, rows, cols, buf, rule, acc[p], touched[p])

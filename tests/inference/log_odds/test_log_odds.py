@@ -73,7 +73,9 @@ def test_all_paths_agree_for_every_family(family):
     torch_path = evidence_grid(rays, d, differentiable=True)
     fused = evidence_grid_from_scans(grid, scans, d)
     torch.testing.assert_close(torch_path.log_odds.detach(), compiled.log_odds, rtol=0, atol=1e-12)
-    torch.testing.assert_close(fused.log_odds, compiled.log_odds, rtol=0, atol=1e-12)
+    # the fused map is the sum of each cell's terms to two roundings; the compiled path adds its (at most 360)
+    # terms in float one by one, each addition rounding by half an ulp of the running sum
+    torch.testing.assert_close(fused.log_odds, compiled.log_odds, rtol=360 * 2.0**-53, atol=1e-12)
     assert torch.equal(compiled.observed, torch_path.observed)
     assert torch.equal(compiled.observed, fused.observed)
     # and against a direct, per-entry evaluation of the family's table
@@ -217,3 +219,28 @@ def test_fitted_term_far_from_its_range_warns_in_evidence_grid():
         evidence_grid(raycast(grid, near), delta_by_name("p21"))
         evidence_grid(raycast(grid, far), delta_by_name("haehnel"))
         evidence_grid(raycast(grid, far), delta_by_name("p21"), check_setting=False)
+
+
+@pytest.mark.parametrize("family", [Moravec.haehnel, lambda: PN(np.linspace(-2, 0.5, 21))])
+def test_the_fused_map_is_the_same_for_any_thread_count_and_the_exact_sum(family):
+    """The rays split into 1, 2 or 3 parts walked side by side give the same map to the last bit (integer sums),
+    and each cell is the correctly rounded sum of its float64 terms (``math.fsum``) to two roundings, tighter
+    than a sequential float sum's ``n_k`` roundings."""
+    grid, scans = random_problem(4, S=6, B=120)
+    d = family()
+    maps = [evidence_grid_from_scans(grid, scans, d, threads=t) for t in (1, 2, 3)]
+    for m in maps[1:]:
+        assert torch.equal(m.log_odds, maps[0].log_odds) and torch.equal(m.observed, maps[0].observed)
+    rays = raycast(grid, scans)
+    table, max_col = delta_table_for(rays, d)
+    table = table.detach().numpy()
+    terms: list[list[float]] = [[] for _ in range(grid.num_cells)]
+    for r in range(rays.num_rays):
+        col = max_col if rays.is_max[r] else rays.z[r]
+        for k, c in enumerate(rays.ray(r)[: table.shape[0]]):
+            terms[c].append(float(table[k, col]))
+    exact = np.array([math.fsum(t) for t in terms])
+    got = maps[0].log_odds.numpy()
+    assert (np.abs(got - exact) <= 2 * np.spacing(np.abs(exact)) + 1e-300).all()
+    with pytest.raises(ValueError, match="threads"):
+        evidence_grid_from_scans(grid, scans, d, threads=0)
