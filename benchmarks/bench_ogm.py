@@ -4,15 +4,19 @@ Scene: a 500 x 500 grid at 5 cm, 100 scan poses x 720 beams (72,000 rays), max r
 noise sigma = 3 cells, sparse obstacles so that most beams are max-range readings. Every method does the
 same work (Hähnel's update term, traversal included) and must give the same evidence grid.
 
-Compared in the same run, on one core:
-  ours (fused)   ogm_ppl.inference.evidence_grid_from_scans: one compiled pass, no ray structure kept
+Compared in the same run, on one core (and ours also on ``--threads`` threads, default every core):
+  ours (fused)   ogm_ppl.inference.evidence_grid_from_scans(threads=1): one compiled pass, no ray structure kept
+  ours (fused, N threads)  the same on N threads (the rays split into parts, fixed-point sums: the same map
+                 to the last bit, checked)
   ours (CSR)     raycast() then evidence_grid(): builds the ray -> cells structure other algorithms use
   numpy          ogm_ppl.reference.evidence_grid_numpy, batched and vectorised
   python loop    ogm_ppl.reference.evidence_grid_reference, one ray at a time (timed on a subset)
   octomap        OctoMap's insertPointCloud through octomap-python (optional; z = 0 point clouds)
 
 Rates: rays/s and ray-cell updates/s, where ray-cell updates = cells traversed within max range and
-grid (the same count for every method). Writes out/bench/bench_ogm.json.
+grid (the same count for every method). Targets: the threaded fused pass at least 15x OctoMap and 8x numpy.
+
+    python benchmarks/bench_ogm.py [--threads N]   (writes out/bench/bench_ogm.json)
 """
 
 from __future__ import annotations
@@ -20,8 +24,9 @@ from __future__ import annotations
 import os
 
 os.environ.setdefault("OMP_NUM_THREADS", "1")  # one core for OctoMap too
-os.environ.setdefault("NUMBA_NUM_THREADS", "1")
+os.environ.setdefault("NUMBA_NUM_THREADS", str(os.cpu_count() or 1))  # ours: one thread, then --threads
 
+import argparse
 import math
 import sys
 import time
@@ -69,6 +74,10 @@ def octomap_time(scans: Scans):
 
 
 def main() -> dict:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--threads", type=int, default=int(os.environ["NUMBA_NUM_THREADS"]), help="threads of ours")
+    args = ap.parse_args()
+    T = args.threads
     t0 = time.perf_counter()
     grid, scans = scene()
     rays = raycast(grid, scans)
@@ -80,10 +89,14 @@ def main() -> dict:
     )
 
     t = time.perf_counter()
-    evidence_grid_from_scans(grid, scans, haehnel)
+    evidence_grid_from_scans(grid, scans, haehnel, threads=1)
     compile_s = time.perf_counter() - t
-    ours_fused = evidence_grid_from_scans(grid, scans, haehnel).log_odds.numpy()
-    t_fused = best_time(lambda: evidence_grid_from_scans(grid, scans, haehnel), repeat=7)
+    ours_fused = evidence_grid_from_scans(grid, scans, haehnel, threads=1).log_odds.numpy()
+    same_threads = bool(
+        np.array_equal(evidence_grid_from_scans(grid, scans, haehnel, threads=T).log_odds.numpy(), ours_fused)
+    )
+    t_fused = best_time(lambda: evidence_grid_from_scans(grid, scans, haehnel, threads=1), repeat=7)
+    t_threads = best_time(lambda: evidence_grid_from_scans(grid, scans, haehnel, threads=T), repeat=7)
     t_csr = best_time(lambda: evidence_grid(raycast(grid, scans), haehnel), repeat=5)
     t_numpy = best_time(lambda: evidence_grid_numpy(grid, scans, L4, -L4), repeat=2, warmup=0)
     ref_np = evidence_grid_numpy(grid, scans, L4, -L4)
@@ -97,7 +110,13 @@ def main() -> dict:
     agree_loop = float(np.abs(evidence_grid_from_scans(grid, sub, haehnel).log_odds.numpy() - ref_loop).max())
     t_octo, octo_status = octomap_time(scans)
 
-    rows = {"ours (fused)": t_fused, "ours (CSR)": t_csr, "numpy (batched)": t_numpy, "python loop": t_loop}
+    rows = {
+        "ours (fused)": t_fused,
+        f"ours (fused, {T} threads)": t_threads,
+        "ours (CSR)": t_csr,
+        "numpy (batched)": t_numpy,
+        "python loop": t_loop,
+    }
     if t_octo is not None:
         rows["octomap"] = t_octo
     print(f"\n{'method':<18}{'time (s)':>10}{'rays/s':>14}{'M updates/s':>14}{'ours fused is':>16}")
@@ -110,6 +129,12 @@ def main() -> dict:
     print(f"numba compile/load on first call: {compile_s:.2f} s; peak RSS {peak_rss_mb():.0f} MiB")
     target = nnz / t_fused / 1e6
     print(f"target >= 100 M updates/s: {target:.0f} M/s -> {'met' if target >= 100 else 'NOT met'}")
+    vs = {k: rows[k] / t_threads for k in rows}
+    octo = f"{vs['octomap']:.1f}x OctoMap (target 15), " if "octomap" in vs else ""
+    print(
+        f"{T} threads: {t_fused / t_threads:.2f}x one thread, {octo}{vs['numpy (batched)']:.1f}x numpy (target 8); "
+        f"the same map as one thread to the last bit: {same_threads}; load {os.getloadavg()[0]:.2f}"
+    )
     payload = {
         "scene": {
             "grid": [N, N],
@@ -124,6 +149,10 @@ def main() -> dict:
         "rays_per_second": {k: R / v for k, v in rows.items()},
         "updates_per_second": {k: nnz / v for k, v in rows.items()},
         "speedup_of_fused_over": {k: v / t_fused for k, v in rows.items()},
+        "threads": T,
+        "speedup_of_threaded_over": vs,
+        "threaded_equals_one_thread": same_threads,
+        "load_1min": os.getloadavg()[0],
         "octomap_status": octo_status,
         "python_loop_subset": {"ray_cell_updates": sub_nnz, "seconds": t_loop_sub},
         "max_abs_difference": {"numpy": agree_numpy, "python_loop": agree_loop},

@@ -374,6 +374,7 @@ def _bench_ogm(doc: dict) -> Table:
         caption=(
             f"Traditional OGM, {s['grid'][0]} x {s['grid'][1]} grid at {s['resolution_m'] * 100:g} cm, "
             f"{s['rays']:,} rays, max range {s['max_range_cells']} cells: best of several runs, one core"
+            + (f" (ours also on {doc['threads']} threads)" if doc.get("threads", 1) > 1 else "")
         ),
         header=["method", "seconds", "rays/s", "M ray-cell updates/s", "the fused kernel is faster by"],
         rows=rows,

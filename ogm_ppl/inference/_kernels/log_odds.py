@@ -75,8 +75,9 @@ def evidence_from_scans(rays, rows, cols, evidence, touched, rule):
 class FixedRule(NamedTuple):
     """The update term of Eq. 2.10 in fixed point, for the threaded fused pass (one numba argument)."""
 
-    table: np.ndarray  # rows x cols x 2 int64: a term as hi 2^-bits + lo 2^-(bits + lo_bits) (log_odds.maps)
-    nonzero: np.ndarray  # rows x cols bool: the float term is not 0 (the cells it marks touched)
+    table: np.ndarray  # cols x rows x 2 int64: a term as hi 2^-bits + lo 2^-(bits + lo_bits) (log_odds.maps);
+    # column-major, so that a ray reads its column's terms from consecutive memory
+    nonzero: np.ndarray  # cols x rows bool: the float term is not 0 (the cells it marks touched)
     stop: np.ndarray  # cols int64: rows of a column up to its last non-zero term (the walk stops there)
     max_col: int  # the column of a max-range reading
 
@@ -93,6 +94,10 @@ def _walk_apply(rays, r, rows, cols, buf, rule, acc, touched):
     row, sy, by = _axis_setup(v0, dv)
     tx = _t_cross(bx, u0, du, sx)
     ty = _t_cross(by, v0, dv, sy)
+    # the crossings after the next, computed a step ahead (the same formula and values as trace_ray's, so the
+    # same cells; the division then leaves the chain of dependent steps)
+    tx2 = _t_cross(bx + sx, u0, du, sx)
+    ty2 = _t_cross(by + sy, v0, dv, sy)
     n = 0
     k = 0
     t = 0.0
@@ -100,7 +105,8 @@ def _walk_apply(rays, r, rows, cols, buf, rule, acc, touched):
     zr = -1
     inside = True
     final = mx  # the ray's column is known (a max-range ray's from the start; a hit's once past its reading)
-    stop = stop_at[max_col] if mx else table.shape[0]
+    n_rows = table.shape[1]
+    stop = stop_at[max_col] if mx else n_rows
     while True:
         if inside:
             buf[n] = row * cols + col
@@ -118,12 +124,14 @@ def _walk_apply(rays, r, rows, cols, buf, rule, acc, touched):
             t = tx
             col += sx
             bx += sx
-            tx = _t_cross(bx, u0, du, sx)
+            tx = tx2
+            tx2 = _t_cross(bx + sx, u0, du, sx)
         else:
             t = ty
             row += sy
             by += sy
-            ty = _t_cross(by, v0, dv, sy)
+            ty = ty2
+            ty2 = _t_cross(by + sy, v0, dv, sy)
         if t >= L:
             break
         k += 1
@@ -131,12 +139,12 @@ def _walk_apply(rays, r, rows, cols, buf, rule, acc, touched):
             inside = False
         if not inside and (mx or 0.5 * (t_prev + t) >= th):
             break
-    c_ = max_col if mx else zr
-    for j in range(min(n, table.shape[0])):
-        if nonzero[j, c_]:
+    terms, marks = table[max_col if mx else zr], nonzero[max_col if mx else zr]
+    for j in range(min(n, n_rows)):
+        if marks[j]:
             c = buf[j]
-            acc[c, 0] += table[j, c_, 0]
-            acc[c, 1] += table[j, c_, 1]
+            acc[c, 0] += terms[j, 0]
+            acc[c, 1] += terms[j, 1]
             touched[c] = True
 
 

@@ -281,5 +281,5 @@ def fixed_rule(table: np.ndarray, max_col: int, bits: int, lo_bits: int) -> Fixe
     scaled = np.ldexp(table, bits)
     hi = np.rint(scaled)
     lo = np.rint(np.ldexp(scaled - hi, lo_bits))  # scaled - hi is exact: |scaled| < 2^61
-    fixed = np.stack([hi, lo], -1).astype(np.int64)
-    return FixedRule(fixed, np.ascontiguousarray(nonzero), stop, int(max_col))
+    fixed = np.ascontiguousarray(np.stack([hi.T, lo.T], -1).astype(np.int64))  # cols x rows x 2
+    return FixedRule(fixed, np.ascontiguousarray(nonzero.T), stop, int(max_col))
