@@ -143,3 +143,16 @@ def test_cli_map_online_amortised_writes_the_guides_map(tmp_path):
     with np.load(tmp_path / "b" / "snapshots.npz", allow_pickle=False) as z:
         assert z["scans"].tolist() == [2, 4]
         np.testing.assert_array_equal(z["probabilities"][-1], b["probabilities"])
+
+
+def test_the_thread_count_is_an_option_and_torchs_is_restored():
+    grid, scans = _scene(2)
+    guide = AmortisedGuide(channels=2, dilations=(1,), phase=(0, 0))
+    with pytest.raises(ValueError, match="threads"):
+        OnlineGuideMap(grid, guide, threads=0)
+    before = torch.get_num_threads()
+    a, b = OnlineGuideMap(grid, guide, threads=1), OnlineGuideMap(grid, guide, threads=2)
+    for om in (a, b):
+        om.add_scans(_part(scans, 0, 1))
+    assert torch.get_num_threads() == before
+    torch.testing.assert_close(a.logits, b.logits, rtol=0, atol=1e-4)  # float32 rounding of logits of a few units

@@ -57,6 +57,9 @@ class OnlineGuideMap:
         guide: an :class:`~ogm_ppl.inference.variational.AmortisedGuide` (its network, update term and
             tile phase are read once; its ``symmetrize`` is the default of ``symmetrize``).
         symmetrize: the mean over the 8 turns and flips of the grid (8 times the work and memory).
+        threads: torch threads of an update's small matrix products (default 1: they are a few thousand
+            rows each, and threads that wait on a loaded machine cost more than they give); torch's own
+            thread count is restored after each update.
 
     Attributes:
         recomputed: cells whose logits the latest :meth:`add_scans` recomputed.
@@ -70,7 +73,7 @@ class OnlineGuideMap:
     torch.Size([144])
     """
 
-    def __init__(self, grid: Grid, guide, *, symmetrize: bool | None = None) -> None:
+    def __init__(self, grid: Grid, guide, *, symmetrize: bool | None = None, threads: int = 1) -> None:
         if grid.ndim != 2:
             raise ValueError(f"the online guide map needs a 2D grid, got shape {grid.shape}")
         sym = guide.symmetrize if symmetrize is None else symmetrize
@@ -79,7 +82,9 @@ class OnlineGuideMap:
                 f"a guide with tile-phase channels (phase {guide.arch.phase}) cannot be symmetrised: the tiling "
                 "does not turn with the grid"
             )
-        self.grid, self.guide, self.symmetrize = grid, guide, bool(sym)
+        if not isinstance(threads, int) or isinstance(threads, bool) or threads < 1:
+            raise ValueError(f"threads must be a positive integer, got {threads!r}")
+        self.grid, self.guide, self.symmetrize, self.threads = grid, guide, bool(sym), threads
         self._delta = guide.arch.delta
         H, W = grid.shape
         K = grid.num_cells
@@ -140,7 +145,12 @@ class OnlineGuideMap:
         rows = self._rows(k)
         old = self._inc._x[self._inc._flat(k)]
         diff = (rows != old).any(1)
-        self.recomputed = int(self._inc.update_cells(k[diff], rows[diff]).sum())
+        prev = torch.get_num_threads()
+        torch.set_num_threads(self.threads)
+        try:
+            self.recomputed = int(self._inc.update_cells(k[diff], rows[diff]).sum())
+        finally:
+            torch.set_num_threads(prev)
         self._reached |= rays.reached()
 
     @property
