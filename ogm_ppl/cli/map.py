@@ -220,7 +220,8 @@ def add_parser(sub) -> None:
         type=_pos_int,
         metavar="N",
         help="parameter threads of gibbs: chromatic tile sweeps on N of numba's threads (exact; one chain "
-        "whatever N, another than the serial kernel's; priors with a compiled face)",
+        "whatever N, another than the serial kernel's; priors with a compiled face); of ogm (p21, elfes): the rays "
+        "walked on N threads (the same map for any N)",
     )
     m.add_argument(
         "--sweeps",

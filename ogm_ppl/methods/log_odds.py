@@ -11,7 +11,7 @@ from __future__ import annotations
 import warnings
 from dataclasses import dataclass
 
-from ogm_ppl.methods.params import Choice, DeltaName, Float, Optional, Pair, ParamError, param
+from ogm_ppl.methods.params import Choice, DeltaName, Float, Int, Optional, Pair, ParamError, param
 from ogm_ppl.methods.problem import MapProblem, MapResult, RunContext
 from ogm_ppl.methods.registry import register_method
 
@@ -29,8 +29,21 @@ class OGMParams:
         Optional(Float(0, lo_open=True)),
         "the sensor setting's range noise in cells (default: the data's)",
     )
+    threads: int | None = param(
+        None,
+        Optional(Int(lo=1)),
+        "walk the rays on this many of numba's threads (default all; the same map to the last bit for any number: "
+        "fixed-point sums); a clamped map is one thread's",
+    )
 
     def check(self) -> None:
+        if self.threads is not None:
+            from ogm_ppl.inference.mcmc.parallel import max_threads
+
+            if self.threads > 1 and self.clamp is not None:
+                raise ParamError("threads", "a clamped map adds its terms in reading order, on one thread")
+            if self.threads > max_threads():
+                raise ParamError("threads", f"at most numba's {max_threads()} threads (NUMBA_NUM_THREADS)")
         if self.fit == "setting":
             from ogm_ppl.inference.variational.setting_fit import (
                 fit_family_for,
@@ -92,6 +105,7 @@ def ogm(params: OGMParams, problem: MapProblem, ctx: RunContext) -> MapResult:
         prior=params.prior,
         clamp=_clamp(params.clamp),
         check_setting=False,  # _delta checked it, with the noise where it is known
+        threads=params.threads,
     )
     details = {"ray_cast": "fused with the update (evidence_grid_from_scans)", **details}
     return MapResult(ev.probabilities.numpy(), ev.observed.numpy(), details)
