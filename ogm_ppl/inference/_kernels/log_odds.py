@@ -7,7 +7,9 @@ from typing import NamedTuple
 import numba as nb
 import numpy as np
 
+from ogm_ppl._numba_cache import njit_shipped
 from ogm_ppl._raycast_kernels import _axis_setup, _t_cross, ray_capacity, trace_ray
+from ogm_ppl.inference._kernels.parallel import fetch_add
 
 
 class EvidenceRule(NamedTuple):
@@ -148,19 +150,27 @@ def _walk_apply(rays, r, rows, cols, buf, rule, acc, touched):
             touched[c] = True
 
 
-@nb.njit(cache=True, parallel=True)
+_CHUNK = 1024  # rays a worker takes at a time
+
+
+@njit_shipped(parallel=True)
 def evidence_fixed_point(rays, rows, cols, acc, touched, rule):
-    """The fused traversal and update in fixed point over ``acc.shape[0]`` contiguous parts of the rays, side by
-    side (``numba.prange``): part ``p`` adds its rays' integer terms to ``acc[p]`` (``P x K x 2`` int64) and marks
-    ``touched[p]``; integer sums do not depend on their order, so ``acc.sum(0)`` is the same for any split and
-    any thread count."""
+    """The fused traversal and update in fixed point on ``acc.shape[0]`` workers side by side (``numba.prange``):
+    each takes chunks of :data:`_CHUNK` rays from a shared counter (:func:`~.parallel.fetch_add`) while any is
+    left, so a worker slowed by other jobs takes fewer, and adds their integer terms to its own ``acc[p]``
+    (``P x K x 2`` int64) and marks ``touched[p]``. Integer sums do not depend on their order, so ``acc.sum(0)``
+    is the same whoever took which chunk, for any number of workers."""
     P = acc.shape[0]
     R = rays.length.shape[0]
     cap = 1
     for r in range(R):
         cap = max(cap, ray_capacity(rays.length[r], rays.du[r], rays.dv[r]))
+    n_chunks = (R + _CHUNK - 1) // _CHUNK
+    taken = np.zeros(1, np.int64)
     for p in nb.prange(P):
         buf = np.empty(cap, np.int64)
-        a, b = (R * p) // P, (R * (p + 1)) // P
-        for r in range(a, b):
-            _walk_apply(rays, r, rows, cols, buf, rule, acc[p], touched[p])
+        j = fetch_add(taken, 0, np.int64(1))
+        while j < n_chunks:
+            for r in range(j * _CHUNK, min(R, (j + 1) * _CHUNK)):
+                _walk_apply(rays, r, rows, cols, buf, rule, acc[p], touched[p])
+            j = fetch_add(taken, 0, np.int64(1))
