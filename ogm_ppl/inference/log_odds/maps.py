@@ -214,8 +214,8 @@ def evidence_grid_from_scans(
     ray -> cells structure: the fast path for large maps when only the evidence grid is wanted. The same
     setting check (``check_setting``) on ``scans.max_range / grid.resolution``.
 
-    Without ``clamp`` the rays are split into ``threads`` parts walked side by side (default
-    ``numba.get_num_threads()``) and the terms are summed in fixed point: a term ``d`` is
+    Without ``clamp`` the rays are walked by ``threads`` workers side by side, each taking chunks of rays while
+    any is left (default ``numba.get_num_threads()``), and the terms are summed in fixed point: a term ``d`` is
     :math:`h 2^{-S} + l 2^{-S-S'}` with integers :math:`h = \mathrm{rint}(d 2^S)`,
     :math:`l = \mathrm{rint}((d 2^S - h) 2^{S'})`, :math:`S = \lfloor 61 - \log_2(R \max|\Delta| + 1) \rfloor`,
     :math:`S' = \lfloor 61 - \log_2 R \rfloor` (``R`` rays, each adding one term to a cell: no sum can overflow), so
