@@ -65,6 +65,7 @@ from ogm_ppl.inference.mcmc import (
     run_from_starts,
     start_maps,
 )
+from ogm_ppl.inference.mcmc.diagnostics import default_start_method
 from ogm_ppl.inference.mcmc.diagnostics import ess as ess_of
 from ogm_ppl.priors import IndependentPrior
 
@@ -230,9 +231,14 @@ def reference_scene(num_sweeps: int) -> dict:
         "sweeps_per_chain": num_sweeps,
         "traced_cells": len(trace_cells),
     }
+    # the library's default start method, spawn, and fork only where it is safe: a process that has started
+    # JAX's threads (the NumPyro peer above) must not fork (a forked copy can crash)
+    contexts = [default_start_method(), "spawn"] + ([] if "jax" in sys.modules else ["fork"])
+    res["start_methods"] = contexts
     for update in ("gibbs", "metropolised"):
         make = partial(CellGibbs, model, scan="systematic", update=update)
-        for processes, ctx in ((1, None), (2, "fork"), (2, "spawn")) if update == "metropolised" else ((1, None),):
+        runs = [(1, None)] + [(2, c) for c in contexts] if update == "metropolised" else [(1, None)]
+        for processes, ctx in runs:
             t = time.perf_counter()
             chains = run_chains(
                 make, 4, num_sweeps, trace_cells, warmup=20, seed=0, processes=processes, mp_context=ctx
@@ -253,11 +259,11 @@ def reference_scene(num_sweeps: int) -> dict:
             key = f"{update}, {processes} process(es)" + (f", {ctx}" if processes > 1 else "")
             res[key] = row
             print(
-                f"  reference scene {update:12s} processes={processes} {ctx or '':5s}: {sec:6.1f} s, ESS/s "
+                f"  reference scene {update:12s} processes={processes} {ctx or '':10s}: {sec:6.1f} s, ESS/s "
                 f"{row['ess_per_s']:.1f}, "
                 f"R-hat max {row['rhat_max']:.3f}, {row['frac_rhat_below_1.01']:.0%} of {ok.sum()} varying cells < 1.01"
             )
-    for ctx in ("fork", "spawn"):
+    for ctx in contexts:
         res[f"parallel speed-up (metropolised, {ctx})"] = (
             res["metropolised, 1 process(es)"]["seconds"] / res[f"metropolised, 2 process(es), {ctx}"]["seconds"]
         )
