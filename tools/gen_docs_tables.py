@@ -616,11 +616,15 @@ def _calibration_plans(doc: dict) -> Table:
         "occupied": "cells the plan does not know count as occupied, as the corpora's exteriors do",
     }[st.get("plan_outside", "occupied")]
     maps = summ[0]["maps"] if summ else 0
+    kernel = st.get("kernel", "gibbs")
+    sampler = "" if kernel == "gibbs" else f" of the {kernel} sampler"
+    if kernel == "guided":
+        sampler += f" (blocks proposed by guide:{st['proposal_guide']})"
     return Table(
         caption=(
             f"Unseen cells of {maps} plans of buildings in no training set ({st['plan_set']}; a {st['window']} x "
             f"{st['window']}-cell window of each, {st['poses']} stops x {st['beams']} beams), means over the plans; "
-            f"{outside}; chains: 3 from different starts, {st['sweeps']} sweeps each"
+            f"{outside}; chains{sampler}: 3 from different starts, {st['sweeps']} sweeps each"
         ),
         header=list(TARGET_HEADER),
         rows=rows,
@@ -1301,6 +1305,8 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "calibration_all": ("calibration_all", _calibration_guides),
     "calibration_logs": ("calibration_logs", _calibration_plans),
     "calibration_logs_occupied": ("calibration_logs_occupied", _calibration_plans),
+    "calibration_logs_net": ("calibration_logs_net", _calibration_plans),
+    "calibration_logs_net_guided": ("calibration_logs_net_guided", _calibration_plans),
     "calibration_cycle": ("calibration_cycle", _calibration_kernels),
     "guide_limits_ipa": ("guide_limits_ipa", _guide_limits),
     "unseen_by_distance": ("unseen_by_distance", _unseen_by_distance),
@@ -1310,6 +1316,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "prior_occupancy": ("prior_occupancy", _prior_occupancy),
     "corpus_stats": ("corpus_stats", _corpus_stats),
     "path_free": ("path_free", _path_free),
+    "path_free_net": ("path_free_net", _path_free),
     "data_curve": ("data_curve", _data_curve),
     "calibration_corpora": ("calibration_corpora", _calibration_corpora),
     "calibration_corpora_logs": ("calibration_corpora_logs", _calibration_corpora),

@@ -19,6 +19,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Mapping
+from functools import lru_cache
 from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
@@ -49,6 +50,7 @@ __all__ = [
     "cycle_kernel",
     "default_patch",
     "gibbs_kernel",
+    "guided_kernel",
     "run_prior_chains",
     "run_guide",
     "run_ogm",
@@ -129,9 +131,37 @@ def shifted_cycle_random_kernel(model: OccupancyModel, patch: Patch, init: str, 
     return mixing_cycle(model, patch, init=init, shifted="random" if patch is not None else False)
 
 
+#: the proposal block of the ``guided`` sampler (a tiling with a random offset at every pass) and the share of its
+#: sweeps that are passes of guide moves
+GUIDED_BLOCK, GUIDED_P = (6, 6), 0.5
+
+
+def guided_kernel(model: OccupancyModel, patch: Patch, init: str, options: Any) -> MapKernel:
+    """Data-driven MCMC (:class:`~ogm_ppl.inference.mcmc.guided.GuidedGibbs`): each sweep is, with probability
+    :data:`GUIDED_P`, a pass of independence Metropolis-Hastings moves proposing :data:`GUIDED_BLOCK` blocks from
+    the corpus guide ``options.proposal_guide`` (read from ``options.guide_dir``), else a sweep of the sampler
+    :func:`gibbs_kernel` would use; the chain starts at ``init`` (the guide is a proposal, not a start, so the
+    three starts test whether its moves carry every chain to the same place). The posterior is stationary."""
+    from ogm_ppl.inference.mcmc.guided import GuidedGibbs
+
+    guide = _proposal_guide(options.proposal_guide, getattr(options, "guide_dir", None))
+    return GuidedGibbs(gibbs_kernel(model, patch, init), guide, block=GUIDED_BLOCK, p_guide=GUIDED_P, init="base")
+
+
+@lru_cache(maxsize=4)
+def _proposal_guide(name: str, directory: str | None):
+    """The ``guided`` sampler's guide (:func:`~ogm_ppl.calibration.leakage.guide_for`), read once a run."""
+    from pathlib import Path
+
+    from ogm_ppl.calibration.leakage import guide_for
+
+    return guide_for(name, None if directory is None else Path(directory))
+
+
 #: the samplers by name (the ``kernel`` setting); another sampler plugs in by adding an entry
 KERNELS: dict[str, KernelFactory] = {
     "gibbs": gibbs_kernel,
+    "guided": guided_kernel,
     "tempering": tempering_kernel,
     "cycle": cycle_kernel,
     "shifted-cycle": shifted_cycle_kernel,

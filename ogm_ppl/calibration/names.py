@@ -19,7 +19,7 @@ from typing import TYPE_CHECKING
 from ogm_ppl.calibration.errors import BiasFileError
 from ogm_ppl.calibration.leakage import GUIDE_PREFIX
 from ogm_ppl.inference.mcmc.fingerprint import digest, prior_name_digest
-from ogm_ppl.priors.named import PRIOR_KINDS, load_temper_params, prior_kinds, split_prior_name
+from ogm_ppl.priors.named import PRIOR_KINDS, kind_corpora, load_temper_params, prior_kinds, split_prior_name
 
 if TYPE_CHECKING:
     from ogm_ppl.inference.variational.amortised import AmortisedGuide
@@ -65,7 +65,9 @@ def kind_label(name: str) -> str:
 def prior_names(kinds: Sequence[str], train: Sequence[str]) -> list[tuple[str, str | None]]:
     """``(prior name, training corpus)`` pairs: ``KIND:CORPUS`` for every kind and training corpus (a name that
     already holds ``:CORPUS`` is kept), the uniform ``independent`` (trained on nothing) once, and a kind of
-    one's own (not shipped) named without a corpus once, trained on :data:`OWN`."""
+    one's own (not shipped) named without a corpus once, trained on :data:`OWN`. A kind shipped for some
+    corpora only (:func:`~ogm_ppl.priors.named.kind_corpora`: ``net``) pairs with those of ``train`` it was
+    fitted on; ``ValueError`` when that is none of them."""
     out: list[tuple[str, str | None]] = []
     for k in kinds:
         kind, corpus, at, mod = split_prior_name(k)
@@ -77,14 +79,22 @@ def prior_names(kinds: Sequence[str], train: Sequence[str]) -> list[tuple[str, s
             continue
         if kind == "independent" and not at:
             out.append(("independent", None))
-        out += [(f"{kind}:{c}{at}{mod}", c) for c in train]  # a tempering suffix goes after the corpus
+        fitted = kind_corpora(kind)
+        cs = [c for c in train if fitted is None or c in fitted]
+        if not cs:
+            raise ValueError(
+                f"prior kind {kind!r} is shipped for {', '.join(fitted or ()) or 'no corpus'}, none of the "
+                f"training corpora {', '.join(train)}: name one (KIND:CORPUS) or add it to --train"
+            )
+        out += [(f"{kind}:{c}{at}{mod}", c) for c in cs]  # a tempering suffix goes after the corpus
     return list(dict.fromkeys(out))
 
 
 def default_priors(train: Sequence[str]) -> list[str]:
-    """Every registered kind, then ``KIND@cal`` for each kind with a fitted tempering exponent on every
-    training corpus (:func:`~ogm_ppl.priors.named.load_temper_params`)."""
-    kinds = list(prior_kinds())
+    """Every registered kind (a kind shipped for some corpora only, :func:`~ogm_ppl.priors.named.kind_corpora`,
+    where it is shipped for every training corpus), then ``KIND@cal`` for each kind with a fitted tempering
+    exponent on every training corpus (:func:`~ogm_ppl.priors.named.load_temper_params`)."""
+    kinds = [k for k in prior_kinds() if (kind_corpora(k) is None or set(train) <= set(kind_corpora(k) or ()))]
     fitted: set[str] | None = None
     for c in train:
         try:

@@ -58,6 +58,8 @@ __all__ = ["CalibrationResult", "calibrate", "recorded_settings"]
 
 #: the settings of one sampler only, recorded with the ``tempering`` kernel alone
 _TEMPERING_KEYS = ("rungs", "beta_min", "temper")
+#: the settings of the ``guided`` sampler only (recorded when it runs)
+_GUIDED_KEYS = ("proposal_guide",)
 #: settings not recorded: where the run writes and how, not what it computes
 _UNRECORDED = ("fresh", "figures", "bias_file")
 
@@ -84,7 +86,7 @@ def recorded_settings(s: CalibrationSettings, bias: Mapping[str, float]) -> dict
     ``plans`` (maps per corpus) and ``plan_limit`` (maps of the plan set; ``None``: all), and with plan files
     their paths and :func:`~ogm_ppl.calibration.heldout.plan_digests` (a changed file refuses to resume).
     Sequences are lists, as read back from the JSON."""
-    own = () if s.kernel == "tempering" else _TEMPERING_KEYS
+    own = (() if s.kernel == "tempering" else _TEMPERING_KEYS) + (() if s.kernel == "guided" else _GUIDED_KEYS)
     order: tuple[str, ...] = (
         "test",
         "plan_files",
@@ -96,7 +98,8 @@ def recorded_settings(s: CalibrationSettings, bias: Mapping[str, float]) -> dict
         "guides",
     )
     order += ("guide_dir", "diagonal", "plans", "window", "generated_shape", "poses", "beams", "range_cells")
-    order += ("sigma", "sweeps", "burn", "seed", "kernel", *_TEMPERING_KEYS, "patch", "max_support", "quick")
+    order += ("sigma", "sweeps", "burn", "seed", "kernel", *_TEMPERING_KEYS, *_GUIDED_KEYS, "patch", "max_support")
+    order += ("quick",)
     out: dict = {}
     for k in order:
         if k in own or k in _UNRECORDED:
@@ -203,7 +206,8 @@ def _calibrate(
         runs_of[test] = [(n, c) for n, c in pairs if not own or n.startswith(GUIDE_PREFIX) or c in (None, OWN, test)]
         for name, train in runs_of[test]:
             is_guide = name.startswith(GUIDE_PREFIX)
-            for c in guide_corpora(name[len(GUIDE_PREFIX) :]) if is_guide else [train]:
+            proposing = guide_corpora(s.proposal_guide) if s.kernel == "guided" and not is_guide else []
+            for c in guide_corpora(name[len(GUIDE_PREFIX) :]) if is_guide else [train, *proposing]:
                 check_heldout(test, [t.plan for t in maps], c)
     for test, maps in test_sets:
         _say(progress, f"[{test}] {len(maps)} held-out maps: " + ", ".join(f"{t.name} {t.truth.shape}" for t in maps))

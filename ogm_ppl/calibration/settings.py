@@ -17,6 +17,7 @@ from pathlib import Path
 from ogm_ppl.calibration.chains import KERNELS
 from ogm_ppl.calibration.errors import SettingsError
 from ogm_ppl.calibration.heldout import DEFAULT_TEST_CORPORA, PLAN_FILES_GUIDE, PLAN_FILES_PRIORS, TEST_CORPORA
+from ogm_ppl.calibration.leakage import GUIDE_SYM
 from ogm_ppl.calibration.names import default_priors
 from ogm_ppl.inference.mcmc.tempering import TEMPERS, geometric_ladder
 from ogm_ppl.priors.tables import available_tables
@@ -58,9 +59,10 @@ class CalibrationSettings:
 
     The chains: ``sweeps`` kept sweeps (at least 4: split R-hat halves each chain) after ``burn`` of the
     sampler ``kernel`` (a key of :data:`~ogm_ppl.calibration.chains.KERNELS`); for ``tempering``, ``rungs``
-    rungs down to ``beta_min`` in (0, 1) on the factor ``temper``; ``patch`` overrides per kind
-    (``KIND=RxC`` or ``KIND=1``); a prior whose update weighs more than ``max_support`` configurations is
-    skipped; ``bias_file`` runs each prior it names biased beside it.
+    rungs down to ``beta_min`` in (0, 1) on the factor ``temper``; for ``guided``, the corpus guide
+    ``proposal_guide`` (``C``, ``C1+C2``, ``C@sym``, read from ``guide_dir``) proposes blocks of cells;
+    ``patch`` overrides per kind (``KIND=RxC`` or ``KIND=1``); a prior whose update weighs more than
+    ``max_support`` configurations is skipped; ``bias_file`` runs each prior it names biased beside it.
 
     Plan files of other buildings: ``plan_files`` (paths or folders), labelled ``plan_set``, images read at
     ``pixel_size`` metres per pixel, unknown cells read as ``plan_outside`` (``occupied`` or ``unknown``).
@@ -89,6 +91,7 @@ class CalibrationSettings:
     rungs: int = 6
     beta_min: float = 0.1
     temper: str = "prior"
+    proposal_guide: str = PLAN_FILES_GUIDE
     patch: tuple[str, ...] = ()
     bias_file: Path | None = None
     max_support: int = 4096
@@ -148,6 +151,11 @@ class CalibrationSettings:
                 geometric_ladder(self.rungs, self.beta_min)
             except ValueError as e:
                 raise SettingsError("beta_min", str(e)) from None
+        if self.kernel == "guided":
+            base = self.proposal_guide.removesuffix(GUIDE_SYM) if isinstance(self.proposal_guide, str) else ""
+            if not base or "@" in base:
+                got = self.proposal_guide
+                raise SettingsError("proposal_guide", f"a corpus guide is CORPUS, C1+C2 or C{GUIDE_SYM}, not {got!r}")
         parse_patch_overrides(self.patch)
         if self.plans is not None and self.plans < 1:
             raise SettingsError("plans", f"must be at least 1, got {self.plans}")

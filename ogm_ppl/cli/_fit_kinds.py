@@ -234,6 +234,8 @@ def add_net_field(k: argparse.ArgumentParser) -> None:
     src.add_argument("--corpus", choices=CORPORA, help="fit on this corpus's training plans")
     src.add_argument("--plan-files", nargs="+", type=Path, metavar="PATH", help="plan files or folders of them")
     k.add_argument("--limit", type=int, default=None, help="the first N training plans (default: the corpus's)")
+    k.add_argument("--sample", type=int, default=None, help="a random N of the corpus's training plans")
+    k.add_argument("--sample-seed", type=int, default=0, help="the seed of --sample (0)")
     k.add_argument("--pixel-size", type=float, default=None, help="metres per pixel of plan images")
     k.add_argument("--resolution", type=float, default=0.05, help="metres per cell of plan files (0.05)")
     k.add_argument("--name", default=None, help="the files' name part (default the corpus, or 'plans')")
@@ -250,11 +252,14 @@ def add_net_field(k: argparse.ArgumentParser) -> None:
 def run_net_field(args: argparse.Namespace) -> Any:
     from dataclasses import fields
 
-    from ogm_ppl.learn import FitOptionError
+    from ogm_ppl.learn import FitOptionError, load_training_plans
     from ogm_ppl.learn.net_field import NetFieldSettings, fit_net_field
 
     s = NetFieldSettings(**{f.name: getattr(args, f"s_{f.name}") for f in fields(NetFieldSettings)})
     out, name = args.out, args.name
+    source = args.corpus if args.corpus is not None else list(args.plan_files)
+    if args.sample is not None:  # a random subset of a corpus's training plans, recorded in the provenance
+        source = load_training_plans(source, limit=args.limit, sample=args.sample, sample_seed=args.sample_seed)
     if args.ship:
         from ogm_ppl.priors.net_field import net_path
 
@@ -262,10 +267,10 @@ def run_net_field(args: argparse.Namespace) -> Any:
             raise FitOptionError("ship", "ships a corpus's fit: give --corpus")
         out, name = net_path(args.corpus).parent, args.corpus
     return fit_net_field(
-        args.corpus if args.corpus is not None else list(args.plan_files),
+        source,
         out,
         settings=s,
-        limit=args.limit,
+        limit=None if args.sample is not None else args.limit,
         pixel_size=args.pixel_size,
         resolution=args.resolution,
         name=name,

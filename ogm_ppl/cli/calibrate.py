@@ -170,6 +170,11 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--rungs", type=int, default=6, help="tempering: rungs of the geometric ladder (cold one included)")
     ap.add_argument("--beta-min", type=float, default=0.1, help="tempering: the hottest rung's exponent, in (0, 1)")
     ap.add_argument("--temper", default="prior", choices=TEMPERS, help="tempering: the factor the ladder raises")
+    ap.add_argument(
+        "--proposal-guide",
+        default=PLAN_FILES_GUIDE,
+        help="guided: the corpus guide proposing blocks of cells (C, C1+C2 or either with @sym; default %(default)s)",
+    )
     ap.add_argument("--patch", nargs="*", default=[], help="per-kind patch override: KIND=RxC or KIND=1")
     ap.add_argument(
         "--bias-file",
@@ -228,6 +233,7 @@ def settings_from_args(args: argparse.Namespace) -> CalibrationSettings:
         rungs=args.rungs,
         beta_min=args.beta_min,
         temper=args.temper,
+        proposal_guide=args.proposal_guide,
         patch=tuple(args.patch),
         bias_file=args.bias_file,
         max_support=args.max_support,

@@ -5,7 +5,8 @@ A name is ``KIND`` or ``KIND:CORPUS``; ``CORPUS`` is one of :func:`~ogm_ppl.prio
 tables, back-off weights and pattern fields are shipped without tempering exponents; default ``houseexpo``, the
 real floor plans whose statistics are closest to the thesis's). A corpus is registered by its files in
 ``ogm_ppl/fitted``: ``prior_CORPUS.npz`` (the tables), ``backoff_CORPUS.json`` (the ``*_bo`` kinds),
-``field_CORPUS.npz`` (``field``, ``field2``) and ``temper_CORPUS.json`` (``@cal``), each written by
+``field_CORPUS.npz`` (``field``, ``field2``), ``net_CORPUS.npz`` (``net``, only where fitted) and
+``temper_CORPUS.json`` (``@cal``), each written by
 ``ogm-ppl fit-prior`` with its provenance:
 
 ========================  ==========================================================================
@@ -25,6 +26,9 @@ real floor plans whose statistics are closest to the thesis's). A corpus is regi
 ``border1_bo:CORPUS``     ``border1`` backed off to ``(1 - lambda, lambda)``
 ``field:CORPUS``          :class:`PatternFieldPrior`, every 3 x 3 window's learned potential (PL + PCD)
 ``field2:CORPUS``         the same at two scales (3 x 3 windows of the map and of its 2 x 2 OR-pooling)
+``net:CORPUS``            :class:`NetFieldPrior`, a small network on every ``w x w`` window, learned by
+                          pseudo-likelihood (and PCD) on the corpus's training plans; shipped for the
+                          corpora with a ``net_CORPUS.npz`` (:func:`net_corpora`)
 ========================  ==========================================================================
 
 **Tempering.** Any name takes a suffix ``@BETA`` (a number ``>= 0``) or ``@cal``: the prior raised to the power
@@ -76,7 +80,9 @@ __all__ = [
     "TEMPER_FORMAT",
     "CorpusTables",
     "TemperParams",
+    "kind_corpora",
     "load_temper_params",
+    "net_corpora",
     "prior_by_name",
     "prior_kinds",
     "register_prior",
@@ -99,7 +105,10 @@ PRIOR_KINDS: tuple[str, ...] = (
     "border1_bo",
     "field",
     "field2",
+    "net",
 )
+#: the kinds read from one fitted file per corpus that not every corpus has (:func:`kind_corpora`)
+FILE_KINDS: tuple[str, ...] = ("net",)
 DEFAULT_CORPUS = "houseexpo"
 
 #: ``factory(shape, tables) -> MapPrior``: ``shape`` the grid's shape (a tuple), ``tables`` a
@@ -374,6 +383,36 @@ def _field(scales: int) -> PriorFactory:
     return build
 
 
+def net_corpora() -> tuple[str, ...]:
+    """The corpora with a shipped net field (``ogm_ppl/fitted/net_<corpus>.npz``), sorted."""
+    return tuple(sorted(p.stem[len("net_") :] for p in _FITTED.glob("net_*.npz")))
+
+
+def kind_corpora(kind: str) -> tuple[str, ...] | None:
+    """The corpora ``KIND:CORPUS`` is shipped for when that is not every corpus with tables (``net``:
+    :func:`net_corpora`); ``None`` for a kind built from any corpus's tables."""
+    return net_corpora() if kind == "net" else None
+
+
+def _net(shape, tables) -> MapPrior:
+    from ogm_ppl.priors.net_field import net_from_file, net_path
+
+    _two_d("net", shape)
+    if tables.own:
+        raise ValueError(
+            "prior 'net' is a fitted net field, not count tables: fit one on your plans "
+            "(ogm-ppl fit-prior net-field --plan-files ..., ogm_ppl.learn.fit_net_field) and read it with "
+            "ogm_ppl.priors.net_field.net_from_file, or leave out tables= for a shipped corpus's net field"
+        )
+    corpus = tables.corpus or DEFAULT_CORPUS
+    if corpus not in net_corpora():
+        raise ValueError(
+            f"prior 'net:{corpus}': no shipped net field for corpus {corpus!r} ({net_path(corpus)} does not exist); "
+            f"shipped: {', '.join(net_corpora()) or 'none'} (ogm-ppl fit-prior net-field --corpus C --ship)"
+        )
+    return net_from_file(net_path(corpus), shape)
+
+
 for _kind, _factory in (
     ("independent", _independent),
     ("mrf", _mrf(4)),
@@ -385,6 +424,7 @@ for _kind, _factory in (
     ("border1", _border1),
     ("field", _field(1)),
     ("field2", _field(2)),
+    ("net", _net),
 ):
     register_prior(_kind, _factory)
 

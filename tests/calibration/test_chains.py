@@ -52,6 +52,32 @@ def test_tempering_kernel_scores_the_cold_rung_of_its_ladder(monkeypatch):
         assert unseen["cells"] == res["rhat_cells"] == int(scene.masks["unseen"].sum()) and unseen["nll_bits"] > 0
 
 
+def test_guided_kernel_wraps_the_gibbs_sampler_with_the_proposal_guide_from_each_start(monkeypatch):
+    """``kernel = "guided"``: each chain is :class:`GuidedGibbs` around the sampler ``gibbs`` would use, proposing
+    from the named guide (symmetrised for ``@sym``) and started at the chain's own start, not the guide's mode."""
+    from ogm_ppl.inference.mcmc import CellGibbs, PatchGibbs
+    from ogm_ppl.inference.mcmc.guided import GuidedGibbs
+
+    settings = tiny(kernel="guided", proposal_guide="ipa@sym")
+    built = []
+
+    def spy(model, patch, init, options):
+        kernel = chains.guided_kernel(model, patch, init, options)
+        built.append((init, kernel))
+        return kernel
+
+    monkeypatch.setitem(KERNELS, "guided", spy)
+    scene = box_scene(settings)
+    for name, base in (("mrf:houseexpo", CellGibbs), ("patch3:houseexpo", PatchGibbs)):
+        built.clear()
+        res = run_prior(scene, name, settings)
+        assert [i for i, _ in built] == list(STARTS)
+        for init, kernel in built:
+            assert isinstance(kernel, GuidedGibbs) and isinstance(kernel.base, base) and kernel.init == "base"
+            assert kernel.base.init == init and kernel.guide.symmetrize and kernel.guide_sweeps > 0
+        assert res["scores"]["unseen"]["cells"] == res["rhat_cells"] > 0
+
+
 def test_a_tempered_kind_without_a_fitted_exponent_is_skipped():
     from ogm_ppl.priors.named import load_temper_params
 

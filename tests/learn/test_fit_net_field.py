@@ -114,3 +114,6 @@ def test_the_command_fits_a_net_field(tmp_path, capsys):
     assert ogm_ppl(["fit-prior", "net-field", "--plan-files", str(plans), "--ship"]) == 2  # --ship needs --corpus
     assert "--corpus" in capsys.readouterr().err and fitted_dir_listing() == shipped
     assert np.isfinite(json.loads((out / "net_plans.json").read_text())["heldout_nll"])
+    # --sample draws from a corpus by name only, refused before anything is read or written
+    assert ogm_ppl(["fit-prior", "net-field", "--plan-files", str(plans), "--sample", "2", "--out", str(out)]) == 2
+    assert "sample: applies to a floor-plan corpus by name only" in capsys.readouterr().err

@@ -97,3 +97,62 @@ def test_a_grid_of_other_cells_than_the_tables_were_counted_on_warns():
         prior_by_name("patch3:houseexpo", (12, 12))
         prior_by_name("patch3:dungeon", Grid((12, 12), resolution=0.1))
         prior_by_name("independent", Grid((12, 12), resolution=0.1))
+
+
+# ------------------------------------------------------------------ net:CORPUS, the shipped net fields
+def test_net_names_resolve_to_the_shipped_fit_learned_on_the_tables_plans():
+    """``net:CORPUS`` is the shipped file's field (every parameter), whose JSON records the file's SHA-256 and was
+    fitted on the very plans the corpus's tables were counted on (so the leakage checks built from the tables'
+    provenance cover it)."""
+    import hashlib
+
+    import numpy as np
+
+    from ogm_ppl.priors import NetFieldPrior
+    from ogm_ppl.priors.named import net_corpora
+    from ogm_ppl.priors.net_field import load_net_field, net_path
+
+    assert "houseexpo" in net_corpora()
+    for corpus in net_corpora():
+        p = prior_by_name(f"net:{corpus}", (10, 12))
+        d = load_net_field(net_path(corpus))
+        assert isinstance(p, NetFieldPrior) and p.shape == (10, 12)
+        for k in ("filters", "bias", "out"):
+            assert np.array_equal(getattr(p, k), d[k])
+        assert (p.unary, p.pad, p.activation, p.occupancy) == (d["unary"], d["pad"], d["activation"], d["occupancy"])
+        side = json.loads(net_path(corpus).with_suffix(".json").read_text())
+        assert side["sha256"] == hashlib.sha256(net_path(corpus).read_bytes()).hexdigest()
+        tables = json.loads((FITTED_DIR / f"prior_{corpus}.json").read_text())["provenance"]
+        assert side["provenance"]["plan_names_sha256"] == tables["plan_names_sha256"]
+        assert side["provenance"]["excluded_buildings"] == tables["excluded_buildings"]
+    assert isinstance(prior_by_name("net", (6, 6)), NetFieldPrior)  # the default corpus
+    t = prior_by_name("net:houseexpo@0.5", (6, 6))
+    assert isinstance(t, TemperedPrior) and t.beta == 0.5 and isinstance(t.base, NetFieldPrior)
+
+
+def test_net_names_refuse_a_corpus_without_a_fit_tables_and_1d_grids():
+    from ogm_ppl.priors.named import net_corpora
+    from ogm_ppl.priors.tables import tables_by_name
+
+    missing = next(c for c in available_tables() if c not in net_corpora())
+    with pytest.raises(ValueError, match=f"no shipped net field for corpus '{missing}'.*shipped: .*houseexpo"):
+        prior_by_name(f"net:{missing}", (8, 8))
+    with pytest.raises(ValueError, match="fitted net field, not count tables"):
+        prior_by_name("net:houseexpo", (8, 8), tables=tables_by_name("houseexpo"))
+    with pytest.raises(ValueError, match="2D patch prior"):
+        prior_by_name("net:houseexpo", (8,))
+
+
+def test_calibration_pairs_the_net_kind_with_its_fitted_corpora_only():
+    from ogm_ppl.calibration import default_priors, prior_names
+    from ogm_ppl.priors.named import net_corpora
+
+    missing = next(c for c in available_tables() if c not in net_corpora())
+    assert prior_names(["net", "field"], ["houseexpo", missing]) == [
+        ("net:houseexpo", "houseexpo"),
+        ("field:houseexpo", "houseexpo"),
+        (f"field:{missing}", missing),
+    ]
+    with pytest.raises(ValueError, match=r"'net' is shipped for .*houseexpo"):
+        prior_names(["net@0.5"], [missing])
+    assert "net" in default_priors(["houseexpo"]) and "net" not in default_priors(["houseexpo", missing])
