@@ -294,6 +294,8 @@ def plan_file_pieces(path: str | os.PathLike) -> list[Path]:
     YAML reads and the image exists)."""
     p = Path(path)
     img = _image_of_yaml(p) if p.suffix.lower() in YAML_SUFFIXES else None
+    if img is not None and img.is_relative_to(p.parent.resolve()):
+        img = p.parent / img.relative_to(p.parent.resolve())  # as the YAML's path is given: no machine's folder
     return [p] + ([img] if img is not None and img.is_file() else [])
 
 

@@ -33,6 +33,7 @@ import hashlib
 import io
 import json
 import os
+import shlex
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -161,7 +162,7 @@ def fit_net_field(
 
     from ogm_ppl.io import atomic_write_bytes, atomic_write_text
     from ogm_ppl.priors import learn_net as ln
-    from ogm_ppl.priors.net_field import NET_FORMAT_VERSION, load_net_field, net_arrays
+    from ogm_ppl.priors.net_field import NET_FORMAT_VERSION, load_net_field, net_arrays, net_path
     from ogm_ppl.progress import Progress
 
     s = (settings or NetFieldSettings()).checked()
@@ -170,6 +171,9 @@ def fit_net_field(
     )
     opts = s.options() + ([] if every == VALIDATION_EVERY else ["--validation-every", str(every)])
     cmd = command("net-field", plans, out, opts + ([] if name is None else ["--name", name]))
+    if out.resolve() == net_path(plans.corpus).parent.resolve() and not plans.files and name == plans.corpus:
+        # the package's own folder: the command is --ship (no machine's path in a shipped record)
+        cmd = shlex.join(["ogm-ppl", "fit-prior", "net-field", *plans.command_args(), *opts, "--ship"])
     say = print if progress else (lambda *a, **k: None)
     t0 = time.perf_counter()
     maps = [_pair(m) for m in plans.maps()]

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 from PIL import Image
@@ -127,7 +129,7 @@ def test_bad_plan_files_name_the_file(tmp_path):
         load_plan_file(tmp_path, pixel_size=0.05)
 
 
-def test_plan_files_and_names(tmp_path):
+def test_plan_files_and_names(tmp_path, monkeypatch):
     px = _room()
     for d in ("a", "b"):
         grid = Grid(px.shape, resolution=0.05)
@@ -141,6 +143,9 @@ def test_plan_files_and_names(tmp_path):
     assert plan_names(files[:2]) == ["extra", "map"]
     assert plan_file_pieces(files[1]) == [files[1], (tmp_path / "a" / "map.pgm").resolve()]  # the YAML, its image
     assert plan_file_pieces(files[0]) == [files[0]]
+    # a YAML given by a relative path names its image relative too (records hold no machine's folder)
+    monkeypatch.chdir(tmp_path)
+    assert plan_file_pieces(Path("a/map.yaml")) == [Path("a/map.yaml"), Path("a/map.pgm")]
     with pytest.raises(PlanFileError, match="no such file or folder"):
         plan_files([tmp_path / "nowhere"])
     with pytest.raises(PlanFileError, match="not a plan file"):

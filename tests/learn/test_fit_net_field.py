@@ -117,3 +117,17 @@ def test_the_command_fits_a_net_field(tmp_path, capsys):
     # --sample draws from a corpus by name only, refused before anything is read or written
     assert ogm_ppl(["fit-prior", "net-field", "--plan-files", str(plans), "--sample", "2", "--out", str(out)]) == 2
     assert "sample: applies to a floor-plan corpus by name only" in capsys.readouterr().err
+
+
+def test_a_fit_into_the_package_folder_records_ship_not_a_path(tmp_path, monkeypatch):
+    """A corpus's fit written where the package keeps its net fields (``--ship``) records ``--ship``: a shipped
+    record holds no machine's folder."""
+    import ogm_ppl.priors.net_field as nf
+
+    monkeypatch.setattr(nf, "net_path", lambda corpus: tmp_path / "fitted" / f"net_{corpus}.npz")
+    r = fit_net_field(
+        "houseexpo", tmp_path / "fitted", settings=TINY, limit=4, name="houseexpo", validation_every=2, progress=False
+    )
+    cmd = json.loads(r.files[1].read_text())["provenance"]["command"]
+    assert cmd.startswith("ogm-ppl fit-prior net-field --corpus houseexpo --limit 4 ") and cmd.endswith(" --ship")
+    assert str(tmp_path) not in cmd and "--out" not in cmd and "--name" not in cmd
