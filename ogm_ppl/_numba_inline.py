@@ -54,7 +54,7 @@ def install() -> bool:
     namespace: dict = {}
     code = compile(source.replace(_PER_BLOCK, _ONE_MEMO), inline_closurecall.__file__, "exec")
     exec(code, vars(inline_closurecall), namespace)  # numba's own module globals, so its helpers resolve
-    inline_closurecall.InlineWorker.inline_ir = namespace["inline_ir"]
+    inline_closurecall.InlineWorker.inline_ir = namespace["inline_ir"]  # type: ignore[method-assign]
     INSTALLED = True
     return True
 
