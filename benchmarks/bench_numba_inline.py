@@ -1,5 +1,5 @@
 """Compile time of a sweep kernel with numba's own inliner and with :mod:`ogm_ppl._numba_inline` (one deep-copy
-memo per callee).
+memo per callee, one copy).
 
 Each measurement is a fresh process with an empty numba cache (``NUMBA_CACHE_DIR`` in a temporary folder) that
 compiles one specialisation: the single-cell sweep :func:`~ogm_ppl.inference._kernels.cell_sweep.sweep` with an
@@ -9,7 +9,7 @@ suite. The child reports its CPU seconds (``time.process_time``, so a loaded mac
 seconds); ``--repeat`` alternates the two ways and keeps each one's best. The ratio is numba's own over ours.
 
 Writes ``out/bench/bench_numba_inline.json``; about a minute on a quiet core (``--repeat 1``). Measured here (2 cores,
-load 10-12): numba 38.9 s, ours 17.2 s CPU, 2.3x.
+load 6-9): numba 42.6 s, ours 15.0 s CPU, 2.8x.
 """
 
 from __future__ import annotations
