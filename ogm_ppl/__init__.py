@@ -3,6 +3,7 @@
 Implements Merali (2020), "A Study of the Benefits of Cell Correlations in Occupancy Grid Mapping".
 """
 
+import ogm_ppl._numba_inline  # noqa: F401  (numba inlines without its quadratic IR copy; before any compile)
 from ogm_ppl.grid import Grid
 from ogm_ppl.models.occupancy import OccupancyModel
 from ogm_ppl.raycast import CellIndex, Rays, raycast

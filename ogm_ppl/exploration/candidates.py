@@ -261,8 +261,8 @@ def path_free_probability(
     share of ``samples`` (``S x K``) in which every cell within ``clearance_cells`` of the path is free, or
     (``samples`` None) :math:`\prod_{c \in W} (1 - p_c)` from ``marginals`` (``K``). ``exclude``: flat cells
     left out of every swept set (the robot's own disk: it is there already). ``C`` float64."""
-    offs = np.asarray(path_offsets, dtype=np.int64)
-    cells = np.asarray(path_cells, dtype=np.int64)
+    offs = np.ascontiguousarray(path_offsets, dtype=np.int64)  # contiguous: one compiled _swept for any input
+    cells = np.ascontiguousarray(path_cells, dtype=np.int64)
     if cells.size and (cells.min() < 0 or cells.max() >= grid.num_cells):
         raise ValueError(f"path cells must lie in 0..{grid.num_cells - 1}")
     if offs.ndim != 1 or offs.size < 1 or offs[0] != 0 or offs[-1] != cells.size or (np.diff(offs) < 0).any():

@@ -152,6 +152,22 @@ def test_the_robots_own_disk_is_no_part_of_a_paths_risk():
     assert p[0] == pytest.approx(1e-9, rel=1e-6)
 
 
+def test_path_arrays_of_any_layout_and_int_width_run_one_compiled_sweep():
+    """Reversed views, int32 offsets and lists give the same answer through one specialisation of the compiled
+    swept-set kernel (contiguous int64, the library's index convention)."""
+    from ogm_ppl.exploration.candidates import _swept
+
+    grid = Grid((15, 15), 0.1)
+    q = np.zeros(225)
+    q[7 * 15 + 7] = 0.5
+    path = np.array([7 * 15 + 9, 7 * 15 + 8])
+    ways = [(np.array([0, 2]), path), (np.array([0, 2], np.int32), path[::-1]), ([0, 2], list(path))]
+    p = [path_free_probability(grid, offs, cells, marginals=q, clearance_cells=1.0) for offs, cells in ways]
+    # the cell at (7, 7), next to the path, is in its swept set: P(free) = 1 - 0.5 exactly
+    assert p[0][0] == 0.5 and p[1][0] == 0.5 and p[2][0] == 0.5
+    assert len(_swept.signatures) == 1, _swept.signatures
+
+
 def test_a_start_or_goal_cell_off_the_grid_is_refused_not_followed():
     """A flat start cell of a pose just off the grid (negative) sent Dijkstra's path tracing into an endless loop
     or a crash; a pose given where a cell is meant and a goal cell past the end are refused too."""

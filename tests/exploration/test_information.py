@@ -446,6 +446,8 @@ def test_beam_information_survives_max_range_terms_that_underflow():
     sigma = F / (27.2 * math.sqrt(2.0))
     assert 0.0 < 0.5 * math.erfc(F / (sigma * math.sqrt(2.0))) < 1e-323
     pf = np.array([[0.5, 0.5, 0.0]])  # hits at kappa 0 and 1, never none
-    rays = RayTable(np.array([0, 2]), np.zeros(2, np.int64), np.array([0.0, 0.001]), np.zeros(1, np.int64), 1)
+    # t_enter float32, the library's convention (RayTable), so the kernel is the one the library compiles
+    t_enter = np.array([0.0, 0.001], np.float32)
+    rays = RayTable(np.array([0, 2], np.int64), np.zeros(2, np.int64), t_enter, np.zeros(1, np.int64), 1)
     mi = beam_mi_kernel(pf, rays, np.array([F]), GaussianReading(sigma=sigma, p_rand=0.0, width=1.0))
     assert np.isfinite(mi).all() and 0.0 <= mi[0] <= math.log(2.0)
