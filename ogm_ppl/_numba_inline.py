@@ -15,12 +15,15 @@ one scope) and each object is copied once; and the "unmutated copy" of the calle
 of numba's callers drop) is the callee as passed in, not a second copy (a further ~9%: 17.4 s -> 15.9 s). Everything
 else numba does is unchanged; the compiled code is the same (``tests/test__numba_inline.py`` compares the LLVM IR
 numba writes with and without it). If numba's source is not the one this was written against, nothing is replaced
-(:data:`INSTALLED` stays ``False``).
+(:data:`INSTALLED` stays ``False``), and ``OGM_PPL_NUMBA_INLINE_PATCH=0`` in the environment leaves numba untouched.
+The replacement is process-wide: it also applies to other code's ``inline="always"`` functions compiled after
+``ogm_ppl`` is imported (numba's own fix of the same copy is upstream work: numba issue 8989).
 """
 
 from __future__ import annotations
 
 import inspect
+import os
 import textwrap
 
 from numba.core import inline_closurecall
@@ -57,6 +60,8 @@ def install() -> bool:
     global INSTALLED
     if INSTALLED:
         return True
+    if os.environ.get("OGM_PPL_NUMBA_INLINE_PATCH", "1") == "0":  # numba's own inliner, untouched
+        return False
     try:
         source = textwrap.dedent(inspect.getsource(ORIGINAL_INLINE_IR))
     except (OSError, TypeError):  # no source shipped

@@ -73,3 +73,18 @@ def test_compiles_the_same_code_as_numbas_own_inliner():
     assert ours == theirs == _nested().py_func(X)  # exact: sums of a few multiples of 0.5
     assert "inner" in ours_llvm  # the inlined helpers' variables are there: they were inlined
     assert _canonical(ours_llvm) == _canonical(theirs_llvm)
+
+
+def test_the_environment_can_keep_numbas_own_inliner():
+    """``OGM_PPL_NUMBA_INLINE_PATCH=0``: a fresh process that imports the library leaves numba's method in place."""
+    import os
+    import subprocess
+    import sys
+
+    code = (
+        "import ogm_ppl, ogm_ppl._numba_inline as p; from numba.core import inline_closurecall as ic; "
+        "print(p.INSTALLED, ic.InlineWorker.inline_ir is p.ORIGINAL_INLINE_IR)"
+    )
+    env = {**os.environ, "OGM_PPL_NUMBA_INLINE_PATCH": "0"}
+    out = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, check=True).stdout
+    assert out.split() == ["False", "True"]
