@@ -769,6 +769,34 @@ def _calibration_guides(doc: dict) -> Table:
     )
 
 
+def _calibration_guides_spread(doc: dict) -> Table:
+    """Each guide (and traditional OGM, the baseline) on each test set, unseen cells: NLL mean with its spread
+    over the maps (min-max), ROC AUC and best F1 with theirs."""
+    tests, summ = _calibration_rows(doc, "unseen")
+
+    def cell(s: dict) -> str:
+        sp = s.get("spread", {})
+        return " / ".join(
+            f"{_f(s[k])} ({_f(sp.get(k, {}).get('min'))}-{_f(sp.get(k, {}).get('max'))})"
+            for k in ("nll_bits", "auc", "best_f1")
+        )
+
+    rows = _method_by_test(summ, tests, lambda s: s["prior"] in ("guide", "ogm"), cell)
+    st = doc["settings"]
+    maps = sorted({s["maps"] for s in summ})
+    return Table(
+        caption=(
+            f"Guides per map: on the unseen cells of each test set ({'-'.join(map(str, maps))} maps, "
+            f"{st['window']} x {st['window']} cells, {st['poses']} stops x {st['beams']} beams), NLL (bits/cell) / "
+            "ROC AUC / best F1, each the mean over the maps (min-max over the maps)"
+        ),
+        header=["method", *tests],
+        rows=rows,
+        provenance=doc["provenance"],
+        note="a guide is never scored on a building of the maps it was trained on (the leakage check runs first)",
+    )
+
+
 def _unseen_by_distance(doc: dict) -> Table:
     """``ogm-ppl study unseen_by_distance``: per test corpus and distance bin (cells to the nearest reached
     cell), the unseen cells' share, occupied share and the method's NLL; for a prior's chains also the chain
@@ -1303,6 +1331,10 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "calibration_mix": ("calibration_mix", _calibration_guides),
     "calibration_generated": ("calibration_generated", _calibration_guides),
     "calibration_all": ("calibration_all", _calibration_guides),
+    "calibration_real": ("calibration_real", _calibration_guides),
+    "calibration_real_spread": ("calibration_real", _calibration_guides_spread),
+    "calibration_real_logs": ("calibration_real_logs", _calibration_plans),
+    "calibration_real_logs_spread": ("calibration_real_logs", _calibration_guides_spread),
     "calibration_logs": ("calibration_logs", _calibration_plans),
     "calibration_logs_occupied": ("calibration_logs_occupied", _calibration_plans),
     "calibration_logs_net": ("calibration_logs_net", _calibration_plans),

@@ -4,7 +4,8 @@
 (plan names checked against the stored SHA-256; the generated corpus's seed streams); :func:`check_heldout`
 refuses test maps in it, of a building in it (also across two corpora of the same buildings: ``houseexpo`` and
 ``houseexpo-full`` share their house ids), or of a real log's building; :func:`load_corpus_guide` refuses a
-corpus guide whose record is not that very training set, so the same check covers it.
+corpus guide whose record is not the training set it names (:func:`guide_plans`: the tables' training set, or a
+stated random sample of the corpus's training split), so the same check covers it.
 """
 
 from __future__ import annotations
@@ -27,12 +28,15 @@ __all__ = [
     "GUIDE_JOIN",
     "GUIDE_PREFIX",
     "GUIDE_SYM",
+    "GUIDE_CORPORA",
     "GuideNameError",
     "LeakageError",
     "check_heldout",
     "guide_corpora",
     "guide_for",
     "guide_path",
+    "guide_plans",
+    "guide_training_sets",
     "load_corpus_guide",
     "names_digest",
     "training_set",
@@ -132,14 +136,69 @@ def check_heldout(test_corpus: str, plans: Sequence[str], train_corpus: str | No
         )
 
 
+#: the corpora a guide can be learned on: every floor-plan corpus the library reads, and the generated maps
+GUIDE_CORPORA: tuple[str, ...] = (*fp.CORPORA, "generated")
+
+
+def guide_plans(corpus: str, sample: int | None = None, seed: int = 0) -> tuple[list[str], dict]:
+    """The maps a corpus guide learns from (sorted) and what its record says of them (``split``, ``sample``).
+
+    ``sample`` ``None``: the training set of the corpus's shipped tables (:func:`training_set`, the plans the
+    tables counted). ``sample = N``: a random ``min(N, n)`` of the corpus's whole training split of ``n`` maps
+    (:func:`~ogm_ppl.datasets.floorplans.training_plans`, real-log buildings left out; ``generated``: the
+    tables' maps), drawn by :func:`~ogm_ppl.datasets.floorplans.sample_indices` with ``seed`` (a smaller
+    sample of one seed is a subset of a larger one). Either is a subset of the training split, so every
+    held-out plan stays held out.
+
+    >>> names, rec = guide_plans("schools", sample=10, seed=0)
+    >>> len(names), rec["sample"]["random"], rec["sample"]["of"], rec["split"]
+    (10, 10, 39, 'train')
+    """
+    if corpus not in GUIDE_CORPORA:
+        raise ValueError(f"unknown corpus {corpus!r}; a guide is learned on one of {', '.join(GUIDE_CORPORA)}")
+    if sample is None:
+        return sorted(training_set(corpus)), {"split": "train", "sample": None}
+    if isinstance(sample, bool) or not isinstance(sample, int) or sample < 1:
+        raise ValueError(f"a sample of {sample!r} plans: it must be a whole number of at least 1")
+    base = sorted(training_set(corpus)) if corpus == "generated" else fp.training_plans(corpus)
+    k = min(sample, len(base))
+    names = [base[i] for i in fp.sample_indices(len(base), k, seed)]
+    rule = "sample_indices of the training split (natural order), real-log buildings left out"
+    return sorted(names), {"split": "train", "sample": {"random": k, "seed": seed, "of": len(base), "rule": rule}}
+
+
+def _recorded_plans(corpus: str, record: dict, path: Path) -> list[str]:
+    """The plans a guide's record of ``corpus`` names: its ``sample`` rebuilt by :func:`guide_plans`, or (no
+    sample recorded, as every guide learned on the tables' plans) the tables' :func:`training_set`."""
+    sample = record.get("sample")
+    if sample is None:
+        return sorted(training_set(corpus))
+    try:
+        n, seed, of = int(sample["random"]), int(sample["seed"]), int(sample["of"])
+    except (KeyError, TypeError, ValueError) as e:
+        raise LeakageError(f"{path}: its record of {corpus} has a malformed sample ({e})") from None
+    names, rec = guide_plans(corpus, n, seed)
+    if rec["sample"]["of"] != of:
+        raise LeakageError(
+            f"{path}: its record of {corpus} sampled {n} of {of} training plans; the training split now holds "
+            f"{rec['sample']['of']}: the floor-plan data changed since the guide was learned"
+        )
+    return names
+
+
 GUIDE_PREFIX = "guide:"
 GUIDE_JOIN = "+"  # a guide learned on several corpora: guide:houseexpo+ipa
 GUIDE_SYM = "@sym"  # the guide symmetrised: guide:houseexpo+ipa@sym
 
 
 def guide_corpora(name: str) -> list[str]:
-    """The corpora a guide named ``C``, ``C1+C2`` (either with ``@sym``) was learned on."""
+    """The corpora a guide named ``C``, ``C1+C2`` (either with ``@sym``) was learned on, by its name (a guide
+    given a name of its own, e.g. ``real``, names them in its record: :func:`guide_training_sets`)."""
     return name.removesuffix(GUIDE_SYM).split(GUIDE_JOIN)
+
+
+def _is_join(name: str) -> bool:
+    return all(c in GUIDE_CORPORA for c in name.split(GUIDE_JOIN))
 
 
 def guide_for(name: str, directory: Path | None = None) -> AmortisedGuide:
@@ -165,29 +224,61 @@ def guide_path(corpus: str, directory: Path | None = None) -> Path:
     return Path(directory or FITTED_DIR) / f"guide_{corpus}.npz"
 
 
+def _source_records(name: str, meta: dict, path: Path) -> dict:
+    """``corpus -> record`` of the corpora a guide's record ``meta`` names (checked against its ``name``: a
+    ``C1+C2`` name must list exactly those corpora; a name of its own, any corpora of :data:`GUIDE_CORPORA`)."""
+    if meta.get("corpus") != name:
+        raise LeakageError(f"{path}: its record names corpus {meta.get('corpus')!r}, not {name!r}")
+    joined = _is_join(name)
+    parts = guide_corpora(name)
+    records = {name: meta} if joined and len(parts) == 1 else meta.get("corpora")
+    if joined and (not isinstance(records, dict) or sorted(records) != sorted(parts)):
+        raise LeakageError(f"{path}: its record does not list the training sets of {', '.join(parts)}")
+    if not isinstance(records, dict) or not records or any(c not in GUIDE_CORPORA for c in records):
+        raise LeakageError(f'{path}: its record does not list the corpora it was learned on ("corpora")')
+    if not all(isinstance(r, dict) for r in records.values()):
+        raise LeakageError(f"{path}: its record of a corpus is not an object")
+    return records
+
+
+def guide_training_sets(name: str, meta: dict, path: Path | str = "guide") -> dict[str, set[str]]:
+    """``corpus -> training maps`` of a guide named ``name`` whose record is ``meta`` (its ``trained_for``),
+    each rebuilt (:func:`guide_plans`) and checked against the record's SHA-256 of the names; refused
+    (:class:`LeakageError`) when the record does not name ``name``, lacks a corpus or names other plans."""
+    path = Path(path)
+    out: dict[str, set[str]] = {}
+    for c, rec in _source_records(name, meta, path).items():
+        names = _recorded_plans(c, rec, path)
+        got, want = rec.get("plan_names_sha256"), names_digest(names)
+        if got != want:
+            what = f"the training set of the {c} tables"
+            if rec.get("sample"):
+                what = "the random sample of its training split it records"
+            raise LeakageError(f"{path}: its record of {c} (plans {str(got)[:12]}...) is not {what} ({want[:12]}...)")
+        out[c] = set(names)
+    return out
+
+
 def load_corpus_guide(corpus: str, train: set[str] | None = None, directory: Path | None = None):
-    """The guide of :func:`guide_path`, refused (:class:`LeakageError`) unless its record names ``corpus`` and
-    the SHA-256 of the very plans the corpus's tables were learned from (``train``, default
-    :func:`training_set`), so that :func:`check_heldout` covers it as it covers the tables. A guide of several
-    corpora (``C1+C2``, :func:`guide_corpora`) records each one's plans under ``"corpora"``; each is checked
-    against that corpus's :func:`training_set` (``train`` applies to a one-corpus guide only)."""
+    """The guide of :func:`guide_path`, refused (:class:`LeakageError`) unless its record names ``corpus`` and,
+    for every corpus it was learned on, the SHA-256 of the very plans it names (:func:`guide_training_sets`:
+    the corpus's tables' training set, or the random sample of its training split it records), so that
+    :func:`check_heldout` covers it as it covers the tables. ``corpus`` is ``C``, ``C1+C2`` (each corpus's
+    plans recorded under ``"corpora"``) or a name of the guide's own (``real``: its corpora listed in its
+    record). ``train`` replaces the rebuilt set of a one-corpus guide (a test's own set)."""
     from ogm_ppl.inference.variational.amortised import AmortisedGuide
 
     path = guide_path(corpus, directory)
     guide = AmortisedGuide.load(path)
     meta = guide.trained_for
-    parts = guide_corpora(corpus)
-    if meta.get("corpus") != corpus:
-        raise LeakageError(f"{path}: its record names corpus {meta.get('corpus')!r}, not {corpus!r}")
-    records = {corpus: meta} if len(parts) == 1 else meta.get("corpora")
-    if not isinstance(records, dict) or sorted(records) != sorted(parts):
-        raise LeakageError(f"{path}: its record does not list the training sets of {', '.join(parts)}")
-    for c in parts:
-        got = records[c].get("plan_names_sha256") if isinstance(records[c], dict) else None
-        want = names_digest(training_set(c) if train is None or len(parts) > 1 else train)
-        if got != want:
+    records = _source_records(corpus, meta, path)
+    if train is not None and len(records) == 1:
+        (c, rec), want = next(iter(records.items())), names_digest(train)
+        if rec.get("plan_names_sha256") != want:
             raise LeakageError(
-                f"{path}: its record of {c} (plans {str(got)[:12]}...) is not the training set of the {c} tables "
-                f"({want[:12]}...)"
+                f"{path}: its record of {c} (plans {str(rec.get('plan_names_sha256'))[:12]}...) is not the "
+                f"training set of the {c} tables ({want[:12]}...)"
             )
+        return guide
+    guide_training_sets(corpus, meta, path)
     return guide

@@ -43,7 +43,7 @@ from ogm_ppl._dtype import torch_threads
 from ogm_ppl.calibration.chains import run_guide, run_ogm, run_prior
 from ogm_ppl.calibration.errors import PriorNameError, SettingsError
 from ogm_ppl.calibration.heldout import TEST_CORPORA, TestMap, heldout_maps, plan_digests
-from ogm_ppl.calibration.leakage import GUIDE_PREFIX, check_heldout, guide_corpora, guide_for
+from ogm_ppl.calibration.leakage import GUIDE_PREFIX, GUIDE_SYM, check_heldout, guide_for, guide_training_sets
 from ogm_ppl.calibration.names import BIAS_SUFFIX, OGM_LABEL, OWN, load_bias_file, name_digest, prior_names
 from ogm_ppl.calibration.report import figures, fmt, tables_md
 from ogm_ppl.calibration.results import drop_changed, load_previous, row_key, rows_for, summary
@@ -167,6 +167,12 @@ def _calibrate(
     pairs += [(n + BIAS_SUFFIX, c) for n, c in pairs if n in bias]  # each biased prior beside its base
     guides = {c: guide_for(c, None if s.guide_dir is None else Path(s.guide_dir)) for c in s.guides or ()}
     pairs += [(GUIDE_PREFIX + c, c) for c in s.guides or ()]
+    # each guide's training maps, per corpus it was learned on, as its record names them (checked on loading)
+    guide_sets = {c: guide_training_sets(c.removesuffix(GUIDE_SYM), g.trained_for) for c, g in guides.items()}
+    proposal_sets: dict[str, set[str]] = {}
+    if s.kernel == "guided":
+        g = guide_for(s.proposal_guide, None if s.guide_dir is None else Path(s.guide_dir))
+        proposal_sets = guide_training_sets(s.proposal_guide.removesuffix(GUIDE_SYM), g.trained_for)
     try:  # builds every prior once: an unknown name or unreadable tables stop the run before any work
         digests = {name: name_digest(name, bias, guides) for name, _ in [(OGM_LABEL, None), *pairs]}
     except (ValueError, LookupError, OSError) as e:
@@ -205,10 +211,13 @@ def _calibrate(
         own = test in TEST_CORPORA and s.diagonal  # a plan set has no priors of its own: every one runs on it
         runs_of[test] = [(n, c) for n, c in pairs if not own or n.startswith(GUIDE_PREFIX) or c in (None, OWN, test)]
         for name, train in runs_of[test]:
-            is_guide = name.startswith(GUIDE_PREFIX)
-            proposing = guide_corpora(s.proposal_guide) if s.kernel == "guided" and not is_guide else []
-            for c in guide_corpora(name[len(GUIDE_PREFIX) :]) if is_guide else [train, *proposing]:
-                check_heldout(test, [t.plan for t in maps], c)
+            if name.startswith(GUIDE_PREFIX):
+                for c, train_set in guide_sets[name[len(GUIDE_PREFIX) :]].items():
+                    check_heldout(test, [t.plan for t in maps], c, train_set)
+            else:
+                check_heldout(test, [t.plan for t in maps], train)
+                for c, train_set in proposal_sets.items():  # the guided sampler's guide, as its record names it
+                    check_heldout(test, [t.plan for t in maps], c, train_set)
     for test, maps in test_sets:
         _say(progress, f"[{test}] {len(maps)} held-out maps: " + ", ".join(f"{t.name} {t.truth.shape}" for t in maps))
         for t in maps:

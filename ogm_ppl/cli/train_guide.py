@@ -3,6 +3,7 @@
     ogm-ppl train-guide --corpus houseexpo --range-cells 400 --sigma 0.5 --out guides/guide_houseexpo.npz
     ogm-ppl train-guide --plan-files my_plans/ --pixel-size 0.05 --range-m 8 --out my_guide.npz
     ogm-ppl train-guide --corpus ipa --steps 20 --examples 16 --val 4 --out /tmp/g.npz        # a smoke run
+    ogm-ppl train-guide --corpus houseexpo-full r2v schools ipa --sample 3000 --name real --ship
 
 A command module of the ``ogm-ppl`` command line: :func:`add_parser` adds the subcommand, :func:`run` runs it
 (exit status 0 when the guide is written, 130 when stopped by Ctrl-C with a checkpoint kept). Bad options raise
@@ -22,7 +23,8 @@ __all__ = ["NAME", "add_arguments", "add_parser", "run", "settings_from_args", "
 NAME = "train-guide"
 
 _DESCRIPTION = """\
-Train the amortised guide q(m | z) on the training plans of floor-plan corpora (--corpus), on plan files of
+Train the amortised guide q(m | z) on the training plans of floor-plan corpora (--corpus: the plans their
+shipped tables counted, or with --sample N a random N of each one's training split), on plan files of
 one's own (--plan-files: ROS map YAMLs, images, HouseExpo JSON) or both, scanned by the simulator with the
 sensor given (range, noise, beams, stops or a driven route): the posterior predictive with those maps as the
 prior. Every fifth plan of each source validates: it picks the step kept and fits a temperature. Checkpoints
@@ -41,7 +43,20 @@ def add_arguments(p: argparse.ArgumentParser, *, out_required: bool = True) -> N
         choices=CORPORA,
         default=[],
         help="corpus, or several: one guide learned on all their tables' training plans (windows shared evenly; "
-        "named C1+C2, e.g. guide:houseexpo+ipa)",
+        "named C1+C2, e.g. guide:houseexpo+ipa, or --name)",
+    )
+    src.add_argument(
+        "--sample",
+        type=int,
+        default=None,
+        metavar="N",
+        help="a random N of each corpus's training split instead of its tables' plans (all of a smaller one)",
+    )
+    src.add_argument("--sample-seed", type=int, default=0, help="the seed of --sample (0)")
+    src.add_argument(
+        "--name",
+        default=None,
+        help="the guide's name (guide:NAME; default the corpora joined, C1+C2); its record lists the corpora",
     )
     src.add_argument(
         "--plan-files",
@@ -126,6 +141,9 @@ def settings_from_args(args: argparse.Namespace) -> GuideTrainingSettings:
         corpus=tuple(args.corpus),
         plan_files=tuple(args.plan_files),
         pixel_size=args.pixel_size,
+        sample=args.sample,
+        sample_seed=args.sample_seed,
+        name=args.name,
         examples=args.examples,
         val=args.val,
         window=args.window,
@@ -152,10 +170,11 @@ def settings_from_args(args: argparse.Namespace) -> GuideTrainingSettings:
 
 
 def shipped_path(settings: GuideTrainingSettings) -> Path:
-    """Where ``--ship`` writes: the package's fitted guide of the settings' sources (``guide_C1+C2.npz``)."""
-    from ogm_ppl.calibration.leakage import GUIDE_JOIN, guide_path
+    """Where ``--ship`` writes: the package's fitted guide of the settings' name (``guide_C1+C2.npz``,
+    ``guide_NAME.npz``)."""
+    from ogm_ppl.calibration.leakage import guide_path
 
-    return guide_path(GUIDE_JOIN.join(settings.sources))
+    return guide_path(settings.label)
 
 
 def add_parser(sub: argparse._SubParsersAction) -> None:

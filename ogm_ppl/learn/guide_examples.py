@@ -13,9 +13,9 @@ temperature are measured on, thesis Section 5.2.3). Three ways to scan:
   cropped from its features;
 * :func:`driven_scans`: that route driven, a pose every ``S`` cells of path scanning ``fov`` degrees ahead.
 
-A :class:`MapSource` names the maps of one source and reads them: a corpus's tables' training set
-(:func:`corpus_source`, :func:`~ogm_ppl.calibration.leakage.training_set`), or plan files of one's own
-(:func:`files_source`). :func:`split_names` holds every fifth name out as a validation map.
+A :class:`MapSource` names the maps of one source and reads them: a corpus's tables' training set or a
+random sample of its training split (:func:`corpus_source`, :func:`~ogm_ppl.calibration.leakage.guide_plans`),
+or plan files of one's own (:func:`files_source`). :func:`split_names` holds every fifth name out as a validation map.
 """
 
 from __future__ import annotations
@@ -29,7 +29,7 @@ import numpy as np
 import torch
 
 from ogm_ppl.calibration.heldout import choose_window
-from ogm_ppl.calibration.leakage import training_set
+from ogm_ppl.calibration.leakage import guide_plans, training_set
 from ogm_ppl.datasets import floorplans as fp
 from ogm_ppl.datasets.stop_and_scan import stop_and_scan
 from ogm_ppl.grid import Grid
@@ -143,10 +143,39 @@ def load_map(corpus: str, name: str) -> TrainingMap:
     return TrainingMap(p.occupancy, p.known, p.resolution)
 
 
-def corpus_source(corpus: str) -> MapSource:
-    """The training set of the shipped tables of ``corpus`` (rebuilt from their provenance)."""
-    record = {"tables_provenance": f"{FITTED_DIR.name}/prior_{corpus}.json"}
-    return MapSource(corpus, tuple(sorted(training_set(corpus))), lambda name: load_map(corpus, name), record)
+def corpus_source(corpus: str, sample: int | None = None, seed: int = 0) -> MapSource:
+    """The maps of ``corpus`` a guide learns from (:func:`~ogm_ppl.calibration.leakage.guide_plans`): the
+    training set of its shipped tables (rebuilt from their provenance), or with ``sample`` a random ``sample``
+    of its training split drawn with ``seed``. The record says which (``split``, ``sample``). ``houseexpo-full``
+    plans are read from one pass over its file, made on the first plan asked for (:func:`_outline_loader`)."""
+    names, record = guide_plans(corpus, sample, seed)
+    if sample is None:
+        record["tables_provenance"] = f"{FITTED_DIR.name}/prior_{corpus}.json"
+    if corpus == "houseexpo-full":
+        load = _outline_loader(names)
+    else:
+
+        def load(name: str) -> TrainingMap:
+            return load_map(corpus, name)
+
+    return MapSource(corpus, tuple(names), load, record)
+
+
+def _outline_loader(names: Sequence[str]) -> Callable[[str], TrainingMap]:
+    """A loader of ``houseexpo-full`` plans that reads the outlines of all ``names`` in one pass over the
+    corpus file when the first plan is asked for (a few kB each), then rasterises each plan asked for from its
+    outline (:func:`~ogm_ppl.datasets.floorplans.plan_from_outline`), instead of a pass over the file a plan."""
+    from ogm_ppl.datasets.floorplans import houseexpo_full
+
+    outlines: dict[str, np.ndarray] = {}
+
+    def load(name: str) -> TrainingMap:
+        if not outlines:
+            outlines.update(houseexpo_full.records(names))
+        p = fp.plan_from_outline(name, outlines[name])
+        return TrainingMap(p.occupancy, p.known, p.resolution)
+
+    return load
 
 
 def files_source(paths: Sequence[Path], pixel_size: float | None = None) -> MapSource:

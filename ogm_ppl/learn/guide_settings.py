@@ -24,6 +24,7 @@ import dataclasses
 import json
 import math
 import os
+import re
 import shlex
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -34,12 +35,16 @@ __all__ = [
     "CORPORA",
     "FILES_SOURCE",
     "MAX_EXAMPLE_BYTES",
+    "NAME_PATTERN",
     "GuideSettingsError",
     "GuideTrainingSettings",
 ]
 
-#: the floor-plan corpora a guide can be trained on (their training plans, as the shipped tables learned them)
-CORPORA: tuple[str, ...] = ("houseexpo", "ipa", "dungeon", "generated")
+#: the corpora a guide can be trained on: the thesis's four first, then the larger floor-plan corpora (each
+#: one's training split only: :func:`~ogm_ppl.calibration.leakage.guide_plans`)
+CORPORA: tuple[str, ...] = ("houseexpo", "ipa", "dungeon", "generated", "houseexpo-full", "r2v", "schools")
+#: a guide's own name (``--name``): lower-case letters, digits, ``-`` and ``_``
+NAME_PATTERN = re.compile(r"^[a-z0-9][a-z0-9_-]{0,39}$")
 #: the label of the plan files of one's own among a guide's sources (and its record's ``corpus``)
 FILES_SOURCE = "files"
 #: metres per cell of the training maps: the corpora's plans and plan files are read at 0.05 m a cell
@@ -81,10 +86,14 @@ class GuideTrainingSettings:
     """Every option of a corpus guide's training (``ogm-ppl train-guide``; the flag of field ``f_g`` is
     ``--f-g``).
 
-    Maps: ``corpus`` (names of :data:`CORPORA`; their tables' training plans) and ``plan_files`` (plan files or
-    folders of them, :func:`~ogm_ppl.datasets.plan_files.plan_files`; ``pixel_size`` metres per pixel for
-    images). Each source's plans, sorted by name, are split: every fifth one a validation plan. ``examples``
-    training and ``val`` validation windows of ``window x window`` cells are shared evenly between the sources.
+    Maps: ``corpus`` (names of :data:`CORPORA`; their tables' training plans, or with ``sample = N`` a random
+    ``N`` of each corpus's training split, all of a corpus that holds fewer, drawn with ``sample_seed``:
+    :func:`~ogm_ppl.calibration.leakage.guide_plans`) and ``plan_files`` (plan files or folders of them,
+    :func:`~ogm_ppl.datasets.plan_files.plan_files`; ``pixel_size`` metres per pixel for images). Each
+    source's plans, sorted by name, are split: every fifth one a validation plan. ``examples`` training and
+    ``val`` validation windows of ``window x window`` cells are shared evenly between the sources. ``name``:
+    the guide's name (``guide:NAME``; default the sources joined, ``C1+C2``), its corpora then listed in its
+    record only.
 
     Sensor: ``poses`` stops (0 with ``scan_whole_map``: the route planner's own number), ``beams`` beams a
     full turn, range ``range_cells`` (or ``range_m`` metres at :data:`CELL_M` a cell), Gaussian range noise
@@ -104,6 +113,9 @@ class GuideTrainingSettings:
     corpus: tuple[str, ...] = ()
     plan_files: tuple[Path, ...] = ()
     pixel_size: float | None = None
+    sample: int | None = None
+    sample_seed: int = 0
+    name: str | None = None
     examples: int = 600
     val: int = 60
     window: int = 96
@@ -158,6 +170,24 @@ class GuideTrainingSettings:
             raise bad("corpus", f"--corpus names a corpus twice: {' '.join(self.corpus)}")
         if not self.sources:
             raise bad("corpus", "no maps to train on: give --corpus, --plan-files or both")
+        n = self.sample
+        if n is not None and (isinstance(n, bool) or not isinstance(n, int) or n < 1):
+            raise bad("sample", f"--sample must be a whole number of at least 1 plan, got {self.sample!r}")
+        if self.sample is not None and not self.corpus:
+            raise bad("sample", "--sample draws from the corpora's training plans: it needs --corpus")
+        if isinstance(self.sample_seed, bool) or not isinstance(self.sample_seed, int) or self.sample_seed < 0:
+            raise bad("sample_seed", f"--sample-seed must be a whole number of at least 0, got {self.sample_seed!r}")
+        if self.sample is None and self.sample_seed != 0:
+            raise bad("sample_seed", "--sample-seed needs --sample")
+        if self.name is not None:
+            if not isinstance(self.name, str) or not NAME_PATTERN.match(self.name):
+                raise bad(
+                    "name",
+                    f"--name must be 1-40 lower-case letters, digits, '-' or '_' (starting with a letter or digit), "
+                    f"got {self.name!r}",
+                )
+            if self.name in CORPORA and self.sources != (self.name,):
+                raise bad("name", f"--name {self.name!r} is a corpus's name: a guide named so is learned on it alone")
         for k in _INT_AT_LEAST_1:
             v = getattr(self, k)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
@@ -198,6 +228,11 @@ class GuideTrainingSettings:
     def sources(self) -> tuple[str, ...]:
         """The map sources in order: the corpora, then :data:`FILES_SOURCE` for the plan files (if any)."""
         return self.corpus + ((FILES_SOURCE,) if self.plan_files else ())
+
+    @property
+    def label(self) -> str:
+        """The guide's name: ``name``, else the sources joined by ``+`` (``houseexpo+ipa``)."""
+        return self.name if self.name is not None else "+".join(self.sources)
 
     @property
     def example_bytes(self) -> int:

@@ -43,7 +43,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from ogm_ppl.calibration.leakage import GUIDE_JOIN, names_digest
+from ogm_ppl.calibration.leakage import names_digest
 from ogm_ppl.exceptions import CheckpointError
 from ogm_ppl.inference.variational.amortised import AmortisedGuide
 from ogm_ppl.io import atomic_write, atomic_write_text
@@ -233,7 +233,7 @@ def _load_checkpoint(path: Path, key: str, loop: _Loop) -> tuple[int, float]:
 
 # ------------------------------------------------------------------ training
 def _sources(s: GuideTrainingSettings) -> list[MapSource]:
-    out = [corpus_source(c) for c in s.corpus]
+    out = [corpus_source(c, s.sample, s.sample_seed) for c in s.corpus]
     if s.plan_files:
         out.append(files_source(s.plan_files, s.pixel_size))
     return out
@@ -279,7 +279,7 @@ def train_corpus_guide(
     command = s.command(out) if command is None else command
     torch.manual_seed(s.seed)
     sources = _sources(s)
-    name = GUIDE_JOIN.join(src.label for src in sources)
+    name = s.label
     t0 = time.perf_counter()
     tr: list[Example] = []
     val: list[Example] = []
@@ -404,7 +404,7 @@ def _record(
     return {
         "kind": GUIDE_KIND,
         "corpus": name,
-        **(records[name] if len(records) == 1 else {"corpora": records}),
+        **(records[name] if name in records and len(records) == 1 else {"corpora": records}),
         "scans": {
             "whole_map": bool(s.scan_whole_map),
             "poses": s.poses,

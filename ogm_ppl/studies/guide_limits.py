@@ -120,8 +120,9 @@ def guide_limits(
     for entry in guides:  # NAME, or NAME=DIR: the guide NAME read from DIR (another training of it)
         name, _, folder = entry.partition("=")
         loaded[entry] = C.guide_for(name, Path(folder) if folder else (None if guide_dir is None else Path(guide_dir)))
-        for c in C.guide_corpora(name):
-            C.check_heldout(test, [t.plan for t in maps], c)
+        trained = C.guide_training_sets(name.removesuffix(C.GUIDE_SYM), loaded[entry].trained_for)
+        for c, train in trained.items():  # the training maps the guide's record names, per corpus
+            C.check_heldout(test, [t.plan for t in maps], c, train)
     t0 = time.perf_counter()
     rows: list[dict] = []
     logits: dict[str, list[np.ndarray]] = {g: [] for g in loaded}

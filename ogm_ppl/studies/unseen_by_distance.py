@@ -151,14 +151,18 @@ def _bins(d: np.ndarray, unseen: np.ndarray) -> list[np.ndarray]:
     return [unseen & (d > EDGES[i]) & (d <= EDGES[i + 1]) for i in range(len(EDGES) - 1)]
 
 
-def _maps(test: str, s: DistanceSettings, train_corpora: Sequence[str | None]) -> list[calibration.TestMap]:
-    """The test set's maps, checked against each training corpus (``None``: a prior learned from nothing)."""
+def _maps(
+    test: str, s: DistanceSettings, train_corpora: Sequence[str | None], train_sets: Sequence[set[str] | None] = ()
+) -> list[calibration.TestMap]:
+    """The test set's maps, checked against each training corpus (``None``: a prior learned from nothing) and,
+    where given, its training maps (``train_sets[i]``, default the corpus's tables' training set)."""
     if s.plan_files and test == s.plan_set:
         maps = calibration.plan_set_maps(s.protocol(), s.plans)
     else:
         maps = calibration.heldout_maps(test, s.maps_per_corpus, s.protocol().window)
-    for corpus in train_corpora:  # never a map of the method's training plans
-        calibration.check_heldout(test, [t.plan for t in maps], corpus)
+    sets = list(train_sets) + [None] * (len(train_corpora) - len(train_sets))
+    for corpus, train in zip(train_corpora, sets, strict=True):  # never a map of the method's training plans
+        calibration.check_heldout(test, [t.plan for t in maps], corpus, train)
     return maps
 
 
@@ -215,7 +219,8 @@ def guide_by_distance(test: str, guide: Any, name: str, settings: DistanceSettin
     from ogm_ppl.priors import IndependentPrior
 
     acc = _sums(len(EDGES) - 1)
-    maps = _maps(test, settings, calibration.guide_corpora(name))
+    trained = calibration.guide_training_sets(name.removesuffix(calibration.GUIDE_SYM), guide.trained_for)
+    maps = _maps(test, settings, list(trained), list(trained.values()))
     proto = settings.protocol()
     for t in maps:
         scene = calibration.make_scene(t, proto)

@@ -221,18 +221,20 @@ def test_a_guide_of_two_corpora_records_each_training_set(cal, tmp_path, monkeyp
 
 
 class _FakeGuide:
-    """What the calibration run reads of a guide before it scores one: its weights (for the rows' digest) and
-    ``symmetrize``."""
+    """What the calibration run reads of a guide before it scores one: its weights (for the rows' digest),
+    ``symmetrize`` and its record."""
 
     symmetrize = False
     net = torch.nn.Linear(1, 1)
+    trained_for: dict = {}
 
 
 def test_calibration_checks_a_two_corpus_guide_against_each_corpus(cal, monkeypatch, tmp_path):
     """The leakage check runs for every corpus a guide was learned on: a test plan that is a training plan of
     either corpus is refused."""
     seen: list[tuple] = []
-    monkeypatch.setattr(run_module, "check_heldout", lambda test, plans, train: seen.append((test, train)))
+    monkeypatch.setattr(run_module, "check_heldout", lambda test, plans, train, *_: seen.append((test, train)))
+    monkeypatch.setattr(run_module, "guide_training_sets", lambda name, meta: {c: set() for c in name.split("+")})
     monkeypatch.setattr(leakage, "load_corpus_guide", lambda c, directory=None: _FakeGuide())
     monkeypatch.setattr(run_module, "make_scene", lambda t, args: (_ for _ in ()).throw(SystemExit("stop")))
     with pytest.raises(SystemExit, match="stop"):
@@ -252,7 +254,8 @@ def test_a_symmetrised_guide_row_loads_the_guide_symmetrised_and_checks_its_corp
         loaded.append((c, _FakeGuide()))
         return loaded[-1][1]
 
-    monkeypatch.setattr(run_module, "check_heldout", lambda test, plans, train: seen.append((test, train)))
+    monkeypatch.setattr(run_module, "check_heldout", lambda test, plans, train, *_: seen.append((test, train)))
+    monkeypatch.setattr(run_module, "guide_training_sets", lambda name, meta: {c: set() for c in name.split("+")})
     monkeypatch.setattr(leakage, "load_corpus_guide", load)
     monkeypatch.setattr(run_module, "make_scene", lambda t, args: (_ for _ in ()).throw(SystemExit("stop")))
     assert cal.guide_corpora("ipa+dungeon@sym") == ["ipa", "dungeon"]
@@ -335,6 +338,12 @@ def test_several_corpora_refuse_too_few_windows_to_share():
     [
         ({"corpus": ()}, "corpus", "give --corpus, --plan-files or both"),
         ({"corpus": ("ipaa",)}, "corpus", "'ipaa' is not a corpus; choose from houseexpo"),
+        ({"sample": 0}, "sample", "--sample must be a whole number of at least 1 plan, got 0"),
+        ({"corpus": (), "plan_files": ("x",), "sample": 5}, "sample", "it needs --corpus"),
+        ({"sample_seed": 3}, "sample_seed", "--sample-seed needs --sample"),
+        ({"sample": 5, "sample_seed": -1}, "sample_seed", "--sample-seed must be a whole number of at least 0"),
+        ({"name": "Real+1"}, "name", "--name must be 1-40 lower-case letters"),
+        ({"name": "r2v"}, "name", "'r2v' is a corpus's name: a guide named so is learned on it alone"),
         ({"steps": 0}, "steps", "--steps must be at least 1, got 0"),
         ({"window": 2.5}, "window", "--window must be at least 1"),
         ({"poses": 0}, "poses", "--poses must be at least 1"),

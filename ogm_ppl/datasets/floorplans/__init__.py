@@ -116,6 +116,7 @@ __all__ = [
     "validation_plans",
     "load_plan",
     "iter_plans",
+    "plan_from_outline",
     "plan_image_path",
     "rasterise",
 ]
@@ -369,8 +370,7 @@ def iter_plans(
     f = _factor(corpus, resolution)
     if corpus == "houseexpo-full":
         for n, verts in houseexpo_full.records(names, root):
-            occ_px, free_px = houseexpo_full.checked_pixels(n, verts, root)
-            yield _plan(corpus, n, *rasterise(occ_px, free_px, f, margin, wall_cells, outside), resolution, root)
+            yield plan_from_outline(n, verts, resolution, margin, wall_cells, outside, root)
         return
     if corpus == "dungeon":
         raw = dungeon_bytes(names, root)
@@ -382,6 +382,26 @@ def iter_plans(
     for n in names:
         occ_px, free_px = plan_pixels(corpus, n, root)
         yield _plan(corpus, n, *rasterise(occ_px, free_px, f, margin, wall_cells, outside), resolution, root)
+
+
+def plan_from_outline(
+    name: str,
+    verts: np.ndarray,
+    resolution: float | str | None = "default",
+    margin: int | None = 20,
+    wall_cells: int = 2,
+    outside: str = "occupied",
+    root=None,
+) -> FloorPlan:
+    """The ``houseexpo-full`` plan ``name`` from its outline ``verts`` (``V x 2`` metres, as
+    :func:`~ogm_ppl.datasets.floorplans.houseexpo_full.records` yields it), rasterised as :func:`load_plan`
+    does: to read many plans without a pass over the corpus file for each."""
+    corpus = "houseexpo-full"
+    if resolution == "default":
+        resolution = DEFAULT_RESOLUTION[corpus]
+    f = _factor(corpus, resolution)
+    occ_px, free_px = houseexpo_full.checked_pixels(name, verts, root)
+    return _plan(corpus, name, *rasterise(occ_px, free_px, f, margin, wall_cells, outside), resolution, root)
 
 
 def _vector_cells(corpus: str, name: str, resolution: float, thickness: float, root) -> tuple[np.ndarray, np.ndarray]:

@@ -42,7 +42,8 @@ def corpus_guide_path(corpus: str) -> Path:
 
 def corpus_guides() -> list[str]:
     """The corpora with a shipped corpus guide (:func:`corpus_guide`)."""
-    return sorted(p.stem.removeprefix("guide_") for p in SHIPPED_GUIDE.parent.glob("guide_*.npz") if p != SHIPPED_GUIDE)
+    paths = SHIPPED_GUIDE.parent.glob("guide_*.npz")  # a training's checkpoint (.ckpt.npz) beside them is none
+    return sorted(p.stem.removeprefix("guide_") for p in paths if p != SHIPPED_GUIDE and not p.stem.endswith(".ckpt"))
 
 
 def unknown_corpus_message(corpus: str) -> str:
