@@ -50,7 +50,7 @@ def test_an_update_term_whose_table_grows_with_its_cube_is_refused_before_it_is_
             "ogm",
             r"traditional OGM on a 2501 x 3001 grid \(building the update term's table \(Moravec\) of [\d,]+ x "
             r"[\d,]+ float64 entries, a ray's most cells up to the sensor's maximum range of [\d.]+ m, and a copy "
-            r"of it; 9 bytes a cell\) "
+            r"of it; \d+ bytes a cell with \d+ thread\(s\)\) "
             r"needs about [\d.]+ MiB, more than the 64\.0 MiB",
         ),
     ],

@@ -240,7 +240,7 @@ def evidence_grid_from_scans(
         f"traditional OGM on a {' x '.join(map(str, grid.shape))} grid (building the update term's table "
         f"({type(delta).__name__}) "
         f"of {cap:,} x {cap + 1:,} float64 entries, a ray's most cells up to the sensor's maximum range of "
-        f"{float(scans.max_range):g} m, and a copy of it; {9 * parts + 8} bytes a cell for {parts} part(s))",
+        f"{float(scans.max_range):g} m, and a copy of it; {9 * parts + 8} bytes a cell with {parts} thread(s))",
         "use a coarser resolution or a shorter usable range",
     )
     with torch.no_grad():
