@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ogm_ppl._dtype import torch_threads
-from ogm_ppl.calibration.chains import run_guide, run_ogm, run_prior
+from ogm_ppl.calibration.chains import proposal_guide, run_guide, run_ogm, run_prior
 from ogm_ppl.calibration.errors import PriorNameError, SettingsError
 from ogm_ppl.calibration.heldout import TEST_CORPORA, TestMap, heldout_maps, plan_digests
 from ogm_ppl.calibration.leakage import GUIDE_PREFIX, check_heldout, guide_corpora, guide_for
@@ -167,6 +167,11 @@ def _calibrate(
     pairs += [(n + BIAS_SUFFIX, c) for n, c in pairs if n in bias]  # each biased prior beside its base
     guides = {c: guide_for(c, None if s.guide_dir is None else Path(s.guide_dir)) for c in s.guides or ()}
     pairs += [(GUIDE_PREFIX + c, c) for c in s.guides or ()]
+    if s.kernel == "guided":  # the proposing guide is read before any work too (kept for the chains)
+        try:
+            proposal_guide(s.proposal_guide, s.guide_dir)
+        except (ValueError, OSError) as e:
+            raise SettingsError("proposal_guide", str(e)) from None
     try:  # builds every prior once: an unknown name or unreadable tables stop the run before any work
         digests = {name: name_digest(name, bias, guides) for name, _ in [(OGM_LABEL, None), *pairs]}
     except (ValueError, LookupError, OSError) as e:
