@@ -147,7 +147,28 @@ def _add_delta_setting(k: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``fit-prior``; prints the files written. Option errors raise :class:`~ogm_ppl.learn.FitOptionError`
-    (a ``ValueError``: the command line reports it in one line naming the option and exits 2)."""
+    (a ``ValueError``: the command line reports it in one line naming the option and exits 2), its option
+    spelled as the command line spells it (``check_size`` -> ``--check-size``) where it is one of the kind's."""
+    from ogm_ppl.learn import FitOptionError
+
+    try:
+        return _run(args)
+    except FitOptionError as e:
+        flag = _flag(args, e.option)
+        if flag is None:
+            raise
+        raise FitOptionError(flag, str(e).removeprefix(f"{e.option}: ")) from None
+
+
+def _flag(args: argparse.Namespace, option: str) -> str | None:
+    """``--OPTION`` (dashes for underscores, a trailing one dropped: ``lambda_`` -> ``--lambda``) where ``option``
+    is an option of this command line (a destination of ``args``, or ``s_OPTION`` for the settings' fields)."""
+    if not (hasattr(args, option) or hasattr(args, f"s_{option}")):
+        return None
+    return "--" + option.replace("_", "-").rstrip("-")
+
+
+def _run(args: argparse.Namespace) -> int:
     from ogm_ppl.learn import FieldSettings, fit_backoff, fit_delta_setting, fit_deltas, fit_field, fit_tables
 
     if args.kind in PROTOCOL_KINDS:
