@@ -36,7 +36,7 @@ def test_a_net_fields_memo_filled_by_sweeps_leaves_its_digest_as_it_was():
     prior = prior_by_name("net:houseexpo", (8, 8))
     before = prior_digest(prior, 64)
     bundle = prior.compiled()
-    for name in bundle.cache_fields:
+    for name in bundle.cache_fields():
         getattr(bundle, name)[:] = 7
     assert prior_digest(prior, 64) == before
     assert prior_digest(prior_by_name("net:houseexpo@0.5", (8, 8)), 64) != before
