@@ -91,6 +91,9 @@ def test_a_grid_of_other_cells_than_the_tables_were_counted_on_warns():
 
     with pytest.warns(FittedSettingWarning, match="learned on plans at 0.05 m a cell .* grid of 0.1 m a cell"):
         prior_by_name("patch3:houseexpo", Grid((12, 12), resolution=0.1))
+    with pytest.warns(FittedSettingWarning, match=r"or fit a net field on plan files read at 0\.1 m") as rec:
+        prior_by_name("net:houseexpo", Grid((12, 12), resolution=0.1))  # a net field is fitted, not counted
+    assert "count tables" not in str(rec[0].message)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         prior_by_name("patch3:houseexpo", Grid((12, 12), resolution=0.05))
