@@ -158,6 +158,8 @@ def prior_by_name(name: str, shape, tables: PriorTables | None = None) -> MapPri
     """
     kind, corpus, at, modifier = split_prior_name(name)
     factory = _REGISTRY.get(kind, name)
+    if kind == "net" and tables is None and (corpus or DEFAULT_CORPUS) not in net_corpora():
+        raise _no_net_field(corpus or DEFAULT_CORPUS)  # the net fits shipped, not the corpora with tables
     beta = _exponent(name, kind, corpus, modifier, tables) if at else 1.0
     if kind != "independent":  # (which keeps only the corpus's occupied share)
         _check_resolution(name, shape, corpus, tables, kind)
@@ -412,11 +414,17 @@ def _net(shape, tables) -> MapPrior:
         )
     corpus = tables.corpus or DEFAULT_CORPUS
     if corpus not in net_corpora():
-        raise ValueError(
-            f"prior 'net:{corpus}': no shipped net field for corpus {corpus!r} ({net_path(corpus)} does not exist); "
-            f"shipped: {', '.join(net_corpora()) or 'none'} (ogm-ppl fit-prior net-field --corpus C --ship)"
-        )
+        raise _no_net_field(corpus)
     return net_from_file(net_path(corpus), shape)
+
+
+def _no_net_field(corpus: str) -> ValueError:
+    from ogm_ppl.priors.net_field import net_path
+
+    return ValueError(
+        f"prior 'net:{corpus}': no shipped net field for corpus {corpus!r} ({net_path(corpus)} does not exist); "
+        f"shipped: {', '.join(net_corpora()) or 'none'} (ogm-ppl fit-prior net-field --corpus C --ship)"
+    )
 
 
 for _kind, _factory in (

@@ -140,6 +140,9 @@ def test_net_names_refuse_a_corpus_without_a_fit_tables_and_1d_grids():
     missing = next(c for c in available_tables() if c not in net_corpora())
     with pytest.raises(ValueError, match=f"no shipped net field for corpus '{missing}'.*shipped: .*houseexpo"):
         prior_by_name(f"net:{missing}", (8, 8))
+    # a corpus with no tables either: the net fits shipped are listed, not the corpora with tables
+    with pytest.raises(ValueError, match=r"no shipped net field for corpus 'nowhere'.*shipped: houseexpo"):
+        prior_by_name("net:nowhere@0.5", (8, 8))
     with pytest.raises(ValueError, match="fitted net field, not count tables"):
         prior_by_name("net:houseexpo", (8, 8), tables=tables_by_name("houseexpo"))
     with pytest.raises(ValueError, match="2D patch prior"):
