@@ -28,6 +28,7 @@ import sys
 from pathlib import Path
 
 from ogm_ppl.cli._fit_kinds import KINDS as PROTOCOL_KINDS
+from ogm_ppl.cli._fit_kinds import sample_seed
 
 NAME = "fit-prior"
 PLAN_KINDS = ("tables", "backoff", "field")
@@ -67,7 +68,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         k.add_argument("--out", type=Path, required=True, help="the folder the fitted files go to")
         k.add_argument("--limit", type=int, default=None, help="the first N training plans (default: the corpus's)")
         k.add_argument("--sample", type=int, default=None, help="a random N of the corpus's training plans")
-        k.add_argument("--sample-seed", type=int, default=0, help="the seed of --sample (0)")
+        k.add_argument("--sample-seed", type=int, default=None, help="the seed of --sample (0)")
         k.add_argument("--pixel-size", type=float, default=None, help="metres per pixel of plan images")
         k.add_argument("--resolution", type=float, default=0.05, help="metres per cell of plan files (0.05)")
         k.add_argument("--name", default=None, help="the files' name part (default the corpus, or 'plans')")
@@ -218,8 +219,9 @@ def _run(args: argparse.Namespace) -> int:
     from ogm_ppl.learn import load_training_plans
 
     source = args.corpus if args.corpus is not None else list(args.plan_files)
+    seed = sample_seed(args)  # refused without --sample
     if args.sample is not None:
-        source = load_training_plans(source, limit=args.limit, sample=args.sample, sample_seed=args.sample_seed)
+        source = load_training_plans(source, limit=args.limit, sample=args.sample, sample_seed=seed)
     common = dict(
         limit=None if args.sample is not None else args.limit,
         pixel_size=args.pixel_size,
