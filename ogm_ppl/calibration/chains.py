@@ -51,6 +51,7 @@ __all__ = [
     "default_patch",
     "gibbs_kernel",
     "guided_kernel",
+    "proposal_guide",
     "run_prior_chains",
     "run_guide",
     "run_ogm",
@@ -144,12 +145,12 @@ def guided_kernel(model: OccupancyModel, patch: Patch, init: str, options: Any) 
     three starts test whether its moves carry every chain to the same place). The posterior is stationary."""
     from ogm_ppl.inference.mcmc.guided import GuidedGibbs
 
-    guide = _proposal_guide(options.proposal_guide, getattr(options, "guide_dir", None))
+    guide = proposal_guide(options.proposal_guide, getattr(options, "guide_dir", None))
     return GuidedGibbs(gibbs_kernel(model, patch, init), guide, block=GUIDED_BLOCK, p_guide=GUIDED_P, init="base")
 
 
 @lru_cache(maxsize=4)
-def _proposal_guide(name: str, directory: str | None):
+def proposal_guide(name: str, directory: str | None):
     """The ``guided`` sampler's guide (:func:`~ogm_ppl.calibration.leakage.guide_for`), read once a run."""
     from pathlib import Path
 

@@ -40,7 +40,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 from ogm_ppl._dtype import torch_threads
-from ogm_ppl.calibration.chains import run_guide, run_ogm, run_prior
+from ogm_ppl.calibration.chains import proposal_guide, run_guide, run_ogm, run_prior
 from ogm_ppl.calibration.errors import PriorNameError, SettingsError
 from ogm_ppl.calibration.heldout import TEST_CORPORA, TestMap, heldout_maps, plan_digests
 from ogm_ppl.calibration.leakage import GUIDE_PREFIX, GUIDE_SYM, check_heldout, guide_for, guide_training_sets
@@ -170,8 +170,11 @@ def _calibrate(
     # each guide's training maps, per corpus it was learned on, as its record names them (checked on loading)
     guide_sets = {c: guide_training_sets(c.removesuffix(GUIDE_SYM), g.trained_for) for c, g in guides.items()}
     proposal_sets: dict[str, set[str]] = {}
-    if s.kernel == "guided":
-        g = guide_for(s.proposal_guide, None if s.guide_dir is None else Path(s.guide_dir))
+    if s.kernel == "guided":  # the proposing guide is read before any work too (kept for the chains)
+        try:
+            g = proposal_guide(s.proposal_guide, s.guide_dir)
+        except (ValueError, OSError) as e:
+            raise SettingsError("proposal_guide", str(e)) from None
         proposal_sets = guide_training_sets(s.proposal_guide.removesuffix(GUIDE_SYM), g.trained_for)
     try:  # builds every prior once: an unknown name or unreadable tables stop the run before any work
         digests = {name: name_digest(name, bias, guides) for name, _ in [(OGM_LABEL, None), *pairs]}

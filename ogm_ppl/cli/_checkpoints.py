@@ -138,7 +138,7 @@ def _online_guide_map(args, params, problem: MapProblem, times: dict) -> tuple[n
     setting checked on the first scan's rays; the final map is the guide's map of every scan to float32 rounding."""
     from ogm_ppl.inference.online import replay_guide
     from ogm_ppl.inference.online._replay import _one
-    from ogm_ppl.methods.amortised import load_guide
+    from ogm_ppl.methods.amortised import load_guide, set_symmetrize
     from ogm_ppl.models.occupancy import OccupancyModel
     from ogm_ppl.priors import IndependentPrior
     from ogm_ppl.raycast import raycast
@@ -148,6 +148,7 @@ def _online_guide_map(args, params, problem: MapProblem, times: dict) -> tuple[n
     first = _one(scans, int(np.flatnonzero(scans.valid.any(1))[0]))
     model = OccupancyModel(grid, raycast(grid, first), problem.sensor(), IndependentPrior(0.5, grid.num_cells))
     guide = load_guide(params.guide, model, noise_known=problem.sigma_cells is not None)
+    set_symmetrize(guide, params.symmetrize)  # refused by its name before the replay
     t0 = time.perf_counter()
     r = replay_guide(grid, scans, guide, symmetrize=params.symmetrize, snapshot_every=args.snapshots, progress=True)
     times["ray_cast_s"], times["map_s"] = None, time.perf_counter() - t0

@@ -224,6 +224,15 @@ _NET_HELP = {
 }
 
 
+def sample_seed(args: argparse.Namespace) -> int:
+    """``--sample-seed`` (default 0), refused without ``--sample``: it would pick nothing."""
+    from ogm_ppl.learn import FitOptionError
+
+    if args.sample_seed is not None and args.sample is None:
+        raise FitOptionError("sample_seed", "applies with --sample only (the seed of its random plans)")
+    return 0 if args.sample_seed is None else args.sample_seed
+
+
 def add_net_field(k: argparse.ArgumentParser) -> None:
     from dataclasses import fields
 
@@ -235,7 +244,7 @@ def add_net_field(k: argparse.ArgumentParser) -> None:
     src.add_argument("--plan-files", nargs="+", type=Path, metavar="PATH", help="plan files or folders of them")
     k.add_argument("--limit", type=int, default=None, help="the first N training plans (default: the corpus's)")
     k.add_argument("--sample", type=int, default=None, help="a random N of the corpus's training plans")
-    k.add_argument("--sample-seed", type=int, default=0, help="the seed of --sample (0)")
+    k.add_argument("--sample-seed", type=int, default=None, help="the seed of --sample (0)")
     k.add_argument("--pixel-size", type=float, default=None, help="metres per pixel of plan images")
     k.add_argument("--resolution", type=float, default=0.05, help="metres per cell of plan files (0.05)")
     k.add_argument("--name", default=None, help="the files' name part (default the corpus, or 'plans')")
@@ -258,8 +267,9 @@ def run_net_field(args: argparse.Namespace) -> Any:
     s = NetFieldSettings(**{f.name: getattr(args, f"s_{f.name}") for f in fields(NetFieldSettings)})
     out, name = args.out, args.name
     source = args.corpus if args.corpus is not None else list(args.plan_files)
+    seed = sample_seed(args)  # refused without --sample
     if args.sample is not None:  # a random subset of a corpus's training plans, recorded in the provenance
-        source = load_training_plans(source, limit=args.limit, sample=args.sample, sample_seed=args.sample_seed)
+        source = load_training_plans(source, limit=args.limit, sample=args.sample, sample_seed=seed)
     if args.ship:
         from ogm_ppl.priors.net_field import net_path
 

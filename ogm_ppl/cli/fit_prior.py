@@ -28,6 +28,7 @@ import sys
 from pathlib import Path
 
 from ogm_ppl.cli._fit_kinds import KINDS as PROTOCOL_KINDS
+from ogm_ppl.cli._fit_kinds import sample_seed
 
 NAME = "fit-prior"
 PLAN_KINDS = ("tables", "backoff", "field")
@@ -67,7 +68,7 @@ def add_parser(sub: argparse._SubParsersAction) -> None:
         k.add_argument("--out", type=Path, required=True, help="the folder the fitted files go to")
         k.add_argument("--limit", type=int, default=None, help="the first N training plans (default: the corpus's)")
         k.add_argument("--sample", type=int, default=None, help="a random N of the corpus's training plans")
-        k.add_argument("--sample-seed", type=int, default=0, help="the seed of --sample (0)")
+        k.add_argument("--sample-seed", type=int, default=None, help="the seed of --sample (0)")
         k.add_argument("--pixel-size", type=float, default=None, help="metres per pixel of plan images")
         k.add_argument("--resolution", type=float, default=0.05, help="metres per cell of plan files (0.05)")
         k.add_argument("--name", default=None, help="the files' name part (default the corpus, or 'plans')")
@@ -147,7 +148,28 @@ def _add_delta_setting(k: argparse.ArgumentParser) -> None:
 
 def run(args: argparse.Namespace) -> int:
     """Run ``fit-prior``; prints the files written. Option errors raise :class:`~ogm_ppl.learn.FitOptionError`
-    (a ``ValueError``: the command line reports it in one line naming the option and exits 2)."""
+    (a ``ValueError``: the command line reports it in one line naming the option and exits 2), its option
+    spelled as the command line spells it (``check_size`` -> ``--check-size``) where it is one of the kind's."""
+    from ogm_ppl.learn import FitOptionError
+
+    try:
+        return _run(args)
+    except FitOptionError as e:
+        flag = _flag(args, e.option)
+        if flag is None:
+            raise
+        raise FitOptionError(flag, str(e).removeprefix(f"{e.option}: ")) from None
+
+
+def _flag(args: argparse.Namespace, option: str) -> str | None:
+    """``--OPTION`` (dashes for underscores, a trailing one dropped: ``lambda_`` -> ``--lambda``) where ``option``
+    is an option of this command line (a destination of ``args``, or ``s_OPTION`` for the settings' fields)."""
+    if not (hasattr(args, option) or hasattr(args, f"s_{option}")):
+        return None
+    return "--" + option.replace("_", "-").rstrip("-")
+
+
+def _run(args: argparse.Namespace) -> int:
     from ogm_ppl.learn import FieldSettings, fit_backoff, fit_delta_setting, fit_deltas, fit_field, fit_tables
 
     if args.kind in PROTOCOL_KINDS:
@@ -197,8 +219,9 @@ def run(args: argparse.Namespace) -> int:
     from ogm_ppl.learn import load_training_plans
 
     source = args.corpus if args.corpus is not None else list(args.plan_files)
+    seed = sample_seed(args)  # refused without --sample
     if args.sample is not None:
-        source = load_training_plans(source, limit=args.limit, sample=args.sample, sample_seed=args.sample_seed)
+        source = load_training_plans(source, limit=args.limit, sample=args.sample, sample_seed=seed)
     common = dict(
         limit=None if args.sample is not None else args.limit,
         pixel_size=args.pixel_size,

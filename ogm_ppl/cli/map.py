@@ -254,7 +254,7 @@ def add_parser(sub) -> None:
         "--snapshots",
         type=_pos_int,
         metavar="K",
-        help="with --online: also write snapshots.npz, the marginals after every K-th scan",
+        help="with --online: also write snapshots.npz, the marginals after every K-th scan (K: at most the scans)",
     )
     _add_reader_options(m, carmen_only=True)
     _add_bag_options(m)
@@ -446,6 +446,9 @@ def _map(args, method, params) -> dict:
         bar.set_postfix_str("mapping")
         if getattr(args, "snapshots", None) is not None and not getattr(args, "online", False):
             raise CLIError("--snapshots needs --online")
+        if getattr(args, "snapshots", None) is not None and args.snapshots > inp.scans.num_scans:
+            n = inp.scans.num_scans  # else no snapshot at all, and no snapshots.npz
+            raise CLIError(f"--snapshots {args.snapshots}: more than the {n} scans mapped (at most {n})")
         probs, observed, details = _compute_map(args, method, params, inp, grid, times)
         snapshots = details.pop("_snapshots", None)
         bar.update()

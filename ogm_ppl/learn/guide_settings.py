@@ -160,6 +160,8 @@ class GuideTrainingSettings:
 
     # ------------------------------------------------------------------ checks
     def _check(self) -> None:
+        from ogm_ppl.inference.variational.amortised_net import _MAX_CHANNELS, _MAX_DILATION, _MAX_LAYERS
+
         def bad(option: str, message: str) -> GuideSettingsError:
             return GuideSettingsError(option, message)
 
@@ -210,6 +212,13 @@ class GuideTrainingSettings:
                 raise bad(k, f"{_flag(k)} must be finite and above 0{unit}, got {getattr(self, k)}")
         if not self.dilations or any(isinstance(d, bool) or not isinstance(d, int) or d < 1 for d in self.dilations):
             raise bad("dilations", f"--dilations must be one or more whole numbers of at least 1, got {self.dilations}")
+        if self.channels > _MAX_CHANNELS:  # the network's own limits, by option before any map is read
+            raise bad("channels", f"--channels must be at most {_MAX_CHANNELS}, got {self.channels}")
+        if len(self.dilations) > _MAX_LAYERS or max(self.dilations) > _MAX_DILATION:
+            raise bad(
+                "dilations",
+                f"--dilations must be at most {_MAX_LAYERS} layers of at most {_MAX_DILATION}, got {self.dilations}",
+            )
         if isinstance(self.seed, bool) or not isinstance(self.seed, int) or self.seed < 0:
             raise bad("seed", f"--seed must be a whole number of at least 0, got {self.seed!r}")
         if self.pixel_size is not None and (not self.plan_files or not _finite_positive(self.pixel_size)):

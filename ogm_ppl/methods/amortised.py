@@ -12,7 +12,7 @@ from ogm_ppl.methods.params import Bool, GuideFile, param
 from ogm_ppl.methods.problem import MapProblem, MapResult, RunContext
 from ogm_ppl.methods.registry import register_method
 
-__all__ = ["AmortisedParams", "amortised", "load_guide"]
+__all__ = ["AmortisedParams", "amortised", "load_guide", "set_symmetrize"]
 
 
 @dataclass(frozen=True)
@@ -46,11 +46,19 @@ def load_guide(name: str, model, noise_known: bool = True):
     return guide
 
 
+def set_symmetrize(guide, on: bool) -> None:
+    """``guide.symmetrize = on``, a guide with tile-phase channels refused as the parameter ``symmetrize``."""
+    try:
+        guide.symmetrize = on
+    except ValueError as e:
+        raise ValueError(f"--param symmetrize: {e}") from None
+
+
 @register_method("amortised", AmortisedParams)
 def amortised(params: AmortisedParams, problem: MapProblem, ctx: RunContext) -> MapResult:
     """The amortised guide's one-pass map q(m_k = 1 | z) (a network of the evidence features)."""
     model = problem.model()
     guide = load_guide(params.guide, model, noise_known=problem.sigma_cells is not None)
-    guide.symmetrize = params.symmetrize
+    set_symmetrize(guide, params.symmetrize)
     q = guide.marginals(model).numpy()
     return MapResult(q, problem.rays.reached(), {"ray_cells": int(problem.rays.nnz), "trained_for": guide.trained_for})

@@ -158,9 +158,11 @@ def prior_by_name(name: str, shape, tables: PriorTables | None = None) -> MapPri
     """
     kind, corpus, at, modifier = split_prior_name(name)
     factory = _REGISTRY.get(kind, name)
+    if kind == "net" and tables is None and (corpus or DEFAULT_CORPUS) not in net_corpora():
+        raise _no_net_field(corpus or DEFAULT_CORPUS)  # the net fits shipped, not the corpora with tables
     beta = _exponent(name, kind, corpus, modifier, tables) if at else 1.0
     if kind != "independent":  # (which keeps only the corpus's occupied share)
-        _check_resolution(name, shape, corpus, tables)
+        _check_resolution(name, shape, corpus, tables, kind)
     prior = factory(_shape(shape), CorpusTables(corpus, tables))
     if beta == 1.0:
         return prior
@@ -185,7 +187,7 @@ def _corpus_resolution(corpus: str) -> float | None:
         return None
 
 
-def _check_resolution(name: str, shape, corpus: str, tables) -> None:
+def _check_resolution(name: str, shape, corpus: str, tables, kind: str = "") -> None:
     """Warn (:class:`~ogm_ppl.exceptions.FittedSettingWarning`) when ``shape`` is a grid whose cells
     differ in size from those of the plans the prior's tables were counted on (by more than 1 %): its windows
     then span another piece of a building, and walls another number of cells."""
@@ -195,12 +197,18 @@ def _check_resolution(name: str, shape, corpus: str, tables) -> None:
     learned = _recorded_resolution(tables.provenance) if tables is not None else _corpus_resolution(corpus)
     if learned is None or abs(float(res) / learned - 1.0) <= 0.01:
         return
+    if kind == "net":  # a network fitted on the plans, not tables counted on them
+        redo = f"fit a net field on plan files read at {float(res):g} m (ogm-ppl fit-prior net-field --resolution)"
+    else:
+        redo = (
+            f"count tables on plans read at {float(res):g} m "
+            "(ogm_ppl.priors.learn.count_tables; plan_files.load_plan_file(..., resolution=...))"
+        )
     warnings.warn(
         FittedSettingWarning(
             f"prior {name!r} was learned on plans at {learned:g} m a cell and is used on a grid of {float(res):g} m "
             f"a cell: its windows span {float(res) / learned:.3g} times the space, and walls are another number of "
-            f"cells thick. Map at {learned:g} m, or count tables on plans read at {float(res):g} m "
-            "(ogm_ppl.priors.learn.count_tables; plan_files.load_plan_file(..., resolution=...))"
+            f"cells thick. Map at {learned:g} m, or {redo}"
         ),
         stacklevel=3,
     )
@@ -406,11 +414,17 @@ def _net(shape, tables) -> MapPrior:
         )
     corpus = tables.corpus or DEFAULT_CORPUS
     if corpus not in net_corpora():
-        raise ValueError(
-            f"prior 'net:{corpus}': no shipped net field for corpus {corpus!r} ({net_path(corpus)} does not exist); "
-            f"shipped: {', '.join(net_corpora()) or 'none'} (ogm-ppl fit-prior net-field --corpus C --ship)"
-        )
+        raise _no_net_field(corpus)
     return net_from_file(net_path(corpus), shape)
+
+
+def _no_net_field(corpus: str) -> ValueError:
+    from ogm_ppl.priors.net_field import net_path
+
+    return ValueError(
+        f"prior 'net:{corpus}': no shipped net field for corpus {corpus!r} ({net_path(corpus)} does not exist); "
+        f"shipped: {', '.join(net_corpora()) or 'none'} (ogm-ppl fit-prior net-field --corpus C --ship)"
+    )
 
 
 for _kind, _factory in (

@@ -255,3 +255,15 @@ def test_a_prior_of_ones_own_runs_once_and_reruns_when_it_changes(tmp_path, monk
     with pytest.raises(SettingsError, match=r"^out: .*exists and is not a folder") as e:
         calibrate(small, tmp_path / "file", progress=False)
     assert e.value.option == "out"
+
+
+def test_a_proposal_guide_that_cannot_be_read_is_refused_by_its_option_before_any_work(tmp_path, monkeypatch):
+    def never(*a, **k):
+        raise AssertionError("work started before the proposal guide was read")
+
+    monkeypatch.setattr(run_module, "run_ogm", never)
+    s = tiny(test=("houseexpo",), priors=("independent",), kernel="guided", proposal_guide="nope")
+    with pytest.raises(SettingsError, match=r"^proposal_guide: .*guide_nope\.npz: no such file") as e:
+        calibrate(s, tmp_path / "x", progress=False)
+    assert e.value.flag == "--proposal-guide"
+    assert not (tmp_path / "x").exists()

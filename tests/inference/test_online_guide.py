@@ -145,6 +145,19 @@ def test_cli_map_online_amortised_writes_the_guides_map(tmp_path):
         np.testing.assert_array_equal(z["probabilities"][-1], b["probabilities"])
 
 
+@pytest.mark.parametrize("online", [[], ["--online"]])
+def test_cli_map_refuses_symmetrising_a_tile_phase_guide_by_its_parameter(tmp_path, capsys, online):
+    from ogm_ppl.cli import main
+    from tests.test_cli import write_log
+
+    log = write_log(tmp_path / "tiny.log")
+    argv = ["map", str(log), "--resolution", "0.1", "--method", "amortised", "--param", "symmetrize=true", *online]
+    assert main([*argv, "--out", str(tmp_path / "a")]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err.startswith("ogm-ppl: error: --param symmetrize: a guide with tile-phase channels") and "\n" not in err
+    assert not (tmp_path / "a").exists()
+
+
 def test_the_thread_count_is_an_option_and_torchs_is_restored():
     grid, scans = _scene(2)
     guide = AmortisedGuide(channels=2, dilations=(1,), phase=(0, 0))
@@ -156,3 +169,19 @@ def test_the_thread_count_is_an_option_and_torchs_is_restored():
         om.add_scans(_part(scans, 0, 1))
     assert torch.get_num_threads() == before
     torch.testing.assert_close(a.logits, b.logits, rtol=0, atol=1e-4)  # float32 rounding of logits of a few units
+
+
+def test_cli_map_refuses_snapshots_rarer_than_the_scans_it_maps(tmp_path, capsys):
+    # every K-th scan of fewer than K scans is no snapshot: it wrote no snapshots.npz, and said nothing
+    from ogm_ppl.cli import main
+    from tests.test_cli import POSES, write_log
+
+    log = write_log(tmp_path / "tiny.log")
+    n = len(POSES)
+    argv = ["map", str(log), "--resolution", "0.1", "--method", "amortised", "--online"]
+    assert main([*argv, "--snapshots", str(n + 1), "--out", str(tmp_path / "a")]) == 2
+    assert (
+        capsys.readouterr().err.strip()
+        == f"ogm-ppl: error: --snapshots {n + 1}: more than the {n} scans mapped (at most {n})"
+    )
+    assert not (tmp_path / "a").exists()

@@ -79,4 +79,4 @@ def test_the_command_fits_weights(tmp_path, capsys):
     assert load_backoff_params("plans", path=tmp_path / "o" / "backoff_plans.json").kappa_border > 0
     assert ogm_ppl(argv) == 2  # every fifth plan of two: none
     err = capsys.readouterr().err
-    assert err.startswith("ogm-ppl: error: validation_every") and len(err.strip().splitlines()) == 1
+    assert err.startswith("ogm-ppl: error: --validation-every") and len(err.strip().splitlines()) == 1

@@ -90,5 +90,5 @@ def test_the_command_refuses_a_bad_option_in_one_line(tmp_path, capsys):
     argv = ["fit-prior", "bias", "--priors", "independent", "--train", "dungeon", "--window", "2"]
     assert ogm_ppl([*argv, "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("ogm-ppl: error: window") and len(err.strip().splitlines()) == 1
+    assert err.startswith("ogm-ppl: error: --window") and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()

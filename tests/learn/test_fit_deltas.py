@@ -246,10 +246,10 @@ def test_the_commands_fit_and_refuse_a_bad_option_in_one_line(tmp_path, capsys):
     ):
         assert ogm_ppl([*argv, *bad]) == 2
         err = capsys.readouterr().err
-        assert err.startswith(f"ogm-ppl: error: {option}") and len(err.strip().splitlines()) == 1
+        assert err.startswith(f"ogm-ppl: error: --{option.replace('_', '-')}") and len(err.strip().splitlines()) == 1
     deltas = ["fit-prior", "deltas", "--out", str(tmp_path / "d"), "--datasets", "8", "--folds", "2", "--quiet"]
     for bad, option in ((["--folds", "1"], "folds"), (["--families", "p99"], "families"), (["--F", "1"], "F")):
         assert ogm_ppl([*deltas, *bad]) == 2
         err = capsys.readouterr().err
-        assert err.startswith(f"ogm-ppl: error: {option}") and len(err.strip().splitlines()) == 1
+        assert err.startswith(f"ogm-ppl: error: --{option.replace('_', '-')}") and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "d").exists() and files_under(tmp_path) == {f"cmd/delta_{stem}.json"}

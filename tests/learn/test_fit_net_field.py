@@ -131,3 +131,16 @@ def test_a_fit_into_the_package_folder_records_ship_not_a_path(tmp_path, monkeyp
     cmd = json.loads(r.files[1].read_text())["provenance"]["command"]
     assert cmd.startswith("ogm-ppl fit-prior net-field --corpus houseexpo --limit 4 ") and cmd.endswith(" --ship")
     assert str(tmp_path) not in cmd and "--out" not in cmd and "--name" not in cmd
+
+
+def test_the_command_names_a_bad_option_as_it_is_spelled(tmp_path, capsys):
+    out = tmp_path / "o"
+    for bad, says in (
+        (["--check-size", "16"], "--check-size: must be between 17 and 1024, got 16"),
+        (["--lambda", "-1"], "--lambda: must lie in [0, 1000]"),
+        (["--sample", "5", "--sample-seed", "-1"], "--sample-seed: must be at least 0, got -1"),
+        (["--sample-seed", "3"], "--sample-seed: applies with --sample only"),  # it picked nothing
+    ):
+        assert ogm_ppl(["fit-prior", "net-field", "--corpus", "houseexpo", "--out", str(out), *bad]) == 2
+        assert f"ogm-ppl: error: {says}" in capsys.readouterr().err
+    assert not out.exists()

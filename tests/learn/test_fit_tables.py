@@ -94,7 +94,7 @@ def test_the_command_fits_tables_and_refuses_a_bad_option(tmp_path, capsys):
     assert _same_arrays(load_tables(out / "prior_mine.npz"), direct)
     assert ogm_ppl([*argv, "--min-count-5x5", "0"]) == 2
     err = capsys.readouterr().err
-    assert err.startswith("ogm-ppl: error: min_count_5x5") and len(err.strip().splitlines()) == 1
+    assert err.startswith("ogm-ppl: error: --min-count-5x5") and len(err.strip().splitlines()) == 1
 
 
 def test_the_fits_import_neither_the_experiments_nor_the_command_line_and_nothing_below_imports_them():

@@ -161,7 +161,7 @@ def test_the_command_refuses_a_bad_option_in_one_line(tmp_path, capsys):
     argv = ["fit-prior", "headline", "--candidates", "border", "--out", str(tmp_path / "o")]
     assert ogm_ppl(argv) == 2
     err = capsys.readouterr().err
-    assert err.startswith("ogm-ppl: error: candidates") and len(err.strip().splitlines()) == 1
+    assert err.startswith("ogm-ppl: error: --candidates") and len(err.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()
 
 

@@ -91,6 +91,9 @@ def test_a_grid_of_other_cells_than_the_tables_were_counted_on_warns():
 
     with pytest.warns(FittedSettingWarning, match="learned on plans at 0.05 m a cell .* grid of 0.1 m a cell"):
         prior_by_name("patch3:houseexpo", Grid((12, 12), resolution=0.1))
+    with pytest.warns(FittedSettingWarning, match=r"or fit a net field on plan files read at 0\.1 m") as rec:
+        prior_by_name("net:houseexpo", Grid((12, 12), resolution=0.1))  # a net field is fitted, not counted
+    assert "count tables" not in str(rec[0].message)
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         prior_by_name("patch3:houseexpo", Grid((12, 12), resolution=0.05))
@@ -137,6 +140,9 @@ def test_net_names_refuse_a_corpus_without_a_fit_tables_and_1d_grids():
     missing = next(c for c in available_tables() if c not in net_corpora())
     with pytest.raises(ValueError, match=f"no shipped net field for corpus '{missing}'.*shipped: .*houseexpo"):
         prior_by_name(f"net:{missing}", (8, 8))
+    # a corpus with no tables either: the net fits shipped are listed, not the corpora with tables
+    with pytest.raises(ValueError, match=r"no shipped net field for corpus 'nowhere'.*shipped: houseexpo"):
+        prior_by_name("net:nowhere@0.5", (8, 8))
     with pytest.raises(ValueError, match="fitted net field, not count tables"):
         prior_by_name("net:houseexpo", (8, 8), tables=tables_by_name("houseexpo"))
     with pytest.raises(ValueError, match="2D patch prior"):

@@ -49,9 +49,11 @@ def _simple(v) -> bool:
 
 def _tables(obj) -> list:
     """The arrays and plain settings ``obj`` holds: every NamedTuple field, or the public attributes by
-    sorted name (private ones may be caches filled later, which must not change the digest)."""
+    sorted name (private ones may be caches filled later, which must not change the digest); a bundle's
+    ``cache_fields()`` (memos its sweeps fill, as the net field's) count as empty: zeros of their shape."""
     if hasattr(obj, "_asdict"):
-        items = list(obj._asdict().items())
+        cache = set(obj.cache_fields()) if hasattr(obj, "cache_fields") else set()
+        items = [(k, np.zeros_like(v) if k in cache else v) for k, v in obj._asdict().items()]
     else:
         items = [(k, v) for k, v in sorted(vars(obj).items()) if not k.startswith("_")]
     out: list = []

@@ -77,6 +77,11 @@ class NetField(NamedTuple):
     win_key: np.ndarray  # (rows+w-1)*(cols+w-1) int64: each window anchor's memoised content (w <= 7; else empty)
     win_delta: np.ndarray  # (rows+w-1)*(cols+w-1)*w*w float64: each window's memoised cell terms
 
+    def cache_fields(self) -> tuple[str, ...]:
+        """The fields that are caches the sweeps fill, not of the distribution (a checkpoint's fingerprint
+        reads them as empty)."""
+        return ("memo_key", "memo_lo", "win_key", "win_delta")
+
     def sparse_patches(self) -> bool:
         return False
 

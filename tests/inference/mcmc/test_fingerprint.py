@@ -28,3 +28,15 @@ def test_a_1d_only_kind_is_digested_on_8_cells_and_a_bad_name_says_why():
         unregister_prior("fp_line")
     with pytest.raises(ValueError, match=r"^unknown prior kind 'no_such_kind'"):
         prior_name_digest("no_such_kind")
+
+
+def test_a_net_fields_memo_filled_by_sweeps_leaves_its_digest_as_it_was():
+    # the memo is a cache of the sweeps: a digest that followed it made every checkpoint of a net prior's chain
+    # "belong to another run" when the command line resumed it at its next mark
+    prior = prior_by_name("net:houseexpo", (8, 8))
+    before = prior_digest(prior, 64)
+    bundle = prior.compiled()
+    for name in bundle.cache_fields():
+        getattr(bundle, name)[:] = 7
+    assert prior_digest(prior, 64) == before
+    assert prior_digest(prior_by_name("net:houseexpo@0.5", (8, 8)), 64) != before
