@@ -17,7 +17,7 @@ else numba does is unchanged; the compiled code is the same (``tests/test__numba
 numba writes with and without it). If numba's source is not the one this was written against, nothing is replaced
 (:data:`INSTALLED` stays ``False``), and ``OGM_PPL_NUMBA_INLINE_PATCH=0`` in the environment leaves numba untouched.
 The replacement is process-wide: it also applies to other code's ``inline="always"`` functions compiled after
-``ogm_ppl`` is imported (numba's own fix of the same copy is upstream work: numba issue 8989).
+``ogm_ppl`` is imported, until numba copies a callee once itself.
 """
 
 from __future__ import annotations

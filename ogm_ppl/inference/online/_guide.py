@@ -30,18 +30,16 @@ activations of every layer but the last, ``4 (H + 2P)(W + 2P)(C_0 + sum_{l<n} C_
 
 from __future__ import annotations
 
-import time
 from dataclasses import dataclass
 
 import numpy as np
 import torch
 
 from ogm_ppl.grid import Grid
-from ogm_ppl.inference.online._replay import _one
+from ogm_ppl.inference.online._replay import feed_scans
 from ogm_ppl.inference.variational.amortised_features import base_channels, phase_channels, ray_terms
 from ogm_ppl.inference.variational.amortised_incremental import IncrementalLogits
 from ogm_ppl.models.occupancy import entry_table, range_to_kappa
-from ogm_ppl.progress import Progress
 from ogm_ppl.raycast import Rays, raycast
 from ogm_ppl.scans import Scans
 
@@ -206,18 +204,5 @@ def replay_guide(
     if snapshot_every is not None and snapshot_every < 1:
         raise ValueError(f"snapshot_every must be a positive number of scans, got {snapshot_every}")
     om = OnlineGuideMap(grid, guide, symmetrize=symmetrize)
-    S = scans.num_scans
-    times = np.zeros(S)
-    snaps: list[tuple[int, np.ndarray]] = []
-    assert scans.valid is not None  # Scans.__post_init__ always sets the S x B mask
-    with Progress(S, "online scans", unit="scan", enabled=progress, after=10.0) as bar:
-        for i in range(S):
-            bar.update()
-            if not scans.valid[i].any():
-                continue
-            t0 = time.perf_counter()
-            om.add_scans(_one(scans, i))
-            times[i] = time.perf_counter() - t0
-            if snapshot_every is not None and (i + 1) % snapshot_every == 0:
-                snaps.append((i + 1, om.probabilities.numpy().copy()))
+    times, snaps = feed_scans(om, scans, snapshot_every, progress, lambda: om.probabilities)
     return GuideReplay(om.probabilities.numpy().copy(), om.observed, snaps, times, om)

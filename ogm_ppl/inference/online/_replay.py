@@ -4,6 +4,7 @@
 
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -41,18 +42,27 @@ def replay(
     """Replay ``scans`` one scan at a time into an :class:`OnlineMap` (``online_kw``: its options), then
     run ``burn_in`` full sweeps and ``sweeps`` full sweeps whose mean is the map. ``snapshot_every = k``
     keeps the marginals (of the sweeps since the latest scan) after every ``k``-th scan."""
-    import time
 
     if snapshot_every is not None and snapshot_every < 1:
         raise ValueError(f"snapshot_every must be a positive number of scans, got {snapshot_every}")
     om = OnlineMap(grid, sensor, prior, **online_kw)
+    times, snaps = feed_scans(om, scans, snapshot_every, progress, lambda: om.marginals)
+    om.sweep(burn_in, focus=False)
+    om.reset_marginals()
+    om.sweep(sweeps, focus=False)
+    return Replay(om.marginals.numpy().copy(), om.observed, snaps, times, om)
+
+
+def feed_scans(om, scans: Scans, snapshot_every: int | None, progress: bool, read) -> tuple[np.ndarray, list]:
+    """Add ``scans`` to the online map ``om`` one at a time (``om.add_scans``), skipping scans without a reading:
+    the seconds of each scan (``S``, 0 where skipped) and ``(scans so far, read() as numpy)`` after every
+    ``snapshot_every``-th scan. A bar on a terminal; elsewhere a plain line every 10 s once it has taken 10 s."""
+    from ogm_ppl.progress import Progress
+
     S = scans.num_scans
     times = np.zeros(S)
     snaps: list[tuple[int, np.ndarray]] = []
-    from ogm_ppl.progress import Progress
-
     assert scans.valid is not None  # Scans.__post_init__ always sets the S x B mask
-    # a bar on a terminal; elsewhere a plain line every 10 s once the replay has taken 10 s
     with Progress(S, "online scans", unit="scan", enabled=progress, after=10.0) as bar:
         for i in range(S):
             bar.update()
@@ -62,11 +72,8 @@ def replay(
             om.add_scans(_one(scans, i))
             times[i] = time.perf_counter() - t0
             if snapshot_every is not None and (i + 1) % snapshot_every == 0:
-                snaps.append((i + 1, om.marginals.numpy().copy()))
-    om.sweep(burn_in, focus=False)
-    om.reset_marginals()
-    om.sweep(sweeps, focus=False)
-    return Replay(om.marginals.numpy().copy(), om.observed, snaps, times, om)
+                snaps.append((i + 1, read().numpy().copy()))
+    return times, snaps
 
 
 def _one(scans: Scans, i: int) -> Scans:
