@@ -109,12 +109,9 @@ class IncrementalLogits:
             self._bias = [c.bias.detach().float() for c in convs]
             self._head = (net.head.weight.detach().float().reshape(-1, 1), net.head.bias.detach().float())  # type: ignore[union-attr]
             self._skip = (net.skip.weight.detach().float().reshape(-1, 1), net.skip.bias.detach().float())  # type: ignore[union-attr]
-        # a tile's cells, and its window of T + 2d cells a side, as row offsets from the corner in the
-        # flattened padded buffers
-        self._offsets = {
-            n: (torch.arange(n)[:, None] * Wp + torch.arange(n)[None]).reshape(-1)
-            for n in set(self._tile) | {T + 2 * d for T, d in zip(self._tile, self.dilations)}
-        }
+        # a tile's cells as row offsets from its corner in the flattened padded buffers
+        self._offsets = {T: (torch.arange(T)[:, None] * Wp + torch.arange(T)[None]).reshape(-1) for T in self._tile}
+        self._scratch: dict[tuple[int, int], torch.Tensor] = {}  # gathered windows, kept between updates
         n = (H + 2 * P + max(self._tile)) * Wp
         self._x = torch.zeros((n, C), dtype=torch.float32)
         self._x[self._flat(torch.arange(H * W))] = x.permute(1, 2, 0).reshape(H * W, C).float()
@@ -185,6 +182,19 @@ class IncrementalLogits:
         done[r0:r1, c0:c1] = self._recompute_box(box, r0, c0)
         return done
 
+    def _gather(self, src: torch.Tensor, starts: torch.Tensor, n: int) -> torch.Tensor:
+        """The runs of ``n`` cells of ``src`` (rows of the flattened buffer) starting at ``starts``, ``n`` runs
+        a window: ``len(starts) / n x n x n x C``, in a scratch buffer kept between updates."""
+        C = src.shape[1]
+        runs = src.as_strided((src.shape[0] - n + 1, n * C), (C, 1))  # run p: cells p .. p + n - 1
+        size = starts.numel() * n * C
+        buf = self._scratch.get((n, C))
+        if buf is None or buf.numel() < size:
+            buf = self._scratch[(n, C)] = torch.empty(max(size, 2 * (0 if buf is None else buf.numel())))
+        out = buf[:size].view(starts.numel(), n * C)
+        torch.index_select(runs, 0, starts, out=out)
+        return out.view(-1, n, n, C)
+
     def _recompute_box(self, changed: torch.Tensor, r0: int, c0: int) -> torch.Tensor:
         """Recompute every layer on the cells the changed cells of the box at ``(r0, c0)`` reach (the box
         holds the whole reach, or touches the grid's edge); returns the box's mask of recomputed logits.
@@ -210,7 +220,8 @@ class IncrementalLogits:
             sel = tiles[tr, tc].reshape(-1).nonzero().flatten()  # cells of S_l in the batch's (b, i, j) order
             corner = (tr * T + (r0 + P)) * Wp + (tc * T + (c0 + P))
             rows = (corner[:, None] + self._offsets[T][None]).reshape(-1)[sel]
-            window = ((corner - d * (Wp + 1))[:, None] + self._offsets[T + 2 * d][None]).reshape(-1)
+            # the window's rows of T + 2d cells, each a contiguous run of the buffers
+            window = ((corner - d * (Wp + 1))[:, None] + torch.arange(T + 2 * d) * Wp).reshape(-1)
             plans.append((window, sel, rows))
         last = plans[-1][2]
         with torch.no_grad():
@@ -223,7 +234,7 @@ class IncrementalLogits:
                     zip(weights, self._bias, self.dilations, self._tile, plans)
                 ):
                     n = T + 2 * d  # B x C x n x n, channels-last
-                    batch = src.index_select(0, window).reshape(-1, n, n, src.shape[1]).permute(0, 3, 1, 2)
+                    batch = self._gather(src, window, n).permute(0, 3, 1, 2)
                     a = _conv_relu(batch, wt, b, d, _FUSED)
                     a = a.permute(0, 2, 3, 1).reshape(-1, a.shape[1]).index_select(0, sel)
                     if layer < len(acts):
