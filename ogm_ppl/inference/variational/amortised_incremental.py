@@ -190,7 +190,9 @@ class IncrementalLogits:
         size = starts.numel() * n * C
         buf = self._scratch.get((n, C))
         if buf is None or buf.numel() < size:
-            buf = self._scratch[(n, C)] = torch.empty(max(size, 2 * (0 if buf is None else buf.numel())))
+            buf = self._scratch[(n, C)] = torch.empty(
+                max(size, 2 * (0 if buf is None else buf.numel())), dtype=src.dtype
+            )
         out = buf[:size].view(starts.numel(), n * C)
         torch.index_select(runs, 0, starts, out=out)
         return out.view(-1, n, n, C)
