@@ -163,6 +163,13 @@ class OnlineGuideMap:
         return torch.where(self._pinned, 0.0, torch.sigmoid(self.logits))
 
     @property
+    def layer_work(self) -> list[tuple[int, int]]:
+        """Per layer of the network, the cells the latest :meth:`add_scans` recomputed and the cells of the
+        tiles it ran the convolution on (:attr:`IncrementalLogits.last_work
+        <ogm_ppl.inference.variational.amortised_incremental.IncrementalLogits.last_work>`)."""
+        return list(self._inc.last_work)
+
+    @property
     def features(self) -> torch.Tensor:
         """``C x H x W`` float32: the features the logits are of (a copy)."""
         return self._inc.features

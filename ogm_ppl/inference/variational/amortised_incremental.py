@@ -79,6 +79,9 @@ class IncrementalLogits:
     :attr:`logits` (``H x W`` float32) is the current map's logits; :meth:`update` (a mask and new features)
     and :meth:`update_cells` (flat cell indices and their feature rows) change the features and recompute
     what depends on them. The first logits come from dense convolutions over the whole grid.
+    :attr:`last_work` holds, per layer, the cells of :math:`S_l` the latest update wrote and the cells of the
+    tiles it computed (``(|S_l|, tiles x T_l^2)``; empty before an update): the multiply-adds of layer ``l``
+    are those cells times ``9 C_{l-1} C_l`` (times 8 symmetrised).
     """
 
     def __init__(self, net: nn.Module, x: torch.Tensor, symmetrize: bool = False) -> None:
@@ -112,6 +115,7 @@ class IncrementalLogits:
         # a tile's cells as row offsets from its corner in the flattened padded buffers
         self._offsets = {T: (torch.arange(T)[:, None] * Wp + torch.arange(T)[None]).reshape(-1) for T in self._tile}
         self._scratch: dict[tuple[int, int], torch.Tensor] = {}  # gathered windows, kept between updates
+        self.last_work: list[tuple[int, int]] = []
         n = (H + 2 * P + max(self._tile)) * Wp
         self._x = torch.zeros((n, C), dtype=torch.float32)
         self._x[self._flat(torch.arange(H * W))] = x.permute(1, 2, 0).reshape(H * W, C).float()
@@ -167,6 +171,7 @@ class IncrementalLogits:
         cells = torch.as_tensor(cells, dtype=torch.int64).flatten()
         done = torch.zeros((H, W), dtype=torch.bool)
         if cells.numel() == 0:
+            self.last_work = [(0, 0)] * len(self.dilations)
             return done
         if int(cells.min()) < 0 or int(cells.max()) >= H * W:
             raise ValueError(f"cells must lie in 0..{H * W - 1}")
@@ -225,6 +230,10 @@ class IncrementalLogits:
             # the window's rows of T + 2d cells, each a contiguous run of the buffers
             window = ((corner - d * (Wp + 1))[:, None] + torch.arange(T + 2 * d) * Wp).reshape(-1)
             plans.append((window, sel, rows))
+        self.last_work = [
+            (int(sel.numel()), int(window.numel()) // (T + 2 * d) * T * T)
+            for (window, sel, _), T, d in zip(plans, self._tile, self.dilations)
+        ]
         last = plans[-1][2]
         with torch.no_grad():
             sw, sb = self._skip

@@ -65,3 +65,20 @@ def test_large_dilations_read_tiles_across_the_grid_edge():
         every,
     ]
     _check_updates(arch, (11, 15), changes, False, 2)
+
+
+def test_the_work_of_an_update_is_its_cells_and_tiles():
+    """One changed cell in the middle of a 30 x 30 grid, dilations 1 and 2: the layers write 3 x 3 and 7 x 7 cells, on
+    one tile of 8 x 8 cells each (the tiles are anchored at the reach's box, which holds every written cell);
+    no changed cell: no work."""
+    arch = GuideArchitecture(2, (1, 2), (0, 0), "p21")
+    torch.manual_seed(0)
+    x = torch.rand((arch.in_channels, 30, 30), dtype=torch.float32)
+    inc = IncrementalLogits(GuideNet(arch), x)
+    assert inc.last_work == []
+    changed = torch.zeros((30, 30), dtype=torch.bool)
+    changed[15, 15] = True
+    inc.update(x + 1, changed)
+    assert inc.last_work == [(9, 64), (49, 64)]
+    inc.update(x, torch.zeros((30, 30), dtype=torch.bool))
+    assert inc.last_work == [(0, 0), (0, 0)]
