@@ -64,7 +64,7 @@ def _sha(text: str) -> str:
 
 
 def test_a_finished_size_is_reused_by_the_same_call(curve, monkeypatch):
-    out, r = curve
+    out, _ = curve
     before = json.loads((out / "data_curve_guide_schools.json").read_text())
     monkeypatch.setattr(gt, "train_corpus_guide", lambda *a, **k: pytest.fail("a finished guide was retrained"))
     again = guide_data_curve("schools", out, sizes=(2, 5), validation=3, seed=1, settings=TEMPLATE, progress=False)
