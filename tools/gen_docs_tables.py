@@ -1382,6 +1382,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "path_free_net": ("path_free_net", _path_free),
     "data_curve": ("data_curve", _data_curve),
     "data_curve_guide": ("data_curve_guide", _data_curve_guide),
+    "data_curve_guide_small": ("data_curve_guide_small", _data_curve_guide),
     "calibration_corpora": ("calibration_corpora", _calibration_corpora),
     "calibration_corpora_logs": ("calibration_corpora_logs", _calibration_corpora),
     "calibration_bias": ("calibration_bias", _calibration_bias),

@@ -34,8 +34,9 @@ checkpoint of other settings is refused; --fresh starts afresh). Writes OUT (.np
 sources, sensor, training, validation losses, provenance)."""
 
 
-def add_arguments(p: argparse.ArgumentParser, *, out_required: bool = True) -> None:
-    """The options of the command (and of ``experiments/train_corpus_guide.py``, with ``out_required=False``)."""
+def add_arguments(p: argparse.ArgumentParser, *, out_required: bool = True, curve: bool = True) -> None:
+    """The options of the command (and of ``experiments/train_corpus_guide.py``, with ``out_required=False`` and
+    without ``--curve-sizes``: ``curve=False``)."""
     d = GuideTrainingSettings(corpus=(CORPORA[0],))  # the defaults
     src = p.add_argument_group("maps")
     src.add_argument(
@@ -70,16 +71,17 @@ def add_arguments(p: argparse.ArgumentParser, *, out_required: bool = True) -> N
         help="with --validation-sample: skip the first K plans of the permutation (default N; guides of every "
         "--sample up to K then share one validation set)",
     )
-    src.add_argument(
-        "--curve-sizes",
-        type=int,
-        nargs="+",
-        default=None,
-        metavar="N",
-        help="the data curve: one guide per size N (the first N of the --sample-seed permutation of one --corpus), "
-        "all validated on the --validation-sample plans after the largest; --out is then a folder: "
-        "guide_C_N.npz each and data_curve_guide_C.json",
-    )
+    if curve:
+        src.add_argument(
+            "--curve-sizes",
+            type=int,
+            nargs="+",
+            default=None,
+            metavar="N",
+            help="the data curve: one guide per size N (the first N of the --sample-seed permutation of one "
+            "--corpus), all validated on the --validation-sample plans after the largest; --out is then a folder: "
+            "guide_C_N.npz each and data_curve_guide_C.json",
+        )
     src.add_argument(
         "--name",
         default=None,
@@ -227,7 +229,7 @@ def run(args: argparse.Namespace) -> int:
     """Run ``ogm-ppl train-guide``: 0 when the guide is written, 130 when stopped with a checkpoint kept."""
     from ogm_ppl.learn.guide_training import train_corpus_guide
 
-    if args.curve_sizes is not None:
+    if getattr(args, "curve_sizes", None) is not None:
         return _run_curve(args)
     settings = settings_from_args(args)
     out = shipped_path(settings) if args.ship else Path(args.out)
