@@ -197,6 +197,8 @@ def fit_temper(
     corpora = [corpus] if isinstance(corpus, str) else list(corpus)
     if not corpora or len(set(corpora)) != len(corpora) or any(c not in CORPORA for c in corpora):
         raise FitOptionError("corpus", f"give one or more distinct corpora of {', '.join(CORPORA)}, got {corpora}")
+    if s.sample is not None and "generated" in corpora:
+        raise FitOptionError("sample", "applies to floor-plan corpora only (the generated maps have no split)")
     out, where = output_folder(out_dir, ship)
     old = {c: _previous(out / f"temper_{c}.json", c, s) for c in corpora} if update else {}
     cmd = shell_command("temper", "--corpus", *corpora, *where, *s.options(), *(["--update"] if update else []))
@@ -244,8 +246,6 @@ def _fit_corpus(corpus: str, s: TemperSettings, prov: dict, progress: bool) -> d
         maps = generated_windows(s.plans, s.generated_shape, s.window, VALIDATION_SEED)
         rec.update(tables="shipped (ogm_ppl/fitted/prior_generated.npz)", validation_seed=VALIDATION_SEED)
     else:
-        if s.sample is not None and corpus == "generated":
-            raise FitOptionError("sample", "applies to floor-plan corpora only (the generated maps have no split)")
         fit, val = split_names(corpus, s.sample, s.sample_seed)
         fit = fit[: s.fit_limit]
         maps = validation_windows(corpus, val, s.plans, s.window)  # refused before the counting
