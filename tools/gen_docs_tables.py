@@ -1386,6 +1386,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "calibration_corpora": ("calibration_corpora", _calibration_corpora),
     "calibration_corpora_logs": ("calibration_corpora_logs", _calibration_corpora),
     "calibration_corpora_cal": ("calibration_corpora_cal", _calibration_corpora),
+    "calibration_corpora_logs_cal": ("calibration_corpora_logs_cal", _calibration_corpora),
     "calibration_bias": ("calibration_bias", _calibration_bias),
     "calibration_bias10": ("calibration_bias10", _calibration_bias),
     "prior_bias": ("prior_bias", _prior_occupancy),
