@@ -25,7 +25,7 @@ from ogm_ppl.provenance import command_line
 def main(argv=None, stop_after: int | None = None) -> dict | None:
     """The command line; returns the guide's record, or ``None`` when stopped (``stop_after`` steps, Ctrl-C)."""
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    add_arguments(ap, out_required=False)
+    add_arguments(ap, out_required=False, curve=False)  # the data curve: ogm-ppl train-guide --curve-sizes
     args = ap.parse_args(argv)
     try:
         settings = settings_from_args(args)

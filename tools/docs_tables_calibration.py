@@ -216,6 +216,37 @@ def data_curve_table(doc: dict) -> Table:
     )
 
 
+def data_curve_guide_table(doc: dict) -> Table:
+    """``ogm-ppl train-guide --curve-sizes``: the corpus guide's validation loss against the training plans."""
+    rows = [
+        [
+            f"{r['plans']:,}",
+            f"{r['training_plans_drawn']:,}",
+            f"{r['validation_bits_per_unseen_cell_last']:.4f}",
+            f"{r['validation_bits_per_unseen_cell_best']:.4f} ({r['kept_step']})",
+            f"{r['validation_bits_per_unseen_cell_tempered']:.4f}",
+            f"{r['train_bits_per_cell_tail']:.4f}",
+            f"{r['minutes_data']:.1f} + {r['minutes_training']:.1f}",
+        ]
+        for r in doc["rows"]
+    ]
+    st, tr = doc["settings"], doc["settings"]["training"]
+    return Table(
+        caption=(
+            f"The corpus guide trained on a random N of the {doc['training_split_plans']:,} {doc['corpus']} "
+            f"training plans (nested samples, seed {st['seed']}; {tr['examples']:,} windows of {tr['window']} x "
+            f"{tr['window']} cells drawn from them, {tr['steps']} steps of {tr['batch']}), every size validated on "
+            f"the same {doc['validation_windows']} windows of the same {st['validation']} other training plans: "
+            "the distinct plans the windows came from, the validation loss in bits per unseen near-mapped cell at "
+            "the last step, at the best step (which) and after the temperature, the training loss (bits per "
+            "scored cell, the last evaluations) and the minutes on 2 shared cores (data + training)"
+        ),
+        header=["plans", "drawn", "last step", "best (step)", "tempered", "training", "minutes"],
+        rows=rows,
+        provenance=doc["provenance"],
+    )
+
+
 def calibration_guides_table(doc: dict) -> Table:
     """Each amortised guide (by the corpora it was learned on) on each test corpus, unseen cells: NLL, pooled
     ECE, ROC AUC and best F1."""

@@ -5,7 +5,8 @@
 refuses test maps in it, of a building in it (also across two corpora of the same buildings: ``houseexpo`` and
 ``houseexpo-full`` share their house ids), or of a real log's building; :func:`load_corpus_guide` refuses a
 corpus guide whose record is not the training set it names (:func:`guide_plans`: the tables' training set, or a
-stated random sample of the corpus's training split), so the same check covers it.
+stated random sample of the corpus's training split, with or without a validation set drawn apart from it:
+:func:`guide_split`), so the same check covers it.
 """
 
 from __future__ import annotations
@@ -33,9 +34,11 @@ __all__ = [
     "LeakageError",
     "check_heldout",
     "guide_corpora",
+    "guide_base",
     "guide_for",
     "guide_path",
     "guide_plans",
+    "guide_split",
     "guide_training_sets",
     "load_corpus_guide",
     "names_digest",
@@ -160,11 +163,71 @@ def guide_plans(corpus: str, sample: int | None = None, seed: int = 0) -> tuple[
         return sorted(training_set(corpus)), {"split": "train", "sample": None}
     if isinstance(sample, bool) or not isinstance(sample, int) or sample < 1:
         raise ValueError(f"a sample of {sample!r} plans: it must be a whole number of at least 1")
-    base = sorted(training_set(corpus)) if corpus == "generated" else fp.training_plans(corpus)
+    base = guide_base(corpus)
     k = min(sample, len(base))
     names = [base[i] for i in fp.sample_indices(len(base), k, seed)]
     rule = "sample_indices of the training split (natural order), real-log buildings left out"
     return sorted(names), {"split": "train", "sample": {"random": k, "seed": seed, "of": len(base), "rule": rule}}
+
+
+def guide_base(corpus: str) -> list[str]:
+    """The maps a guide's sample of ``corpus`` is drawn from: its training split in natural order (the
+    ``generated`` tables' maps)."""
+    if corpus not in GUIDE_CORPORA:
+        raise ValueError(f"unknown corpus {corpus!r}; a guide is learned on one of {', '.join(GUIDE_CORPORA)}")
+    return sorted(training_set(corpus)) if corpus == "generated" else fp.training_plans(corpus)
+
+
+#: how a fixed validation set is drawn (the data curves' rule, :mod:`ogm_ppl.learn.data_curve`)
+VALIDATION_RULE = (
+    "with P = numpy.random.default_rng(seed).permutation(training split): training P[:sample], "
+    "validation P[after:after + plans] (after >= sample)"
+)
+
+
+def guide_split(
+    corpus: str, sample: int, seed: int, validation: int, after: int | None = None
+) -> tuple[list[str], list[str], dict]:
+    """``(training, validation, record)``: a guide's training plans and a validation set fixed apart from them,
+    both drawn from ``corpus``'s training split (:func:`guide_plans`' maps, ``n`` of them) by the data curves'
+    rule. With ``P = numpy.random.default_rng(seed).permutation(n)``, the training plans are ``P[:sample]``
+    (the very plans of ``guide_plans(corpus, sample, seed)``, a smaller sample a subset of a larger one) and the
+    validation plans ``P[after : after + validation]`` (``after`` at least ``sample``, default ``sample``): so
+    guides of every sample size up to ``after`` share one validation set, disjoint from each one's training
+    plans, and the pattern field's data curve (:func:`~ogm_ppl.learn.data_curve.field_data_curve`, ``after``
+    its largest size) draws its own the same way. Both lists sorted; ``record`` is :func:`guide_plans`'
+    with ``sample["validation"]`` (``plans``, ``after``, ``rule``).
+
+    Raises:
+        ValueError: ``sample`` or ``validation`` below 1, ``after`` below ``sample``, or ``after + validation``
+            above ``n`` (the message names ``--validation-sample`` / ``--validation-after`` and the limit).
+
+    >>> tr, val, rec = guide_split("schools", 10, 0, 5, after=20)
+    >>> len(tr), len(val), set(tr) & set(val), rec["sample"]["validation"]["after"]
+    (10, 5, set(), 20)
+    """
+    for v, flag in ((sample, "--sample"), (validation, "--validation-sample"), (seed, "--sample-seed")):
+        if isinstance(v, bool) or not isinstance(v, int) or v < (0 if flag == "--sample-seed" else 1):
+            raise ValueError(
+                f"{flag} must be a whole number of at least {0 if flag == '--sample-seed' else 1}, got {v!r}"
+            )
+    after = sample if after is None else after
+    if isinstance(after, bool) or not isinstance(after, int) or after < sample:
+        raise ValueError(f"--validation-after must be a whole number of at least --sample ({sample}), got {after!r}")
+    base = guide_base(corpus)
+    n = len(base)
+    if after + validation > n:
+        raise ValueError(
+            f"--validation-sample {validation} after the first {after} plans: {corpus} has {n} training plans, so "
+            f"--validation-sample may be at most {max(n - after, 0)}"
+        )
+    perm = np.random.default_rng(seed).permutation(n)
+    train = sorted(base[int(i)] for i in perm[:sample])
+    val = sorted(base[int(i)] for i in perm[after : after + validation])
+    rule = "sample_indices of the training split (natural order), real-log buildings left out"
+    held = {"plans": validation, "after": after, "rule": VALIDATION_RULE}
+    sample_rec = {"random": sample, "seed": seed, "of": n, "rule": rule, "validation": held}
+    return train, val, {"split": "train", "sample": sample_rec}
 
 
 def _recorded_plans(corpus: str, record: dict, path: Path) -> list[str]:
@@ -175,9 +238,14 @@ def _recorded_plans(corpus: str, record: dict, path: Path) -> list[str]:
         return sorted(training_set(corpus))
     try:
         n, seed, of = int(sample["random"]), int(sample["seed"]), int(sample["of"])
+        held = sample.get("validation")
+        if held is not None:
+            tr, val, rec = guide_split(corpus, n, seed, int(held["plans"]), int(held["after"]))
+            names = sorted(tr + val)
+        else:
+            names, rec = guide_plans(corpus, n, seed)
     except (KeyError, TypeError, ValueError) as e:
         raise LeakageError(f"{path}: its record of {corpus} has a malformed sample ({e})") from None
-    names, rec = guide_plans(corpus, n, seed)
     if rec["sample"]["of"] != of:
         raise LeakageError(
             f"{path}: its record of {corpus} sampled {n} of {of} training plans; the training split now holds "

@@ -71,6 +71,13 @@ def add_temper(k: argparse.ArgumentParser, *, ship_by_default: bool = False) -> 
     k.add_argument("--kernel", default=d.kernel, help="the chains' sampler (gibbs, cycle, shifted-cycle, ...)")
     k.add_argument("--update", action="store_true", help="keep the other kinds of the file there; refit --kinds")
     k.add_argument(
+        "--sample",
+        type=int,
+        default=None,
+        help="split a random N of the corpus's training plans (as its tables were counted: houseexpo-full 1000)",
+    )
+    k.add_argument("--sample-seed", type=int, default=None, help="the seed of --sample (0)")
+    k.add_argument(
         "--quick",
         action="store_true",
         help="smoke run: the first corpus given (dungeon if all), 2 plans of 48 cells, 10 + 4 sweeps, the first 2 "
@@ -111,6 +118,8 @@ def run_temper(args: argparse.Namespace) -> Any:
         max_support=args.max_support,
         kernel=args.kernel,
         fit_limit=args.fit_limit,
+        sample=args.sample,
+        sample_seed=sample_seed(args),
     )
     out = None if args.ship else args.out
     return fit_temper(args.corpus, out, settings=s, update=args.update, ship=args.ship, progress=not args.quiet)

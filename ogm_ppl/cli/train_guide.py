@@ -4,6 +4,7 @@
     ogm-ppl train-guide --plan-files my_plans/ --pixel-size 0.05 --range-m 8 --out my_guide.npz
     ogm-ppl train-guide --corpus ipa --steps 20 --examples 16 --val 4 --out /tmp/g.npz        # a smoke run
     ogm-ppl train-guide --corpus houseexpo-full r2v schools ipa --sample 3000 --name real --ship
+    ogm-ppl train-guide --corpus houseexpo-full --curve-sizes 60 600 6000 --validation-sample 300 --out out/gc
 
 A command module of the ``ogm-ppl`` command line: :func:`add_parser` adds the subcommand, :func:`run` runs it
 (exit status 0 when the guide is written, 130 when stopped by Ctrl-C with a checkpoint kept). Bad options raise
@@ -33,8 +34,9 @@ checkpoint of other settings is refused; --fresh starts afresh). Writes OUT (.np
 sources, sensor, training, validation losses, provenance)."""
 
 
-def add_arguments(p: argparse.ArgumentParser, *, out_required: bool = True) -> None:
-    """The options of the command (and of ``experiments/train_corpus_guide.py``, with ``out_required=False``)."""
+def add_arguments(p: argparse.ArgumentParser, *, out_required: bool = True, curve: bool = True) -> None:
+    """The options of the command (and of ``experiments/train_corpus_guide.py``, with ``out_required=False`` and
+    without ``--curve-sizes``: ``curve=False``)."""
     d = GuideTrainingSettings(corpus=(CORPORA[0],))  # the defaults
     src = p.add_argument_group("maps")
     src.add_argument(
@@ -53,6 +55,33 @@ def add_arguments(p: argparse.ArgumentParser, *, out_required: bool = True) -> N
         help="a random N of each corpus's training split instead of its tables' plans (all of a smaller one)",
     )
     src.add_argument("--sample-seed", type=int, default=0, help="the seed of --sample (0)")
+    src.add_argument(
+        "--validation-sample",
+        type=int,
+        default=None,
+        metavar="M",
+        help="validate on M plans of the training split fixed apart from --sample (the M after the first "
+        "--validation-after of the --sample-seed permutation whose first N train) instead of every fifth sampled plan",
+    )
+    src.add_argument(
+        "--validation-after",
+        type=int,
+        default=None,
+        metavar="K",
+        help="with --validation-sample: skip the first K plans of the permutation (default N; guides of every "
+        "--sample up to K then share one validation set)",
+    )
+    if curve:
+        src.add_argument(
+            "--curve-sizes",
+            type=int,
+            nargs="+",
+            default=None,
+            metavar="N",
+            help="the data curve: one guide per size N (the first N of the --sample-seed permutation of one "
+            "--corpus), all validated on the --validation-sample plans after the largest; --out is then a folder: "
+            "guide_C_N.npz each and data_curve_guide_C.json",
+        )
     src.add_argument(
         "--name",
         default=None,
@@ -119,7 +148,13 @@ def add_arguments(p: argparse.ArgumentParser, *, out_required: bool = True) -> N
     )
     outg = p.add_argument_group("output")
     where = outg.add_mutually_exclusive_group(required=out_required)
-    where.add_argument("--out", type=Path, default=None, metavar="FILE.npz", help="the guide file (and FILE.json)")
+    where.add_argument(
+        "--out",
+        type=Path,
+        default=None,
+        metavar="FILE.npz",
+        help="the guide file (and FILE.json); a folder with --curve-sizes",
+    )
     where.add_argument(
         "--ship",
         action="store_true",
@@ -143,6 +178,8 @@ def settings_from_args(args: argparse.Namespace) -> GuideTrainingSettings:
         pixel_size=args.pixel_size,
         sample=args.sample,
         sample_seed=args.sample_seed,
+        validation_sample=args.validation_sample,
+        validation_after=args.validation_after,
         name=args.name,
         examples=args.examples,
         val=args.val,
@@ -192,6 +229,8 @@ def run(args: argparse.Namespace) -> int:
     """Run ``ogm-ppl train-guide``: 0 when the guide is written, 130 when stopped with a checkpoint kept."""
     from ogm_ppl.learn.guide_training import train_corpus_guide
 
+    if getattr(args, "curve_sizes", None) is not None:
+        return _run_curve(args)
     settings = settings_from_args(args)
     out = shipped_path(settings) if args.ship else Path(args.out)
     if out.suffix != ".npz":
@@ -208,4 +247,44 @@ def run(args: argparse.Namespace) -> int:
         f"ogm-ppl train-guide: kept step {r.record['training']['kept_step']}, {v['bits_per_unseen_cell']:.3f} "
         f"bits/unseen cell (validation) -> {r.path} and {r.sidecar}"
     )
+    return 0
+
+
+def _run_curve(args: argparse.Namespace) -> int:
+    """``--curve-sizes``: the guide's data curve (:func:`~ogm_ppl.learn.guide_curve.guide_data_curve`)."""
+    from ogm_ppl.learn.guide_curve import guide_data_curve
+    from ogm_ppl.learn.guide_settings import GuideSettingsError
+
+    def refuse(option: str, why: str) -> GuideSettingsError:
+        return GuideSettingsError(option, f"--curve-sizes {why}")
+
+    if len(args.corpus) != 1 or args.plan_files:
+        raise refuse("corpus", "samples one corpus's training split: give one --corpus and no --plan-files")
+    if args.sample is not None or args.validation_after is not None or args.name is not None:
+        raise refuse("sample", "sets --sample, --validation-after and the guides' names itself: give none of them")
+    if args.ship or args.out is None:
+        raise refuse("out", "writes its guides and curve into the folder --out names (not --ship)")
+    if args.validation_sample is None:
+        raise refuse("validation_sample", "needs --validation-sample M: the validation plans every size shares")
+    ns = argparse.Namespace(**{**vars(args), "validation_sample": None, "sample_seed": 0})
+    try:
+        r = guide_data_curve(
+            args.corpus[0],
+            args.out,
+            sizes=args.curve_sizes,
+            validation=args.validation_sample,
+            seed=args.sample_seed,
+            settings=settings_from_args(ns),
+            progress=not args.quiet,
+            fresh=args.fresh,
+        )
+    except KeyboardInterrupt as e:
+        print(f"ogm-ppl train-guide: {e}")
+        return 130
+    for row in r.summary["rows"]:
+        print(
+            f"{row['plans']} plans: {row['validation_bits_per_unseen_cell_last']:.4f} bits/unseen cell at the last "
+            f"step ({row['validation_bits_per_unseen_cell_tempered']:.4f} best and tempered)"
+        )
+    print(f"ogm-ppl train-guide: wrote {r.files[0]}")
     return 0

@@ -5,8 +5,9 @@ posteriors (the shipped setting, or one's own sensor's); the priors' tempering e
 (:mod:`~ogm_ppl.learn.temper`) and biases (:mod:`~ogm_ppl.learn.bias`), and the headline experiment's prior
 (:mod:`~ogm_ppl.learn.headline`), each scored on validation plans by the calibration protocol (``ogm-ppl
 fit-prior``); the amortised guide of a corpus (:mod:`~ogm_ppl.learn.guide_training`, its windows
-:mod:`~ogm_ppl.learn.guide_examples` and settings :mod:`~ogm_ppl.learn.guide_settings`; ``ogm-ppl train-guide``) and
-the guide of a learned prior (:mod:`~ogm_ppl.learn.prior_guide`).
+:mod:`~ogm_ppl.learn.guide_examples` and settings :mod:`~ogm_ppl.learn.guide_settings`; ``ogm-ppl train-guide``),
+its data curve (:mod:`~ogm_ppl.learn.guide_curve`; ``ogm-ppl train-guide --curve-sizes``) and the guide of a
+learned prior (:mod:`~ogm_ppl.learn.prior_guide`).
 
 This package sits above the datasets, inference, priors and :mod:`ogm_ppl.calibration`, and below
 :mod:`ogm_ppl.experiment` and the command line, which it does not import.
@@ -23,6 +24,7 @@ from ogm_ppl.learn.bias import BiasSettings, fit_bias
 from ogm_ppl.learn.delta_setting import fit_delta_setting
 from ogm_ppl.learn.deltas import fit_deltas
 from ogm_ppl.learn.field import FieldSettings, fit_field
+from ogm_ppl.learn.guide_curve import guide_data_curve
 from ogm_ppl.learn.guide_examples import TooFewWindowsError
 from ogm_ppl.learn.guide_settings import GuideSettingsError, GuideTrainingSettings
 from ogm_ppl.learn.guide_training import CheckpointError, GuideTrainingResult, train_corpus_guide
@@ -57,6 +59,7 @@ __all__ = [
     "fit_net_field",
     "fit_tables",
     "fit_temper",
+    "guide_data_curve",
     "select_headline_prior",
     "train_corpus_guide",
     "train_prior_guide",

@@ -3,7 +3,8 @@ fit part, its usable validation windows, and the output folder (``out_dir``, or 
 when shipping).
 
 The split is :func:`~ogm_ppl.learn.fit_backoff`'s: the corpus's training plans
-(:func:`~ogm_ppl.learn.load_training_plans`, the real logs' buildings left out) in their natural order, every fifth
+(:func:`~ogm_ppl.learn.load_training_plans`, the real logs' buildings left out; or a random sample of them) in
+their natural order, every fifth
 (``index % 5 == 4``) *validation*, the rest *fit* (the shipped Witten-Bell ``kappa`` were chosen on exactly
 this split, so the backed-off kinds may use them). Tables are counted on the fit part only, with the 8
 symmetries and the shipped ``min_count_5x5 = 2`` (thesis Sections 5.2.2-5.2.3).
@@ -34,9 +35,10 @@ __all__ = [
 VALIDATION_EVERY = 5
 
 
-def split_names(corpus: str) -> tuple[list[str], list[str]]:
-    """``(fit, validation)`` plan names of a floor-plan corpus: every fifth training plan is validation."""
-    plans = load_training_plans(corpus)
+def split_names(corpus: str, sample: int | None = None, seed: int = 0) -> tuple[list[str], list[str]]:
+    """``(fit, validation)`` plan names of a floor-plan corpus: every fifth training plan is validation (of a
+    random ``sample`` of them drawn with ``seed``, :func:`~ogm_ppl.learn.load_training_plans`, where given)."""
+    plans = load_training_plans(corpus, sample=sample, sample_seed=seed)
     fit_idx, val_idx = validation_split(len(plans), VALIDATION_EVERY)
     return [plans.names[i] for i in fit_idx], [plans.names[i] for i in val_idx]
 

@@ -15,7 +15,8 @@ temperature are measured on, thesis Section 5.2.3). Three ways to scan:
 
 A :class:`MapSource` names the maps of one source and reads them: a corpus's tables' training set or a
 random sample of its training split (:func:`corpus_source`, :func:`~ogm_ppl.calibration.leakage.guide_plans`),
-or plan files of one's own (:func:`files_source`). :func:`split_names` holds every fifth name out as a validation map.
+or plan files of one's own (:func:`files_source`). :func:`split_names` holds every fifth name out as a validation map,
+unless the source fixes its validation plans apart from its sample (``corpus_source(..., validation=M)``).
 """
 
 from __future__ import annotations
@@ -29,7 +30,7 @@ import numpy as np
 import torch
 
 from ogm_ppl.calibration.heldout import choose_window
-from ogm_ppl.calibration.leakage import guide_plans, training_set
+from ogm_ppl.calibration.leakage import guide_plans, guide_split, training_set
 from ogm_ppl.datasets import floorplans as fp
 from ogm_ppl.datasets.stop_and_scan import stop_and_scan
 from ogm_ppl.grid import Grid
@@ -94,12 +95,22 @@ class TrainingMap:
 class MapSource:
     """The maps of one source: ``label`` (a corpus, or ``"files"``), the map ``names`` (sorted), ``load(name)``
     reading one as a :class:`TrainingMap`, and ``record``: what the guide's record says of the source beyond
-    its plans' names (e.g. the plan files' SHA-256)."""
+    its plans' names (e.g. the plan files' SHA-256). ``validation`` (sorted names, none of ``names``): a
+    validation set fixed apart from the training plans ``names``; ``None``: :func:`split_names` splits
+    ``names``."""
 
     label: str
     names: tuple[str, ...]
     load: Callable[[str], TrainingMap]
     record: dict
+    validation: tuple[str, ...] | None = None
+
+    def split(self) -> tuple[list[str], list[str]]:
+        """``(training, validation)`` names: ``names`` and ``validation``, or ``names`` split by
+        :func:`split_names` when no validation set is fixed."""
+        if self.validation is None:
+            return split_names(self.names)
+        return list(self.names), list(self.validation)
 
 
 def split_names(names: Iterable[str]) -> tuple[list[str], list[str]]:
@@ -140,22 +151,33 @@ def load_map(corpus: str, name: str) -> TrainingMap:
     return TrainingMap(p.occupancy, p.known, p.resolution)
 
 
-def corpus_source(corpus: str, sample: int | None = None, seed: int = 0) -> MapSource:
+def corpus_source(
+    corpus: str, sample: int | None = None, seed: int = 0, validation: int | None = None, after: int | None = None
+) -> MapSource:
     """The maps of ``corpus`` a guide learns from (:func:`~ogm_ppl.calibration.leakage.guide_plans`): the
     training set of its shipped tables (rebuilt from their provenance), or with ``sample`` a random ``sample``
-    of its training split drawn with ``seed``. The record says which (``split``, ``sample``). ``houseexpo-full``
-    plans are read from one pass over its file, made on the first plan asked for (:func:`_outline_loader`)."""
-    names, record = guide_plans(corpus, sample, seed)
+    of its training split drawn with ``seed``; with ``validation`` also that many validation plans fixed apart
+    from them, after the first ``after`` of the seed's permutation
+    (:func:`~ogm_ppl.calibration.leakage.guide_split`, the data curves' rule). The record says which
+    (``split``, ``sample``). ``houseexpo-full`` plans are read from one pass over its file, made on the first
+    plan asked for (:func:`_outline_loader`)."""
+    held: list[str] | None = None
+    if validation is not None:
+        if sample is None:
+            raise ValueError("--validation-sample needs --sample: the validation plans follow the sample's")
+        names, held, record = guide_split(corpus, sample, seed, validation, after)
+    else:
+        names, record = guide_plans(corpus, sample, seed)
     if sample is None:
         record["tables_provenance"] = f"{FITTED_DIR.name}/prior_{corpus}.json"
     if corpus == "houseexpo-full":
-        load = _outline_loader(names)
+        load = _outline_loader([*names, *(held or ())])
     else:
 
         def load(name: str) -> TrainingMap:
             return load_map(corpus, name)
 
-    return MapSource(corpus, tuple(names), load, record)
+    return MapSource(corpus, tuple(names), load, record, None if held is None else tuple(held))
 
 
 def _outline_loader(names: Sequence[str]) -> Callable[[str], TrainingMap]:
@@ -334,11 +356,13 @@ def build_set(
     seed: int,
     label: str,
     progress: bool = False,
+    drawn: set[str] | None = None,
 ) -> list[Example]:
-    """``n`` windows of maps drawn (``default_rng(seed)``) from ``names`` of ``source``: each scanned on its
-    own (:func:`make_example`), or with ``s.scan_whole_map`` ``s.crops`` windows a scene of the whole map
-    (:func:`scene_examples`). At most ``4 n`` maps are drawn; fewer usable windows raise
-    :class:`TooFewWindowsError`."""
+    """``n`` windows of maps drawn (``default_rng(seed)``, with replacement) from ``names`` of ``source``: each
+    scanned on its own (:func:`make_example`), or with ``s.scan_whole_map`` ``s.crops`` windows a scene of the
+    whole map (:func:`scene_examples`). At most ``4 n`` maps are drawn; fewer usable windows raise
+    :class:`TooFewWindowsError`. ``drawn``: a set the names of the maps that gave a window are added to (how
+    many distinct maps ``n`` windows of ``len(names)`` maps come from)."""
     rng = np.random.default_rng(seed)
     plans: dict[str, TrainingMap] = {}
     out: list[Example] = []
@@ -358,6 +382,8 @@ def build_set(
             out += new
             if new:
                 bar.update(len(new))
+                if drawn is not None:
+                    drawn.add(name)
     if len(out) < n:
         raise TooFewWindowsError(f"{source.label}: only {len(out)} usable {label} windows of {n} after {tries} tries")
     return out

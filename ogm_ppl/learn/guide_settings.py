@@ -95,7 +95,12 @@ class GuideTrainingSettings:
     ``N`` of each corpus's training split, all of a corpus that holds fewer, drawn with ``sample_seed``:
     :func:`~ogm_ppl.calibration.leakage.guide_plans`) and ``plan_files`` (plan files or folders of them,
     :func:`~ogm_ppl.datasets.plan_files.plan_files`; ``pixel_size`` metres per pixel for images). Each
-    source's plans, sorted by name, are split: every fifth one a validation plan. ``examples`` training and
+    source's plans, sorted by name, are split: every fifth one a validation plan; or, with
+    ``validation_sample = M`` (needs ``sample``; corpora only), all ``sample`` plans train and ``M`` other plans
+    of the training split validate, those after the first ``validation_after`` (default ``sample``) of the
+    ``sample_seed`` permutation whose first ``sample`` train
+    (:func:`~ogm_ppl.calibration.leakage.guide_split`): guides of any sample up to ``validation_after`` then
+    share one validation set. ``examples`` training and
     ``val`` validation windows of ``window x window`` cells are shared evenly between the sources. ``name``:
     the guide's name (``guide:NAME``; default the sources joined, ``C1+C2``), its corpora then listed in its
     record only.
@@ -120,6 +125,8 @@ class GuideTrainingSettings:
     pixel_size: float | None = None
     sample: int | None = None
     sample_seed: int = 0
+    validation_sample: int | None = None
+    validation_after: int | None = None
     name: str | None = None
     examples: int = 600
     val: int = 60
@@ -186,6 +193,24 @@ class GuideTrainingSettings:
             raise bad("sample_seed", f"--sample-seed must be a whole number of at least 0, got {self.sample_seed!r}")
         if self.sample is None and self.sample_seed != 0:
             raise bad("sample_seed", "--sample-seed needs --sample")
+        m, after = self.validation_sample, self.validation_after
+        if m is not None:
+            if isinstance(m, bool) or not isinstance(m, int) or m < 1:
+                raise bad("validation_sample", f"--validation-sample must be a whole number of at least 1, got {m!r}")
+            if self.sample is None or self.plan_files:
+                raise bad(
+                    "validation_sample",
+                    "--validation-sample draws validation plans apart from a corpus's --sample: it needs --sample "
+                    "and no --plan-files",
+                )
+        if after is not None:
+            if m is None:
+                raise bad("validation_after", "--validation-after needs --validation-sample")
+            if isinstance(after, bool) or not isinstance(after, int) or self.sample is None or after < self.sample:
+                raise bad(
+                    "validation_after",
+                    f"--validation-after must be a whole number of at least --sample ({self.sample}), got {after!r}",
+                )
         if self.name is not None:
             if not isinstance(self.name, str) or not NAME_PATTERN.match(self.name):
                 raise bad(

@@ -16,9 +16,10 @@ stops, 90 beams, 75-cell range, Gaussian range noise of 1 cell), train the guide
 with a receptive field of ``1 + 2 * sum(dilations)`` cells. Each step takes a batch of ``batch`` windows of one
 shape, turned by a random one of the 8 symmetries; Adam with a cosine schedule.
 
-Every ``eval_every`` steps the validation windows (of the validation maps, every fifth map of each source) are
-scored in bits per unseen near-mapped cell; the best step's weights are kept, then a temperature ``T`` on the
-logits, fitted to the validation windows' unseen cells (:func:`fit_temperature`), is folded into them.
+Every ``eval_every`` steps the validation windows (of the validation maps: every fifth map of each source, or
+a validation set fixed apart from a corpus's sample, ``validation_sample``) are scored in bits per unseen
+near-mapped cell; the best step's weights are kept, then a temperature ``T`` on the logits, fitted to the
+validation windows' unseen cells (:func:`fit_temperature`), is folded into them.
 
 Training checkpoints into ``OUT.ckpt.npz`` (:func:`checkpoint_path`) every ``checkpoint_every`` steps and on
 Ctrl-C (at the end of the step); a second call with the same settings resumes it, bit for bit, and a checkpoint
@@ -54,7 +55,6 @@ from ogm_ppl.learn.guide_examples import (
     build_set,
     corpus_source,
     files_source,
-    split_names,
 )
 from ogm_ppl.learn.guide_settings import GuideTrainingSettings
 from ogm_ppl.progress import Progress
@@ -70,6 +70,7 @@ __all__ = [
     "losses",
     "share",
     "train_corpus_guide",
+    "windows_digest",
 ]
 
 #: the record's ``kind`` of a guide trained here
@@ -115,6 +116,18 @@ def losses(guide: AmortisedGuide, exs: list[Example]) -> dict[str, float]:
         "bits_per_unseen_cell": tot["unseen"][0] / max(tot["unseen"][1], 1),
         "unseen_cells": tot["unseen"][1],
     }
+
+
+def windows_digest(exs: list[Example]) -> str:
+    """SHA-256 of windows' truths and unseen-cell masks (shapes and bytes, in order): which validation windows a
+    guide was scored on, so that guides claiming one validation set can be checked to share it."""
+    h = hashlib.sha256()
+    for e in exs:
+        for t in (e.y, e.unseen):
+            a = t.numpy()
+            h.update(repr(a.shape).encode())
+            h.update(np.ascontiguousarray(a.astype(np.uint8)).tobytes())
+    return h.hexdigest()
 
 
 def fit_temperature(guide: AmortisedGuide, exs: list[Example]) -> float:
@@ -233,7 +246,7 @@ def _load_checkpoint(path: Path, key: str, loop: _Loop) -> tuple[int, float]:
 
 # ------------------------------------------------------------------ training
 def _sources(s: GuideTrainingSettings) -> list[MapSource]:
-    out = [corpus_source(c, s.sample, s.sample_seed) for c in s.corpus]
+    out = [corpus_source(c, s.sample, s.sample_seed, s.validation_sample, s.validation_after) for c in s.corpus]
     if s.plan_files:
         out.append(files_source(s.plan_files, s.pixel_size))
     return out
@@ -285,15 +298,17 @@ def train_corpus_guide(
     val: list[Example] = []
     records: dict[str, dict] = {}
     for i, src in enumerate(sources):
-        tr_names, val_names = split_names(src.names)
+        tr_names, val_names = src.split()
         _say(progress, f"{src.label}: {len(tr_names)} training plans, {len(val_names)} validation plans")
         if not tr_names:
             raise ValueError(f"{src.label}: no training plans (every fifth plan validates; give 2 or more)")
         seed = s.seed + 10 * i
-        tr += build_set(src, tr_names, share(s.examples, len(sources), i), s, seed, "training", progress)
+        drawn: set[str] = set()
+        tr += build_set(src, tr_names, share(s.examples, len(sources), i), s, seed, "training", progress, drawn)
         val += build_set(src, val_names, share(s.val, len(sources), i), s, seed + 1, "validation", progress)
         records[src.label] = {
             "training_plans": len(tr_names),
+            "training_plans_drawn": len(drawn),
             "validation_plans": len(val_names),
             "plan_names_sha256": names_digest(tr_names + val_names),
             **src.record,
@@ -379,6 +394,7 @@ def train_corpus_guide(
         )
         best = {**best, **after, "before_temperature": best["bits_per_unseen_cell"]}
     meta = _record(s, name, records, best, temperature, t_data, time.perf_counter() - t1, command)
+    meta["validation"]["windows_sha256"] = windows_digest(val)
     guide.save(out, meta)
     side = out.with_suffix(".json")
     digest = hashlib.sha256(out.read_bytes()).hexdigest()

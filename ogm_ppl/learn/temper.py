@@ -17,8 +17,9 @@ data only, by the quantity the calibration protocol scores (Section 5.2.1):
 plan ``p`` (:func:`~ogm_ppl.calibration.make_scene`), ``U_p`` its unseen near-mapped cells; ties go to the
 larger ``beta``.
 
-The split is :func:`~ogm_ppl.learn.fit_backoff`'s (every fifth training plan is validation; the backed-off
-kinds use the shipped ``kappa``, chosen on this split); every table is counted on the fit part only. The first
+The split is :func:`~ogm_ppl.learn.fit_backoff`'s (every fifth training plan is validation, of the random
+``sample`` of them where the shipped tables counted one; the backed-off kinds use the shipped ``kappa``, chosen
+on this split); every table is counted on the fit part only. The first
 ``plans`` validation plans with at least 200 free cells in their window are scored. For ``generated`` (no plan
 names) the validation maps are fresh draws of the generator from a seed stream no table and no held-out map
 uses (:data:`VALIDATION_SEED`), with the shipped tables.
@@ -85,7 +86,9 @@ class TemperSettings:
     generated maps' side); the scan: ``poses`` stops, ``beams`` beams, ``range_cells``, range noise ``sigma``
     cells; the chains: ``sweeps`` kept after ``burn``, the ``kernel`` (:data:`~ogm_ppl.calibration.KERNELS`),
     updates weighing more than ``max_support`` configurations skip the kind; ``seed``; ``fit_limit``: count
-    the tables on the first ``fit_limit`` fit plans only (a quick run; ``None``: all)."""
+    the tables on the first ``fit_limit`` fit plans only (a quick run; ``None``: all); ``sample``: split a random
+    ``sample`` of a floor-plan corpus's training plans (``sample_seed``; the one its shipped tables were
+    counted on, e.g. ``houseexpo-full``'s ``--sample 1000``) instead of all of them."""
 
     kinds: tuple[str, ...] = KINDS
     betas: tuple[float, ...] = BETAS
@@ -102,6 +105,8 @@ class TemperSettings:
     max_support: int = 4096
     kernel: str = "gibbs"
     fit_limit: int | None = None
+    sample: int | None = None
+    sample_seed: int = 0
 
     def checked(self) -> TemperSettings:
         """These settings, each checked (:class:`~ogm_ppl.learn.FitOptionError` names the first out of range)."""
@@ -131,6 +136,11 @@ class TemperSettings:
             raise FitOptionError("kernel", f"must be one of {', '.join(_KERNELS)}, got {self.kernel!r}")
         if self.fit_limit is not None:
             check_int(self.fit_limit, "fit_limit", 1)
+        if self.sample is not None:
+            check_int(self.sample, "sample", 2)
+        check_int(self.sample_seed, "sample_seed", 0, 2**32 - 1)
+        if self.sample is None and self.sample_seed != 0:
+            raise FitOptionError("sample_seed", "applies with --sample only (the seed of its random plans)")
         return TemperSettings(
             **{**asdict(self), "kinds": tuple(self.kinds), "betas": tuple(float(b) for b in self.betas)}
         )
@@ -187,6 +197,8 @@ def fit_temper(
     corpora = [corpus] if isinstance(corpus, str) else list(corpus)
     if not corpora or len(set(corpora)) != len(corpora) or any(c not in CORPORA for c in corpora):
         raise FitOptionError("corpus", f"give one or more distinct corpora of {', '.join(CORPORA)}, got {corpora}")
+    if s.sample is not None and "generated" in corpora:
+        raise FitOptionError("sample", "applies to floor-plan corpora only (the generated maps have no split)")
     out, where = output_folder(out_dir, ship)
     old = {c: _previous(out / f"temper_{c}.json", c, s) for c in corpora} if update else {}
     cmd = shell_command("temper", "--corpus", *corpora, *where, *s.options(), *(["--update"] if update else []))
@@ -234,7 +246,7 @@ def _fit_corpus(corpus: str, s: TemperSettings, prov: dict, progress: bool) -> d
         maps = generated_windows(s.plans, s.generated_shape, s.window, VALIDATION_SEED)
         rec.update(tables="shipped (ogm_ppl/fitted/prior_generated.npz)", validation_seed=VALIDATION_SEED)
     else:
-        fit, val = split_names(corpus)
+        fit, val = split_names(corpus, s.sample, s.sample_seed)
         fit = fit[: s.fit_limit]
         maps = validation_windows(corpus, val, s.plans, s.window)  # refused before the counting
         tables = count_fit_tables(corpus, fit)
@@ -306,7 +318,8 @@ def _fit_corpus(corpus: str, s: TemperSettings, prov: dict, progress: bool) -> d
 def _protocol(settings: dict) -> dict:
     """The settings that define the protocol; a file recorded with ``quick`` counted 10 fit plans."""
     fit_limit = settings.get("fit_limit", 10 if settings.get("quick") else None)
-    return {**{k: settings.get(k) for k in _PROTOCOL}, "fit_limit": fit_limit}
+    sample = {"sample": settings.get("sample"), "sample_seed": settings.get("sample_seed", 0)}
+    return {**{k: settings.get(k) for k in _PROTOCOL}, "fit_limit": fit_limit, **sample}
 
 
 def _previous(path: Path, corpus: str, s: TemperSettings) -> dict | None:

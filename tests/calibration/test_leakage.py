@@ -78,3 +78,39 @@ def test_no_shipped_guide_was_trained_on_a_held_out_building_of_any_corpus():
     held = fp.heldout_plans("schools")
     with pytest.raises(LeakageError, match="share a building"):
         check_heldout("schools", held[:1], "schools", train={*leakage.guide_plans("schools", 5)[0], held[0]})
+
+
+def test_a_fixed_validation_set_is_drawn_apart_from_every_sample_it_serves():
+    """``guide_split(c, N, S, M, after=K)``: the training plans are ``guide_plans(c, N, S)``'s, the ``M``
+    validation plans are the same for every ``N`` up to ``K`` and in none of their samples, both within the
+    training split (so no held-out building); a set too large for the split, or ``K`` below ``N``, is refused
+    naming the option and its limit; the record's digest of both is what the leakage check rebuilds."""
+    from ogm_ppl.datasets import floorplans as fp
+
+    split = fp.training_plans("schools")
+    vals = []
+    for n in (3, 10, 20):
+        tr, val, rec = leakage.guide_split("schools", n, 1, 8, after=20)
+        assert tr == leakage.guide_plans("schools", n, 1)[0] and len(val) == 8 and val == sorted(val)
+        assert not set(tr) & set(val) and set(tr) | set(val) <= set(split)
+        assert rec["sample"]["validation"] == {"plans": 8, "after": 20, "rule": leakage.VALIDATION_RULE}
+        vals.append(val)
+    assert vals[0] == vals[1] == vals[2]
+    assert not set(vals[0]) & set(leakage.guide_plans("schools", 20, 1)[0])
+    _, own, _ = leakage.guide_split("schools", 3, 1, 8)  # after defaults to the sample: the next 8
+    assert not set(own) & set(leakage.guide_plans("schools", 3, 1)[0])
+    with pytest.raises(ValueError, match=rf"--validation-sample may be at most {len(split) - 30}"):
+        leakage.guide_split("schools", 3, 1, len(split), after=30)
+    with pytest.raises(ValueError, match="--validation-after must be a whole number of at least --sample"):
+        leakage.guide_split("schools", 10, 1, 8, after=5)
+    with pytest.raises(ValueError, match="--validation-sample must be a whole number of at least 1"):
+        leakage.guide_split("schools", 10, 1, 0)
+    tr, val, rec = leakage.guide_split("schools", 3, 1, 8, after=20)
+    meta = {"corpus": "schools", **rec, "plan_names_sha256": leakage.names_digest(tr + val)}
+    assert leakage.guide_training_sets("schools", meta) == {"schools": set(tr) | set(val)}
+    meta["sample"]["validation"]["after"] = 21  # another validation set than the plans it names
+    with pytest.raises(LeakageError, match="not the random sample of its training split"):
+        leakage.guide_training_sets("schools", meta)
+    del meta["sample"]["validation"]["after"]
+    with pytest.raises(LeakageError, match="malformed sample"):
+        leakage.guide_training_sets("schools", meta)

@@ -88,6 +88,9 @@ def test_choose_prefers_the_larger_beta_on_ties():
         ({"settings": TemperSettings(plans=0)}, "plans", "between 1 and 1000"),
         ({"settings": TemperSettings(kernel="tempering")}, "kernel", "one of"),
         ({"corpus": "mars"}, "corpus", "generated, houseexpo"),
+        ({"settings": TemperSettings(sample_seed=3)}, "sample_seed", "with --sample only"),
+        ({"settings": TemperSettings(sample=1)}, "sample", "at least 2"),
+        ({"settings": TemperSettings(sample=10), "corpus": "generated"}, "sample", "floor-plan corpora only"),
         ({"ship": True}, "out", "not both"),
     ],
 )
@@ -151,3 +154,24 @@ def test_quick_passes_its_settings_to_the_library(tmp_path, monkeypatch):
     a = ap.parse_args([])
     assert a.corpus == list(CORPORA) and a.out is None and not a.ship
     assert quick_temper(ap.parse_args(["--quick"])).corpus == ["dungeon"]
+
+
+def test_a_sample_splits_the_random_plans_the_tables_were_counted_on(monkeypatch, tmp_path):
+    """``--sample N --sample-seed S``: the fit and validation plans are every fifth of the random ``N`` training
+    plans of ``fit-prior tables --sample N --sample-seed S`` (their natural order), recorded in the file's
+    command and settings; the command passes them on."""
+    import ogm_ppl.learn.temper as temper
+    from ogm_ppl.learn import FitResult, load_training_plans
+    from ogm_ppl.learn._heldout import split_names
+
+    fit, val = split_names("schools", 10, 1)
+    plans = load_training_plans("schools", sample=10, sample_seed=1).names
+    assert (fit, val) == ([n for i, n in enumerate(plans) if i % 5 != 4], list(plans[4::5]))
+    assert TemperSettings(sample=10, sample_seed=1).options() == ["--sample", "10", "--sample-seed", "1"]
+    calls = []
+    monkeypatch.setattr(
+        temper, "fit_temper", lambda *a, **kw: calls.append(kw["settings"]) or FitResult("temper", (), {}, {}, 0)
+    )
+    argv = ["fit-prior", "temper", "--corpus", "schools", "--sample", "10", "--sample-seed", "1", "--quiet"]
+    assert ogm_ppl([*argv, "--out", str(tmp_path)]) == 0
+    assert (calls[0].sample, calls[0].sample_seed) == (10, 1)
