@@ -166,7 +166,7 @@ def test_the_net_field_is_tempered_on_the_plans_its_fit_kept_for_validation(tmp_
     names = list(load_training_plans("houseexpo").names)
     own = file_kind_validation("net", "houseexpo")
     assert own == [n for i, n in enumerate(names) if i % 10 == 9]
-    s = TemperSettings(kinds=("net",), betas=(1.0, 0.5), plans=1, window=32, sweeps=2, burn=1)
+    s = TemperSettings(kinds=("net",), betas=(1.0, 0.5), plans=1, window=32, sweeps=4, burn=2)
     r = fit_temper("houseexpo", tmp_path / "out", settings=s, progress=False)
     doc = json.loads(r.files[0].read_text())
     v = doc["validation"]["net"]
@@ -176,7 +176,7 @@ def test_the_net_field_is_tempered_on_the_plans_its_fit_kept_for_validation(tmp_
     for row in v["prior_samples"]:
         assert row["start_gap"] == row["occupied"]["occupied"] - row["free"]["occupied"]
     plan = v["validation_plan_statistics"]
-    assert 0 < plan["occupied"] < 1 and np.isfinite(plan["occupied_run"]) and v["prior_sample_check"]["sweeps"] == 3
+    assert 0 < plan["occupied"] < 1 and np.isfinite(plan["occupied_run"]) and v["prior_sample_check"]["sweeps"] == 6
     assert load_temper_params("houseexpo", path=r.files[0]).beta == {"net": doc["beta"]["net"]}
     with pytest.raises(FitOptionError, match="no shipped net fit") as e:
         fit_temper("dungeon", tmp_path / "none", settings=s, progress=False)
