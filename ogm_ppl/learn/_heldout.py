@@ -161,9 +161,20 @@ def file_kind_record(kind: str, corpus: str, windows: Sequence, s: Any, progress
         samples.append(row)
         if progress:
             print(f"  {corpus:>9} {kind:>10} beta {b:<5g} prior samples {ln.describe_statistics(row)}", flush=True)
-    return {
-        "validation_plans_scored": [t.name for t in windows],
-        "prior_samples": samples,
-        "validation_plan_statistics": ln.sample_statistics(crops.reshape(-1, side, side).astype(bool)),
-        "prior_sample_check": {**c, "sweeps": s.burn + s.sweeps, "starts": list(ln.SAMPLE_STARTS)},
-    }
+    return _no_nan(
+        {
+            "validation_plans_scored": [t.name for t in windows],
+            "prior_samples": samples,
+            "validation_plan_statistics": ln.sample_statistics(crops.reshape(-1, side, side).astype(bool)),
+            "prior_sample_check": {**c, "sweeps": s.burn + s.sweeps, "starts": list(ln.SAMPLE_STARTS)},
+        }
+    )
+
+
+def _no_nan(x: Any) -> Any:
+    """``x`` with every float NaN (a run length of maps holding no such run) as ``None``: JSON has no NaN."""
+    if isinstance(x, dict):
+        return {k: _no_nan(v) for k, v in x.items()}
+    if isinstance(x, list):
+        return [_no_nan(v) for v in x]
+    return None if isinstance(x, float) and x != x else x
