@@ -29,13 +29,16 @@ from thresholded traditional OGM over the scans so far, the offline chains' star
 The online *predictive* map (``--part guide``): the same log replayed into an
 :class:`~ogm_ppl.inference.online.OnlineGuideMap` of the headline's corpus guide (``houseexpo+ipa``, one pass;
 ``--symmetrize``: the 8 turns and flips) on ``--guide-threads`` torch threads (default 1; the baseline too).
-Measured: the time per scan
-(ray casting, the sums and features, the recomputed cells; target median 30 ms, 95th percentile 100 ms), the
-cells recomputed a scan; the *from-scratch baseline* in the same run, what ``ogm-ppl map --method amortised``
-does after each scan (ray-cast every scan so far, the model, the features, a full pass of the network), timed at
-a few points of the log and interpolated linearly over it; and the final map against the full recomputation on
-every scan (features, logits, probabilities; the tests hold the online map to the float32 error bound of the
-float64 network on small grids, where that bound can be computed).
+Measured: the time per scan (ray casting, the sums and features, the recomputed cells; target median 30 ms, 95th
+percentile 100 ms), wall clock and the process's CPU time (what a scan costs whatever else the machine runs), the
+cells recomputed a scan; the network's work a scan (multiply-adds on the recomputed cells, and on the tiles the
+convolutions ran on) against the rate of a dense pass measured in the same run (CPU time): the time the
+recomputed cells' own arithmetic takes at that rate, which no recomputation of those cells goes below; the
+*from-scratch baseline* in the same run, what ``ogm-ppl map --method amortised`` does after each scan (ray-cast
+every scan so far, the model, the features, a full pass of the network), timed at a few points of the log and
+interpolated linearly over it; and the final map against the full recomputation on every scan (features,
+logits, probabilities; the tests hold the online map to the float32 error bound of the float64 network on small
+grids, where that bound can be computed).
 
     python benchmarks/bench_online.py [--scans N] [--part chain|guide|all]   (writes out/bench/bench_online.json)
 """
@@ -300,19 +303,41 @@ def guide_part(grid, scans: Scans, args) -> dict:
     om = OnlineGuideMap(grid, guide, threads=args.guide_threads)
     start_s = time.perf_counter() - t0
     t = np.zeros(len(kept))
+    cpu = np.zeros(len(kept))  # the process's CPU seconds: what the scan cost, whatever else the machine runs
     recomputed = np.zeros(len(kept), np.int64)
+    convs = list(guide.net.convs)
+    per_cell = np.array([9 * c.in_channels * c.out_channels for c in convs])  # multiply-adds a cell, per layer
+    macs = np.zeros((len(kept), 2))  # per scan: the written cells' multiply-adds, and the tiles'
     for j, i in enumerate(kept):
-        t0 = time.perf_counter()
+        c0, t0 = time.process_time(), time.perf_counter()
         om.add_scans(_one(scans, i))
-        t[j] = time.perf_counter() - t0
+        t[j], cpu[j] = time.perf_counter() - t0, time.process_time() - c0
         recomputed[j] = om.recomputed
+        work = np.array(om.layer_work, dtype=np.float64).reshape(-1, 2)
+        macs[j] = (work * per_cell[: len(work), None]).sum(0) * (8 if args.symmetrize else 1)
         if j % 100 == 0:
             print(f"guide: scan {i}: {1e3 * t[j]:.0f} ms, {om.recomputed:,} cells", flush=True)
+    # the network's dense rate on this machine, in this run: one full pass over the final features (1 thread
+    # unless --guide-threads), the rate the recomputed cells' multiply-adds could at best run at
+    from ogm_ppl.inference.variational.amortised_fast import fast_logits
+
+    x_final = om.features[None]
+    fast_logits(guide.net, x_final)  # warm-up
+    c0 = time.process_time()
+    fast_logits(guide.net, x_final)
+    dense_s = time.process_time() - c0
+    rate = grid.num_cells * float(per_cell.sum()) / dense_s  # multiply-adds a CPU second
+    floor_ms = 1e3 * macs[:, 0] / rate
     print(
         f"online guide map ({'symmetrised' if args.symmetrize else 'one pass'}, {args.guide_threads} threads): "
         f"start {start_s:.1f} s; per scan median {1e3 * np.median(t):.1f} ms, mean {1e3 * t.mean():.1f} ms, p95 "
-        f"{1e3 * np.percentile(t, 95):.1f} ms (targets 30 / 100); mean recomputed {recomputed.mean():,.0f} cells "
-        f"of {grid.num_cells:,}; load {os.getloadavg()[0]:.2f}",
+        f"{1e3 * np.percentile(t, 95):.1f} ms (targets 30 / 100); CPU time a scan median "
+        f"{1e3 * np.median(cpu):.1f} ms, p95 {1e3 * np.percentile(cpu, 95):.1f} ms; mean recomputed "
+        f"{recomputed.mean():,.0f} cells of {grid.num_cells:,}; load {os.getloadavg()[0]:.2f}\n"
+        f"network work a scan: median {np.median(macs[:, 0]) / 1e6:,.0f} M multiply-adds on the recomputed cells "
+        f"({np.median(macs[:, 1] / macs[:, 0]):.2f}x that on their tiles); dense pass {2 * rate / 1e9:.1f} GFLOP/s "
+        f"(CPU time), so the recomputed cells alone take {np.median(floor_ms):.1f} ms (median), "
+        f"{np.percentile(floor_ms, 95):.1f} ms (p95) of CPU time at that rate",
         flush=True,
     )
     sensor, prior = GaussianRange(1.0), IndependentPrior(0.5, grid.num_cells)
@@ -354,6 +379,20 @@ def guide_part(grid, scans: Scans, args) -> dict:
             "max": 1e3 * float(t.max()),
         },
         "target_ms": {"median": 30.0, "p95": 100.0},
+        "per_scan_cpu_ms": {
+            "median": 1e3 * float(np.median(cpu)),
+            "mean": 1e3 * float(cpu.mean()),
+            "p95": 1e3 * float(np.percentile(cpu, 95)),
+        },
+        "network_macs_per_scan": {
+            "recomputed_cells_median": float(np.median(macs[:, 0])),
+            "tiles_over_cells_median": float(np.median(macs[:, 1] / macs[:, 0])),
+        },
+        "dense_pass_gflops_cpu_time": 2 * rate / 1e9,
+        "recomputed_cells_at_dense_rate_ms": {
+            "median": float(np.median(floor_ms)),
+            "p95": float(np.percentile(floor_ms, 95)),
+        },
         "recomputed_cells_mean": float(recomputed.mean()),
         "grid_cells": grid.num_cells,
         "from_scratch_s": {str(k): v for k, v in scratch.items()},

@@ -50,7 +50,8 @@ class OgmTable(Directive):
         snap = gen_docs_tables.TABLES[name][0]
         env = self.state.document.settings.env
         env.note_dependency(str(gen_docs_tables.RESULTS / f"{snap}.json"))
-        env.note_dependency(gen_docs_tables.__file__)
+        for tool in sorted(Path(gen_docs_tables.__file__).parent.glob("*tables*.py")):  # the builders' modules
+            env.note_dependency(str(tool))
         try:
             t = gen_docs_tables.table(name)
         except FileNotFoundError:

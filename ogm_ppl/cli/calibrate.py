@@ -167,13 +167,19 @@ def add_arguments(ap: argparse.ArgumentParser) -> None:
     ap.add_argument("--burn", type=int, default=50, help="warm-up sweeps per chain")
     ap.add_argument("--seed", type=int, default=0, help="seed of the scans (and of chain c: seed + 1000 c)")
     ap.add_argument("--kernel", default="gibbs", choices=sorted(KERNELS), help="sampler (an entry of KERNELS)")
-    ap.add_argument("--rungs", type=int, default=6, help="tempering: rungs of the geometric ladder (cold one included)")
-    ap.add_argument("--beta-min", type=float, default=0.1, help="tempering: the hottest rung's exponent, in (0, 1)")
-    ap.add_argument("--temper", default="prior", choices=TEMPERS, help="tempering: the factor the ladder raises")
+    ap.add_argument(
+        "--rungs", type=int, default=None, help="tempering: rungs of the geometric ladder, the cold one in (default 6)"
+    )
+    ap.add_argument(
+        "--beta-min", type=float, default=None, help="tempering: the hottest rung's exponent, in (0, 1) (default 0.1)"
+    )
+    ap.add_argument(
+        "--temper", default=None, choices=TEMPERS, help="tempering: the factor the ladder raises (default prior)"
+    )
     ap.add_argument(
         "--proposal-guide",
-        default=PLAN_FILES_GUIDE,
-        help="guided: the corpus guide proposing blocks of cells (C, C1+C2 or either with @sym; default %(default)s)",
+        default=None,
+        help=f"guided: the corpus guide proposing blocks of cells (C, C1+C2, either @sym; default {PLAN_FILES_GUIDE})",
     )
     ap.add_argument("--patch", nargs="*", default=[], help="per-kind patch override: KIND=RxC or KIND=1")
     ap.add_argument(
@@ -209,9 +215,33 @@ def build_parser(prog: str | None = None, description: str | None = None) -> arg
     return ap
 
 
+#: the options that only one sampler reads, by ``--kernel``: named with another sampler they are refused
+KERNEL_OPTIONS: dict[str, tuple[str, ...]] = {
+    "tempering": ("rungs", "beta_min", "temper"),
+    "guided": ("proposal_guide",),
+}
+
+
+def _kernel_options(args: argparse.Namespace) -> dict[str, object]:
+    """The sampler-specific settings of ``args``: each named option for its own ``--kernel`` (the settings'
+    default where it is not named); one named for another sampler raises :class:`SettingsError` (it would be
+    taken and ignored)."""
+    defaults = CalibrationSettings.__dataclass_fields__
+    out: dict[str, object] = {}
+    for kernel, fields in KERNEL_OPTIONS.items():
+        for f in fields:
+            given = getattr(args, f, None)
+            if given is not None and args.kernel != kernel:
+                raise SettingsError(f, f"applies to --kernel {kernel} only, not --kernel {args.kernel}")
+            out[f] = defaults[f].default if given is None else given
+    return out
+
+
 def settings_from_args(args: argparse.Namespace) -> CalibrationSettings:
     """The :class:`~ogm_ppl.calibration.settings.CalibrationSettings` of parsed ``calibrate`` options; raises
-    :class:`~ogm_ppl.calibration.errors.SettingsError` for a value out of range."""
+    :class:`~ogm_ppl.calibration.errors.SettingsError` for a value out of range, or for a sampler's own option
+    (:data:`KERNEL_OPTIONS`) named with another ``--kernel``."""
+    kernel_options = _kernel_options(args)
     return CalibrationSettings(
         test=args.test,
         train=args.train,
@@ -230,10 +260,7 @@ def settings_from_args(args: argparse.Namespace) -> CalibrationSettings:
         burn=args.burn,
         seed=args.seed,
         kernel=args.kernel,
-        rungs=args.rungs,
-        beta_min=args.beta_min,
-        temper=args.temper,
-        proposal_guide=args.proposal_guide,
+        **kernel_options,  # type: ignore[arg-type]
         patch=tuple(args.patch),
         bias_file=args.bias_file,
         max_support=args.max_support,

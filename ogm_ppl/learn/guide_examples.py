@@ -34,7 +34,7 @@ from ogm_ppl.datasets import floorplans as fp
 from ogm_ppl.datasets.stop_and_scan import stop_and_scan
 from ogm_ppl.grid import Grid
 from ogm_ppl.inference.variational.amortised import evidence_features
-from ogm_ppl.learn.guide_settings import CELL_M, FILES_SOURCE, GuideTrainingSettings
+from ogm_ppl.learn.guide_settings import CELL_M, FILES_SOURCE, MIN_FREE_CELLS, GuideTrainingSettings
 from ogm_ppl.metrics import near_mapped_mask
 from ogm_ppl.models import OccupancyModel
 from ogm_ppl.priors import IndependentPrior
@@ -63,9 +63,6 @@ __all__ = [
     "split_names",
     "split_plans",
 ]
-
-#: a training window holds at least this many known free cells
-MIN_FREE_CELLS = 200
 
 
 class TooFewWindowsError(ValueError):

@@ -35,6 +35,8 @@ __all__ = [
     "CORPORA",
     "FILES_SOURCE",
     "MAX_EXAMPLE_BYTES",
+    "MIN_FREE_CELLS",
+    "MIN_WINDOW",
     "NAME_PATTERN",
     "GuideSettingsError",
     "GuideTrainingSettings",
@@ -51,6 +53,9 @@ FILES_SOURCE = "files"
 CELL_M = 0.05
 #: bytes a training window holds per cell: 7 float32 feature channels, the float32 truth, 2 bool masks
 BYTES_PER_CELL = 7 * 4 + 4 + 2
+#: a training window holds at least this many known free cells, so its side is at least :data:`MIN_WINDOW`
+MIN_FREE_CELLS = 200
+MIN_WINDOW = math.isqrt(MIN_FREE_CELLS - 1) + 1
 #: the most memory the training and validation windows may take: ``(examples + val) * window^2 * BYTES_PER_CELL``
 MAX_EXAMPLE_BYTES = 4 * 2**30
 
@@ -194,6 +199,12 @@ class GuideTrainingSettings:
             v = getattr(self, k)
             if isinstance(v, bool) or not isinstance(v, int) or v < 1:
                 raise bad(k, f"{_flag(k)} must be at least 1, got {v!r}")
+        if self.window < MIN_WINDOW:
+            raise bad(
+                "window",
+                f"--window must be at least {MIN_WINDOW} cells (a training window holds at least {MIN_FREE_CELLS} "
+                f"known free cells), got {self.window}",
+            )
         if len(self.sources) > min(self.examples, self.val):
             raise bad("examples", "--examples and --val must give each corpus at least one window")
         if self.poses < 0 or (self.poses == 0 and not self.scan_whole_map):

@@ -50,12 +50,30 @@ def test_the_command_runs_the_library_function(tmp_path, capsys):
         (["--plan-files", "x", "--plan-set", "ipa"], "--plan-set"),
         (["--pixel-size", "0.05"], "--pixel-size"),
         (["--patch", "border1=3"], "--patch"),
+        (["--rungs", "4"], "--rungs"),
+        (["--kernel", "guided", "--beta-min", "0.2"], "--beta-min"),
+        (["--kernel", "cycle", "--temper", "both"], "--temper"),
+        (["--kernel", "tempering", "--proposal-guide", "ipa"], "--proposal-guide"),
     ],
 )
 def test_a_bad_option_names_its_flag(argv, flag, tmp_path, capsys):
     assert main(["calibrate", *argv, "--out", str(tmp_path / "out")]) == 2
     assert capsys.readouterr().err.startswith(f"ogm-ppl: error: {flag}: ")
     assert not any(tmp_path.iterdir())
+
+
+def test_a_samplers_own_option_is_refused_with_another_sampler(capsys):
+    assert main(["calibrate", "--kernel", "gibbs", "--rungs", "4"]) == 2
+    err = capsys.readouterr().err.strip()
+    assert err == "ogm-ppl: error: --rungs: applies to --kernel tempering only, not --kernel gibbs"
+
+
+def test_a_samplers_own_options_reach_the_settings():
+    parse = cli_parser().parse_args
+    s = settings_from_args(parse(["calibrate", "--kernel", "tempering", "--rungs", "4", "--beta-min", "0.2"]))
+    assert (s.rungs, s.beta_min, s.temper) == (4, 0.2, CalibrationSettings().temper)
+    s = settings_from_args(parse(["calibrate", "--kernel", "guided", "--proposal-guide", "ipa@sym"]))
+    assert s.proposal_guide == "ipa@sym" and s.rungs == CalibrationSettings().rungs
 
 
 def test_refusals_of_the_run_are_one_line_errors(tmp_path, capsys):

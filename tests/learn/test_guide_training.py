@@ -346,6 +346,7 @@ def test_several_corpora_refuse_too_few_windows_to_share():
         ({"name": "r2v"}, "name", "'r2v' is a corpus's name: a guide named so is learned on it alone"),
         ({"steps": 0}, "steps", "--steps must be at least 1, got 0"),
         ({"window": 2.5}, "window", "--window must be at least 1"),
+        ({"window": 14}, "window", r"--window must be at least 15 cells \(a training window holds at least 200"),
         ({"poses": 0}, "poses", "--poses must be at least 1"),
         ({"sigma": -1.0}, "sigma", "--sigma must be finite and above 0 cells"),
         ({"range_cells": math.inf}, "range_cells", "--range-cells must be finite"),

@@ -55,9 +55,9 @@ class OnlineGuideMap:
         guide: an :class:`~ogm_ppl.inference.variational.AmortisedGuide` (its network, update term and
             tile phase are read once; its ``symmetrize`` is the default of ``symmetrize``).
         symmetrize: the mean over the 8 turns and flips of the grid (8 times the work and memory).
-        threads: torch threads of an update's small matrix products (default 1: they are a few thousand
-            rows each, and threads that wait on a loaded machine cost more than they give); torch's own
-            thread count is restored after each update.
+        threads: torch threads of an update's convolutions (one a layer, over the tiles it recomputes;
+            default 1: on a machine other jobs load, threads that wait cost more than they give); torch's
+            own thread count is restored after each update.
 
     Attributes:
         recomputed: cells whose logits the latest :meth:`add_scans` recomputed.
@@ -161,6 +161,13 @@ class OnlineGuideMap:
         """``K`` float64: ``q(m_k = 1 | z)`` (pinned cells 0), as
         :meth:`~ogm_ppl.inference.variational.AmortisedGuide.marginals` on a model of every scan so far."""
         return torch.where(self._pinned, 0.0, torch.sigmoid(self.logits))
+
+    @property
+    def layer_work(self) -> list[tuple[int, int]]:
+        """Per layer of the network, the cells the latest :meth:`add_scans` recomputed and the cells of the
+        tiles it ran the convolution on (:attr:`IncrementalLogits.last_work
+        <ogm_ppl.inference.variational.amortised_incremental.IncrementalLogits.last_work>`)."""
+        return list(self._inc.last_work)
 
     @property
     def features(self) -> torch.Tensor:

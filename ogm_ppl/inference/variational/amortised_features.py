@@ -37,6 +37,25 @@ def _delta(name: str):
     return d
 
 
+_TABLE_CACHE_ENTRIES = 1 << 20  # tables up to 8 MiB are kept (a few of them): a replay's scans share a few sizes
+
+
+@lru_cache(maxsize=4)
+def _cached_table(name: str, n_kappa: int, n_z: int) -> torch.Tensor:
+    with torch.no_grad():
+        return _delta(name).table(n_kappa, n_z).to(torch.float64)
+
+
+def _delta_table(name: str, n_kappa: int, n_z: int) -> torch.Tensor:
+    """``Delta``'s ``n_kappa x (n_z + 1)`` float64 table (column ``n_z``: max-range readings); small tables are
+    kept, so that scans added one at a time do not rebuild the same table (the same computation: the same
+    values). Read only."""
+    if n_kappa * (n_z + 1) <= _TABLE_CACHE_ENTRIES:
+        return _cached_table(name, n_kappa, n_z)
+    with torch.no_grad():
+        return _delta(name).table(n_kappa, n_z).to(torch.float64)
+
+
 def feature_names(phase: tuple[int, int] = (3, 3)) -> list[str]:
     """Channel names of :func:`evidence_features` for a tile phase ``(h, w)`` (``(0, 0)``: none)."""
     h, w = phase
@@ -107,8 +126,7 @@ def ray_terms(
     n_kappa = int(rays.lengths.max())
     hz = kz[~is_max]
     n_z = max(int(hz.max()) + 1 if hz.numel() else 0, n_kappa)
-    with torch.no_grad():
-        table = _delta(delta).table(n_kappa, n_z).to(torch.float64)
+    table = _delta_table(delta, n_kappa, n_z)
     col = torch.where(mx, n_z, kze)
     return passed, hit, table[kap[None].expand_as(col), col]
 

@@ -152,35 +152,3 @@ def test_any_architecture_and_an_odd_grid():
         for sym in (False, True):
             exact, bound = exact_logits_and_bound(net, x, sym)
             assert ((fast_logits(net, x, sym).double() - exact).abs() <= bound).all()
-
-
-@pytest.mark.parametrize("symmetrize", [False, True])
-def test_incremental_logits_equal_a_full_pass_after_updates(symmetrize):
-    """Features changed on a few cells twice (a wall of cells, a single cell at the grid edge): the kept
-    logits stay within the float32 bound of the float64 network on the new features, only cells within
-    ``sum(dilations)`` of a change are recomputed, and the logits outside them are those of before."""
-    from ogm_ppl.inference.variational.amortised_incremental import IncrementalLogits
-
-    arch = GuideArchitecture(4, (1, 2, 1), (0, 0), "p21")
-    torch.manual_seed(1)
-    net = GuideNet(arch)
-    gen = torch.Generator().manual_seed(4)
-    x = torch.rand((arch.in_channels, 12, 17), generator=gen, dtype=torch.float32)
-    inc = IncrementalLogits(net, x, symmetrize)
-    exact, bound = exact_logits_and_bound(net, x[None], symmetrize)
-    assert ((inc.logits.double() - exact[0]).abs() <= bound[0]).all()
-    reach = sum(arch.dilations)
-    for rows, cols in ((slice(5, 6), slice(2, 8)), (slice(0, 1), slice(16, 17))):
-        changed = torch.zeros((12, 17), dtype=torch.bool)
-        changed[rows, cols] = True
-        before = inc.logits.clone()
-        x = x.clone()
-        x[:, changed] = torch.rand((arch.in_channels, int(changed.sum())), generator=gen, dtype=torch.float32)
-        done = inc.update(x, changed)
-        near = torch.zeros_like(changed)
-        r0, c0 = rows.start, cols.start
-        near[max(r0 - reach, 0) : rows.stop + reach, max(c0 - reach, 0) : cols.stop + reach] = True
-        assert done[changed].all() and not done[~near].any()
-        assert torch.equal(inc.logits[~done], before[~done])
-        exact, bound = exact_logits_and_bound(net, x[None], symmetrize)
-        assert ((inc.logits.double() - exact[0]).abs() <= bound[0]).all()
