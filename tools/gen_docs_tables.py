@@ -290,6 +290,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "calibration_logs_occupied": ("calibration_logs_occupied", calibration_plans_table),
     "calibration_logs_net": ("calibration_logs_net", calibration_plans_table),
     "calibration_logs_net_guided": ("calibration_logs_net_guided", calibration_plans_table),
+    "calibration_logs_net_tempered": ("calibration_logs_net_tempered", calibration_plans_table),
     "calibration_cycle": ("calibration_cycle", calibration_kernels_table),
     "guide_limits_ipa": ("guide_limits_ipa", guide_limits_table),
     "unseen_by_distance": ("unseen_by_distance", unseen_by_distance_table),

@@ -230,6 +230,13 @@ _NET_HELP = {
     "check_size": "grid side of the final sampler check",
     "check_sweeps": "sweeps of the final sampler check",
     "seed": "seed of the initial weights, batches, crops and chains",
+    "start": "a net-field file whose parameters start the fit (then --pl-steps may be 0)",
+    "start_beta": "the PCD stage starts from the field raised to this power, in (0, 1]",
+    "pcd_init": "the PCD chains start from training crops (data) or uniform noise (noise)",
+    "select": "stopping score: held-out pseudo-likelihood (pl) or unseen-cell NLL of scanned validation windows",
+    "select_plans": "validation windows of the unseen-cell score",
+    "select_window": "side of those windows, cells",
+    "select_sweeps": "Gibbs sweeps a chain of the unseen-cell score (after 5)",
 }
 
 

@@ -56,6 +56,10 @@ from ogm_ppl.learn._fit_common import (
 __all__ = ["NetFieldSettings", "fit_net_field"]
 
 VALIDATION_EVERY = 10
+#: how the PCD chains start
+PCD_INITS = ("data", "noise")
+#: the stopping scores
+SELECTS = ("pl", "unseen")
 _PARAMS = ("filters", "bias", "out", "unary")
 
 
@@ -65,7 +69,12 @@ class NetFieldSettings:
     (``8 hidden`` units); ``activation``: ``relu`` or ``softplus``; ``pad``: the value of a cell past the grid's
     edge; ``lambda_``: L2 penalty; ``pl_steps``/``pl_batch``/``pl_lr``: the pseudo-likelihood stage;
     ``pcd_steps``/``pcd_chains``/``pcd_size``/``pcd_sweeps``/``pcd_lr``: the PCD stage; ``eval_every``: steps between
-    held-out scores (and checkpoints); ``check_size``/``check_sweeps``: the final sampler check; ``seed``."""
+    held-out scores (and checkpoints); ``check_size``/``check_sweeps``: the final sampler check; ``seed``;
+    ``start``: a net-field file whose parameters start the fit (``pl_steps`` may then be 0); ``start_beta``: the
+    PCD stage starts from the field raised to this power (output weights and unary bias times it); ``pcd_init``:
+    the chains start from training crops (``data``) or uniform noise (``noise``); ``select``: the stopping score,
+    held-out pseudo-likelihood (``pl``) or the unseen-cell NLL of :mod:`~ogm_ppl.learn._net_select` (``unseen``,
+    on ``select_plans`` validation windows of ``select_window`` cells, ``select_sweeps`` sweeps a chain)."""
 
     w: int = 5
     hidden: int = 8
@@ -84,6 +93,13 @@ class NetFieldSettings:
     check_size: int = 48
     check_sweeps: int = 100
     seed: int = 0
+    start: str = ""
+    start_beta: float = 1.0
+    pcd_init: str = "data"
+    select: str = "pl"
+    select_plans: int = 3
+    select_window: int = 64
+    select_sweeps: int = 20
 
     def checked(self) -> NetFieldSettings:
         """These settings, each checked (:class:`~ogm_ppl.learn.FitOptionError` names the first out of range)."""
@@ -95,7 +111,7 @@ class NetFieldSettings:
             raise FitOptionError("activation", f"must be one of {', '.join(ACTIVATIONS)}, got {self.activation!r}")
         check_float(self.pad, "pad", 0.0, 1.0, lo_open=False)
         check_float(self.lambda_, "lambda_", 0.0, 1e3, lo_open=False)
-        check_int(self.pl_steps, "pl_steps", 1, 10_000_000)
+        check_int(self.pl_steps, "pl_steps", 0 if self.start else 1, 10_000_000)
         check_int(self.pl_batch, "pl_batch", 1, 10_000_000)
         check_float(self.pl_lr, "pl_lr", 0.0, 10.0)
         check_int(self.pcd_steps, "pcd_steps", 0, 10_000_000)
@@ -107,6 +123,16 @@ class NetFieldSettings:
         check_int(self.check_size, "check_size", 17, 1024)
         check_int(self.check_sweeps, "check_sweeps", 1, 1_000_000)
         check_int(self.seed, "seed", 0, 2**32 - 1)
+        check_float(self.start_beta, "start_beta", 0.0, 1.0)
+        if self.pcd_init not in PCD_INITS:
+            raise FitOptionError("pcd_init", f"must be one of {', '.join(PCD_INITS)}, got {self.pcd_init!r}")
+        if self.select not in SELECTS:
+            raise FitOptionError("select", f"must be one of {', '.join(SELECTS)}, got {self.select!r}")
+        check_int(self.select_plans, "select_plans", 1, 100)
+        check_int(self.select_window, "select_window", 16, 1024)
+        check_int(self.select_sweeps, "select_sweeps", 1, 100_000)
+        if self.start and not Path(self.start).is_file():
+            raise FitOptionError("start", f"{self.start} is not a file (a net field of save_net_field)")
         return self
 
     def record(self) -> dict:
@@ -117,8 +143,16 @@ class NetFieldSettings:
             "Adam on -mean log p(m_k | m_-k) over uniform batches of known-neighbourhood training cells, "
             "step size pl_lr falling to pl_lr / 20 on a half cosine"
         )
-        d["pcd"] = "Adam on (mean log p~(chains) - mean log p~(crops)) / cells; chains from training crops, carried"
-        d["stopping"] = "the evaluated parameters of least held-out -log p(m_k | m_-k) on the validation plans"
+        chains = "training crops" if self.pcd_init == "data" else "uniform noise"
+        d["pcd"] = f"Adam on (mean log p~(chains) - mean log p~(crops)) / cells; chains from {chains}, carried"
+        d["stopping"] = (
+            "the evaluated parameters of least held-out -log p(m_k | m_-k) on the validation plans"
+            if self.select == "pl"
+            else "the evaluated parameters of least unseen-cell NLL (bits) of 2 chains on sparse scans of "
+            "validation windows (ogm_ppl.learn._net_select)"
+        )
+        if self.start:
+            d["start_sha256"] = hashlib.sha256(Path(self.start).read_bytes()).hexdigest()
         return d
 
     def options(self) -> list[str]:
@@ -192,9 +226,22 @@ def fit_net_field(
     ckpt = out / f"net_{label}.checkpoint.npz"
     share = min(max(share, 1e-3), 1 - 1e-3)
     model = ln.NetModel(s.w, s.hidden, s.activation, s.pad, s.seed, unary=float(np.log(share / (1 - share))))
+    if s.start:
+        _load_start(model, s)
+    sel = None
+    if s.select == "unseen":
+        from ogm_ppl.learn._net_select import selection_scenes
+
+        val_names = [plans.names[i] for i in va_idx]
+        sel = selection_scenes(val, val_names, s.select_plans, s.select_window, s.select_sweeps, seed=s.seed)
+        if not sel.scenes:
+            raise FitOptionError("select_window", f"no validation plan has a usable {s.select_window}-cell window")
+        say(f"{label}: stopping score on {len(sel.scenes)} validation windows: {', '.join(sel.names)}", flush=True)
     total = s.pl_steps + s.pcd_steps
     state = _read_checkpoint(ckpt, key) if resume else None
     step, history = 0, []
+    if s.pl_steps == 0 and state is None:
+        _temper(model, s.start_beta)  # a started fit's PCD stage begins at once
     best: dict[str, Any] = {"nll": float("inf"), "step": 0, "params": model.arrays()}
     chains = np.zeros((s.pcd_chains, s.pcd_size**2), np.uint8)
     opt = torch.optim.Adam(model.parameters(), lr=s.pl_lr)
@@ -212,12 +259,24 @@ def fit_net_field(
         row = {"step": at, "phase": phase, "heldout_nll": nll, "cells": n}
         if phase == "pcd":
             row["chain_occupancy"] = float(chains.mean())
+        score = nll
+        if sel is not None:
+            from ogm_ppl.learn._net_select import unseen_nll
+
+            score = row["unseen_nll_bits"] = unseen_nll(lambda shape: model.prior(shape, occupancy=share), sel)
         history.append(row)
-        if nll < best["nll"]:
-            best.update(nll=nll, step=at, params=model.arrays())
-        say(f"  step {at} ({phase}): held-out -log p(m_k | m_-k) = {nll:.5f} nats/cell over {n:,} cells", flush=True)
+        if score < best["nll"]:
+            best.update(nll=score, step=at, params=model.arrays())
+        more = "" if sel is None else f", unseen-cell NLL {score:.4f} bits"
+        say(
+            f"  step {at} ({phase}): held-out -log p(m_k | m_-k) = {nll:.5f} nats/cell over {n:,} cells{more}",
+            flush=True,
+        )
         state = {"key": key, "step": at, "history": history, "best": best, "params": model.arrays(), "chains": chains}
         _write_checkpoint(ckpt, state, opt)
+
+    if s.pl_steps == 0 and state is None:
+        evaluate(0, "start")  # the (tempered) start is a candidate too
 
     with Progress(total, f"fit-prior net-field {label}", unit="step", enabled=progress, initial=step) as bar:
         while step < total:
@@ -229,19 +288,25 @@ def fit_net_field(
                     group["lr"] = pl_step_size(s, step)
                 nb, y = cells.draw(s.pl_batch, rng)
                 loss = ln.pl_loss(model, nb, y)
+                opt.zero_grad()
+                (loss + s.lambda_ * model.penalty()).backward()
+                opt.step()
+                value = float(loss.detach())
             else:
                 phase = "pcd"
-                if step == s.pl_steps + 1:  # the PCD stage starts: its optimiser, chains from training crops
+                if step == s.pl_steps + 1:  # the PCD stage starts: its optimiser, its start, its chains
+                    if s.pl_steps > 0:
+                        _temper(model, s.start_beta)
                     opt = torch.optim.Adam(model.parameters(), lr=s.pcd_lr)
-                    chains = ln.data_crops_known(train, s.pcd_chains, s.pcd_size, np.random.default_rng([s.seed, 0]))
-                ln.advance_chains(model, chains, s.pcd_size, s.pcd_sweeps, int(rng.integers(2**31 - 1)))
-                grid = (-1, s.pcd_size, s.pcd_size)
-                data = ln.data_crops_known(train, s.pcd_chains, s.pcd_size, rng).reshape(grid)
-                loss = ln.pcd_loss(model, torch.from_numpy(data.astype(np.float64)), _maps(chains, grid))
-            opt.zero_grad()
-            (loss + s.lambda_ * model.penalty()).backward()
-            opt.step()
-            bar.update(note=f"{phase} loss {float(loss.detach()):.4g}")
+                    crng = np.random.default_rng([s.seed, 0])
+                    if s.pcd_init == "data":
+                        chains = ln.data_crops_known(train, s.pcd_chains, s.pcd_size, crng)
+                    else:
+                        chains = np.ascontiguousarray(crng.random((s.pcd_chains, s.pcd_size**2)) < 0.5, np.uint8)
+                chain_seed = int(rng.integers(2**31 - 1))
+                data = ln.data_crops_known(train, s.pcd_chains, s.pcd_size, rng)
+                value = ln.pcd_update(model, opt, data, chains, s.pcd_sweeps, chain_seed, s.lambda_)
+            bar.update(note=f"{phase} loss {value:.4g}")
             if step % s.eval_every == 0 or step in (s.pl_steps, total):
                 evaluate(step, phase)
     model.load_arrays(best["params"])
@@ -266,16 +331,47 @@ def fit_net_field(
         "train_cells": cells.n_cells,
         "train_occupied_share": share,
         "chosen_step": best["step"],
-        "heldout_nll": best["nll"],
+        "selected_by": s.select,
+        "heldout_nll" if s.select == "pl" else "unseen_nll_bits": best["nll"],
         "curve": history,
         "occupancy": float(arrays["occupancy"]),
         "sampler_check": check,
     }
     side = atomic_write_text(out / f"net_{label}.json", json.dumps(info, indent=1) + "\n")
     ckpt.unlink(missing_ok=True)
-    say(f"{label}: wrote {path} (step {best['step']}, held-out {best['nll']:.5f}; {info['seconds_incl_reading']} s)")
-    summary = {"chosen_step": best["step"], "heldout_nll": best["nll"], "occupancy": info["occupancy"]}
+    secs = info["seconds_incl_reading"]
+    say(f"{label}: wrote {path} (step {best['step']}, {s.select} score {best['nll']:.5f}; {secs} s)")
+    summary = {"chosen_step": best["step"], s.select: best["nll"], "occupancy": info["occupancy"]}
     return FitResult("net-field", (path, side), prov, summary, info["seconds_incl_reading"])
+
+
+def _load_start(model, s: NetFieldSettings) -> None:
+    """Set ``model``'s parameters from the net-field file ``s.start`` (its window, filters, activation and pad must
+    be the settings')."""
+    from ogm_ppl.priors.net_field import load_net_field
+
+    try:
+        d = load_net_field(s.start)
+    except ValueError as e:
+        raise FitOptionError("start", str(e)) from None
+    got = (d["w"], d["filters"].shape[0], d["activation"], d["pad"])
+    if got != (s.w, s.hidden, s.activation, s.pad):
+        raise FitOptionError(
+            "start",
+            f"{s.start} holds w={got[0]}, hidden={got[1]}, {got[2]}, pad {got[3]:g}; the settings ask w={s.w}, "
+            f"hidden={s.hidden}, {s.activation}, pad {s.pad:g}",
+        )
+    model.load_arrays({k: d[k] for k in _PARAMS})
+
+
+def _temper(model, beta: float) -> None:
+    """Raise ``model``'s field to the power ``beta`` in place (output weights and unary bias times ``beta``)."""
+    import torch
+
+    if beta != 1.0:
+        with torch.no_grad():
+            model.out.mul_(beta)
+            model.unary.mul_(beta)
 
 
 def pl_step_size(s: NetFieldSettings, step: int) -> float:
@@ -306,12 +402,6 @@ def _pair(m: Any) -> tuple[np.ndarray, np.ndarray]:
     if hasattr(m, "occupancy"):
         return np.asarray(m.occupancy, bool), np.asarray(m.known, bool)
     return np.asarray(m, bool), np.ones(np.shape(m), bool)
-
-
-def _maps(chains: np.ndarray, grid: tuple[int, int, int]):
-    import torch
-
-    return torch.from_numpy(chains.reshape(grid).astype(np.float64))
 
 
 def _adam_arrays(opt) -> dict[str, np.ndarray]:

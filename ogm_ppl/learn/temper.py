@@ -24,6 +24,13 @@ on this split); every table is counted on the fit part only. The first
 names) the validation maps are fresh draws of the generator from a seed stream no table and no held-out map
 uses (:data:`VALIDATION_SEED`), with the shipped tables.
 
+**A net field** (``--kinds net``, a kind fitted as a file: :data:`~ogm_ppl.priors.named.FILE_KINDS`) counts no
+tables: its exponent is scored on windows of the plans the net's own fit kept for validation
+(:func:`~ogm_ppl.learn._heldout.file_kind_validation`: every tenth of the same training plans, which it never
+trained on), and its entry records, at each exponent, the statistics of its prior samples (occupied share and
+mean runs from the all-free and the all-occupied start, their gap showing an ordered phase) beside the
+validation plans' (:func:`~ogm_ppl.learn._heldout.file_kind_record`). ``net:CORPUS@cal`` then reads it.
+
 :func:`fit_temper` writes ``temper_<corpus>.json`` (``beta`` per kind, every ``(beta, kind)`` score per plan,
 the settings and provenance), read by :func:`~ogm_ppl.priors.named.load_temper_params`
 (``ogm-ppl fit-prior temper --corpus C --out DIR``; ``--ship`` replaces the package's
@@ -44,7 +51,11 @@ import numpy as np
 
 from ogm_ppl.learn._fit_common import CORPORA, FitOptionError, FitResult, check_float, check_int
 from ogm_ppl.learn._heldout import (
+    FILE_KINDS,
     count_fit_tables,
+    file_kind_path,
+    file_kind_record,
+    file_kind_validation,
     names_sha256,
     output_folder,
     shell_command,
@@ -199,6 +210,10 @@ def fit_temper(
         raise FitOptionError("corpus", f"give one or more distinct corpora of {', '.join(CORPORA)}, got {corpora}")
     if s.sample is not None and "generated" in corpora:
         raise FitOptionError("sample", "applies to floor-plan corpora only (the generated maps have no split)")
+    for c in corpora:  # a file kind needs its fit on every corpus given: refused before anything is written
+        for k in s.kinds:
+            if k in FILE_KINDS:
+                file_kind_path(k, c)
     out, where = output_folder(out_dir, ship)
     old = {c: _previous(out / f"temper_{c}.json", c, s) for c in corpora} if update else {}
     cmd = shell_command("temper", "--corpus", *corpora, *where, *s.options(), *(["--update"] if update else []))
@@ -241,6 +256,10 @@ def _fit_corpus(corpus: str, s: TemperSettings, prov: dict, progress: bool) -> d
 
     t0 = time.perf_counter()
     rec: dict = {**prov, "excluded_buildings": list(fp.REAL_LOG_BUILDINGS)}
+    table_kinds = [k for k in s.kinds if k not in FILE_KINDS]
+    own = {k: file_kind_validation(k, corpus) for k in s.kinds if k in FILE_KINDS}  # refused before any work
+    maps: list = []
+    own_maps: dict[str, list] = {}
     if corpus == "generated":
         tables, counted = None, 0.0
         maps = generated_windows(s.plans, s.generated_shape, s.window, VALIDATION_SEED)
@@ -248,11 +267,13 @@ def _fit_corpus(corpus: str, s: TemperSettings, prov: dict, progress: bool) -> d
     else:
         fit, val = split_names(corpus, s.sample, s.sample_seed)
         fit = fit[: s.fit_limit]
-        maps = validation_windows(corpus, val, s.plans, s.window)  # refused before the counting
-        tables = count_fit_tables(corpus, fit)
+        own_maps = {k: validation_windows(corpus, names, s.plans, s.window) for k, names in own.items()}
+        if table_kinds:
+            maps = validation_windows(corpus, val, s.plans, s.window)  # refused before the counting
+        tables = count_fit_tables(corpus, fit) if table_kinds else None
         counted = time.perf_counter() - t0
         rec.update(
-            tables="counted on the fit part",
+            tables="counted on the fit part" if table_kinds else "none (file kinds only)",
             fit_plans=len(fit),
             fit_names_sha256=names_sha256(fit),
             validation_names_sha256=names_sha256(val),
@@ -264,10 +285,11 @@ def _fit_corpus(corpus: str, s: TemperSettings, prov: dict, progress: bool) -> d
         per: dict[float, list[float]] = {}
         rhat: dict[float, list[float]] = {}
         skipped = None
+        kind_scenes = [make_scene(t, s) for t in own_maps[kind]] if kind in own else scenes
         for b in s.betas:
             name = f"{kind}:{corpus}" + ("" if b == 1.0 else f"@{b:g}")
-            for sc in scenes:
-                r = run_prior(sc, name, s, tables=tables)
+            for sc in kind_scenes:
+                r = run_prior(sc, name, s, tables=None if kind in own else tables)
                 if "skipped" in r:
                     skipped = r["skipped"]
                     break
@@ -292,6 +314,8 @@ def _fit_corpus(corpus: str, s: TemperSettings, prov: dict, progress: bool) -> d
             "mean_nll_bits": [float(np.mean(per[b])) for b in per],
             "rhat_below": [float(np.mean(rhat[b])) for b in per],
         }
+        if kind in own:
+            validation[kind].update(file_kind_record(kind, corpus, own_maps[kind], s, progress))
         if progress:
             print(f"  {corpus:>9} {kind:>10} -> beta {beta[kind]:g}", flush=True)
     rec.update(

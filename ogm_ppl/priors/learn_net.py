@@ -20,6 +20,10 @@ single-cell Gibbs sweeps under the current parameters
 ``(mean_chains log p~ - mean_data log p~) / size^2`` has that gradient (per cell). Crops and chains alike are
 scored as grids of their own (windows past their edge read ``pad``).
 
+**Prior samples** (:func:`prior_sample_statistics`): whether a field's chains leave their start (an ordered
+field's freeze where they begin), and how their maps compare with plans (:func:`sample_statistics`: occupied
+share, mean runs of occupied and of free cells along rows and columns).
+
 **Held-out score** (:func:`heldout_nll`): the mean ``-log p(m_k | m_-k)`` over the validation maps' eligible
 cells, by the compiled conditionals of the bundle in float64
 (:func:`~ogm_ppl.priors.compiled.sampling.conditional_nll`), so any compiled prior (a pattern field too) is scored on
@@ -28,6 +32,7 @@ the same cells.
 
 from __future__ import annotations
 
+import math
 from collections.abc import Sequence
 
 import numpy as np
@@ -35,19 +40,27 @@ import torch
 
 from ogm_ppl.priors.compiled.net_field import ACTIVATIONS
 from ogm_ppl.priors.compiled.net_field_patches import net_prior_sweeps
-from ogm_ppl.priors.compiled.sampling import conditional_nll
+from ogm_ppl.priors.compiled.sampling import conditional_nll, prior_gibbs_sweeps
 from ogm_ppl.priors.net_field import NetFieldPrior, activation_fn, energy, oriented
 
 __all__ = [
     "CellBatches",
     "NetModel",
+    "SAMPLE_STARTS",
     "data_crops_known",
+    "describe_statistics",
     "eligible_cells",
     "heldout_nll",
     "pcd_loss",
+    "pcd_update",
     "pl_loss",
+    "prior_sample_statistics",
+    "sample_statistics",
     "window_index",
 ]
+
+#: the starts of :func:`prior_sample_statistics`' chains
+SAMPLE_STARTS = ("free", "occupied")
 
 
 def window_index(w: int) -> tuple[np.ndarray, np.ndarray]:
@@ -189,6 +202,26 @@ def pcd_loss(model: NetModel, data: torch.Tensor, chains: torch.Tensor) -> torch
     return (model.energy(chains).mean() - model.energy(data).mean()) / cells
 
 
+def pcd_update(
+    model: NetModel, opt, data: np.ndarray, chains: np.ndarray, sweeps: int, seed: int, lambda_: float = 0.0
+) -> float:
+    """One step of persistent contrastive divergence (maximum likelihood with a Markov-chain negative phase):
+    ``sweeps`` compiled Gibbs sweeps of the ``B x S^2`` uint8 ``chains`` under the current field (in place), then
+    one step of the optimiser ``opt`` on :func:`pcd_loss` of the ``B' x S^2`` uint8 ``data`` against them, plus
+    ``lambda_`` times :meth:`NetModel.penalty`. Returns the loss before the step."""
+    size = math.isqrt(chains.shape[1])
+    if size * size != chains.shape[1] or data.shape[1] != chains.shape[1]:
+        raise ValueError(f"chains and data must be square grids of one size, got {chains.shape} and {data.shape}")
+    advance_chains(model, chains, size, sweeps, seed)
+    grid = (-1, size, size)
+    x = torch.from_numpy(data.reshape(grid).astype(np.float64))
+    loss = pcd_loss(model, x, torch.from_numpy(chains.reshape(grid).astype(np.float64)))
+    opt.zero_grad()
+    (loss + lambda_ * model.penalty()).backward()
+    opt.step()
+    return float(loss.detach())
+
+
 def advance_chains(model: NetModel, chains: np.ndarray, size: int, sweeps: int, seed: int) -> None:
     """``sweeps`` compiled Gibbs sweeps of the ``B x size^2`` uint8 chains under the model's current field."""
     net_prior_sweeps(model.prior((size, size)).compiled(), chains, int(sweeps), int(seed))
@@ -228,3 +261,50 @@ def heldout_nll(prior_for_shape, maps: Sequence[tuple[np.ndarray, np.ndarray]], 
         tot += conditional_nll(prior_for_shape(np.asarray(occ).shape), m, cells)
         n += len(cells)
     return (tot / n if n else float("nan")), n
+
+
+def sample_statistics(maps: np.ndarray) -> dict[str, float]:
+    """Statistics of ``B x R x C`` binary maps, pooled: ``occupied`` the occupied share, ``occupied_run`` and
+    ``free_run`` the mean length of the maximal runs of occupied and of free cells along rows and along columns
+    (a run cut by the map's edge counts as it is; ``nan`` when there is none). A plan's walls give occupied runs of
+    their thickness across and their length along; noise of share ``p`` gives ``1 / (1 - p)``."""
+    x = np.asarray(maps, bool)
+    if x.ndim != 3 or x.size == 0:
+        raise ValueError(f"maps must be a non-empty B x R x C array, got shape {x.shape}")
+    out = {"occupied": float(x.mean())}
+    for key, v in (("occupied_run", True), ("free_run", False)):
+        cells = runs = 0
+        for a in (x, x.transpose(0, 2, 1)):
+            b = (a == v).reshape(-1, a.shape[-1]).astype(np.int8)
+            cells += int(b.sum())
+            runs += int((np.diff(b, axis=1, prepend=0) == 1).sum())
+        out[key] = cells / runs if runs else float("nan")
+    return out
+
+
+def prior_sample_statistics(prior, chains: int = 2, sweeps: int = 100, edge: int = 8, seed: int = 0) -> dict:
+    """:func:`sample_statistics` of a compiled prior's samples on its 2D grid: ``chains`` chains from each start of
+    :data:`SAMPLE_STARTS` (all free, all occupied), ``sweeps`` compiled single-cell Gibbs sweeps on the prior
+    alone, the cells at least ``edge`` from the grid's edges read at the end. Returns ``{start: statistics}`` and
+    ``start_gap``, the difference of the two starts' occupied shares (near 1: chains frozen at their start, an
+    ordered phase; near 0: they forget it)."""
+    R, C = prior.shape if len(prior.shape) == 2 else (1, prior.shape[0])
+    if R <= 2 * edge or C <= 2 * edge:
+        raise ValueError(f"a {R} x {C} grid has no cell {edge} from its edges")
+    bundle = prior.compiled()
+    out: dict = {}
+    for start in SAMPLE_STARTS:
+        maps = np.full((int(chains), R * C), start == "occupied", np.uint8)
+        prior_gibbs_sweeps(bundle, maps, int(sweeps), int(seed))
+        out[start] = sample_statistics(maps.reshape(-1, R, C)[:, edge:-edge, edge:-edge])
+    out["start_gap"] = out["occupied"]["occupied"] - out["free"]["occupied"]
+    return out
+
+
+def describe_statistics(row: dict) -> str:
+    """One line of :func:`prior_sample_statistics`' result."""
+    parts = [
+        f"{k}: occupied {row[k]['occupied']:.3f}, runs {row[k]['occupied_run']:.1f} / {row[k]['free_run']:.1f}"
+        for k in SAMPLE_STARTS
+    ]
+    return "; ".join(parts) + f" (start gap {row['start_gap']:.3f})"

@@ -144,3 +144,35 @@ def test_the_command_names_a_bad_option_as_it_is_spelled(tmp_path, capsys):
         assert ogm_ppl(["fit-prior", "net-field", "--corpus", "houseexpo", "--out", str(out), *bad]) == 2
         assert f"ogm-ppl: error: {says}" in capsys.readouterr().err
     assert not out.exists()
+
+
+def test_a_fit_started_from_a_file_tempers_it_and_stops_on_the_unseen_cell_score(tmp_path):
+    """``start`` (pseudo-likelihood skipped), ``start_beta`` (the start's output weights and unary bias times
+    beta), PCD chains from noise, and ``select="unseen"``: every evaluation scores the unseen-cell NLL of the
+    scanned validation window, the tempered start (step 0) among them, and the written field is the least's. A
+    start of another window side is refused, naming ``start``, before anything is written."""
+    from dataclasses import replace
+
+    from ogm_ppl.learn._net_select import selection_scenes, unseen_nll
+
+    plans = plan_folder(tmp_path)
+    first = _fit(plans, tmp_path / "first")
+    s = replace(TINY, start=str(first.files[0]), pl_steps=0, start_beta=0.5, pcd_init="noise", select="unseen")
+    s = replace(s, select_plans=1, select_window=32, select_sweeps=2, pcd_steps=4, eval_every=2)
+    r = fit_net_field(plans, tmp_path / "out", settings=s, pixel_size=PIXEL_SIZE, validation_every=2, progress=False)
+    info = json.loads(r.files[1].read_text())
+    assert [(row["step"], row["phase"]) for row in info["curve"]] == [(0, "start"), (2, "pcd"), (4, "pcd")]
+    scores = [row["unseen_nll_bits"] for row in info["curve"]]
+    assert info["selected_by"] == "unseen" and info["unseen_nll_bits"] == min(scores)
+    assert info["chosen_step"] == info["curve"][scores.index(min(scores))]["step"]
+    d0, d = load_net_field(first.files[0]), load_net_field(r.files[0])
+    if info["chosen_step"] == 0:  # the tempered start itself
+        np.testing.assert_array_equal(d["out"], 0.5 * d0["out"])
+    val = [(p.occupancy, p.known) for p in read_plans(plans)][1::2]
+    sel = selection_scenes(val, ["p1"], 1, 32, 2)
+    tempered = NetFieldPrior((4, 4), d0["filters"], d0["bias"], 0.5 * d0["out"], 0.5 * d0["unary"])
+    assert unseen_nll(lambda shape: tempered.with_shape(shape), sel) == scores[0]
+    with pytest.raises(FitOptionError, match="w=3") as e:
+        fit_net_field(plans, tmp_path / "bad", settings=replace(s, w=5, pcd_size=16), pixel_size=PIXEL_SIZE,
+                      validation_every=2, progress=False)  # fmt: skip
+    assert e.value.option == "start" and not (tmp_path / "bad").exists()

@@ -175,3 +175,33 @@ def test_a_sample_splits_the_random_plans_the_tables_were_counted_on(monkeypatch
     argv = ["fit-prior", "temper", "--corpus", "schools", "--sample", "10", "--sample-seed", "1", "--quiet"]
     assert ogm_ppl([*argv, "--out", str(tmp_path)]) == 0
     assert (calls[0].sample, calls[0].sample_seed) == (10, 1)
+
+
+def test_the_net_field_is_tempered_on_the_plans_its_fit_kept_for_validation(tmp_path):
+    """A file kind (the shipped ``net:houseexpo``) counts no tables: its exponents are scored on windows of the
+    plans its own fit kept for validation (every tenth training plan, none it trained on), and the record holds
+    its prior samples' statistics at each exponent beside the validation plans'. A corpus without a net fit is
+    refused before anything is written."""
+    import numpy as np
+
+    from ogm_ppl.learn._fit_common import load_training_plans
+    from ogm_ppl.learn._heldout import file_kind_validation
+
+    names = list(load_training_plans("houseexpo").names)
+    own = file_kind_validation("net", "houseexpo")
+    assert own == [n for i, n in enumerate(names) if i % 10 == 9]
+    s = TemperSettings(kinds=("net",), betas=(1.0, 0.5), plans=1, window=32, sweeps=4, burn=2)
+    r = fit_temper("houseexpo", tmp_path / "out", settings=s, progress=False)
+    doc = json.loads(r.files[0].read_text())
+    v = doc["validation"]["net"]
+    assert {name.split("@")[0] for name in v["validation_plans_scored"]} <= set(own)
+    assert doc["beta"]["net"] == choose(dict(zip(v["betas"], v["nll_bits"])))
+    assert [row["beta"] for row in v["prior_samples"]] == [1.0, 0.5]
+    for row in v["prior_samples"]:
+        assert row["start_gap"] == row["occupied"]["occupied"] - row["free"]["occupied"]
+    plan = v["validation_plan_statistics"]
+    assert 0 < plan["occupied"] < 1 and np.isfinite(plan["occupied_run"]) and v["prior_sample_check"]["sweeps"] == 6
+    assert load_temper_params("houseexpo", path=r.files[0]).beta == {"net": doc["beta"]["net"]}
+    with pytest.raises(FitOptionError, match="no shipped net fit") as e:
+        fit_temper("dungeon", tmp_path / "none", settings=s, progress=False)
+    assert e.value.option == "kinds" and not (tmp_path / "none").exists()

@@ -1,6 +1,7 @@
 """Learning a net field: the torch conditionals of pseudo-likelihood equal the compiled ones, the held-out score
-is their mean negative log, and pseudo-likelihood recovers the conditionals of samples of a known net field to
-within what the sample size allows."""
+is their mean negative log, pseudo-likelihood recovers the conditionals of samples of a known net field to
+within what the sample size allows, persistent contrastive divergence moves a perturbed field to its samples'
+statistics, and the prior-sample statistics tell an ordered field from independent cells."""
 
 import numpy as np
 import torch
@@ -8,7 +9,18 @@ import torch
 from ogm_ppl.inference._kernels.cell_sweep import prior_log_odds
 from ogm_ppl.priors import NetFieldPrior
 from ogm_ppl.priors.compiled.net_field_patches import net_prior_sweeps
-from ogm_ppl.priors.learn_net import CellBatches, NetModel, eligible_cells, heldout_nll, pcd_loss, pl_loss
+from ogm_ppl.priors.learn_net import (
+    SAMPLE_STARTS,
+    CellBatches,
+    NetModel,
+    eligible_cells,
+    heldout_nll,
+    pcd_loss,
+    pcd_update,
+    pl_loss,
+    prior_sample_statistics,
+    sample_statistics,
+)
 
 
 def test_torch_conditionals_equal_the_compiled_ones():
@@ -94,3 +106,67 @@ def test_pseudo_likelihood_recovers_a_known_fields_conditionals():
     assert got <= 4 * p / (2 * N), (got, p / (2 * N))
     share = torch.full_like(pt, float(y.mean()))
     assert kl(pt, share) > 50 * got
+
+
+def test_sample_statistics_count_runs_along_rows_and_columns():
+    """One wall across a 4 x 4 map: occupied runs are the row (4 cells) and 4 one-cell column crossings
+    (8 cells in 5 runs); free runs are 3 rows of 4 and 2 runs in each column (24 cells in 11 runs)."""
+    x = np.zeros((1, 4, 4), bool)
+    x[0, 1, :] = True
+    got = sample_statistics(x)
+    assert got == {"occupied": 0.25, "occupied_run": 8 / 5, "free_run": 24 / 11}
+    assert np.isnan(sample_statistics(np.zeros((1, 3, 3), bool))["occupied_run"])
+
+
+# a two-phase field: one filter rewards windows mostly occupied, the other windows mostly free
+TWO_PHASE = dict(filters=[np.ones((3, 3)), -np.ones((3, 3))], bias=[-4.5, 4.5], out=[1.0, 1.0])
+
+
+def test_prior_sample_statistics_tell_an_ordered_field_from_independent_cells():
+    """The two-phase field keeps each start (a flip costs 9 windows x 8 orientations x 1 = 72 nats): the starts'
+    occupied shares differ by 1. A zero field is independent fair cells after one sweep: 2 chains x 16^2 read cells
+    a start, so the two shares differ by at most 4 standard deviations, ``4 sqrt(2 * 0.25 / 512)``, and the mean
+    runs are those of fair coins (2 cells) within the same relative margin."""
+    ordered = NetFieldPrior((24, 24), **TWO_PHASE)
+    row = prior_sample_statistics(ordered, chains=2, sweeps=3, edge=4, seed=0)
+    assert row["start_gap"] == 1.0 and row["free"]["occupied"] == 0.0
+    zero = NetFieldPrior((24, 24), np.zeros((1, 3, 3)), [0.0], [0.0])
+    row = prior_sample_statistics(zero, chains=2, sweeps=1, edge=4, seed=0)
+    tol = 4 * np.sqrt(2 * 0.25 / 512)
+    assert abs(row["start_gap"]) <= tol
+    for start in SAMPLE_STARTS:
+        assert abs(row[start]["occupied_run"] / 2 - 1) <= 2 * tol and abs(row[start]["free_run"] / 2 - 1) <= 2 * tol
+
+
+def test_pcd_moves_a_perturbed_field_to_its_samples_statistics():
+    """Maximum likelihood with persistent chains (:func:`pcd_update`): 32 samples of the teacher (16 x 16, 50
+    sweeps from noise: its disordered samples mix in a few) are the data; a student equal to the teacher but with
+    its unary bias raised by 1.5 (its samples over 85 % occupied) takes 60 Adam steps (16 chains, 2 sweeps a step).
+    16 fresh samples of the student then have the data's occupied share to within the larger of 4 standard errors
+    of the difference of the two means (``32 x 256`` and ``16 x 256`` cells, treated as independent, widened 3 times
+    for their correlation) and a third of the start's gap."""
+    side, n, m = 16, 32, 16
+    t = TEACHER
+    teacher = NetFieldPrior((side, side), t["filters"], t["bias"], t["out"], t["unary"])
+    data = np.ascontiguousarray(np.random.default_rng(1).random((n, side * side)) < 0.5, np.uint8)
+    net_prior_sweeps(teacher.compiled(), data, 50, 1)
+    student = NetModel(3, 1, "relu").load_arrays({k: np.asarray(v, np.float64) for k, v in TEACHER.items()})
+    with torch.no_grad():
+        student.unary.add_(1.5)
+
+    def share_of_fresh_samples(seed: int) -> float:
+        fresh = np.ascontiguousarray(np.random.default_rng(seed).random((m, side * side)) < 0.5, np.uint8)
+        net_prior_sweeps(student.prior((side, side)).compiled(), fresh, 50, seed)
+        return float(fresh.mean())
+
+    target = float(data.mean())
+    before = share_of_fresh_samples(5)
+    opt = torch.optim.Adam(student.parameters(), lr=0.02)
+    chains = np.ascontiguousarray(np.random.default_rng(2).random((16, side * side)) < 0.5, np.uint8)
+    for i in range(60):
+        batch = data[np.random.default_rng([4, i]).integers(0, n, 16)]
+        pcd_update(student, opt, batch, chains, 2, 10 + i)
+    after = share_of_fresh_samples(6)
+    se = 3 * np.sqrt(target * (1 - target) * (1 / n + 1 / m) / (side * side))
+    assert before - target > 0.25
+    assert abs(after - target) <= max(4 * se, (before - target) / 3), (before, after, target)

@@ -214,3 +214,20 @@ def test_load_refuses_bad_files(tmp_path):
     (tmp_path / "junk.npz").write_bytes(b"not a zip")
     with pytest.raises(ValueError, match=r"junk\.npz"):
         load_net_field(tmp_path / "junk.npz")
+
+
+def test_the_calibrated_name_is_the_shipped_net_raised_to_its_fitted_exponent():
+    """``net:houseexpo@cal``: ``log_prob`` is the shipped field's times the exponent of
+    ``ogm_ppl/fitted/temper_houseexpo.json`` (the same product), and its compiled conditionals are theirs times it to
+    1e-12 relative (the tempered bundle scales the output weights, so the sums round apart)."""
+    from ogm_ppl.priors.named import load_temper_params, prior_by_name
+
+    beta = load_temper_params("houseexpo").beta["net"]
+    cal, base = prior_by_name("net:houseexpo@cal", (6, 7)), prior_by_name("net:houseexpo", (6, 7))
+    assert isinstance(cal, TemperedPrior) and cal.beta == beta < 1.0
+    maps = (torch.rand(5, 42, generator=torch.Generator().manual_seed(0)) < 0.4).double()
+    assert torch.equal(cal.log_prob(maps), base.log_prob(maps) * beta)
+    m = np.ascontiguousarray(maps[0].numpy(), np.uint8)
+    got = np.array([prior_log_odds(cal.compiled(), k, m) for k in range(42)])
+    want = beta * np.array([prior_log_odds(base.compiled(), k, m) for k in range(42)])
+    np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12)
