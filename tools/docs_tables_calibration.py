@@ -546,3 +546,45 @@ def calibration_kernels_table(
         rows=rows,
         provenance=join_provenance(base["provenance"], doc["provenance"]),
     )
+
+
+def temper_net_table(doc: dict) -> Table:
+    """``ogm-ppl fit-prior temper --kinds net``: each exponent's unseen-cell NLL on the net's own validation plans,
+    the share of cells whose chains agree (split R-hat < 1.05), and its prior samples' statistics from the all-free
+    and the all-occupied start beside the validation plans'."""
+    v = doc["validation"]
+
+    def runs(s: dict) -> str:
+        o, f = s.get("occupied_run"), s.get("free_run")
+        return "–" if o is None or f is None else f"{o:.1f} / {f:.1f}"
+
+    rows = []
+    for beta, nll, agree, ps in zip(v["betas"], v["mean_nll_bits"], v["rhat_below"], v["prior_samples"], strict=True):
+        free, occ = ps["free"], ps["occupied"]
+        frozen = free["occupied"] == 0.0 and occ["occupied"] == 1.0
+        mark = "**" if beta == doc["beta"] else ""
+        rows.append(
+            [
+                f"{mark}{beta:g}{mark}",
+                f"{mark}{_f(nll)}{mark}",
+                f"{agree * 100:.0f} %",
+                f"{_f(free['occupied'])} / {_f(occ['occupied'])}",
+                "frozen at the starts" if frozen else f"{runs(free)} (from all-free)",
+            ]
+        )
+    plan = v["validation_plan_statistics"]
+    rows.append(["validation plans", "", "", _f(plan["occupied"]), runs(plan)])
+    check = v["prior_sample_check"]
+    return Table(
+        caption=(
+            f"`net:{doc['corpus']}@BETA` on the plans its fit kept for validation: the unseen cells' NLL (bits per "
+            "cell, the chains pooled), the cells whose chains agree (split R-hat < 1.05), and prior samples "
+            f"({check['chains']} chains of {check['size']} x {check['size']} cells, {check['sweeps']} sweeps, "
+            f"{check['edge']} cells from the edges left out) from the all-free / all-occupied map: occupied share, "
+            f"occupied / free run lengths in cells; bold: the exponent chosen ({doc['criterion']})"
+        ),
+        header=["beta", "unseen NLL, bits", "cells whose chains agree", "occupied share", "occupied / free run"],
+        rows=rows,
+        provenance=doc["provenance"],
+        note=doc["provenance"].get("note", ""),
+    )

@@ -63,6 +63,7 @@ from docs_tables_calibration import (
     data_curve_table,
     guide_limits_table,
     prior_occupancy_table,
+    temper_net_table,
     unseen_by_distance_table,
 )
 from docs_tables_common import RESULTS, ROOT, Table, join_provenance, load_snapshot
@@ -302,6 +303,7 @@ TABLES: dict[str, tuple[str, Callable[[dict], Table]]] = {
     "path_free": ("path_free", path_free_table),
     "path_free_net": ("path_free_net", path_free_table),
     "data_curve": ("data_curve", data_curve_table),
+    "temper_net": ("temper_net", temper_net_table),
     "data_curve_guide": ("data_curve_guide", data_curve_guide_table),
     "data_curve_guide_small": ("data_curve_guide_small", data_curve_guide_table),
     "calibration_corpora_cal": ("calibration_corpora_cal", calibration_corpora_table),
