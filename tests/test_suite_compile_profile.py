@@ -29,3 +29,25 @@ def test_report_sums_tests_into_files_and_signatures_into_functions(tmp_path):
     assert lines[2].split() == ["3.5", "2.0", "1.5", "0.7", "tests/a.py"]
     assert lines[3].split() == ["12.5", "2.0", "5.5", "0.7", "all", "2", "files"]
     assert [ln.split() for ln in lines[6:]] == [["2", "2", "1.7", "ogm_ppl.k:sweep"]]  # numba's own left out
+
+
+def test_report_gives_each_xdist_workers_finishing_time_after_the_earliest_start(tmp_path):
+    """Profiles written by pytest-xdist workers carry the worker's name and its session's start and end (epoch
+    seconds): the report lists the workers by finishing time, counted from the earliest start of all of them."""
+    paths = []
+    for worker, start, end, seconds in (("gw0", 100.0, 400.0, 250.0), ("gw1", 101.0, 250.5, 120.0)):
+        profile = {
+            "wall": {f"tests/{worker}.py::t": seconds},
+            "cpu": {},
+            "compile_wall": {},
+            "compile_cpu": {},
+            "compiled": [],
+            "worker": worker,
+            "clock": {"start": start, "end": end},
+        }
+        paths.append(tmp_path / f"p.{worker}.json")
+        paths[-1].write_text(json.dumps(profile))
+    cmd = [sys.executable, str(ROOT / "tools" / "suite_compile_profile.py"), *map(str, paths)]
+    lines = subprocess.run(cmd, capture_output=True, text=True, check=True).stdout.splitlines()
+    at = next(i for i, ln in enumerate(lines) if ln.split()[:1] == ["finished"])
+    assert [ln.split() for ln in lines[at + 1 :]] == [["150.5", "120.0", "gw1"], ["300.0", "250.0", "gw0"]]

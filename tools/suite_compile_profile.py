@@ -6,11 +6,18 @@ numba compilation inside it, and a report of the costliest test files and compil
         .venv/bin/python -m pytest -p no:cacheprovider -p suite_compile_profile -n 0 tests/inference
     python tools/suite_compile_profile.py out/profile/*.json [--top N]
 
+    # the whole suite as `make test` runs it: one profile per worker, out/profile/suite.gw0.json, ...gw1.json
+    CI=1 PYTHONPATH=tools SUITE_PROFILE_OUT=out/profile/suite.json .venv/bin/python -m pytest -p no:cacheprovider \
+        -p suite_compile_profile -n 2 --dist loadfile -m "not packaging" tests
+
 The plugin listens to numba's ``numba:compile`` events (:mod:`numba.core.event`): every specialisation compiled
 from scratch (not loaded from the disk cache), with its argument types, its own seconds (``exclusive``: less the
 functions it compiled inside it) and the test that triggered it; a test's compile seconds are those of the
-outermost compilations. Run it with ``-n 0`` (xdist workers would each need their own file). Wall seconds on a
-shared machine follow its load; CPU seconds (``time.process_time``, all threads of the process) much less.
+outermost compilations. Under pytest-xdist (``-n 2 --dist loadfile``, as ``make test`` runs) each worker writes
+its own file (``SUITE_PROFILE_OUT`` with ``.gw0``, ``.gw1``... before the suffix) and the report also gives each
+worker's test seconds and when it finished (seconds since the earliest start over all the profiles): the skew
+between the workers is what a whole-file split costs. Wall seconds on a shared machine follow its load; CPU seconds
+(``time.process_time``, all threads of the process) much less.
 """
 
 from __future__ import annotations
@@ -28,6 +35,7 @@ _cpu: dict[str, float] = collections.defaultdict(float)
 _compile_wall: dict[str, float] = collections.defaultdict(float)
 _compile_cpu: dict[str, float] = collections.defaultdict(float)
 _compiled: list[dict] = []
+_clock: dict[str, float] = {}  # session start and end (epoch seconds)
 
 
 def _listen() -> None:
@@ -62,6 +70,7 @@ def _listen() -> None:
 
 def pytest_configure(config) -> None:
     _listen()
+    _clock["start"] = time.time()
 
 
 def pytest_runtest_logstart(nodeid, location) -> None:
@@ -80,16 +89,24 @@ def pytest_runtest_logreport(report) -> None:
 
 def pytest_sessionfinish(session) -> None:
     out = os.environ.get("SUITE_PROFILE_OUT")
-    if out:
-        Path(out).parent.mkdir(parents=True, exist_ok=True)
+    worker = os.environ.get("PYTEST_XDIST_WORKER")
+    controller = not worker and getattr(session.config.option, "numprocesses", None)  # its workers write
+    if out and not controller:
+        path = Path(out)
+        if worker:
+            path = path.with_name(f"{path.stem}.{worker}{path.suffix}")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        _clock["end"] = time.time()
         payload = {
             "wall": _wall,
             "cpu": _cpu,
             "compile_wall": _compile_wall,
             "compile_cpu": _compile_cpu,
             "compiled": _compiled,
+            "worker": worker or "main",
+            "clock": _clock,
         }
-        Path(out).write_text(json.dumps(payload))
+        path.write_text(json.dumps(payload))
 
 
 def report(paths: list[Path], top: int) -> str:
@@ -97,8 +114,11 @@ def report(paths: list[Path], top: int) -> str:
     specialisations, their own seconds) over the profiles ``paths``."""
     per_file = collections.defaultdict(lambda: [0.0, 0.0, 0.0, 0.0])
     per_function = collections.defaultdict(lambda: [0, 0.0, set()])
+    workers = []
     for p in paths:
         d = json.loads(p.read_text())
+        if "clock" in d:
+            workers.append((d["worker"], d["clock"]["start"], d["clock"]["end"], sum(d["wall"].values())))
         for i, key in enumerate(("wall", "cpu", "compile_wall", "compile_cpu")):
             for test, s in d[key].items():
                 per_file[test.split("::")[0]][i] += s
@@ -116,6 +136,11 @@ def report(paths: list[Path], top: int) -> str:
     lines += ["", f"{'compiles':>8} {'distinct':>8} {'seconds':>8}  compiled function (its own seconds)"]
     for name, (n, s, sigs) in sorted(per_function.items(), key=lambda kv: -kv[1][1])[:top]:
         lines.append(f"{n:8d} {len(sigs):8d} {s:8.1f}  {name}")
+    if workers:
+        t0 = min(w[1] for w in workers)
+        lines += ["", f"{'finished':>8} {'tests s':>8}  worker (finished: seconds after the earliest start)"]
+        for name, _, end, tests in sorted(workers, key=lambda w: w[2]):
+            lines.append(f"{end - t0:8.1f} {tests:8.1f}  {name}")
     return "\n".join(lines)
 
 

@@ -67,7 +67,7 @@ def _additive_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     logw = np.empty(1 << L, np.float64)
     codes = np.arange(1 << L)  # every configuration, in order: the candidates of lik_grouped
     patch = np.empty(L, np.int64)
-    sc = ray_scratch(L, max_slots(L, ps), True, 0)
+    sc = ray_scratch(L, max_slots(L, ps), np.bool_(True), np.int64(0))
     p_rand, thesis, metro = rule.p_rand_patch, rule.thesis_random, rule.metropolised
     changed = 0
     for i in range(anchors.shape[0]):

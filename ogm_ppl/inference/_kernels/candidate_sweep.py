@@ -44,8 +44,8 @@ class UpdateScratch(NamedTuple):
 def candidate_log_weights(ps, patch, prior, cands, n, logw):
     """``logw[j]``: unnormalised log conditional of ``cands[j]`` (prior first; the likelihood only for
     candidates the prior allows)."""
-    sc = ray_scratch(patch.shape[0], patch_slots(patch, ps.c_off, ps.offsets.shape[0] - 1), False, n)
-    ts = tile_scratch(ps.m.shape[0], scratch_capacity(prior, patch.shape[0]))
+    sc = ray_scratch(patch.shape[0], patch_slots(patch, ps.c_off, ps.offsets.shape[0] - 1), np.bool_(False), n)
+    ts = tile_scratch(ps.m.shape[0], np.int64(scratch_capacity(prior, patch.shape[0])))
     candidate_weights(prior, patch, ps.m, cands, n, -1, logw, logw, ts)
     ns = collect_rays(ps, patch, _next_stamp(ps, 1), sc)
     lik_list(sc, ns, ps.ll, cands, n, logw)
@@ -103,7 +103,7 @@ def _restricted_update(ps, patch, prior, u, i, rule, stamp, n, t, work):
             candidate_weights(prior, patch, m, pair, 2, t, pw, pw, ts)
             if ns < 0:
                 ns = collect_rays(ps, patch, stamp, sc)
-            lik_list(sc, ns, ll, pair, 2, pw)
+            lik_list(sc, ns, ll, pair, np.int64(2), pw)
             d = pw[1] - pw[0] + log_q
             if pw[0] == -np.inf or d >= 0.0 or (d > -np.inf and u[4, i] < math.exp(d)):
                 set_patch(ps, patch, prop)
@@ -133,7 +133,7 @@ def _candidate_sweep(ps, geo, anchors, prior, u, rule, stamp0, bit_of):
     pair = np.empty(2, np.int64)
     pw = np.empty(2, np.float64)
     sc = ray_scratch(L, max_slots(L, ps), L <= 20, capacity)
-    ts = tile_scratch_on(bit_of, scratch_capacity(prior, L))
+    ts = tile_scratch_on(bit_of, np.int64(scratch_capacity(prior, L)))
     # heat-bath updates of full tiles whose candidates and prior weights every tile of a key shares
     # (shared_weights_key): each key's candidates, weights and inverse-CDF table are built once a sweep; a
     # patch no ray reaches is a binary search (the same index as the categorical's scan), one with rays
@@ -216,7 +216,7 @@ def _candidate_loop_body(ps, geo, anchors, prior, u, rule, stamp0, scratch):
                 pair[1] = prop
                 candidate_weights(prior, patch, m, pair, 2, -1, pw, pw, ts)
                 ns = collect_rays(ps, patch, stamp, sc)
-                lik_list(sc, ns, ll, pair, 2, pw)
+                lik_list(sc, ns, ll, pair, np.int64(2), pw)
                 if accept_random(pw[0], pw[1], u[2, i]):
                     new = prop  # (a state without mass may move anywhere)
         else:

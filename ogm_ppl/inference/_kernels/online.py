@@ -38,6 +38,10 @@ from ogm_ppl.priors.compiled import cell_log_odds
 
 #: the smallest block a cell gets in the pool
 MIN_BLOCK = 4
+#: the signs of a term added / taken away, typed int64 where they are passed: a literal ``1`` / ``-1`` would have
+#: numba compile ``_add_term`` and ``_ray_term`` once per value
+PLUS = np.int64(1)
+MINUS = np.int64(-1)
 
 
 class OnlineState(NamedTuple):
@@ -110,8 +114,8 @@ def _retarget(st, r, f1, s1):
     if f0 == f1:
         if s0 != s1 and f0 < n:
             c = st.cells[a + f0]
-            _add_term(st, c, r, f0, s1, 1)
-            _add_term(st, c, r, f0, s0, -1)
+            _add_term(st, c, r, f0, s1, PLUS)
+            _add_term(st, c, r, f0, s0, MINUS)
         return
     lo = min(f0, f1)
     b0 = _ll(st, r, f0)
@@ -128,11 +132,11 @@ def _retarget(st, r, f1, s1):
     else:
         for kap in range(lo):
             c = st.cells[a + kap]
-            _add_term(st, c, r, kap, f1, 1)
-            _add_term(st, c, r, kap, f0, -1)
+            _add_term(st, c, r, kap, f1, PLUS)
+            _add_term(st, c, r, kap, f0, MINUS)
     for kap in range(lo, min(max(f0, f1), n - 1) + 1):
-        _ray_term(st, r, kap, f1, s1, 1)
-        _ray_term(st, r, kap, f0, s0, -1)
+        _ray_term(st, r, kap, f1, s1, PLUS)
+        _ray_term(st, r, kap, f0, s0, MINUS)
 
 
 @nb.njit(cache=True)
@@ -220,7 +224,7 @@ def add_ray_terms(st, r0, r1):
         st.rays[r].f = f
         st.rays[r].s = s
         for kap in range(min(f, n - 1) + 1):
-            _ray_term(st, r, kap, f, s, 1)
+            _ray_term(st, r, kap, f, s, PLUS)
 
 
 @nb.njit(cache=True)
@@ -236,7 +240,7 @@ def refill_sums(st, R):
         f = st.rays[r].f
         s = st.rays[r].s
         for kap in range(min(f, n - 1) + 1):
-            _ray_term(st, r, kap, f, s, 1)
+            _ray_term(st, r, kap, f, s, PLUS)
 
 
 @nb.njit(cache=True)

@@ -214,12 +214,12 @@ def _patch_log_lik_ws(ps, patch, stamp, out, sc):
     for w in range(W):
         out[w] = 0.0
     ns = collect_rays(ps, patch, stamp, sc)
-    lik_all(sc, ns, ps.ll, L, out)
+    lik_all(sc, ns, ps.ll, np.int64(L), out)  # int64: no extra compile for the literal L = 0
     return W
 
 
 @nb.njit(cache=True)
 def patch_log_lik(ps, patch, out):
     """``out[w] = log p(z | patch = w, rest)`` up to a constant common to all ``w`` (Eq. 4.4). Returns ``W``."""
-    sc = ray_scratch(patch.shape[0], patch_slots(patch, ps.c_off, ps.offsets.shape[0] - 1), True, 0)
+    sc = ray_scratch(patch.shape[0], patch_slots(patch, ps.c_off, ps.offsets.shape[0] - 1), np.bool_(True), np.int64(0))
     return _patch_log_lik_ws(ps, patch, _next_stamp(ps, 1), out, sc)

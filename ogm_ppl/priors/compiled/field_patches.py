@@ -351,11 +351,11 @@ def field_patch_weights(lp, patch, m, cands, n, out, ts):
     cap = max(nl, 1) * w * w
     if not rect:  # scale 1 by the windows' (patch bit, window bit) pairs
         win = _window_pairs(cap)
-        nw = _scale_setup(w, rows, cols, cr, cc, nl, CellBox(bit_of, m, 0, 0, cols), win)
+        nw = _scale_setup(w, rows, cols, cr, cc, np.int64(nl), CellBox(bit_of, m, 0, 0, cols), win)
         if nl <= 20 and full_range(cands, n, nl):
             _window_sums_gray(theta, nw, win, nl, out)
         else:
-            _window_sums(theta, nw, win, cands, n, out, False)
+            _window_sums(theta, nw, win, cands, n, out, np.bool_(False))
     for i in range(L):
         if patch[i] >= 0:
             bit_of[patch[i]] = -1
@@ -410,7 +410,7 @@ def field_patch_weights(lp, patch, m, cands, n, out, ts):
                 if is_par[(i - i0) * S + j - j0] < 0:
                     pooled[(i - i0) * S + j - j0] = _pooled(m, rows, cols, i, j)
     win2 = _window_pairs(cap)
-    nw2 = _scale_setup(w, P, Q, pr_, pc_, npar, CellBox(is_par, pooled, i0, j0, S), win2)
+    nw2 = _scale_setup(w, P, Q, pr_, pc_, np.int64(npar), CellBox(is_par, pooled, i0, j0, S), win2)
     pcands = np.empty(max(n, 1), np.int64)  # each candidate's parents' pooled values (bit y: parent y)
     for jx in range(n):
         pbits = np.int64(0)
@@ -422,11 +422,11 @@ def field_patch_weights(lp, patch, m, cands, n, out, ts):
         # the pooled scale depends on a candidate through its parents alone: their 2^npar sums, tabled once
         NP = np.int64(1) << npar
         t2 = np.empty(NP, np.float64)
-        _window_sums(theta2, nw2, win2, np.arange(NP), NP, t2, False)
+        _window_sums(theta2, nw2, win2, np.arange(NP), NP, t2, np.bool_(False))
         for jx in range(n):
             out[jx] += t2[pcands[jx]]
     else:
-        _window_sums(theta2, nw2, win2, pcands, n, out, True)
+        _window_sums(theta2, nw2, win2, pcands, n, out, np.bool_(True))
 
 
 # ------------------------------------------------------------------ whole maps

@@ -36,7 +36,7 @@ def prior_gibbs_sweeps(prior, maps, num_sweeps, seed):
 def patch_prior_batch(prior, maps, patch, cands, out):
     """``out[b, j] = log p(patch = cands[j], rest of maps[b])`` up to a constant in ``j`` (``B x K`` uint8
     maps; bit ``i`` of a candidate = the ``i``-th live cell of ``patch``)."""
-    ts = tile_scratch(maps.shape[1], scratch_capacity(prior, patch.shape[0]))
+    ts = tile_scratch(maps.shape[1], np.int64(scratch_capacity(prior, patch.shape[0])))
     for b in range(maps.shape[0]):
         patch_prior_weights(prior, patch, maps[b], cands, cands.shape[0], out[b], ts)
 

@@ -339,7 +339,7 @@ def tiles_patch_weights(lp, patch, m, cands, n, out, ts):
     window holds a patch cell, through the scratch ``ts``."""
     for j in range(n):
         out[j] = 0.0
-    nt = tile_patch_setup(lp, patch, m, -1, ts)
+    nt = tile_patch_setup(lp, patch, m, np.int64(-1), ts)
     tile_patch_factors(lp, nt, ts, cands, n, out)
 
 
