@@ -258,7 +258,9 @@ def set_cell(st, k, v):
     _set_cell(st, k, v)
 
 
-@nb.njit(cache=True, inline="always")
+# compiled once per state type and called (not inlined): it runs only when a cell flips, and inlining its
+# ``_retarget`` / ``_ray_term`` / ``_add_term`` tree into each kernel and prior kind cost most of their compile time
+@nb.njit(cache=True)
 def _set_cell(st, k, v):
     st.m[k] = v
     for p in range(st.c_off[k], st.c_off[k + 1]):
