@@ -252,6 +252,7 @@ def run(args: argparse.Namespace) -> int:
 
 def _run_curve(args: argparse.Namespace) -> int:
     """``--curve-sizes``: the guide's data curve (:func:`~ogm_ppl.learn.guide_curve.guide_data_curve`)."""
+    from ogm_ppl.learn._fit_common import FitOptionError
     from ogm_ppl.learn.guide_curve import guide_data_curve
     from ogm_ppl.learn.guide_settings import GuideSettingsError
 
@@ -278,6 +279,8 @@ def _run_curve(args: argparse.Namespace) -> int:
             progress=not args.quiet,
             fresh=args.fresh,
         )
+    except FitOptionError as e:  # checked before any plan is read; named by its flag, as the other refusals are
+        raise GuideSettingsError(e.option, f"--{e.option.replace('_', '-')}: {str(e).split(': ', 1)[1]}") from None
     except KeyboardInterrupt as e:
         print(f"ogm-ppl train-guide: {e}")
         return 130

@@ -98,11 +98,16 @@ def test_bad_options_are_named_before_any_plan_is_read(tmp_path):
         ([], "needs --validation-sample"),
         (["--validation-sample", "3", "--sample", "4"], "sets --sample"),
         (["--validation-sample", "3", "--corpus", "schools", "ipa"], "one --corpus"),
+        (["--validation-sample", "0"], "--validation-sample: "),
     ],
 )
 def test_the_command_refuses_what_a_curve_sets_itself(tmp_path, capsys, extra, message):
+    """Each refusal is one line naming the option by its flag, before the output folder is made."""
     argv = ["train-guide", "--corpus", "schools", "--curve-sizes", "2", "5", "--out", str(tmp_path / "c"), *extra]
     assert ogm_ppl(argv) == 2
     assert message in capsys.readouterr().err and not (tmp_path / "c").exists()
+    argv = ["train-guide", "--corpus", "schools", "--curve-sizes", "5", "2", "--validation-sample", "3"]
+    assert ogm_ppl([*argv, "--out", str(tmp_path / "d")]) == 2
+    assert "error: --curve-sizes: give ascending distinct sizes" in capsys.readouterr().err
     args = build_parser().parse_args(["train-guide", "--corpus", "schools", "--curve-sizes", "2", "--ship"])
     assert args.ship and args.curve_sizes == [2]
