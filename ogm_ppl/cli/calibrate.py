@@ -44,6 +44,7 @@ from __future__ import annotations
 
 import argparse
 from pathlib import Path
+from typing import Any
 
 from ogm_ppl.calibration.chains import KERNELS
 from ogm_ppl.calibration.errors import SettingsError
@@ -222,12 +223,12 @@ KERNEL_OPTIONS: dict[str, tuple[str, ...]] = {
 }
 
 
-def _kernel_options(args: argparse.Namespace) -> dict[str, object]:
+def _kernel_options(args: argparse.Namespace) -> dict[str, Any]:
     """The sampler-specific settings of ``args``: each named option for its own ``--kernel`` (the settings'
     default where it is not named); one named for another sampler raises :class:`SettingsError` (it would be
     taken and ignored)."""
     defaults = CalibrationSettings.__dataclass_fields__
-    out: dict[str, object] = {}
+    out: dict[str, Any] = {}
     for kernel, fields in KERNEL_OPTIONS.items():
         for f in fields:
             given = getattr(args, f, None)
@@ -260,7 +261,7 @@ def settings_from_args(args: argparse.Namespace) -> CalibrationSettings:
         burn=args.burn,
         seed=args.seed,
         kernel=args.kernel,
-        **kernel_options,  # type: ignore[arg-type]
+        **kernel_options,
         patch=tuple(args.patch),
         bias_file=args.bias_file,
         max_support=args.max_support,

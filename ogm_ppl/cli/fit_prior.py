@@ -158,7 +158,7 @@ def run(args: argparse.Namespace) -> int:
         flag = _flag(args, e.option)
         if flag is None:
             raise
-        raise FitOptionError(flag, str(e).removeprefix(f"{e.option}: ")) from None
+        raise FitOptionError(flag, e.reason) from None
 
 
 def _flag(args: argparse.Namespace, option: str) -> str | None:

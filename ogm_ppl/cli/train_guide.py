@@ -280,7 +280,7 @@ def _run_curve(args: argparse.Namespace) -> int:
             fresh=args.fresh,
         )
     except FitOptionError as e:  # checked before any plan is read; named by its flag, as the other refusals are
-        raise GuideSettingsError(e.option, f"--{e.option.replace('_', '-')}: {str(e).split(': ', 1)[1]}") from None
+        raise GuideSettingsError(e.option, f"--{e.option.replace('_', '-')}: {e.reason}") from None
     except KeyboardInterrupt as e:
         print(f"ogm-ppl train-guide: {e}")
         return 130

@@ -61,6 +61,7 @@ class FitOptionError(ValueError):
     def __init__(self, option: str, message: str) -> None:
         super().__init__(f"{option}: {message}")
         self.option = option
+        self.reason = message  # the message without the option's name, for a caller that names it otherwise
 
 
 def check_int(value: Any, option: str, lo: int, hi: int | None = None) -> int:
